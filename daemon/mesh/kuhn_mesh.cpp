@@ -1,0 +1,406 @@
+#include "mesh/kuhn_mesh.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace tissue::mesh {
+
+namespace {
+
+// The six edges of a tet as vertex-slot pairs.
+constexpr std::array<std::array<int, 2>, 6> kTetEdges{{{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}}};
+
+std::string describe_key(Key key) {
+  const Vec3i d = unpack_doubled(key);
+  std::ostringstream os;
+  os << "diamond at doubled lattice point (" << d[0] << ", " << d[1] << ", " << d[2] << ")";
+  return os.str();
+}
+
+// Smallest coarse exponent K such that every split up to max_depth lands on
+// the integer lattice: a tet at depth d lives in cubes of H / 2^(d/3) units and
+// its refinement-edge midpoint needs that size to be even.
+int coarse_log2_for_depth(int max_depth) { return max_depth <= 0 ? 1 : (max_depth - 1) / 3 + 1; }
+
+}  // namespace
+
+KuhnMesh::KuhnMesh(const BoxSpec& spec) : spec_(spec) {
+  auto reject = [](const std::string& field, const std::string& why) {
+    throw std::invalid_argument("mesh box: " + field + " " + why);
+  };
+  if (spec.cubes_x <= 0) reject("cubes_x = " + std::to_string(spec.cubes_x), "must be a positive cube count");
+  if (spec.cubes_y <= 0) reject("cubes_y = " + std::to_string(spec.cubes_y), "must be a positive cube count");
+  if (spec.cubes_z <= 0) reject("cubes_z = " + std::to_string(spec.cubes_z), "must be a positive cube count");
+  if (!(spec.cube_size_m > 0.0) || !std::isfinite(spec.cube_size_m))
+    reject("cube_size_m = " + std::to_string(spec.cube_size_m), "must be a finite length > 0 m");
+  if (spec.max_depth < 0) reject("max_depth = " + std::to_string(spec.max_depth), "must be >= 0");
+
+  const std::int64_t largest = std::max({spec.cubes_x, spec.cubes_y, spec.cubes_z});
+  const int k = coarse_log2_for_depth(spec.max_depth);
+  // Largest depth the 21-bit keys allow for this box, for the message.
+  int lattice_limit_k = 1;
+  while ((largest << (lattice_limit_k + 1)) <= kMaxLatticeCoord) ++lattice_limit_k;
+  if ((largest << 1) > kMaxLatticeCoord)
+    reject("cube counts (largest " + std::to_string(largest) + ")",
+           "overflow the 21-bit lattice keys; at most " + std::to_string(kMaxLatticeCoord / 2) + " cubes per axis");
+  if ((largest << k) > kMaxLatticeCoord || spec.max_depth > 60)
+    reject("max_depth = " + std::to_string(spec.max_depth),
+           "exceeds what the lattice can hold for " + std::to_string(largest) + " cubes along an axis (at most " +
+               std::to_string(std::min(60, 3 * lattice_limit_k)) + ")");
+
+  domain_.cubes = {spec.cubes_x, spec.cubes_y, spec.cubes_z};
+  domain_.coarse_log2 = k;
+  const std::int64_t h = domain_.coarse_cube();
+  lattice_unit_m_ = spec.cube_size_m / static_cast<double>(h);
+  coarse_six_volume_ = h * h * h;
+  const __int128 total = static_cast<__int128>(6) * coarse_six_volume_ * spec.cubes_x * spec.cubes_y * spec.cubes_z;
+  if (total > std::numeric_limits<std::int64_t>::max())
+    reject("cube counts", "make the total volume overflow 64-bit lattice units");
+  total_six_volume_ = static_cast<std::int64_t>(total);
+
+  // Coarse nodes: ids in x-fastest order over the (n+1)^3 grid.
+  const std::int64_t nx = spec.cubes_x + 1, ny = spec.cubes_y + 1, nz = spec.cubes_z + 1;
+  const std::size_t coarse_cubes = static_cast<std::size_t>(spec.cubes_x) * spec.cubes_y * spec.cubes_z;
+  reserve_tets(6 * coarse_cubes);
+  nodes_.reserve(static_cast<std::size_t>(nx * ny * nz));
+  for (std::int64_t z = 0; z < nz; ++z)
+    for (std::int64_t y = 0; y < ny; ++y)
+      for (std::int64_t x = 0; x < nx; ++x) add_node({x * h, y * h, z * h}, kInvalidId, kInvalidId, 0, nullptr);
+  coarse_node_count_ = node_count_;
+  auto coarse_id = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+    return static_cast<NodeId>(x + nx * (y + ny * z));
+  };
+
+  // Six Kuhn tets per cube on the reflected grid: per axis, an even cube
+  // index starts at its far side and walks backwards, an odd one starts at
+  // its near side. Neighbouring cubes are mirror images, so the grid is
+  // conforming and cubic-symmetric already at level 0.
+  constexpr std::array<std::array<int, 3>, 6> kPermutations{
+      {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}}};
+  for (std::int64_t cz = 0; cz < spec.cubes_z; ++cz)
+    for (std::int64_t cy = 0; cy < spec.cubes_y; ++cy)
+      for (std::int64_t cx = 0; cx < spec.cubes_x; ++cx) {
+        const std::array<std::int64_t, 3> cube{cx, cy, cz};
+        std::array<std::int64_t, 3> start{}, step{};
+        for (int a = 0; a < 3; ++a) {
+          const bool even = cube[a] % 2 == 0;
+          start[a] = even ? cube[a] + 1 : cube[a];
+          step[a] = even ? -1 : 1;
+        }
+        for (const auto& perm : kPermutations) {
+          std::array<std::int64_t, 3> p = start;
+          std::array<NodeId, 4> v{};
+          v[0] = coarse_id(p[0], p[1], p[2]);
+          for (int i = 0; i < 3; ++i) {
+            p[perm[i]] += step[perm[i]];
+            v[i + 1] = coarse_id(p[0], p[1], p[2]);
+          }
+          add_tet(v, 0, 0, nullptr);
+        }
+      }
+}
+
+std::array<double, 3> KuhnMesh::node_position_m(NodeId id) const {
+  const Vec3i& p = nodes_[id].lattice;
+  return {p[0] * lattice_unit_m_, p[1] * lattice_unit_m_, p[2] * lattice_unit_m_};
+}
+
+std::array<NodeId, 4> KuhnMesh::oriented_vertices(TetId id) const {
+  std::array<NodeId, 4> v = tets_[id].v;
+  if (tets_[id].negative) std::swap(v[0], v[1]);
+  return v;
+}
+
+Key KuhnMesh::diamond_of(TetId id) const {
+  const Tet& t = tets_[id];
+  return edge_key(nodes_[t.v[0]].lattice, nodes_[t.v[maubach_tag(t.depth)]].lattice);
+}
+
+DiamondInfo KuhnMesh::diamond_info(Key diamond) const {
+  DiamondInfo info;
+  std::string why;
+  if (!classify_diamond(domain_, diamond, &info, &why))
+    throw std::invalid_argument(describe_key(diamond) + " is not a diamond of this box: " + why);
+  return info;
+}
+
+bool KuhnMesh::can_split(Key diamond) const {
+  DiamondInfo info;
+  if (!classify_diamond(domain_, diamond, &info, nullptr)) return false;
+  return info.depth < spec_.max_depth && !is_split(diamond);
+}
+
+bool KuhnMesh::can_merge(Key diamond) const {
+  if (!is_split(diamond)) return false;
+  DiamondInfo info;
+  if (!classify_diamond(domain_, diamond, &info, nullptr)) return false;
+  std::array<Key, 8> children{};
+  const int n = diamond_children(domain_, info, &children);
+  for (int i = 0; i < n; ++i)
+    if (is_split(children[i])) return false;
+  return true;
+}
+
+int KuhnMesh::split(Key diamond, MeshChangeLog* log) {
+  const DiamondInfo info = diamond_info(diamond);  // validates before anything else
+  if (is_split(diamond)) return 0;
+  if (info.depth >= spec_.max_depth)
+    throw std::invalid_argument(describe_key(diamond) + " has tets at depth " + std::to_string(info.depth) +
+                                ", and max_depth is " + std::to_string(spec_.max_depth) + ": cannot split further");
+  return split_recursive(diamond, info, log);
+}
+
+int KuhnMesh::split_recursive(Key diamond, const DiamondInfo& info, MeshChangeLog* log) {
+  int splits = 0;
+  // Closure: a diamond's tets exist only once all its parents are split.
+  std::array<Key, 4> parents{};
+  const int parent_count = diamond_parents(domain_, info, &parents);
+  for (int i = 0; i < parent_count; ++i) {
+    if (is_split(parents[i])) continue;
+    DiamondInfo parent_info;
+    classify_diamond(domain_, parents[i], &parent_info, nullptr);
+    splits += split_recursive(parents[i], parent_info, log);
+  }
+
+  const EdgeId e = edge_index_.find(diamond);
+  if (e == util::KeyIndexMap::kNotFound)
+    throw std::logic_error(describe_key(diamond) + ": refinement edge missing after parent closure");
+  std::array<TetId, 8> members{};
+  int count = 0;
+  for (TetId t = edges_[e].diamond_head; t != kInvalidId; t = tets_[t].next_in_diamond) {
+    if (count == 8) throw std::logic_error(describe_key(diamond) + ": more than 8 tets");
+    members[count++] = t;
+  }
+  const int expected = diamond_tet_count(domain_, info);
+  if (count != expected)
+    throw std::logic_error(describe_key(diamond) + ": has " + std::to_string(count) + " tets, expected " +
+                           std::to_string(expected));
+
+  const NodeId z = add_node(info.centre, edges_[e].a, edges_[e].b, info.depth, log);
+  for (int i = 0; i < count; ++i) bisect(members[i], z, log);
+  if (log) ++log->diamonds_split;
+  return splits + 1;
+}
+
+void KuhnMesh::bisect(TetId t, NodeId z, MeshChangeLog* log) {
+  const Tet parent = tets_[t];
+  const int k = maubach_tag(parent.depth);
+  // Maubach: child0 = (x0..x_{k-1}, z, x_{k+1}..x3), child1 = (x1..x_k, z, x_{k+1}..x3).
+  std::array<NodeId, 4> c0 = parent.v, c1 = parent.v;
+  c0[k] = z;
+  for (int i = 0; i < k; ++i) c1[i] = parent.v[i + 1];
+  c1[k] = z;
+  remove_tet(t, log);
+  add_tet(c0, parent.depth + 1, parent.child_path, log);
+  add_tet(c1, parent.depth + 1, parent.child_path | (std::uint64_t{1} << parent.depth), log);
+}
+
+void KuhnMesh::merge(Key diamond, MeshChangeLog* log) {
+  const NodeId z = node_index_.find(diamond);
+  if (z == util::KeyIndexMap::kNotFound)
+    throw std::invalid_argument(describe_key(diamond) + " cannot merge: it is not split");
+  const DiamondInfo info = diamond_info(diamond);
+  std::array<Key, 8> children{};
+  const int child_count = diamond_children(domain_, info, &children);
+  for (int i = 0; i < child_count; ++i)
+    if (is_split(children[i]))
+      throw std::invalid_argument(describe_key(diamond) + " cannot merge: its child " + describe_key(children[i]) +
+                                  " is split (merge finer diamonds first)");
+
+  // The tets around z are exactly the children of the diamond's tets; they
+  // sit in the child diamonds' lists (z is never on their refinement edges).
+  std::array<TetId, 16> halves{};
+  int half_count = 0;
+  for (int i = 0; i < child_count; ++i) {
+    const EdgeId e = edge_index_.find(children[i]);
+    if (e == util::KeyIndexMap::kNotFound) continue;
+    for (TetId t = edges_[e].diamond_head; t != kInvalidId; t = tets_[t].next_in_diamond) {
+      const auto& v = tets_[t].v;
+      if (v[0] != z && v[1] != z && v[2] != z && v[3] != z) continue;
+      if (half_count == 16) throw std::logic_error(describe_key(diamond) + ": more than 16 child tets");
+      halves[half_count++] = t;
+    }
+  }
+  const int expected = 2 * diamond_tet_count(domain_, info);
+  if (half_count != expected)
+    throw std::logic_error(describe_key(diamond) + ": found " + std::to_string(half_count) +
+                           " child tets around its node, expected " + std::to_string(expected));
+
+  // Rebuild each parent from its first child: parent = child0 with z replaced
+  // by the far end of the refinement edge, x_k = 2z - x0.
+  struct Parent {
+    std::array<NodeId, 4> v;
+    std::uint64_t path;
+  };
+  std::array<Parent, 8> parents{};
+  int parent_count = 0;
+  const Vec3i& zc = nodes_[z].lattice;
+  for (int i = 0; i < half_count; ++i) {
+    const Tet& child = tets_[halves[i]];
+    const int parent_depth = child.depth - 1;
+    if ((child.child_path >> parent_depth) & 1) continue;  // second child
+    const Vec3i& x0 = nodes_[child.v[0]].lattice;
+    const NodeId far = node_index_.find(vertex_key({2 * zc[0] - x0[0], 2 * zc[1] - x0[1], 2 * zc[2] - x0[2]}));
+    if (far == util::KeyIndexMap::kNotFound)
+      throw std::logic_error(describe_key(diamond) + ": refinement edge end missing");
+    Parent p{child.v, child.child_path};
+    p.v[maubach_tag(parent_depth)] = far;
+    parents[parent_count++] = p;
+  }
+  if (parent_count * 2 != half_count) throw std::logic_error(describe_key(diamond) + ": child tets do not pair up");
+
+  const int parent_depth = info.depth;
+  for (int i = 0; i < half_count; ++i) remove_tet(halves[i], log);
+  for (int i = 0; i < parent_count; ++i) add_tet(parents[i].v, parent_depth, parents[i].path, log);
+  remove_node(z, log);
+  if (log) ++log->diamonds_merged;
+}
+
+TetId KuhnMesh::add_tet(const std::array<NodeId, 4>& v, int depth, std::uint64_t child_path, MeshChangeLog* log) {
+  TetId id;
+  if (!free_tets_.empty()) {
+    id = free_tets_.back();
+    free_tets_.pop_back();
+  } else {
+    id = static_cast<TetId>(tets_.size());
+    tets_.emplace_back();
+  }
+  Tet& t = tets_[id];
+  t.v = v;
+  t.depth = static_cast<std::uint8_t>(depth);
+  t.child_path = child_path;
+  t.negative = orientation_negative(v);
+  ++tet_count_;
+
+  const std::int64_t six = six_volume_at_depth(depth);
+  for (const auto& ends : kTetEdges) add_edge_share(v[ends[0]], v[ends[1]], six, log);
+  for (NodeId n : v) nodes_[n].six_volume += six;
+
+  Edge& refinement = edges_[edge_index_.find(edge_key(nodes_[v[0]].lattice, nodes_[v[maubach_tag(depth)]].lattice))];
+  tets_[id].next_in_diamond = refinement.diamond_head;
+  refinement.diamond_head = id;
+
+  if (log) log->events.push_back({MeshEvent::Kind::kTetAdded, static_cast<std::uint8_t>(depth), id, v});
+  return id;
+}
+
+void KuhnMesh::remove_tet(TetId id, MeshChangeLog* log) {
+  const Tet t = tets_[id];
+  Edge& refinement =
+      edges_[edge_index_.find(edge_key(nodes_[t.v[0]].lattice, nodes_[t.v[maubach_tag(t.depth)]].lattice))];
+  if (refinement.diamond_head == id) {
+    refinement.diamond_head = t.next_in_diamond;
+  } else {
+    TetId prev = refinement.diamond_head;
+    while (tets_[prev].next_in_diamond != id) prev = tets_[prev].next_in_diamond;
+    tets_[prev].next_in_diamond = t.next_in_diamond;
+  }
+
+  const std::int64_t six = six_volume_at_depth(t.depth);
+  for (NodeId n : t.v) nodes_[n].six_volume -= six;
+  for (const auto& ends : kTetEdges) remove_edge_share(t.v[ends[0]], t.v[ends[1]], six, log);
+
+  tets_[id].depth = Tet::kDeadDepth;
+  tets_[id].next_in_diamond = kInvalidId;
+  free_tets_.push_back(id);
+  --tet_count_;
+  if (log) log->events.push_back({MeshEvent::Kind::kTetRemoved, t.depth, id, t.v});
+}
+
+NodeId KuhnMesh::add_node(const Vec3i& p, NodeId edge_a, NodeId edge_b, int depth, MeshChangeLog* log) {
+  NodeId id;
+  if (!free_nodes_.empty()) {
+    id = free_nodes_.back();
+    free_nodes_.pop_back();
+  } else {
+    id = static_cast<NodeId>(nodes_.size());
+    nodes_.emplace_back();
+  }
+  nodes_[id] = Node{p, 0, edge_a, edge_b, static_cast<std::uint8_t>(depth), true};
+  node_index_.insert(vertex_key(p), id);
+  ++node_count_;
+  if (log)
+    log->events.push_back(
+        {MeshEvent::Kind::kNodeAdded, static_cast<std::uint8_t>(depth), id, {edge_a, edge_b, kInvalidId, kInvalidId}});
+  return id;
+}
+
+void KuhnMesh::remove_node(NodeId id, MeshChangeLog* log) {
+  Node& n = nodes_[id];
+  if (n.six_volume != 0) throw std::logic_error("mesh: removing a node that still has incident tets");
+  node_index_.erase(vertex_key(n.lattice));
+  n.alive = false;
+  free_nodes_.push_back(id);
+  --node_count_;
+  if (log)
+    log->events.push_back({MeshEvent::Kind::kNodeRemoved, n.depth, id, {n.edge_a, n.edge_b, kInvalidId, kInvalidId}});
+}
+
+void KuhnMesh::add_edge_share(NodeId a, NodeId b, std::int64_t six_volume, MeshChangeLog* log) {
+  const Key key = edge_key(nodes_[a].lattice, nodes_[b].lattice);
+  EdgeId id = edge_index_.find(key);
+  if (id == util::KeyIndexMap::kNotFound) {
+    if (!free_edges_.empty()) {
+      id = free_edges_.back();
+      free_edges_.pop_back();
+    } else {
+      id = static_cast<EdgeId>(edges_.size());
+      edges_.emplace_back();
+    }
+    edges_[id] = Edge{std::min(a, b), std::max(a, b), 0, kInvalidId};
+    edge_index_.insert(key, id);
+    ++edge_count_;
+    if (log)
+      log->events.push_back({MeshEvent::Kind::kEdgeAdded, 0, id, {edges_[id].a, edges_[id].b, kInvalidId, kInvalidId}});
+  } else if (!((edges_[id].a == a && edges_[id].b == b) || (edges_[id].a == b && edges_[id].b == a))) {
+    // Two distinct edges with one midpoint would break the diamond encoding.
+    throw std::logic_error("mesh: two edges share a midpoint key");
+  }
+  edges_[id].six_volume += six_volume;
+}
+
+void KuhnMesh::remove_edge_share(NodeId a, NodeId b, std::int64_t six_volume, MeshChangeLog* log) {
+  const Key key = edge_key(nodes_[a].lattice, nodes_[b].lattice);
+  const EdgeId id = edge_index_.find(key);
+  if (id == util::KeyIndexMap::kNotFound) throw std::logic_error("mesh: removing a share of a missing edge");
+  Edge& e = edges_[id];
+  e.six_volume -= six_volume;
+  if (e.six_volume > 0) return;
+  if (e.six_volume < 0 || e.diamond_head != kInvalidId)
+    throw std::logic_error("mesh: edge volume bookkeeping out of balance");
+  edge_index_.erase(key);
+  free_edges_.push_back(id);
+  --edge_count_;
+  if (log) log->events.push_back({MeshEvent::Kind::kEdgeRemoved, 0, id, {e.a, e.b, kInvalidId, kInvalidId}});
+}
+
+bool KuhnMesh::orientation_negative(const std::array<NodeId, 4>& v) const {
+  const Vec3i& p0 = nodes_[v[0]].lattice;
+  __int128 d[3][3];
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) d[r][c] = nodes_[v[r + 1]].lattice[c] - p0[c];
+  const __int128 det = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
+                       d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
+                       d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
+  if (det == 0) throw std::logic_error("mesh: degenerate tetrahedron");
+  return det < 0;
+}
+
+std::size_t KuhnMesh::memory_bytes() const {
+  return nodes_.capacity() * sizeof(Node) + edges_.capacity() * sizeof(Edge) + tets_.capacity() * sizeof(Tet) +
+         (free_nodes_.capacity() + free_edges_.capacity() + free_tets_.capacity()) * sizeof(std::uint32_t) +
+         node_index_.memory_bytes() + edge_index_.memory_bytes();
+}
+
+void KuhnMesh::reserve_tets(std::size_t tets) {
+  // Kuhn meshes have about 1.2 edges and 0.18 nodes per tet.
+  tets_.reserve(tets);
+  edges_.reserve(tets + tets / 4);
+  nodes_.reserve(tets / 5 + 8);
+  edge_index_.reserve(tets + tets / 4);
+  node_index_.reserve(tets / 5 + 8);
+}
+
+}  // namespace tissue::mesh

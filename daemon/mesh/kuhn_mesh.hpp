@@ -1,0 +1,190 @@
+// The adaptive tetrahedral mesh of the seed paper (§2–3.4): a box of cubes cut
+// into 6 Kuhn tetrahedra each, refined by Maubach (longest-edge) bisection in
+// whole diamonds, so the mesh is conforming by construction.
+//
+// Ownership and cost model:
+// - Nodes, edges and tets live in pools with stable ids (freed ids are reused).
+//   Physics keeps per-id arrays; the change log says which ids appear/vanish.
+// - Edges are keyed by their doubled midpoint. An edge that is the refinement
+//   edge of leaf tets *is* their diamond: it heads an intrusive list of those
+//   tets, so no separate diamond table exists.
+// - split/merge touch only the diamond (and, for split, its unsplit ancestors);
+//   their cost is proportional to what changes, not to the mesh size.
+// - Incident volumes are kept as exact integers: 6·V in lattice units.
+//
+// Threading: none. The sim thread owns a mesh; others see snapshots.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "mesh/lattice.hpp"
+#include "mesh/mesh_change.hpp"
+#include "util/key_index_map.hpp"
+
+namespace tissue::mesh {
+
+struct BoxSpec {
+  int cubes_x = 1;
+  int cubes_y = 1;
+  int cubes_z = 1;
+  double cube_size_m = 0.1;
+  // Deepest bisection level a leaf may reach (0 = the 6-tet cubes only).
+  int max_depth = 9;
+};
+
+struct Node {
+  Vec3i lattice{};              // lattice coordinates
+  std::int64_t six_volume = 0;  // Σ 6V of incident leaf tets (lattice units)
+  NodeId edge_a = kInvalidId;   // endpoints of the edge this node split,
+  NodeId edge_b = kInvalidId;   //   kInvalidId for coarse grid nodes
+  std::uint8_t depth = 0;       // depth of the diamond that created it
+  bool alive = false;
+};
+
+struct Edge {
+  NodeId a = kInvalidId;
+  NodeId b = kInvalidId;
+  std::int64_t six_volume = 0;      // Σ 6V of incident leaf tets; 0 <=> edge gone
+  TetId diamond_head = kInvalidId;  // first leaf tet whose refinement edge this is
+};
+
+struct Tet {
+  // Maubach order: refinement edge is (v[0], v[k]) with k = 3 - depth % 3.
+  std::array<NodeId, 4> v{};
+  TetId next_in_diamond = kInvalidId;
+  // Bit i = 1 when the ancestor at depth i+1 (or this tet, i = depth-1) was
+  // the second child of its parent. Merge needs it to rebuild parents in the
+  // order their own parents produced them.
+  std::uint64_t child_path = 0;
+  std::uint8_t depth = kDeadDepth;
+  bool negative = false;  // Maubach order has negative orientation
+  static constexpr std::uint8_t kDeadDepth = 0xff;
+};
+
+class KuhnMesh {
+ public:
+  // Throws std::invalid_argument naming the field for non-positive counts or
+  // sizes, a max depth the lattice cannot hold, or a box that overflows keys.
+  explicit KuhnMesh(const BoxSpec& spec);
+
+  const BoxSpec& spec() const { return spec_; }
+  const LatticeDomain& domain() const { return domain_; }
+  // Edge of one lattice unit in metres.
+  double lattice_unit_m() const { return lattice_unit_m_; }
+  // 6V of a tet at `depth` in lattice units (exact).
+  std::int64_t six_volume_at_depth(int depth) const { return coarse_six_volume_ >> depth; }
+  // 6V of the whole box in lattice units (exact).
+  std::int64_t total_six_volume() const { return total_six_volume_; }
+
+  // --- Counts and pools (ids index the pools; check alive) -----------------
+  std::size_t node_count() const { return node_count_; }
+  std::size_t edge_count() const { return edge_count_; }
+  std::size_t tet_count() const { return tet_count_; }
+  std::size_t node_capacity() const { return nodes_.size(); }
+  std::size_t edge_capacity() const { return edges_.size(); }
+  std::size_t tet_capacity() const { return tets_.size(); }
+  std::size_t coarse_node_count() const { return coarse_node_count_; }
+
+  const Node& node(NodeId id) const { return nodes_[id]; }
+  const Edge& edge(EdgeId id) const { return edges_[id]; }
+  const Tet& tet(TetId id) const { return tets_[id]; }
+  bool node_alive(NodeId id) const { return id < nodes_.size() && nodes_[id].alive; }
+  bool edge_alive(EdgeId id) const { return id < edges_.size() && edges_[id].six_volume > 0; }
+  bool tet_alive(TetId id) const { return id < tets_.size() && tets_[id].depth != Tet::kDeadDepth; }
+
+  NodeId find_node(Key key) const { return node_index_.find(key); }
+  EdgeId find_edge(Key key) const { return edge_index_.find(key); }
+  EdgeId find_edge(NodeId a, NodeId b) const {
+    return edge_index_.find(edge_key(nodes_[a].lattice, nodes_[b].lattice));
+  }
+  Key node_key(NodeId id) const { return vertex_key(nodes_[id].lattice); }
+  std::array<double, 3> node_position_m(NodeId id) const;
+
+  // Vertices in positive orientation (det(v1-v0, v2-v0, v3-v0) > 0).
+  std::array<NodeId, 4> oriented_vertices(TetId id) const;
+  // The key of the diamond (refinement edge) a leaf tet belongs to.
+  Key diamond_of(TetId id) const;
+
+  // --- Diamonds ------------------------------------------------------------
+  // True when the diamond's node exists.
+  bool is_split(Key diamond) const { return node_index_.contains(diamond); }
+  // True when `diamond` is a diamond of this box whose tets lie above max depth
+  // and it is not yet split (its ancestors may still be unsplit).
+  bool can_split(Key diamond) const;
+  // True when split and none of its child diamonds is split.
+  bool can_merge(Key diamond) const;
+  // Depth of a diamond's tets; throws std::invalid_argument if `diamond` is
+  // not a diamond of this box.
+  DiamondInfo diamond_info(Key diamond) const;
+
+  // Splits `diamond` and, first, every unsplit ancestor (crack-free closure).
+  // Returns the number of diamonds split (0 if already split). Throws
+  // std::invalid_argument when the key is not a diamond of this box or its
+  // tets are at max depth. Events are appended to `log` if non-null.
+  int split(Key diamond, MeshChangeLog* log = nullptr);
+
+  // Merges a split diamond whose children are all unsplit. Throws
+  // std::invalid_argument otherwise.
+  void merge(Key diamond, MeshChangeLog* log = nullptr);
+
+  // --- Iteration -----------------------------------------------------------
+  template <class F>
+  void for_each_tet(F&& f) const {
+    for (TetId t = 0; t < tets_.size(); ++t)
+      if (tets_[t].depth != Tet::kDeadDepth) f(t, tets_[t]);
+  }
+  template <class F>
+  void for_each_node(F&& f) const {
+    for (NodeId n = 0; n < nodes_.size(); ++n)
+      if (nodes_[n].alive) f(n, nodes_[n]);
+  }
+  template <class F>
+  void for_each_edge(F&& f) const {
+    for (EdgeId e = 0; e < edges_.size(); ++e)
+      if (edges_[e].six_volume > 0) f(e, edges_[e]);
+  }
+
+  // Bytes held by the mesh's pools and indices (capacity, not just size).
+  std::size_t memory_bytes() const;
+  // Pre-sizes pools and indices for about `tets` leaf tets.
+  void reserve_tets(std::size_t tets);
+
+ private:
+  int split_recursive(Key diamond, const DiamondInfo& info, MeshChangeLog* log);
+  void bisect(TetId t, NodeId z, MeshChangeLog* log);
+  TetId add_tet(const std::array<NodeId, 4>& v, int depth, std::uint64_t child_path, MeshChangeLog* log);
+  void remove_tet(TetId t, MeshChangeLog* log);
+  NodeId add_node(const Vec3i& p, NodeId edge_a, NodeId edge_b, int depth, MeshChangeLog* log);
+  void remove_node(NodeId id, MeshChangeLog* log);
+  void add_edge_share(NodeId a, NodeId b, std::int64_t six_volume, MeshChangeLog* log);
+  void remove_edge_share(NodeId a, NodeId b, std::int64_t six_volume, MeshChangeLog* log);
+  bool orientation_negative(const std::array<NodeId, 4>& v) const;
+
+  BoxSpec spec_;
+  LatticeDomain domain_;
+  double lattice_unit_m_ = 0.0;
+  std::int64_t coarse_six_volume_ = 0;
+  std::int64_t total_six_volume_ = 0;
+  std::size_t coarse_node_count_ = 0;
+
+  std::vector<Node> nodes_;
+  std::vector<Edge> edges_;
+  std::vector<Tet> tets_;
+  std::vector<NodeId> free_nodes_;
+  std::vector<EdgeId> free_edges_;
+  std::vector<TetId> free_tets_;
+  util::KeyIndexMap node_index_;
+  util::KeyIndexMap edge_index_;
+  std::size_t node_count_ = 0;
+  std::size_t edge_count_ = 0;
+  std::size_t tet_count_ = 0;
+};
+
+// Refinement tag of a tet at `depth`: the refinement edge is (v0, v_tag).
+constexpr int maubach_tag(int depth) { return 3 - depth % 3; }
+
+}  // namespace tissue::mesh
