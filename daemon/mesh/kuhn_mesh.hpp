@@ -55,6 +55,9 @@ struct Edge {
 struct Tet {
   // Maubach order: refinement edge is (v[0], v[k]) with k = 3 - depth % 3.
   std::array<NodeId, 4> v{};
+  // Its six edges in kTetEdgeSlots order. Stored (24 bytes) because finding
+  // them again by hash was most of the cost of a bisection.
+  std::array<EdgeId, 6> e{};
   TetId next_in_diamond = kInvalidId;
   // Bit i = 1 when the ancestor at depth i+1 (or this tet, i = depth-1) was
   // the second child of its parent. Merge needs it to rebuild parents in the
@@ -156,12 +159,17 @@ class KuhnMesh {
  private:
   int split_recursive(Key diamond, const DiamondInfo& info, MeshChangeLog* log);
   void bisect(TetId t, NodeId z, MeshChangeLog* log);
+  void unbisect(TetId first, TetId second, const std::array<NodeId, 4>& parent, NodeId z, MeshChangeLog* log);
+  // Full-cost add/remove (six edge shares each): construction only.
   TetId add_tet(const std::array<NodeId, 4>& v, int depth, std::uint64_t child_path, MeshChangeLog* log);
-  void remove_tet(TetId t, MeshChangeLog* log);
+  // Tet records without edge-share bookkeeping; `edges` in kTetEdgeSlots order.
+  TetId link_tet(const std::array<NodeId, 4>& v, int depth, std::uint64_t child_path,
+                 const std::array<EdgeId, 6>& edges, MeshChangeLog* log);
+  void unlink_tet(TetId t, MeshChangeLog* log);
+  void change_edge_share(EdgeId e, std::int64_t delta, MeshChangeLog* log);
   NodeId add_node(const Vec3i& p, NodeId edge_a, NodeId edge_b, int depth, MeshChangeLog* log);
   void remove_node(NodeId id, MeshChangeLog* log);
-  void add_edge_share(NodeId a, NodeId b, std::int64_t six_volume, MeshChangeLog* log);
-  void remove_edge_share(NodeId a, NodeId b, std::int64_t six_volume, MeshChangeLog* log);
+  EdgeId add_edge_share(NodeId a, NodeId b, std::int64_t six_volume, MeshChangeLog* log);
   bool orientation_negative(const std::array<NodeId, 4>& v) const;
 
   BoxSpec spec_;

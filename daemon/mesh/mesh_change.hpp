@@ -26,7 +26,14 @@ struct MeshEvent {
   // Tets: the four vertices (Maubach order). Edges: endpoints (a, b).
   // Nodes: endpoints of the edge the node splits (its "parents").
   std::array<NodeId, 4> nodes{kInvalidId, kInvalidId, kInvalidId, kInvalidId};
+  // Tets only: ids of the six edges (vertex pairs 01 02 03 12 13 23) as they
+  // are at this event: a removed tet is logged before any of its edges die,
+  // an added tet after its edges exist.
+  std::array<EdgeId, 6> edges{kInvalidId, kInvalidId, kInvalidId, kInvalidId, kInvalidId, kInvalidId};
 };
+
+// Vertex slots of the six tet edges, in MeshEvent::edges order.
+inline constexpr std::array<std::array<int, 2>, 6> kTetEdgeSlots{{{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}}};
 
 struct MeshChangeLog {
   std::vector<MeshEvent> events;

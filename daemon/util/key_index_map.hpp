@@ -2,9 +2,9 @@
 //
 // Why not std::unordered_map: the mesh holds millions of node and edge keys and
 // the benchmark budget is <= 200 bytes per leaf tet. A node-based map spends
-// ~40 bytes and one allocation per entry; this one spends 12 bytes per slot
-// (keys and values in separate arrays) at <= 7/8 load, with no per-entry
-// allocation. Linear probing with backward-shift deletion keeps lookups short
+// ~40 bytes and one allocation per entry; this one spends 16 bytes per slot
+// (key and value side by side, so a lookup costs one cache miss, not two) at
+// <= 3/4 load, with no per-entry allocation. Linear probing with backward-shift deletion keeps lookups short
 // without tombstones, so long split/merge churn does not degrade it.
 #pragma once
 
@@ -25,9 +25,9 @@ class KeyIndexMap {
   std::uint32_t find(std::uint64_t key) const {
     if (size_ == 0) return kNotFound;
     for (std::size_t slot = home(key);; slot = (slot + 1) & mask_) {
-      const std::uint64_t k = keys_[slot];
-      if (k == key) return values_[slot];
-      if (k == kEmptyKey) return kNotFound;
+      const Slot& s = slots_[slot];
+      if (s.key == key) return s.value;
+      if (s.key == kEmptyKey) return kNotFound;
     }
   }
 
@@ -44,17 +44,15 @@ class KeyIndexMap {
   void clear();
 
   std::size_t size() const { return size_; }
-  std::size_t slot_count() const { return keys_.size(); }
-  std::size_t memory_bytes() const {
-    return keys_.capacity() * sizeof(std::uint64_t) + values_.capacity() * sizeof(std::uint32_t);
-  }
+  std::size_t slot_count() const { return slots_.size(); }
+  std::size_t memory_bytes() const { return slots_.capacity() * sizeof(Slot); }
 
   // Calls f(key, value) for every entry, in slot order (deterministic for a
   // given insertion/erase history, but not sorted).
   template <class F>
   void for_each(F&& f) const {
-    for (std::size_t i = 0; i < keys_.size(); ++i)
-      if (keys_[i] != kEmptyKey) f(keys_[i], values_[i]);
+    for (const Slot& s : slots_)
+      if (s.key != kEmptyKey) f(s.key, s.value);
   }
 
  private:
@@ -71,8 +69,11 @@ class KeyIndexMap {
   std::size_t home(std::uint64_t key) const { return static_cast<std::size_t>(mix(key)) & mask_; }
   void rehash(std::size_t new_slot_count);
 
-  std::vector<std::uint64_t> keys_;
-  std::vector<std::uint32_t> values_;
+  struct Slot {
+    std::uint64_t key;
+    std::uint32_t value;
+  };
+  std::vector<Slot> slots_;
   std::size_t mask_ = 0;
   std::size_t size_ = 0;
 };

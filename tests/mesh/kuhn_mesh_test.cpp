@@ -294,9 +294,11 @@ TEST(KuhnMesh, ChangeLogReplaysToTheLiveMesh) {
         case MeshEvent::Kind::kTetAdded:
           ASSERT_TRUE(tets.insert(ev.id).second);
           for (NodeId v : ev.nodes) ASSERT_TRUE(nodes.count(v));
+          for (EdgeId e : ev.edges) ASSERT_TRUE(edges.count(e)) << "an added tet's edges exist when it is logged";
           break;
         case MeshEvent::Kind::kTetRemoved:
           ASSERT_EQ(tets.erase(ev.id), 1u);
+          for (EdgeId e : ev.edges) ASSERT_TRUE(edges.count(e)) << "a removed tet is logged before its edges die";
           break;
       }
     }

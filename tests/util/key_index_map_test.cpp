@@ -52,11 +52,11 @@ TEST(KeyIndexMap, RejectsTheReservedKeyAndHandlesEmpty) {
   EXPECT_FALSE(map.contains(0));
 }
 
-TEST(KeyIndexMap, StaysUnderSevenEighthsLoad) {
+TEST(KeyIndexMap, StaysUnderThreeQuartersLoad) {
   KeyIndexMap map;
   for (std::uint32_t i = 0; i < 100000; ++i) map.insert(std::uint64_t{i} * 2654435761u, i);
-  EXPECT_LE(map.size() * 8, map.slot_count() * 7);
-  EXPECT_LE(map.memory_bytes(), 16 * map.slot_count());
+  EXPECT_LE(map.size() * 4, map.slot_count() * 3);
+  EXPECT_EQ(map.memory_bytes(), 16 * map.slot_count());
 }
 
 }  // namespace
