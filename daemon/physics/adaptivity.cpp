@@ -1,0 +1,67 @@
+#include "physics/adaptivity.hpp"
+
+#include <algorithm>
+#include <tuple>
+
+#include "physics/forces.hpp"
+
+namespace tissue::physics {
+
+double Adaptivity::measure(const Body& body, TetId t) const {
+  return spec_.criterion == scene::RefineCriterion::kStretch ? max_edge_strain(body, t)
+                                                             : strain_energy_density_Pa(body, t);
+}
+
+double Adaptivity::refine_threshold() const {
+  return spec_.criterion == scene::RefineCriterion::kStretch ? spec_.stretch_ratio - 1.0 : spec_.refine_threshold_Pa;
+}
+
+AdaptStats Adaptivity::adapt(Body& body) {
+  AdaptStats stats;
+  const mesh::KuhnMesh& mesh = body.mesh();
+  const double refine_above = refine_threshold();
+  const double merge_below = simplify_threshold();
+  node_max_.assign(body.x_m.size(), 0.0);
+  refine_.clear();
+  mesh.for_each_tet([&](TetId t, const mesh::Tet& tet) {
+    const double m = measure(body, t);
+    for (NodeId n : tet.v) node_max_[n] = std::max(node_max_[n], m);
+    if (m > refine_above && tet.depth < spec_.max_depth) refine_.emplace_back(-m, mesh.diamond_of(t));
+  });
+
+  // Most strained first; each diamond once.
+  std::sort(refine_.begin(), refine_.end());
+  int budget = spec_.max_ops_per_step;
+  for (std::size_t i = 0; i < refine_.size() && budget > 0; ++i) {
+    const mesh::Key d = refine_[i].second;
+    if (!mesh.can_split(d)) continue;  // split already (closure of an earlier one) or at max depth
+    const int n = body.split(d);
+    stats.splits += n;
+    budget -= n;
+  }
+
+  // Simplify the relaxed regions, finest diamonds first. Nodes created in
+  // this pass are too young to merge, so refine and merge never fight.
+  merge_.clear();
+  const double tol = spec_.midpoint_tolerance;
+  mesh.for_each_node([&](NodeId z, const mesh::Node& node) {
+    if (node.edge_a == mesh::kInvalidId || node.depth < spec_.min_depth) return;
+    if (body.step_index - body.changed_step[z] < spec_.min_age_steps) return;
+    if (z >= node_max_.size() || node_max_[z] >= merge_below) return;
+    const Vec3 mid = 0.5 * (body.x_m[node.edge_a] + body.x_m[node.edge_b]);
+    const double length = (body.rest_m[node.edge_b] - body.rest_m[node.edge_a]).norm();
+    if ((body.x_m[z] - mid).norm() >= tol * length) return;
+    merge_.emplace_back(-static_cast<int>(node.depth), node_max_[z], mesh.node_key(z));
+  });
+  std::sort(merge_.begin(), merge_.end());
+  for (std::size_t i = 0; i < merge_.size() && budget > 0; ++i) {
+    const mesh::Key d = std::get<2>(merge_[i]);
+    if (!mesh.can_merge(d)) continue;
+    body.merge(d);
+    ++stats.merges;
+    --budget;
+  }
+  return stats;
+}
+
+}  // namespace tissue::physics

@@ -1,0 +1,42 @@
+// Adaptation of the mesh to the deformation (seed paper §3.1, 3.2, 3.4, with
+// the corrections of NUMERICS.md §2):
+// - refine: split the diamond of every tet whose strain-energy density
+//   exceeds Th (or whose worst edge strain exceeds stretch_ratio − 1);
+// - simplify, with hysteresis: merge a split diamond when it can merge, every
+//   tet around its node is below Th · simplify_factor, its node sits within
+//   midpoint_tolerance · L of its edge's midpoint (merging then moves nothing
+//   visibly), and it has not changed for min_age_steps;
+// - a budget of split+merge operations per pass keeps a pass's cost bounded.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "physics/body.hpp"
+
+namespace tissue::physics {
+
+struct AdaptStats {
+  int splits = 0;  // diamonds split, closure included
+  int merges = 0;
+};
+
+class Adaptivity {
+ public:
+  explicit Adaptivity(const scene::AdaptivitySpec& spec) : spec_(spec) {}
+  // One adaptation pass over the body.
+  AdaptStats adapt(Body& body);
+  // The density measure the criterion uses for a tet: Pa for strain energy,
+  // dimensionless strain for stretch.
+  double measure(const Body& body, TetId t) const;
+  double refine_threshold() const;
+  double simplify_threshold() const { return refine_threshold() * spec_.simplify_factor; }
+
+ private:
+  scene::AdaptivitySpec spec_;
+  std::vector<double> node_max_;                           // per node: max measure of incident tets
+  std::vector<std::pair<double, mesh::Key>> refine_;       // (−measure, diamond)
+  std::vector<std::tuple<int, double, mesh::Key>> merge_;  // (−depth, measure, diamond)
+};
+
+}  // namespace tissue::physics

@@ -1,0 +1,255 @@
+#include "physics/body.hpp"
+
+#include <cmath>
+
+#include "mesh/refine_ops.hpp"
+#include "physics/spring_law.hpp"
+
+namespace tissue::physics {
+
+namespace {
+
+mesh::BoxSpec box_of(const scene::Scene& s) {
+  const auto& a = s.adaptivity;
+  // Without adaptivity the mesh never goes deeper than its starting depth.
+  const int max_depth = a.enabled ? a.max_depth : a.min_depth;
+  return {s.object.cubes[0], s.object.cubes[1], s.object.cubes[2], s.object.cube_size_m, max_depth};
+}
+
+std::int64_t lattice_length2(const mesh::KuhnMesh& m, NodeId a, NodeId b) {
+  const mesh::Vec3i& p = m.node(a).lattice;
+  const mesh::Vec3i& q = m.node(b).lattice;
+  std::int64_t s = 0;
+  for (int i = 0; i < 3; ++i) s += (p[i] - q[i]) * (p[i] - q[i]);
+  return s;
+}
+
+}  // namespace
+
+Body::Body(const scene::Scene& scene) : scene_(scene), mesh_(box_of(scene)) {
+  if (scene.adaptivity.min_depth > 0) mesh::refine_uniform(mesh_, scene.adaptivity.min_depth);
+  resize_to_mesh();
+  mesh_.for_each_node([&](NodeId n, const mesh::Node&) {
+    const auto p = mesh_.node_position_m(n);
+    rest_m[n] = Vec3(p[0], p[1], p[2]);
+    x_m[n] = rest_m[n];
+    v_m_per_s[n].setZero();
+    classify_node(n);
+  });
+  rebuild_parameters();
+}
+
+void Body::resize_to_mesh() {
+  const std::size_t nodes = mesh_.node_capacity();
+  if (x_m.size() < nodes) {
+    x_m.resize(nodes, Vec3::Zero());
+    v_m_per_s.resize(nodes, Vec3::Zero());
+    rest_m.resize(nodes, Vec3::Zero());
+    mass_kg.resize(nodes, 0.0);
+    inv_mass_per_kg.resize(nodes, 0.0);
+    kind.resize(nodes, NodeKind::kDead);
+    prescribed_index.resize(nodes, -1);
+    changed_step.resize(nodes, 0);
+    node_touched_.resize(nodes, 0);
+  }
+  const std::size_t edges = mesh_.edge_capacity();
+  if (edge_a.size() < edges) {
+    edge_a.resize(edges, 0);
+    edge_b.resize(edges, 0);
+    rest_length_m.resize(edges, 1.0);  // never 0: a dead edge must not divide by zero
+    weighted_volume_m3.resize(edges, 0.0);
+    stiffness_N_per_m.resize(edges, 0.0);
+    damping_N_s_per_m.resize(edges, 0.0);
+    edge_touched_.resize(edges, 0);
+  }
+}
+
+void Body::classify_node(NodeId n) {
+  // Regions are in metres; lattice positions are exact multiples of the unit,
+  // so a tolerance far below one lattice unit decides boundary cases.
+  const double tol = 1e-6 * mesh_.lattice_unit_m();
+  const scene::Vec3 p{rest_m[n][0], rest_m[n][1], rest_m[n][2]};
+  kind[n] = NodeKind::kFree;
+  prescribed_index[n] = -1;
+  for (const auto& f : scene_.fixed)
+    if (f.region.contains(p, tol)) kind[n] = NodeKind::kFixed;
+  if (kind[n] == NodeKind::kFree) {
+    for (std::size_t i = 0; i < scene_.prescribed.size(); ++i)
+      if (scene_.prescribed[i].region.contains(p, tol)) {
+        kind[n] = NodeKind::kPrescribed;
+        prescribed_index[n] = static_cast<std::int32_t>(i);
+        break;
+      }
+  }
+}
+
+std::array<double, 6> Body::tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const {
+  // Lattice coordinates of a node stay readable after it dies (merge removes
+  // its node last, and no mesh operation re-adds a node it removed), so this
+  // also serves removed tets replayed from a change log.
+  const double unit = mesh_.lattice_unit_m();
+  const double volume_m3 = static_cast<double>(mesh_.six_volume_at_depth(depth)) * unit * unit * unit / 6.0;
+  std::array<std::int64_t, 6> len2{};
+  std::int64_t longest2 = 0;
+  for (int i = 0; i < 6; ++i) {
+    len2[i] = lattice_length2(mesh_, v[mesh::kTetEdgeSlots[i][0]], v[mesh::kTetEdgeSlots[i][1]]);
+    longest2 = std::max(longest2, len2[i]);
+  }
+  std::array<double, 6> shares{};
+  for (int i = 0; i < 6; ++i) shares[i] = edge_weight(scene_.material.stiffness, depth, len2[i], longest2) * volume_m3;
+  return shares;
+}
+
+void Body::refresh_edge(EdgeId e) {
+  const NodeId a = edge_a[e], b = edge_b[e];
+  stiffness_N_per_m[e] =
+      spring_stiffness_N_per_m(scene_.material.youngs_modulus_Pa, weighted_volume_m3[e], rest_length_m[e]);
+  damping_N_s_per_m[e] =
+      spring_damping_N_s_per_m(scene_.material, stiffness_N_per_m[e], mass_kg[a], mass_kg[b], rest_length_m[e]);
+}
+
+void Body::rebuild_parameters() {
+  resize_to_mesh();
+  std::fill(weighted_volume_m3.begin(), weighted_volume_m3.end(), 0.0);
+  std::fill(stiffness_N_per_m.begin(), stiffness_N_per_m.end(), 0.0);
+  std::fill(damping_N_s_per_m.begin(), damping_N_s_per_m.end(), 0.0);
+  const double unit = mesh_.lattice_unit_m();
+  mesh_.for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+    edge_a[e] = edge.a;
+    edge_b[e] = edge.b;
+    rest_length_m[e] = std::sqrt(static_cast<double>(lattice_length2(mesh_, edge.a, edge.b))) * unit;
+  });
+  mesh_.for_each_tet([&](TetId, const mesh::Tet& t) {
+    const auto shares = tet_edge_shares_m3(t.v, t.depth);
+    for (int i = 0; i < 6; ++i)
+      weighted_volume_m3[mesh_.find_edge(t.v[mesh::kTetEdgeSlots[i][0]], t.v[mesh::kTetEdgeSlots[i][1]])] += shares[i];
+  });
+  const double rho = scene_.material.density_kg_per_m3;
+  mesh_.for_each_node([&](NodeId n, const mesh::Node& node) {
+    mass_kg[n] = rho * static_cast<double>(node.six_volume) * unit * unit * unit / 24.0;  // eq. (2)
+    inv_mass_per_kg[n] = kind[n] == NodeKind::kFree ? 1.0 / mass_kg[n] : 0.0;
+  });
+  mesh_.for_each_edge([&](EdgeId e, const mesh::Edge&) { refresh_edge(e); });
+}
+
+int Body::split(mesh::Key diamond) {
+  log_.clear();
+  const int n = mesh_.split(diamond, &log_);
+  apply_log(log_);
+  return n;
+}
+
+void Body::merge(mesh::Key diamond) {
+  const NodeId z = mesh_.find_node(diamond);
+  if (z != mesh::kInvalidId && kind[z] == NodeKind::kFree) {
+    // Half of the vanishing node's momentum to each end of its edge: momentum
+    // is conserved and kinetic energy can only drop.
+    const NodeId ends[2] = {mesh_.node(z).edge_a, mesh_.node(z).edge_b};
+    const Vec3 half_momentum = 0.5 * mass_kg[z] * v_m_per_s[z];
+    for (NodeId e : ends) {
+      if (kind[e] != NodeKind::kFree) continue;
+      const double m = mass_kg[e] + 0.5 * mass_kg[z];
+      v_m_per_s[e] = (mass_kg[e] * v_m_per_s[e] + half_momentum) / m;
+    }
+  }
+  log_.clear();
+  mesh_.merge(diamond, &log_);
+  apply_log(log_);
+}
+
+void Body::apply_log(const mesh::MeshChangeLog& log) {
+  resize_to_mesh();
+  const double unit = mesh_.lattice_unit_m();
+  auto touch_edge = [&](EdgeId e) {
+    if (!edge_touched_[e]) {
+      edge_touched_[e] = 1;
+      touched_edges_.push_back(e);
+    }
+  };
+  auto touch_node = [&](NodeId n) {
+    if (!node_touched_[n]) {
+      node_touched_[n] = 1;
+      touched_nodes_.push_back(n);
+    }
+  };
+  for (const mesh::MeshEvent& ev : log.events) {
+    switch (ev.kind) {
+      case mesh::MeshEvent::Kind::kNodeAdded: {
+        const NodeId z = ev.id, a = ev.nodes[0], b = ev.nodes[1];
+        const auto p = mesh_.node_position_m(z);
+        rest_m[z] = Vec3(p[0], p[1], p[2]);
+        x_m[z] = 0.5 * (x_m[a] + x_m[b]);
+        v_m_per_s[z] = 0.5 * (v_m_per_s[a] + v_m_per_s[b]);
+        mass_kg[z] = 0.0;
+        classify_node(z);
+        changed_step[z] = step_index;
+        touch_node(z);
+        break;
+      }
+      case mesh::MeshEvent::Kind::kNodeRemoved:
+        kind[ev.id] = NodeKind::kDead;
+        mass_kg[ev.id] = 0.0;
+        inv_mass_per_kg[ev.id] = 0.0;
+        v_m_per_s[ev.id].setZero();
+        break;
+      case mesh::MeshEvent::Kind::kEdgeAdded: {
+        const EdgeId e = ev.id;
+        edge_a[e] = ev.nodes[0];
+        edge_b[e] = ev.nodes[1];
+        rest_length_m[e] = std::sqrt(static_cast<double>(lattice_length2(mesh_, ev.nodes[0], ev.nodes[1]))) * unit;
+        weighted_volume_m3[e] = 0.0;
+        touch_edge(e);
+        break;
+      }
+      case mesh::MeshEvent::Kind::kEdgeRemoved: {
+        const EdgeId e = ev.id;
+        edge_a[e] = edge_b[e] = 0;
+        rest_length_m[e] = 1.0;
+        weighted_volume_m3[e] = stiffness_N_per_m[e] = damping_N_s_per_m[e] = 0.0;
+        break;
+      }
+      case mesh::MeshEvent::Kind::kTetAdded:
+      case mesh::MeshEvent::Kind::kTetRemoved: {
+        const double sign = ev.kind == mesh::MeshEvent::Kind::kTetAdded ? 1.0 : -1.0;
+        const auto shares = tet_edge_shares_m3(ev.nodes, ev.depth);
+        for (int i = 0; i < 6; ++i) {
+          weighted_volume_m3[ev.edges[i]] += sign * shares[i];
+          touch_edge(ev.edges[i]);
+        }
+        for (NodeId n : ev.nodes) touch_node(n);
+        break;
+      }
+    }
+  }
+  const double rho = scene_.material.density_kg_per_m3;
+  for (NodeId n : touched_nodes_) {
+    node_touched_[n] = 0;
+    if (!mesh_.node_alive(n)) continue;
+    mass_kg[n] = rho * static_cast<double>(mesh_.node(n).six_volume) * unit * unit * unit / 24.0;
+    inv_mass_per_kg[n] = kind[n] == NodeKind::kFree ? 1.0 / mass_kg[n] : 0.0;
+  }
+  touched_nodes_.clear();
+  for (EdgeId e : touched_edges_) {
+    edge_touched_[e] = 0;
+    if (mesh_.edge_alive(e)) refresh_edge(e);
+  }
+  touched_edges_.clear();
+  // The paper's damper depends on both end masses, which change for edges
+  // no event names: refresh them all (the "paper" law is for comparison).
+  if (scene_.material.damping == scene::DampingLaw::kPaper)
+    mesh_.for_each_edge([&](EdgeId e, const mesh::Edge&) { refresh_edge(e); });
+}
+
+double Body::total_mass_kg() const {
+  double m = 0.0;
+  mesh_.for_each_node([&](NodeId n, const mesh::Node&) { m += mass_kg[n]; });
+  return m;
+}
+
+Vec3 Body::momentum() const {
+  Vec3 p = Vec3::Zero();
+  mesh_.for_each_node([&](NodeId n, const mesh::Node&) { p += mass_kg[n] * v_m_per_s[n]; });
+  return p;
+}
+
+}  // namespace tissue::physics

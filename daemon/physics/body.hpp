@@ -1,0 +1,87 @@
+// The deformable body: the adaptive mesh plus the mass-spring state that lives
+// on it (the mutable "context"; the scene is the immutable "system").
+//
+// Arrays are indexed by mesh ids and sized to the mesh pools, so a split or
+// merge updates only the entries it touches. Dead edges carry zero stiffness
+// and damping, dead and kinematic nodes zero inverse mass: the force and
+// solver loops run over the pools without branches on liveness.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+#include "mesh/kuhn_mesh.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue::physics {
+
+using Vec3 = Eigen::Vector3d;
+using mesh::EdgeId;
+using mesh::NodeId;
+using mesh::TetId;
+
+enum class NodeKind : std::uint8_t { kFree, kFixed, kPrescribed, kDead };
+
+class Body {
+ public:
+  // Builds the coarse mesh of the scene's object, refined uniformly to the
+  // adaptivity's min_depth when adaptivity is on. Throws std::invalid_argument
+  // for a box the lattice cannot hold.
+  explicit Body(const scene::Scene& scene);
+
+  const mesh::KuhnMesh& mesh() const { return mesh_; }
+  const scene::Scene& scene() const { return scene_; }
+
+  // Splits / merges one diamond (closure included for split) and carries the
+  // state across: a new node takes its edge's mean position and velocity (a
+  // split adds no momentum or energy); a merged node gives half its momentum
+  // to each end of its edge. Returns diamonds split / 1 for merge.
+  int split(mesh::Key diamond);
+  void merge(mesh::Key diamond);
+
+  // Per node (index = NodeId).
+  std::vector<Vec3> x_m;                // position
+  std::vector<Vec3> v_m_per_s;          // velocity
+  std::vector<Vec3> rest_m;             // rest position (from the lattice, exact)
+  std::vector<double> mass_kg;          // eq. (2)
+  std::vector<double> inv_mass_per_kg;  // 0 for fixed, prescribed and dead nodes
+  std::vector<NodeKind> kind;
+  std::vector<std::int32_t> prescribed_index;  // into scene.prescribed, or -1
+  std::vector<std::int64_t> changed_step;      // step at which a split created the node
+
+  // Per edge (index = EdgeId); dead edges: a = b = 0, k = c = 0.
+  std::vector<NodeId> edge_a, edge_b;
+  std::vector<double> rest_length_m;
+  std::vector<double> weighted_volume_m3;  // Σ w V of incident tets, eq. (3)
+  std::vector<double> stiffness_N_per_m;
+  std::vector<double> damping_N_s_per_m;
+
+  // Step counter the adaptivity stamps new nodes with.
+  std::int64_t step_index = 0;
+
+  // Recomputes every mass, spring and damper from the mesh alone. The
+  // incremental updates must agree with it (a test checks that).
+  void rebuild_parameters();
+
+  // Total mass [kg] and momentum [kg m/s] of all nodes.
+  double total_mass_kg() const;
+  Vec3 momentum() const;
+
+ private:
+  void apply_log(const mesh::MeshChangeLog& log);
+  void resize_to_mesh();
+  void classify_node(NodeId n);
+  // Σ w V share [m³] a tet gives each of its edges (kTetEdgeSlots order).
+  std::array<double, 6> tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const;
+  void refresh_edge(EdgeId e);
+
+  scene::Scene scene_;
+  mesh::KuhnMesh mesh_;
+  mesh::MeshChangeLog log_;            // reused: no allocation in steady state
+  std::vector<EdgeId> touched_edges_;  // reused scratch
+  std::vector<NodeId> touched_nodes_;
+  std::vector<std::uint8_t> edge_touched_, node_touched_;
+};
+
+}  // namespace tissue::physics

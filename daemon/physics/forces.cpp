@@ -1,0 +1,100 @@
+#include "physics/forces.hpp"
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+namespace tissue::physics {
+
+SpringFrame spring_frame(const Body& body, EdgeId e) {
+  const NodeId a = body.edge_a[e], b = body.edge_b[e];
+  Vec3 d = body.x_m[b] - body.x_m[a];
+  const double l = d.norm();
+  if (l > 1e-9 * body.rest_length_m[e]) return {d / l, l};
+  d = body.rest_m[b] - body.rest_m[a];
+  const double rest = d.norm();
+  return {rest > 0.0 ? Vec3(d / rest) : Vec3::Zero(), l};
+}
+
+void add_spring_forces(const Body& body, std::vector<Vec3>& f, bool with_dampers) {
+  const std::size_t edges = body.stiffness_N_per_m.size();
+  for (EdgeId e = 0; e < edges; ++e) {
+    const double k = body.stiffness_N_per_m[e];
+    if (k == 0.0) continue;  // dead edge slot
+    const NodeId a = body.edge_a[e], b = body.edge_b[e];
+    const SpringFrame s = spring_frame(body, e);
+    const double closing_speed = with_dampers ? (body.v_m_per_s[b] - body.v_m_per_s[a]).dot(s.direction) : 0.0;
+    const Vec3 force_on_a =
+        (k * (s.length_m - body.rest_length_m[e]) + body.damping_N_s_per_m[e] * closing_speed) * s.direction;
+    f[a] += force_on_a;
+    f[b] -= force_on_a;
+  }
+}
+
+void apply_spring_dampers_implicitly(Body& body, double h_s) {
+  const std::size_t edges = body.damping_N_s_per_m.size();
+  for (EdgeId e = 0; e < edges; ++e) {
+    const double c = body.damping_N_s_per_m[e];
+    if (c == 0.0) continue;
+    const NodeId a = body.edge_a[e], b = body.edge_b[e];
+    const double wa = body.inv_mass_per_kg[a], wb = body.inv_mass_per_kg[b];
+    const double w = wa + wb;
+    if (w == 0.0) continue;  // both ends kinematic
+    const Vec3 d = spring_frame(body, e).direction;
+    const double u = (body.v_m_per_s[b] - body.v_m_per_s[a]).dot(d);
+    const double impulse = (u / (1.0 + h_s * c * w) - u) / w;  // changes u by exactly that
+    body.v_m_per_s[a] -= wa * impulse * d;
+    body.v_m_per_s[b] += wb * impulse * d;
+  }
+}
+
+double elastic_energy_J(const Body& body) {
+  double energy = 0.0;
+  body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
+    const double stretch = (body.x_m[body.edge_b[e]] - body.x_m[body.edge_a[e]]).norm() - body.rest_length_m[e];
+    energy += 0.5 * body.stiffness_N_per_m[e] * stretch * stretch;
+  });
+  return energy;
+}
+
+double kinetic_energy_J(const Body& body) {
+  double energy = 0.0;
+  body.mesh().for_each_node(
+      [&](NodeId n, const mesh::Node&) { energy += 0.5 * body.mass_kg[n] * body.v_m_per_s[n].squaredNorm(); });
+  return energy;
+}
+
+double strain_energy_density_Pa(const Body& body, TetId t) {
+  const auto& v = body.mesh().tet(t).v;
+  double sum = 0.0;
+  for (const auto& slots : mesh::kTetEdgeSlots) {
+    const NodeId a = v[slots[0]], b = v[slots[1]];
+    const double rest = (body.rest_m[b] - body.rest_m[a]).norm();
+    const double strain = (body.x_m[b] - body.x_m[a]).norm() / rest - 1.0;
+    sum += strain * strain;
+  }
+  return 0.5 * body.scene().material.youngs_modulus_Pa * sum;
+}
+
+std::size_t inverted_tet_count(const Body& body) {
+  std::size_t inverted = 0;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
+    const auto v = body.mesh().oriented_vertices(t);
+    const Vec3 a = body.x_m[v[1]] - body.x_m[v[0]], b = body.x_m[v[2]] - body.x_m[v[0]],
+               c = body.x_m[v[3]] - body.x_m[v[0]];
+    if (a.dot(b.cross(c)) <= 0.0) ++inverted;
+  });
+  return inverted;
+}
+
+double max_edge_strain(const Body& body, TetId t) {
+  const auto& v = body.mesh().tet(t).v;
+  double worst = 0.0;
+  for (const auto& slots : mesh::kTetEdgeSlots) {
+    const NodeId a = v[slots[0]], b = v[slots[1]];
+    const double rest = (body.rest_m[b] - body.rest_m[a]).norm();
+    worst = std::max(worst, std::abs((body.x_m[b] - body.x_m[a]).norm() / rest - 1.0));
+  }
+  return worst;
+}
+
+}  // namespace tissue::physics

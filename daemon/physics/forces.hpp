@@ -1,0 +1,51 @@
+// Internal forces and energies of the mass-spring body (MuJoCo's "passive"
+// stage): springs along every mesh edge with a damper in parallel.
+#pragma once
+
+#include <vector>
+
+#include "physics/body.hpp"
+
+namespace tissue::physics {
+
+// Unit direction a→b of a spring and its length; for a spring squashed below
+// 1e-9 of its rest length (collapsed nodes) the rest direction stands in, so
+// no force ever divides by zero.
+struct SpringFrame {
+  Vec3 direction;
+  double length_m;
+};
+SpringFrame spring_frame(const Body& body, EdgeId e);
+
+// Adds spring forces [N] of every live edge into `f` (indexed by node; must
+// already hold body.x_m.size() entries); with `with_dampers` also the
+// dampers' forces at the current velocities.
+void add_spring_forces(const Body& body, std::vector<Vec3>& f, bool with_dampers = true);
+
+// Applies every spring damper implicitly for a time h, one spring at a time
+// (a Gauss–Seidel sweep in edge order): the relative velocity along the
+// spring decays as u / (1 + h c (1/m_a + 1/m_b)), by equal and opposite
+// impulses. Momentum is conserved, kinetic energy never grows, and there is
+// no step-size limit however stiff the damping. One sweep relaxes each spring
+// locally, so low modes get less than their Rayleigh ratio: the projective
+// integrator uses it (its own numerical dissipation dominates anyway).
+void apply_spring_dampers_implicitly(Body& body, double h_s);
+
+// Σ ½ k (l − L)² over live edges [J].
+double elastic_energy_J(const Body& body);
+// Σ ½ m v² over live nodes [J].
+double kinetic_energy_J(const Body& body);
+
+// Per-tet strain-energy density [Pa] with the square the paper's eq. (1)
+// omits: D_T = (1/V_T) Σ_e ½ k_e^T (l_e − L_e)² with k_e^T = E V_T / L_e², i.e.
+// (E/2) Σ_e ε_e²: level independent, so one threshold serves every depth.
+double strain_energy_density_Pa(const Body& body, TetId t);
+// Tets whose current signed volume is <= 0 (inverted or flat). Springs are
+// blind to inversion (a mirrored tet has no spring energy), so this count is
+// reported, not corrected.
+std::size_t inverted_tet_count(const Body& body);
+
+// Largest |l/L − 1| over a tet's edges (the stretch criterion).
+double max_edge_strain(const Body& body, TetId t);
+
+}  // namespace tissue::physics

@@ -1,0 +1,55 @@
+// The integrator ladder users choose from (scene: integrator.kind):
+//   explicit   — symplectic Euler with automatic sub-steps below a safe
+//                stable bound; refuses when more than max_substeps are needed.
+//   implicit   — backward Euler (Baraff & Witkin 1998) with the clamped spring
+//                Hessian (Choi & Ko 2002), matrix-free Jacobi-PCG, warm start.
+//   projective — Liu et al. 2013 local/global springs with a prefactored
+//                system, refactored once after each adaptation batch.
+// Every integrator leaves the body untouched when a step fails (non-finite
+// state, refused sub-stepping), and says why.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "physics/body.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue::physics {
+
+struct StepOutcome {
+  bool ok = true;
+  std::string error;          // set when !ok
+  int substeps = 1;           // explicit
+  int solver_iterations = 0;  // implicit CG / projective local-global
+  double solver_residual = 0.0;
+};
+
+class Integrator {
+ public:
+  virtual ~Integrator() = default;
+  // Advances positions and velocities by dt_s under per-node external forces
+  // f_ext [N]. Kinematic nodes (inverse mass 0) move with their velocity.
+  virtual StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) = 0;
+  // The mesh changed (split/merge): drop cached bounds and factorizations.
+  virtual void mesh_changed() = 0;
+  virtual const char* name() const = 0;
+};
+
+std::unique_ptr<Integrator> make_integrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material);
+
+// Safe explicit step [s] from Gershgorin bounds on the mass-normalised
+// stiffness (ω² ≤ max_i 2 Σk / m_i, 0.57x the true limit on these meshes) and
+// spring damping (γ ≤ max_i 2 Σc / m_i): h ≤ (2/ω)(√(1+ζ²) − ζ), ζ = γ/(2ω).
+// Stiffness-proportional damping thus shrinks it (ζ = βω/2 at the highest
+// mode): heavily damped scenes belong on the implicit rung. Mass-proportional
+// damping is integrated implicitly and does not limit it.
+double explicit_stable_dt_s(const Body& body);
+
+// True when every live node's position and velocity is finite and below
+// 1e100 in magnitude: beyond that, squared lengths overflow and forces
+// silently vanish, so such a state counts as diverged.
+bool state_is_finite(const Body& body);
+
+}  // namespace tissue::physics

@@ -1,0 +1,140 @@
+#include <cmath>
+#include <sstream>
+
+#include "physics/forces.hpp"
+#include "physics/integrator_impl.hpp"
+
+namespace tissue::physics {
+
+ProjectiveIntegrator::ProjectiveIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material)
+    : spec_(spec), alpha_per_s_(material.rayleigh_alpha_per_s) {}
+
+void ProjectiveIntegrator::factor(const Body& body, double dt_s) {
+  // Global matrix M/h² + Σ_e k_e A_eᵀA_e over the free nodes (the same for x,
+  // y and z). Its pattern changes with every split/merge, so it is rebuilt
+  // and refactored once per adaptation batch, not per operation.
+  const std::size_t nodes = body.x_m.size();
+  dof_of_node_.assign(nodes, -1);
+  node_of_dof_.clear();
+  for (NodeId n = 0; n < nodes; ++n)
+    if (body.inv_mass_per_kg[n] != 0.0) {
+      dof_of_node_[n] = static_cast<int>(node_of_dof_.size());
+      node_of_dof_.push_back(n);
+    }
+  const int dofs = static_cast<int>(node_of_dof_.size());
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(static_cast<std::size_t>(dofs) + 4 * body.mesh().edge_count());
+  const double inv_h2 = 1.0 / (dt_s * dt_s);
+  for (int i = 0; i < dofs; ++i) triplets.emplace_back(i, i, body.mass_kg[node_of_dof_[i]] * inv_h2);
+  body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
+    const double k = body.stiffness_N_per_m[e];
+    const int a = dof_of_node_[body.edge_a[e]], b = dof_of_node_[body.edge_b[e]];
+    if (a >= 0) triplets.emplace_back(a, a, k);
+    if (b >= 0) triplets.emplace_back(b, b, k);
+    if (a >= 0 && b >= 0) {
+      triplets.emplace_back(a, b, -k);
+      triplets.emplace_back(b, a, -k);
+    }
+  });
+  Eigen::SparseMatrix<double> system(dofs, dofs);
+  system.setFromTriplets(triplets.begin(), triplets.end());
+  solver_.compute(system);
+  factor_valid_ = solver_.info() == Eigen::Success;
+  factored_dt_s_ = dt_s;
+}
+
+StepOutcome ProjectiveIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) {
+  StepOutcome out;
+  if (!factor_valid_ || factored_dt_s_ != dt_s) factor(body, dt_s);
+  if (!factor_valid_) {
+    out.ok = false;
+    out.error = "projective integrator: factorisation of the global system failed";
+    return out;
+  }
+  save_.save(body);
+  const std::size_t nodes = body.x_m.size();
+  const int dofs = static_cast<int>(node_of_dof_.size());
+  const double h = dt_s, inv_h2 = 1.0 / (h * h);
+  inertial_.resize(nodes);
+  x_prev_ = body.x_m;
+  // Inertial target y = x + h v + h² M⁻¹ f_ext; kinematic nodes move with
+  // their velocity and act as known positions in the global solve.
+  for (std::size_t n = 0; n < nodes; ++n)
+    inertial_[n] = body.x_m[n] + h * body.v_m_per_s[n] + h * h * body.inv_mass_per_kg[n] * f_ext_N[n];
+  // Start the local/global descent from whichever of y and x_n (kinematic
+  // nodes moved) has the lower objective ½|x − y|²_M / h² + E_el(x): next to
+  // a fixed face y can be hugely stretched in a stiff material, and a capped
+  // number of iterations would not recover from it.
+  auto objective = [&]() {
+    double inertia = 0.0;
+    for (std::size_t n = 0; n < nodes; ++n) inertia += body.mass_kg[n] * (body.x_m[n] - inertial_[n]).squaredNorm();
+    return 0.5 * inertia * inv_h2 + elastic_energy_J(body);
+  };
+  for (std::size_t n = 0; n < nodes; ++n)
+    if (body.inv_mass_per_kg[n] == 0.0) body.x_m[n] = inertial_[n];
+  const double from_current = objective();
+  for (std::size_t n = 0; n < nodes; ++n) body.x_m[n] = inertial_[n];
+  if (from_current < objective())
+    for (std::size_t n = 0; n < nodes; ++n)
+      if (body.inv_mass_per_kg[n] != 0.0) body.x_m[n] = x_prev_[n];
+  rhs_.resize(dofs, 3);
+  solution_.resize(dofs, 3);
+  const double tolerance_m = spec_.cg_tolerance * body.mesh().lattice_unit_m() * body.mesh().domain().coarse_cube();
+  int it = 0;
+  double change = INFINITY;
+  while (it < spec_.cg_max_iterations && change > tolerance_m) {
+    for (int i = 0; i < dofs; ++i)
+      rhs_.row(i) = (body.mass_kg[node_of_dof_[i]] * inv_h2 * inertial_[node_of_dof_[i]]).transpose();
+    // Local step: each spring's projection onto its rest length.
+    body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
+      const double k = body.stiffness_N_per_m[e];
+      const NodeId na = body.edge_a[e], nb = body.edge_b[e];
+      const SpringFrame s = spring_frame(body, e);
+      const Vec3 d = -body.rest_length_m[e] * s.direction;  // target for x_a − x_b
+      const int a = dof_of_node_[na], b = dof_of_node_[nb];
+      if (a >= 0) rhs_.row(a) += (k * d).transpose();
+      if (b >= 0) rhs_.row(b) -= (k * d).transpose();
+      if (a >= 0 && b < 0) rhs_.row(a) += (k * body.x_m[nb]).transpose();
+      if (b >= 0 && a < 0) rhs_.row(b) += (k * body.x_m[na]).transpose();
+    });
+    solution_ = solver_.solve(rhs_);
+    change = 0.0;
+    for (int i = 0; i < dofs; ++i) {
+      const Vec3 next = solution_.row(i).transpose();
+      change = std::max(change, (next - body.x_m[node_of_dof_[i]]).cwiseAbs().maxCoeff());
+      body.x_m[node_of_dof_[i]] = next;
+    }
+    ++it;
+  }
+  out.solver_iterations = it;
+  out.solver_residual = change;
+  for (std::size_t n = 0; n < nodes; ++n) {
+    if (body.inv_mass_per_kg[n] == 0.0) continue;
+    body.v_m_per_s[n] = (body.x_m[n] - x_prev_[n]) / h / (1.0 + h * alpha_per_s_);
+  }
+  // The local/global solve has no dampers; apply them implicitly to the new
+  // velocities. (Re-deriving positions from the damped velocities was tried
+  // and diverged: the positions stay those of the solve.)
+  apply_spring_dampers_implicitly(body, h);
+
+  if (!state_is_finite(body)) {
+    save_.restore(body);
+    out.ok = false;
+    out.error = "projective integrator: state became non-finite; step rejected, previous state kept";
+  }
+  return out;
+}
+
+std::unique_ptr<Integrator> make_integrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material) {
+  switch (spec.kind) {
+    case scene::IntegratorKind::kExplicit:
+      return std::make_unique<ExplicitIntegrator>(spec, material);
+    case scene::IntegratorKind::kImplicit:
+      return std::make_unique<ImplicitIntegrator>(spec, material);
+    case scene::IntegratorKind::kProjective:
+      return std::make_unique<ProjectiveIntegrator>(spec, material);
+  }
+  return nullptr;
+}
+
+}  // namespace tissue::physics

@@ -1,0 +1,44 @@
+#include "physics/probes.hpp"
+
+#include <Eigen/Dense>
+#include <stdexcept>
+
+namespace tissue::physics {
+
+std::array<double, 4> barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
+  Eigen::Matrix3d m;
+  m << b - a, c - a, d - a;
+  const Vec3 l = m.partialPivLu().solve(p - a);
+  return {1.0 - l.sum(), l[0], l[1], l[2]};
+}
+
+bool Probe::cache_valid(const Body& body) const {
+  // Tet ids are reused, so the vertices must match too.
+  return tet_ != mesh::kInvalidId && body.mesh().tet_alive(tet_) && body.mesh().tet(tet_).v == nodes_;
+}
+
+void Probe::locate(const Body& body) {
+  double best = -INFINITY;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+    if (best >= -1e-12) return;  // already inside one: keep the first (lowest id)
+    const auto& v = tet.v;
+    const auto l = barycentric(rest_m_, body.rest_m[v[0]], body.rest_m[v[1]], body.rest_m[v[2]], body.rest_m[v[3]]);
+    const double worst = std::min({l[0], l[1], l[2], l[3]});
+    if (worst > best) {
+      best = worst;
+      tet_ = t;
+      nodes_ = v;
+      bary_ = l;
+    }
+  });
+  if (best < -1e-9) throw std::invalid_argument("probe '" + name_ + "' lies outside the object");
+}
+
+Vec3 Probe::displacement_m(const Body& body) {
+  if (!cache_valid(body)) locate(body);
+  Vec3 u = Vec3::Zero();
+  for (int i = 0; i < 4; ++i) u += bary_[i] * (body.x_m[nodes_[i]] - body.rest_m[nodes_[i]]);
+  return u;
+}
+
+}  // namespace tissue::physics

@@ -1,0 +1,34 @@
+// Probes: rest-space points whose displacement is reported, interpolated
+// linearly (barycentric) inside the leaf tet that contains them at rest.
+#pragma once
+
+#include <array>
+#include <string>
+
+#include "physics/body.hpp"
+
+namespace tissue::physics {
+
+class Probe {
+ public:
+  Probe(std::string name, const Vec3& rest_m) : name_(std::move(name)), rest_m_(rest_m) {}
+  const std::string& name() const { return name_; }
+  const Vec3& rest_m() const { return rest_m_; }
+  // Displacement [m]; re-locates the containing tet when the mesh changed.
+  Vec3 displacement_m(const Body& body);
+
+ private:
+  void locate(const Body& body);
+  bool cache_valid(const Body& body) const;
+
+  std::string name_;
+  Vec3 rest_m_;
+  TetId tet_ = mesh::kInvalidId;
+  std::array<NodeId, 4> nodes_{};
+  std::array<double, 4> bary_{};
+};
+
+// Barycentric coordinates of p in the tet (a, b, c, d).
+std::array<double, 4> barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d);
+
+}  // namespace tissue::physics

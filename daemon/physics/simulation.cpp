@@ -1,0 +1,79 @@
+#include "physics/simulation.hpp"
+
+#include "physics/forces.hpp"
+
+namespace tissue::physics {
+
+Simulation::Simulation(const scene::Scene& scene)
+    : body_(scene), integrator_(make_integrator(scene.integrator, scene.material)) {
+  if (scene.adaptivity.enabled) adaptivity_ = std::make_unique<Adaptivity>(scene.adaptivity);
+  loads_.rebuild(body_);
+  for (const auto& p : scene.probes) {
+    probes_.emplace_back(p.name, Vec3(p.rest_m[0], p.rest_m[1], p.rest_m[2]));
+    probes_.back().displacement_m(body_);  // locates it now: a bad probe fails at load time
+  }
+  counters_.peak_nodes = body_.mesh().node_count();
+  counters_.peak_tets = body_.mesh().tet_count();
+  counters_.peak_springs = body_.mesh().edge_count();
+}
+
+StepResult Simulation::step() {
+  StepResult result;
+  const double dt = scene().integrator.dt_s;
+  const double t_next = time_s_ + dt;
+
+  set_kinematic_velocities(body_, t_next, dt);
+  loads_.external_forces(body_, t_next, f_ext_N_);
+  x_before_ = body_.x_m;
+
+  const StepOutcome out = integrator_->step(body_, f_ext_N_, dt);
+  result.substeps = out.substeps;
+  result.solver_iterations = out.solver_iterations;
+  result.solver_residual = out.solver_residual;
+  if (!out.ok) {
+    result.ok = false;
+    result.error = out.error;
+    ++counters_.rejected_steps;
+    return result;
+  }
+  for (std::size_t n = 0; n < f_ext_N_.size(); ++n)
+    if (body_.inv_mass_per_kg[n] != 0.0) counters_.external_work_J += f_ext_N_[n].dot(body_.x_m[n] - x_before_[n]);
+
+  time_s_ = t_next;
+  ++counters_.steps;
+  body_.step_index = counters_.steps;
+
+  if (adaptivity_ && counters_.steps % scene().adaptivity.every_steps == 0) {
+    result.adapted = adaptivity_->adapt(body_);
+    counters_.splits += result.adapted.splits;
+    counters_.merges += result.adapted.merges;
+    if (result.adapted.splits + result.adapted.merges > 0) mesh_changed();
+  }
+  return result;
+}
+
+void Simulation::mesh_changed() {
+  integrator_->mesh_changed();
+  loads_.rebuild(body_);
+  counters_.peak_nodes = std::max(counters_.peak_nodes, body_.mesh().node_count());
+  counters_.peak_tets = std::max(counters_.peak_tets, body_.mesh().tet_count());
+  counters_.peak_springs = std::max(counters_.peak_springs, body_.mesh().edge_count());
+}
+
+int Simulation::split_diamond(mesh::Key diamond) {
+  const int n = body_.split(diamond);
+  counters_.splits += n;
+  if (n > 0) mesh_changed();
+  return n;
+}
+
+void Simulation::merge_diamond(mesh::Key diamond) {
+  body_.merge(diamond);
+  ++counters_.merges;
+  mesh_changed();
+}
+
+double Simulation::kinetic_energy_J() const { return physics::kinetic_energy_J(body_); }
+double Simulation::elastic_energy_J() const { return physics::elastic_energy_J(body_); }
+
+}  // namespace tissue::physics

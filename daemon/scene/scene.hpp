@@ -1,0 +1,141 @@
+// A scene: everything a simulation run needs to know, in SI units, already
+// validated. Plain data; loaders (scene_yaml) fill it, the simulation reads it.
+//
+// Units are in the names. Positions are in metres in the object's frame: the
+// box spans [0, cubes * cube_size_m] along each axis.
+#pragma once
+
+#include <array>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tissue::scene {
+
+using Vec3 = std::array<double, 3>;
+
+// A scalar factor over time: 0 before start_s, a linear ramp to 1 over
+// ramp_s, 1 until release_s, 0 from release_s on. Covers "constant"
+// (defaults), "ramp" and "release at t".
+struct TimeProfile {
+  double start_s = 0.0;
+  double ramp_s = 0.0;
+  double release_s = std::numeric_limits<double>::infinity();
+
+  double at(double t_s) const {
+    if (t_s < start_s || t_s >= release_s) return 0.0;
+    if (ramp_s <= 0.0) return 1.0;
+    const double u = (t_s - start_s) / ramp_s;
+    return u >= 1.0 ? 1.0 : u;
+  }
+};
+
+// Region of rest-space points: an axis-aligned box (closed) or a sphere.
+struct Region {
+  enum class Kind { kBox, kSphere };
+  Kind kind = Kind::kBox;
+  Vec3 min_m{};  // box
+  Vec3 max_m{};
+  Vec3 centre_m{};  // sphere
+  double radius_m = 0.0;
+
+  bool contains(const Vec3& p, double tolerance_m) const {
+    if (kind == Kind::kBox) {
+      for (int a = 0; a < 3; ++a)
+        if (p[a] < min_m[a] - tolerance_m || p[a] > max_m[a] + tolerance_m) return false;
+      return true;
+    }
+    double d2 = 0.0;
+    for (int a = 0; a < 3; ++a) d2 += (p[a] - centre_m[a]) * (p[a] - centre_m[a]);
+    const double r = radius_m + tolerance_m;
+    return d2 <= r * r;
+  }
+};
+
+struct ObjectSpec {
+  std::array<int, 3> cubes{4, 4, 4};
+  double cube_size_m = 0.025;
+};
+
+enum class StiffnessLaw { kIsotropic, kPaper };
+enum class DampingLaw { kRayleigh, kPaper };
+
+struct MaterialSpec {
+  double youngs_modulus_Pa = 5.0e4;
+  double density_kg_per_m3 = 100.0;
+  StiffnessLaw stiffness = StiffnessLaw::kIsotropic;
+  DampingLaw damping = DampingLaw::kRayleigh;
+  double rayleigh_alpha_per_s = 0.0;  // mass-proportional: c = alpha * m
+  double rayleigh_beta_s = 0.01;      // stiffness-proportional: c = beta * k
+};
+
+// Nodes whose rest position lies in `region` never move.
+struct FixedSpec {
+  Region region;
+};
+
+// Nodes in `region` follow rest + profile(t) * displacement_m.
+struct PrescribedSpec {
+  std::string name;
+  Region region;
+  Vec3 displacement_m{};
+  TimeProfile profile;
+};
+
+// total_force_N * profile(t), shared among the nodes in `region` by lumped
+// mass (so the load is consistent as the mesh refines).
+struct LoadSpec {
+  std::string name;
+  Region region;
+  Vec3 total_force_N{};
+  TimeProfile profile;
+};
+
+enum class RefineCriterion { kStrainEnergy, kStretch };
+
+struct AdaptivitySpec {
+  bool enabled = false;
+  RefineCriterion criterion = RefineCriterion::kStrainEnergy;
+  double refine_threshold_Pa = 4.0;  // strain-energy density Th
+  double simplify_factor = 0.25;     // merge only below Th * factor
+  double stretch_ratio = 1.05;       // kStretch: refine when any l/L or L/l exceeds it
+  int min_depth = 0;
+  int max_depth = 3;
+  int every_steps = 5;             // adaptation cadence
+  int max_ops_per_step = 64;       // split+merge budget per adaptation pass
+  int min_age_steps = 20;          // a diamond that just changed is left alone
+  double midpoint_tolerance = 1e-3;  // merge only when |z - mid| < tol * L
+};
+
+enum class IntegratorKind { kExplicit, kImplicit, kProjective };
+
+struct IntegratorSpec {
+  IntegratorKind kind = IntegratorKind::kImplicit;
+  double dt_s = 1e-3;
+  int max_substeps = 1000;          // explicit: refuse beyond this
+  double substep_safety = 0.8;      // explicit: fraction of the stable bound
+  double cg_tolerance = 1e-6;       // implicit: relative residual
+  int cg_max_iterations = 100;      // implicit
+};
+
+struct ProbeSpec {
+  std::string name;
+  Vec3 rest_m{};
+};
+
+struct Scene {
+  std::string source;  // file the scene came from (for messages)
+  std::string name;
+  ObjectSpec object;
+  MaterialSpec material;
+  Vec3 gravity_m_per_s2{0.0, 0.0, 0.0};
+  std::vector<FixedSpec> fixed;
+  std::vector<PrescribedSpec> prescribed;
+  std::vector<LoadSpec> loads;
+  AdaptivitySpec adaptivity;
+  IntegratorSpec integrator;
+  std::vector<ProbeSpec> probes;
+};
+
+}  // namespace tissue::scene

@@ -1,0 +1,168 @@
+#include "physics/body.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "physics/forces.hpp"
+#include "physics/physics_test_support.hpp"
+
+namespace tissue::physics {
+namespace {
+
+scene::Scene adaptive_cube(scene::StiffnessLaw law = scene::StiffnessLaw::kIsotropic,
+                           scene::DampingLaw damping = scene::DampingLaw::kRayleigh) {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 6;
+  s.material.stiffness = law;
+  s.material.damping = damping;
+  return s;
+}
+
+// Random split/merge walk over a body; returns the number of operations done.
+int churn(Body& body, std::mt19937& rng, int ops) {
+  int done = 0;
+  for (int i = 0; i < ops; ++i) {
+    const mesh::KuhnMesh& m = body.mesh();
+    if (rng() % 3 != 0) {
+      TetId t;
+      do t = static_cast<TetId>(rng() % m.tet_capacity());
+      while (!m.tet_alive(t));
+      if (m.can_split(m.diamond_of(t))) done += body.split(m.diamond_of(t));
+    } else {
+      NodeId n;
+      do n = static_cast<NodeId>(rng() % m.node_capacity());
+      while (!m.node_alive(n));
+      if (m.node(n).edge_a != mesh::kInvalidId && m.can_merge(m.node_key(n))) {
+        body.merge(m.node_key(n));
+        ++done;
+      }
+    }
+  }
+  return done;
+}
+
+void randomise_state(Body& body, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    body.x_m[n] = body.rest_m[n] + 1e-3 * Vec3(u(rng), u(rng), u(rng));
+    body.v_m_per_s[n] = Vec3(u(rng), u(rng), u(rng));
+  });
+}
+
+TEST(Body, MassesSumToDensityTimesVolumeThroughChurn) {
+  Body body(adaptive_cube());
+  const double expected = 100.0 * 0.1 * 0.1 * 0.1;
+  EXPECT_NEAR(body.total_mass_kg(), expected, 1e-15);
+  std::mt19937 rng(3);
+  EXPECT_GT(churn(body, rng, 400), 100);
+  EXPECT_NEAR(body.total_mass_kg(), expected, 1e-13);
+}
+
+// Incremental updates on every split/merge equal a from-scratch rebuild.
+TEST(Body, IncrementalParametersMatchARebuild) {
+  for (auto law : {scene::StiffnessLaw::kIsotropic, scene::StiffnessLaw::kPaper}) {
+    for (auto damping : {scene::DampingLaw::kRayleigh, scene::DampingLaw::kPaper}) {
+      Body body(adaptive_cube(law, damping));
+      std::mt19937 rng(11);
+      churn(body, rng, 500);
+      Body rebuilt = body;
+      rebuilt.rebuild_parameters();
+      body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+        EXPECT_NEAR(body.mass_kg[n], rebuilt.mass_kg[n], 1e-15);
+        EXPECT_EQ(body.inv_mass_per_kg[n], rebuilt.inv_mass_per_kg[n]);
+      });
+      int edges = 0;
+      body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
+        ++edges;
+        EXPECT_EQ(body.rest_length_m[e], rebuilt.rest_length_m[e]);
+        EXPECT_NEAR(body.stiffness_N_per_m[e] / rebuilt.stiffness_N_per_m[e], 1.0, 1e-10);
+        EXPECT_NEAR(body.damping_N_s_per_m[e] / rebuilt.damping_N_s_per_m[e], 1.0, 1e-10);
+      });
+      EXPECT_GT(edges, 600);
+    }
+  }
+}
+
+TEST(Body, SplitConservesMomentumAndCentreOfMassAndAddsNoEnergy) {
+  Body body(adaptive_cube());
+  std::mt19937 rng(5);
+  randomise_state(body, rng);
+  for (int i = 0; i < 200; ++i) {
+    const Vec3 p0 = body.momentum();
+    Vec3 com0 = Vec3::Zero();
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { com0 += body.mass_kg[n] * body.x_m[n]; });
+    const double ke0 = kinetic_energy_J(body);
+    TetId t;
+    do t = static_cast<TetId>(rng() % body.mesh().tet_capacity());
+    while (!body.mesh().tet_alive(t));
+    const mesh::Key d = body.mesh().diamond_of(t);
+    if (!body.mesh().can_split(d)) continue;
+    body.split(d);
+    Vec3 com1 = Vec3::Zero();
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { com1 += body.mass_kg[n] * body.x_m[n]; });
+    EXPECT_LT((body.momentum() - p0).norm(), 1e-12);
+    EXPECT_LT((com1 - com0).norm(), 1e-14);
+    EXPECT_LE(kinetic_energy_J(body), ke0 * (1 + 1e-12));
+  }
+}
+
+TEST(Body, MergeConservesMomentumAndNeverAddsKineticEnergy) {
+  Body body(adaptive_cube());
+  std::mt19937 rng(9);
+  for (int i = 0; i < 60; ++i) {
+    TetId t;
+    do t = static_cast<TetId>(rng() % body.mesh().tet_capacity());
+    while (!body.mesh().tet_alive(t));
+    if (body.mesh().can_split(body.mesh().diamond_of(t))) body.split(body.mesh().diamond_of(t));
+  }
+  randomise_state(body, rng);
+  int merges = 0;
+  for (int i = 0; i < 2000 && merges < 100; ++i) {
+    NodeId n;
+    do n = static_cast<NodeId>(rng() % body.mesh().node_capacity());
+    while (!body.mesh().node_alive(n));
+    const mesh::Key d = body.mesh().node_key(n);
+    if (body.mesh().node(n).edge_a == mesh::kInvalidId || !body.mesh().can_merge(d)) continue;
+    const Vec3 p0 = body.momentum();
+    const double ke0 = kinetic_energy_J(body);
+    body.merge(d);
+    ++merges;
+    EXPECT_LT((body.momentum() - p0).norm(), 1e-12);
+    EXPECT_LE(kinetic_energy_J(body), ke0 * (1 + 1e-12));
+  }
+  EXPECT_GT(merges, 20);
+}
+
+TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
+  scene::Scene s = testing::cantilever_scene();
+  Body body(s);
+  std::mt19937 rng(2);
+  randomise_state(body, rng);
+  // Split diamonds along the fixed face.
+  for (int i = 0; i < 40; ++i) {
+    TetId t;
+    do t = static_cast<TetId>(rng() % body.mesh().tet_capacity());
+    while (!body.mesh().tet_alive(t));
+    const mesh::Key d = body.mesh().diamond_of(t);
+    if (!body.mesh().can_split(d)) continue;
+    const Vec3 mid = 0.5 * (body.x_m[body.mesh().edge(body.mesh().find_edge(d)).a] +
+                            body.x_m[body.mesh().edge(body.mesh().find_edge(d)).b]);
+    body.split(d);
+    EXPECT_LT((body.x_m[body.mesh().find_node(d)] - mid).norm(), 1e-15);
+  }
+  int fixed = 0;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    const bool on_face = body.rest_m[n].x() == 0.0;
+    EXPECT_EQ(body.kind[n] == NodeKind::kFixed, on_face);
+    if (on_face) {
+      EXPECT_EQ(body.inv_mass_per_kg[n], 0.0);
+      ++fixed;
+    }
+  });
+  EXPECT_GT(fixed, 25);
+}
+
+}  // namespace
+}  // namespace tissue::physics

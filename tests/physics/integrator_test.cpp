@@ -1,0 +1,181 @@
+#include "physics/integrator.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <random>
+
+#include "physics/forces.hpp"
+#include "physics/physics_test_support.hpp"
+
+namespace tissue::physics {
+namespace {
+
+using testing::beam_scene;
+using testing::free_cube_scene;
+using testing::run_until;
+using testing::total_energy_J;
+
+const scene::IntegratorKind kAll[] = {scene::IntegratorKind::kExplicit, scene::IntegratorKind::kImplicit,
+                                      scene::IntegratorKind::kProjective};
+
+double static_tip_mm(scene::Scene s) {
+  s.integrator.kind = scene::IntegratorKind::kImplicit;
+  s.integrator.dt_s = 0.05;
+  s.integrator.cg_tolerance = 1e-10;
+  s.integrator.cg_max_iterations = 2000;
+  Simulation sim(s);
+  EXPECT_TRUE(run_until(sim, 20.0));
+  return -1e3 * sim.probe_displacement_m(0).z();
+}
+
+// Beam theory for PERFORMANCE.md's beam: 2.56 mm (Euler–Bernoulli), 2.68 mm
+// with Timoshenko shear. The isotropic springs at depth 3 land within 2%.
+TEST(Integrator, StaticBeamAtDepthThreeMatchesBeamTheory) {
+  scene::Scene s = beam_scene();
+  s.adaptivity.min_depth = 3;
+  const double tip = static_tip_mm(s);
+  EXPECT_NEAR(tip, 2.68, 0.02 * 2.68);
+}
+
+// Run long with mass damping, every rung settles on the same static tip.
+TEST(Integrator, AllRungsSettleOnTheSameStaticTip) {
+  scene::Scene s = beam_scene();
+  s.material.rayleigh_alpha_per_s = 20.0;
+  const double reference = static_tip_mm(s);
+  for (auto kind : kAll) {
+    s.integrator = {};
+    s.integrator.kind = kind;
+    s.integrator.dt_s = 1e-3;
+    Simulation sim(s);
+    std::string error;
+    ASSERT_TRUE(run_until(sim, 3.0, &error)) << error;
+    EXPECT_NEAR(-1e3 * sim.probe_displacement_m(0).z(), reference, 0.01 * reference) << sim.integrator().name();
+  }
+}
+
+TEST(Integrator, ExplicitRefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
+  scene::Scene s = beam_scene();
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.integrator.dt_s = 0.01;
+  s.integrator.max_substeps = 1;
+  Simulation sim(s);
+  const auto x_before = sim.body().x_m;
+  const StepResult r = sim.step();
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.error.find("max_substeps"), std::string::npos);
+  EXPECT_EQ(sim.body().x_m, x_before);
+  EXPECT_EQ(sim.time_s(), 0.0);
+  EXPECT_EQ(sim.counters().rejected_steps, 1);
+}
+
+// The Gershgorin step is safe (below 2/ω_max) without being absurdly small.
+TEST(Integrator, ExplicitBoundIsSafeAndNotTooConservative) {
+  for (int depth : {0, 1, 2, 3}) {
+    scene::Scene s = beam_scene();
+    s.material.rayleigh_beta_s = 0.0;
+    s.adaptivity.min_depth = depth;
+    Body body(s);
+    // Power iteration on M^-1 K at rest (K assembled densely: small mesh).
+    const int n = static_cast<int>(body.x_m.size());
+    Eigen::MatrixXd k = Eigen::MatrixXd::Zero(3 * n, 3 * n);
+    body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+      const Vec3 d = (body.rest_m[edge.b] - body.rest_m[edge.a]).normalized();
+      const Eigen::Matrix3d block = body.stiffness_N_per_m[e] * d * d.transpose();
+      k.block<3, 3>(3 * edge.a, 3 * edge.a) += block;
+      k.block<3, 3>(3 * edge.b, 3 * edge.b) += block;
+      k.block<3, 3>(3 * edge.a, 3 * edge.b) -= block;
+      k.block<3, 3>(3 * edge.b, 3 * edge.a) -= block;
+    });
+    Eigen::VectorXd w(3 * n);
+    for (int i = 0; i < n; ++i) w.segment<3>(3 * i).setConstant(body.inv_mass_per_kg[i]);
+    Eigen::VectorXd v = Eigen::VectorXd::Ones(3 * n);
+    double lambda = 0;
+    for (int it = 0; it < 3000; ++it) {
+      Eigen::VectorXd next = w.cwiseProduct(k * v);
+      lambda = next.norm() / v.norm();
+      v = next / next.norm();
+    }
+    const double true_limit = 2.0 / std::sqrt(lambda);
+    const double bound = explicit_stable_dt_s(body);
+    EXPECT_LE(bound, true_limit * 1.0001) << "depth " << depth;
+    EXPECT_GE(bound, 0.3 * true_limit) << "depth " << depth;
+  }
+}
+
+// A free body with no external force: momentum is conserved by every rung
+// (by the implicit one to its CG tolerance: the residual is what it misses).
+TEST(Integrator, MomentumIsConservedWithoutExternalForces) {
+  for (auto kind : kAll) {
+    scene::Scene s = free_cube_scene(2, 1);
+    s.integrator.kind = kind;
+    Simulation sim(s);
+    std::mt19937 rng(1);
+    std::uniform_real_distribution<double> u(-0.1, 0.1);
+    Body& body = sim.mutable_body();
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.v_m_per_s[n] = Vec3(u(rng), u(rng), u(rng)); });
+    const Vec3 p0 = body.momentum();
+    ASSERT_TRUE(run_until(sim, 0.2));
+    const double tolerance = kind == scene::IntegratorKind::kImplicit ? 10 * s.integrator.cg_tolerance : 1e-10;
+    EXPECT_LT((sim.body().momentum() - p0).norm(), tolerance * p0.norm()) << sim.integrator().name();
+  }
+}
+
+// Free vibration: implicit and projective never gain energy. Symplectic
+// Euler conserves a shadow energy instead: the true energy oscillates by
+// O(h ω) (large here: random velocities excite the highest modes) but never
+// drifts upward.
+TEST(Integrator, FreeVibrationNeverGainsEnergy) {
+  for (auto kind : kAll) {
+    scene::Scene s = free_cube_scene(2, 2);
+    s.material.rayleigh_beta_s = 0.0;
+    s.integrator.kind = kind;
+    Simulation sim(s);
+    std::mt19937 rng(4);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Body& body = sim.mutable_body();
+    body.mesh().for_each_node(
+        [&](NodeId n, const mesh::Node&) { body.v_m_per_s[n] = 0.05 * Vec3(u(rng), u(rng), u(rng)); });
+    const double e0 = total_energy_J(sim);
+    double worst_early = 0, worst_late = 0;
+    for (int i = 0; i < 800; ++i) {
+      ASSERT_TRUE(sim.step().ok);
+      (i < 400 ? worst_early : worst_late) = std::max(i < 400 ? worst_early : worst_late, total_energy_J(sim));
+    }
+    if (kind == scene::IntegratorKind::kExplicit) {
+      EXPECT_LE(worst_early, 1.5 * e0);
+      EXPECT_LE(worst_late, 1.001 * worst_early) << "explicit energy drifts upward";
+    } else {
+      EXPECT_LE(std::max(worst_early, worst_late), (1.0 + 1e-9) * e0) << sim.integrator().name();
+    }
+    EXPECT_GT(total_energy_J(sim), 0.0);
+  }
+}
+
+// A state driven past floating-point range is rejected and the last finite
+// state kept, for every rung.
+TEST(Integrator, NonFiniteStateIsRejectedAndTheLastFiniteStateKept) {
+  for (auto kind : kAll) {
+    scene::Scene s = beam_scene(1e300);
+    s.integrator.kind = kind;
+    s.integrator.max_substeps = 1000000000;
+    Simulation sim(s);
+    bool failed = false;
+    for (int i = 0; i < 50 && !failed; ++i) {
+      const auto x_before = sim.body().x_m;
+      const double t_before = sim.time_s();
+      const StepResult r = sim.step();
+      if (!r.ok) {
+        failed = true;
+        EXPECT_NE(r.error.find("non-finite"), std::string::npos) << r.error;
+        EXPECT_EQ(sim.body().x_m, x_before);
+        EXPECT_EQ(sim.time_s(), t_before);
+      }
+      EXPECT_TRUE(state_is_finite(sim.body())) << sim.integrator().name();
+    }
+    EXPECT_TRUE(failed) << sim.integrator().name() << " never overflowed";
+  }
+}
+
+}  // namespace
+}  // namespace tissue::physics

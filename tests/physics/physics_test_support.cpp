@@ -1,0 +1,72 @@
+#include "physics/physics_test_support.hpp"
+
+namespace tissue::physics::testing {
+
+scene::Region box(scene::Vec3 min_m, scene::Vec3 max_m) {
+  scene::Region r;
+  r.kind = scene::Region::Kind::kBox;
+  r.min_m = min_m;
+  r.max_m = max_m;
+  return r;
+}
+
+scene::Region sphere(scene::Vec3 centre_m, double radius_m) {
+  scene::Region r;
+  r.kind = scene::Region::Kind::kSphere;
+  r.centre_m = centre_m;
+  r.radius_m = radius_m;
+  return r;
+}
+
+scene::Scene beam_scene(double tip_force_N) {
+  scene::Scene s;
+  s.name = "beam";
+  s.object.cubes = {8, 2, 2};
+  s.object.cube_size_m = 0.05;
+  s.material.rayleigh_beta_s = 0.01;
+  s.fixed.push_back({box({0, 0, 0}, {0, 0.1, 0.1})});
+  s.loads.push_back({"tip", box({0.4, 0, 0}, {0.4, 0.1, 0.1}), {0, 0, -tip_force_N}, {}});
+  s.probes.push_back({"tip", {0.4, 0.05, 0.05}});
+  return s;
+}
+
+scene::Scene cantilever_scene(double release_s) {
+  scene::Scene s;
+  s.name = "cantilever";
+  s.object.cubes = {4, 4, 4};
+  s.object.cube_size_m = 0.025;
+  s.material.rayleigh_beta_s = 0.003;
+  s.fixed.push_back({box({0, 0, 0}, {0, 0.1, 0.1})});
+  scene::LoadSpec load{"tip", box({0.1, 0, 0}, {0.1, 0.1, 0.1}), {0, 0, -5.0}, {}};
+  load.profile.release_s = release_s;
+  s.loads.push_back(load);
+  s.adaptivity.enabled = true;
+  s.adaptivity.refine_threshold_Pa = 20.0;
+  s.adaptivity.max_depth = 3;
+  s.probes.push_back({"tip", {0.1, 0.05, 0.0}});
+  return s;
+}
+
+scene::Scene free_cube_scene(int cubes, int depth) {
+  scene::Scene s;
+  s.name = "free cube";
+  s.object.cubes = {cubes, cubes, cubes};
+  s.object.cube_size_m = 0.05;
+  s.adaptivity.min_depth = depth;
+  return s;
+}
+
+double total_energy_J(const Simulation& sim) { return sim.kinetic_energy_J() + sim.elastic_energy_J(); }
+
+bool run_until(Simulation& sim, double t_end_s, std::string* error) {
+  while (sim.time_s() < t_end_s - 1e-12) {
+    const StepResult r = sim.step();
+    if (!r.ok) {
+      if (error) *error = r.error;
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace tissue::physics::testing

@@ -1,0 +1,30 @@
+// Scenes built in code for the physics tests (no YAML: these tests pin the
+// physics, not the loader).
+#pragma once
+
+#include "physics/simulation.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue::physics::testing {
+
+scene::Region box(scene::Vec3 min_m, scene::Vec3 max_m);
+scene::Region sphere(scene::Vec3 centre_m, double radius_m);
+
+// PERFORMANCE.md's beam: 0.4 x 0.1 x 0.1 m of 0.05 m cubes, x = 0 fixed,
+// `tip_force_N` downward on the free face, probe `tip` at its centre.
+scene::Scene beam_scene(double tip_force_N = 0.05);
+
+// The seed paper's cantilever: 4x4x4 cubes of 0.025 m, x = 0 fixed, 5 N down
+// on the free face released at `release_s`, adaptivity on (Th 20 Pa, depth 3).
+scene::Scene cantilever_scene(double release_s = 1.0);
+
+// A small free cube (no fixed nodes) for conservation tests.
+scene::Scene free_cube_scene(int cubes = 2, int depth = 0);
+
+// Kinetic + elastic energy [J].
+double total_energy_J(const Simulation& sim);
+
+// Runs until time_s >= t_end_s; returns false (with `error`) on a failed step.
+bool run_until(Simulation& sim, double t_end_s, std::string* error = nullptr);
+
+}  // namespace tissue::physics::testing

@@ -1,0 +1,108 @@
+#include "physics/simulation.hpp"
+
+#include <gtest/gtest.h>
+
+#include "mesh/refine_ops.hpp"
+#include "physics/physics_test_support.hpp"
+
+namespace tissue::physics {
+namespace {
+
+using testing::beam_scene;
+using testing::box;
+using testing::cantilever_scene;
+using testing::run_until;
+using testing::sphere;
+
+TEST(Simulation, SameSceneGivesBitIdenticalRuns) {
+  Simulation a(cantilever_scene()), b(cantilever_scene());
+  ASSERT_TRUE(run_until(a, 0.3));
+  ASSERT_TRUE(run_until(b, 0.3));
+  ASSERT_GT(a.counters().splits, 0);
+  EXPECT_EQ(a.body().x_m, b.body().x_m);
+  EXPECT_EQ(a.body().v_m_per_s, b.body().v_m_per_s);
+  EXPECT_EQ(a.counters().splits, b.counters().splits);
+  EXPECT_EQ(a.counters().merges, b.counters().merges);
+}
+
+// Paper §4.2: the centre vertex of the free face is moved; the node lands
+// exactly on its target and the probe there reads it.
+TEST(Simulation, PrescribedDisplacementIsFollowedExactly) {
+  scene::Scene s = cantilever_scene();
+  s.loads.clear();
+  scene::PrescribedSpec poke{"poke", sphere({0.1, 0.05, 0.05}, 1e-4), {0, 0, -0.01}, {}};
+  poke.profile.ramp_s = 0.2;
+  s.prescribed.push_back(poke);
+  s.probes = {{"poke", {0.1, 0.05, 0.05}}};
+  Simulation sim(s);
+  ASSERT_TRUE(run_until(sim, 0.1));
+  EXPECT_NEAR(sim.probe_displacement_m(0).z(), -0.005, 1e-12);  // half way up the ramp
+  ASSERT_TRUE(run_until(sim, 0.3));
+  EXPECT_NEAR(sim.probe_displacement_m(0).z(), -0.01, 1e-12);
+  EXPECT_NEAR(sim.probe_displacement_m(0).x(), 0.0, 1e-12);
+}
+
+// A face load is shared by area: its resultant and its centre stay exact
+// however unevenly the face is refined.
+TEST(Simulation, SurfaceLoadKeepsItsResultantAndCentreUnderUnevenRefinement) {
+  scene::Scene s = beam_scene(1.0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 6;
+  Simulation sim(s);
+  // Refine one corner of the loaded face only.
+  std::vector<mesh::Key> diamonds;
+  sim.body().mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
+    for (NodeId n : sim.body().mesh().tet(t).v)
+      if ((sim.body().rest_m[n] - Vec3(0.4, 0.0, 0.0)).norm() < 0.03)
+        diamonds.push_back(sim.body().mesh().diamond_of(t));
+  });
+  for (int pass = 0; pass < 6; ++pass) {
+    std::vector<mesh::Key> next;
+    for (mesh::Key d : diamonds)
+      if (sim.body().mesh().can_split(d)) sim.split_diamond(d);
+    sim.body().mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      for (NodeId n : tet.v)
+        if ((sim.body().rest_m[n] - Vec3(0.4, 0.0, 0.0)).norm() < 0.03) next.push_back(sim.body().mesh().diamond_of(t));
+    });
+    diamonds = next;
+  }
+  ASSERT_GT(sim.body().mesh().tet_count(), 192u + 100u);
+  ASSERT_TRUE(sim.step().ok);
+  // Σ f over the loaded face equals the load; its first moment sits at the face centre.
+  Vec3 total = Vec3::Zero(), moment = Vec3::Zero();
+  const auto& body = sim.body();
+  std::vector<Vec3> f;
+  LoadDistribution loads;
+  loads.rebuild(body);
+  loads.external_forces(body, sim.time_s(), f);
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    total += f[n];
+    moment += f[n].z() * body.rest_m[n];
+  });
+  EXPECT_NEAR(total.z(), -1.0, 1e-12);
+  EXPECT_NEAR(moment.y() / total.z(), 0.05, 1e-12);
+  EXPECT_NEAR(moment.z() / total.z(), 0.05, 1e-12);
+}
+
+TEST(Simulation, LoadedBeamNeverHoldsMoreEnergyThanTheWorkDoneOnIt) {
+  Simulation sim(beam_scene(0.05));
+  for (int i = 0; i < 1000; ++i) {
+    ASSERT_TRUE(sim.step().ok);
+    EXPECT_LE(sim.kinetic_energy_J() + sim.elastic_energy_J(), sim.counters().external_work_J * (1 + 1e-6) + 1e-15);
+  }
+  EXPECT_GT(sim.counters().external_work_J, 0.0);
+}
+
+TEST(Simulation, ProbeOutsideTheObjectIsRejected) {
+  scene::Scene s = beam_scene();
+  s.probes.push_back({"lost", {1.0, 0.05, 0.05}});
+  try {
+    Simulation sim(s);
+    FAIL() << "a probe outside the object must be rejected";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("lost"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace tissue::physics

@@ -1,0 +1,83 @@
+#include "physics/spring_law.hpp"
+
+#include <gtest/gtest.h>
+
+#include "physics/body.hpp"
+#include "physics/forces.hpp"
+#include "physics/physics_test_support.hpp"
+
+namespace tissue::physics {
+namespace {
+
+// Eq. (3) with w = 1 equals the paper's closed form (5) on the refinement edge
+// of every complete interior diamond, at every level of the cycle.
+TEST(SpringLaw, EquationThreeMatchesClosedFormFiveOnInteriorRefinementEdges) {
+  for (int level = 0; level <= 5; ++level) {
+    scene::Scene s = testing::free_cube_scene(3, level);
+    s.object.cube_size_m = 0.1;
+    s.adaptivity.enabled = true;  // a lattice one level finer, so level's diamonds have centres
+    s.adaptivity.max_depth = level + 1;
+    s.material.stiffness = scene::StiffnessLaw::kPaper;
+    Body body(s);
+    const mesh::KuhnMesh& m = body.mesh();
+    const double expected = paper_closed_form_stiffness_N_per_m(s.material.youngs_modulus_Pa, 0.1, level);
+    int compared = 0;
+    m.for_each_tet([&](TetId t, const mesh::Tet&) {
+      const mesh::Key d = m.diamond_of(t);
+      const mesh::DiamondInfo info = m.diamond_info(d);
+      const int full = info.phase == 0 ? 6 : (info.phase == 1 ? 4 : 8);
+      if (mesh::diamond_tet_count(m.domain(), info) != full) return;  // boundary-reduced
+      EXPECT_NEAR(body.stiffness_N_per_m[m.find_edge(d)] / expected, 1.0, 1e-12) << "level " << level;
+      ++compared;
+    });
+    EXPECT_GT(compared, 0) << "level " << level;
+  }
+}
+
+// With eq. (3) a uniform dilation stores 3 ε² E V: bulk modulus exactly 2E/3.
+// The isotropic weights keep Σ w = 6 per tet, so they keep that too.
+TEST(SpringLaw, UniformDilationGivesBulkModulusTwoThirdsE) {
+  for (auto law : {scene::StiffnessLaw::kPaper, scene::StiffnessLaw::kIsotropic}) {
+    for (int depth : {0, 1, 2, 3}) {
+      scene::Scene s = testing::free_cube_scene(2, depth);
+      s.material.stiffness = law;
+      Body body(s);
+      const double eps = 1e-3;
+      body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n] = (1.0 + eps) * body.rest_m[n]; });
+      const double volume = 0.1 * 0.1 * 0.1;
+      const double bulk = 2.0 * s.material.youngs_modulus_Pa / 3.0;
+      const double expected = 0.5 * bulk * (3 * eps) * (3 * eps) * volume;
+      EXPECT_NEAR(elastic_energy_J(body) / expected, 1.0, 1e-4) << "depth " << depth;
+    }
+  }
+}
+
+TEST(SpringLaw, IsotropicWeightsFollowTheTypeTable) {
+  // TYPE I: axis, face diagonal, body diagonal (squared lengths 1, 2, 3 of 3).
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(0, 1, 3), 0.5525);
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(3, 2, 3), 1.4847);
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(6, 3, 3), 1.3729);
+  // TYPE II: half body 3/4, axis 1, face diagonal 2 (of 2).
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(1, 3, 8), 0.9507);
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(4, 1, 2), 1.0754);
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(1, 2, 2), 0.9971);
+  // TYPE III: half axis, half face, half body, axis (1, 2, 3, 4 of 4).
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(2, 1, 4), 0.9481);
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(2, 2, 4), 1.0074);
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(5, 3, 4), 1.0444);
+  EXPECT_DOUBLE_EQ(isotropic_edge_weight(2, 4, 4), 0.9481);
+  EXPECT_THROW(isotropic_edge_weight(0, 1, 4), std::logic_error);
+  EXPECT_DOUBLE_EQ(edge_weight(scene::StiffnessLaw::kPaper, 0, 1, 3), 1.0);
+}
+
+TEST(SpringLaw, DampingLaws) {
+  scene::MaterialSpec m;
+  m.rayleigh_beta_s = 0.02;
+  EXPECT_DOUBLE_EQ(spring_damping_N_s_per_m(m, 50.0, 1.0, 2.0, 0.5), 1.0);
+  m.damping = scene::DampingLaw::kPaper;
+  // Eq. (4): 2 sqrt(k (m_i + m_j)) / L.
+  EXPECT_DOUBLE_EQ(spring_damping_N_s_per_m(m, 50.0, 1.0, 1.0, 0.5), 2.0 * 10.0 / 0.5);
+}
+
+}  // namespace
+}  // namespace tissue::physics
