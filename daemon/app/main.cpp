@@ -1,62 +1,76 @@
-// tissued — the daemon's entry point. Until the simulation and service land
-// (issues 3 and 4) its only face is a mesh demonstration that prints figures.
+// tissued — the daemon's entry point: parses the command line and dispatches
+// to a mode. Modes live in their own files (batch_run.cpp); this file stays
+// thin. Exit codes: 0 success, 1 internal error, 2 bad command line or scene,
+// 3 simulation failure, 4 report not writable.
 #include <CLI/CLI.hpp>
-#include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <exception>
+#include <string>
 
-#include "mesh/kuhn_mesh.hpp"
-#include "mesh/refine_ops.hpp"
-#include "mesh/surface.hpp"
+#include "app/batch_run.hpp"
 
 namespace {
 
-void print_counts(const char* label, const tissue::mesh::KuhnMesh& mesh, double ms) {
-  tissue::mesh::SurfaceMesh surface;
-  tissue::mesh::extract_surface(mesh, &surface);
-  std::printf("%-34s nodes %7zu  edges %8zu  tets %8zu  surface tris %7zu  %8.3f ms\n", label, mesh.node_count(),
-              mesh.edge_count(), mesh.tet_count(), surface.triangles.size(), ms);
-}
+// A finite number of seconds >= 0 (CLI::NonNegativeNumber lets "inf" through
+// and prints DBL_MAX in full when it fails).
+const CLI::Validator kSeconds(
+    [](std::string& text) -> std::string {
+      double value = 0.0;
+      if (!CLI::detail::lexical_cast(text, value) || !std::isfinite(value) || value < 0.0)
+        return "must be a finite number of seconds >= 0 (got " + text + ")";
+      return {};
+    },
+    "SECONDS>=0");
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"tissued: real-time haptic server for adaptive soft-tissue simulation (mesh demo)"};
-  int cubes_x = 4, cubes_y = 4, cubes_z = 4, depth = 6;
-  double cube_size_m = 0.025;
-  app.add_option("--cubes-x", cubes_x, "cubes along x")->capture_default_str();
-  app.add_option("--cubes-y", cubes_y, "cubes along y")->capture_default_str();
-  app.add_option("--cubes-z", cubes_z, "cubes along z")->capture_default_str();
-  app.add_option("--cube-size", cube_size_m, "coarse cube edge [m]")->capture_default_str();
-  app.add_option("--depth", depth, "refinement depth near the free end (3 = one cube halving)")->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
-
   try {
-    using Clock = std::chrono::steady_clock;
-    auto ms_since = [](Clock::time_point t0) {
-      return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-    };
-    tissue::mesh::BoxSpec spec{cubes_x, cubes_y, cubes_z, cube_size_m, std::max(depth, 9)};
-    auto t0 = Clock::now();
-    tissue::mesh::KuhnMesh mesh(spec);
-    print_counts("coarse (paper's low resolution)", mesh, ms_since(t0));
+    CLI::App app{"tissued: real-time haptic server for adaptive soft-tissue simulation"};
+    app.footer(
+        "Exit codes: 0 success, 1 internal error, 2 bad command line or scene, 3 simulation failure, "
+        "4 report not writable.");
+    bool batch = false;
+    tissue::app::BatchOptions batch_options;
+    app.add_flag("--batch", batch, "run a scene for --duration simulated seconds as fast as possible, then exit");
+    app.add_option("--scene", batch_options.scene_path, "scene file (YAML, see docs/scene-format.md)");
+    CLI::Option* duration =
+        app.add_option("--duration", batch_options.duration_s, "simulated seconds to run")->check(kSeconds);
+    app.add_option("--set", batch_options.overrides, "override a scene value: key.path=value (repeatable)");
+    app.add_option("--report", batch_options.report_path, "write the JSON report to this file");
+    bool no_timing = false;
+    app.add_flag("--no-timing", no_timing, "leave wall-clock timing out of the report (bit-identical reruns)");
+    app.add_option("--progress", batch_options.progress_every_s,
+                   "simulated seconds between live lines on stdout (0: quiet)")
+        ->check(kSeconds)
+        ->capture_default_str();
 
-    // Refine around the free end's bottom edge, where a cantilever bends most.
-    const double lx = cubes_x * cube_size_m, ly = cubes_y * cube_size_m, lz = cubes_z * cube_size_m;
-    t0 = Clock::now();
-    tissue::mesh::MeshChangeLog log;
-    const int splits = tissue::mesh::refine_sphere(mesh, {{lx, ly / 2, lz / 2}, 0.3 * lx}, depth, &log);
-    print_counts("refined near the free end", mesh, ms_since(t0));
-    std::printf("  %d diamond splits, %zu change events, mesh memory %.1f bytes/tet\n", splits, log.events.size(),
-                static_cast<double>(mesh.memory_bytes()) / static_cast<double>(mesh.tet_count()));
+    try {
+      app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+      if (e.get_exit_code() == 0) return app.exit(e);  // --help
+      std::fprintf(stderr, "tissued: %s (see --help)\n", e.what());
+      return tissue::app::kExitUsage;
+    }
 
-    t0 = Clock::now();
-    const int merges = tissue::mesh::merge_all(mesh);
-    print_counts("simplified back", mesh, ms_since(t0));
-    std::printf("  %d diamond merges\n", merges);
-    return 0;
+    if (!batch) {
+      std::fprintf(stderr,
+                   "usage: tissued --batch --scene FILE --duration SECONDS [options] (see --help); "
+                   "the service mode arrives with the daemon issue\n");
+      return tissue::app::kExitUsage;
+    }
+    if (batch_options.scene_path.empty() || duration->count() == 0) {
+      std::fprintf(stderr, "tissued: --batch needs --scene FILE and --duration SECONDS (see --help)\n");
+      return tissue::app::kExitUsage;
+    }
+    batch_options.timing = !no_timing;
+    return tissue::app::batch_command(batch_options);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "tissued: %s\n", e.what());
-    return 1;
+    std::fprintf(stderr, "tissued: internal error: %s\n", e.what());
+    return tissue::app::kExitInternal;
+  } catch (...) {
+    std::fprintf(stderr, "tissued: internal error: unknown exception\n");
+    return tissue::app::kExitInternal;
   }
 }

@@ -9,6 +9,18 @@ namespace tissue::mesh {
 
 namespace {
 
+// A free slot of a pool: the most recently freed one (warm in cache), else a new one.
+template <class T>
+std::uint32_t take_slot(std::vector<T>& pool, std::vector<std::uint32_t>& free_slots) {
+  if (!free_slots.empty()) {
+    const std::uint32_t id = free_slots.back();
+    free_slots.pop_back();
+    return id;
+  }
+  pool.emplace_back();
+  return static_cast<std::uint32_t>(pool.size() - 1);
+}
+
 std::string describe_key(Key key) {
   const Vec3i d = unpack_doubled(key);
   std::ostringstream os;
@@ -287,14 +299,7 @@ void KuhnMesh::unbisect(TetId first, TetId second, const std::array<NodeId, 4>& 
 
 TetId KuhnMesh::link_tet(const std::array<NodeId, 4>& v, int depth, std::uint64_t child_path,
                          const std::array<EdgeId, 6>& edges, MeshChangeLog* log) {
-  TetId id;
-  if (!free_tets_.empty()) {
-    id = free_tets_.back();
-    free_tets_.pop_back();
-  } else {
-    id = static_cast<TetId>(tets_.size());
-    tets_.emplace_back();
-  }
+  const TetId id = take_slot(tets_, free_tets_);
   Tet& t = tets_[id];
   t.v = v;
   t.e = edges;
@@ -401,14 +406,7 @@ TetId KuhnMesh::add_tet(const std::array<NodeId, 4>& v, int depth, std::uint64_t
 }
 
 NodeId KuhnMesh::add_node(const Vec3i& p, NodeId edge_a, NodeId edge_b, int depth, MeshChangeLog* log) {
-  NodeId id;
-  if (!free_nodes_.empty()) {
-    id = free_nodes_.back();
-    free_nodes_.pop_back();
-  } else {
-    id = static_cast<NodeId>(nodes_.size());
-    nodes_.emplace_back();
-  }
+  const NodeId id = take_slot(nodes_, free_nodes_);
   nodes_[id] = Node{p, 0, edge_a, edge_b, static_cast<std::uint8_t>(depth), true};
   node_index_.insert(vertex_key(p), id);
   ++node_count_;
@@ -433,13 +431,7 @@ EdgeId KuhnMesh::add_edge_share(NodeId a, NodeId b, std::int64_t six_volume, Mes
   const Key key = edge_key(nodes_[a].lattice, nodes_[b].lattice);
   EdgeId id = edge_index_.find(key);
   if (id == util::KeyIndexMap::kNotFound) {
-    if (!free_edges_.empty()) {
-      id = free_edges_.back();
-      free_edges_.pop_back();
-    } else {
-      id = static_cast<EdgeId>(edges_.size());
-      edges_.emplace_back();
-    }
+    id = take_slot(edges_, free_edges_);
     edges_[id] = Edge{std::min(a, b), std::max(a, b), 0, kInvalidId};
     edge_index_.insert(key, id);
     ++edge_count_;

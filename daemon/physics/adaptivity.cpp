@@ -1,6 +1,7 @@
 #include "physics/adaptivity.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <tuple>
 
 #include "physics/forces.hpp"
@@ -16,15 +17,30 @@ double Adaptivity::refine_threshold() const {
   return spec_.criterion == scene::RefineCriterion::kStretch ? spec_.stretch_ratio - 1.0 : spec_.refine_threshold_Pa;
 }
 
+double Adaptivity::measure_from_edges(const mesh::Tet& tet) const {
+  double sum = 0.0, worst = 0.0;
+  for (EdgeId e : tet.e) {
+    const double strain = edge_strain_[e];
+    sum += strain * strain;
+    worst = std::max(worst, std::abs(strain));
+  }
+  return spec_.criterion == scene::RefineCriterion::kStretch ? worst : 0.5 * youngs_modulus_Pa_ * sum;
+}
+
 AdaptStats Adaptivity::adapt(Body& body) {
   AdaptStats stats;
   const mesh::KuhnMesh& mesh = body.mesh();
   const double refine_above = refine_threshold();
   const double merge_below = simplify_threshold();
+  youngs_modulus_Pa_ = body.scene().material.youngs_modulus_Pa;
+  edge_strain_.resize(body.rest_length_m.size());
+  mesh.for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+    edge_strain_[e] = (body.x_m[edge.b] - body.x_m[edge.a]).norm() / body.rest_length_m[e] - 1.0;
+  });
   node_max_.assign(body.x_m.size(), 0.0);
   refine_.clear();
   mesh.for_each_tet([&](TetId t, const mesh::Tet& tet) {
-    const double m = measure(body, t);
+    const double m = measure_from_edges(tet);
     for (NodeId n : tet.v) node_max_[n] = std::max(node_max_[n], m);
     if (m > refine_above && tet.depth < spec_.max_depth) refine_.emplace_back(-m, mesh.diamond_of(t));
   });

@@ -1,6 +1,7 @@
 #include "physics/forces.hpp"
 
 #include <Eigen/Geometry>
+#include <array>
 #include <cmath>
 
 namespace tissue::physics {
@@ -63,15 +64,22 @@ double kinetic_energy_J(const Body& body) {
   return energy;
 }
 
-double strain_energy_density_Pa(const Body& body, TetId t) {
+namespace {
+// l / L − 1 of a tet's six edges, in kTetEdgeSlots order.
+std::array<double, 6> tet_edge_strains(const Body& body, TetId t) {
   const auto& v = body.mesh().tet(t).v;
-  double sum = 0.0;
-  for (const auto& slots : mesh::kTetEdgeSlots) {
-    const NodeId a = v[slots[0]], b = v[slots[1]];
-    const double rest = (body.rest_m[b] - body.rest_m[a]).norm();
-    const double strain = (body.x_m[b] - body.x_m[a]).norm() / rest - 1.0;
-    sum += strain * strain;
+  std::array<double, 6> strain{};
+  for (int i = 0; i < 6; ++i) {
+    const NodeId a = v[mesh::kTetEdgeSlots[i][0]], b = v[mesh::kTetEdgeSlots[i][1]];
+    strain[i] = (body.x_m[b] - body.x_m[a]).norm() / (body.rest_m[b] - body.rest_m[a]).norm() - 1.0;
   }
+  return strain;
+}
+}  // namespace
+
+double strain_energy_density_Pa(const Body& body, TetId t) {
+  double sum = 0.0;
+  for (double strain : tet_edge_strains(body, t)) sum += strain * strain;
   return 0.5 * body.scene().material.youngs_modulus_Pa * sum;
 }
 
@@ -87,13 +95,8 @@ std::size_t inverted_tet_count(const Body& body) {
 }
 
 double max_edge_strain(const Body& body, TetId t) {
-  const auto& v = body.mesh().tet(t).v;
   double worst = 0.0;
-  for (const auto& slots : mesh::kTetEdgeSlots) {
-    const NodeId a = v[slots[0]], b = v[slots[1]];
-    const double rest = (body.rest_m[b] - body.rest_m[a]).norm();
-    worst = std::max(worst, std::abs((body.x_m[b] - body.x_m[a]).norm() / rest - 1.0));
-  }
+  for (double strain : tet_edge_strains(body, t)) worst = std::max(worst, std::abs(strain));
   return worst;
 }
 

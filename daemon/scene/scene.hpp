@@ -40,6 +40,21 @@ struct Region {
   Vec3 centre_m{};  // sphere
   double radius_m = 0.0;
 
+  static Region box(const Vec3& min_m, const Vec3& max_m) {
+    Region r;
+    r.kind = Kind::kBox;
+    r.min_m = min_m;
+    r.max_m = max_m;
+    return r;
+  }
+  static Region sphere(const Vec3& centre_m, double radius_m) {
+    Region r;
+    r.kind = Kind::kSphere;
+    r.centre_m = centre_m;
+    r.radius_m = radius_m;
+    return r;
+  }
+
   bool contains(const Vec3& p, double tolerance_m) const {
     if (kind == Kind::kBox) {
       for (int a = 0; a < 3; ++a)
@@ -102,9 +117,9 @@ struct AdaptivitySpec {
   double stretch_ratio = 1.05;       // kStretch: refine when any l/L or L/l exceeds it
   int min_depth = 0;
   int max_depth = 3;
-  int every_steps = 5;             // adaptation cadence
-  int max_ops_per_step = 64;       // split+merge budget per adaptation pass
-  int min_age_steps = 20;          // a diamond that just changed is left alone
+  int every_steps = 5;               // adaptation cadence
+  int max_ops_per_step = 64;         // split+merge budget per adaptation pass
+  int min_age_steps = 20;            // a diamond that just changed is left alone
   double midpoint_tolerance = 1e-3;  // merge only when |z - mid| < tol * L
 };
 
@@ -113,10 +128,10 @@ enum class IntegratorKind { kExplicit, kImplicit, kProjective };
 struct IntegratorSpec {
   IntegratorKind kind = IntegratorKind::kImplicit;
   double dt_s = 1e-3;
-  int max_substeps = 1000;          // explicit: refuse beyond this
-  double substep_safety = 0.8;      // explicit: fraction of the stable bound
-  double cg_tolerance = 1e-6;       // implicit: relative residual
-  int cg_max_iterations = 100;      // implicit
+  int max_substeps = 1000;      // explicit: refuse beyond this
+  double substep_safety = 0.8;  // explicit: fraction of the stable bound
+  double cg_tolerance = 1e-6;   // implicit: relative residual
+  int cg_max_iterations = 100;  // implicit
 };
 
 struct ProbeSpec {

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <set>
+
 #include "physics/forces.hpp"
 #include "physics/physics_test_support.hpp"
 
@@ -85,6 +87,35 @@ TEST(Adaptivity, AdaptationNeverAddsKineticEnergy) {
   const AdaptStats stats = adaptivity.adapt(body);
   EXPECT_GT(stats.splits, 0);
   EXPECT_LE(kinetic_energy_J(body), ke0 * (1 + 1e-12));
+}
+
+// The pass's fast per-edge evaluation equals the per-tet definition (eq. (1)
+// with the square, and the stretch measure).
+TEST(Adaptivity, RefinesExactlyTheTetsAboveThreshold) {
+  for (auto criterion : {scene::RefineCriterion::kStrainEnergy, scene::RefineCriterion::kStretch}) {
+    scene::Scene s = cantilever_scene();
+    s.adaptivity.criterion = criterion;
+    s.adaptivity.stretch_ratio = 1.02;
+    s.adaptivity.enabled = false;
+    Simulation sim(s);
+    ASSERT_TRUE(run_until(sim, 0.05));
+    scene::Scene adaptive = s;
+    adaptive.adaptivity.enabled = true;
+    adaptive.adaptivity.max_ops_per_step = 1000000;
+    Body body(adaptive);
+    body.x_m = sim.body().x_m;
+    Adaptivity adaptivity(adaptive.adaptivity);
+    std::set<mesh::Key> wanted;
+    body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
+      const double m =
+          criterion == scene::RefineCriterion::kStretch ? max_edge_strain(body, t) : strain_energy_density_Pa(body, t);
+      EXPECT_NEAR(adaptivity.measure(body, t), m, 1e-12 * std::max(1.0, m));
+      if (m > adaptivity.refine_threshold()) wanted.insert(body.mesh().diamond_of(t));
+    });
+    ASSERT_FALSE(wanted.empty());
+    adaptivity.adapt(body);
+    for (mesh::Key d : wanted) EXPECT_TRUE(body.mesh().is_split(d));
+  }
 }
 
 TEST(Adaptivity, StretchCriterionRefinesUnderLoad) {

@@ -2,22 +2,6 @@
 
 namespace tissue::physics::testing {
 
-scene::Region box(scene::Vec3 min_m, scene::Vec3 max_m) {
-  scene::Region r;
-  r.kind = scene::Region::Kind::kBox;
-  r.min_m = min_m;
-  r.max_m = max_m;
-  return r;
-}
-
-scene::Region sphere(scene::Vec3 centre_m, double radius_m) {
-  scene::Region r;
-  r.kind = scene::Region::Kind::kSphere;
-  r.centre_m = centre_m;
-  r.radius_m = radius_m;
-  return r;
-}
-
 scene::Scene beam_scene(double tip_force_N) {
   scene::Scene s;
   s.name = "beam";

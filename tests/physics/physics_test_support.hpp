@@ -7,8 +7,8 @@
 
 namespace tissue::physics::testing {
 
-scene::Region box(scene::Vec3 min_m, scene::Vec3 max_m);
-scene::Region sphere(scene::Vec3 centre_m, double radius_m);
+inline scene::Region box(scene::Vec3 min_m, scene::Vec3 max_m) { return scene::Region::box(min_m, max_m); }
+inline scene::Region sphere(scene::Vec3 centre_m, double radius_m) { return scene::Region::sphere(centre_m, radius_m); }
 
 // PERFORMANCE.md's beam: 0.4 x 0.1 x 0.1 m of 0.05 m cubes, x = 0 fixed,
 // `tip_force_N` downward on the free face, probe `tip` at its centre.

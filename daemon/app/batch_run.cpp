@@ -1,0 +1,282 @@
+#include "app/batch_run.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <memory>
+#include <stdexcept>
+
+#include "scene/scene_yaml.hpp"
+
+namespace tissue::app {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+
+// Per-step wall times are kept for the percentiles; reserve them up front so
+// the loop does not reallocate, but never more than this many at once (a
+// huge duration grows the vector instead of failing before the first step).
+constexpr std::size_t kMaxReservedSteps = std::size_t{1} << 25;  // 256 MiB of doubles
+
+// Nearest-rank percentile of sorted values, p in (0, 1].
+double percentile(const std::vector<double>& sorted, double p) {
+  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(sorted.size())));
+  return sorted[std::clamp<std::size_t>(rank, 1, sorted.size()) - 1];
+}
+
+bool says_nonfinite(const std::string& error) { return error.find("non-finite") != std::string::npos; }
+
+struct Tally {
+  std::size_t nodes, tets, springs;
+};
+
+Tally tally(const physics::Simulation& sim) {
+  const auto& m = sim.body().mesh();
+  return {m.node_count(), m.tet_count(), m.edge_count()};
+}
+
+void print_header(std::FILE* out, const physics::Simulation& sim, double duration_s) {
+  const auto& s = sim.scene();
+  std::fprintf(out, "tissued batch: scene '%s' (%s), %s integrator, dt %g s, adaptivity %s, %g s simulated\n",
+               s.name.c_str(), s.source.c_str(), sim.integrator().name(), s.integrator.dt_s,
+               s.adaptivity.enabled ? "on" : "off", duration_s);
+  std::fflush(out);
+}
+
+void print_progress(std::FILE* out, physics::Simulation& sim, double wall_s) {
+  const Tally t = tally(sim);
+  const auto& c = sim.counters();
+  std::string probes;
+  for (std::size_t i = 0; i < sim.probe_count(); ++i) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "  %s %.3f mm", sim.probe_name(i).c_str(), 1e3 * sim.probe_displacement_m(i).norm());
+    probes += buf;
+  }
+  char rtf[32];
+  if (wall_s > 0.0)
+    std::snprintf(rtf, sizeof rtf, "%.2fx", sim.time_s() / wall_s);
+  else
+    std::snprintf(rtf, sizeof rtf, "-");
+  std::fprintf(out,
+               "t %8.3f s | nodes %6zu  tets %7zu  springs %7zu | refines %6lld  merges %6lld |%s | E kin %.3e + el "
+               "%.3e J | %s real time\n",
+               sim.time_s(), t.nodes, t.tets, t.springs, static_cast<long long>(c.splits),
+               static_cast<long long>(c.merges), probes.c_str(), sim.kinetic_energy_J(), sim.elastic_energy_J(), rtf);
+  std::fflush(out);
+}
+
+// A report file opened before the run (so an unwritable path fails before
+// minutes of simulation, not after) and written once at the end.
+class ReportFile {
+ public:
+  // Returns an empty string on success, else "cannot write report PATH: reason".
+  std::string open(const std::string& path) {
+    path_ = path;
+    errno = 0;
+    file_ = std::fopen(path.c_str(), "w");
+    return file_ ? std::string() : failure(errno);
+  }
+  std::string write(const std::string& text) {
+    errno = 0;
+    const bool wrote = std::fwrite(text.data(), 1, text.size(), file_) == text.size() && std::fflush(file_) == 0;
+    const int write_errno = errno;
+    const bool closed = std::fclose(file_) == 0;
+    const int close_errno = errno;
+    file_ = nullptr;
+    if (!wrote) return failure(write_errno);
+    if (!closed) return failure(close_errno);
+    return {};
+  }
+  // Closes and deletes a file the run could not complete.
+  void discard() {
+    if (!file_) return;
+    std::fclose(file_);
+    file_ = nullptr;
+    std::remove(path_.c_str());
+  }
+  ~ReportFile() { discard(); }
+
+ private:
+  std::string failure(int err) const {
+    return "cannot write report " + path_ + ": " + (err != 0 ? std::strerror(err) : "unknown error");
+  }
+  std::string path_;
+  std::FILE* file_ = nullptr;
+};
+
+}  // namespace
+
+nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress) {
+  const scene::Scene& scene = sim.scene();
+  const double dt = scene.integrator.dt_s;
+  if (!(dt > 0.0) || !std::isfinite(dt)) throw std::invalid_argument("integrator.dt_s must be a positive number");
+  if (!(options.duration_s >= 0.0) || !std::isfinite(options.duration_s))
+    throw std::invalid_argument("the duration must be a finite number >= 0");
+  // Summed steps round: 2000 steps of 1 ms end a hair below 2 s. Stop within a
+  // millionth of a step of the end instead of taking one more step.
+  const double slack_s = 1e-6 * dt;
+  const double end_s = options.duration_s - slack_s;
+  const double every_s = progress ? options.progress_every_s : 0.0;
+
+  std::vector<double> peak_m(sim.probe_count(), 0.0);
+  auto track_probes = [&] {
+    for (std::size_t i = 0; i < peak_m.size(); ++i) peak_m[i] = std::max(peak_m[i], sim.probe_displacement_m(i).norm());
+  };
+  track_probes();
+
+  const double expected_steps = std::ceil(std::max(0.0, options.duration_s - sim.time_s()) / dt) + 1.0;
+  std::vector<double> step_ms;
+  step_ms.reserve(static_cast<std::size_t>(std::min(expected_steps, static_cast<double>(kMaxReservedSteps))));
+
+  if (every_s > 0.0) print_header(progress, sim, options.duration_s);
+  std::string error;
+  long long next_line = 1;  // index of the next progress line: printed at next_line * every_s
+  const Clock::time_point start = Clock::now();
+  while (sim.time_s() < end_s) {
+    const double before_s = sim.time_s();
+    const Clock::time_point t0 = Clock::now();
+    const physics::StepResult r = sim.step();
+    const Clock::time_point t1 = Clock::now();
+    step_ms.push_back(1e3 * seconds_between(t0, t1));
+    if (!r.ok) {
+      error = r.error.empty() ? std::string("step failed without a reason") : r.error;
+      break;
+    }
+    if (!(sim.time_s() > before_s)) {  // dt lost in rounding against a huge time
+      error = "simulation time stopped advancing at t = " + std::to_string(before_s) + " s";
+      break;
+    }
+    track_probes();
+    if (every_s > 0.0 && sim.time_s() >= static_cast<double>(next_line) * every_s - slack_s) {
+      print_progress(progress, sim, seconds_between(start, Clock::now()));
+      next_line = static_cast<long long>(std::floor((sim.time_s() + slack_s) / every_s)) + 1;
+    }
+  }
+  const double wall_s = seconds_between(start, Clock::now());
+
+  const Tally final_tally = tally(sim);
+  const physics::SimCounters& c = sim.counters();
+  nlohmann::json probes = nlohmann::json::object();
+  for (std::size_t i = 0; i < sim.probe_count(); ++i) {
+    const physics::Vec3 d = sim.probe_displacement_m(i);
+    probes[sim.probe_name(i)] = {{"final_displacement_m", {d.x(), d.y(), d.z()}}, {"peak_magnitude_m", peak_m[i]}};
+  }
+
+  nlohmann::json report;
+  report["scene"] = {{"source", scene.source},
+                     {"name", scene.name},
+                     {"integrator", sim.integrator().name()},
+                     {"dt_s", dt},
+                     {"adaptivity", scene.adaptivity.enabled}};
+  report["result"] = {
+      {"sim_time_s", sim.time_s()},
+      {"steps", c.steps},
+      {"nodes", {{"final", final_tally.nodes}, {"peak", std::max(c.peak_nodes, final_tally.nodes)}}},
+      {"tets", {{"final", final_tally.tets}, {"peak", std::max(c.peak_tets, final_tally.tets)}}},
+      {"springs", {{"final", final_tally.springs}, {"peak", std::max(c.peak_springs, final_tally.springs)}}},
+      {"refines", c.splits},
+      {"merges", c.merges},
+      {"energy_J", {{"kinetic", sim.kinetic_energy_J()}, {"elastic", sim.elastic_energy_J()}}},
+      {"external_work_J", c.external_work_J},
+      {"nonfinite_events", says_nonfinite(error) ? 1 : 0},
+      {"rejected_steps", c.rejected_steps},
+      {"error", error.empty() ? nlohmann::json(nullptr) : nlohmann::json(error)},
+      {"probes", std::move(probes)},
+  };
+  if (options.timing) {
+    nlohmann::json step = {{"p50", nullptr}, {"p99", nullptr}, {"max", nullptr}};
+    if (!step_ms.empty()) {
+      std::sort(step_ms.begin(), step_ms.end());
+      step = {{"p50", percentile(step_ms, 0.50)}, {"p99", percentile(step_ms, 0.99)}, {"max", step_ms.back()}};
+    }
+    report["timing"] = {{"wall_s", wall_s},
+                        {"step_ms", std::move(step)},
+                        {"real_time_factor", wall_s > 0.0 ? nlohmann::json(sim.time_s() / wall_s) : nullptr}};
+  }
+  return report;
+}
+
+nlohmann::json run_batch(const scene::Scene& scene, const BatchOptions& options, std::FILE* progress) {
+  physics::Simulation sim(scene);
+  return run_batch(sim, options, progress);
+}
+
+std::string report_text(const nlohmann::json& report) { return report.dump(2) + "\n"; }
+
+int batch_command(const BatchOptions& options) {
+  // stdout carries the live figures; flush it before each stderr line so the
+  // two read in order on a terminal.
+  auto fail = [](int code, const std::string& message) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "tissued: %s\n", message.c_str());
+    return code;
+  };
+  try {
+    scene::Scene scene;
+    try {
+      scene = scene::load_scene_file_with_overrides(options.scene_path, options.overrides);
+    } catch (const scene::SceneError& e) {
+      return fail(kExitUsage, e.what());
+    }
+    if (!(options.duration_s >= 0.0) || !std::isfinite(options.duration_s))
+      return fail(kExitUsage, "--duration must be a finite number of seconds >= 0");
+
+    std::unique_ptr<physics::Simulation> sim;
+    try {
+      sim = std::make_unique<physics::Simulation>(scene);
+    } catch (const std::invalid_argument& e) {
+      return fail(kExitUsage, scene.source + ": " + e.what());
+    }
+
+    ReportFile file;
+    if (!options.report_path.empty()) {
+      const std::string why = file.open(options.report_path);
+      if (!why.empty()) return fail(kExitReport, why);
+    }
+
+    const bool talk = options.progress_every_s > 0.0;
+    const nlohmann::json report = run_batch(*sim, options, talk ? stdout : nullptr);
+    const nlohmann::json& result = report["result"];
+
+    std::string write_error;
+    if (!options.report_path.empty()) write_error = file.write(report_text(report));
+
+    if (!result["error"].is_null()) {
+      char where[96];
+      std::snprintf(where, sizeof where, "simulation failed at t = %.6g s after %lld steps: ", sim->time_s(),
+                    static_cast<long long>(sim->counters().steps));
+      const int code = fail(kExitSimFailed, where + result["error"].get<std::string>());
+      if (!write_error.empty()) fail(kExitReport, write_error);
+      return code;
+    }
+    if (!write_error.empty()) return fail(kExitReport, write_error);
+    if (talk) {
+      std::printf("done: %.6g s simulated in %lld steps", sim->time_s(), static_cast<long long>(sim->counters().steps));
+      if (report.contains("timing")) {
+        const auto& timing = report["timing"];
+        std::printf(", %.3f s wall", timing["wall_s"].get<double>());
+        if (!timing["real_time_factor"].is_null())
+          std::printf(" (%.2fx real time)", timing["real_time_factor"].get<double>());
+      }
+      if (!options.report_path.empty()) std::printf("; report %s", options.report_path.c_str());
+      std::printf("\n");
+      std::fflush(stdout);
+    }
+    return kExitOk;
+  } catch (const std::exception& e) {
+    return fail(kExitInternal, std::string("internal error: ") + e.what());
+  } catch (...) {
+    return fail(kExitInternal, "internal error: unknown exception");
+  }
+}
+
+}  // namespace tissue::app

@@ -1,0 +1,73 @@
+// Batch mode: run a scene for a fixed simulated duration as fast as the
+// machine allows (no wall-clock pacing), print live figures, write a JSON
+// report.
+//
+//   tissued --batch --scene FILE --duration SECONDS [--set key.path=value ...]
+//           [--report out.json] [--no-timing] [--progress SECONDS]
+//
+// The report (keys sorted, doubles printed so they round-trip):
+//   scene   {source, name, integrator, dt_s, adaptivity}
+//   result  {sim_time_s, steps, nodes/tets/springs {final, peak}, refines,
+//            merges, energy_J {kinetic, elastic}, external_work_J,
+//            nonfinite_events, rejected_steps, error (null | message),
+//            probes {NAME: {final_displacement_m [x,y,z], peak_magnitude_m}}}
+//   timing  {wall_s, step_ms {p50, p99, max}, real_time_factor}
+// Everything except `timing` depends only on the scene and the overrides, so
+// it is bit-identical from run to run; with timing off (--no-timing) the
+// whole file is.
+//
+// A step that fails (the integrator refused it, or the state went
+// non-finite; the simulation keeps its previous state) ends the run: the
+// report is still written, with result.error set.
+#pragma once
+
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "physics/simulation.hpp"
+#include "scene/scene.hpp"
+
+namespace tissue::app {
+
+struct BatchOptions {
+  std::string scene_path;
+  std::vector<std::string> overrides;  // "key.path=value", applied in order
+  double duration_s = 0.0;             // simulated seconds
+  std::string report_path;             // empty: no report file
+  bool timing = true;                  // include the wall-clock `timing` object
+  double progress_every_s = 0.1;       // simulated seconds between live lines; 0 = quiet
+};
+
+// Process exit codes of `tissued --batch`.
+enum ExitCode : int {
+  kExitOk = 0,
+  kExitInternal = 1,   // an unexpected exception (out of memory, a bug)
+  kExitUsage = 2,      // bad command line or bad scene
+  kExitSimFailed = 3,  // a step failed; the report says why
+  kExitReport = 4,     // the report file cannot be written
+};
+
+// Steps `sim` until its time reaches options.duration_s (to within a
+// millionth of a step, so 2 s at 1 ms is 2000 steps) and returns the report.
+// Live lines go to `progress` every options.progress_every_s simulated
+// seconds (nothing when it is null or the interval is 0). A failed step ends
+// the run early; the report's result.error then holds the reason. Only
+// options.duration_s, .timing and .progress_every_s are read.
+nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress);
+
+// The same on a fresh Simulation of `scene`. Throws std::invalid_argument when
+// the simulation cannot be built from it (mesh limits, a probe outside the
+// object).
+nlohmann::json run_batch(const scene::Scene& scene, const BatchOptions& options, std::FILE* progress);
+
+// The report as written to the file: two-space indentation, newline at the end.
+std::string report_text(const nlohmann::json& report);
+
+// The whole batch command: loads the scene with the overrides, runs it, writes
+// the report, prints a one-line reason on stderr for every failure and
+// returns the exit code. Never throws.
+int batch_command(const BatchOptions& options);
+
+}  // namespace tissue::app

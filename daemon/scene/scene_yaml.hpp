@@ -1,0 +1,63 @@
+// Scene files: YAML text -> a validated tissue::scene::Scene.
+//
+// The format is documented key by key in docs/scene-format.md. Every problem
+// with a scene is reported as a SceneError whose message names the source (the
+// file), the full key path inside it (lists indexed, e.g.
+// "loads[1].total_force_N[2]") and the reason:
+//
+//   config/scenes/x.yaml: material.youngs_modulus_Pa: must be > 0 (got -5)
+//
+// Nothing else escapes these functions for bad input (no yaml-cpp exceptions,
+// no crashes); yaml-cpp itself is an implementation detail and never appears
+// in this header.
+#pragma once
+
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "scene/scene.hpp"
+
+namespace tissue::scene {
+
+class SceneError : public std::runtime_error {
+ public:
+  // key_path may be empty (whole-document problems: missing file, syntax
+  // error, empty document); what() then reads "<source>: <reason>".
+  SceneError(const std::string& source, const std::string& key_path, const std::string& reason);
+
+  const std::string& source() const noexcept { return parts_->source; }
+  const std::string& key_path() const noexcept { return parts_->key_path; }
+  const std::string& reason() const noexcept { return parts_->reason; }
+
+ private:
+  struct Parts {
+    std::string source, key_path, reason;
+  };
+  std::shared_ptr<const Parts> parts_;  // shared: copying an exception must not throw
+};
+
+// Reads and parses a scene file. A missing, unreadable or oversized file is a
+// SceneError naming the file. Scene::source is set to `path`.
+Scene load_scene_file(const std::string& path);
+
+// Parses scene text; `source_name` is used in messages, stored in
+// Scene::source, and its file stem is the default Scene::name.
+Scene parse_scene(const std::string& yaml_text, const std::string& source_name);
+
+// Command-line overrides, each "key.path=value" with the value parsed as YAML,
+// e.g. "integrator.dt_s=0.002", "adaptivity.enabled=false",
+// "gravity_m_per_s2=[0,0,-9.81]", "loads[0].total_force_N[2]=-2". They are
+// applied in order to the YAML tree before conversion, so the same type and
+// validation rules apply; missing maps on the path are created, list indices
+// must exist. Errors caused by an override say so in their reason.
+Scene parse_scene_with_overrides(const std::string& yaml_text, const std::string& source_name,
+                                 const std::vector<std::string>& overrides);
+Scene load_scene_file_with_overrides(const std::string& path, const std::vector<std::string>& overrides);
+
+// Physical validation of a scene however it was built (the loaders call it).
+// Throws SceneError with source = s.source and YAML-style key paths.
+void validate_scene(const Scene& s);
+
+}  // namespace tissue::scene

@@ -1,0 +1,326 @@
+// Batch mode: the report (in-process, through run_batch) and the process
+// contract of `tissued --batch` (exit codes, messages, bit-identical files).
+#include "app/batch_run.hpp"
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "scene/scene_yaml.hpp"
+
+namespace tissue::app {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::string scene_path(const std::string& name) {
+  return std::string(TISSUE_SOURCE_DIR) + "/config/scenes/" + name + ".yaml";
+}
+
+std::string read_file(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// The cantilever with its tip load released at 0.15 s, run for 0.3 s: it
+// bends (the mesh refines), springs back (the probes' peak is well above
+// their final displacement) and coarsens again.
+const std::vector<std::string> kCantileverOverrides = {"loads[0].profile.release_s=0.15"};
+constexpr double kCantileverDuration_s = 0.3;
+
+json run_cantilever(bool timing) {
+  const scene::Scene scene = scene::load_scene_file_with_overrides(scene_path("cantilever"), kCantileverOverrides);
+  BatchOptions options;
+  options.duration_s = kCantileverDuration_s;
+  options.timing = timing;
+  return run_batch(scene, options, nullptr);
+}
+
+// One cantilever run shared by the report-content tests (it is the slow part).
+const json& cantilever_report() {
+  static const json report = run_cantilever(/*timing=*/true);
+  return report;
+}
+
+TEST(BatchReport, SameSceneGivesIdenticalResult) {
+  const json a = run_cantilever(/*timing=*/false);
+  const json b = run_cantilever(/*timing=*/false);
+  ASSERT_TRUE(a["result"]["error"].is_null()) << a["result"]["error"];
+  EXPECT_GT(a["result"]["refines"].get<long long>(), 0);  // the adaptive path is exercised
+  EXPECT_EQ(a["result"].dump(), b["result"].dump());
+  EXPECT_EQ(report_text(a), report_text(b));
+}
+
+TEST(BatchReport, StepsUntilTheDurationDespiteRoundedTimeSums) {
+  // Ten steps of 0.01 s sum to 0.09999999999999999 s: an eleventh would overshoot.
+  const scene::Scene scene = scene::load_scene_file_with_overrides(scene_path("beam"), {"integrator.dt_s=0.01"});
+  BatchOptions options;
+  options.duration_s = 0.1;
+  const json report = run_batch(scene, options, nullptr);
+  EXPECT_EQ(report["result"]["steps"].get<long long>(), 10);
+  EXPECT_NEAR(report["result"]["sim_time_s"].get<double>(), 0.1, 1e-12);
+  options.duration_s = 0.0;
+  EXPECT_EQ(run_batch(scene, options, nullptr)["result"]["steps"].get<long long>(), 0);
+}
+
+TEST(BatchReport, TimingPresentOnlyWhenAsked) {
+  const scene::Scene scene = scene::load_scene_file(scene_path("beam"));
+  BatchOptions options;
+  options.duration_s = 0.01;
+  options.timing = false;
+  EXPECT_FALSE(run_batch(scene, options, nullptr).contains("timing"));
+  options.timing = true;
+  const json report = run_batch(scene, options, nullptr);
+  ASSERT_TRUE(report.contains("timing"));
+  const json& t = report["timing"];
+  ASSERT_TRUE(t["wall_s"].is_number());
+  EXPECT_GT(t["wall_s"].get<double>(), 0.0);
+  for (const char* key : {"p50", "p99", "max"}) {
+    ASSERT_TRUE(t["step_ms"][key].is_number()) << key;
+    EXPECT_GT(t["step_ms"][key].get<double>(), 0.0) << key;
+  }
+  EXPECT_LE(t["step_ms"]["p50"].get<double>(), t["step_ms"]["p99"].get<double>());
+  EXPECT_LE(t["step_ms"]["p99"].get<double>(), t["step_ms"]["max"].get<double>());
+  ASSERT_TRUE(t["real_time_factor"].is_number());
+  EXPECT_NEAR(t["real_time_factor"].get<double>(),
+              report["result"]["sim_time_s"].get<double>() / t["wall_s"].get<double>(), 1e-9);
+}
+
+TEST(BatchReport, FieldsHaveTheRightTypes) {
+  const json& r = cantilever_report();
+  const json& s = r["scene"];
+  EXPECT_TRUE(s["source"].is_string());
+  EXPECT_EQ(s["source"], scene_path("cantilever"));
+  EXPECT_EQ(s["name"], "cantilever");
+  EXPECT_EQ(s["integrator"], "implicit");
+  EXPECT_TRUE(s["dt_s"].is_number_float());
+  EXPECT_EQ(s["dt_s"].get<double>(), 0.001);
+  EXPECT_TRUE(s["adaptivity"].is_boolean());
+  EXPECT_TRUE(s["adaptivity"].get<bool>());
+
+  const json& res = r["result"];
+  EXPECT_TRUE(res["sim_time_s"].is_number_float());
+  EXPECT_NEAR(res["sim_time_s"].get<double>(), kCantileverDuration_s, 1e-9);
+  EXPECT_TRUE(res["steps"].is_number_integer());
+  EXPECT_EQ(res["steps"].get<long long>(), 300);  // summed dts round, yet no extra step
+  for (const char* key : {"nodes", "tets", "springs"}) {
+    ASSERT_TRUE(res[key].is_object()) << key;
+    EXPECT_TRUE(res[key]["final"].is_number_integer()) << key;
+    EXPECT_TRUE(res[key]["peak"].is_number_integer()) << key;
+    EXPECT_GT(res[key]["final"].get<long long>(), 0) << key;
+    EXPECT_GE(res[key]["peak"].get<long long>(), res[key]["final"].get<long long>()) << key;
+  }
+  EXPECT_TRUE(res["refines"].is_number_integer());
+  EXPECT_TRUE(res["merges"].is_number_integer());
+  EXPECT_TRUE(res["energy_J"]["kinetic"].is_number_float());
+  EXPECT_TRUE(res["energy_J"]["elastic"].is_number_float());
+  EXPECT_TRUE(res["external_work_J"].is_number_float());
+  EXPECT_GT(res["external_work_J"].get<double>(), 0.0);  // the tip load did work while it bent the beam
+  EXPECT_TRUE(res["nonfinite_events"].is_number_integer());
+  EXPECT_EQ(res["nonfinite_events"].get<long long>(), 0);
+  EXPECT_TRUE(res["rejected_steps"].is_number_integer());
+  EXPECT_EQ(res["rejected_steps"].get<long long>(), 0);
+  EXPECT_TRUE(res["error"].is_null());
+
+  ASSERT_TRUE(res["probes"].is_object());
+  ASSERT_EQ(res["probes"].size(), 2u);
+  for (const char* name : {"tip", "tip_centre"}) {
+    ASSERT_TRUE(res["probes"].contains(name)) << name;
+    const json& p = res["probes"][name];
+    ASSERT_TRUE(p["final_displacement_m"].is_array()) << name;
+    ASSERT_EQ(p["final_displacement_m"].size(), 3u) << name;
+    for (const json& c : p["final_displacement_m"]) EXPECT_TRUE(c.is_number()) << name;
+    EXPECT_TRUE(p["peak_magnitude_m"].is_number_float()) << name;
+  }
+}
+
+TEST(BatchReport, PeaksAreTrackedEveryStep) {
+  const json& res = cantilever_report()["result"];
+  for (const auto& [name, p] : res["probes"].items()) {
+    const auto d = p["final_displacement_m"].get<std::vector<double>>();
+    const double final_m = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    const double peak_m = p["peak_magnitude_m"].get<double>();
+    EXPECT_GE(peak_m, final_m) << name;
+    // Released at 0.15 s, the tip sprang back: its peak (mm of bend) is long
+    // gone by 0.3 s, so only per-step tracking can have seen it.
+    EXPECT_GT(peak_m, 3e-3) << name;
+    EXPECT_GT(peak_m, 10.0 * final_m) << name;
+  }
+  EXPECT_GT(res["nodes"]["peak"].get<long long>(), res["nodes"]["final"].get<long long>());  // refined, then merged
+}
+
+TEST(BatchReport, AdaptiveCantileverRefinesWithinAThirdOfASecond) {
+  const json& res = cantilever_report()["result"];
+  EXPECT_GT(res["refines"].get<long long>(), 0);
+  EXPECT_GT(res["tets"]["peak"].get<long long>(), 384);  // above the 4x4x4-cube level-0 mesh
+}
+
+TEST(BatchReport, ProgressLinesEveryIntervalOfSimTime) {
+  const scene::Scene scene = scene::load_scene_file(scene_path("beam"));
+  BatchOptions options;
+  options.duration_s = 0.05;
+  options.progress_every_s = 0.01;
+  std::FILE* out = std::tmpfile();
+  ASSERT_NE(out, nullptr);
+  run_batch(scene, options, out);
+  std::rewind(out);
+  std::vector<std::string> lines;
+  char buf[1024];
+  while (std::fgets(buf, sizeof buf, out)) lines.emplace_back(buf);
+  std::fclose(out);
+  ASSERT_EQ(lines.size(), 1u + 5u);  // a header, then t = 0.01, 0.02, ..., 0.05
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    char expected_time[32];
+    std::snprintf(expected_time, sizeof expected_time, "%.3f s", 0.01 * static_cast<double>(i));
+    EXPECT_NE(lines[i].find(expected_time), std::string::npos) << lines[i];
+    for (const char* word : {"nodes", "tets", "springs", "refines", "merges", "tip ", " mm", "kin", "el ", "real time"})
+      EXPECT_NE(lines[i].find(word), std::string::npos) << word << " in " << lines[i];
+  }
+
+  options.progress_every_s = 0.0;  // quiet
+  std::FILE* quiet = std::tmpfile();
+  ASSERT_NE(quiet, nullptr);
+  run_batch(scene, options, quiet);
+  EXPECT_EQ(std::ftell(quiet), 0L);
+  std::fclose(quiet);
+}
+
+// ---- the process ---------------------------------------------------------
+
+struct Process {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+std::string shell_quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+class TissuedProcess : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() / ("tissued_app_test_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  Process run(const std::vector<std::string>& args) const {
+    std::string command = shell_quote(TISSUED_BINARY);
+    // Appended piece by piece: GCC 12 warns falsely (-Wrestrict) on "literal" + std::string&&.
+    for (const auto& a : args) command.append(" ").append(shell_quote(a));
+    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    command.append(" >").append(shell_quote(out.string()));
+    command.append(" 2>").append(shell_quote(err.string()));
+    command.append(" </dev/null");
+    const int status = std::system(command.c_str());
+    Process p;
+    if (status != -1 && WIFEXITED(status)) p.exit_code = WEXITSTATUS(status);
+    p.out = read_file(out);
+    p.err = read_file(err);
+    return p;
+  }
+
+  fs::path dir_;
+};
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+TEST_F(TissuedProcess, NoTimingReportsAreByteIdentical) {
+  const fs::path a = dir_ / "a.json", b = dir_ / "b.json";
+  for (const fs::path& report : {a, b}) {
+    const Process p =
+        run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set",
+             "loads[0].profile.release_s=0.05", "--no-timing", "--progress", "0", "--report", report.string()});
+    ASSERT_EQ(p.exit_code, 0) << p.err;
+    EXPECT_EQ(p.out, "");  // --progress 0 is quiet
+    EXPECT_EQ(p.err, "");
+  }
+  const std::string text_a = read_file(a);
+  ASSERT_FALSE(text_a.empty());
+  EXPECT_EQ(text_a, read_file(b));
+  const json report = json::parse(text_a);
+  EXPECT_FALSE(report.contains("timing"));
+  EXPECT_GT(report["result"]["refines"].get<long long>(), 0);
+  EXPECT_GT(report["result"]["merges"].get<long long>(), 0);
+}
+
+TEST_F(TissuedProcess, ReportsTimingAndProgressByDefault) {
+  const fs::path report = dir_ / "r.json";
+  const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.2", "--report", report.string()});
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  EXPECT_TRUE(contains(p.out, "t    0.100 s")) << p.out;  // every 0.1 s of simulated time by default
+  EXPECT_TRUE(contains(p.out, "t    0.200 s")) << p.out;
+  EXPECT_FALSE(contains(p.out, "t    0.300 s")) << p.out;
+  EXPECT_TRUE(json::parse(read_file(report)).contains("timing"));
+}
+
+TEST_F(TissuedProcess, InvalidOverrideExits2NamingTheKey) {
+  const fs::path report = dir_ / "r.json";
+  const Process p = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set",
+                         "material.youngs_modulus_Pa=-1", "--report", report.string()});
+  EXPECT_EQ(p.exit_code, 2);
+  EXPECT_TRUE(contains(p.err, "material.youngs_modulus_Pa")) << p.err;
+  EXPECT_FALSE(fs::exists(report));  // nothing ran, nothing written
+}
+
+TEST_F(TissuedProcess, MissingSceneExits2NamingTheFile) {
+  const std::string missing = (dir_ / "no_such_scene.yaml").string();
+  const Process p = run({"--batch", "--scene", missing, "--duration", "0.1"});
+  EXPECT_EQ(p.exit_code, 2);
+  EXPECT_TRUE(contains(p.err, missing)) << p.err;
+}
+
+TEST_F(TissuedProcess, BadCommandLineExits2) {
+  EXPECT_EQ(run({"--batch", "--scene", scene_path("beam"), "--duration", "-1"}).exit_code, 2);
+  EXPECT_EQ(run({"--batch", "--scene", scene_path("beam")}).exit_code, 2);  // no --duration
+  EXPECT_EQ(run({"--batch", "--scene", scene_path("beam"), "--duration", "1", "--bogus"}).exit_code, 2);
+  const Process no_mode = run({});
+  EXPECT_EQ(no_mode.exit_code, 2);
+  EXPECT_TRUE(contains(no_mode.err, "--batch")) << no_mode.err;
+}
+
+TEST_F(TissuedProcess, UnwritableReportExits4NamingThePath) {
+  const std::string path = "/proc/forbidden/report.json";
+  const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.01", "--report", path});
+  EXPECT_EQ(p.exit_code, 4);
+  EXPECT_TRUE(contains(p.err, path)) << p.err;
+  EXPECT_TRUE(contains(p.err, "No such file or directory")) << p.err;  // the errno reason
+}
+
+TEST_F(TissuedProcess, RefusedExplicitStepExits3WithTheReasonInTheReport) {
+  const fs::path report = dir_ / "r.json";
+  const Process p =
+      run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set", "integrator.kind=explicit",
+           "--set", "integrator.max_substeps=1", "--set", "integrator.dt_s=0.01", "--report", report.string()});
+  EXPECT_EQ(p.exit_code, 3);
+  EXPECT_TRUE(contains(p.err, "max_substeps")) << p.err;
+  EXPECT_EQ(std::count(p.err.begin(), p.err.end(), '\n'), 1) << p.err;  // one line
+  ASSERT_TRUE(fs::exists(report));
+  const json r = json::parse(read_file(report));
+  ASSERT_TRUE(r["result"]["error"].is_string());
+  EXPECT_TRUE(contains(r["result"]["error"].get<std::string>(), "max_substeps"));
+  EXPECT_EQ(r["result"]["steps"].get<long long>(), 0);
+  EXPECT_EQ(r["result"]["rejected_steps"].get<long long>(), 1);
+  EXPECT_EQ(r["result"]["nonfinite_events"].get<long long>(), 0);
+  EXPECT_EQ(r["scene"]["integrator"], "explicit");
+}
+
+}  // namespace
+}  // namespace tissue::app

@@ -1,0 +1,583 @@
+#include "scene/scene_yaml.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <exception>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace tissue::scene {
+namespace {
+
+std::string scene_path(const std::string& file) { return std::string(TISSUE_SOURCE_DIR) + "/config/scenes/" + file; }
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  EXPECT_TRUE(in) << "cannot open " << path;
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// A valid scene using every section; error cases are one edit away from it.
+const std::string kBase = R"(name: base
+object:
+  cubes: [4, 4, 4]
+  cube_size_m: 0.025
+material:
+  youngs_modulus_Pa: 5.0e4
+  density_kg_per_m3: 100
+  stiffness: isotropic
+  damping: rayleigh
+  rayleigh_alpha_per_s: 0.0
+  rayleigh_beta_s: 0.003
+gravity_m_per_s2: [0, 0, 0]
+fixed:
+  - region: {box: {min_m: [0, 0, 0], max_m: [0, 0.1, 0.1]}}
+prescribed:
+  - name: poke
+    region: {sphere: {centre_m: [0.1, 0.05, 0.05], radius_m: 0.001}}
+    displacement_m: [0, 0, -0.01]
+    profile: {start_s: 0, ramp_s: 0.5, release_s: .inf}
+loads:
+  - name: tip
+    region: {box: {min_m: [0.1, 0, 0], max_m: [0.1, 0.1, 0.1]}}
+    total_force_N: [0, 0, -5]
+    profile: {release_s: 1.0}
+adaptivity:
+  enabled: true
+  criterion: strain_energy
+  refine_threshold_Pa: 20
+  simplify_factor: 0.25
+  stretch_ratio: 1.05
+  min_depth: 0
+  max_depth: 3
+  every_steps: 5
+  max_ops_per_step: 64
+  min_age_steps: 20
+  midpoint_tolerance: 1.0e-3
+integrator:
+  kind: implicit
+  dt_s: 0.001
+  max_substeps: 1000
+  substep_safety: 0.8
+  cg_tolerance: 1.0e-6
+  cg_max_iterations: 100
+probes:
+  - name: tip
+    rest_m: [0.1, 0.05, 0.05]
+)";
+
+const std::string kMinimal = "object: {cubes: [4, 4, 4], cube_size_m: 0.025}\n";
+
+// kBase with the one occurrence of `from` replaced by `to`.
+std::string base_with(const std::string& from, const std::string& to) {
+  const auto at = kBase.find(from);
+  EXPECT_NE(at, std::string::npos) << "'" << from << "' is not in kBase";
+  EXPECT_EQ(kBase.find(from, at + 1), std::string::npos) << "'" << from << "' is not unique in kBase";
+  if (at == std::string::npos) return kBase;
+  std::string out = kBase;
+  out.replace(at, from.size(), to);
+  return out;
+}
+
+// Parsing must throw a SceneError naming the source, exactly `key_path`, and
+// containing `reason_word`. Returns the message for further checks.
+std::string expect_error(const std::string& yaml, const std::string& key_path, const std::string& reason_word,
+                         const std::vector<std::string>& overrides = {}) {
+  try {
+    parse_scene_with_overrides(yaml, "test.yaml", overrides);
+  } catch (const SceneError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(e.source(), "test.yaml") << what;
+    EXPECT_EQ(e.key_path(), key_path) << what;
+    EXPECT_EQ(what.rfind("test.yaml: ", 0), 0u) << what;
+    if (!key_path.empty()) {
+      EXPECT_NE(what.find("test.yaml: " + key_path + ": "), std::string::npos) << what;
+    }
+    EXPECT_NE(e.reason().find(reason_word), std::string::npos) << what;
+    EXPECT_NE(what.find(reason_word), std::string::npos) << what;
+    return what;
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "expected SceneError, got another exception: " << e.what();
+    return {};
+  }
+  ADD_FAILURE() << "expected SceneError at '" << key_path << "' (" << reason_word << "), but the scene parsed:\n"
+                << yaml;
+  return {};
+}
+
+// ------------------------------------------------------------ shipped scenes
+
+TEST(SceneYaml, CantileverSceneLoadsWithThePapersValues) {
+  const Scene s = load_scene_file(scene_path("cantilever.yaml"));
+  EXPECT_EQ(s.source, scene_path("cantilever.yaml"));
+  EXPECT_EQ(s.name, "cantilever");
+  EXPECT_EQ(s.object.cubes, (std::array<int, 3>{4, 4, 4}));
+  EXPECT_DOUBLE_EQ(s.object.cube_size_m, 0.025);
+  EXPECT_DOUBLE_EQ(s.material.youngs_modulus_Pa, 5.0e4);
+  EXPECT_DOUBLE_EQ(s.material.density_kg_per_m3, 100.0);
+  EXPECT_EQ(s.material.stiffness, StiffnessLaw::kIsotropic);
+  EXPECT_EQ(s.material.damping, DampingLaw::kRayleigh);
+  EXPECT_DOUBLE_EQ(s.material.rayleigh_beta_s, 0.003);
+  EXPECT_EQ(s.gravity_m_per_s2, (Vec3{0, 0, 0}));
+  ASSERT_EQ(s.fixed.size(), 1u);
+  EXPECT_EQ(s.fixed[0].region.kind, Region::Kind::kBox);
+  EXPECT_EQ(s.fixed[0].region.min_m, (Vec3{0, 0, 0}));
+  EXPECT_EQ(s.fixed[0].region.max_m, (Vec3{0, 0.1, 0.1}));
+  EXPECT_TRUE(s.prescribed.empty());
+  ASSERT_EQ(s.loads.size(), 1u);
+  EXPECT_EQ(s.loads[0].region.kind, Region::Kind::kBox);
+  EXPECT_EQ(s.loads[0].region.min_m, (Vec3{0.1, 0, 0}));
+  EXPECT_EQ(s.loads[0].region.max_m, (Vec3{0.1, 0.1, 0.1}));
+  EXPECT_EQ(s.loads[0].total_force_N, (Vec3{0, 0, -5}));
+  EXPECT_DOUBLE_EQ(s.loads[0].profile.start_s, 0.0);
+  EXPECT_DOUBLE_EQ(s.loads[0].profile.ramp_s, 0.0);
+  EXPECT_DOUBLE_EQ(s.loads[0].profile.release_s, 1.0);
+  EXPECT_EQ(s.loads[0].profile.at(0.5), 1.0);
+  EXPECT_EQ(s.loads[0].profile.at(1.0), 0.0);
+  EXPECT_TRUE(s.adaptivity.enabled);
+  EXPECT_EQ(s.adaptivity.criterion, RefineCriterion::kStrainEnergy);
+  EXPECT_DOUBLE_EQ(s.adaptivity.refine_threshold_Pa, 20.0);
+  EXPECT_EQ(s.adaptivity.max_depth, 3);
+  EXPECT_EQ(s.adaptivity.every_steps, 5);
+  EXPECT_EQ(s.integrator.kind, IntegratorKind::kImplicit);
+  EXPECT_DOUBLE_EQ(s.integrator.dt_s, 0.001);
+  ASSERT_EQ(s.probes.size(), 2u);
+  EXPECT_EQ(s.probes[0].name, "tip");
+  EXPECT_EQ(s.probes[0].rest_m, (Vec3{0.1, 0.05, 0.0}));
+  EXPECT_EQ(s.probes[1].name, "tip_centre");
+  EXPECT_EQ(s.probes[1].rest_m, (Vec3{0.1, 0.05, 0.05}));
+}
+
+TEST(SceneYaml, ContactSceneLoadsWithThePapersValues) {
+  const Scene s = load_scene_file(scene_path("contact.yaml"));
+  EXPECT_EQ(s.name, "contact");
+  EXPECT_EQ(s.object.cubes, (std::array<int, 3>{4, 4, 4}));
+  EXPECT_DOUBLE_EQ(s.object.cube_size_m, 0.025);
+  EXPECT_DOUBLE_EQ(s.material.youngs_modulus_Pa, 5.0e4);
+  EXPECT_DOUBLE_EQ(s.material.density_kg_per_m3, 100.0);
+  ASSERT_EQ(s.fixed.size(), 1u);
+  EXPECT_EQ(s.fixed[0].region.max_m, (Vec3{0, 0.1, 0.1}));
+  EXPECT_TRUE(s.loads.empty());
+  ASSERT_EQ(s.prescribed.size(), 1u);
+  const PrescribedSpec& p = s.prescribed[0];
+  EXPECT_EQ(p.region.kind, Region::Kind::kSphere);
+  EXPECT_EQ(p.region.centre_m, (Vec3{0.1, 0.05, 0.05}));
+  EXPECT_DOUBLE_EQ(p.region.radius_m, 1e-4);
+  EXPECT_EQ(p.displacement_m, (Vec3{0, 0, -0.01}));
+  EXPECT_DOUBLE_EQ(p.profile.ramp_s, 0.5);
+  EXPECT_TRUE(std::isinf(p.profile.release_s));
+  EXPECT_DOUBLE_EQ(p.profile.at(0.25), 0.5);
+  EXPECT_TRUE(s.adaptivity.enabled);
+  EXPECT_DOUBLE_EQ(s.adaptivity.refine_threshold_Pa, 20.0);
+  EXPECT_EQ(s.adaptivity.max_depth, 3);
+  ASSERT_EQ(s.probes.size(), 1u);
+  EXPECT_EQ(s.probes[0].rest_m, (Vec3{0.1, 0.05, 0.05}));
+}
+
+TEST(SceneYaml, BeamSceneLoadsWithTheBenchmarkValues) {
+  const Scene s = load_scene_file(scene_path("beam.yaml"));
+  EXPECT_EQ(s.name, "beam");
+  EXPECT_EQ(s.object.cubes, (std::array<int, 3>{8, 2, 2}));
+  EXPECT_DOUBLE_EQ(s.object.cube_size_m, 0.05);
+  EXPECT_DOUBLE_EQ(s.material.youngs_modulus_Pa, 5.0e4);
+  EXPECT_DOUBLE_EQ(s.material.density_kg_per_m3, 100.0);
+  EXPECT_DOUBLE_EQ(s.material.rayleigh_beta_s, 0.01);
+  EXPECT_EQ(s.gravity_m_per_s2, (Vec3{0, 0, 0}));
+  ASSERT_EQ(s.fixed.size(), 1u);
+  EXPECT_EQ(s.fixed[0].region.max_m, (Vec3{0, 0.1, 0.1}));
+  ASSERT_EQ(s.loads.size(), 1u);
+  EXPECT_EQ(s.loads[0].region.min_m, (Vec3{0.4, 0, 0}));
+  EXPECT_EQ(s.loads[0].region.max_m, (Vec3{0.4, 0.1, 0.1}));
+  EXPECT_EQ(s.loads[0].total_force_N, (Vec3{0, 0, -0.05}));
+  EXPECT_EQ(s.loads[0].profile.at(0.0), 1.0);  // constant
+  EXPECT_EQ(s.loads[0].profile.at(1e6), 1.0);
+  EXPECT_FALSE(s.adaptivity.enabled);
+  EXPECT_EQ(s.integrator.kind, IntegratorKind::kImplicit);
+  EXPECT_DOUBLE_EQ(s.integrator.dt_s, 0.001);
+  ASSERT_EQ(s.probes.size(), 1u);
+  EXPECT_EQ(s.probes[0].name, "tip");
+  EXPECT_EQ(s.probes[0].rest_m, (Vec3{0.4, 0.05, 0.05}));
+}
+
+// ------------------------------------------------------- values and defaults
+
+TEST(SceneYaml, EveryKeyOfTheBaseSceneIsRead) {
+  const Scene s = parse_scene(kBase, "test.yaml");
+  EXPECT_EQ(s.source, "test.yaml");
+  EXPECT_EQ(s.name, "base");
+  EXPECT_DOUBLE_EQ(s.material.rayleigh_beta_s, 0.003);  // not the struct default 0.01
+  ASSERT_EQ(s.prescribed.size(), 1u);
+  EXPECT_EQ(s.prescribed[0].name, "poke");
+  EXPECT_DOUBLE_EQ(s.prescribed[0].region.radius_m, 0.001);
+  EXPECT_TRUE(std::isinf(s.prescribed[0].profile.release_s));
+  EXPECT_TRUE(s.adaptivity.enabled);
+  EXPECT_DOUBLE_EQ(s.adaptivity.refine_threshold_Pa, 20.0);  // not the struct default 4
+  EXPECT_DOUBLE_EQ(s.adaptivity.midpoint_tolerance, 1e-3);
+  EXPECT_EQ(s.adaptivity.min_age_steps, 20);
+  EXPECT_DOUBLE_EQ(s.integrator.cg_tolerance, 1e-6);
+  EXPECT_EQ(s.integrator.cg_max_iterations, 100);
+
+  const Scene t = parse_scene(base_with("kind: implicit", "kind: projective") + "", "test.yaml");
+  EXPECT_EQ(t.integrator.kind, IntegratorKind::kProjective);
+  const Scene u = parse_scene(base_with("criterion: strain_energy", "criterion: stretch"), "test.yaml");
+  EXPECT_EQ(u.adaptivity.criterion, RefineCriterion::kStretch);
+  const Scene v = parse_scene(
+      base_with("stiffness: isotropic\n  damping: rayleigh", "stiffness: paper\n  damping: paper"), "test.yaml");
+  EXPECT_EQ(v.material.stiffness, StiffnessLaw::kPaper);
+  EXPECT_EQ(v.material.damping, DampingLaw::kPaper);
+}
+
+TEST(SceneYaml, OmittedSectionsTakeTheStructDefaultsAndTheNameIsTheFileStem) {
+  const Scene s = parse_scene(kMinimal, "some/dir/my_scene.yaml");
+  const Scene d;
+  EXPECT_EQ(s.name, "my_scene");
+  EXPECT_EQ(s.material.youngs_modulus_Pa, d.material.youngs_modulus_Pa);
+  EXPECT_EQ(s.material.rayleigh_beta_s, d.material.rayleigh_beta_s);
+  EXPECT_EQ(s.adaptivity.enabled, d.adaptivity.enabled);
+  EXPECT_EQ(s.adaptivity.refine_threshold_Pa, d.adaptivity.refine_threshold_Pa);
+  EXPECT_EQ(s.adaptivity.max_depth, d.adaptivity.max_depth);
+  EXPECT_EQ(s.integrator.kind, d.integrator.kind);
+  EXPECT_EQ(s.integrator.dt_s, d.integrator.dt_s);
+  EXPECT_EQ(s.gravity_m_per_s2, d.gravity_m_per_s2);
+  EXPECT_TRUE(s.fixed.empty() && s.loads.empty() && s.prescribed.empty() && s.probes.empty());
+
+  // Unnamed list entries get distinct default names.
+  const Scene n = parse_scene(kMinimal + "probes: [{rest_m: [0, 0, 0]}, {rest_m: [0.1, 0.1, 0.1]}]\n", "x.yaml");
+  ASSERT_EQ(n.probes.size(), 2u);
+  EXPECT_EQ(n.probes[0].name, "probe0");
+  EXPECT_EQ(n.probes[1].name, "probe1");
+}
+
+TEST(SceneYaml, NumbersFollowYamlSpelling) {
+  // Integers are accepted where a real is expected, and .inf for release_s.
+  const Scene s = parse_scene(kMinimal +
+                                  "gravity_m_per_s2: [+2., .5, -9.81e0]\n"
+                                  "loads: [{region: {box: {min_m: [0,0,0], max_m: [1,1,1]}},"
+                                  " total_force_N: [1, 2, 3], profile: {release_s: .Inf}}]\n",
+                              "x.yaml");
+  EXPECT_EQ(s.gravity_m_per_s2, (Vec3{2, 0.5, -9.81}));
+  EXPECT_TRUE(std::isinf(s.loads[0].profile.release_s));
+  // But an integer field does not take a real, nor a number a quoted string.
+  expect_error(base_with("max_depth: 3", "max_depth: 2.5"), "adaptivity.max_depth", "expected an integer");
+  expect_error(base_with("youngs_modulus_Pa: 5.0e4", "youngs_modulus_Pa: \"5.0e4\""), "material.youngs_modulus_Pa",
+               "expected a number");
+  expect_error(base_with("youngs_modulus_Pa: 5.0e4", "youngs_modulus_Pa: 1e999"), "material.youngs_modulus_Pa",
+               "out of range");
+  expect_error(base_with("max_substeps: 1000", "max_substeps: 99999999999"), "integrator.max_substeps", "out of range");
+  expect_error(base_with("dt_s: 0.001", "dt_s: 1ms"), "integrator.dt_s", "expected a number");
+}
+
+// ------------------------------------------------------------------ errors
+
+TEST(SceneYamlErrors, MessageFormatIsSourceKeyPathReason) {
+  try {
+    parse_scene(base_with("youngs_modulus_Pa: 5.0e4", "youngs_modulus_Pa: -5"), "config/scenes/x.yaml");
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    EXPECT_STREQ(e.what(), "config/scenes/x.yaml: material.youngs_modulus_Pa: must be > 0 (got -5)");
+    EXPECT_EQ(e.source(), "config/scenes/x.yaml");
+    EXPECT_EQ(e.key_path(), "material.youngs_modulus_Pa");
+    EXPECT_EQ(e.reason(), "must be > 0 (got -5)");
+  }
+}
+
+TEST(SceneYamlErrors, UnknownTopLevelKey) {
+  const std::string what = expect_error(kBase + "colour: red\n", "colour", "unknown key");
+  EXPECT_NE(what.find("allowed keys: name, object, material"), std::string::npos) << what;
+}
+
+TEST(SceneYamlErrors, UnknownNestedKeyListsTheAllowedKeysAndSuggestsOne) {
+  const std::string what =
+      expect_error(base_with("youngs_modulus_Pa:", "youngs_modulus:"), "material.youngs_modulus", "unknown key");
+  EXPECT_NE(what.find("did you mean 'youngs_modulus_Pa'"), std::string::npos) << what;
+  EXPECT_NE(what.find("allowed keys: youngs_modulus_Pa, density_kg_per_m3"), std::string::npos) << what;
+  expect_error(base_with("{release_s: 1.0}", "{release: 1.0}"), "loads[0].profile.release", "unknown key");
+  expect_error(base_with("centre_m:", "center_m:"), "prescribed[0].region.sphere.center_m", "unknown key");
+}
+
+TEST(SceneYamlErrors, WrongYamlType) {
+  expect_error(base_with("dt_s: 0.001", "dt_s: {value: 0.001}"), "integrator.dt_s", "expected a number, got a map");
+  expect_error(base_with("enabled: true", "enabled: \"true\""), "adaptivity.enabled", "expected a boolean");
+  expect_error(base_with("enabled: true", "enabled: 1"), "adaptivity.enabled", "expected a boolean");
+  expect_error(base_with("cube_size_m: 0.025", "cube_size_m: [0.025]"), "object.cube_size_m", "expected a number");
+  expect_error(base_with("kind: implicit", "kind: [implicit]"), "integrator.kind", "expected one of");
+  expect_error(base_with("name: base", "name: {a: b}"), "name", "expected a string");
+  expect_error(kBase + "material: 5\n", "material", "duplicate key");
+  expect_error(base_with("material:\n  youngs_modulus_Pa: 5.0e4", "mat:\n  youngs_modulus_Pa: 5.0e4"), "mat",
+               "unknown key");
+  expect_error(base_with("fixed:\n  - region:", "fixed:\n  region:"), "fixed", "expected a list");
+  expect_error(base_with("dt_s: 0.001", "dt_s:"), "integrator.dt_s", "got null");
+  expect_error("- object\n", "", "must be a map");
+}
+
+TEST(SceneYamlErrors, WrongListLength) {
+  expect_error(base_with("total_force_N: [0, 0, -5]", "total_force_N: [0, -5]"), "loads[0].total_force_N",
+               "expected a list of 3 numbers, got 2 items");
+  expect_error(base_with("cubes: [4, 4, 4]", "cubes: [4, 4, 4, 4]"), "object.cubes", "3 integers");
+}
+
+TEST(SceneYamlErrors, NonFiniteNumbers) {
+  expect_error(base_with("youngs_modulus_Pa: 5.0e4", "youngs_modulus_Pa: .nan"), "material.youngs_modulus_Pa",
+               "finite");
+  expect_error(base_with("total_force_N: [0, 0, -5]", "total_force_N: [0, 0, .inf]"), "loads[0].total_force_N[2]",
+               "finite");
+  expect_error(base_with("gravity_m_per_s2: [0, 0, 0]", "gravity_m_per_s2: [0, -.inf, 0]"), "gravity_m_per_s2[1]",
+               "finite");
+  expect_error(base_with("release_s: .inf", "release_s: .nan"), "prescribed[0].profile.release_s", "nan");
+}
+
+TEST(SceneYamlErrors, PhysicallyMeaninglessValues) {
+  expect_error(base_with("youngs_modulus_Pa: 5.0e4", "youngs_modulus_Pa: 0"), "material.youngs_modulus_Pa",
+               "must be > 0 (got 0)");
+  expect_error(base_with("density_kg_per_m3: 100", "density_kg_per_m3: -1"), "material.density_kg_per_m3",
+               "must be > 0 (got -1)");
+  expect_error(base_with("dt_s: 0.001", "dt_s: 0"), "integrator.dt_s", "must be > 0");
+  expect_error(base_with("dt_s: 0.001", "dt_s: 2"), "integrator.dt_s", "must be <= 1");
+  expect_error(base_with("cubes: [4, 4, 4]", "cubes: [4, -4, 4]"), "object.cubes[1]", "must be >= 1 (got -4)");
+  expect_error(base_with("cube_size_m: 0.025", "cube_size_m: 0"), "object.cube_size_m", "must be > 0");
+  expect_error(base_with("rayleigh_beta_s: 0.003", "rayleigh_beta_s: -0.1"), "material.rayleigh_beta_s", ">= 0");
+  expect_error(base_with("radius_m: 0.001", "radius_m: -0.001"), "prescribed[0].region.sphere.radius_m", ">= 0");
+  expect_error(base_with("ramp_s: 0.5", "ramp_s: -0.5"), "prescribed[0].profile.ramp_s", ">= 0");
+  expect_error(base_with("{release_s: 1.0}", "{start_s: 2, release_s: 1.0}"), "loads[0].profile.release_s",
+               "must be > start_s");
+  expect_error(base_with("min_depth: 0", "min_depth: 4"), "adaptivity.min_depth", "must be <= max_depth");
+  expect_error(base_with("max_depth: 3", "max_depth: 31"), "adaptivity.max_depth", "<= 30");
+  expect_error(base_with("simplify_factor: 0.25", "simplify_factor: 1"), "adaptivity.simplify_factor", "(0, 1)");
+  expect_error(base_with("stretch_ratio: 1.05", "stretch_ratio: 1"), "adaptivity.stretch_ratio", "> 1");
+  expect_error(base_with("every_steps: 5", "every_steps: 0"), "adaptivity.every_steps", ">= 1");
+  expect_error(base_with("substep_safety: 0.8", "substep_safety: 1.5"), "integrator.substep_safety", "(0, 1]");
+  expect_error(base_with("cg_tolerance: 1.0e-6", "cg_tolerance: 1"), "integrator.cg_tolerance", "(0, 1)");
+}
+
+TEST(SceneYamlErrors, BadEnumListsTheAllowedValues) {
+  const std::string what = expect_error(base_with("kind: implicit", "kind: implict"), "integrator.kind",
+                                        "allowed values: explicit, implicit, projective");
+  EXPECT_NE(what.find("'implict'"), std::string::npos) << what;
+  expect_error(base_with("stiffness: isotropic", "stiffness: iso"), "material.stiffness",
+               "allowed values: isotropic, paper");
+}
+
+TEST(SceneYamlErrors, Regions) {
+  expect_error(base_with("max_m: [0, 0.1, 0.1]", "max_m: [-0.01, 0.1, 0.1]"), "fixed[0].region.box",
+               "min_m[0] > max_m[0]");
+  expect_error(base_with("{box: {min_m: [0.1, 0, 0], max_m: [0.1, 0.1, 0.1]}}",
+                         "{box: {min_m: [0.5, 0, 0], max_m: [0.6, 0.1, 0.1]}}"),
+               "loads[0].region", "outside the object");
+  expect_error(base_with("centre_m: [0.1, 0.05, 0.05]", "centre_m: [0.1, 0.05, 0.2]"), "prescribed[0].region",
+               "outside the object");
+  expect_error(base_with("rest_m: [0.1, 0.05, 0.05]", "rest_m: [1.0, 0.05, 0.05]"), "probes[0].rest_m",
+               "outside the object");
+  expect_error(base_with("{box: {min_m: [0.1, 0, 0], max_m: [0.1, 0.1, 0.1]}}", "{}"), "loads[0].region",
+               "exactly one of 'box' or 'sphere'");
+  expect_error(
+      base_with("{box: {min_m: [0.1, 0, 0], max_m: [0.1, 0.1, 0.1]}}",
+                "{box: {min_m: [0.1, 0, 0], max_m: [0.1, 0.1, 0.1]}, sphere: {centre_m: [0,0,0], radius_m: 1}}"),
+      "loads[0].region", "got both");
+  expect_error(base_with("min_m: [0.1, 0, 0], ", ""), "loads[0].region.box.min_m", "missing required key");
+  // Touching the box at a face, edge or corner is inside.
+  EXPECT_NO_THROW(parse_scene(base_with("rest_m: [0.1, 0.05, 0.05]", "rest_m: [0.1, 0.1, 0.1]"), "test.yaml"));
+  EXPECT_NO_THROW(parse_scene(base_with("centre_m: [0.1, 0.05, 0.05]", "centre_m: [0.101, 0.05, 0.05]"), "t.yaml"));
+}
+
+TEST(SceneYamlErrors, DuplicateNames) {
+  const std::string what =
+      expect_error(kBase + "  - name: tip\n    rest_m: [0, 0, 0]\n", "probes[1].name", "duplicate");
+  EXPECT_NE(what.find("probes[0].name"), std::string::npos) << what;
+  expect_error(base_with("profile: {release_s: 1.0}\n",
+                         "profile: {release_s: 1.0}\n  - name: tip\n    region: "
+                         "{box: {min_m: [0,0,0], max_m: [0,0,0]}}\n    "
+                         "total_force_N: [0, 0, 1]\n"),
+               "loads[1].name", "duplicate");
+  expect_error(base_with("name: tip\n    rest_m", "name: \"tip top\"\n    rest_m"), "probes[0].name", "bad name");
+  // The same name in different lists is fine: kBase has a load and a probe called "tip".
+  EXPECT_NO_THROW(parse_scene(kBase, "test.yaml"));
+}
+
+TEST(SceneYamlErrors, MissingObject) {
+  expect_error("name: x\n", "object", "missing required");
+  expect_error("object: {cubes: [4, 4, 4]}\n", "object.cube_size_m", "missing required");
+}
+
+TEST(SceneYamlErrors, MissingFile) {
+  const std::string path = scene_path("does_not_exist.yaml");
+  try {
+    load_scene_file(path);
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.source(), path);
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("no such file"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(load_scene_file(std::string(TISSUE_SOURCE_DIR) + "/config/scenes"), SceneError);  // a directory
+}
+
+TEST(SceneYamlErrors, YamlSyntaxErrorGivesTheLine) {
+  const std::string what =
+      expect_error("object:\n  cubes: [4, 4, 4]\n  cube_size_m: [0.025\nmaterial: {}\n", "", "YAML syntax error");
+  EXPECT_NE(what.find("line 4"), std::string::npos) << what;
+  const std::string tab = expect_error("object:\n  cubes: [4, 4, 4]\n cube_size_m: 0.1\n", "", "YAML syntax error");
+  EXPECT_NE(tab.find("line 3"), std::string::npos) << tab;
+}
+
+TEST(SceneYamlErrors, EmptyDocumentAndMultipleDocuments) {
+  expect_error("", "", "empty document");
+  expect_error("# nothing but a comment\n\n", "", "empty document");
+  expect_error("---\n...\n", "", "empty document");
+  const std::string two = expect_error(kMinimal + "---\n" + kMinimal, "", "second YAML document");
+  EXPECT_NE(two.find("line 2"), std::string::npos) << two;
+  // yaml-cpp 0.7's LoadAll loops forever on these (jbeder/yaml-cpp#1040).
+  expect_error(",\n", "", "");
+  expect_error("!x\n,\n", "", "line 2");
+  expect_error(kMinimal + ",\n", "", "line 2");
+  expect_error("object: " + std::string(100000, '['), "", "nesting too deep");
+}
+
+TEST(SceneYamlErrors, ValidateSceneWorksOnProgrammaticScenes) {
+  Scene s;
+  s.source = "built-in";
+  EXPECT_NO_THROW(validate_scene(s));
+  s.loads.push_back(LoadSpec{"push", Region{}, Vec3{0, 0, -1}, TimeProfile{}});
+  EXPECT_NO_THROW(validate_scene(s));  // a point region at the origin corner
+  s.integrator.dt_s = -1;
+  try {
+    validate_scene(s);
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    EXPECT_STREQ(e.what(), "built-in: integrator.dt_s: must be > 0 (got -1)");
+  }
+  s.integrator.dt_s = 1e-3;
+  s.material.stiffness = static_cast<StiffnessLaw>(7);
+  EXPECT_THROW(validate_scene(s), SceneError);
+}
+
+// --------------------------------------------------------------- overrides
+
+TEST(SceneYamlOverrides, ScalarOverrides) {
+  const Scene s = parse_scene_with_overrides(kBase, "test.yaml",
+                                             {"integrator.dt_s=0.002", "adaptivity.enabled=false", "name=renamed"});
+  EXPECT_DOUBLE_EQ(s.integrator.dt_s, 0.002);
+  EXPECT_FALSE(s.adaptivity.enabled);
+  EXPECT_EQ(s.name, "renamed");
+  // Later overrides win.
+  const Scene t = parse_scene_with_overrides(kBase, "test.yaml", {"integrator.dt_s=0.002", "integrator.dt_s = 0.004"});
+  EXPECT_DOUBLE_EQ(t.integrator.dt_s, 0.004);
+}
+
+TEST(SceneYamlOverrides, ListOverrides) {
+  const Scene s = parse_scene_with_overrides(
+      kBase, "test.yaml",
+      {"gravity_m_per_s2=[0,0,-9.81]", "loads[0].total_force_N[2]=-2", "object.cubes=[8, 2, 2]",
+       "probes=[{name: a, rest_m: [0, 0, 0]}, {name: b, rest_m: [0.1, 0.05, 0.05]}]"});
+  EXPECT_EQ(s.gravity_m_per_s2, (Vec3{0, 0, -9.81}));
+  EXPECT_EQ(s.loads[0].total_force_N, (Vec3{0, 0, -2}));
+  EXPECT_EQ(s.object.cubes, (std::array<int, 3>{8, 2, 2}));
+  ASSERT_EQ(s.probes.size(), 2u);
+  EXPECT_EQ(s.probes[1].name, "b");
+}
+
+TEST(SceneYamlOverrides, MissingSectionsAreCreated) {
+  const Scene s =
+      parse_scene_with_overrides(kMinimal, "test.yaml", {"adaptivity.enabled=true", "adaptivity.max_depth=4"});
+  EXPECT_TRUE(s.adaptivity.enabled);
+  EXPECT_EQ(s.adaptivity.max_depth, 4);
+}
+
+TEST(SceneYamlOverrides, AnchorsElsewhereAreNotChanged) {
+  const std::string text = kMinimal + "gravity_m_per_s2: &g [0.01, 0.02, 0.03]\nprobes: [{name: p, rest_m: *g}]\n";
+  const Scene s = parse_scene_with_overrides(text, "test.yaml", {"gravity_m_per_s2[2]=-9.81"});
+  EXPECT_EQ(s.gravity_m_per_s2, (Vec3{0.01, 0.02, -9.81}));
+  EXPECT_EQ(s.probes[0].rest_m, (Vec3{0.01, 0.02, 0.03}));
+}
+
+TEST(SceneYamlOverrides, UnknownPathFailsNamingIt) {
+  const std::string what = expect_error(kBase, "integrator.dtt_s", "unknown key", {"integrator.dtt_s=0.002"});
+  EXPECT_NE(what.find("--set 'integrator.dtt_s=0.002'"), std::string::npos) << what;
+  expect_error(kBase, "probes[3]", "out of range", {"probes[3].name=x"});
+  expect_error(kBase, "name", "not a map", {"name.first=x"});
+  expect_error(kBase, "material", "not a list", {"material[0]=1"});
+}
+
+TEST(SceneYamlOverrides, ValueThatBreaksValidationFailsWithTheKeyPath) {
+  const std::string what = expect_error(kBase, "integrator.dt_s", "must be > 0", {"integrator.dt_s=0"});
+  EXPECT_NE(what.find("--set"), std::string::npos) << what;
+  expect_error(kBase, "adaptivity.enabled", "expected a boolean", {"adaptivity.enabled=maybe"});
+  expect_error(kBase, "gravity_m_per_s2", "not valid YAML", {"gravity_m_per_s2=[0,0"});
+  expect_error(kBase, "gravity_m_per_s2", "expected a list of 3 numbers", {"gravity_m_per_s2=0,0,-9.81"});
+}
+
+TEST(SceneYamlOverrides, MalformedOverrideFailsClearly) {
+  const std::string what = expect_error(kBase, "", "expected key.path=value", {"integrator.dt_s"});
+  EXPECT_NE(what.find("integrator.dt_s"), std::string::npos) << what;
+  expect_error(kBase, "", "bad key path", {"=1"});
+  expect_error(kBase, "", "bad key path", {"integrator..dt_s=1"});
+  expect_error(kBase, "", "bad key path", {"loads[x].name=a"});
+  expect_error(kBase, "", "bad key path", {"loads[0.name=a"});
+}
+
+TEST(SceneYamlOverrides, FileWithOverrides) {
+  const Scene s = load_scene_file_with_overrides(scene_path("beam.yaml"), {"integrator.kind=explicit"});
+  EXPECT_EQ(s.integrator.kind, IntegratorKind::kExplicit);
+  EXPECT_EQ(s.object.cubes, (std::array<int, 3>{8, 2, 2}));
+}
+
+// ------------------------------------------------------------------- fuzz
+
+TEST(SceneYamlFuzz, MutatedScenesEitherParseOrThrowSceneError) {
+  const std::string original = read_text(scene_path("cantilever.yaml"));
+  ASSERT_FALSE(original.empty());
+  const std::string yamlish = "[]{}:,-&*!|>'\"#%@`?\n\t .0123456789e";
+  std::mt19937 rng(20240611);
+  const auto pick = [&](std::size_t n) { return std::uniform_int_distribution<std::size_t>(0, n - 1)(rng); };
+  int parsed = 0, rejected = 0;
+  for (int iteration = 0; iteration < 600; ++iteration) {
+    std::string text = original;
+    const int edits = 1 + static_cast<int>(pick(4));
+    for (int e = 0; e < edits && !text.empty(); ++e) {
+      switch (pick(5)) {
+        case 0:  // flip a byte to any value
+          text[pick(text.size())] = static_cast<char>(pick(256));
+          break;
+        case 1:  // truncate
+          text.resize(pick(text.size()));
+          break;
+        case 2:  // insert YAML punctuation
+          text.insert(pick(text.size() + 1), 1, yamlish[pick(yamlish.size())]);
+          break;
+        case 3: {  // delete a range
+          const std::size_t at = pick(text.size());
+          text.erase(at, pick(20) + 1);
+          break;
+        }
+        default: {  // flip one bit
+          text[pick(text.size())] ^= static_cast<char>(1 << pick(8));
+          break;
+        }
+      }
+    }
+    try {
+      const Scene s = parse_scene(text, "fuzz.yaml");
+      EXPECT_NO_THROW(validate_scene(s));
+      ++parsed;
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.source(), "fuzz.yaml");
+      EXPECT_FALSE(e.reason().empty());
+      ++rejected;
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << "iteration " << iteration << ": non-SceneError exception: " << e.what() << "\n" << text;
+    } catch (...) {
+      ADD_FAILURE() << "iteration " << iteration << ": unknown exception\n" << text;
+    }
+  }
+  // Both outcomes occur, so the mutations neither always break nor never touch the scene.
+  EXPECT_GT(parsed, 10);
+  EXPECT_GT(rejected, 100);
+}
+
+}  // namespace
+}  // namespace tissue::scene
