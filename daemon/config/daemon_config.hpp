@@ -1,0 +1,106 @@
+// The daemon's settings (config/tissued.yaml): plain data in SI units,
+// validated by the loader (daemon_config_yaml) before anyone reads it.
+// Scenes are separate (scene/scene.hpp); this file says which scene to load,
+// which device to drive, how the threads run and where the control socket is.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace tissue::config {
+
+using Vec3 = std::array<double, 3>;
+
+// Per-device force safety. Every limit applies after the coupling computes a
+// force and before the device sees it.
+struct ForceLimits {
+  double max_force_N = 3.0;                  // |F| clamp (Phantom Omni/Touch peak is 3.3 N)
+  double max_force_rate_N_per_s = 300.0;     // |dF/dt| clamp
+  double max_stiffness_N_per_m = 1000.0;     // rendered stiffness clamp (coupling and K_c)
+  double ramp_in_s = 0.5;                    // force scale ramps 0 -> 1 after start
+  double ramp_out_s = 0.05;                  // ... and 1 -> 0 on a fault or stop
+  double stale_model_s = 0.1;                // no new LocalModel for this long: ramp to zero
+  double device_timeout_s = 0.01;            // no valid device sample for this long: ramp to zero
+  double max_speed_m_per_s = 5.0;            // device input faster than this is rejected as a glitch
+  double workspace_radius_m = 1.0;           // device input farther than this from the origin is rejected
+};
+
+// A scripted target position at a time (piecewise-linear in between).
+struct Waypoint {
+  double time_s = 0.0;
+  Vec3 position_m{};
+};
+
+// The simulated device. kTrajectory: the tip follows the waypoints exactly.
+// kHand: a virtual hand (point mass) is pulled towards the waypoint target by
+// a spring-damper and pushed back by the rendered force, so the full force
+// path is exercised and the "user" yields when the object pushes.
+struct SimDeviceSpec {
+  enum class Mode { kTrajectory, kHand };
+  Mode mode = Mode::kHand;
+  std::vector<Waypoint> waypoints;  // at least one
+  bool loop = false;                // repeat the waypoint timeline
+  double hand_mass_kg = 0.1;
+  double hand_stiffness_N_per_m = 200.0;
+  double hand_damping_N_s_per_m = 4.0;
+};
+
+struct UdpDeviceSpec {
+  std::string bind_address = "127.0.0.1";
+  int port = 47800;
+  double timeout_s = 0.05;
+};
+
+struct OpenHapticsSpec {
+  std::string library = "libHD.so";
+  std::string device_name = "Default Device";
+};
+
+struct DeviceSpec {
+  enum class Kind { kNone, kSim, kUdp, kOpenHaptics };
+  Kind kind = Kind::kSim;
+  ForceLimits limits;
+  // Device frame -> scene frame: p_scene = offset_m + scale * p_device.
+  Vec3 offset_m{};
+  double scale = 1.0;
+  SimDeviceSpec sim;
+  UdpDeviceSpec udp;
+  OpenHapticsSpec openhaptics;
+};
+
+struct HapticSpec {
+  double rate_hz = 1000.0;
+  double coupling_stiffness_N_per_m = 400.0;  // virtual coupling spring, proxy <-> device
+  double coupling_damping_N_s_per_m = 1.0;
+  double crossfade_s = 0.01;                  // blend time when a new LocalModel arrives
+};
+
+struct RealtimeSpec {
+  bool sched_fifo = true;  // try SCHED_FIFO; fall back to SCHED_OTHER and say so
+  int haptic_priority = 80;
+  int sim_priority = 60;
+  bool lock_memory = true;  // try mlockall; undo it when the memlock limit is too small
+  int haptic_cpu = -1;      // pin the haptic thread to this CPU (-1: no pinning)
+};
+
+struct ControlSpec {
+  std::string unix_socket_path = "/run/tissued/control.sock";  // empty: no Unix socket
+  int tcp_port = 0;  // 0: no TCP; otherwise bound to 127.0.0.1 only
+  std::size_t max_line_bytes = 65536;
+  int max_connections = 16;
+};
+
+struct DaemonConfig {
+  std::string source;      // file the config came from (for messages)
+  std::string scene_path;  // resolved against the config file's directory when relative
+  std::string state_dir = "/var/lib/tissued";  // recordings and exports go here only
+  DeviceSpec device;
+  HapticSpec haptics;
+  RealtimeSpec realtime;
+  ControlSpec control;
+  double status_interval_s = 1.0;  // live status line on stdout and STATUS= to systemd
+};
+
+}  // namespace tissue::config
