@@ -42,7 +42,10 @@ AdaptStats Adaptivity::adapt(Body& body) {
   mesh.for_each_tet([&](TetId t, const mesh::Tet& tet) {
     const double m = measure_from_edges(tet);
     for (NodeId n : tet.v) node_max_[n] = std::max(node_max_[n], m);
-    if (m > refine_above && tet.depth < spec_.max_depth) refine_.emplace_back(-m, mesh.diamond_of(t));
+    if (m > refine_above && tet.depth < spec_.max_depth) {
+      if (frozen_ && std::any_of(tet.v.begin(), tet.v.end(), [&](NodeId n) { return is_frozen(body.x_m[n]); })) return;
+      refine_.emplace_back(-m, mesh.diamond_of(t));
+    }
   });
 
   // Most strained first; each diamond once.
@@ -64,6 +67,7 @@ AdaptStats Adaptivity::adapt(Body& body) {
     if (node.edge_a == mesh::kInvalidId || node.depth < spec_.min_depth) return;
     if (body.step_index - body.changed_step[z] < spec_.min_age_steps) return;
     if (z >= node_max_.size() || node_max_[z] >= merge_below) return;
+    if (is_frozen(body.x_m[z])) return;
     const Vec3 mid = 0.5 * (body.x_m[node.edge_a] + body.x_m[node.edge_b]);
     const double length = (body.rest_m[node.edge_b] - body.rest_m[node.edge_a]).norm();
     if ((body.x_m[z] - mid).norm() >= tol * length) return;

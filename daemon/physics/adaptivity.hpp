@@ -32,12 +32,29 @@ class Adaptivity {
   double refine_threshold() const;
   double simplify_threshold() const { return refine_threshold() * spec_.simplify_factor; }
 
+  // While a tool presses the object the mesh under it must not change (the
+  // haptic loop renders against that patch): tets with a vertex, and nodes,
+  // currently within radius_m of centre_m are neither refined nor merged.
+  void freeze_sphere(const Vec3& centre_m, double radius_m) {
+    frozen_ = true;
+    frozen_centre_m_ = centre_m;
+    frozen_radius_m_ = radius_m;
+  }
+  void unfreeze() { frozen_ = false; }
+
  private:
   // Per-tet measure from per-edge strains (each edge's sqrt once, not once
   // per incident tet: ~5x fewer).
   double measure_from_edges(const mesh::Tet& tet) const;
 
+  bool is_frozen(const Vec3& x_m) const {
+    return frozen_ && (x_m - frozen_centre_m_).squaredNorm() <= frozen_radius_m_ * frozen_radius_m_;
+  }
+
   scene::AdaptivitySpec spec_;
+  bool frozen_ = false;
+  Vec3 frozen_centre_m_ = Vec3::Zero();
+  double frozen_radius_m_ = 0.0;
   double youngs_modulus_Pa_ = 0.0;
   std::vector<double> edge_strain_;                        // per edge: l / L − 1
   std::vector<double> node_max_;                           // per node: max measure of incident tets

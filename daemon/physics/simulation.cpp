@@ -1,5 +1,7 @@
 #include "physics/simulation.hpp"
 
+#include <cmath>
+
 #include "physics/forces.hpp"
 
 namespace tissue::physics {
@@ -7,6 +9,10 @@ namespace tissue::physics {
 Simulation::Simulation(const scene::Scene& scene)
     : body_(scene), integrator_(make_integrator(scene.integrator, scene.material)) {
   if (scene.adaptivity.enabled) adaptivity_ = std::make_unique<Adaptivity>(scene.adaptivity);
+  if (scene.tool) {
+    tool_ = std::make_unique<ToolContact>();
+    tool_->spec = *scene.tool;
+  }
   loads_.rebuild(body_);
   for (const auto& p : scene.probes) {
     probes_.emplace_back(p.name, Vec3(p.rest_m[0], p.rest_m[1], p.rest_m[2]));
@@ -24,6 +30,8 @@ StepResult Simulation::step() {
 
   set_kinematic_velocities(body_, t_next, dt);
   loads_.external_forces(body_, t_next, f_ext_N_);
+  if (tool_ && tool_->active)
+    for (int i = 0; i < 3; ++i) f_ext_N_[tool_->nodes[i]] += tool_->weights[i] * tool_->force_N;
   x_before_ = body_.x_m;
 
   const StepOutcome out = integrator_->step(body_, f_ext_N_, dt);
@@ -43,7 +51,7 @@ StepResult Simulation::step() {
   ++counters_.steps;
   body_.step_index = counters_.steps;
 
-  if (adaptivity_ && counters_.steps % scene().adaptivity.every_steps == 0) {
+  if (adaptivity_ && !adaptation_paused_ && counters_.steps % scene().adaptivity.every_steps == 0) {
     result.adapted = adaptivity_->adapt(body_);
     counters_.splits += result.adapted.splits;
     counters_.merges += result.adapted.merges;
@@ -54,6 +62,10 @@ StepResult Simulation::step() {
 
 void Simulation::mesh_changed() {
   integrator_->mesh_changed();
+  // A node the tool pushed on merged away: release rather than push a reused id.
+  if (tool_ && tool_->active)
+    for (NodeId n : tool_->nodes)
+      if (!body_.mesh().node_alive(n)) tool_->active = false;
   loads_.rebuild(body_);
   counters_.peak_nodes = std::max(counters_.peak_nodes, body_.mesh().node_count());
   counters_.peak_tets = std::max(counters_.peak_tets, body_.mesh().tet_count());
@@ -71,6 +83,28 @@ void Simulation::merge_diamond(mesh::Key diamond) {
   body_.merge(diamond);
   ++counters_.merges;
   mesh_changed();
+}
+
+bool Simulation::set_tool_force(const std::array<NodeId, 3>& nodes, const std::array<double, 3>& weights,
+                                const Vec3& force_N) {
+  if (!tool_) return false;
+  if (!force_N.allFinite()) return false;
+  double weight_sum = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    if (!body_.mesh().node_alive(nodes[i]) || !std::isfinite(weights[i]) || weights[i] < 0.0) return false;
+    weight_sum += weights[i];
+  }
+  if (!(weight_sum > 0.0)) return false;
+  const double max_N = tool_->spec.max_force_N, norm = force_N.norm();
+  tool_->nodes = nodes;
+  for (int i = 0; i < 3; ++i) tool_->weights[i] = weights[i] / weight_sum;  // the whole force, no more
+  tool_->force_N = norm > max_N ? Vec3(force_N * (max_N / norm)) : force_N;
+  tool_->active = true;
+  return true;
+}
+
+void Simulation::clear_tool_force() {
+  if (tool_) tool_->active = false;
 }
 
 double Simulation::kinetic_energy_J() const { return physics::kinetic_energy_J(body_); }

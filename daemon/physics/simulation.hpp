@@ -7,6 +7,7 @@
 // results. Clients read the body and the statistics; only step() mutates.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -70,7 +71,37 @@ class Simulation {
   double kinetic_energy_J() const;
   double elastic_energy_J() const;
 
+  // --- Tool contact (scenes with a `tool` section; no contact state otherwise)
+  bool has_tool() const { return tool_ != nullptr; }
+  // The force the tool applies to the object from the next step on, shared by
+  // barycentric `weights` over the touched triangle's `nodes`, its magnitude
+  // clamped to tool.max_force_N. Held until changed or cleared. Returns false
+  // (and applies nothing) when the scene has no tool, a node is dead, or the
+  // force or a weight is non-finite: input from another thread never throws.
+  bool set_tool_force(const std::array<NodeId, 3>& nodes, const std::array<double, 3>& weights,
+                      const Vec3& force_N);
+  void clear_tool_force();
+  // The force last applied through set_tool_force (after clamping), or zero.
+  Vec3 tool_force_N() const { return tool_ && tool_->active ? tool_->force_N : Vec3::Zero(); }
+
+  // --- Adaptation control for a real-time loop -----------------------------
+  // Shedding: a loop that falls behind wall time pauses adaptation first.
+  void set_adaptation_paused(bool paused) { adaptation_paused_ = paused; }
+  bool adaptation_paused() const { return adaptation_paused_; }
+  // Null when the scene has no adaptivity.
+  Adaptivity* adaptivity() { return adaptivity_.get(); }
+
  private:
+  struct ToolContact {
+    scene::ToolSpec spec;
+    bool active = false;
+    std::array<NodeId, 3> nodes{};
+    std::array<double, 3> weights{};
+    Vec3 force_N = Vec3::Zero();
+  };
+  std::unique_ptr<ToolContact> tool_;  // null when the scene has no tool
+  bool adaptation_paused_ = false;
+
   Body body_;
   std::unique_ptr<Integrator> integrator_;
   std::unique_ptr<Adaptivity> adaptivity_;  // null when the scene has no adaptivity

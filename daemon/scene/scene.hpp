@@ -139,6 +139,16 @@ struct ProbeSpec {
   Vec3 rest_m{};
 };
 
+// A hand-held tool (the haptic probe) touching the object. Present only in
+// scenes that want one: without it the simulation has no contact code at all
+// and the daemon runs no haptic thread.
+struct ToolSpec {
+  double patch_radius_m = 0.02;   // surface handed to the haptic loop: this far around the tool
+  double engage_distance_m = 0.01;  // build the contact model when the tool is this close to the surface
+  double freeze_radius_m = 0.015;   // while engaged, adaptivity leaves diamonds this close to the contact alone
+  double max_force_N = 20.0;        // force the tool may apply to the object (clamped, never exceeded)
+};
+
 struct Scene {
   std::string source;  // file the scene came from (for messages)
   std::string name;
@@ -151,6 +161,7 @@ struct Scene {
   AdaptivitySpec adaptivity;
   IntegratorSpec integrator;
   std::vector<ProbeSpec> probes;
+  std::optional<ToolSpec> tool;
 };
 
 }  // namespace tissue::scene

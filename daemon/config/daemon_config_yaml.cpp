@@ -1,0 +1,384 @@
+#include "config/daemon_config_yaml.hpp"
+
+#include <sys/un.h>
+
+#include <boost/asio/ip/address.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <string_view>
+#include <utility>
+
+#include "scene/yaml_util.hpp"
+
+namespace tissue::config {
+
+ConfigError::ConfigError(const std::string& source, const std::string& key_path, const std::string& reason)
+    : std::runtime_error(yaml_util::compose_what(source, key_path, reason, "<daemon config>")),
+      parts_(std::make_shared<const Parts>(Parts{source, key_path, reason})) {}
+
+namespace {
+
+using yaml_util::Choices;
+using yaml_util::FieldMap;
+using yaml_util::fmt_num;
+using yaml_util::join_index;
+using yaml_util::join_key;
+using yaml_util::printable;
+
+// A hand-written settings file is a few kilobytes; anything near this is not one.
+constexpr std::uintmax_t kMaxConfigFileBytes = 1u << 20;
+// Limits on the control socket settings: a line must hold a small request,
+// and neither bound may let one client pin a large share of the daemon's memory.
+constexpr std::size_t kMinLineBytes = 256;
+constexpr std::size_t kMaxLineBytes = 64u << 20;
+constexpr int kMaxConnections = 1024;
+// The haptic loop is 1 kHz; faster than this no device or scheduler keeps up.
+constexpr double kMaxHapticRateHz = 10000.0;
+// Linux SCHED_FIFO priorities.
+constexpr int kMinRtPriority = 1;
+constexpr int kMaxRtPriority = 99;
+// CPU_SETSIZE: sched_setaffinity cannot name a CPU beyond it.
+constexpr int kMaxCpuIndex = 1023;
+
+const std::array<std::string_view, 7> kTopLevelKeys{"scene",   "state_dir", "status_interval_s", "device",
+                                                    "haptics", "realtime",  "control"};
+
+const yaml_util::DocumentKind kConfigDocument{"daemon config",
+                                              "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
+
+constexpr std::array<std::pair<std::string_view, DeviceSpec::Kind>, 4> kDeviceKinds{
+    {{"none", DeviceSpec::Kind::kNone},
+     {"sim", DeviceSpec::Kind::kSim},
+     {"udp", DeviceSpec::Kind::kUdp},
+     {"openhaptics", DeviceSpec::Kind::kOpenHaptics}}};
+constexpr std::array<std::pair<std::string_view, SimDeviceSpec::Mode>, 2> kSimModes{
+    {{"trajectory", SimDeviceSpec::Mode::kTrajectory}, {"hand", SimDeviceSpec::Mode::kHand}}};
+
+// ------------------------------------------------------------ YAML -> config
+
+class Converter : public yaml_util::Reader {
+ public:
+  explicit Converter(const std::string& source) : Reader(source) {}
+
+  DaemonConfig config(const YAML::Node& root) {
+    if (!root.IsMap()) fail("", "a daemon config must be a map of sections, got " + yaml_util::describe(root));
+    const FieldMap f =
+        fields(root, "", {"scene", "state_dir", "status_interval_s", "device", "haptics", "realtime", "control"});
+    DaemonConfig c;
+    c.source = source_;
+    read(require(f, "scene", ""), "scene", c.scene_path);
+    opt(f, "state_dir", "", c.state_dir);
+    opt(f, "status_interval_s", "", c.status_interval_s);
+    if (const auto it = f.find("device"); it != f.end()) device(it->second, "device", c.device);
+    if (const auto it = f.find("haptics"); it != f.end()) haptics(it->second, "haptics", c.haptics);
+    if (const auto it = f.find("realtime"); it != f.end()) realtime(it->second, "realtime", c.realtime);
+    if (const auto it = f.find("control"); it != f.end()) control(it->second, "control", c.control);
+    return c;
+  }
+
+ private:
+  void device(const YAML::Node& n, const std::string& p, DeviceSpec& d) const {
+    const FieldMap f = fields(n, p, {"kind", "limits", "offset_m", "scale", "sim", "udp", "openhaptics"});
+    opt_choice<DeviceSpec::Kind>(f, "kind", p, kDeviceKinds, d.kind);
+    if (const auto it = f.find("limits"); it != f.end()) limits(it->second, join_key(p, "limits"), d.limits);
+    opt(f, "offset_m", p, d.offset_m);
+    opt(f, "scale", p, d.scale);
+    if (const auto it = f.find("sim"); it != f.end()) sim(it->second, join_key(p, "sim"), d.sim);
+    if (const auto it = f.find("udp"); it != f.end()) {
+      const std::string up = join_key(p, "udp");
+      const FieldMap g = fields(it->second, up, {"bind_address", "port", "timeout_s"});
+      opt(g, "bind_address", up, d.udp.bind_address);
+      opt(g, "port", up, d.udp.port);
+      opt(g, "timeout_s", up, d.udp.timeout_s);
+    }
+    if (const auto it = f.find("openhaptics"); it != f.end()) {
+      const std::string op = join_key(p, "openhaptics");
+      const FieldMap g = fields(it->second, op, {"library", "device_name"});
+      opt(g, "library", op, d.openhaptics.library);
+      opt(g, "device_name", op, d.openhaptics.device_name);
+    }
+  }
+
+  void limits(const YAML::Node& n, const std::string& p, ForceLimits& l) const {
+    const FieldMap f = fields(n, p,
+                              {"max_force_N", "max_force_rate_N_per_s", "max_stiffness_N_per_m", "ramp_in_s",
+                               "ramp_out_s", "stale_model_s", "device_timeout_s", "max_speed_m_per_s",
+                               "workspace_radius_m"});
+    opt(f, "max_force_N", p, l.max_force_N);
+    opt(f, "max_force_rate_N_per_s", p, l.max_force_rate_N_per_s);
+    opt(f, "max_stiffness_N_per_m", p, l.max_stiffness_N_per_m);
+    opt(f, "ramp_in_s", p, l.ramp_in_s);
+    opt(f, "ramp_out_s", p, l.ramp_out_s);
+    opt(f, "stale_model_s", p, l.stale_model_s);
+    opt(f, "device_timeout_s", p, l.device_timeout_s);
+    opt(f, "max_speed_m_per_s", p, l.max_speed_m_per_s);
+    opt(f, "workspace_radius_m", p, l.workspace_radius_m);
+  }
+
+  void sim(const YAML::Node& n, const std::string& p, SimDeviceSpec& s) const {
+    const FieldMap f = fields(
+        n, p, {"mode", "waypoints", "loop", "hand_mass_kg", "hand_stiffness_N_per_m", "hand_damping_N_s_per_m"});
+    opt_choice<SimDeviceSpec::Mode>(f, "mode", p, kSimModes, s.mode);
+    if (const auto it = f.find("waypoints"); it != f.end()) {
+      s.waypoints.clear();
+      for_each(it->second, join_key(p, "waypoints"), [&](const YAML::Node& w, const std::string& wp) {
+        const FieldMap g = fields(w, wp, {"time_s", "position_m"});
+        Waypoint point;
+        read(require(g, "time_s", wp), join_key(wp, "time_s"), point.time_s);
+        read(require(g, "position_m", wp), join_key(wp, "position_m"), point.position_m);
+        s.waypoints.push_back(point);
+      });
+    }
+    opt(f, "loop", p, s.loop);
+    opt(f, "hand_mass_kg", p, s.hand_mass_kg);
+    opt(f, "hand_stiffness_N_per_m", p, s.hand_stiffness_N_per_m);
+    opt(f, "hand_damping_N_s_per_m", p, s.hand_damping_N_s_per_m);
+  }
+
+  void haptics(const YAML::Node& n, const std::string& p, HapticSpec& h) const {
+    const FieldMap f =
+        fields(n, p, {"rate_hz", "coupling_stiffness_N_per_m", "coupling_damping_N_s_per_m", "crossfade_s"});
+    opt(f, "rate_hz", p, h.rate_hz);
+    opt(f, "coupling_stiffness_N_per_m", p, h.coupling_stiffness_N_per_m);
+    opt(f, "coupling_damping_N_s_per_m", p, h.coupling_damping_N_s_per_m);
+    opt(f, "crossfade_s", p, h.crossfade_s);
+  }
+
+  void realtime(const YAML::Node& n, const std::string& p, RealtimeSpec& r) const {
+    const FieldMap f = fields(n, p, {"sched_fifo", "haptic_priority", "sim_priority", "lock_memory", "haptic_cpu"});
+    opt(f, "sched_fifo", p, r.sched_fifo);
+    opt(f, "haptic_priority", p, r.haptic_priority);
+    opt(f, "sim_priority", p, r.sim_priority);
+    opt(f, "lock_memory", p, r.lock_memory);
+    opt(f, "haptic_cpu", p, r.haptic_cpu);
+  }
+
+  void control(const YAML::Node& n, const std::string& p, ControlSpec& c) const {
+    const FieldMap f = fields(n, p, {"unix_socket_path", "tcp_port", "max_line_bytes", "max_connections"});
+    if (const auto it = f.find("unix_socket_path"); it != f.end()) {
+      // `unix_socket_path: ~` (null) or "" both switch the Unix socket off.
+      if (it->second.IsNull())
+        c.unix_socket_path.clear();
+      else
+        read(it->second, join_key(p, "unix_socket_path"), c.unix_socket_path);
+    }
+    opt(f, "tcp_port", p, c.tcp_port);
+    opt(f, "max_line_bytes", p, c.max_line_bytes);
+    opt(f, "max_connections", p, c.max_connections);
+  }
+};
+
+// ------------------------------------------------------------- validation
+
+class Validator {
+ public:
+  explicit Validator(const DaemonConfig& c) : c_(c) {}
+
+  void run() const {
+    if (c_.scene_path.empty()) fail("scene", "must not be empty (the scene file to load)");
+    if (c_.state_dir.empty()) fail("state_dir", "must not be empty (recordings and exports go there)");
+    positive(c_.status_interval_s, "status_interval_s");
+
+    const DeviceSpec& d = c_.device;
+    const int kind = static_cast<int>(d.kind);
+    if (kind < 0 || kind >= static_cast<int>(kDeviceKinds.size()))
+      fail("device.kind", "invalid device kind " + std::to_string(kind));
+    finite(d.offset_m, "device.offset_m");
+    positive(d.scale, "device.scale");
+    if (d.kind != DeviceSpec::Kind::kNone) limits(d.limits, "device.limits");
+    switch (d.kind) {
+      case DeviceSpec::Kind::kNone:
+        break;
+      case DeviceSpec::Kind::kSim:
+        sim(d.sim, "device.sim");
+        break;
+      case DeviceSpec::Kind::kUdp:
+        udp(d.udp, "device.udp");
+        break;
+      case DeviceSpec::Kind::kOpenHaptics:
+        if (d.openhaptics.library.empty()) fail("device.openhaptics.library", "must not be empty");
+        if (d.openhaptics.device_name.empty()) fail("device.openhaptics.device_name", "must not be empty");
+        break;
+    }
+
+    const HapticSpec& h = c_.haptics;
+    positive(h.rate_hz, "haptics.rate_hz");
+    if (h.rate_hz > kMaxHapticRateHz)
+      fail("haptics.rate_hz", "must be <= " + fmt_num(kMaxHapticRateHz) + " Hz (got " + fmt_num(h.rate_hz) + ")");
+    positive(h.coupling_stiffness_N_per_m, "haptics.coupling_stiffness_N_per_m");
+    non_negative(h.coupling_damping_N_s_per_m, "haptics.coupling_damping_N_s_per_m");
+    non_negative(h.crossfade_s, "haptics.crossfade_s");
+    // The safety clamp would silently cut a stiffer coupling: say so instead.
+    if (d.kind != DeviceSpec::Kind::kNone && h.coupling_stiffness_N_per_m > d.limits.max_stiffness_N_per_m)
+      fail("haptics.coupling_stiffness_N_per_m", "must be <= device.limits.max_stiffness_N_per_m (" +
+                                                     fmt_num(d.limits.max_stiffness_N_per_m) + ") (got " +
+                                                     fmt_num(h.coupling_stiffness_N_per_m) + ")");
+
+    const RealtimeSpec& r = c_.realtime;
+    priority(r.haptic_priority, "realtime.haptic_priority");
+    priority(r.sim_priority, "realtime.sim_priority");
+    if (r.haptic_cpu < -1 || r.haptic_cpu > kMaxCpuIndex)
+      fail("realtime.haptic_cpu", "must be -1 (no pinning) or a CPU index 0.." + std::to_string(kMaxCpuIndex) +
+                                      " (got " + std::to_string(r.haptic_cpu) + ")");
+
+    const ControlSpec& k = c_.control;
+    // sockaddr_un::sun_path holds the path and its terminating NUL.
+    constexpr std::size_t kMaxSocketPath = sizeof(sockaddr_un{}.sun_path) - 1;
+    if (k.unix_socket_path.size() > kMaxSocketPath)
+      fail("control.unix_socket_path", "too long for a Unix socket (" + std::to_string(k.unix_socket_path.size()) +
+                                           " bytes, at most " + std::to_string(kMaxSocketPath) + ")");
+    if (k.unix_socket_path.find('\0') != std::string::npos)
+      fail("control.unix_socket_path", "must not contain a NUL byte");
+    port(k.tcp_port, 0, "control.tcp_port", " (0 switches TCP off)");
+    if (k.max_line_bytes < kMinLineBytes || k.max_line_bytes > kMaxLineBytes)
+      fail("control.max_line_bytes", "must be in [" + std::to_string(kMinLineBytes) + ", " +
+                                         std::to_string(kMaxLineBytes) + "] (got " +
+                                         std::to_string(k.max_line_bytes) + ")");
+    if (k.max_connections < 1 || k.max_connections > kMaxConnections)
+      fail("control.max_connections", "must be in [1, " + std::to_string(kMaxConnections) + "] (got " +
+                                          std::to_string(k.max_connections) + ")");
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& path, const std::string& reason) const {
+    throw ConfigError(c_.source, path, reason);
+  }
+
+  void finite(double v, const std::string& path) const {
+    if (!std::isfinite(v)) fail(path, "must be a finite number (got " + fmt_num(v) + ")");
+  }
+  void finite(const Vec3& v, const std::string& path) const {
+    for (std::size_t i = 0; i < 3; ++i) finite(v[i], join_index(path, i));
+  }
+  void positive(double v, const std::string& path) const {
+    finite(v, path);
+    if (!(v > 0.0)) fail(path, "must be > 0 (got " + fmt_num(v) + ")");
+  }
+  void non_negative(double v, const std::string& path) const {
+    finite(v, path);
+    if (!(v >= 0.0)) fail(path, "must be >= 0 (got " + fmt_num(v) + ")");
+  }
+  void priority(int v, const std::string& path) const {
+    if (v < kMinRtPriority || v > kMaxRtPriority)
+      fail(path, "must be a SCHED_FIFO priority in [" + std::to_string(kMinRtPriority) + ", " +
+                     std::to_string(kMaxRtPriority) + "] (got " + std::to_string(v) + ")");
+  }
+  void port(int v, int min, const std::string& path, const std::string& note) const {
+    if (v < min || v > 65535)
+      fail(path, "port out of range: must be in [" + std::to_string(min) + ", 65535]" + note + " (got " +
+                     std::to_string(v) + ")");
+  }
+
+  void limits(const ForceLimits& l, const std::string& p) const {
+    positive(l.max_force_N, p + ".max_force_N");
+    positive(l.max_force_rate_N_per_s, p + ".max_force_rate_N_per_s");
+    positive(l.max_stiffness_N_per_m, p + ".max_stiffness_N_per_m");
+    non_negative(l.ramp_in_s, p + ".ramp_in_s");
+    non_negative(l.ramp_out_s, p + ".ramp_out_s");
+    positive(l.stale_model_s, p + ".stale_model_s");
+    positive(l.device_timeout_s, p + ".device_timeout_s");
+    positive(l.max_speed_m_per_s, p + ".max_speed_m_per_s");
+    positive(l.workspace_radius_m, p + ".workspace_radius_m");
+  }
+
+  void sim(const SimDeviceSpec& s, const std::string& p) const {
+    const int mode = static_cast<int>(s.mode);
+    if (mode < 0 || mode >= static_cast<int>(kSimModes.size()))
+      fail(p + ".mode", "invalid mode " + std::to_string(mode));
+    const std::string wl = p + ".waypoints";
+    if (s.waypoints.empty()) fail(wl, "a simulated device needs at least one waypoint");
+    for (std::size_t i = 0; i < s.waypoints.size(); ++i) {
+      const Waypoint& w = s.waypoints[i];
+      const std::string wp = join_index(wl, i);
+      finite(w.time_s, wp + ".time_s");
+      if (w.time_s < 0.0) fail(wp + ".time_s", "must be >= 0 (got " + fmt_num(w.time_s) + ")");
+      if (i > 0 && !(w.time_s > s.waypoints[i - 1].time_s))
+        fail(wp + ".time_s", "waypoint times must increase: must be > " + join_index(wl, i - 1) + ".time_s (" +
+                                 fmt_num(s.waypoints[i - 1].time_s) + ") (got " + fmt_num(w.time_s) + ")");
+      finite(w.position_m, wp + ".position_m");
+    }
+    if (s.loop && !(s.waypoints.back().time_s > s.waypoints.front().time_s))
+      fail(p + ".loop", "looping needs a timeline of positive length (at least 2 waypoints)");
+    if (s.mode == SimDeviceSpec::Mode::kHand) {
+      positive(s.hand_mass_kg, p + ".hand_mass_kg");
+      positive(s.hand_stiffness_N_per_m, p + ".hand_stiffness_N_per_m");
+      non_negative(s.hand_damping_N_s_per_m, p + ".hand_damping_N_s_per_m");
+    }
+  }
+
+  void udp(const UdpDeviceSpec& u, const std::string& p) const {
+    boost::system::error_code ec;
+    boost::asio::ip::make_address(u.bind_address, ec);
+    if (ec) fail(p + ".bind_address", "not an IP address: " + printable(u.bind_address));
+    port(u.port, 1, p + ".port", "");
+    positive(u.timeout_s, p + ".timeout_s");
+  }
+
+  const DaemonConfig& c_;
+};
+
+// Relative paths in a config file mean "next to this file", so a config and
+// its scenes can move together (/etc/tissued/, or config/ in the source tree).
+std::string resolve(const std::string& path, const std::string& source) {
+  namespace fs = std::filesystem;
+  const fs::path p(path);
+  if (path.empty() || p.is_absolute()) return path;
+  const fs::path dir = fs::path(source).parent_path();
+  if (dir.empty()) return p.lexically_normal().string();
+  return (dir / p).lexically_normal().string();
+}
+
+DaemonConfig build(const std::string& text, const std::string& source, const std::vector<std::string>& overrides) {
+  try {
+    const yaml_util::Document doc = yaml_util::load_with_overrides(text, source, overrides, kConfigDocument);
+    try {
+      DaemonConfig c = Converter(source).config(doc.root);
+      c.scene_path = resolve(c.scene_path, source);
+      c.state_dir = resolve(c.state_dir, source);
+      validate_daemon_config(c);
+      return c;
+    } catch (const ConfigError& e) {
+      throw ConfigError(e.source(), e.key_path(), yaml_util::blame_override(doc.overrides, e.key_path(), e.reason()));
+    } catch (const yaml_util::PathError& e) {
+      throw ConfigError(e.source(), e.key_path(), yaml_util::blame_override(doc.overrides, e.key_path(), e.reason()));
+    }
+  } catch (const yaml_util::PathError& e) {
+    throw ConfigError(e.source(), e.key_path(), e.reason());
+  } catch (const YAML::Exception& e) {
+    // Not expected (the converter only reads nodes it has checked), but a
+    // yaml-cpp exception must never escape as anything but a ConfigError.
+    throw ConfigError(source, "", std::string("YAML error: ") + e.what());
+  }
+}
+
+}  // namespace
+
+void validate_daemon_config(const DaemonConfig& c) { Validator(c).run(); }
+
+DaemonConfig parse_daemon_config(const std::string& yaml_text, const std::string& source,
+                                 const std::vector<std::string>& overrides) {
+  return build(yaml_text, source, overrides);
+}
+
+DaemonConfig load_daemon_config(const std::string& path, const std::vector<std::string>& overrides) {
+  std::string text;
+  try {
+    text = yaml_util::read_text_file(path, kMaxConfigFileBytes, "daemon config file");
+  } catch (const yaml_util::PathError& e) {
+    throw ConfigError(e.source(), e.key_path(), e.reason());
+  }
+  return build(text, path, overrides);
+}
+
+bool is_daemon_config_key(std::string_view key_path) {
+  const std::size_t end = key_path.find_first_of(".[");
+  const std::string_view head = key_path.substr(0, end);
+  for (const std::string_view k : kTopLevelKeys)
+    if (head == k) return true;
+  return false;
+}
+
+}  // namespace tissue::config

@@ -1,0 +1,134 @@
+// ContactRenderer: god-object proxy + virtual coupling against one LocalModel.
+//
+// Geometry (Zilles & Salisbury 1995; Ruspini 1997), frictionless:
+//   - The patch is extrapolated to the tick time with its vertex velocities,
+//     x_i(t) = x_i + v_i * tau, tau = clamp(t - built, 0, horizon): bounded, so
+//     a late model never flies away.
+//   - Free: the proxy is the device. Contact starts when the segment from the
+//     previous proxy to the device crosses a triangle from its front (outward)
+//     side to its back side. The test runs in each triangle's own moving frame
+//     (start point shifted by the triangle's motion since the last tick), so a
+//     fast device (5 mm per 1 ms tick) or a moving surface cannot tunnel
+//     through a thin patch between two ticks.
+//   - Touching: the proxy is the point of the patch closest to the device,
+//     searched only over triangles whose front side faces the previous contact
+//     point (so the proxy cannot jump to the far side of a thin object), with
+//     faces, edges and vertices handled by the closest-point regions. Contact
+//     ends when the device is on the outer side of that feature, judged with
+//     the angle-weighted pseudo-normal (Baerentzen & Aanaes 2005), which is
+//     well defined on edges and vertices too. Past the patch border the proxy
+//     stays on the border edge (the sim re-centres the patch on the tool).
+//
+// Deformable object (LocalModel::in_contact): the patch is the surface as the
+// sim last left it under force_ref; pushing harder displaces the contact point
+// per the linearisation f(x) = F0 + K_c (x - x0) (f: force on the object). The
+// proxy is the massless point between the coupling spring and the object, so
+// it settles where the two forces balance:
+//       k_v (x_dev - p) = F0 + K_c (p - x0')
+//   <=> (k_v I + K_c) p = k_v x_dev + K_c x0' - F0,
+// i.e. the coupling and the object's contact stiffness act in series (pressing
+// a flat patch along its normal with K_c = k I gives k_v k / (k_v + k)).
+// Frictionless sliding: x0' = x0 + (I - n n^T)(c - x0), the reference point
+// slides with the geometric contact point c along the surface (n = contact
+// normal), so sliding sideways does not drag the node (the sim re-anchors x0
+// every step anyway). The contact is unilateral: if the solved proxy would
+// PULL on the object (n . f >= 0, n outward), the object is not being pushed
+// and the proxy falls back to the surface point c.
+//
+// Force on the device (scene frame, before safety):
+//       F = k_v (p - x_dev) - b_v (n . (v_dev - v_surface)) n
+// The damper acts only in contact and only along the normal (a frictionless
+// coupling must not drag sideways); it works on the velocity relative to the
+// touched surface. The normal component of F is clamped to >= 0: a contact can
+// push the tool out but never pull it in.
+//
+// No threads, no I/O, no allocation: all scratch space is inside the object.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "haptics/local_model.hpp"
+
+namespace tissue::haptics {
+
+struct RenderParams {
+  double coupling_stiffness_N_per_m = 400.0;  // k_v, already clamped to the device's max stiffness
+  double coupling_damping_N_s_per_m = 1.0;    // b_v
+  double max_stiffness_N_per_m = 1000.0;      // K_c eigenvalues are clamped to [0, this]
+  double extrapolation_horizon_s = 0.02;      // patch motion is extrapolated at most this far
+};
+
+struct RenderOutput {
+  Vec3 force_on_device_N = Vec3::Zero();  // scene frame, before safety
+  Vec3 proxy_m = Vec3::Zero();
+  Vec3 surface_point_m = Vec3::Zero();  // geometric contact point c (on the patch)
+  Vec3 normal = Vec3::Zero();           // outward contact normal (zero when free)
+  bool contact = false;
+  bool compliant = false;  // the deformable (K_c) solution set the proxy
+  std::array<std::uint32_t, 3> contact_node{};
+  std::array<double, 3> contact_weight{};
+};
+
+// A model the renderer may bind: counts in range, triangle indices valid,
+// every number finite. The haptic loop drops models that fail this.
+bool local_model_is_valid(const LocalModel& model) noexcept;
+
+class ContactRenderer {
+ public:
+  explicit ContactRenderer(const RenderParams& params = {});
+
+  // Binds a validated model (nullptr: no model, render zero force). The model
+  // must stay alive and unchanged while bound. The proxy state is kept.
+  void set_model(const LocalModel* model) noexcept;
+  const LocalModel* model() const noexcept { return model_; }
+  // Continue the proxy of another renderer (a new model version arrived): the
+  // contact state and the proxy's world position carry over.
+  void carry_state_from(const ContactRenderer& other) noexcept;
+  // Forget contact; the proxy jumps to the device on the next render.
+  void reset() noexcept;
+
+  RenderOutput render(std::int64_t now_ns, const Vec3& device_m, const Vec3& device_velocity_m_per_s) noexcept;
+
+  // K_c after symmetrisation and eigenvalue clamping.
+  const Mat3& contact_stiffness_N_per_m() const noexcept { return contact_stiffness_N_per_m_; }
+  bool touching() const noexcept { return touching_; }
+  const Vec3& proxy_m() const noexcept { return proxy_m_; }
+
+ private:
+  struct Closest {
+    int triangle = -1;
+    double distance2 = 0.0;
+    Vec3 point = Vec3::Zero();
+    std::array<double, 3> weight{};
+    int feature_a = -1, feature_b = -1;  // patch vertices of the feature: face (-1,-1), edge (a,b), vertex (a,-1)
+  };
+
+  void extrapolate(std::int64_t now_ns) noexcept;
+  bool find_entry(const Vec3& from_m, const Vec3& to_m, Vec3* hit_m) const noexcept;
+  Closest closest_facing(const Vec3& device_m, const Vec3& reference_m, bool filter) const noexcept;
+  Vec3 pseudo_normal(const Closest& c) const noexcept;
+  Vec3 surface_velocity(const Closest& c) const noexcept;
+
+  RenderParams params_;
+  const LocalModel* model_ = nullptr;
+  Mat3 contact_stiffness_N_per_m_ = Mat3::Zero();
+
+  // Per-tick patch (extrapolated) and last tick's, for the moving-frame entry test.
+  std::array<Vec3, LocalModel::kMaxPatchVertices> vertex_m_{};
+  std::array<Vec3, LocalModel::kMaxPatchVertices> previous_vertex_m_{};
+  std::array<Vec3, LocalModel::kMaxPatchTriangles> normal_{};
+  std::array<bool, LocalModel::kMaxPatchTriangles> degenerate_{};
+  bool have_previous_vertices_ = false;
+  bool surface_moving_ = false;  // tau below the horizon: vertex velocities apply
+
+  // Proxy state.
+  bool initialised_ = false;
+  bool touching_ = false;
+  Vec3 proxy_m_ = Vec3::Zero();
+  Vec3 surface_point_m_ = Vec3::Zero();  // last geometric contact point c
+  int contact_triangle_ = -1;            // in the bound model; -1 after a model switch
+  std::array<double, 3> contact_weight_{};
+};
+
+}  // namespace tissue::haptics

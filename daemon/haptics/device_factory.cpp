@@ -1,0 +1,24 @@
+#include "haptics/device.hpp"
+#include "haptics/openhaptics_device.hpp"
+#include "haptics/sim_device.hpp"
+
+namespace tissue::haptics {
+
+std::unique_ptr<Device> make_device(const config::DeviceSpec& spec, std::string* error) {
+  if (error) error->clear();
+  switch (spec.kind) {
+    case config::DeviceSpec::Kind::kNone:
+      return nullptr;
+    case config::DeviceSpec::Kind::kSim:
+      return std::make_unique<SimDevice>(spec.sim);
+    case config::DeviceSpec::Kind::kOpenHaptics:
+      return std::make_unique<OpenHapticsDevice>(spec.openhaptics);
+    case config::DeviceSpec::Kind::kUdp:
+      if (error) *error = "udp device: not yet implemented";
+      return nullptr;
+  }
+  if (error) *error = "device: unknown kind";
+  return nullptr;
+}
+
+}  // namespace tissue::haptics

@@ -1,0 +1,60 @@
+// SimDevice: the simulated device of SimDeviceSpec.
+//
+// kTrajectory: the tip follows the waypoint timeline exactly (piecewise
+//   linear; the velocity is the segment slope). Rendered forces are ignored,
+//   like a position-controlled robot holding the stylus.
+// kHand: a point mass (the user's hand) is pulled towards the waypoint target
+//   by a spring-damper and pushed by the rendered force, integrated on every
+//   read() with semi-implicit Euler in sub-steps of at most kMaxSubstep_s, so
+//   the whole force path (render -> safety -> device -> motion) is exercised
+//   and the "user" yields when the object pushes back.
+// The timeline starts at the first read() after start() (t = 0 there).
+#pragma once
+
+#include <vector>
+
+#include "config/daemon_config.hpp"
+#include "haptics/device.hpp"
+
+namespace tissue::haptics {
+
+class SimDevice final : public Device {
+ public:
+  // Stability of the hand integration: the stiffest loop is hand spring +
+  // coupling (~1 kN/m on 0.1 kg, omega ~ 100 rad/s); 0.5 ms keeps omega*dt small.
+  static constexpr double kMaxSubstep_s = 0.0005;
+  // A stalled caller must not make read() do unbounded work.
+  static constexpr int kMaxSubsteps = 64;
+
+  explicit SimDevice(const config::SimDeviceSpec& spec);
+
+  bool start(std::string* error) override;
+  void stop() noexcept override {}
+  bool read(std::int64_t now_ns, DeviceSample* out) noexcept override;
+  void write(std::int64_t now_ns, const Vec3& force_N) noexcept override;
+  const char* name() const noexcept override { return "sim"; }
+
+  // The waypoint target at t seconds since the timeline started.
+  Vec3 target_m(double t_s) const noexcept;
+  // The slope of the timeline at t (zero past the end of a non-looping one).
+  Vec3 target_velocity_m_per_s(double t_s) const noexcept;
+  // Hand state (kHand) or trajectory point at the last read().
+  const Vec3& position_m() const noexcept { return position_m_; }
+  const Vec3& velocity_m_per_s() const noexcept { return velocity_m_per_s_; }
+
+ private:
+  double timeline_time_s(double t_s) const noexcept;
+  int segment_index(double tl_s) const noexcept;
+
+  config::SimDeviceSpec spec_;
+  std::vector<Vec3> waypoint_m_;
+  std::vector<double> waypoint_time_s_;
+  bool started_clock_ = false;
+  std::int64_t t0_ns_ = 0;
+  std::int64_t last_ns_ = 0;
+  Vec3 position_m_ = Vec3::Zero();
+  Vec3 velocity_m_per_s_ = Vec3::Zero();
+  Vec3 force_N_ = Vec3::Zero();  // last rendered force, acts on the hand
+};
+
+}  // namespace tissue::haptics

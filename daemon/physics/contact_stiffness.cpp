@@ -1,0 +1,65 @@
+#include "physics/contact_stiffness.hpp"
+
+#include <Eigen/LU>
+#include <stdexcept>
+#include <string>
+
+namespace tissue::physics {
+
+void ContactStiffness::factor(const Body& body) {
+  const mesh::KuhnMesh& mesh = body.mesh();
+  dof_of_node_.assign(body.x_m.size(), -1);
+  int dofs = 0;
+  for (std::size_t n = 0; n < body.x_m.size(); ++n)
+    if (mesh.node_alive(static_cast<NodeId>(n)) && body.inv_mass_per_kg[n] != 0.0) {
+      dof_of_node_[n] = dofs;
+      dofs += 3;
+    }
+
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(static_cast<std::size_t>(dofs) * 3 + 36 * mesh.edge_count());
+  constexpr double kRegularisation_per_s2 = 1.0;  // M / (1 s)^2, see the header
+  for (std::size_t n = 0; n < dof_of_node_.size(); ++n)
+    if (dof_of_node_[n] >= 0)
+      for (int i = 0; i < 3; ++i)
+        entries.emplace_back(dof_of_node_[n] + i, dof_of_node_[n] + i, kRegularisation_per_s2 * body.mass_kg[n]);
+  mesh.for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+    const double k = body.stiffness_N_per_m[e];
+    if (k == 0.0) return;
+    const Vec3 d = (body.rest_m[edge.b] - body.rest_m[edge.a]).normalized();
+    const Mat3 block = k * d * d.transpose();
+    const int da = dof_of_node_[edge.a], db = dof_of_node_[edge.b];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        if (da >= 0) entries.emplace_back(da + i, da + j, block(i, j));
+        if (db >= 0) entries.emplace_back(db + i, db + j, block(i, j));
+        if (da >= 0 && db >= 0) {
+          entries.emplace_back(da + i, db + j, -block(i, j));
+          entries.emplace_back(db + i, da + j, -block(i, j));
+        }
+      }
+  });
+  Eigen::SparseMatrix<double> k_matrix(dofs, dofs);
+  k_matrix.setFromTriplets(entries.begin(), entries.end());
+  ldlt_.compute(k_matrix);
+  if (ldlt_.info() != Eigen::Success)
+    throw std::runtime_error("contact stiffness: the stiffness matrix could not be factored");
+  factored_ = true;
+  ++factorizations_;
+}
+
+Mat3 ContactStiffness::at_node(const Body& body, NodeId node) {
+  if (!body.mesh().node_alive(node))
+    throw std::invalid_argument("contact stiffness: node " + std::to_string(node) + " is not in the mesh");
+  if (!factored_ || dof_of_node_.size() != body.x_m.size()) factor(body);
+  const int dof = dof_of_node_[node];
+  if (dof < 0) return kRigid_N_per_m * Mat3::Identity();
+  rhs_.setZero(ldlt_.rows(), 3);
+  for (int i = 0; i < 3; ++i) rhs_(dof + i, i) = 1.0;
+  solution_ = ldlt_.solve(rhs_);
+  const Mat3 compliance = solution_.block<3, 3>(dof, 0);
+  const Mat3 symmetric = 0.5 * (compliance + compliance.transpose());
+  return symmetric.inverse();
+}
+
+}  // namespace tissue::physics

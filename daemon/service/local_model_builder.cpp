@@ -1,0 +1,130 @@
+#include "service/local_model_builder.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace tissue::service {
+
+using physics::Vec3;
+
+ClosestPoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return {a, {1.0, 0.0, 0.0}};
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return {b, {0.0, 1.0, 0.0}};
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+    const double v = d1 / (d1 - d3);
+    return {a + v * ab, {1.0 - v, v, 0.0}};
+  }
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return {c, {0.0, 0.0, 1.0}};
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+    const double w = d2 / (d2 - d6);
+    return {a + w * ac, {1.0 - w, 0.0, w}};
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {b + w * (c - b), {0.0, 1.0 - w, w}};
+  }
+  const double denom = 1.0 / (va + vb + vc);
+  const double v = vb * denom, w = vc * denom;
+  return {a + v * ab + w * ac, {1.0 - v - w, v, w}};
+}
+
+void LocalModelBuilder::refresh_surface(const physics::Simulation& sim) {
+  const std::int64_t revision = sim.counters().splits + sim.counters().merges;
+  if (revision == surface_revision_) return;
+  mesh::extract_surface(sim.body().mesh(), &surface_);
+  contact_.mesh_changed();
+  surface_revision_ = revision;
+}
+
+void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query, haptics::LocalModel* out) {
+  if (!sim.has_tool()) throw std::logic_error("LocalModelBuilder: the scene has no tool");
+  refresh_surface(sim);
+  const physics::Body& body = sim.body();
+  const scene::ToolSpec& tool = *sim.scene().tool;
+  const auto& tri = surface_.triangles;
+  const auto& nodes = surface_.vertex_nodes;
+  auto pos = [&](std::uint32_t surface_vertex) -> const Vec3& { return body.x_m[nodes[surface_vertex]]; };
+
+  // Nearest surface point, and each triangle's distance for the patch.
+  by_distance_.clear();
+  ClosestPoint nearest{Vec3::Zero(), {1.0, 0.0, 0.0}};
+  std::uint32_t nearest_tri = 0;
+  double nearest_d = std::numeric_limits<double>::infinity();
+  for (std::uint32_t t = 0; t < tri.size(); ++t) {
+    const ClosestPoint cp = closest_point_on_triangle(query.tool_m, pos(tri[t][0]), pos(tri[t][1]), pos(tri[t][2]));
+    const double d = (cp.point_m - query.tool_m).norm();
+    if (d < nearest_d) {
+      nearest_d = d;
+      nearest = cp;
+      nearest_tri = t;
+    }
+    if (d <= tool.patch_radius_m) by_distance_.emplace_back(d, t);
+  }
+  surface_distance_m_ = nearest_d;
+  if (by_distance_.empty() && !tri.empty()) by_distance_.emplace_back(nearest_d, nearest_tri);
+  std::sort(by_distance_.begin(), by_distance_.end());
+
+  // Patch: nearest triangles first while both capacities hold.
+  patch_index_.assign(nodes.size(), -1);
+  out->vertex_count = 0;
+  out->triangle_count = 0;
+  for (const auto& [d, t] : by_distance_) {
+    if (out->triangle_count == haptics::LocalModel::kMaxPatchTriangles) break;
+    int needed = 0;
+    for (std::uint32_t v : tri[t]) needed += patch_index_[v] < 0 ? 1 : 0;
+    if (out->vertex_count + needed > haptics::LocalModel::kMaxPatchVertices) continue;
+    std::array<std::int32_t, 3> local{};
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t v = tri[t][k];
+      if (patch_index_[v] < 0) {
+        const int i = out->vertex_count++;
+        patch_index_[v] = i;
+        out->vertex_m[i] = body.x_m[nodes[v]];
+        out->vertex_velocity_m_per_s[i] = body.v_m_per_s[nodes[v]];
+        out->vertex_node[i] = nodes[v];
+      }
+      local[k] = patch_index_[v];
+    }
+    out->triangle[out->triangle_count++] = local;
+  }
+
+  // Contact reference and stiffness.
+  out->sim_time_s = sim.time_s();
+  const Vec3 force_N = sim.tool_force_N();
+  out->in_contact = force_N.squaredNorm() > 0.0;
+  std::uint32_t contact_node = nodes.empty() ? 0 : nodes[tri[nearest_tri][0]];
+  if (out->in_contact) {
+    Vec3 x0 = Vec3::Zero();
+    double best_w = -1.0;
+    for (int k = 0; k < 3; ++k) {
+      x0 += query.contact_weight[k] * body.x_m[query.contact_node[k]];
+      if (query.contact_weight[k] > best_w) {
+        best_w = query.contact_weight[k];
+        contact_node = query.contact_node[k];
+      }
+    }
+    out->position_ref_m = x0;
+    out->force_ref_N = force_N;
+  } else {
+    out->position_ref_m = nearest.point_m;
+    out->force_ref_N.setZero();
+    const int k = static_cast<int>(std::max_element(nearest.weight.begin(), nearest.weight.end()) - nearest.weight.begin());
+    if (!tri.empty()) contact_node = nodes[tri[nearest_tri][k]];
+  }
+  const bool engaged = out->in_contact || nearest_d <= tool.engage_distance_m;
+  out->contact_stiffness_N_per_m =
+      engaged && !tri.empty() ? contact_.at_node(body, contact_node) : physics::Mat3::Zero();
+}
+
+}  // namespace tissue::service

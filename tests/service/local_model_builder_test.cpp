@@ -1,0 +1,149 @@
+#include "service/local_model_builder.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <random>
+
+#include "physics/physics_test_support.hpp"
+
+namespace tissue::service {
+namespace {
+
+using physics::Vec3;
+
+TEST(ClosestPointOnTriangle, VertexEdgeAndFaceRegions) {
+  const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0);
+  EXPECT_EQ(closest_point_on_triangle(Vec3(-1, -1, 1), a, b, c).point_m, a);
+  EXPECT_EQ(closest_point_on_triangle(Vec3(2, -0.5, 0), a, b, c).point_m, b);
+  const ClosestPoint edge = closest_point_on_triangle(Vec3(0.5, -1, 3), a, b, c);
+  EXPECT_NEAR((edge.point_m - Vec3(0.5, 0, 0)).norm(), 0.0, 1e-15);
+  const ClosestPoint hyp = closest_point_on_triangle(Vec3(1, 1, 0), a, b, c);
+  EXPECT_NEAR((hyp.point_m - Vec3(0.5, 0.5, 0)).norm(), 0.0, 1e-15);
+  const ClosestPoint face = closest_point_on_triangle(Vec3(0.2, 0.3, -2), a, b, c);
+  EXPECT_NEAR((face.point_m - Vec3(0.2, 0.3, 0)).norm(), 0.0, 1e-15);
+  EXPECT_NEAR(face.weight[0], 0.5, 1e-15);
+  EXPECT_NEAR(face.weight[1], 0.2, 1e-15);
+  EXPECT_NEAR(face.weight[2], 0.3, 1e-15);
+}
+
+// Against brute force: no sampled point of the triangle is closer, and the
+// weights reproduce the point.
+TEST(ClosestPointOnTriangle, NoSampledPointIsCloser) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 200; ++trial) {
+    const Vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)), c(u(rng), u(rng), u(rng)),
+        p(2 * u(rng), 2 * u(rng), 2 * u(rng));
+    const ClosestPoint cp = closest_point_on_triangle(p, a, b, c);
+    EXPECT_LT((cp.weight[0] * a + cp.weight[1] * b + cp.weight[2] * c - cp.point_m).norm(), 1e-12);
+    for (double w : cp.weight) EXPECT_GE(w, -1e-12);
+    const double d = (cp.point_m - p).norm();
+    for (int i = 0; i <= 20; ++i)
+      for (int j = 0; i + j <= 20; ++j) {
+        const Vec3 q = a + (b - a) * (i / 20.0) + (c - a) * (j / 20.0);
+        EXPECT_GE((q - p).norm(), d - 1e-12);
+      }
+  }
+}
+
+scene::Scene cantilever_with_tool() {
+  scene::Scene s = physics::testing::cantilever_scene();
+  s.loads.clear();
+  s.tool = scene::ToolSpec{};
+  return s;
+}
+
+TEST(LocalModelBuilder, PatchUnderAToolAboveTheTopFace) {
+  physics::Simulation sim(cantilever_with_tool());
+  LocalModelBuilder builder;
+  haptics::LocalModel model;
+  PatchQuery query;
+  query.tool_m = Vec3(0.05, 0.05, 0.105);  // 5 mm above the top face's centre
+  builder.build(sim, query, &model);
+
+  EXPECT_NEAR(builder.surface_distance_m(), 0.005, 1e-12);
+  EXPECT_FALSE(model.in_contact);
+  EXPECT_NEAR((model.position_ref_m - Vec3(0.05, 0.05, 0.1)).norm(), 0.0, 1e-12);
+  EXPECT_EQ(model.force_ref_N, Vec3::Zero());
+  ASSERT_GT(model.triangle_count, 0);
+  ASSERT_LE(model.vertex_count, haptics::LocalModel::kMaxPatchVertices);
+  for (int t = 0; t < model.triangle_count; ++t) {
+    const auto& tr = model.triangle[t];
+    const Vec3 n = (model.vertex_m[tr[1]] - model.vertex_m[tr[0]]).cross(model.vertex_m[tr[2]] - model.vertex_m[tr[0]]);
+    const ClosestPoint cp = closest_point_on_triangle(query.tool_m, model.vertex_m[tr[0]], model.vertex_m[tr[1]],
+                                                      model.vertex_m[tr[2]]);
+    EXPECT_LE((cp.point_m - query.tool_m).norm(), sim.scene().tool->patch_radius_m + 1e-12);
+    // Every patch triangle near the top centre lies on the top face, facing up.
+    EXPECT_NEAR(model.vertex_m[tr[0]].z(), 0.1, 1e-12);
+    EXPECT_GT(n.z(), 0.0);
+  }
+  for (int v = 0; v < model.vertex_count; ++v)
+    EXPECT_EQ(model.vertex_m[v], sim.body().x_m[model.vertex_node[v]]);
+  // Within engage distance: K_c is there, SPD and dominated by the normal.
+  EXPECT_GT(model.contact_stiffness_N_per_m(2, 2), 0.0);
+  EXPECT_LT((model.contact_stiffness_N_per_m - model.contact_stiffness_N_per_m.transpose()).norm(),
+            1e-9 * model.contact_stiffness_N_per_m.norm());
+}
+
+TEST(LocalModelBuilder, FarToolGetsNoStiffnessAndAOneTrianglePatch) {
+  physics::Simulation sim(cantilever_with_tool());
+  LocalModelBuilder builder;
+  haptics::LocalModel model;
+  PatchQuery query;
+  query.tool_m = Vec3(0.05, 0.05, 0.5);
+  builder.build(sim, query, &model);
+  EXPECT_EQ(model.contact_stiffness_N_per_m, physics::Mat3::Zero());
+  EXPECT_EQ(model.triangle_count, 1);  // the nearest one, so the loop still sees where the surface is
+  EXPECT_EQ(builder.factorizations(), 0);
+}
+
+TEST(LocalModelBuilder, PushingToolGivesTheForceAndThePushedPoint) {
+  physics::Simulation sim(cantilever_with_tool());
+  LocalModelBuilder builder;
+  haptics::LocalModel model;
+  PatchQuery query;
+  query.tool_m = Vec3(0.05, 0.05, 0.099);
+  builder.build(sim, query, &model);
+  // Push on the first patch triangle's centroid.
+  const auto& tr = model.triangle[0];
+  query.contact_node = {model.vertex_node[tr[0]], model.vertex_node[tr[1]], model.vertex_node[tr[2]]};
+  query.contact_weight = {1.0 / 3, 1.0 / 3, 1.0 / 3};
+  ASSERT_TRUE(sim.set_tool_force(query.contact_node, query.contact_weight, Vec3(0, 0, -0.5)));
+  ASSERT_TRUE(sim.step().ok);
+  builder.build(sim, query, &model);
+  EXPECT_TRUE(model.in_contact);
+  EXPECT_EQ(model.force_ref_N, Vec3(0, 0, -0.5));
+  Vec3 centroid = Vec3::Zero();
+  for (auto n : query.contact_node) centroid += sim.body().x_m[n] / 3.0;
+  EXPECT_LT((model.position_ref_m - centroid).norm(), 1e-15);
+  EXPECT_GT(model.contact_stiffness_N_per_m(2, 2), 0.0);
+  EXPECT_EQ(model.sim_time_s, sim.time_s());
+}
+
+TEST(LocalModelBuilder, PatchRespectsTheFixedCapacity) {
+  scene::Scene s = cantilever_with_tool();
+  s.tool->patch_radius_m = 10.0;  // the whole surface qualifies
+  s.adaptivity.min_depth = 3;     // 3,072 tets, far more surface than fits
+  physics::Simulation sim(s);
+  LocalModelBuilder builder;
+  haptics::LocalModel model;
+  PatchQuery query;
+  query.tool_m = Vec3(0.05, 0.05, 0.1);
+  builder.build(sim, query, &model);
+  EXPECT_LE(model.vertex_count, haptics::LocalModel::kMaxPatchVertices);
+  EXPECT_LE(model.triangle_count, haptics::LocalModel::kMaxPatchTriangles);
+  EXPECT_GT(model.triangle_count, haptics::LocalModel::kMaxPatchTriangles / 2);
+  // Nearest first: the patch is the neighbourhood of the tool.
+  for (int v = 0; v < model.vertex_count; ++v) EXPECT_LT((model.vertex_m[v] - query.tool_m).norm(), 0.06);
+}
+
+TEST(LocalModelBuilder, NeedsAToolInTheScene) {
+  physics::Simulation sim(physics::testing::cantilever_scene());
+  LocalModelBuilder builder;
+  haptics::LocalModel model;
+  EXPECT_THROW(builder.build(sim, PatchQuery{}, &model), std::logic_error);
+}
+
+}  // namespace
+}  // namespace tissue::service
