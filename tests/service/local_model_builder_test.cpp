@@ -134,8 +134,15 @@ TEST(LocalModelBuilder, PatchRespectsTheFixedCapacity) {
   EXPECT_LE(model.vertex_count, haptics::LocalModel::kMaxPatchVertices);
   EXPECT_LE(model.triangle_count, haptics::LocalModel::kMaxPatchTriangles);
   EXPECT_GT(model.triangle_count, haptics::LocalModel::kMaxPatchTriangles / 2);
-  // Nearest first: the patch is the neighbourhood of the tool.
-  for (int v = 0; v < model.vertex_count; ++v) EXPECT_LT((model.vertex_m[v] - query.tool_m).norm(), 0.06);
+  // Nearest first: the top face under the tool (8 x 8 cells of 2 triangles at
+  // depth 3) is all in, before any triangle of the side faces.
+  int top = 0;
+  for (int t = 0; t < model.triangle_count; ++t) {
+    bool on_top = true;
+    for (int k = 0; k < 3; ++k) on_top = on_top && std::abs(model.vertex_m[model.triangle[t][k]].z() - 0.1) < 1e-12;
+    top += on_top ? 1 : 0;
+  }
+  EXPECT_EQ(top, 128);
 }
 
 TEST(LocalModelBuilder, NeedsAToolInTheScene) {
