@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <random>
 
 #include "physics/physics_test_support.hpp"
@@ -134,15 +135,31 @@ TEST(LocalModelBuilder, PatchRespectsTheFixedCapacity) {
   EXPECT_LE(model.vertex_count, haptics::LocalModel::kMaxPatchVertices);
   EXPECT_LE(model.triangle_count, haptics::LocalModel::kMaxPatchTriangles);
   EXPECT_GT(model.triangle_count, haptics::LocalModel::kMaxPatchTriangles / 2);
-  // Nearest first: the top face under the tool (8 x 8 cells of 2 triangles at
-  // depth 3) is all in, before any triangle of the side faces.
-  int top = 0;
-  for (int t = 0; t < model.triangle_count; ++t) {
-    bool on_top = true;
-    for (int k = 0; k < 3; ++k) on_top = on_top && std::abs(model.vertex_m[model.triangle[t][k]].z() - 0.1) < 1e-12;
-    top += on_top ? 1 : 0;
+  // Nearest first: the 100 surface triangles nearest the tool are all in.
+  mesh::SurfaceMesh surface;
+  mesh::extract_surface(sim.body().mesh(), &surface);
+  std::vector<std::pair<double, std::array<std::uint32_t, 3>>> all;
+  for (const auto& tr : surface.triangles) {
+    std::array<std::uint32_t, 3> n{surface.vertex_nodes[tr[0]], surface.vertex_nodes[tr[1]],
+                                   surface.vertex_nodes[tr[2]]};
+    const auto& x = sim.body().x_m;
+    all.emplace_back((closest_point_on_triangle(query.tool_m, x[n[0]], x[n[1]], x[n[2]]).point_m - query.tool_m).norm(),
+                     n);
   }
-  EXPECT_EQ(top, 128);
+  std::sort(all.begin(), all.end());
+  const double cutoff = all[100].first;
+  int nearest_in = 0, nearest_total = 0;
+  for (const auto& [d, n] : all) {
+    if (d >= cutoff) break;
+    ++nearest_total;
+    for (int t = 0; t < model.triangle_count; ++t) {
+      const auto& tr = model.triangle[t];
+      if (model.vertex_node[tr[0]] == n[0] && model.vertex_node[tr[1]] == n[1] && model.vertex_node[tr[2]] == n[2])
+        ++nearest_in;
+    }
+  }
+  EXPECT_GE(nearest_total, 50);
+  EXPECT_EQ(nearest_in, nearest_total);
 }
 
 TEST(LocalModelBuilder, NeedsAToolInTheScene) {
