@@ -78,8 +78,7 @@ class Simulation {
   // clamped to tool.max_force_N. Held until changed or cleared. Returns false
   // (and applies nothing) when the scene has no tool, a node is dead, or the
   // force or a weight is non-finite: input from another thread never throws.
-  bool set_tool_force(const std::array<NodeId, 3>& nodes, const std::array<double, 3>& weights,
-                      const Vec3& force_N);
+  bool set_tool_force(const std::array<NodeId, 3>& nodes, const std::array<double, 3>& weights, const Vec3& force_N);
   void clear_tool_force();
   // The force last applied through set_tool_force (after clamping), or zero.
   Vec3 tool_force_N() const { return tool_ && tool_->active ? tool_->force_N : Vec3::Zero(); }

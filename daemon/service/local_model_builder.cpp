@@ -119,7 +119,8 @@ void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query,
   } else {
     out->position_ref_m = nearest.point_m;
     out->force_ref_N.setZero();
-    const int k = static_cast<int>(std::max_element(nearest.weight.begin(), nearest.weight.end()) - nearest.weight.begin());
+    const int k =
+        static_cast<int>(std::max_element(nearest.weight.begin(), nearest.weight.end()) - nearest.weight.begin());
     if (!tri.empty()) contact_node = nodes[tri[nearest_tri][k]];
   }
   const bool engaged = out->in_contact || nearest_d <= tool.engage_distance_m;

@@ -72,15 +72,14 @@ TEST(LocalModelBuilder, PatchUnderAToolAboveTheTopFace) {
   for (int t = 0; t < model.triangle_count; ++t) {
     const auto& tr = model.triangle[t];
     const Vec3 n = (model.vertex_m[tr[1]] - model.vertex_m[tr[0]]).cross(model.vertex_m[tr[2]] - model.vertex_m[tr[0]]);
-    const ClosestPoint cp = closest_point_on_triangle(query.tool_m, model.vertex_m[tr[0]], model.vertex_m[tr[1]],
-                                                      model.vertex_m[tr[2]]);
+    const ClosestPoint cp =
+        closest_point_on_triangle(query.tool_m, model.vertex_m[tr[0]], model.vertex_m[tr[1]], model.vertex_m[tr[2]]);
     EXPECT_LE((cp.point_m - query.tool_m).norm(), sim.scene().tool->patch_radius_m + 1e-12);
     // Every patch triangle near the top centre lies on the top face, facing up.
     EXPECT_NEAR(model.vertex_m[tr[0]].z(), 0.1, 1e-12);
     EXPECT_GT(n.z(), 0.0);
   }
-  for (int v = 0; v < model.vertex_count; ++v)
-    EXPECT_EQ(model.vertex_m[v], sim.body().x_m[model.vertex_node[v]]);
+  for (int v = 0; v < model.vertex_count; ++v) EXPECT_EQ(model.vertex_m[v], sim.body().x_m[model.vertex_node[v]]);
   // Within engage distance: K_c is there, SPD and dominated by the normal.
   EXPECT_GT(model.contact_stiffness_N_per_m(2, 2), 0.0);
   EXPECT_LT((model.contact_stiffness_N_per_m - model.contact_stiffness_N_per_m.transpose()).norm(),

@@ -1,0 +1,54 @@
+// The sim thread's work for one step, without the thread (tests drive it
+// directly; service/sim_thread runs it paced to the wall clock):
+//   tool samples from the haptic loop -> tool force on the mesh (equal and
+//   opposite to what the user felt, averaged over the samples since the last
+//   step) -> freeze adaptivity under an engaged tool -> Simulation::step()
+//   -> rebuild the LocalModel around the tool.
+// A scene without a tool runs none of the tool code (no samples expected, no
+// local model built).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "haptics/local_model.hpp"
+#include "physics/simulation.hpp"
+#include "service/local_model_builder.hpp"
+
+namespace tissue::service {
+
+struct RunnerStep {
+  bool ok = true;
+  std::string error;          // why the step was refused (state kept)
+  bool model_built = false;   // *model was rewritten (scenes with a tool)
+  bool tool_pushing = false;  // a tool force was applied in this step
+  int samples_used = 0;
+  physics::AdaptStats adapted;
+};
+
+class SimRunner {
+ public:
+  // Throws std::invalid_argument when the scene cannot be simulated.
+  explicit SimRunner(const scene::Scene& scene);
+
+  // One step. `samples` are the haptic ticks since the last call, oldest
+  // first (may be empty). When the scene has a tool, `model` receives the new
+  // local model (version and built_ns are the caller's to stamp).
+  RunnerStep step(std::span<const haptics::ToolSample> samples, haptics::LocalModel* model);
+
+  physics::Simulation& simulation() { return *sim_; }
+  const physics::Simulation& simulation() const { return *sim_; }
+  // Where the tool was last seen (scene frame); far away until a sample came.
+  const physics::Vec3& tool_position_m() const { return query_.tool_m; }
+
+ private:
+  void apply_tool(std::span<const haptics::ToolSample> samples, RunnerStep* out);
+
+  std::unique_ptr<physics::Simulation> sim_;
+  LocalModelBuilder builder_;
+  PatchQuery query_;
+};
+
+}  // namespace tissue::service
