@@ -579,5 +579,30 @@ TEST(SceneYamlFuzz, MutatedScenesEitherParseOrThrowSceneError) {
   EXPECT_GT(rejected, 100);
 }
 
+
+// The optional tool: absent means no tool at all; present, every field is
+// read and validated like the rest.
+TEST(SceneYaml, ToolSectionIsOptionalAndRead) {
+  EXPECT_FALSE(parse_scene(kBase, "base.yaml").tool.has_value());
+  const Scene s = parse_scene(kBase + "tool:\n  patch_radius_m: 0.03\n  engage_distance_m: 0.004\n"
+                                      "  freeze_radius_m: 0\n  max_force_N: 7.5\n",
+                              "tool.yaml");
+  ASSERT_TRUE(s.tool.has_value());
+  EXPECT_EQ(s.tool->patch_radius_m, 0.03);
+  EXPECT_EQ(s.tool->engage_distance_m, 0.004);
+  EXPECT_EQ(s.tool->freeze_radius_m, 0.0);
+  EXPECT_EQ(s.tool->max_force_N, 7.5);
+  const Scene defaults = parse_scene(kBase + "tool: {}\n", "tool.yaml");
+  ASSERT_TRUE(defaults.tool.has_value());
+  EXPECT_EQ(defaults.tool->max_force_N, ToolSpec{}.max_force_N);
+}
+
+TEST(SceneYamlErrors, ToolValuesAreChecked) {
+  expect_error(kBase + "tool: {max_force_N: 0}\n", "tool.max_force_N", "must be");
+  expect_error(kBase + "tool: {patch_radius_m: -1}\n", "tool.patch_radius_m", "must be");
+  expect_error(kBase + "tool: {freeze_radius_m: .nan}\n", "tool.freeze_radius_m", "");
+  expect_error(kBase + "tool: {radius: 1}\n", "tool.radius", "unknown key");
+}
+
 }  // namespace
 }  // namespace tissue::scene

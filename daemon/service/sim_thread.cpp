@@ -1,0 +1,181 @@
+#include "service/sim_thread.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+
+namespace tissue::service {
+
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+namespace {
+
+void sleep_until_ns(std::int64_t t_ns) {
+  // steady_clock is CLOCK_MONOTONIC on Linux; absolute sleeps do not drift.
+  timespec ts{static_cast<time_t>(t_ns / 1000000000), static_cast<long>(t_ns % 1000000000)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+}  // namespace
+
+SimThread::SimThread(std::unique_ptr<SimRunner> runner, ToolSampleRing* samples, LocalModelChannel* models,
+                     SimThreadOptions options)
+    : runner_(std::move(runner)), samples_(samples), models_(models), options_(options) {
+  batch_.reserve(ToolSampleRing::kCapacity);
+}
+
+SimThread::~SimThread() { stop(); }
+
+void SimThread::start() {
+  if (thread_.joinable()) return;
+  stop_.store(false);
+  thread_ = std::thread([this] { run(); });
+}
+
+void SimThread::stop() {
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
+}
+
+void SimThread::replace_runner(std::unique_ptr<SimRunner> runner) {
+  std::lock_guard<std::mutex> lock(pending_mutex_);
+  pending_ = std::move(runner);
+}
+
+std::string SimThread::scheduling() const {
+  std::lock_guard<std::mutex> lock(scheduling_mutex_);
+  return scheduling_;
+}
+
+void SimThread::publish_model(std::int64_t t_ns, bool rebuilt) {
+  if (!models_ || !runner_->simulation().has_tool()) return;
+  // Re-published while paused too, so the haptic loop does not read a
+  // resting object as a stale model.
+  if (rebuilt) scratch_model_.version = ++model_version_;
+  if (scratch_model_.version == 0) return;  // nothing built yet
+  scratch_model_.built_ns = t_ns;
+  models_->write(scratch_model_);
+}
+
+void SimThread::publish_status(std::int64_t t_ns) {
+  const physics::Simulation& sim = runner_->simulation();
+  const double window_s = 1e-9 * static_cast<double>(t_ns - window_start_ns_);
+  if (window_s >= 1.0 || window_start_ns_ == 0) {
+    if (window_start_ns_ != 0) rtf_ = window_sim_s_ / window_s;
+    window_start_ns_ = t_ns;
+    window_sim_s_ = 0.0;
+  }
+  SimStatus& s = status_.write_buffer();
+  s.generation = generation_;
+  s.sim_time_s = sim.time_s();
+  s.steps = sim.counters().steps;
+  s.nodes = sim.body().mesh().node_count();
+  s.tets = sim.body().mesh().tet_count();
+  s.springs = sim.body().mesh().edge_count();
+  s.refines = sim.counters().splits;
+  s.merges = sim.counters().merges;
+  s.kinetic_energy_J = sim.kinetic_energy_J();
+  s.elastic_energy_J = sim.elastic_energy_J();
+  s.real_time_factor = rtf_;
+  s.step_ms_last = step_ms_last_;
+  s.step_ms_max_window = step_ms_max_;
+  s.paused = paused_.load(std::memory_order_relaxed);
+  s.adaptation_shed = shed_;
+  s.overruns = overruns_;
+  s.failed_steps = failed_steps_;
+  s.model_version = model_version_;
+  s.samples = samples_total_;
+  s.tool_pushing = last_step_.tool_pushing;
+  const physics::Vec3 f = sim.tool_force_N();
+  s.tool_force_N = {f.x(), f.y(), f.z()};
+  std::snprintf(s.last_error, sizeof s.last_error, "%s", last_error_.c_str());
+  status_.publish();
+  step_ms_max_ = 0.0;
+}
+
+void SimThread::run() {
+  {
+    std::string what = "SCHED_OTHER (no real-time priority asked)";
+    if (options_.priority > 0) {
+      sched_param param{};
+      param.sched_priority = options_.priority;
+      const int err = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+      what = err == 0 ? "SCHED_FIFO " + std::to_string(options_.priority)
+                      : std::string("SCHED_OTHER (SCHED_FIFO refused: ") + std::strerror(err) + ")";
+    }
+    std::lock_guard<std::mutex> lock(scheduling_mutex_);
+    scheduling_ = what;
+  }
+
+  std::int64_t next_ns = now_ns();
+  std::int64_t last_status_ns = 0;
+  while (!stop_.load(std::memory_order_relaxed)) {
+    heartbeat_.fetch_add(1, std::memory_order_relaxed);
+    // A new runner (reset / load / set) takes over between steps.
+    if (std::unique_lock<std::mutex> lock(pending_mutex_, std::try_to_lock); lock.owns_lock() && pending_) {
+      runner_ = std::move(pending_);
+      ++generation_;
+      scratch_model_.version = 0;
+      shed_ = false;
+      last_error_.clear();
+      next_ns = now_ns();
+    }
+    physics::Simulation& sim = runner_->simulation();
+    const double dt_s = sim.scene().integrator.dt_s;
+    const auto dt_ns = static_cast<std::int64_t>(dt_s * 1e9);
+
+    batch_.clear();
+    if (samples_) samples_->drain([this](const haptics::ToolSample& s) {
+        if (batch_.size() < batch_.capacity()) batch_.push_back(s);
+      });
+    samples_total_ += batch_.size();
+
+    const std::int64_t t0 = now_ns();
+    bool rebuilt = false;
+    if (!paused_.load(std::memory_order_relaxed)) {
+      last_step_ = runner_->step(batch_, &scratch_model_);
+      rebuilt = last_step_.model_built;
+      if (last_step_.ok) {
+        window_sim_s_ += dt_s;
+      } else {
+        ++failed_steps_;
+        last_error_ = last_step_.error;
+      }
+    }
+    const std::int64_t t1 = now_ns();
+    step_ms_last_ = 1e-6 * static_cast<double>(t1 - t0);
+    step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
+    publish_model(t1, rebuilt);
+    if (t1 - last_status_ns >= static_cast<std::int64_t>(options_.status_every_s * 1e9)) {
+      publish_status(t1);
+      last_status_ns = t1;
+    }
+
+    if (!options_.pace) continue;
+    next_ns += dt_ns;
+    const std::int64_t lag_ns = t1 - next_ns;
+    // Shed adaptation first when behind; take it back once on time again.
+    if (lag_ns > static_cast<std::int64_t>(options_.shed_after_lag_s * 1e9)) {
+      shed_ = true;
+    } else if (lag_ns < 0) {
+      shed_ = false;
+    }
+    sim.set_adaptation_paused(shed_);
+    if (lag_ns > static_cast<std::int64_t>(options_.max_lag_s * 1e9)) {
+      ++overruns_;
+      next_ns = t1;  // re-anchor: no burst of catch-up steps
+    }
+    sleep_until_ns(next_ns);
+  }
+  publish_status(now_ns());
+}
+
+}  // namespace tissue::service

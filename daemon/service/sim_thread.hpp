@@ -1,0 +1,129 @@
+// The sim thread: runs a SimRunner paced to the wall clock (one step per
+// dt_s of wall time, absolute-time sleeps), feeds it the haptic loop's tool
+// samples and hands each new LocalModel to the haptic loop. Commands from the
+// control side (pause, resume, a new runner for reset / load / set) are
+// picked up between steps; the sim thread never waits for them (try_lock).
+//
+// Falling behind: when a step ends later than its slot, adaptation is shed
+// first (paused until the loop catches up again); past max_lag_s the schedule
+// is re-anchored to now and an overrun is counted rather than running a burst
+// of catch-up steps. The haptic thread never waits for any of this.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "concurrency/latest_value.hpp"
+#include "concurrency/spsc_ring.hpp"
+#include "haptics/local_model.hpp"
+#include "service/sim_runner.hpp"
+
+namespace tissue::service {
+
+using ToolSampleRing = concurrency::SpscRing<haptics::ToolSample, 4096>;
+using LocalModelChannel = concurrency::LatestValue<haptics::LocalModel>;
+
+// What the sim thread reports; read through a LatestValue by one reader.
+struct SimStatus {
+  std::uint64_t generation = 0;  // bumps when a new runner (reset / load / set) takes over
+  double sim_time_s = 0.0;
+  std::int64_t steps = 0;
+  std::size_t nodes = 0, tets = 0, springs = 0;
+  std::int64_t refines = 0, merges = 0;
+  double kinetic_energy_J = 0.0, elastic_energy_J = 0.0;
+  double real_time_factor = 0.0;  // simulated / wall seconds over the last status window
+  double step_ms_last = 0.0, step_ms_max_window = 0.0;
+  bool paused = false;
+  bool adaptation_shed = false;  // adaptation paused because the loop fell behind
+  std::int64_t overruns = 0;     // schedule re-anchored after falling max_lag_s behind
+  std::int64_t failed_steps = 0;
+  std::uint64_t model_version = 0;
+  std::uint64_t samples = 0;
+  bool tool_pushing = false;
+  std::array<double, 3> tool_force_N{};
+  char last_error[256] = {};  // the newest failed step's reason (NUL-terminated)
+};
+
+struct SimThreadOptions {
+  double max_lag_s = 0.1;         // behind by more than this: re-anchor the schedule
+  double shed_after_lag_s = 0.01; // behind by more than this: pause adaptation
+  double status_every_s = 0.05;   // publish SimStatus this often (wall)
+  int priority = 0;               // SCHED_FIFO priority to try (0: leave the policy alone)
+  bool pace = true;               // false: as fast as possible (tests)
+};
+
+class SimThread {
+ public:
+  // `samples` and `models` may be null (no haptic loop). The runner is owned.
+  SimThread(std::unique_ptr<SimRunner> runner, ToolSampleRing* samples, LocalModelChannel* models,
+            SimThreadOptions options);
+  ~SimThread();
+  SimThread(const SimThread&) = delete;
+  SimThread& operator=(const SimThread&) = delete;
+
+  void start();
+  void stop();  // joins; idempotent
+
+  // Any thread; applied at the next step boundary.
+  void pause() { paused_.store(true, std::memory_order_relaxed); }
+  void resume() { paused_.store(false, std::memory_order_relaxed); }
+  bool paused() const { return paused_.load(std::memory_order_relaxed); }
+  // Hands over a new runner (built on the caller's thread: construction
+  // allocates and may throw, neither belongs on the sim thread).
+  void replace_runner(std::unique_ptr<SimRunner> runner);
+
+  // One reader (the service's io thread).
+  SimStatus status() { return *status_.read().value; }
+  // Advances every loop iteration, paused or not: the watchdog's heartbeat
+  // when there is no haptic thread.
+  std::uint64_t heartbeat() const { return heartbeat_.load(std::memory_order_relaxed); }
+  // Scheduling actually obtained ("SCHED_FIFO 60" or why not).
+  std::string scheduling() const;
+
+ private:
+  void run();
+  void publish_model(std::int64_t now_ns, bool rebuilt);
+  void publish_status(std::int64_t now_ns);
+
+  std::unique_ptr<SimRunner> runner_;
+  ToolSampleRing* samples_;
+  LocalModelChannel* models_;
+  SimThreadOptions options_;
+
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> paused_{false};
+  std::atomic<std::uint64_t> heartbeat_{0};
+
+  std::mutex pending_mutex_;  // guards pending_ only; the sim thread only try_locks
+  std::unique_ptr<SimRunner> pending_;
+
+  concurrency::LatestValue<SimStatus> status_;
+  mutable std::mutex scheduling_mutex_;
+  std::string scheduling_;
+
+  // Sim-thread state.
+  std::vector<haptics::ToolSample> batch_;
+  haptics::LocalModel scratch_model_;
+  std::uint64_t model_version_ = 0;
+  std::uint64_t generation_ = 0;
+  std::uint64_t samples_total_ = 0;
+  std::int64_t overruns_ = 0, failed_steps_ = 0;
+  bool shed_ = false;
+  RunnerStep last_step_;
+  std::string last_error_;
+  double window_sim_s_ = 0.0;
+  std::int64_t window_start_ns_ = 0;
+  double step_ms_last_ = 0.0, step_ms_max_ = 0.0;
+  double rtf_ = 0.0;
+};
+
+// steady_clock now in nanoseconds (the clock every timestamp here uses).
+std::int64_t now_ns();
+
+}  // namespace tissue::service
