@@ -59,6 +59,10 @@ struct ToolSample {
   std::array<double, 3> contact_weight{};       // barycentric weights, sum 1 (0 when not in contact)
   bool contact = false;
   std::uint64_t model_version = 0;  // LocalModel version the tick rendered against
+
+  // Fixed-size Eigen members never throw on copy, but do not say so; the
+  // lock-free ring requires it to be stated.
+  ToolSample& operator=(const ToolSample&) noexcept = default;
 };
 
 }  // namespace tissue::haptics
