@@ -9,6 +9,7 @@
 #include <string>
 
 #include "app/batch_run.hpp"
+#include "service/service.hpp"
 
 namespace {
 
@@ -33,11 +34,18 @@ int main(int argc, char** argv) {
         "4 report not writable.");
     bool batch = false;
     tissue::app::BatchOptions batch_options;
+    std::string config_path;
+    app.add_option("--config", config_path,
+                   "run the service (threads, device, control socket) with this daemon config "
+                   "(YAML, see docs/daemon-config.md)");
     app.add_flag("--batch", batch, "run a scene for --duration simulated seconds as fast as possible, then exit");
     app.add_option("--scene", batch_options.scene_path, "scene file (YAML, see docs/scene-format.md)");
     CLI::Option* duration =
-        app.add_option("--duration", batch_options.duration_s, "simulated seconds to run")->check(kSeconds);
-    app.add_option("--set", batch_options.overrides, "override a scene value: key.path=value (repeatable)");
+        app.add_option("--duration", batch_options.duration_s,
+                       "--batch: simulated seconds to run; --config: stop the service after this many wall seconds")
+            ->check(kSeconds);
+    app.add_option("--set", batch_options.overrides,
+                   "override a scene value (or, with --config, a daemon value): key.path=value (repeatable)");
     app.add_option("--report", batch_options.report_path, "write the JSON report to this file");
     bool no_timing = false;
     app.add_flag("--no-timing", no_timing, "leave wall-clock timing out of the report (bit-identical reruns)");
@@ -54,10 +62,23 @@ int main(int argc, char** argv) {
       return tissue::app::kExitUsage;
     }
 
+    if (batch && !config_path.empty()) {
+      std::fprintf(stderr, "tissued: --batch and --config are two different modes; give one (see --help)\n");
+      return tissue::app::kExitUsage;
+    }
+    if (!config_path.empty()) {
+      tissue::service::ServiceOptions options;
+      options.config_path = config_path;
+      options.overrides = batch_options.overrides;
+      options.duration_s = batch_options.duration_s;
+      tissue::service::Service service(options);
+      return service.run();
+    }
     if (!batch) {
       std::fprintf(stderr,
-                   "usage: tissued --batch --scene FILE --duration SECONDS [options] (see --help); "
-                   "the service mode arrives with the daemon issue\n");
+                   "usage: tissued --config FILE [--duration SECONDS] [--set key=value ...]   (the service)\n"
+                   "       tissued --batch --scene FILE --duration SECONDS [options]          (a batch run)\n"
+                   "see --help\n");
       return tissue::app::kExitUsage;
     }
     if (batch_options.scene_path.empty() || duration->count() == 0) {

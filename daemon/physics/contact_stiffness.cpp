@@ -51,15 +51,22 @@ void ContactStiffness::factor(const Body& body) {
 Mat3 ContactStiffness::at_node(const Body& body, NodeId node) {
   if (!body.mesh().node_alive(node))
     throw std::invalid_argument("contact stiffness: node " + std::to_string(node) + " is not in the mesh");
-  if (!factored_ || dof_of_node_.size() != body.x_m.size()) factor(body);
+  if (!factored_ || dof_of_node_.size() != body.x_m.size()) {
+    factor(body);
+    cached_node_ = mesh::kInvalidId;
+  }
+  if (node == cached_node_) return cached_;
   const int dof = dof_of_node_[node];
   if (dof < 0) return kRigid_N_per_m * Mat3::Identity();
   rhs_.setZero(ldlt_.rows(), 3);
   for (int i = 0; i < 3; ++i) rhs_(dof + i, i) = 1.0;
   solution_ = ldlt_.solve(rhs_);
+  ++solves_;
   const Mat3 compliance = solution_.block<3, 3>(dof, 0);
   const Mat3 symmetric = 0.5 * (compliance + compliance.transpose());
-  return symmetric.inverse();
+  cached_ = symmetric.inverse();
+  cached_node_ = node;
+  return cached_;
 }
 
 }  // namespace tissue::physics

@@ -33,15 +33,25 @@ class ContactStiffness {
   // mesh changed since the last call (mesh_changed()). Throws
   // std::invalid_argument for a dead node.
   Mat3 at_node(const Body& body, NodeId node);
-  void mesh_changed() { factored_ = false; }
+  void mesh_changed() {
+    factored_ = false;
+    cached_node_ = mesh::kInvalidId;
+  }
   // How many times K was factored (tests and stats).
   int factorizations() const { return factorizations_; }
+  // How many times K_c was solved for (repeated queries of a node are cached).
+  int solves() const { return solves_; }
 
  private:
   void factor(const Body& body);
 
   bool factored_ = false;
+  // The last answer: a tool pressing one spot asks for the same node every
+  // step, and K (hence K_c) changes only with the mesh.
+  NodeId cached_node_ = mesh::kInvalidId;
+  Mat3 cached_ = Mat3::Zero();
   int factorizations_ = 0;
+  int solves_ = 0;
   std::vector<int> dof_of_node_;  // first of three unknowns, -1 for kinematic and dead nodes
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt_;
   Eigen::MatrixXd rhs_, solution_;

@@ -133,7 +133,8 @@ void SimThread::run() {
     const auto dt_ns = static_cast<std::int64_t>(dt_s * 1e9);
 
     batch_.clear();
-    if (samples_) samples_->drain([this](const haptics::ToolSample& s) {
+    if (samples_)
+      samples_->drain([this](const haptics::ToolSample& s) {
         if (batch_.size() < batch_.capacity()) batch_.push_back(s);
       });
     samples_total_ += batch_.size();

@@ -20,13 +20,15 @@
 
 #include "concurrency/latest_value.hpp"
 #include "concurrency/spsc_ring.hpp"
+#include "haptics/haptic_loop.hpp"
 #include "haptics/local_model.hpp"
 #include "service/sim_runner.hpp"
 
 namespace tissue::service {
 
-using ToolSampleRing = concurrency::SpscRing<haptics::ToolSample, 4096>;
-using LocalModelChannel = concurrency::LatestValue<haptics::LocalModel>;
+// The hand-offs shared with the haptic loop (haptics/haptic_loop.hpp).
+using ToolSampleRing = haptics::ToolSampleRing;
+using LocalModelChannel = haptics::LocalModelBuffer;
 
 // What the sim thread reports; read through a LatestValue by one reader.
 struct SimStatus {
@@ -50,11 +52,11 @@ struct SimStatus {
 };
 
 struct SimThreadOptions {
-  double max_lag_s = 0.1;         // behind by more than this: re-anchor the schedule
-  double shed_after_lag_s = 0.01; // behind by more than this: pause adaptation
-  double status_every_s = 0.05;   // publish SimStatus this often (wall)
-  int priority = 0;               // SCHED_FIFO priority to try (0: leave the policy alone)
-  bool pace = true;               // false: as fast as possible (tests)
+  double max_lag_s = 0.1;          // behind by more than this: re-anchor the schedule
+  double shed_after_lag_s = 0.01;  // behind by more than this: pause adaptation
+  double status_every_s = 0.05;    // publish SimStatus this often (wall)
+  int priority = 0;                // SCHED_FIFO priority to try (0: leave the policy alone)
+  bool pace = true;                // false: as fast as possible (tests)
 };
 
 class SimThread {

@@ -83,8 +83,9 @@ TEST(ContactStiffness, RefactorsOnlyWhenTheMeshChanged) {
   ContactStiffness contact;
   const NodeId tip = node_at(sim.body(), Vec3(0.4, 0.05, 0.1));
   const Mat3 before = contact.at_node(sim.body(), tip);
-  contact.at_node(sim.body(), tip);
+  EXPECT_EQ(contact.at_node(sim.body(), tip), before);
   EXPECT_EQ(contact.factorizations(), 1);
+  EXPECT_EQ(contact.solves(), 1);  // the same node again is answered from the cache
 
   // Refining next to the node adds compliance paths: a finer mesh is a
   // little softer, never stiffer by more than rounding, and K_c changes.
@@ -96,6 +97,7 @@ TEST(ContactStiffness, RefactorsOnlyWhenTheMeshChanged) {
   contact.mesh_changed();
   const Mat3 after = contact.at_node(sim.body(), tip);
   EXPECT_EQ(contact.factorizations(), 2);
+  EXPECT_EQ(contact.solves(), 2);
   EXPECT_TRUE(after.allFinite());
   EXPECT_NE(before, after);
 }

@@ -1,0 +1,97 @@
+#include "service/haptic_side.hpp"
+
+#include <stdexcept>
+#include <string>
+
+#include "haptics/device.hpp"
+#include "haptics/haptic_loop.hpp"
+#include "haptics/haptic_thread.hpp"
+
+namespace tissue::service {
+
+namespace {
+
+class HapticSideImpl final : public HapticSide {
+ public:
+  HapticSideImpl(const config::DaemonConfig& config, ToolSampleRing& samples, LocalModelChannel& models) {
+    std::string error;
+    device_ = haptics::make_device(config.device, &error);
+    if (!device_) throw std::runtime_error("haptic device: " + (error.empty() ? "none configured" : error));
+    if (!device_->start(&error))
+      throw std::runtime_error(std::string("haptic device ") + device_->name() + ": " + error);
+    memory_ = haptics::lock_memory(config.realtime.lock_memory);
+    loop_ = std::make_unique<haptics::HapticLoop>(*device_, config.device, config.haptics, models, samples);
+    thread_ = std::make_unique<haptics::HapticThread>(*loop_, config.haptics, config.realtime);
+    if (!thread_->start(&error)) {
+      device_->stop();
+      throw std::runtime_error("haptic thread: " + error);
+    }
+    rate_hz_ = config.haptics.rate_hz;
+  }
+  ~HapticSideImpl() override { stop(); }
+
+  void stop() override {
+    if (stopped_) return;
+    stopped_ = true;
+    thread_->request_stop();  // ramps the force to zero first
+    thread_->join();
+    device_->stop();
+  }
+
+  std::uint64_t heartbeat() const override { return loop_->heartbeat().load(std::memory_order_relaxed); }
+
+  void summary(char* buffer, std::size_t size) const override {
+    const haptics::HapticStats s = loop_->stats();
+    std::snprintf(buffer, size, " | haptic %s F %.2f N%s%s", device_->name(), s.force_N, s.contact ? " contact" : "",
+                  s.safety_trips ? " (safety trips)" : "");
+  }
+
+  nlohmann::json status_json() const override {
+    const haptics::HapticStats s = loop_->stats();
+    const haptics::TimingSummary t = thread_->timing();
+    return {
+        {"device", device_->name()},
+        {"rate_hz", rate_hz_},
+        {"ticks", s.ticks},
+        {"contact", s.contact},
+        {"force_N", s.force_N},
+        {"force_scale", s.force_scale},
+        {"model_version", s.model_version},
+        {"passivity_energy_J", s.passivity_energy_J},
+        {"rejected_inputs", s.rejected_inputs},
+        {"missing_samples", s.missing_samples},
+        {"safety_trips", s.safety_trips},
+        {"stale_model_trips", s.stale_model_trips},
+        {"device_lost_trips", s.device_lost_trips},
+        {"ring_drops", s.ring_drops},
+        {"overruns", t.overruns},
+        {"lateness_us",
+         {{"p50", 1e-3 * t.lateness_p50_ns}, {"p99", 1e-3 * t.lateness_p99_ns}, {"p999", 1e-3 * t.lateness_p999_ns}}},
+        {"compute_us",
+         {{"p50", 1e-3 * t.compute_p50_ns}, {"p99", 1e-3 * t.compute_p99_ns}, {"p999", 1e-3 * t.compute_p999_ns}}},
+        {"scheduling", thread_->scheduling().summary()},
+        {"memory_lock", memory_.message}};
+  }
+
+  void print_startup(std::FILE* out) const override {
+    std::fprintf(out, "tissued: haptic device %s at %g Hz; %s; memory: %s\n", device_->name(), rate_hz_,
+                 thread_->scheduling().summary().c_str(), memory_.message.c_str());
+  }
+
+ private:
+  std::unique_ptr<haptics::Device> device_;
+  std::unique_ptr<haptics::HapticLoop> loop_;
+  std::unique_ptr<haptics::HapticThread> thread_;
+  haptics::MemoryLockReport memory_;
+  double rate_hz_ = 0.0;
+  bool stopped_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<HapticSide> HapticSide::start(const config::DaemonConfig& config, ToolSampleRing& samples,
+                                              LocalModelChannel& models, std::FILE* /*out*/) {
+  return std::make_unique<HapticSideImpl>(config, samples, models);
+}
+
+}  // namespace tissue::service

@@ -1,0 +1,324 @@
+#include "service/service.hpp"
+
+#include <boost/asio/post.hpp>
+#include <cmath>
+#include <exception>
+#include <filesystem>
+#include <stdexcept>
+
+#include "config/daemon_config_yaml.hpp"
+#include "control/control_server.hpp"
+#include "control/systemd_notify.hpp"
+#include "scene/scene_yaml.hpp"
+#include "service/haptic_side.hpp"
+
+namespace tissue::service {
+
+namespace {
+
+SimThreadOptions sim_options(const config::DaemonConfig& c) {
+  SimThreadOptions o;
+  o.priority = c.realtime.sched_fifo ? c.realtime.sim_priority : 0;
+  return o;
+}
+
+nlohmann::json status_json(const SimStatus& s) {
+  return {{"sim_time_s", s.sim_time_s},
+          {"steps", s.steps},
+          {"nodes", s.nodes},
+          {"tets", s.tets},
+          {"springs", s.springs},
+          {"refines", s.refines},
+          {"merges", s.merges},
+          {"energy_J", {{"kinetic", s.kinetic_energy_J}, {"elastic", s.elastic_energy_J}}},
+          {"real_time_factor", s.real_time_factor},
+          {"step_ms", {{"last", s.step_ms_last}, {"max_recent", s.step_ms_max_window}}},
+          {"paused", s.paused},
+          {"adaptation_shed", s.adaptation_shed},
+          {"overruns", s.overruns},
+          {"failed_steps", s.failed_steps},
+          {"last_error", s.last_error[0] ? nlohmann::json(std::string(s.last_error)) : nlohmann::json(nullptr)},
+          {"tool", {{"pushing", s.tool_pushing}, {"force_N", s.tool_force_N}, {"model_version", s.model_version}}}};
+}
+
+}  // namespace
+
+Service::Service(ServiceOptions options)
+    : options_(std::move(options)),
+      signals_(io_, SIGINT, SIGTERM, SIGHUP),
+      status_timer_(io_),
+      watchdog_timer_(io_),
+      duration_timer_(io_) {}
+
+Service::~Service() { stop_threads(); }
+
+std::vector<std::string> Service::config_overrides() const {
+  std::vector<std::string> out;
+  for (const std::string& o : options_.overrides)
+    if (config::is_daemon_config_key(o.substr(0, o.find('=')))) out.push_back(o);
+  return out;
+}
+
+std::vector<std::string> Service::scene_overrides() const {
+  std::vector<std::string> out;
+  for (const std::string& o : options_.overrides)
+    if (!config::is_daemon_config_key(o.substr(0, o.find('=')))) out.push_back(o);
+  return out;
+}
+
+scene::Scene Service::load_scene_file(const std::string& path) const {
+  return scene::load_scene_file_with_overrides(path, scene_overrides());
+}
+
+void Service::load_config() {
+  config_ = config::load_daemon_config(options_.config_path, config_overrides());
+  scene_path_ = config_.scene_path;
+  scene_ = load_scene_file(scene_path_);
+}
+
+void Service::start_threads() {
+  samples_ = std::make_unique<ToolSampleRing>();
+  models_ = std::make_unique<LocalModelChannel>();
+  sim_ = std::make_unique<SimThread>(std::make_unique<SimRunner>(scene_), samples_.get(), models_.get(),
+                                     sim_options(config_));
+  sim_->start();
+  if (scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone)
+    haptics_ = HapticSide::start(config_, *samples_, *models_, options_.out);
+}
+
+void Service::stop_threads() {
+  // Forces first: the haptic side ramps to zero before anything else stops.
+  if (haptics_) haptics_->stop();
+  haptics_.reset();
+  if (sim_) sim_->stop();
+}
+
+void Service::apply_scene(scene::Scene scene) {
+  auto runner = std::make_unique<SimRunner>(scene);  // throws std::invalid_argument: nothing changes
+  const bool had_tool = scene_.tool.has_value();
+  scene_ = std::move(scene);
+  sim_->replace_runner(std::move(runner));
+  const bool want_haptics = scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone;
+  if (had_tool && !want_haptics && haptics_) {
+    haptics_->stop();
+    haptics_.reset();
+  } else if (want_haptics && !haptics_) {
+    haptics_ = HapticSide::start(config_, *samples_, *models_, options_.out);
+  }
+}
+
+void Service::request_stop(const std::string& why) {
+  if (stopping_) return;
+  stopping_ = true;
+  stop_reason_ = why;
+  if (systemd_) systemd_->stopping();
+  std::fprintf(options_.out, "tissued: stopping (%s)\n", why.c_str());
+  std::fflush(options_.out);
+  signals_.cancel();
+  status_timer_.cancel();
+  watchdog_timer_.cancel();
+  duration_timer_.cancel();
+  if (server_) server_->stop();
+  // The threads stop in run() once the io_context has no more work.
+}
+
+void Service::reload() {
+  if (systemd_) systemd_->reloading();
+  try {
+    config::DaemonConfig config = config::load_daemon_config(options_.config_path, config_overrides());
+    scene::Scene scene = scene::load_scene_file_with_overrides(config.scene_path, scene_overrides());
+    // Device and socket changes need a restart; the rest applies now.
+    config_.haptics = config.haptics;
+    config_.status_interval_s = config.status_interval_s;
+    scene_path_ = config.scene_path;
+    apply_scene(std::move(scene));
+    std::fprintf(options_.out, "tissued: reloaded %s and %s\n", options_.config_path.c_str(), scene_path_.c_str());
+  } catch (const std::exception& e) {
+    std::fprintf(options_.err, "tissued: reload failed, keeping the running scene: %s\n", e.what());
+  }
+  std::fflush(options_.out);
+  if (systemd_) systemd_->ready();
+}
+
+void Service::print_status() {
+  const SimStatus s = sim_->status();
+  char haptic[160] = "";
+  if (haptics_) haptics_->summary(haptic, sizeof haptic);
+  std::fprintf(
+      options_.out, "t %8.2f s | nodes %6zu tets %7zu | refines %6lld merges %6lld | rtf %.2f step %.2f ms%s%s%s\n",
+      s.sim_time_s, s.nodes, s.tets, static_cast<long long>(s.refines), static_cast<long long>(s.merges),
+      s.real_time_factor, s.step_ms_last, s.paused ? " | paused" : "", s.adaptation_shed ? " | shedding" : "", haptic);
+  std::fflush(options_.out);
+  if (systemd_) {
+    char line[160];
+    std::snprintf(line, sizeof line, "t=%.1fs nodes=%zu tets=%zu rtf=%.2f%s", s.sim_time_s, s.nodes, s.tets,
+                  s.real_time_factor, s.paused ? " paused" : "");
+    systemd_->status(line);
+  }
+}
+
+void Service::arm_status_timer() {
+  status_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(config_.status_interval_s)));
+  status_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (ec || stopping_) return;
+    print_status();
+    arm_status_timer();
+  });
+}
+
+void Service::arm_watchdog_timer() {
+  if (!watchdog_ || !watchdog_->enabled()) return;
+  watchdog_timer_.expires_after(*watchdog_->poll_period());
+  watchdog_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (ec || stopping_) return;
+    // Fed only while the real-time loop is alive: the haptic heartbeat when
+    // there is a haptic thread, else the sim thread's.
+    heartbeat_.store(haptics_ ? haptics_->heartbeat() : sim_->heartbeat(), std::memory_order_relaxed);
+    watchdog_->poll(std::chrono::steady_clock::now());
+    arm_watchdog_timer();
+  });
+}
+
+int Service::run() {
+  try {
+    load_config();
+  } catch (const std::exception& e) {
+    std::fprintf(options_.err, "tissued: %s\n", e.what());
+    return kServiceBadConfig;
+  }
+  try {
+    std::filesystem::create_directories(std::filesystem::path(config_.control.unix_socket_path).parent_path());
+  } catch (const std::exception&) {
+    // The server names the path when it cannot bind; nothing more to say here.
+  }
+  try {
+    systemd_ = std::make_unique<control::SystemdNotifier>();
+    if (!systemd_->setup_error().empty())
+      std::fprintf(options_.err, "tissued: systemd notifications off: %s\n", systemd_->setup_error().c_str());
+    watchdog_ = std::make_unique<control::WatchdogFeeder>(*systemd_, heartbeat_);
+    start_threads();
+    server_ = std::make_unique<control::ControlServer>(io_, control::ServerSettings::from_spec(config_.control), *this);
+    server_->start();
+  } catch (const std::exception& e) {
+    std::fprintf(options_.err, "tissued: %s\n", e.what());
+    stop_threads();
+    return kServiceStartFailed;
+  }
+
+  std::fprintf(options_.out, "tissued: scene '%s' (%s), sim thread %s, control %s%s\n", scene_.name.c_str(),
+               scene_path_.c_str(), sim_->scheduling().c_str(), config_.control.unix_socket_path.c_str(),
+               haptics_ ? "" : ", no haptic thread (no device or the scene has no tool)");
+  if (haptics_) haptics_->print_startup(options_.out);
+  std::fflush(options_.out);
+
+  signals_.async_wait([this](const boost::system::error_code& ec, int signo) {
+    if (ec) return;
+    if (signo == SIGHUP) {
+      reload();
+      // Wait for the next signal.
+      signals_.async_wait([this](const boost::system::error_code& e2, int s2) {
+        if (!e2) request_stop(s2 == SIGHUP ? "second SIGHUP" : "signal");
+      });
+      return;
+    }
+    request_stop(signo == SIGTERM ? "SIGTERM" : "SIGINT");
+  });
+  if (options_.duration_s > 0.0) {
+    duration_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(options_.duration_s)));
+    duration_timer_.async_wait([this](const boost::system::error_code& ec) {
+      if (!ec) request_stop("--duration elapsed");
+    });
+  }
+  arm_status_timer();
+  arm_watchdog_timer();
+  systemd_->ready();
+
+  int code = kServiceOk;
+  try {
+    io_.run();
+  } catch (const std::exception& e) {
+    std::fprintf(options_.err, "tissued: internal error: %s\n", e.what());
+    code = kServiceInternal;
+  }
+  stop_threads();
+  print_status();
+  return code;
+}
+
+// ---------------------------------------------------------------- control
+
+nlohmann::json Service::status() {
+  nlohmann::json j = status_json(sim_->status());
+  j["scene"] = {{"name", scene_.name}, {"source", scene_path_}, {"tool", scene_.tool.has_value()}};
+  j["threads"] = {{"sim", sim_->scheduling()}};
+  j["haptics"] = haptics_ ? haptics_->status_json() : nlohmann::json(nullptr);
+  return j;
+}
+
+nlohmann::json Service::pause() {
+  sim_->pause();
+  return {{"paused", true}};
+}
+
+nlohmann::json Service::resume() {
+  sim_->resume();
+  return {{"paused", false}};
+}
+
+nlohmann::json Service::reset() {
+  try {
+    apply_scene(scene_);
+  } catch (const std::exception& e) {
+    throw control::ControlError(std::string("reset failed: ") + e.what());
+  }
+  return {{"scene", scene_.name}, {"reset", true}};
+}
+
+nlohmann::json Service::load_scene(const std::string& path) {
+  scene::Scene scene;
+  try {
+    scene = load_scene_file(path);
+    apply_scene(scene);
+  } catch (const std::exception& e) {
+    throw control::ControlError(e.what());  // names the file, the key and the reason
+  }
+  scene_path_ = path;
+  return {{"scene", scene_.name}, {"source", path}};
+}
+
+nlohmann::json Service::set(const std::string& key, const nlohmann::json& value) {
+  const std::string override = control::set_override_text(key, value);
+  if (config::is_daemon_config_key(key)) {
+    // Validated like the file; applied at the next reload (device, socket and
+    // thread settings cannot change under a running loop).
+    try {
+      std::vector<std::string> overrides = config_overrides();
+      overrides.push_back(override);
+      config::load_daemon_config(options_.config_path, overrides);
+    } catch (const std::exception& e) {
+      throw control::ControlError(e.what());
+    }
+    options_.overrides.push_back(override);
+    return {{"key", key}, {"applied", "at the next reload (SIGHUP) or restart"}};
+  }
+  std::vector<std::string> overrides = scene_overrides();
+  overrides.push_back(override);
+  scene::Scene scene;
+  try {
+    scene = scene::load_scene_file_with_overrides(scene_path_, overrides);
+    apply_scene(std::move(scene));
+  } catch (const std::exception& e) {
+    throw control::ControlError(e.what());
+  }
+  options_.overrides.push_back(override);
+  return {{"key", key}, {"applied", "scene restarted with the new value"}};
+}
+
+nlohmann::json Service::shutdown() {
+  boost::asio::post(io_, [this] { request_stop("shutdown command"); });
+  return {{"stopping", true}};
+}
+
+}  // namespace tissue::service

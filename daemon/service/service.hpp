@@ -1,0 +1,106 @@
+// tissued as a service: `tissued --config FILE`. Owns the threads and wires
+// them (ARCHITECTURE.md):
+//   sim thread (SimThread)        steps the scene paced to the wall clock
+//   haptic thread (1 kHz)         only when the config names a device AND the
+//                                 scene has a tool (model only what is asked)
+//   io thread (the caller's)      control socket, signals, status line,
+//                                 systemd notifications and watchdog
+// Control commands and signals act between steps: reset / load_scene / set
+// build the new simulation here, on the io thread, and hand it over.
+#pragma once
+
+#include <atomic>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "config/daemon_config.hpp"
+#include "control/control_protocol.hpp"
+#include "scene/scene.hpp"
+#include "service/sim_thread.hpp"
+
+namespace tissue::control {
+class ControlServer;
+class SystemdNotifier;
+class WatchdogFeeder;
+}  // namespace tissue::control
+
+namespace tissue::service {
+
+class HapticSide;
+
+struct ServiceOptions {
+  std::string config_path;
+  // `--set key.path=value`: daemon keys (haptics.rate_hz) go to the config,
+  // the others (material.youngs_modulus_Pa) to the scene.
+  std::vector<std::string> overrides;
+  double duration_s = 0.0;  // > 0: stop after this many wall seconds (tests, demos)
+  std::FILE* out = stdout;  // live status lines
+  std::FILE* err = stderr;  // one-line errors
+};
+
+// Process exit codes of the service mode (batch mode shares 0-2).
+enum ServiceExit : int { kServiceOk = 0, kServiceInternal = 1, kServiceBadConfig = 2, kServiceStartFailed = 3 };
+
+class Service : public control::ControlHandler {
+ public:
+  explicit Service(ServiceOptions options);
+  ~Service() override;
+
+  // Loads the config and scene, starts the threads and serves until
+  // shutdown (control command, SIGTERM/SIGINT, or --duration). Returns the
+  // exit code; prints the reason of a failure on options.err.
+  int run();
+
+  // ControlHandler (io thread).
+  nlohmann::json status() override;
+  nlohmann::json pause() override;
+  nlohmann::json resume() override;
+  nlohmann::json reset() override;
+  nlohmann::json load_scene(const std::string& path) override;
+  nlohmann::json set(const std::string& key, const nlohmann::json& value) override;
+  nlohmann::json shutdown() override;
+
+ private:
+  void load_config();  // throws config::ConfigError / scene::SceneError
+  scene::Scene load_scene_file(const std::string& path) const;
+  void start_threads();
+  void stop_threads();
+  void apply_scene(scene::Scene scene);  // new runner on the sim thread, haptics started/stopped to match
+  void reload();                         // SIGHUP: config and scene again
+  void request_stop(const std::string& why);
+  void arm_status_timer();
+  void arm_watchdog_timer();
+  void print_status();
+  std::vector<std::string> scene_overrides() const;
+  std::vector<std::string> config_overrides() const;
+
+  ServiceOptions options_;
+  config::DaemonConfig config_;
+  scene::Scene scene_;
+  std::string scene_path_;  // the scene the running simulation came from
+
+  boost::asio::io_context io_;
+  boost::asio::signal_set signals_;
+  boost::asio::steady_timer status_timer_, watchdog_timer_, duration_timer_;
+
+  std::unique_ptr<ToolSampleRing> samples_;    // haptic -> sim
+  std::unique_ptr<LocalModelChannel> models_;  // sim -> haptic
+  std::unique_ptr<SimThread> sim_;
+  std::unique_ptr<HapticSide> haptics_;  // null without device or tool
+  std::unique_ptr<control::ControlServer> server_;
+  std::unique_ptr<control::SystemdNotifier> systemd_;
+  std::unique_ptr<control::WatchdogFeeder> watchdog_;
+  // The real-time loop's heartbeat as the watchdog sees it: the haptic
+  // thread's when there is one, else the sim thread's (copied at each poll).
+  std::atomic<std::uint64_t> heartbeat_{0};
+  bool stopping_ = false;
+  std::string stop_reason_;
+};
+
+}  // namespace tissue::service
