@@ -157,6 +157,18 @@ void Service::print_status() {
   }
 }
 
+void Service::arm_signals() {
+  signals_.async_wait([this](const boost::system::error_code& ec, int signo) {
+    if (ec || stopping_) return;
+    if (signo == SIGHUP) {
+      reload();
+      arm_signals();
+      return;
+    }
+    request_stop(signo == SIGTERM ? "SIGTERM" : "SIGINT");
+  });
+}
+
 void Service::arm_status_timer() {
   status_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(config_.status_interval_s)));
@@ -212,18 +224,7 @@ int Service::run() {
   if (haptics_) haptics_->print_startup(options_.out);
   std::fflush(options_.out);
 
-  signals_.async_wait([this](const boost::system::error_code& ec, int signo) {
-    if (ec) return;
-    if (signo == SIGHUP) {
-      reload();
-      // Wait for the next signal.
-      signals_.async_wait([this](const boost::system::error_code& e2, int s2) {
-        if (!e2) request_stop(s2 == SIGHUP ? "second SIGHUP" : "signal");
-      });
-      return;
-    }
-    request_stop(signo == SIGTERM ? "SIGTERM" : "SIGINT");
-  });
+  arm_signals();
   if (options_.duration_s > 0.0) {
     duration_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
         std::chrono::duration<double>(options_.duration_s)));

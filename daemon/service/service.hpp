@@ -74,6 +74,7 @@ class Service : public control::ControlHandler {
   void apply_scene(scene::Scene scene);  // new runner on the sim thread, haptics started/stopped to match
   void reload();                         // SIGHUP: config and scene again
   void request_stop(const std::string& why);
+  void arm_signals();
   void arm_status_timer();
   void arm_watchdog_timer();
   void print_status();

@@ -139,6 +139,8 @@ void SimThread::run() {
       });
     samples_total_ += batch_.size();
 
+    if (const std::int64_t stall = stall_ns_.exchange(0, std::memory_order_relaxed); stall > 0)
+      sleep_until_ns(now_ns() + stall);
     const std::int64_t t0 = now_ns();
     bool rebuilt = false;
     if (!paused_.load(std::memory_order_relaxed)) {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -79,6 +80,11 @@ class SimThread {
   // allocates and may throw, neither belongs on the sim thread).
   void replace_runner(std::unique_ptr<SimRunner> runner);
 
+  // Fault injection (tests, drills): the sim thread's next iteration blocks
+  // for this long, as a pathological step would. The haptic side must ride
+  // it out: it keeps its rate and ramps the force out on a stale model.
+  void inject_stall(std::chrono::nanoseconds duration) { stall_ns_.store(duration.count(), std::memory_order_relaxed); }
+
   // One reader (the service's io thread).
   SimStatus status() { return *status_.read().value; }
   // Advances every loop iteration, paused or not: the watchdog's heartbeat
@@ -101,6 +107,7 @@ class SimThread {
   std::atomic<bool> stop_{false};
   std::atomic<bool> paused_{false};
   std::atomic<std::uint64_t> heartbeat_{0};
+  std::atomic<std::int64_t> stall_ns_{0};
 
   std::mutex pending_mutex_;  // guards pending_ only; the sim thread only try_locks
   std::unique_ptr<SimRunner> pending_;

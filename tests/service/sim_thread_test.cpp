@@ -5,6 +5,8 @@
 #include <chrono>
 #include <thread>
 
+#include "haptics/haptic_thread.hpp"
+#include "haptics/sim_device.hpp"
 #include "physics/physics_test_support.hpp"
 
 namespace tissue::service {
@@ -113,6 +115,66 @@ TEST(SimThread, FallingBehindShedsAdaptationAndCountsOverruns) {
     return st.adaptation_shed && st.overruns > 0;
   }));
   thread.stop();
+}
+
+// Stall injection: the sim thread blocks for 400 ms with the user pressing.
+// The haptic thread keeps its rate, the force never exceeds its limits nor
+// changes faster than the rate limit, ramps out on the stale model and comes
+// back once the sim does.
+TEST(SimThread, AStallKeepsTheHapticRateAndRampsTheForceOut) {
+  scene::Scene s = cantilever_with_tool();
+  s.loads.clear();
+  config::DeviceSpec device_spec;
+  device_spec.sim.mode = config::SimDeviceSpec::Mode::kHand;
+  // From 10 mm above the top face to 6 mm into it, then held.
+  device_spec.sim.waypoints = {{0.0, {0.05, 0.05, 0.11}}, {0.3, {0.05, 0.05, 0.094}}};
+  device_spec.limits.ramp_in_s = 0.1;
+  config::HapticSpec haptic_spec;
+  config::RealtimeSpec realtime;
+  realtime.sched_fifo = false;
+  realtime.lock_memory = false;
+
+  auto samples = std::make_unique<ToolSampleRing>();
+  auto models = std::make_unique<LocalModelChannel>();
+  haptics::SimDevice device(device_spec.sim);
+  std::string error;
+  ASSERT_TRUE(device.start(&error)) << error;
+  haptics::HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
+  haptics::HapticThread haptic(loop, haptic_spec, realtime);
+  SimThread sim(std::make_unique<SimRunner>(s), samples.get(), models.get(), SimThreadOptions{});
+  sim.start();
+  ASSERT_TRUE(haptic.start(&error)) << error;
+  ASSERT_TRUE(wait_for([&] { return loop.stats().contact && loop.stats().force_N > 0.1; }, 3000ms));
+
+  const std::uint64_t stale_before = loop.stats().stale_model_trips;
+  const std::uint64_t ticks_before = loop.stats().ticks;
+  const auto t0 = std::chrono::steady_clock::now();
+  sim.inject_stall(400ms);
+  double last_force = loop.stats().force_N, worst_jump_N_per_s = 0.0, peak = 0.0;
+  auto last_t = t0;
+  while (std::chrono::steady_clock::now() - t0 < 380ms) {
+    std::this_thread::sleep_for(1ms);
+    const auto now = std::chrono::steady_clock::now();
+    const double f = loop.stats().force_N, dt = std::chrono::duration<double>(now - last_t).count();
+    worst_jump_N_per_s = std::max(worst_jump_N_per_s, std::abs(f - last_force) / dt);
+    peak = std::max(peak, f);
+    last_force = f;
+    last_t = now;
+  }
+  const std::uint64_t ticks = loop.stats().ticks - ticks_before;
+  EXPECT_GT(ticks, 200u);  // ~380 expected; generous for a shared machine and sanitizers
+  EXPECT_LE(peak, device_spec.limits.max_force_N + 1e-9);
+  // The stats are read from another thread between ticks: allow one tick of
+  // slack on the measured interval.
+  EXPECT_LE(worst_jump_N_per_s, 2.0 * device_spec.limits.max_force_rate_N_per_s);
+  EXPECT_GT(loop.stats().stale_model_trips, stale_before);
+  EXPECT_LT(loop.stats().force_N, 0.05);  // ramped out while the model was stale
+  // The sim is back: contact force returns.
+  EXPECT_TRUE(wait_for([&] { return loop.stats().force_N > 0.1; }, 3000ms));
+  haptic.request_stop();
+  haptic.join();
+  sim.stop();
+  EXPECT_EQ(loop.stats().force_N, 0.0);
 }
 
 }  // namespace

@@ -1,0 +1,196 @@
+// The service end to end, in-process: a temp config (simulated hand, the
+// cantilever with a tool, control socket in a temp dir), Service::run() on
+// its own thread, driven over the control socket and by signals while a
+// fake systemd listens.
+#include "service/service.hpp"
+
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "control/control_client.hpp"
+#include "control/fake_systemd.hpp"
+#include "control/temp_dir.hpp"
+
+namespace tissue::service {
+namespace {
+
+using namespace std::chrono_literals;
+using control::ControlClient;
+using control::testing::FakeSystemd;
+using control::testing::ScopedEnv;
+using control::testing::TempDir;
+
+std::string scene_file(const std::string& name) { return std::string(TISSUE_SOURCE_DIR) + "/config/scenes/" + name; }
+
+// A config like config/tissued.yaml, but quick (status every 0.1 s), without
+// real-time requests, the socket in `dir`.
+std::string write_config(const TempDir& dir, const std::string& scene, const std::string& device_kind = "sim") {
+  const std::string path = dir / "tissued.yaml";
+  std::ofstream(path) << "scene: " << scene << "\n"
+                      << "state_dir: " << dir.path() << "\n"
+                      << "status_interval_s: 0.1\n"
+                      << "device:\n  kind: " << device_kind << "\n"
+                      << "  sim:\n    mode: hand\n    loop: true\n    waypoints:\n"
+                      << "      - {time_s: 0.0, position_m: [0.05, 0.05, 0.105]}\n"
+                      << "      - {time_s: 0.3, position_m: [0.05, 0.05, 0.095]}\n"
+                      << "      - {time_s: 0.6, position_m: [0.05, 0.05, 0.105]}\n"
+                      << "realtime: {sched_fifo: false, lock_memory: false}\n"
+                      << "control: {unix_socket_path: " << (dir / "ctl.sock") << "}\n";
+  return path;
+}
+
+struct Running {
+  ServiceOptions options;
+  std::unique_ptr<Service> service;
+  std::thread thread;
+  int exit_code = -1;
+  std::FILE* out = std::tmpfile();
+
+  explicit Running(const std::string& config_path, double duration_s = 0.0) {
+    options.config_path = config_path;
+    options.duration_s = duration_s;
+    options.out = out;
+    service = std::make_unique<Service>(options);
+    thread = std::thread([this] { exit_code = service->run(); });
+  }
+  ~Running() {
+    if (thread.joinable()) thread.join();
+    std::fclose(out);
+  }
+  int wait() {
+    thread.join();
+    return exit_code;
+  }
+};
+
+// Connects once the socket answers (the service starts asynchronously).
+ControlClient connect(const std::string& socket) {
+  for (int i = 0; i < 500; ++i) {
+    try {
+      return ControlClient::connect_unix(socket, 5000ms);
+    } catch (const control::ControlClientError&) {
+      std::this_thread::sleep_for(10ms);
+    }
+  }
+  return ControlClient::connect_unix(socket, 5000ms);
+}
+
+TEST(Service, ServesStatusWithTheHapticSideAndShutsDownCleanly) {
+  TempDir dir;
+  Running run(write_config(dir, scene_file("cantilever.yaml")));
+  ControlClient client = connect(dir / "ctl.sock");
+  std::this_thread::sleep_for(400ms);
+  const nlohmann::json status = client.call("status");
+  ASSERT_TRUE(status["ok"].get<bool>()) << status.dump();
+  const nlohmann::json& r = status["result"];
+  EXPECT_GT(r["steps"].get<std::int64_t>(), 50);
+  ASSERT_TRUE(r["haptics"].is_object()) << r.dump();
+  EXPECT_GT(r["haptics"]["ticks"].get<std::uint64_t>(), 100u);
+  EXPECT_GT(r["haptics"]["model_version"].get<std::uint64_t>(), 0u);
+  EXPECT_EQ(r["scene"]["name"], "cantilever");
+
+  EXPECT_TRUE(client.call("shutdown")["ok"].get<bool>());
+  EXPECT_EQ(run.wait(), kServiceOk);
+  EXPECT_FALSE(std::filesystem::exists(dir / "ctl.sock"));
+}
+
+TEST(Service, NoToolOrNoDeviceMeansNoHapticThread) {
+  TempDir dir;
+  Running run(write_config(dir, scene_file("beam.yaml")));  // the beam scene has no tool
+  ControlClient client = connect(dir / "ctl.sock");
+  const nlohmann::json status = client.call("status");
+  EXPECT_TRUE(status["result"]["haptics"].is_null()) << status.dump();
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+
+  TempDir dir2;
+  Running run2(write_config(dir2, scene_file("cantilever.yaml"), "none"));
+  ControlClient client2 = connect(dir2 / "ctl.sock");
+  EXPECT_TRUE(client2.call("status")["result"]["haptics"].is_null());
+  client2.call("shutdown");
+  EXPECT_EQ(run2.wait(), kServiceOk);
+}
+
+TEST(Service, BadConfigExitsWithCodeTwoNamingTheFile) {
+  TempDir dir;
+  const std::string path = dir / "bad.yaml";
+  std::ofstream(path) << "scene: nowhere.yaml\nhaptics: {rate_hz: -5}\n";
+  ServiceOptions options;
+  options.config_path = path;
+  options.err = std::tmpfile();
+  options.out = std::tmpfile();
+  EXPECT_EQ(Service(options).run(), kServiceBadConfig);
+  std::rewind(options.err);
+  char line[512] = {};
+  ASSERT_NE(std::fgets(line, sizeof line, options.err), nullptr);
+  EXPECT_NE(std::string(line).find(path), std::string::npos) << line;
+  std::fclose(options.err);
+  std::fclose(options.out);
+}
+
+// Scene changes under load: the sim takes each new runner between steps, the
+// haptic loop keeps ticking, bad requests are answered with the reason and
+// change nothing.
+TEST(Service, SceneChangesUnderLoadKeepServing) {
+  TempDir dir;
+  Running run(write_config(dir, scene_file("cantilever.yaml")));
+  ControlClient client = connect(dir / "ctl.sock");
+  for (int i = 0; i < 10; ++i) {
+    ASSERT_TRUE(client.call("reset")["ok"].get<bool>());
+    ASSERT_TRUE(client.call("load_scene", {{"path", scene_file("cantilever.yaml")}})["ok"].get<bool>());
+  }
+  const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 8e4}});
+  EXPECT_TRUE(set["ok"].get<bool>()) << set.dump();
+  const nlohmann::json bad = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", -1}});
+  EXPECT_FALSE(bad["ok"].get<bool>());
+  EXPECT_NE(bad["error"].get<std::string>().find("material.youngs_modulus_Pa"), std::string::npos) << bad.dump();
+  const nlohmann::json missing = client.call("load_scene", {{"path", dir / "missing.yaml"}});
+  EXPECT_FALSE(missing["ok"].get<bool>());
+  EXPECT_NE(missing["error"].get<std::string>().find("missing.yaml"), std::string::npos) << missing.dump();
+
+  const auto ticks = [&] { return client.call("status")["result"]["haptics"]["ticks"].get<std::uint64_t>(); };
+  const std::uint64_t before = ticks();
+  std::this_thread::sleep_for(200ms);
+  EXPECT_GT(ticks(), before + 50);  // 200 ms at 1 kHz, generous for a loaded machine
+  EXPECT_TRUE(client.call("pause")["result"]["paused"].get<bool>());
+  EXPECT_FALSE(client.call("resume")["result"]["paused"].get<bool>());
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// Plays systemd: READY=1 once serving, WATCHDOG=1 while the haptic loop
+// beats, RELOADING=1 then READY=1 on SIGHUP, STOPPING=1 on SIGTERM.
+TEST(Service, SpeaksTheSystemdNotifyProtocol) {
+  TempDir dir;
+  FakeSystemd systemd(dir / "notify");
+  ScopedEnv socket("NOTIFY_SOCKET", (dir / "notify").c_str());
+  ScopedEnv watchdog("WATCHDOG_USEC", "200000");
+  ScopedEnv watchdog_pid("WATCHDOG_PID", nullptr);
+  Running run(write_config(dir, scene_file("cantilever.yaml")));
+
+  auto wait_for = [&](const std::string& what) {
+    for (int i = 0; i < 100; ++i) {
+      const std::optional<std::string> m = systemd.receive();
+      if (!m) return false;
+      if (m->find(what) != std::string::npos) return true;
+    }
+    return false;
+  };
+  EXPECT_TRUE(wait_for("READY=1"));
+  EXPECT_TRUE(wait_for("WATCHDOG=1"));
+  EXPECT_TRUE(wait_for("STATUS="));
+  ASSERT_EQ(::raise(SIGHUP), 0);
+  EXPECT_TRUE(wait_for("RELOADING=1"));
+  EXPECT_TRUE(wait_for("READY=1"));
+  ASSERT_EQ(::raise(SIGTERM), 0);
+  EXPECT_TRUE(wait_for("STOPPING=1"));
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+}  // namespace
+}  // namespace tissue::service
