@@ -43,11 +43,11 @@ constexpr int kMaxRtPriority = 99;
 // CPU_SETSIZE: sched_setaffinity cannot name a CPU beyond it.
 constexpr int kMaxCpuIndex = 1023;
 
-const std::array<std::string_view, 7> kTopLevelKeys{"scene",   "state_dir", "status_interval_s", "device",
-                                                    "haptics", "realtime",  "control"};
+const std::array<std::string_view, 7> kTopLevelKeys{"scene",    "state_dir", "status_interval_s", "device", "haptics",
+                                                    "realtime", "control"};
 
-const yaml_util::DocumentKind kConfigDocument{"daemon config",
-                                              "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
+const yaml_util::DocumentKind kConfigDocument{
+    "daemon config", "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
 
 constexpr std::array<std::pair<std::string_view, DeviceSpec::Kind>, 4> kDeviceKinds{
     {{"none", DeviceSpec::Kind::kNone},
@@ -103,10 +103,10 @@ class Converter : public yaml_util::Reader {
   }
 
   void limits(const YAML::Node& n, const std::string& p, ForceLimits& l) const {
-    const FieldMap f = fields(n, p,
-                              {"max_force_N", "max_force_rate_N_per_s", "max_stiffness_N_per_m", "ramp_in_s",
-                               "ramp_out_s", "stale_model_s", "device_timeout_s", "max_speed_m_per_s",
-                               "workspace_radius_m"});
+    const FieldMap f =
+        fields(n, p,
+               {"max_force_N", "max_force_rate_N_per_s", "max_stiffness_N_per_m", "ramp_in_s", "ramp_out_s",
+                "stale_model_s", "device_timeout_s", "max_speed_m_per_s", "workspace_radius_m"});
     opt(f, "max_force_N", p, l.max_force_N);
     opt(f, "max_force_rate_N_per_s", p, l.max_force_rate_N_per_s);
     opt(f, "max_stiffness_N_per_m", p, l.max_stiffness_N_per_m);
@@ -119,8 +119,8 @@ class Converter : public yaml_util::Reader {
   }
 
   void sim(const YAML::Node& n, const std::string& p, SimDeviceSpec& s) const {
-    const FieldMap f = fields(
-        n, p, {"mode", "waypoints", "loop", "hand_mass_kg", "hand_stiffness_N_per_m", "hand_damping_N_s_per_m"});
+    const FieldMap f =
+        fields(n, p, {"mode", "waypoints", "loop", "hand_mass_kg", "hand_stiffness_N_per_m", "hand_damping_N_s_per_m"});
     opt_choice<SimDeviceSpec::Mode>(f, "mode", p, kSimModes, s.mode);
     if (const auto it = f.find("waypoints"); it != f.end()) {
       s.waypoints.clear();
@@ -188,21 +188,14 @@ class Validator {
       fail("device.kind", "invalid device kind " + std::to_string(kind));
     finite(d.offset_m, "device.offset_m");
     positive(d.scale, "device.scale");
-    if (d.kind != DeviceSpec::Kind::kNone) limits(d.limits, "device.limits");
-    switch (d.kind) {
-      case DeviceSpec::Kind::kNone:
-        break;
-      case DeviceSpec::Kind::kSim:
-        sim(d.sim, "device.sim");
-        break;
-      case DeviceSpec::Kind::kUdp:
-        udp(d.udp, "device.udp");
-        break;
-      case DeviceSpec::Kind::kOpenHaptics:
-        if (d.openhaptics.library.empty()) fail("device.openhaptics.library", "must not be empty");
-        if (d.openhaptics.device_name.empty()) fail("device.openhaptics.device_name", "must not be empty");
-        break;
-    }
+    // Every section is checked whatever the kind, so a typo in an unused
+    // section does not wait for the day someone switches to it. Only "has
+    // waypoints" depends on the kind.
+    limits(d.limits, "device.limits");
+    sim(d.sim, "device.sim", d.kind == DeviceSpec::Kind::kSim);
+    udp(d.udp, "device.udp");
+    if (d.openhaptics.library.empty()) fail("device.openhaptics.library", "must not be empty");
+    if (d.openhaptics.device_name.empty()) fail("device.openhaptics.device_name", "must not be empty");
 
     const HapticSpec& h = c_.haptics;
     positive(h.rate_hz, "haptics.rate_hz");
@@ -235,11 +228,11 @@ class Validator {
     port(k.tcp_port, 0, "control.tcp_port", " (0 switches TCP off)");
     if (k.max_line_bytes < kMinLineBytes || k.max_line_bytes > kMaxLineBytes)
       fail("control.max_line_bytes", "must be in [" + std::to_string(kMinLineBytes) + ", " +
-                                         std::to_string(kMaxLineBytes) + "] (got " +
-                                         std::to_string(k.max_line_bytes) + ")");
+                                         std::to_string(kMaxLineBytes) + "] (got " + std::to_string(k.max_line_bytes) +
+                                         ")");
     if (k.max_connections < 1 || k.max_connections > kMaxConnections)
-      fail("control.max_connections", "must be in [1, " + std::to_string(kMaxConnections) + "] (got " +
-                                          std::to_string(k.max_connections) + ")");
+      fail("control.max_connections",
+           "must be in [1, " + std::to_string(kMaxConnections) + "] (got " + std::to_string(k.max_connections) + ")");
   }
 
  private:
@@ -284,12 +277,12 @@ class Validator {
     positive(l.workspace_radius_m, p + ".workspace_radius_m");
   }
 
-  void sim(const SimDeviceSpec& s, const std::string& p) const {
+  void sim(const SimDeviceSpec& s, const std::string& p, bool in_use) const {
     const int mode = static_cast<int>(s.mode);
     if (mode < 0 || mode >= static_cast<int>(kSimModes.size()))
       fail(p + ".mode", "invalid mode " + std::to_string(mode));
     const std::string wl = p + ".waypoints";
-    if (s.waypoints.empty()) fail(wl, "a simulated device needs at least one waypoint");
+    if (in_use && s.waypoints.empty()) fail(wl, "a simulated device needs at least one waypoint");
     for (std::size_t i = 0; i < s.waypoints.size(); ++i) {
       const Waypoint& w = s.waypoints[i];
       const std::string wp = join_index(wl, i);
@@ -300,13 +293,11 @@ class Validator {
                                  fmt_num(s.waypoints[i - 1].time_s) + ") (got " + fmt_num(w.time_s) + ")");
       finite(w.position_m, wp + ".position_m");
     }
-    if (s.loop && !(s.waypoints.back().time_s > s.waypoints.front().time_s))
+    if (in_use && s.loop && !(s.waypoints.back().time_s > s.waypoints.front().time_s))
       fail(p + ".loop", "looping needs a timeline of positive length (at least 2 waypoints)");
-    if (s.mode == SimDeviceSpec::Mode::kHand) {
-      positive(s.hand_mass_kg, p + ".hand_mass_kg");
-      positive(s.hand_stiffness_N_per_m, p + ".hand_stiffness_N_per_m");
-      non_negative(s.hand_damping_N_s_per_m, p + ".hand_damping_N_s_per_m");
-    }
+    positive(s.hand_mass_kg, p + ".hand_mass_kg");
+    positive(s.hand_stiffness_N_per_m, p + ".hand_stiffness_N_per_m");
+    non_negative(s.hand_damping_N_s_per_m, p + ".hand_damping_N_s_per_m");
   }
 
   void udp(const UdpDeviceSpec& u, const std::string& p) const {

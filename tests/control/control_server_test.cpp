@@ -1,0 +1,419 @@
+// The control server over real sockets (Unix sockets in a temp dir, TCP on
+// 127.0.0.1 only), with the io_context on its own thread as in the daemon.
+#include "control/control_server.hpp"
+
+#include <gtest/gtest.h>
+
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "control/control_client.hpp"
+#include "control/server_harness.hpp"
+
+namespace tissue::control {
+namespace {
+
+using nlohmann::json;
+using testing::ServerHarness;
+
+ServerSettings unix_settings(std::size_t max_line_bytes = 65536, int max_connections = 16) {
+  ServerSettings s;
+  s.unix_socket_path = "<temp>";
+  s.max_line_bytes = max_line_bytes;
+  s.max_connections = max_connections;
+  return s;
+}
+
+// A fresh client gets a correct status answer: the server is healthy.
+void expect_healthy(ServerHarness& h) {
+  ControlClient c = ControlClient::connect_unix(h.socket_path());
+  const json r = c.call("status");
+  EXPECT_EQ(r.at("ok"), true) << r;
+  EXPECT_EQ(r.at("result").at("state"), "running") << r;
+}
+
+// A raw, blocking Unix stream socket, for misbehaving clients.
+class RawClient {
+ public:
+  explicit RawClient(const std::string& path) {
+    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::memcpy(addr.sun_path, path.data(), path.size());
+    connected_ = ::connect(fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0;
+  }
+  ~RawClient() { close(); }
+  bool connected() const { return connected_; }
+  int fd() const { return fd_; }
+  // Sends everything; false when the peer is gone (no SIGPIPE).
+  bool send_all(std::string_view bytes) {
+    while (!bytes.empty()) {
+      const ssize_t n = ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) return false;
+      bytes.remove_prefix(static_cast<std::size_t>(n));
+    }
+    return true;
+  }
+  // One line (without '\n'); empty optional on EOF or after `timeout`.
+  std::optional<std::string> read_line(std::chrono::milliseconds timeout = std::chrono::seconds(5)) {
+    const auto until = std::chrono::steady_clock::now() + timeout;
+    for (;;) {
+      if (const auto nl = buffer_.find('\n'); nl != std::string::npos) {
+        std::string line = buffer_.substr(0, nl);
+        buffer_.erase(0, nl + 1);
+        return line;
+      }
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - std::chrono::steady_clock::now());
+      if (left.count() <= 0) return std::nullopt;
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return std::nullopt;
+      char buf[4096];
+      const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+      if (n <= 0) return std::nullopt;
+      buffer_.append(buf, static_cast<std::size_t>(n));
+    }
+  }
+  // True when the server closed the connection (EOF) within `timeout`.
+  bool sees_eof(std::chrono::milliseconds timeout = std::chrono::seconds(5)) {
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(timeout.count())) <= 0) return false;
+    char c;
+    return ::recv(fd_, &c, 1, MSG_DONTWAIT) == 0;
+  }
+  void close() {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+
+ private:
+  int fd_ = -1;
+  bool connected_ = false;
+  std::string buffer_;
+};
+
+TEST(ControlServer, StatusRoundTripOverTheUnixSocket) {
+  ServerHarness h(unix_settings());
+  ControlClient c = ControlClient::connect_unix(h.socket_path());
+  const json r = c.request({{"id", "first"}, {"cmd", "status"}});
+  EXPECT_EQ(r, json({{"id", "first"},
+                     {"ok", true},
+                     {"result", {{"state", "running"}, {"scene", "cantilever"}, {"calls_before", 0}}}}));
+  // The same connection serves the next request.
+  EXPECT_EQ(c.call("status").at("result").at("calls_before"), 1);
+}
+
+TEST(ControlServer, EveryCommandReachesTheHandler) {
+  ServerHarness h(unix_settings());
+  ControlClient c = ControlClient::connect_unix(h.socket_path());
+  EXPECT_EQ(c.call("pause").at("result"), json({{"paused", true}}));
+  EXPECT_EQ(c.call("resume").at("result"), json({{"paused", false}}));
+  EXPECT_EQ(c.call("reset").at("ok"), true);
+  EXPECT_EQ(c.call("load_scene", {{"path", "/srv/scenes/beam.yaml"}}).at("ok"), true);
+  EXPECT_EQ(c.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 8e4}}).at("ok"), true);
+  EXPECT_EQ(c.call("shutdown").at("ok"), true);
+  const auto calls = h.handler().calls();
+  ASSERT_EQ(calls.size(), 6u);
+  const char* expected[] = {"pause", "resume", "reset", "load_scene", "set", "shutdown"};
+  for (std::size_t i = 0; i < 6; ++i) EXPECT_EQ(calls[i].cmd, expected[i]);
+  EXPECT_EQ(calls[3].args.at("path"), "/srv/scenes/beam.yaml");
+  EXPECT_EQ(calls[4].args.at("key"), "material.youngs_modulus_Pa");
+  EXPECT_EQ(calls[4].args.at("value"), 8e4);
+  // Unknown commands and bad arguments do not reach it.
+  EXPECT_EQ(c.call("record_start").at("error"), "unknown command 'record_start'");
+  EXPECT_EQ(c.call("set", {{"key", "a.b"}}).at("ok"), false);
+  EXPECT_EQ(h.handler().call_count(), 6u);
+}
+
+TEST(ControlServer, MalformedLinesGetErrorsAndTheConnectionLivesOn) {
+  ServerHarness h(unix_settings());
+  RawClient c(h.socket_path());
+  ASSERT_TRUE(c.connected());
+  // Several requests in one write, a CRLF line, blank lines (ignored).
+  ASSERT_TRUE(c.send_all("{oops\n[1,2]\n\n  \n{\"id\":1}\n{\"id\":2,\"cmd\":\"status\"}\r\n"));
+  const char* expected_errors[] = {"malformed JSON", "must be a JSON object", "missing 'cmd'"};
+  for (const char* part : expected_errors) {
+    const auto line = c.read_line();
+    ASSERT_TRUE(line.has_value()) << part;
+    const json r = json::parse(*line);
+    EXPECT_EQ(r.at("ok"), false);
+    EXPECT_NE(r.at("error").get<std::string>().find(part), std::string::npos) << *line;
+  }
+  const auto ok = c.read_line();
+  ASSERT_TRUE(ok.has_value());
+  EXPECT_EQ(json::parse(*ok).at("id"), 2);
+  EXPECT_EQ(json::parse(*ok).at("ok"), true);
+  expect_healthy(h);
+}
+
+TEST(ControlServer, RandomBytesAreAnsweredWithErrors) {
+  ServerHarness h(unix_settings());
+  std::mt19937 rng(1234);
+  for (int round = 0; round < 3; ++round) {
+    RawClient c(h.socket_path());
+    ASSERT_TRUE(c.connected());
+    std::string junk(32768, '\0');
+    for (char& ch : junk) ch = static_cast<char>(rng() & 0xff);
+    std::size_t lines = 0;
+    for (std::size_t i = 0; i < junk.size(); ++i) {
+      if (junk[i] == '\n') ++lines;
+    }
+    junk += '\n';
+    ++lines;
+    ASSERT_TRUE(c.send_all(junk));
+    // Every non-blank line gets one error response; read at least a few and
+    // check each is a well-formed error.
+    for (std::size_t i = 0; i < std::min<std::size_t>(lines, 20); ++i) {
+      const auto line = c.read_line();
+      ASSERT_TRUE(line.has_value()) << "response " << i << " of " << lines;
+      const json r = json::parse(*line);
+      EXPECT_EQ(r.at("ok"), false);
+      EXPECT_TRUE(r.at("error").is_string());
+    }
+    // The same connection still answers a proper request (after the rest of
+    // the junk's answers).
+    ASSERT_TRUE(c.send_all("{\"id\":\"after-junk\",\"cmd\":\"status\"}\n"));
+    bool answered = false;
+    while (auto line = c.read_line()) {
+      const json r = json::parse(*line);
+      if (r.at("id") == "after-junk") {
+        EXPECT_EQ(r.at("ok"), true);
+        answered = true;
+        break;
+      }
+    }
+    EXPECT_TRUE(answered);
+  }
+  EXPECT_EQ(h.handler().call_count(), 3u);  // only the three real status requests
+  expect_healthy(h);
+}
+
+TEST(ControlServer, OversizedLineIsRefusedAndTheStreamResynchronises) {
+  ServerHarness h(unix_settings(65536));
+  RawClient c(h.socket_path());
+  ASSERT_TRUE(c.connected());
+  // A 10 MB line, then a proper request on the same connection.
+  std::thread writer([&] {
+    std::string big(10u << 20, 'a');
+    big += "\n{\"id\":7,\"cmd\":\"status\"}\n";
+    EXPECT_TRUE(c.send_all(big));
+  });
+  const auto first = c.read_line(std::chrono::seconds(20));
+  const auto second = c.read_line(std::chrono::seconds(20));
+  writer.join();
+  ASSERT_TRUE(first.has_value());
+  const json e = json::parse(*first);
+  EXPECT_EQ(e.at("ok"), false);
+  EXPECT_EQ(e.at("id"), nullptr);
+  EXPECT_NE(e.at("error").get<std::string>().find("request line too long (more than 65536 bytes)"), std::string::npos);
+  ASSERT_TRUE(second.has_value());
+  EXPECT_EQ(json::parse(*second).at("id"), 7);
+  EXPECT_EQ(json::parse(*second).at("ok"), true);
+  // A line of exactly the limit is still accepted.
+  const std::string pad = "{\"id\":8,\"cmd\":\"status\"}";
+  ControlClient exact = ControlClient::connect_unix(h.socket_path());
+  exact.send_raw(pad + std::string(65536 - pad.size(), ' ') + "\n");
+  EXPECT_EQ(json::parse(exact.read_line()).at("ok"), true);
+  expect_healthy(h);
+}
+
+TEST(ControlServer, ConnectionsBeyondTheLimitAreRefusedWithAMessage) {
+  constexpr int kLimit = 16;
+  constexpr int kClients = 100;
+  ServerHarness h(unix_settings(65536, kLimit));
+  std::vector<std::unique_ptr<RawClient>> clients;
+  for (int i = 0; i < kClients; ++i) {
+    clients.push_back(std::make_unique<RawClient>(h.socket_path()));
+    ASSERT_TRUE(clients.back()->connected()) << i;
+  }
+  // Refused clients get one error line and EOF; accepted ones hear nothing
+  // until they ask. Connections are accepted in order.
+  int refused = 0;
+  for (int i = kLimit; i < kClients; ++i) {
+    const auto line = clients[i]->read_line();
+    ASSERT_TRUE(line.has_value()) << "client " << i << " got no refusal";
+    const json r = json::parse(*line);
+    EXPECT_EQ(r.at("ok"), false);
+    EXPECT_EQ(r.at("error"), "too many connections (the limit is 16); try again later");
+    EXPECT_TRUE(clients[i]->sees_eof());
+    ++refused;
+  }
+  EXPECT_EQ(refused, kClients - kLimit);
+  for (int i = 0; i < kLimit; ++i) {
+    ASSERT_TRUE(clients[i]->send_all("{\"id\":" + std::to_string(i) + ",\"cmd\":\"status\"}\n"));
+    const auto line = clients[i]->read_line();
+    ASSERT_TRUE(line.has_value()) << "accepted client " << i;
+    EXPECT_EQ(json::parse(*line).at("id"), i);
+    EXPECT_EQ(json::parse(*line).at("ok"), true);
+  }
+  EXPECT_EQ(h.connections(), static_cast<std::size_t>(kLimit));
+  clients.clear();
+  ASSERT_TRUE(h.wait_for_connections(0));
+  expect_healthy(h);
+}
+
+TEST(ControlServer, ManySimultaneousClientsAreAllServedWithinTheLimit) {
+  constexpr int kClients = 100;
+  ServerHarness h(unix_settings(65536, kClients));
+  std::vector<std::thread> threads;
+  std::atomic<int> ok{0};
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      std::vector<ControlClient> mine;
+      for (int i = 0; i < kClients / 4; ++i) mine.push_back(ControlClient::connect_unix(h.socket_path()));
+      for (std::size_t i = 0; i < mine.size(); ++i) {
+        const json r = mine[i].request({{"id", t * 1000 + static_cast<int>(i)}, {"cmd", "status"}});
+        if (r.at("ok") == true && r.at("id") == t * 1000 + static_cast<int>(i)) ++ok;
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(ok.load(), kClients);
+}
+
+TEST(ControlServer, ClientVanishingMidLineLeavesNoTrace) {
+  ServerHarness h(unix_settings());
+  {
+    RawClient c(h.socket_path());
+    ASSERT_TRUE(c.connected());
+    ASSERT_TRUE(c.send_all("{\"id\":1,\"cmd\":\"sta"));
+  }  // closed mid-line
+  {
+    RawClient c(h.socket_path());
+    ASSERT_TRUE(c.connected());
+    ASSERT_TRUE(c.send_all(std::string(100000, 'x')));  // mid oversized line
+  }
+  ASSERT_TRUE(h.wait_for_connections(0));
+  EXPECT_EQ(h.handler().call_count(), 0u);
+  expect_healthy(h);
+}
+
+TEST(ControlServer, IdleConnectionsStayOpen) {
+  ServerHarness h(unix_settings());
+  ControlClient idle = ControlClient::connect_unix(h.socket_path());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  expect_healthy(h);
+  EXPECT_EQ(idle.call("status").at("ok"), true);
+}
+
+TEST(ControlServer, TcpListensOnLoopbackOnly) {
+  ServerSettings s;  // no Unix socket
+  s.tcp_port = 0;    // any free port
+  ServerHarness h(s);
+  const auto endpoint = h.server().tcp_endpoint();
+  ASSERT_TRUE(endpoint.has_value());
+  EXPECT_EQ(endpoint->address(), boost::asio::ip::make_address("127.0.0.1"));
+  EXPECT_TRUE(endpoint->address().is_loopback());
+  EXPECT_NE(endpoint->port(), 0);
+  ControlClient c = ControlClient::connect_tcp(endpoint->port());
+  EXPECT_EQ(c.call("status").at("ok"), true);
+  EXPECT_TRUE(h.socket_path().empty());
+}
+
+TEST(ControlServer, ControlSpecMapsToSettings) {
+  config::ControlSpec spec;
+  EXPECT_FALSE(ServerSettings::from_spec(spec).tcp_port.has_value()) << "tcp_port 0 means no TCP";
+  spec.tcp_port = 47801;
+  spec.max_line_bytes = 4096;
+  spec.max_connections = 3;
+  const ServerSettings s = ServerSettings::from_spec(spec);
+  EXPECT_EQ(s.tcp_port, 47801);
+  EXPECT_EQ(s.unix_socket_path, spec.unix_socket_path);
+  EXPECT_EQ(s.max_line_bytes, 4096u);
+  EXPECT_EQ(s.max_connections, 3);
+}
+
+TEST(ControlServer, SocketFileModeStaleReplacementAndRemoval) {
+  testing::TempDir dir;
+  const std::string path = dir / "control.sock";
+  // A stale socket file, as a crash leaves it: bound, then closed.
+  {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::memcpy(addr.sun_path, path.data(), path.size());
+    ASSERT_EQ(::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr), 0);
+    ::close(fd);
+  }
+  boost::asio::io_context io;
+  testing::FakeHandler handler;
+  ServerSettings s;
+  s.unix_socket_path = path;
+  {
+    ControlServer server(io, s, handler);
+    ASSERT_NO_THROW(server.start());
+    struct stat st {};
+    ASSERT_EQ(::lstat(path.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISSOCK(st.st_mode));
+    EXPECT_EQ(st.st_mode & 0777, 0660u);
+
+    // A second server on the same path must not steal a live socket.
+    boost::asio::io_context io2;
+    ControlServer second(io2, s, handler);
+    try {
+      second.start();
+      ADD_FAILURE() << "second server started on a live socket";
+    } catch (const ControlError& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("another process is serving this socket"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(::access(path.c_str(), F_OK), 0) << "the live socket must survive";
+    server.stop();
+    EXPECT_NE(::access(path.c_str(), F_OK), 0) << "stop() removes the socket file";
+  }
+  // Not a socket: never replaced.
+  std::ofstream(path) << "precious";
+  ControlServer third(io, s, handler);
+  try {
+    third.start();
+    ADD_FAILURE() << "started over a regular file";
+  } catch (const ControlError& e) {
+    EXPECT_NE(std::string(e.what()).find("not a socket"), std::string::npos) << e.what();
+  }
+  std::ifstream in(path);
+  std::string content;
+  in >> content;
+  EXPECT_EQ(content, "precious");
+  // A missing directory is named in the error.
+  ServerSettings missing;
+  missing.unix_socket_path = dir / "no/such/dir/control.sock";
+  ControlServer fourth(io, missing, handler);
+  EXPECT_THROW(fourth.start(), ControlError);
+}
+
+TEST(ControlServer, StopClosesOpenConnections) {
+  ServerHarness h(unix_settings());
+  RawClient idle(h.socket_path());
+  ASSERT_TRUE(idle.connected());
+  ASSERT_TRUE(h.wait_for_connections(1));
+  h.stop();
+  EXPECT_TRUE(idle.sees_eof());
+  EXPECT_NE(::access(h.socket_path().c_str(), F_OK), 0);
+  EXPECT_THROW(ControlClient::connect_unix(h.socket_path(), std::chrono::milliseconds(500)), ControlClientError);
+}
+
+TEST(ControlServer, ClientReportsConnectFailuresClearly) {
+  testing::TempDir dir;
+  try {
+    ControlClient::connect_unix(dir / "absent.sock", std::chrono::milliseconds(500));
+    ADD_FAILURE() << "connected to nothing";
+  } catch (const ControlClientError& e) {
+    EXPECT_EQ(e.kind(), ControlClientError::Kind::kConnect);
+    EXPECT_NE(std::string(e.what()).find(dir / "absent.sock"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace tissue::control
