@@ -70,7 +70,7 @@ class LatestValue {
 
   std::array<T, 3> slots_{};
   alignas(64) std::atomic<std::uint8_t> middle_{1};  // index of the shared slot | kFresh when unread
-  alignas(64) std::uint8_t back_ = 2;                 // writer-private slot
+  alignas(64) std::uint8_t back_ = 2;                // writer-private slot
   std::atomic<std::uint64_t> published_{0};
   alignas(64) std::uint8_t front_ = 0;  // reader-private slot
 };

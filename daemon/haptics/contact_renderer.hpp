@@ -45,6 +45,7 @@
 // No threads, no I/O, no allocation: all scratch space is inside the object.
 #pragma once
 
+#include <Eigen/Geometry>  // cross products
 #include <array>
 #include <cstdint>
 

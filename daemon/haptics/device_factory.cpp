@@ -1,6 +1,7 @@
 #include "haptics/device.hpp"
 #include "haptics/openhaptics_device.hpp"
 #include "haptics/sim_device.hpp"
+#include "haptics/udp_device.hpp"
 
 namespace tissue::haptics {
 
@@ -14,8 +15,7 @@ std::unique_ptr<Device> make_device(const config::DeviceSpec& spec, std::string*
     case config::DeviceSpec::Kind::kOpenHaptics:
       return std::make_unique<OpenHapticsDevice>(spec.openhaptics);
     case config::DeviceSpec::Kind::kUdp:
-      if (error) *error = "udp device: not yet implemented";
-      return nullptr;
+      return std::make_unique<UdpDevice>(spec.udp);
   }
   if (error) *error = "device: unknown kind";
   return nullptr;

@@ -30,6 +30,13 @@ struct LocalModel {
   static constexpr int kMaxPatchVertices = 96;
   static constexpr int kMaxPatchTriangles = 160;
 
+  // Eigen leaves fixed-size vectors uninitialised even under {}: zero them,
+  // so an unused or unset slot is never garbage.
+  LocalModel() {
+    vertex_m.fill(Vec3::Zero());
+    vertex_velocity_m_per_s.fill(Vec3::Zero());
+  }
+
   std::uint64_t version = 0;  // 0: no model yet (render zero force)
   double sim_time_s = 0.0;    // simulated time the model describes
   std::int64_t built_ns = 0;  // steady_clock time when the sim published it

@@ -28,9 +28,7 @@ constexpr HDCallbackCode kHdCallbackContinue = 1;
 constexpr unsigned short kHdDefaultSchedulerPriority = 500;
 constexpr double kMmToM = 1e-3;
 
-HDCallbackCode servo_trampoline(void* self) {
-  return static_cast<OpenHapticsDevice*>(self)->servo_callback();
-}
+HDCallbackCode servo_trampoline(void* self) { return static_cast<OpenHapticsDevice*>(self)->servo_callback(); }
 
 }  // namespace
 

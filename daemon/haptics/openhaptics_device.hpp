@@ -45,7 +45,7 @@ class OpenHapticsDevice final : public Device {
   unsigned long scheduler_handle_ = 0;
   bool running_ = false;
   concurrency::LatestValue<DeviceSample> pose_;  // servo thread -> haptic loop
-  concurrency::LatestValue<Vec3> force_;          // haptic loop -> servo thread
+  concurrency::LatestValue<Vec3> force_;         // haptic loop -> servo thread
   std::atomic<bool> have_pose_{false};
 };
 

@@ -1,0 +1,200 @@
+// haptic_bench: what the 1 kHz haptic thread achieves on this machine.
+//
+// For each background load (idle, and the adaptive cantilever simulation
+// stepping continuously on another thread) it measures, in the same run and
+// with the same thread settings (SCHED_FIFO when permitted, 1 ns timer slack):
+//   - a bare clock_nanosleep(TIMER_ABSTIME) loop: lateness p50/p99/p99.9;
+//   - the HapticThread driving a HapticLoop with a SimDevice hand pressing a
+//     deformable patch while a publisher thread feeds a new LocalModel every
+//     millisecond: period lateness and tick compute time p50/p99/p99.9.
+// and prints the lateness ratio haptic p99 / bare p99.
+// Targets: tick compute p99.9 <= 20 us; lateness p99 within 1.5x the bare loop's.
+//
+//   haptic_bench [--seconds 10] [--scene config/scenes/cantilever.yaml]
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "haptics/haptic_thread.hpp"
+#include "haptics/sim_device.hpp"
+#include "physics/simulation.hpp"
+#include "scene/scene_yaml.hpp"
+
+namespace {
+
+using namespace tissue;
+using haptics::LatencyHistogram;
+using haptics::Vec3;
+
+struct BackgroundSim {
+  std::atomic<bool> stop{false};
+  std::atomic<std::uint64_t> steps{0};
+  std::string error;
+  std::thread thread;
+
+  void start(const scene::Scene& scene) {
+    thread = std::thread([this, scene] {
+      try {
+        auto sim = std::make_unique<physics::Simulation>(scene);
+        while (!stop.load(std::memory_order_relaxed)) {
+          const physics::StepResult r = sim->step();
+          if (!r.ok) {  // restart the scene rather than stop loading the machine
+            if (error.empty()) error = r.error;
+            sim = std::make_unique<physics::Simulation>(scene);
+          }
+          steps.fetch_add(1, std::memory_order_relaxed);
+        }
+      } catch (const std::exception& e) {
+        error = e.what();
+      }
+    });
+  }
+  void join() {
+    stop.store(true);
+    if (thread.joinable()) thread.join();
+  }
+};
+
+haptics::LocalModel make_patch() {
+  haptics::LocalModel m;
+  m.vertex_m.fill(Vec3::Zero());
+  m.vertex_velocity_m_per_s.fill(Vec3::Zero());
+  // A 9x9-vertex grid (128 triangles, close to the contract's maximum) at z = 0.
+  const int n = 9;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      m.vertex_m[j * n + i] = Vec3(-0.04 + 0.01 * i, -0.04 + 0.01 * j, 0.0);
+      m.vertex_node[j * n + i] = static_cast<std::uint32_t>(j * n + i);
+    }
+  m.vertex_count = n * n;
+  int t = 0;
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      const int a = j * n + i;
+      m.triangle[t++] = {a, a + 1, a + n + 1};
+      m.triangle[t++] = {a, a + n + 1, a + n};
+    }
+  m.triangle_count = t;
+  m.in_contact = true;
+  m.contact_stiffness_N_per_m = 800.0 * haptics::Mat3::Identity();
+  return m;
+}
+
+void print_row(const char* name, const haptics::TimingSummary& t, bool with_compute) {
+  std::printf("  %-22s %8llu  %7.1f %7.1f %8.1f %8.1f", name, static_cast<unsigned long long>(t.periods),
+              t.lateness_p50_ns / 1e3, t.lateness_p99_ns / 1e3, t.lateness_p999_ns / 1e3, t.lateness_max_ns / 1e3);
+  if (with_compute)
+    std::printf("   %6.2f %6.2f %7.2f %7.2f", t.compute_p50_ns / 1e3, t.compute_p99_ns / 1e3, t.compute_p999_ns / 1e3,
+                t.compute_max_ns / 1e3);
+  std::printf("\n");
+}
+
+struct Figures {
+  haptics::TimingSummary bare, haptic;
+  std::string scheduling;
+};
+
+Figures measure(double seconds, const config::RealtimeSpec& realtime) {
+  Figures f;
+  const config::HapticSpec haptic_spec;  // 1 kHz, defaults
+  const auto periods = static_cast<std::uint64_t>(seconds * haptic_spec.rate_hz);
+
+  // Bare timer loop on a thread with the same settings as the haptic thread.
+  LatencyHistogram bare(1000, 50000), none(50, 1);
+  std::thread bare_thread([&] {
+    haptics::configure_current_thread(realtime, realtime.haptic_priority);
+    haptics::run_bare_timer_loop(haptic_spec.rate_hz, periods, bare);
+  });
+  bare_thread.join();
+  f.bare = haptics::summarize(bare, none, 0);
+
+  // The haptic thread, fed by a 1 kHz model publisher and drained like the sim would.
+  config::DeviceSpec device_spec;
+  device_spec.sim.mode = config::SimDeviceSpec::Mode::kHand;
+  device_spec.sim.waypoints = {{0.0, {0, 0, 0.005}},         {0.5, {0, 0, 0.005}}, {1.0, {0.01, 0, -0.004}},
+                               {2.0, {-0.01, 0.01, -0.004}}, {2.5, {0, 0, 0.01}},  {3.0, {0, 0, 0.005}}};
+  device_spec.sim.loop = true;
+  haptics::SimDevice device(device_spec.sim);
+  std::string error;
+  if (!device.start(&error)) throw std::runtime_error(error);
+  auto models = std::make_unique<haptics::LocalModelBuffer>();
+  auto samples = std::make_unique<haptics::ToolSampleRing>();
+  haptics::HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
+  haptics::HapticThread thread(loop, haptic_spec, realtime);
+  const haptics::LocalModel patch = make_patch();
+  std::atomic<bool> stop_publisher{false};
+  std::uint64_t contact_samples = 0;
+  std::thread publisher([&] {
+    std::uint64_t version = 0;
+    while (!stop_publisher.load()) {
+      haptics::LocalModel& m = models->write_buffer();
+      m = patch;
+      m.version = ++version;
+      m.built_ns = haptics::monotonic_now_ns();
+      models->publish();
+      samples->drain([&](const haptics::ToolSample& s) { contact_samples += s.contact; });
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  });
+  if (!thread.start(&error)) throw std::runtime_error(error);
+  f.scheduling = thread.scheduling().summary();
+  while (loop.heartbeat().load() < periods) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  thread.request_stop();
+  thread.join();
+  stop_publisher.store(true);
+  publisher.join();
+  f.haptic = thread.timing();
+  const haptics::HapticStats st = loop.stats();
+  std::printf("  (haptic loop: %llu ticks, %llu model updates, %llu contact samples, ring drops %llu)\n",
+              static_cast<unsigned long long>(st.ticks), static_cast<unsigned long long>(st.model_updates),
+              static_cast<unsigned long long>(contact_samples), static_cast<unsigned long long>(st.ring_drops));
+  return f;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"haptic_bench: 1 kHz haptic thread lateness and tick cost vs a bare timer loop"};
+  double seconds = 10.0;
+  std::string scene_path = std::string(TISSUE_SOURCE_DIR) + "/config/scenes/cantilever.yaml";
+  bool fifo = true;
+  app.add_option("--seconds", seconds, "measurement time per configuration")->check(CLI::PositiveNumber);
+  app.add_option("--scene", scene_path, "scene the background simulation runs");
+  app.add_flag("!--no-fifo", fifo, "do not try SCHED_FIFO");
+  CLI11_PARSE(app, argc, argv);
+
+  config::RealtimeSpec realtime;
+  realtime.sched_fifo = fifo;
+  const scene::Scene scene = scene::load_scene_file(scene_path);
+
+  std::printf("haptic_bench: %.1f s per configuration, 1 kHz; background scene %s\n", seconds, scene_path.c_str());
+  std::printf("  %-22s %8s  %7s %7s %8s %8s   %6s %6s %7s %7s\n", "", "periods", "late50", "late99", "late99.9",
+              "lateMax", "tick50", "tick99", "tick99.9", "tickMax");
+  std::printf("  %-22s %8s  %7s %7s %8s %8s   %6s %6s %7s %7s\n", "", "", "us", "us", "us", "us", "us", "us", "us",
+              "us");
+  for (const bool loaded : {false, true}) {
+    BackgroundSim background;
+    if (loaded) background.start(scene);
+    const auto t0 = std::chrono::steady_clock::now();
+    const Figures f = measure(seconds, realtime);
+    const double elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    background.join();
+    std::printf("  [%s] %s\n", loaded ? "cantilever sim running" : "idle background", f.scheduling.c_str());
+    print_row(loaded ? "bare loop + sim" : "bare loop", f.bare, false);
+    print_row(loaded ? "haptic thread + sim" : "haptic thread", f.haptic, true);
+    const double ratio = f.bare.lateness_p99_ns > 0 ? static_cast<double>(f.haptic.lateness_p99_ns) /
+                                                          static_cast<double>(f.bare.lateness_p99_ns)
+                                                    : 0.0;
+    std::printf("  lateness p99 ratio haptic/bare = %.2f (target <= 1.5); tick p99.9 = %.2f us (target <= 20)\n", ratio,
+                f.haptic.compute_p999_ns / 1e3);
+    if (loaded)
+      std::printf("  background sim: %llu steps in %.1f s%s%s\n",
+                  static_cast<unsigned long long>(background.steps.load()), elapsed_s,
+                  background.error.empty() ? "" : "; first error: ", background.error.c_str());
+  }
+  return 0;
+}

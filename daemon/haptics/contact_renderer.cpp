@@ -1,0 +1,302 @@
+#include "haptics/contact_renderer.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace tissue::haptics {
+namespace {
+
+// A reference point this far behind a face's plane is on the other side of
+// the object (0.1 um: far above rounding, far below any tissue thickness).
+constexpr double kBehindTolerance_m = 1e-7;
+// Entry points this close outside a triangle still count as inside it, so a
+// device crossing exactly through a shared edge or vertex is not missed.
+constexpr double kBarycentricTolerance = 1e-9;
+constexpr double kDegenerateArea2_m4 = 1e-30;
+
+struct TriangleClosest {
+  Vec3 point;
+  std::array<double, 3> weight;
+  int feature_a, feature_b;  // local corner indices 0..2: face (-1,-1), edge (a,b), vertex (a,-1)
+};
+
+// Closest point of triangle abc to p with its Voronoi region (Ericson,
+// Real-Time Collision Detection, 5.1.5).
+TriangleClosest closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return {a, {1, 0, 0}, 0, -1};
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return {b, {0, 1, 0}, 1, -1};
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+    const double v = d1 / (d1 - d3);
+    return {a + v * ab, {1 - v, v, 0}, 0, 1};
+  }
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return {c, {0, 0, 1}, 2, -1};
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+    const double w = d2 / (d2 - d6);
+    return {a + w * ac, {1 - w, 0, w}, 0, 2};
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {b + w * (c - b), {0, 1 - w, w}, 1, 2};
+  }
+  const double denom = 1.0 / (va + vb + vc);
+  const double v = vb * denom, w = vc * denom;
+  return {a + v * ab + w * ac, {1 - v - w, v, w}, -1, -1};
+}
+
+double angle_between(const Vec3& u, const Vec3& v) { return std::atan2(u.cross(v).norm(), u.dot(v)); }
+
+}  // namespace
+
+bool local_model_is_valid(const LocalModel& m) noexcept {
+  if (m.vertex_count < 0 || m.vertex_count > LocalModel::kMaxPatchVertices) return false;
+  if (m.triangle_count < 0 || m.triangle_count > LocalModel::kMaxPatchTriangles) return false;
+  if (!std::isfinite(m.sim_time_s)) return false;
+  for (int i = 0; i < m.vertex_count; ++i)
+    if (!m.vertex_m[i].allFinite() || !m.vertex_velocity_m_per_s[i].allFinite()) return false;
+  for (int t = 0; t < m.triangle_count; ++t)
+    for (std::int32_t v : m.triangle[t])
+      if (v < 0 || v >= m.vertex_count) return false;
+  return m.position_ref_m.allFinite() && m.force_ref_N.allFinite() && m.contact_stiffness_N_per_m.allFinite();
+}
+
+ContactRenderer::ContactRenderer(const RenderParams& params) : params_(params) {}
+
+void ContactRenderer::set_model(const LocalModel* model) noexcept {
+  model_ = model;
+  contact_triangle_ = -1;  // triangle indices of another model mean nothing here
+  have_previous_vertices_ = false;
+  contact_stiffness_N_per_m_.setZero();
+  if (!model) return;
+  // K_c is SPD by contract; rounding or a bad linearisation must not make the
+  // rendering active (negative stiffness) or exceed the device's stiffness.
+  const Mat3 symmetric = 0.5 * (model->contact_stiffness_N_per_m + model->contact_stiffness_N_per_m.transpose());
+  Eigen::SelfAdjointEigenSolver<Mat3> eigen;
+  eigen.computeDirect(symmetric);
+  const Vec3 clamped = eigen.eigenvalues().cwiseMax(0.0).cwiseMin(std::max(0.0, params_.max_stiffness_N_per_m));
+  contact_stiffness_N_per_m_ = eigen.eigenvectors() * clamped.asDiagonal() * eigen.eigenvectors().transpose();
+  if (!contact_stiffness_N_per_m_.allFinite()) contact_stiffness_N_per_m_.setZero();
+}
+
+void ContactRenderer::carry_state_from(const ContactRenderer& other) noexcept {
+  initialised_ = other.initialised_;
+  touching_ = other.touching_;
+  proxy_m_ = other.proxy_m_;
+  surface_point_m_ = other.surface_point_m_;
+  contact_triangle_ = -1;
+}
+
+void ContactRenderer::reset() noexcept {
+  initialised_ = false;
+  touching_ = false;
+  contact_triangle_ = -1;
+}
+
+void ContactRenderer::extrapolate(std::int64_t now_ns) noexcept {
+  const double age_s = 1e-9 * static_cast<double>(now_ns - model_->built_ns);
+  const double horizon_s = std::max(0.0, params_.extrapolation_horizon_s);
+  const double tau_s = std::clamp(age_s, 0.0, horizon_s);
+  surface_moving_ = age_s < horizon_s;
+  for (int i = 0; i < model_->vertex_count; ++i)
+    vertex_m_[i] = model_->vertex_m[i] + tau_s * model_->vertex_velocity_m_per_s[i];
+  for (int t = 0; t < model_->triangle_count; ++t) {
+    const auto& tri = model_->triangle[t];
+    const Vec3 n = (vertex_m_[tri[1]] - vertex_m_[tri[0]]).cross(vertex_m_[tri[2]] - vertex_m_[tri[0]]);
+    const double area2 = n.squaredNorm();
+    degenerate_[t] = !(area2 > kDegenerateArea2_m4);
+    normal_[t] = degenerate_[t] ? Vec3::Zero() : Vec3(n / std::sqrt(area2));
+  }
+}
+
+bool ContactRenderer::find_entry(const Vec3& from_m, const Vec3& to_m, Vec3* hit_m) const noexcept {
+  double best_t = std::numeric_limits<double>::infinity();
+  for (int t = 0; t < model_->triangle_count; ++t) {
+    if (degenerate_[t]) continue;
+    const auto& tri = model_->triangle[t];
+    const Vec3& a = vertex_m_[tri[0]];
+    const Vec3& b = vertex_m_[tri[1]];
+    const Vec3& c = vertex_m_[tri[2]];
+    // Relative motion: carried along with the triangle's own displacement since
+    // the last tick, the start point keeps its position relative to the
+    // triangle, so the test sees the tool and the surface approach each other.
+    Vec3 start = from_m;
+    if (have_previous_vertices_)
+      start +=
+          ((a - previous_vertex_m_[tri[0]]) + (b - previous_vertex_m_[tri[1]]) + (c - previous_vertex_m_[tri[2]])) /
+          3.0;
+    const Vec3& n = normal_[t];
+    const double s_start = n.dot(start - a), s_end = n.dot(to_m - a);
+    if (!(s_start >= 0.0 && s_end < 0.0)) continue;  // must go from front (outside) to back
+    const double f = s_start / (s_start - s_end);
+    if (f >= best_t) continue;
+    const Vec3 hit = start + f * (to_m - start);
+    // Barycentric coordinates of the hit in the triangle's plane.
+    const double area = n.dot((b - a).cross(c - a));
+    const double wa = n.dot((b - hit).cross(c - hit)) / area;
+    const double wb = n.dot((c - hit).cross(a - hit)) / area;
+    const double wc = 1.0 - wa - wb;
+    if (wa < -kBarycentricTolerance || wb < -kBarycentricTolerance || wc < -kBarycentricTolerance) continue;
+    best_t = f;
+    *hit_m = wa * a + wb * b + wc * c;
+  }
+  return std::isfinite(best_t);
+}
+
+ContactRenderer::Closest ContactRenderer::closest_facing(const Vec3& device_m, const Vec3& reference_m,
+                                                         bool filter) const noexcept {
+  Closest best;
+  best.distance2 = std::numeric_limits<double>::infinity();
+  for (int t = 0; t < model_->triangle_count; ++t) {
+    if (degenerate_[t]) continue;
+    const auto& tri = model_->triangle[t];
+    const Vec3& a = vertex_m_[tri[0]];
+    if (filter && normal_[t].dot(reference_m - a) < -kBehindTolerance_m) continue;  // faces away from the contact
+    const TriangleClosest c = closest_on_triangle(device_m, a, vertex_m_[tri[1]], vertex_m_[tri[2]]);
+    const double d2 = (device_m - c.point).squaredNorm();
+    if (d2 >= best.distance2) continue;
+    best.triangle = t;
+    best.distance2 = d2;
+    best.point = c.point;
+    best.weight = c.weight;
+    best.feature_a = c.feature_a < 0 ? -1 : tri[c.feature_a];
+    best.feature_b = c.feature_b < 0 ? -1 : tri[c.feature_b];
+  }
+  return best;
+}
+
+Vec3 ContactRenderer::pseudo_normal(const Closest& c) const noexcept {
+  const Vec3& face_normal = normal_[c.triangle];
+  if (c.feature_a < 0) return face_normal;
+  Vec3 sum = Vec3::Zero();
+  for (int t = 0; t < model_->triangle_count; ++t) {
+    if (degenerate_[t]) continue;
+    const auto& tri = model_->triangle[t];
+    int corner_a = -1;
+    bool has_b = false;
+    for (int k = 0; k < 3; ++k) {
+      if (tri[k] == c.feature_a) corner_a = k;
+      if (tri[k] == c.feature_b) has_b = true;
+    }
+    if (corner_a < 0) continue;
+    if (c.feature_b >= 0) {
+      if (has_b) sum += normal_[t];  // edge: the faces sharing it, equal weights
+    } else {
+      const Vec3& p = vertex_m_[tri[corner_a]];
+      sum += angle_between(vertex_m_[tri[(corner_a + 1) % 3]] - p, vertex_m_[tri[(corner_a + 2) % 3]] - p) * normal_[t];
+    }
+  }
+  const double norm = sum.norm();
+  return norm > 1e-12 ? Vec3(sum / norm) : face_normal;
+}
+
+Vec3 ContactRenderer::surface_velocity(const Closest& c) const noexcept {
+  if (!surface_moving_) return Vec3::Zero();  // extrapolation has stopped: the patch is held still
+  const auto& tri = model_->triangle[c.triangle];
+  return c.weight[0] * model_->vertex_velocity_m_per_s[tri[0]] + c.weight[1] * model_->vertex_velocity_m_per_s[tri[1]] +
+         c.weight[2] * model_->vertex_velocity_m_per_s[tri[2]];
+}
+
+RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
+                                     const Vec3& device_velocity_m_per_s) noexcept {
+  RenderOutput out;
+  if (!model_ || model_->version == 0 || model_->triangle_count == 0) {
+    // Nothing to touch: the proxy follows the device and the force is zero.
+    touching_ = false;
+    initialised_ = true;
+    proxy_m_ = device_m;
+    out.proxy_m = device_m;
+    return out;
+  }
+  extrapolate(now_ns);
+  if (!initialised_) {
+    // Without history we cannot tell which side the device came from: start
+    // free, so a device that starts inside the object feels no sudden force.
+    initialised_ = true;
+    touching_ = false;
+    proxy_m_ = device_m;
+  }
+
+  Vec3 reference_m = Vec3::Zero();
+  if (!touching_) {
+    touching_ = find_entry(proxy_m_, device_m, &reference_m);
+  } else if (contact_triangle_ >= 0) {
+    const auto& tri = model_->triangle[contact_triangle_];
+    reference_m = contact_weight_[0] * vertex_m_[tri[0]] + contact_weight_[1] * vertex_m_[tri[1]] +
+                  contact_weight_[2] * vertex_m_[tri[2]];  // the contact point moves with the surface
+  } else {
+    // First tick on a new model: project the old contact point onto the new patch.
+    reference_m = closest_facing(surface_point_m_, surface_point_m_, false).point;
+  }
+
+  Closest c;
+  Vec3 n = Vec3::Zero();
+  if (touching_) {
+    c = closest_facing(device_m, reference_m, true);
+    if (c.triangle < 0) {
+      touching_ = false;
+    } else {
+      n = pseudo_normal(c);
+      if (n.dot(device_m - c.point) > 0.0) touching_ = false;  // the device is back outside
+    }
+  }
+
+  for (int i = 0; i < model_->vertex_count; ++i) previous_vertex_m_[i] = vertex_m_[i];
+  have_previous_vertices_ = true;
+
+  if (!touching_) {
+    contact_triangle_ = -1;
+    proxy_m_ = device_m;
+    out.proxy_m = device_m;
+    return out;
+  }
+
+  contact_triangle_ = c.triangle;
+  contact_weight_ = c.weight;
+  surface_point_m_ = c.point;
+  proxy_m_ = c.point;
+
+  const double k_v = params_.coupling_stiffness_N_per_m;
+  Vec3 proxy = c.point;
+  if (model_->in_contact) {
+    const Mat3 tangential = Mat3::Identity() - n * n.transpose();
+    const Vec3 x0 = model_->position_ref_m + tangential * (c.point - model_->position_ref_m);
+    const Mat3& K = contact_stiffness_N_per_m_;
+    const Mat3 A = k_v * Mat3::Identity() + K;  // SPD: k_v > 0, K PSD
+    const Vec3 p = A.inverse() * (k_v * device_m + K * x0 - model_->force_ref_N);
+    const Vec3 force_on_object_N = k_v * (device_m - p);
+    if (p.allFinite() && n.dot(force_on_object_N) < 0.0) {  // pushes into the object (n is outward)
+      proxy = p;
+      out.compliant = true;
+    }
+  }
+
+  Vec3 force_N = k_v * (proxy - device_m);
+  const Vec3 relative_velocity = device_velocity_m_per_s - surface_velocity(c);
+  force_N -= params_.coupling_damping_N_s_per_m * n.dot(relative_velocity) * n;
+  const double normal_N = n.dot(force_N);
+  if (normal_N < 0.0) force_N -= normal_N * n;  // push out, never pull in
+
+  const auto& tri = model_->triangle[c.triangle];
+  out.force_on_device_N = force_N;
+  out.proxy_m = proxy;
+  out.surface_point_m = c.point;
+  out.normal = n;
+  out.contact = true;
+  for (int k = 0; k < 3; ++k) {
+    out.contact_node[k] = model_->vertex_node[tri[k]];
+    out.contact_weight[k] = c.weight[k];
+  }
+  return out;
+}
+
+}  // namespace tissue::haptics

@@ -1,0 +1,218 @@
+#include "haptics/haptic_loop.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tissue::haptics {
+namespace {
+
+// Counters have one writer (the tick thread): a relaxed load + store is an
+// exact increment without a locked read-modify-write on the hot path.
+inline void bump(std::atomic<std::uint64_t>& counter) noexcept {
+  counter.store(counter.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+}
+
+RenderParams render_params_for(const config::DeviceSpec& device, const config::HapticSpec& haptic,
+                               const HapticLoopOptions& options) {
+  RenderParams p;
+  const double max_stiffness_N_per_m = std::max(0.0, device.limits.max_stiffness_N_per_m);
+  // The coupling spring is the stiffest thing the user can feel: clamp it to the device.
+  p.coupling_stiffness_N_per_m = std::clamp(haptic.coupling_stiffness_N_per_m, 0.0, max_stiffness_N_per_m);
+  p.coupling_damping_N_s_per_m = std::max(0.0, haptic.coupling_damping_N_s_per_m);
+  p.max_stiffness_N_per_m = max_stiffness_N_per_m;
+  p.extrapolation_horizon_s =
+      std::clamp(options.extrapolation_horizon_s, 0.0, std::max(0.0, device.limits.stale_model_s));
+  return p;
+}
+
+}  // namespace
+
+HapticLoop::HapticLoop(Device& device, const config::DeviceSpec& device_spec, const config::HapticSpec& haptic_spec,
+                       LocalModelBuffer& models, ToolSampleRing& samples, const HapticLoopOptions& options)
+    : device_(device),
+      limits_(device_spec.limits),
+      haptic_spec_(haptic_spec),
+      models_(models),
+      samples_(samples),
+      frame_(FrameTransform::from(device_spec.offset_m, device_spec.scale)),
+      render_params_(render_params_for(device_spec, haptic_spec, options)),
+      period_s_(haptic_spec.rate_hz > 0.0 ? 1.0 / haptic_spec.rate_hz : 1e-3),
+      renderer_{ContactRenderer(render_params_), ContactRenderer(render_params_)},
+      safety_(device_spec.limits) {
+  if (!(std::isfinite(frame_.scale) && frame_.scale > 0.0)) frame_.scale = 1.0;  // the loader rejects this; stay finite
+}
+
+void HapticLoop::start(std::int64_t now_ns) noexcept {
+  started_ = true;
+  last_tick_ns_ = now_ns - static_cast<std::int64_t>(period_s_ * 1e9);
+  safety_.reset();
+  renderer_[0].reset();
+  renderer_[1].reset();
+  have_sample_ = false;
+  have_energy_position_ = false;
+  last_force_device_N_.setZero();
+  fade_offset_N_.setZero();
+  stopped_.store(false, std::memory_order_release);
+}
+
+bool HapticLoop::accept_sample(std::int64_t now_ns, const DeviceSample& s) noexcept {
+  if (!s.position_m.allFinite() || !s.velocity_m_per_s.allFinite()) {
+    bump(rejected_nonfinite_);
+    return false;
+  }
+  if (s.position_m.norm() > limits_.workspace_radius_m) {
+    bump(rejected_workspace_);
+    return false;
+  }
+  bool too_fast = s.velocity_m_per_s.norm() > limits_.max_speed_m_per_s;
+  if (!too_fast && have_sample_ && now_ns > last_sample_ns_) {
+    // A position jump is a glitch even when the reported velocity looks sane.
+    const double dt_s = 1e-9 * static_cast<double>(now_ns - last_sample_ns_);
+    too_fast = (s.position_m - sample_.position_m).norm() > limits_.max_speed_m_per_s * dt_s;
+  }
+  if (too_fast) {
+    bump(rejected_speed_);
+    return false;
+  }
+  return true;
+}
+
+void HapticLoop::tick(std::int64_t now_ns) noexcept {
+  if (!started_) start(now_ns);
+  heartbeat_.store(heartbeat_.load(std::memory_order_relaxed) + 1, std::memory_order_release);
+  bump(ticks_);
+  // A stalled tick must not widen the rate limit beyond a few periods.
+  const double dt_s = std::min(1e-9 * static_cast<double>(now_ns - last_tick_ns_), 4.0 * period_s_);
+  last_tick_ns_ = now_ns;
+
+  // 1. Device input.
+  DeviceSample raw;
+  if (device_.read(now_ns, &raw)) {
+    if (accept_sample(now_ns, raw)) {
+      if (have_energy_position_) {
+        energy_J_ -= last_force_device_N_.dot(raw.position_m - energy_position_m_);
+        min_energy_J_ = std::min(min_energy_J_, energy_J_);
+      }
+      energy_position_m_ = raw.position_m;
+      have_energy_position_ = true;
+      sample_ = raw;
+      have_sample_ = true;
+      last_sample_ns_ = now_ns;
+    }
+  } else {
+    bump(missing_samples_);
+  }
+  const bool device_lost =
+      !have_sample_ || 1e-9 * static_cast<double>(now_ns - last_sample_ns_) > limits_.device_timeout_s;
+  const Vec3 device_m = frame_.position_to_scene(sample_.position_m);
+  const Vec3 device_velocity_m_per_s = frame_.velocity_to_scene(sample_.velocity_m_per_s);
+
+  // 2. Newest model (validated, copied into the spare slot).
+  bool switched = false;
+  const bool had_model = have_model_;
+  if (const auto read = models_.read(); read.is_new) {
+    const LocalModel& m = *read.value;
+    if (m.version != 0 && !(have_model_ && m.version == model_slot_[active_].version)) {
+      if (!local_model_is_valid(m)) {
+        bump(rejected_models_);
+      } else {
+        const int next = 1 - active_;
+        model_slot_[next] = m;
+        renderer_[next].set_model(&model_slot_[next]);
+        // Both renderers continue from the same pre-tick proxy state.
+        renderer_[next].carry_state_from(renderer_[active_]);
+        active_ = next;
+        have_model_ = true;
+        switched = true;
+        bump(model_updates_);
+      }
+    }
+  }
+  const LocalModel& model = model_slot_[active_];
+  const bool stale = !have_model_ || 1e-9 * static_cast<double>(now_ns - model.built_ns) > limits_.stale_model_s;
+
+  // 3. Render, with the cross-fade offset of the last model switch.
+  RenderOutput render;
+  render.proxy_m = device_m;
+  Vec3 force_scene_N = Vec3::Zero();
+  if (have_sample_) {
+    render = renderer_[active_].render(now_ns, device_m, device_velocity_m_per_s);
+    const double crossfade_s = haptic_spec_.crossfade_s;
+    auto remaining = [&](std::int64_t t_ns) {
+      if (!(crossfade_s > 0.0)) return 0.0;
+      return std::clamp(1.0 - 1e-9 * static_cast<double>(t_ns - fade_start_ns_) / crossfade_s, 0.0, 1.0);
+    };
+    if (switched && had_model && crossfade_s > 0.0) {
+      const RenderOutput old = renderer_[1 - active_].render(now_ns, device_m, device_velocity_m_per_s);
+      const Vec3 old_total_N = old.force_on_device_N + remaining(now_ns) * fade_offset_N_;
+      fade_offset_N_ = old_total_N - render.force_on_device_N;
+      if (!fade_offset_N_.allFinite()) fade_offset_N_.setZero();
+      fade_start_ns_ = now_ns;
+    }
+    force_scene_N = render.force_on_device_N + remaining(now_ns) * fade_offset_N_;
+  }
+
+  // 4. Safety (device frame) and output.
+  unsigned faults = kFaultNone;
+  if (stale) faults |= kFaultStaleModel;
+  if (device_lost) faults |= kFaultDeviceLost;
+  if (stop_requested_.load(std::memory_order_relaxed)) faults |= kFaultStop;
+  if (watchdog_tripped_.load(std::memory_order_relaxed)) faults |= kFaultWatchdog;
+  const Vec3 force_device_N = safety_.apply(frame_.force_to_device(force_scene_N), dt_s, faults);
+  device_.write(now_ns, force_device_N);
+  last_force_device_N_ = force_device_N;
+
+  // 5. Tell the sim what the tool did: the object gets the reaction of what the user felt.
+  ToolSample& s = last_sample_;
+  s.time_ns = now_ns;
+  s.device_position_m = device_m;
+  s.proxy_position_m = render.proxy_m;
+  s.force_on_device_N = frame_.force_to_scene(force_device_N);
+  s.contact = render.contact;
+  s.force_on_object_N = render.contact ? Vec3(-s.force_on_device_N) : Vec3::Zero();
+  s.contact_node = render.contact ? render.contact_node : std::array<std::uint32_t, 3>{};
+  s.contact_weight = render.contact ? render.contact_weight : std::array<double, 3>{};
+  s.model_version = have_model_ ? model.version : 0;
+  samples_.try_push(s);
+
+  // 6. Counters.
+  stopped_.store(stop_requested_.load(std::memory_order_relaxed) && safety_.quiescent(), std::memory_order_release);
+  safety_trips_.store(safety_.total_trips(), std::memory_order_relaxed);
+  stale_trips_.store(safety_.trips(0), std::memory_order_relaxed);
+  device_lost_trips_.store(safety_.trips(1), std::memory_order_relaxed);
+  nonfinite_forces_.store(safety_.nonfinite_inputs(), std::memory_order_relaxed);
+  model_version_.store(s.model_version, std::memory_order_relaxed);
+  contact_.store(render.contact, std::memory_order_relaxed);
+  force_N_.store(force_device_N.norm(), std::memory_order_relaxed);
+  force_scale_.store(safety_.scale(), std::memory_order_relaxed);
+  energy_atomic_J_.store(energy_J_, std::memory_order_relaxed);
+  min_energy_atomic_J_.store(min_energy_J_, std::memory_order_relaxed);
+}
+
+HapticStats HapticLoop::stats() const noexcept {
+  HapticStats st;
+  st.ticks = ticks_.load(std::memory_order_relaxed);
+  st.heartbeat = heartbeat_.load(std::memory_order_relaxed);
+  st.rejected_nonfinite = rejected_nonfinite_.load(std::memory_order_relaxed);
+  st.rejected_workspace = rejected_workspace_.load(std::memory_order_relaxed);
+  st.rejected_speed = rejected_speed_.load(std::memory_order_relaxed);
+  st.rejected_inputs = st.rejected_nonfinite + st.rejected_workspace + st.rejected_speed;
+  st.missing_samples = missing_samples_.load(std::memory_order_relaxed);
+  st.model_updates = model_updates_.load(std::memory_order_relaxed);
+  st.rejected_models = rejected_models_.load(std::memory_order_relaxed);
+  st.safety_trips = safety_trips_.load(std::memory_order_relaxed);
+  st.stale_model_trips = stale_trips_.load(std::memory_order_relaxed);
+  st.device_lost_trips = device_lost_trips_.load(std::memory_order_relaxed);
+  st.nonfinite_forces = nonfinite_forces_.load(std::memory_order_relaxed);
+  st.ring_drops = samples_.drops();
+  st.model_version = model_version_.load(std::memory_order_relaxed);
+  st.contact = contact_.load(std::memory_order_relaxed);
+  st.stopped = stopped_.load(std::memory_order_acquire);
+  st.force_N = force_N_.load(std::memory_order_relaxed);
+  st.force_scale = force_scale_.load(std::memory_order_relaxed);
+  st.passivity_energy_J = energy_atomic_J_.load(std::memory_order_relaxed);
+  st.min_passivity_energy_J = min_energy_atomic_J_.load(std::memory_order_relaxed);
+  return st;
+}
+
+}  // namespace tissue::haptics

@@ -1,0 +1,211 @@
+#include "haptics/udp_device.hpp"
+
+#include <boost/asio/buffer.hpp>
+#include <boost/asio/ip/address.hpp>
+#include <cmath>
+
+#include "tissue_lcm/tissue/device_packet.hpp"
+
+namespace tissue::haptics {
+namespace {
+
+using Packet = tissue_lcm::tissue::device_packet;
+namespace ip = boost::asio::ip;
+
+constexpr int kFingerprintBytes = 8;  // LCM prefixes every message with its 64-bit type hash
+
+// The fingerprint as LCM writes it: big-endian, first on the wire.
+std::int64_t fingerprint_of(const unsigned char* bytes) noexcept {
+  std::uint64_t v = 0;
+  for (int i = 0; i < kFingerprintBytes; ++i) v = (v << 8) | bytes[i];
+  return static_cast<std::int64_t>(v);
+}
+
+bool all_finite(const double (&v)[3]) noexcept {
+  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+
+}  // namespace
+
+const char* UdpDevice::reject_name(Reject reason) noexcept {
+  switch (reason) {
+    case Reject::kSize:
+      return "size";
+    case Reject::kFingerprint:
+      return "fingerprint";
+    case Reject::kVersion:
+      return "version";
+    case Reject::kKind:
+      return "kind";
+    case Reject::kNonFinite:
+      return "non_finite";
+    case Reject::kOtherSender:
+      return "other_sender";
+    case Reject::kCount:
+      break;
+  }
+  return "unknown";
+}
+
+UdpDevice::UdpDevice(const config::UdpDeviceSpec& spec) : spec_(spec), socket_(io_) {
+  Packet zero{};
+  packet_bytes_ = zero.getEncodedSize();
+}
+
+UdpDevice::~UdpDevice() { stop(); }
+
+bool UdpDevice::start(std::string* error) {
+  stop();
+  const std::string where = spec_.bind_address + ":" + std::to_string(spec_.port);
+  auto fail = [&](const std::string& why) {
+    if (error) *error = "udp device: " + why;
+    return false;
+  };
+  if (!(std::isfinite(spec_.timeout_s) && spec_.timeout_s > 0.0))
+    return fail("timeout_s must be finite and > 0 (got " + std::to_string(spec_.timeout_s) + ")");
+  if (spec_.port < 0 || spec_.port > 65535) return fail("port " + std::to_string(spec_.port) + " is not 0..65535");
+
+  boost::system::error_code ec;
+  const ip::address address = ip::make_address(spec_.bind_address, ec);
+  if (ec) return fail("bind_address '" + spec_.bind_address + "' is not an IP address: " + ec.message());
+  const ip::udp::endpoint local(address, static_cast<unsigned short>(spec_.port));
+
+  socket_.open(local.protocol(), ec);
+  if (!ec) socket_.bind(local, ec);
+  if (!ec) socket_.non_blocking(true, ec);  // read()/write() must never wait
+  if (ec) {
+    const std::string why = "cannot bind " + where + ": " + ec.message();
+    stop();
+    return fail(why);
+  }
+  local_port_ = socket_.local_endpoint(ec).port();
+  if (ec) {
+    stop();
+    return fail("cannot read the bound port of " + where + ": " + ec.message());
+  }
+
+  timeout_ns_ = static_cast<std::int64_t>(std::llround(spec_.timeout_s * 1e9));
+  // Packet::getHash() computes the fingerprint once behind a function-local
+  // static; take that first-call guard here, not in the tick.
+  (void)Packet::getHash();
+
+  have_pose_ = false;
+  last_accept_ns_ = 0;
+  last_sequence_number_ = 0;
+  last_sender_time_ns_ = 0;
+  pose_ = DeviceSample{};
+  force_sequence_number_ = 0;
+  peer_ = ip::udp::endpoint();
+  buttons_.store(0, std::memory_order_relaxed);
+  for (auto& r : rejected_) r.store(0, std::memory_order_relaxed);
+  for (auto* c : {&received_, &accepted_, &out_of_order_, &receive_errors_, &sent_, &send_failures_, &sessions_})
+    c->store(0, std::memory_order_relaxed);
+  return true;
+}
+
+void UdpDevice::stop() noexcept {
+  boost::system::error_code ignored;
+  if (socket_.is_open()) socket_.close(ignored);
+  have_pose_ = false;
+}
+
+bool UdpDevice::sender_live(std::int64_t now_ns) const noexcept {
+  return have_pose_ && now_ns - last_accept_ns_ <= timeout_ns_;
+}
+
+UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) noexcept {
+  auto reject = [&](Reject reason) {
+    bump(rejected_[static_cast<int>(reason)]);
+    return Verdict::kRejected;
+  };
+  if (bytes != static_cast<std::size_t>(packet_bytes_)) return reject(Reject::kSize);
+  if (fingerprint_of(receive_buffer_.data()) != Packet::getHash()) return reject(Reject::kFingerprint);
+
+  Packet packet;  // fixed-size type: decode fills every field, allocates nothing
+  if (packet.decode(receive_buffer_.data(), 0, packet_bytes_) != packet_bytes_) return reject(Reject::kSize);
+  if (packet.version != kProtocolVersion) return reject(Reject::kVersion);
+  if (packet.kind != kKindPose) return reject(Reject::kKind);
+  if (!all_finite(packet.position_m) || !all_finite(packet.velocity_m_per_s)) return reject(Reject::kNonFinite);
+
+  const bool live = sender_live(now_ns);
+  if (live && from_ != peer_) return reject(Reject::kOtherSender);
+  if (live && packet.sequence_number <= last_sequence_number_) {
+    bump(out_of_order_);
+    return Verdict::kOutOfOrder;
+  }
+
+  if (!live) bump(sessions_);
+  peer_ = from_;
+  have_pose_ = true;
+  last_accept_ns_ = now_ns;
+  last_sequence_number_ = packet.sequence_number;
+  last_sender_time_ns_ = packet.sender_time_ns;
+  pose_.position_m = Vec3(packet.position_m[0], packet.position_m[1], packet.position_m[2]);
+  pose_.velocity_m_per_s = Vec3(packet.velocity_m_per_s[0], packet.velocity_m_per_s[1], packet.velocity_m_per_s[2]);
+  buttons_.store(packet.buttons, std::memory_order_relaxed);
+  bump(accepted_);
+  return Verdict::kAccepted;
+}
+
+bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
+  if (!socket_.is_open()) return false;
+  for (int i = 0; i < kMaxDatagramsPerRead; ++i) {
+    boost::system::error_code ec;
+    const std::size_t bytes = socket_.receive_from(boost::asio::buffer(receive_buffer_), from_, 0, ec);
+    if (ec == boost::asio::error::would_block || ec == boost::asio::error::try_again) break;
+    if (ec) {
+      // Nothing a tick can fix (e.g. a queued ICMP error): count it and let
+      // the next tick try again rather than spin on it now.
+      bump(receive_errors_);
+      break;
+    }
+    bump(received_);
+    consider(bytes, now_ns);
+  }
+  if (!sender_live(now_ns)) return false;
+  if (out) *out = pose_;
+  return true;
+}
+
+void UdpDevice::write(std::int64_t now_ns, const Vec3& force_N) noexcept {
+  // No pose yet: nobody to answer. A lost sender still gets the (ramped-out)
+  // force, so a device that comes back starts from what tissued renders.
+  if (!socket_.is_open() || peer_.port() == 0) return;
+
+  Packet packet{};
+  packet.version = kProtocolVersion;
+  packet.kind = kKindForce;
+  packet.sequence_number = ++force_sequence_number_;
+  packet.sender_time_ns = now_ns;
+  packet.echo_sequence_number = last_sequence_number_;
+  packet.echo_sender_time_ns = last_sender_time_ns_;
+  // The loop's safety already guarantees a finite force; a motor must never
+  // be sent a NaN whatever happens upstream.
+  const bool finite = force_N.allFinite();
+  for (int k = 0; k < 3; ++k) packet.force_N[k] = finite ? force_N[k] : 0.0;
+
+  const int bytes = packet.encode(send_buffer_.data(), 0, static_cast<int>(send_buffer_.size()));
+  if (bytes != packet_bytes_) {
+    bump(send_failures_);
+    return;
+  }
+  boost::system::error_code ec;
+  socket_.send_to(boost::asio::buffer(send_buffer_.data(), static_cast<std::size_t>(bytes)), peer_, 0, ec);
+  bump(ec ? send_failures_ : sent_);  // would_block: dropped, the next tick sends a newer force
+}
+
+UdpDevice::Stats UdpDevice::stats() const noexcept {
+  Stats s;
+  s.received = received_.load(std::memory_order_relaxed);
+  s.accepted = accepted_.load(std::memory_order_relaxed);
+  for (int i = 0; i < static_cast<int>(Reject::kCount); ++i)
+    s.rejected[i] = rejected_[i].load(std::memory_order_relaxed);
+  s.out_of_order = out_of_order_.load(std::memory_order_relaxed);
+  s.receive_errors = receive_errors_.load(std::memory_order_relaxed);
+  s.sent = sent_.load(std::memory_order_relaxed);
+  s.send_failures = send_failures_.load(std::memory_order_relaxed);
+  s.sessions = sessions_.load(std::memory_order_relaxed);
+  return s;
+}
+
+}  // namespace tissue::haptics

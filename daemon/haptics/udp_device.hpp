@@ -1,0 +1,136 @@
+// UdpDevice: the UDP device bridge (proto/README.md, "UDP device bridge").
+//
+// A device on another box, or a vendor-SDK shim, streams tissue::device_packet
+// datagrams (LCM encoding, proto/lcm/device_packet.lcm) with kind = pose to
+// UdpDeviceSpec.bind_address:port; every write() answers the sender of the
+// newest valid pose with a kind = force packet.
+//
+// Real-time: read() and write() run in the 1 kHz tick. The socket is
+// non-blocking; read() drains at most kMaxDatagramsPerRead waiting datagrams
+// into a preallocated buffer and keeps the newest valid pose, write() sends one
+// datagram and drops it when the socket would block. Packets are decoded into
+// stack objects of a fixed-size generated type, so nothing allocates, locks or
+// waits. start()/stop() are the only calls that allocate or may fail.
+//
+// Validation, in this order (each rejection is counted by reason):
+//   size          datagram length != the encoded size of device_packet
+//   fingerprint   the first 8 bytes are not device_packet's LCM fingerprint
+//                 (garbage, another LCM type, another schema revision)
+//   version       version != kProtocolVersion
+//   kind          not a pose packet (e.g. a force packet looped back)
+//   non_finite    a position or velocity component is NaN or infinite
+//   other_sender  while a sender is live, datagrams from any other address
+// and then the ordering rule: sequence_number must exceed the last accepted
+// one (duplicates and reordered packets are dropped and counted as
+// out_of_order). When no valid pose has arrived for timeout_s the sender is
+// lost: read() returns false (the haptic loop ramps the force out), and the
+// next valid pose from any address starts a new session with any sequence
+// number (a restarted device may count from 0 again).
+//
+// Threads: start()/stop()/read()/write() from one thread at a time (the
+// haptic thread while it runs); stats() and buttons() from any thread.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/udp.hpp>
+#include <cstdint>
+
+#include "config/daemon_config.hpp"
+#include "haptics/device.hpp"
+
+namespace tissue::haptics {
+
+class UdpDevice final : public Device {
+ public:
+  static constexpr std::int32_t kProtocolVersion = 1;
+  static constexpr std::uint8_t kKindPose = 1;   // device -> tissued
+  static constexpr std::uint8_t kKindForce = 2;  // tissued -> device
+  // Bounds the work of one read(): a flooding sender cannot stall the tick;
+  // what is left waits for the next tick (or is dropped by the kernel).
+  static constexpr int kMaxDatagramsPerRead = 64;
+  // Larger than any valid packet, so an oversized datagram is seen (and
+  // rejected by size) instead of being silently truncated to a valid length.
+  static constexpr std::size_t kReceiveBufferBytes = 2048;
+
+  enum class Reject : int { kSize, kFingerprint, kVersion, kKind, kNonFinite, kOtherSender, kCount };
+  static const char* reject_name(Reject reason) noexcept;
+
+  // Counters since start() (each exact, the set not one instant).
+  struct Stats {
+    std::uint64_t received = 0;  // datagrams taken off the socket
+    std::uint64_t accepted = 0;  // valid poses (not necessarily the newest of their read())
+    std::array<std::uint64_t, static_cast<int>(Reject::kCount)> rejected{};
+    std::uint64_t out_of_order = 0;  // valid but sequence_number <= the last accepted one
+    std::uint64_t receive_errors = 0;
+    std::uint64_t sent = 0;
+    std::uint64_t send_failures = 0;  // would block (dropped) or an OS error
+    std::uint64_t sessions = 0;       // times a sender was (re)acquired after silence
+    std::uint64_t rejected_total() const noexcept {
+      std::uint64_t n = 0;
+      for (std::uint64_t r : rejected) n += r;
+      return n;
+    }
+  };
+
+  explicit UdpDevice(const config::UdpDeviceSpec& spec);
+  ~UdpDevice() override;
+
+  // Binds the socket. False with "udp device: cannot bind ADDRESS:PORT: OS error".
+  bool start(std::string* error) override;
+  void stop() noexcept override;
+  bool read(std::int64_t now_ns, DeviceSample* out) noexcept override;
+  void write(std::int64_t now_ns, const Vec3& force_N) noexcept override;
+  const char* name() const noexcept override { return "udp"; }
+
+  // The port bound by start(). Equals spec.port unless that is 0 (the config
+  // loader forbids 0; tests use it to get an ephemeral port).
+  std::uint16_t local_port() const noexcept { return local_port_; }
+  // The encoded size of device_packet, bytes (every valid datagram has it).
+  int packet_bytes() const noexcept { return packet_bytes_; }
+  Stats stats() const noexcept;
+  // Buttons of the newest accepted pose (bit i = button i).
+  std::int32_t buttons() const noexcept { return buttons_.load(std::memory_order_relaxed); }
+
+ private:
+  // Outcome of one datagram: accepted, rejected for a reason, or out of order.
+  enum class Verdict { kAccepted, kRejected, kOutOfOrder };
+  Verdict consider(std::size_t bytes, std::int64_t now_ns) noexcept;
+  bool sender_live(std::int64_t now_ns) const noexcept;
+  static void bump(std::atomic<std::uint64_t>& counter) noexcept {
+    counter.store(counter.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // one writer
+  }
+
+  config::UdpDeviceSpec spec_;
+  std::int64_t timeout_ns_ = 0;
+  int packet_bytes_ = 0;
+  std::uint16_t local_port_ = 0;
+
+  boost::asio::io_context io_;
+  boost::asio::ip::udp::socket socket_;
+  boost::asio::ip::udp::endpoint from_;  // scratch for receive_from
+  boost::asio::ip::udp::endpoint peer_;  // sender of the newest accepted pose
+  std::array<unsigned char, kReceiveBufferBytes> receive_buffer_{};
+  std::array<unsigned char, kReceiveBufferBytes> send_buffer_{};
+
+  // Newest accepted pose (haptic thread only).
+  bool have_pose_ = false;
+  std::int64_t last_accept_ns_ = 0;  // now_ns of the read() that accepted it
+  std::int64_t last_sequence_number_ = 0;
+  std::int64_t last_sender_time_ns_ = 0;
+  DeviceSample pose_;
+  std::int64_t force_sequence_number_ = 0;
+
+  std::atomic<std::int32_t> buttons_{0};
+  std::atomic<std::uint64_t> received_{0};
+  std::atomic<std::uint64_t> accepted_{0};
+  std::array<std::atomic<std::uint64_t>, static_cast<int>(Reject::kCount)> rejected_{};
+  std::atomic<std::uint64_t> out_of_order_{0};
+  std::atomic<std::uint64_t> receive_errors_{0};
+  std::atomic<std::uint64_t> sent_{0};
+  std::atomic<std::uint64_t> send_failures_{0};
+  std::atomic<std::uint64_t> sessions_{0};
+};
+
+}  // namespace tissue::haptics

@@ -1,0 +1,290 @@
+#include "haptics/contact_renderer.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "haptics/haptics_test_support.hpp"
+
+namespace tissue::haptics {
+namespace {
+
+using test::kMs;
+
+constexpr double kCouplingStiffness_N_per_m = 400.0;
+
+RenderParams params(double damping_N_s_per_m = 0.0) {
+  RenderParams p;
+  p.coupling_stiffness_N_per_m = kCouplingStiffness_N_per_m;
+  p.coupling_damping_N_s_per_m = damping_N_s_per_m;
+  p.max_stiffness_N_per_m = 1e6;
+  p.extrapolation_horizon_s = 0.02;
+  return p;
+}
+
+// Moves the device in a straight line from `from` to `to` in `steps` ticks of 1 ms.
+template <typename Check>
+void sweep(ContactRenderer& r, std::int64_t& now_ns, const Vec3& from, const Vec3& to, int steps, Check check) {
+  for (int k = 1; k <= steps; ++k) {
+    now_ns += kMs;
+    const Vec3 device = from + (to - from) * (static_cast<double>(k) / steps);
+    const RenderOutput out = r.render(now_ns, device, Vec3::Zero());
+    check(device, out);
+  }
+}
+
+TEST(ContactRenderer, ProxyStaysOnFlatPatchWhenDeviceGoes5mmBelow) {
+  const LocalModel patch = test::make_flat_patch();
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  int contact_ticks = 0;
+  sweep(r, now_ns, Vec3(0.01, 0.0, 0.01), Vec3(0.01, 0.0, -0.005), 15,
+        [&](const Vec3& device, const RenderOutput& out) {
+          EXPECT_GE(out.proxy_m.z(), -1e-12) << "proxy went inside at device z " << device.z();
+          if (device.z() < 0.0) {
+            ++contact_ticks;
+            EXPECT_TRUE(out.contact);
+            EXPECT_NEAR(out.proxy_m.z(), 0.0, 1e-12);
+            EXPECT_NEAR(out.force_on_device_N.z(), -kCouplingStiffness_N_per_m * device.z(), 1e-9);
+          } else {
+            EXPECT_FALSE(out.contact);
+            EXPECT_EQ(out.force_on_device_N, Vec3::Zero());
+          }
+        });
+  EXPECT_GT(contact_ticks, 3);
+  // The 5 mm deep end state: proxy on the surface right above the device.
+  const RenderOutput out = r.render(now_ns + kMs, Vec3(0.01, 0.0, -0.005), Vec3::Zero());
+  EXPECT_TRUE(out.proxy_m.isApprox(Vec3(0.01, 0.0, 0.0), 1e-12));
+  EXPECT_NEAR(out.force_on_device_N.z(), 2.0, 1e-9);  // 400 N/m * 5 mm
+  double weight_sum = 0.0;
+  for (double w : out.contact_weight) weight_sum += w;
+  EXPECT_NEAR(weight_sum, 1.0, 1e-12);
+  EXPECT_GE(out.contact_node[0], 1000u);
+}
+
+TEST(ContactRenderer, ProxySlidesAlongThePatchAndReleasesWhenTheDeviceLeaves) {
+  const LocalModel patch = test::make_flat_patch();
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  sweep(r, now_ns, Vec3(-0.03, 0.01, 0.005), Vec3(-0.03, 0.01, -0.005), 5, [](const Vec3&, const RenderOutput&) {});
+  ASSERT_TRUE(r.touching());
+  sweep(r, now_ns, Vec3(-0.03, 0.01, -0.005), Vec3(0.03, -0.01, -0.005), 60,
+        [](const Vec3& device, const RenderOutput& out) {
+          EXPECT_TRUE(out.contact);
+          EXPECT_NEAR(out.proxy_m.x(), device.x(), 1e-12);  // frictionless: follows sideways
+          EXPECT_NEAR(out.proxy_m.y(), device.y(), 1e-12);
+          EXPECT_NEAR(out.proxy_m.z(), 0.0, 1e-12);
+          EXPECT_NEAR(out.force_on_device_N.x(), 0.0, 1e-12);
+          EXPECT_NEAR(out.force_on_device_N.y(), 0.0, 1e-12);
+        });
+  // Lift off: free as soon as the device is above the surface.
+  sweep(r, now_ns, Vec3(0.03, -0.01, -0.005), Vec3(0.03, -0.01, 0.005), 10,
+        [](const Vec3& device, const RenderOutput& out) {
+          if (device.z() > 0.0) {
+            EXPECT_FALSE(out.contact);
+            EXPECT_EQ(out.proxy_m, device);
+            EXPECT_EQ(out.force_on_device_N, Vec3::Zero());
+          }
+        });
+  EXPECT_FALSE(r.touching());
+}
+
+TEST(ContactRenderer, NoTunnellingThroughAThinSlabAt5MetresPerSecond) {
+  // 5 m/s at 1 kHz is 5 mm per tick, five times the slab thickness.
+  const double thickness_m = 0.001;
+  const LocalModel slab = test::make_slab(0.05, thickness_m);
+  ContactRenderer r(params());
+  r.set_model(&slab);
+  std::int64_t now_ns = 0;
+  sweep(r, now_ns, Vec3(0.002, 0.003, 0.0205), Vec3(0.002, 0.003, -0.0295), 10,
+        [&](const Vec3& device, const RenderOutput& out) {
+          if (device.z() < thickness_m / 2) {
+            EXPECT_TRUE(out.contact) << "tunnelled at device z " << device.z();
+            EXPECT_NEAR(out.proxy_m.z(), thickness_m / 2, 1e-12) << "proxy left the top face";
+            EXPECT_GT(out.force_on_device_N.z(), 0.0);  // pushes back up, never through
+          }
+        });
+  // And the flat single-sheet patch.
+  const LocalModel sheet = test::make_flat_patch();
+  ContactRenderer s(params());
+  s.set_model(&sheet);
+  sweep(s, now_ns, Vec3(0.0, 0.0, 0.0125), Vec3(0.0, 0.0, -0.0375), 10,
+        [&](const Vec3& device, const RenderOutput& out) {
+          if (device.z() < 0.0) {
+            EXPECT_TRUE(out.contact) << "tunnelled at device z " << device.z();
+          }
+        });
+}
+
+TEST(ContactRenderer, ForceIsAlongTheNormalOfATiltedFrictionlessPatch) {
+  const Vec3 u = Vec3(1.0, 0.0, 0.3).normalized();
+  const Vec3 v = u.cross(Vec3(0.2, -1.0, 0.1)).cross(u).normalized();
+  const Vec3 n = u.cross(v);
+  const LocalModel patch = test::make_grid_patch(0.05, 4, Vec3::Zero(), u, v);
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  const Vec3 above = 0.01 * u - 0.007 * v + 0.004 * n;
+  const Vec3 below = 0.013 * u + 0.002 * v - 0.006 * n;
+  std::int64_t now_ns = 0;
+  sweep(r, now_ns, above, below, 4, [](const Vec3&, const RenderOutput&) {});
+  const RenderOutput out = r.render(now_ns + kMs, below, Vec3::Zero());
+  ASSERT_TRUE(out.contact);
+  EXPECT_NEAR(out.force_on_device_N.normalized().dot(n), 1.0, 1e-12);
+  EXPECT_NEAR(out.force_on_device_N.norm(), kCouplingStiffness_N_per_m * 0.006, 1e-9);
+  EXPECT_TRUE(out.normal.isApprox(n, 1e-12));
+}
+
+TEST(ContactRenderer, DeformableContactRendersTheSeriesStiffness) {
+  const double k_object_N_per_m = 1500.0;
+  const double depth_m = 0.004;
+  LocalModel patch = test::make_flat_patch();
+  test::set_linear_contact(patch, k_object_N_per_m);
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  // Press along the normal at two places: x0 slides with the contact (frictionless).
+  for (const Vec3& at : {Vec3(0.0, 0.0, 0.0), Vec3(0.012, -0.02, 0.0)}) {
+    r.reset();
+    r.render(now_ns += kMs, at + Vec3(0, 0, 0.002), Vec3::Zero());
+    const RenderOutput out = r.render(now_ns += kMs, at - Vec3(0, 0, depth_m), Vec3::Zero());
+    ASSERT_TRUE(out.contact);
+    EXPECT_TRUE(out.compliant);
+    const double series_N_per_m =
+        kCouplingStiffness_N_per_m * k_object_N_per_m / (kCouplingStiffness_N_per_m + k_object_N_per_m);
+    EXPECT_NEAR(out.force_on_device_N.z(), series_N_per_m * depth_m, 1e-9);
+    EXPECT_NEAR(out.force_on_device_N.x(), 0.0, 1e-9);
+    EXPECT_NEAR(out.force_on_device_N.y(), 0.0, 1e-9);
+    // The proxy sinks by the object's share of the deflection.
+    EXPECT_NEAR(out.proxy_m.z(),
+                -depth_m * kCouplingStiffness_N_per_m / (kCouplingStiffness_N_per_m + k_object_N_per_m), 1e-12);
+  }
+}
+
+TEST(ContactRenderer, DeformableContactWithReferenceForceBalancesCouplingAndObject) {
+  // The sim already pushes F0 into the object at x0: the proxy settles where
+  // k_v (x_dev - p) = F0 + K_c (p - x0).
+  LocalModel patch = test::make_flat_patch();
+  const Vec3 force_ref_N(0.0, 0.0, -0.8);
+  test::set_linear_contact(patch, 900.0, force_ref_N, Vec3::Zero());
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  r.render(kMs, Vec3(0, 0, 0.001), Vec3::Zero());
+  const Vec3 device(0, 0, -0.003);
+  const RenderOutput out = r.render(2 * kMs, device, Vec3::Zero());
+  ASSERT_TRUE(out.compliant);
+  const Vec3 coupling_N = kCouplingStiffness_N_per_m * (device - out.proxy_m);
+  const Vec3 object_N = force_ref_N + 900.0 * out.proxy_m;
+  EXPECT_TRUE(coupling_N.isApprox(object_N, 1e-12));
+  EXPECT_TRUE(out.force_on_device_N.isApprox(-coupling_N, 1e-12));
+}
+
+TEST(ContactRenderer, ConcaveValleyEdgeHoldsTheProxyAndUsesThePseudoNormal) {
+  // A V-shaped valley (faces rising at slope 0.5 to either side of x = 0).
+  // Below the valley line each face's own closest point lies off that face,
+  // so the proxy must sit on the shared edge and the contact normal is the
+  // mean of the two face normals; a per-face rule would poke through the
+  // other face.
+  const LocalModel valley = test::make_ridge(0.05, -0.5);
+  ContactRenderer r(params());
+  r.set_model(&valley);
+  std::int64_t now_ns = 0;
+  sweep(r, now_ns, Vec3(0.0, 0.0, 0.005), Vec3(0.0, 0.0, -0.004), 5, [](const Vec3&, const RenderOutput&) {});
+  const RenderOutput out = r.render(now_ns += kMs, Vec3(0.0, 0.0, -0.004), Vec3::Zero());
+  ASSERT_TRUE(out.contact);
+  EXPECT_LT(out.proxy_m.norm(), 1e-12);  // on the valley line
+  EXPECT_TRUE(out.normal.isApprox(Vec3::UnitZ(), 1e-12));
+  EXPECT_NEAR(out.force_on_device_N.z(), kCouplingStiffness_N_per_m * 0.004, 1e-9);
+  EXPECT_NEAR(out.force_on_device_N.x(), 0.0, 1e-12);
+  // Up the right slope and out above it (the right face is at z = 0.01 at x = 0.02): released.
+  sweep(r, now_ns, Vec3(0.0, 0.0, -0.004), Vec3(0.02, 0.0, 0.015), 5, [](const Vec3& device, const RenderOutput& o) {
+    if (device.z() < 0.5 * device.x()) {
+      EXPECT_TRUE(o.contact);
+    }
+  });
+  EXPECT_FALSE(r.touching());
+}
+
+TEST(ContactRenderer, PastThePatchBorderTheProxyStaysOnTheBorderEdge) {
+  const LocalModel patch = test::make_flat_patch(0.02, 2);
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  sweep(r, now_ns, Vec3(0.015, 0, 0.002), Vec3(0.015, 0, -0.002), 4, [](const Vec3&, const RenderOutput&) {});
+  sweep(r, now_ns, Vec3(0.015, 0, -0.002), Vec3(0.03, 0, -0.002), 10, [](const Vec3&, const RenderOutput& out) {
+    EXPECT_TRUE(out.contact);
+    EXPECT_LE(out.proxy_m.x(), 0.02 + 1e-12);
+  });
+  const RenderOutput out = r.render(now_ns += kMs, Vec3(0.03, 0, -0.002), Vec3::Zero());
+  EXPECT_TRUE(out.proxy_m.isApprox(Vec3(0.02, 0, 0), 1e-12));
+}
+
+TEST(ContactRenderer, MovingSurfaceMeetsAStillToolAndExtrapolationIsBounded) {
+  LocalModel patch = test::make_flat_patch();
+  for (int i = 0; i < patch.vertex_count; ++i) patch.vertex_velocity_m_per_s[i] = Vec3(0, 0, 0.5);  // rising
+  patch.built_ns = 0;
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  const Vec3 tool(0.0, 0.0, 0.004);  // the surface reaches it after 8 ms
+  bool touched = false;
+  for (int k = 0; k <= 40; ++k) {
+    const RenderOutput out = r.render(k * kMs, tool, Vec3::Zero());
+    const double surface_z = 0.5 * std::min(k * 1e-3, 0.02);  // horizon 20 ms
+    if (surface_z > tool.z()) {
+      touched = true;
+      EXPECT_TRUE(out.contact) << "tick " << k;
+      EXPECT_NEAR(out.proxy_m.z(), surface_z, 1e-12);
+    }
+  }
+  EXPECT_TRUE(touched);
+  // Far past the horizon the patch stays where the horizon left it.
+  const RenderOutput late = r.render(500 * kMs, tool, Vec3::Zero());
+  EXPECT_NEAR(late.proxy_m.z(), 0.01, 1e-12);
+}
+
+TEST(ContactRenderer, DampingActsAlongTheNormalOnTheRelativeVelocityAndNeverPulls) {
+  const LocalModel patch = test::make_flat_patch();
+  ContactRenderer r(params(2.0));
+  r.set_model(&patch);
+  r.render(kMs, Vec3(0, 0, 0.001), Vec3::Zero());
+  // Pressing in at 0.1 m/s with a sideways slide: damping adds 0.2 N along n only.
+  const RenderOutput in = r.render(2 * kMs, Vec3(0, 0, -0.001), Vec3(0.3, 0.0, -0.1));
+  EXPECT_NEAR(in.force_on_device_N.z(), 0.4 + 0.2, 1e-12);
+  EXPECT_NEAR(in.force_on_device_N.x(), 0.0, 1e-12);
+  // Pulling out fast: the damper would pull the tool in; the normal force is clamped at 0.
+  const RenderOutput out = r.render(3 * kMs, Vec3(0, 0, -0.0001), Vec3(0.0, 0.0, 1.0));
+  EXPECT_TRUE(out.contact);
+  EXPECT_GE(out.force_on_device_N.z(), 0.0);
+}
+
+TEST(ContactRenderer, ClampsContactStiffnessAndRejectsInvalidModels) {
+  RenderParams p = params();
+  p.max_stiffness_N_per_m = 800.0;
+  LocalModel patch = test::make_flat_patch();
+  patch.in_contact = true;
+  patch.contact_stiffness_N_per_m << 5000, 0, 0, 0, -10, 0, 0, 0, 300;
+  ContactRenderer r(p);
+  r.set_model(&patch);
+  const Vec3 eigen = r.contact_stiffness_N_per_m().diagonal();
+  EXPECT_NEAR(eigen.x(), 800.0, 1e-9);
+  EXPECT_NEAR(eigen.y(), 0.0, 1e-9);
+  EXPECT_NEAR(eigen.z(), 300.0, 1e-9);
+
+  EXPECT_TRUE(local_model_is_valid(patch));
+  LocalModel bad = patch;
+  bad.vertex_m[3].x() = std::nan("");
+  EXPECT_FALSE(local_model_is_valid(bad));
+  bad = patch;
+  bad.triangle[0][1] = bad.vertex_count;
+  EXPECT_FALSE(local_model_is_valid(bad));
+  bad = patch;
+  bad.triangle_count = LocalModel::kMaxPatchTriangles + 1;
+  EXPECT_FALSE(local_model_is_valid(bad));
+  bad = patch;
+  bad.force_ref_N.z() = INFINITY;
+  EXPECT_FALSE(local_model_is_valid(bad));
+}
+
+}  // namespace
+}  // namespace tissue::haptics

@@ -1,0 +1,336 @@
+#include "haptics/haptic_loop.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "haptics/haptics_test_support.hpp"
+#include "haptics/sim_device.hpp"
+
+namespace tissue::haptics {
+namespace {
+
+using test::kMs;
+constexpr double kDt_s = 1e-3;
+
+struct Rig {
+  config::DeviceSpec device_spec;
+  config::HapticSpec haptic_spec;
+  test::ScriptedDevice device;
+  std::unique_ptr<LocalModelBuffer> models = std::make_unique<LocalModelBuffer>();
+  std::unique_ptr<ToolSampleRing> samples = std::make_unique<ToolSampleRing>();
+  std::unique_ptr<HapticLoop> loop;
+  std::int64_t now_ns = 1000 * kMs;
+  std::uint64_t version = 0;
+
+  void build(Device* dev = nullptr) {
+    loop = std::make_unique<HapticLoop>(dev ? *dev : device, device_spec, haptic_spec, *models, *samples);
+  }
+  void publish(LocalModel m) {
+    m.version = ++version;
+    m.built_ns = now_ns;
+    models->write(m);
+  }
+  // Advances 1 ms and ticks; returns the force written to the device.
+  Vec3 tick() {
+    now_ns += kMs;
+    loop->tick(now_ns);
+    return device.last_force_N;
+  }
+  void drain() {
+    ToolSample s;
+    while (samples->try_pop(s)) {
+    }
+  }
+};
+
+// Pressed 2 mm into a flat patch (free approach from above first).
+void press(Rig& rig, const LocalModel& model, int ticks) {
+  rig.device.position_m = Vec3(0, 0, 0.002);
+  rig.publish(model);
+  rig.tick();
+  rig.device.position_m = Vec3(0, 0, -0.002);
+  for (int i = 0; i < ticks; ++i) {
+    rig.publish(model);
+    rig.tick();
+  }
+}
+
+TEST(HapticLoop, CrossFadeBoundsTheForceChangeAtAModelUpdate) {
+  Rig rig;
+  rig.device_spec.limits.max_force_rate_N_per_s = 1e9;  // isolate the cross-fade
+  rig.device_spec.limits.ramp_in_s = 0.01;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.haptic_spec.crossfade_s = 0.01;
+  rig.haptic_spec.coupling_damping_N_s_per_m = 0.0;
+  rig.build();
+  LocalModel before = test::make_flat_patch();
+  test::set_linear_contact(before, 600.0);
+  press(rig, before, 100);
+  const Vec3 force_before = rig.device.last_force_N;
+  // k_v k/(k_v+k) * 2 mm = 240 * 0.002
+  ASSERT_NEAR(force_before.z(), 0.48, 1e-9);
+
+  // The sim now pushes 1 N harder: a step in force_ref between two versions.
+  LocalModel after = before;
+  after.force_ref_N = Vec3(0, 0, -1.0);
+  rig.publish(after);
+  Vec3 previous = force_before;
+  double largest_step_N = 0.0;
+  for (int i = 0; i < 30; ++i) {
+    const Vec3 f = rig.tick();
+    largest_step_N = std::max(largest_step_N, (f - previous).norm());
+    previous = f;
+  }
+  const Vec3 force_after = rig.device.last_force_N;
+  const double jump_N = (force_after - force_before).norm();
+  EXPECT_GT(jump_N, 0.2);  // the update really changes the force ...
+  // ... but never faster than the cross-fade slope.
+  EXPECT_LE(largest_step_N, jump_N * kDt_s / rig.haptic_spec.crossfade_s + 1e-9);
+  // Steady state is the new model's balance: 400 (x + 0.002) = 1 - 600 x  ->  F = k_v (p - x_dev).
+  const double proxy_z = (1.0 - 400.0 * 0.002) / 1000.0;
+  EXPECT_NEAR(force_after.z(), 400.0 * (proxy_z + 0.002), 1e-9);
+}
+
+TEST(HapticLoop, OverlappingModelUpdatesKeepTheForceContinuous) {
+  Rig rig;
+  rig.device_spec.limits.max_force_rate_N_per_s = 1e9;
+  rig.device_spec.limits.ramp_in_s = 0.01;
+  rig.haptic_spec.crossfade_s = 0.01;
+  rig.haptic_spec.coupling_damping_N_s_per_m = 0.0;
+  rig.build();
+  LocalModel m = test::make_flat_patch();
+  test::set_linear_contact(m, 600.0);
+  press(rig, m, 100);
+  // A new version every tick, alternating force_ref by 1 N: the fade restarts
+  // every tick from the force actually rendered.
+  Vec3 previous = rig.device.last_force_N;
+  for (int i = 0; i < 50; ++i) {
+    m.force_ref_N = Vec3(0, 0, (i % 2) ? 0.0 : -1.0);
+    rig.publish(m);
+    const Vec3 f = rig.tick();
+    EXPECT_LE((f - previous).norm(), 1.0 * 400.0 / 1000.0 * kDt_s / 0.01 + 1e-9);
+    previous = f;
+  }
+}
+
+TEST(HapticLoop, StaleModelRampsTheForceToZeroWithinRampOut) {
+  Rig rig;
+  rig.build();
+  LocalModel m = test::make_flat_patch();
+  press(rig, m, 700);  // past the 0.5 s ramp-in
+  ASSERT_NEAR(rig.device.last_force_N.z(), 0.8, 1e-6);
+  // No more models: after stale_model_s the force ramps out.
+  const auto& limits = rig.device_spec.limits;
+  Vec3 previous = rig.device.last_force_N;
+  int ticks_to_zero = -1;
+  const int stale_ticks = static_cast<int>(std::lround(limits.stale_model_s / kDt_s));
+  for (int i = 1; i <= stale_ticks + 100; ++i) {
+    const Vec3 f = rig.tick();
+    EXPECT_LE((f - previous).norm(), limits.max_force_rate_N_per_s * kDt_s + 1e-12);
+    previous = f;
+    if (ticks_to_zero < 0 && f.isZero(0.0)) ticks_to_zero = i;
+  }
+  ASSERT_GT(ticks_to_zero, 0);
+  EXPECT_LE((ticks_to_zero - stale_ticks) * kDt_s, limits.ramp_out_s + 2 * kDt_s);
+  EXPECT_GE(ticks_to_zero, stale_ticks);  // not before the model is stale
+  EXPECT_GE(rig.loop->stats().stale_model_trips, 1u);
+}
+
+TEST(HapticLoop, DeviceTimeoutRampsTheForceOut) {
+  Rig rig;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.build();
+  press(rig, test::make_flat_patch(), 700);
+  ASSERT_GT(rig.device.last_force_N.norm(), 0.5);
+  rig.device.available = false;
+  for (int i = 0; i < 80; ++i) rig.tick();
+  EXPECT_TRUE(rig.device.last_force_N.isZero(0.0));
+  const HapticStats st = rig.loop->stats();
+  EXPECT_EQ(st.missing_samples, 80u);
+  EXPECT_EQ(st.device_lost_trips, 1u);
+}
+
+TEST(HapticLoop, NonFiniteAndOutOfRangeInputIsRejectedAndCounted) {
+  Rig rig;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.build();
+  press(rig, test::make_flat_patch(), 700);
+  const Vec3 good_force = rig.device.last_force_N;
+  ASSERT_GT(good_force.norm(), 0.5);
+
+  rig.device.position_m = Vec3(std::nan(""), 0, 0);
+  Vec3 f = rig.tick();
+  EXPECT_TRUE(f.allFinite());
+  EXPECT_TRUE(f.isApprox(good_force, 1e-12));  // the last good sample is held
+  rig.device.position_m = Vec3(0, 0, -0.002);
+  rig.device.velocity_m_per_s = Vec3(0, INFINITY, 0);
+  EXPECT_TRUE(rig.tick().allFinite());
+  rig.device.velocity_m_per_s = Vec3(0, 0, 6.0);  // > 5 m/s
+  rig.tick();
+  rig.device.velocity_m_per_s = Vec3::Zero();
+  rig.device.position_m = Vec3(0, 0, -0.05);  // a 48 mm jump in 1 ms: 48 m/s
+  rig.tick();
+  rig.device.position_m = Vec3(1.5, 0, 0);  // outside the 1 m workspace
+  f = rig.tick();
+  EXPECT_TRUE(f.isApprox(good_force, 1e-12));
+  const HapticStats st = rig.loop->stats();
+  EXPECT_EQ(st.rejected_nonfinite, 2u);
+  EXPECT_EQ(st.rejected_speed, 2u);
+  EXPECT_EQ(st.rejected_workspace, 1u);
+  EXPECT_EQ(st.rejected_inputs, 5u);
+  // A device that keeps sending garbage times out: force ramps to zero.
+  rig.device.position_m = Vec3(std::nan(""), 0, 0);
+  for (int i = 0; i < 80; ++i) ASSERT_TRUE(rig.tick().allFinite());
+  EXPECT_TRUE(rig.device.last_force_N.isZero(0.0));
+}
+
+TEST(HapticLoop, StopAndWatchdogRampOutAndReportStopped) {
+  Rig rig;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.build();
+  press(rig, test::make_flat_patch(), 700);
+  rig.loop->trip_watchdog();
+  for (int i = 0; i < 60; ++i) rig.tick();
+  EXPECT_TRUE(rig.device.last_force_N.isZero(0.0));
+  EXPECT_FALSE(rig.loop->stopped());  // a watchdog is not a stop
+  rig.loop->clear_watchdog();
+  for (int i = 0; i < 600; ++i) rig.tick();
+  ASSERT_GT(rig.device.last_force_N.norm(), 0.5);  // ramped back in
+  rig.loop->request_stop();
+  Vec3 previous = rig.device.last_force_N;
+  int ticks = 0;
+  while (!rig.loop->stopped() && ticks < 1000) {
+    const Vec3 f = rig.tick();
+    EXPECT_LE((f - previous).norm(), 300.0 * kDt_s + 1e-12);
+    previous = f;
+    ++ticks;
+  }
+  EXPECT_TRUE(rig.loop->stopped());
+  EXPECT_LE(ticks * kDt_s, rig.device_spec.limits.ramp_out_s + 2 * kDt_s);
+  EXPECT_TRUE(rig.device.last_force_N.isZero(0.0));
+}
+
+TEST(HapticLoop, SamplesHeartbeatAndRingDrops) {
+  Rig rig;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.build();
+  LocalModel m = test::make_flat_patch();
+  m.vertex_node[0] = 77;
+  press(rig, m, 700);
+  const HapticStats st = rig.loop->stats();
+  EXPECT_EQ(st.ticks, 701u);
+  EXPECT_EQ(st.heartbeat, 701u);
+  EXPECT_EQ(st.model_updates, 701u);
+  EXPECT_TRUE(st.contact);
+  ToolSample s, last;
+  std::size_t popped = 0;
+  std::uint64_t previous_ns = 0;
+  while (rig.samples->try_pop(s)) {
+    EXPECT_GT(static_cast<std::uint64_t>(s.time_ns), previous_ns);
+    previous_ns = s.time_ns;
+    last = s;
+    ++popped;
+  }
+  EXPECT_EQ(popped, 701u);
+  EXPECT_TRUE(last.contact);
+  EXPECT_TRUE(last.force_on_object_N.isApprox(-last.force_on_device_N, 1e-15));
+  EXPECT_NEAR(last.contact_weight[0] + last.contact_weight[1] + last.contact_weight[2], 1.0, 1e-12);
+  EXPECT_EQ(last.model_version, rig.version);
+  EXPECT_NEAR(last.proxy_position_m.z(), 0.0, 1e-12);
+  // Nobody drains: the ring fills and further samples are dropped, not blocked on.
+  const std::size_t ticks = ToolSampleRing::kCapacity + 100;
+  for (std::size_t i = 0; i < ticks; ++i) rig.tick();
+  EXPECT_EQ(rig.loop->stats().ring_drops, 100u);
+  // Released: no force on the object.
+  rig.drain();
+  rig.device.position_m = Vec3(0, 0, 0.003);
+  rig.tick();
+  ASSERT_TRUE(rig.samples->try_pop(s));
+  EXPECT_FALSE(s.contact);
+  EXPECT_EQ(s.force_on_object_N, Vec3::Zero());
+}
+
+TEST(HapticLoop, InvalidModelsAreDroppedAndCounted) {
+  Rig rig;
+  rig.build();
+  LocalModel bad = test::make_flat_patch();
+  bad.vertex_m[2].y() = std::nan("");
+  rig.publish(bad);
+  rig.tick();
+  const HapticStats st = rig.loop->stats();
+  EXPECT_EQ(st.rejected_models, 1u);
+  EXPECT_EQ(st.model_updates, 0u);
+  EXPECT_EQ(st.model_version, 0u);
+}
+
+TEST(HapticLoop, FrameTransformMapsPositionsAndForcesInOnePlace) {
+  Rig rig;
+  rig.device_spec.offset_m = {0.0, 0.0, 0.1};
+  rig.device_spec.scale = 2.0;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.build();
+  // Device z = -0.051 -> scene z = 0.1 + 2 * (-0.051) = -0.002.
+  const LocalModel m = test::make_flat_patch();
+  rig.device.position_m = Vec3(0, 0, -0.049);
+  rig.publish(m);
+  rig.tick();
+  rig.device.position_m = Vec3(0, 0, -0.051);
+  for (int i = 0; i < 700; ++i) rig.tick();
+  const ToolSample& s = rig.loop->last_sample();
+  EXPECT_NEAR(s.device_position_m.z(), -0.002, 1e-12);
+  EXPECT_NEAR(s.force_on_device_N.z(), 0.8, 1e-9);      // scene frame: 400 N/m * 2 mm
+  EXPECT_NEAR(rig.device.last_force_N.z(), 1.6, 1e-9);  // device frame: power-consistent, x scale
+}
+
+// A simulated hand presses a stiff-but-linear model, holds, and lets go.
+TEST(HapticLoop, HandPressingALinearModelNeitherOscillatesNorGeneratesEnergy) {
+  for (const bool deformable : {false, true}) {
+    SCOPED_TRACE(deformable ? "deformable K_c = 1000 I" : "rigid patch");
+    config::SimDeviceSpec hand;
+    hand.mode = config::SimDeviceSpec::Mode::kHand;
+    hand.waypoints = {{0.0, {0, 0, 0.01}},  {0.6, {0, 0, 0.01}}, {0.7, {0, 0, -0.01}},
+                      {1.6, {0, 0, -0.01}}, {1.7, {0, 0, 0.02}}, {2.2, {0, 0, 0.02}}};
+    SimDevice device(hand);
+    ASSERT_TRUE(device.start(nullptr));
+    Rig rig;
+    rig.device_spec.limits.stale_model_s = 10.0;
+    rig.build(&device);
+    LocalModel m = test::make_flat_patch();
+    if (deformable) test::set_linear_contact(m, 1000.0);
+    rig.publish(m);
+    std::vector<double> force_z;
+    double min_energy_J = 0.0;
+    for (int i = 0; i < 2200; ++i) {
+      rig.now_ns += kMs;
+      rig.loop->tick(rig.now_ns);
+      rig.drain();
+      const HapticStats st = rig.loop->stats();
+      min_energy_J = std::min(min_energy_J, st.passivity_energy_J);
+      force_z.push_back(rig.loop->last_sample().force_on_device_N.z());
+    }
+    // Peaks of successive half-cycles during the hold (0.75 s .. 1.6 s) never grow.
+    std::vector<double> peaks;
+    for (int i = 751; i < 1600; ++i)
+      if (force_z[i] > force_z[i - 1] && force_z[i] >= force_z[i + 1]) peaks.push_back(force_z[i]);
+    for (std::size_t k = 1; k < peaks.size(); ++k) EXPECT_LE(peaks[k], peaks[k - 1] + 1e-9) << "peak " << k;
+    double max_force = 0.0;
+    for (double f : force_z) max_force = std::max(max_force, f);
+    EXPECT_GT(max_force, 0.5);  // the press really happened
+    EXPECT_LE(max_force, rig.device_spec.limits.max_force_N + 1e-12);
+    // Released and at rest: the hand is free and the force is zero.
+    EXPECT_EQ(force_z.back(), 0.0);
+    // Passivity: the environment never gave back more energy than it took.
+    const HapticStats st = rig.loop->stats();
+    EXPECT_GE(min_energy_J, -1e-6);
+    EXPECT_GE(st.passivity_energy_J, 0.0);
+    EXPECT_LT(st.passivity_energy_J, 0.1);  // bounded: a few mJ of coupling damping
+    std::printf("  %s: peaks %zu, max force %.3f N, passivity energy %.3g J (min %.3g J)\n",
+                deformable ? "deformable" : "rigid", peaks.size(), max_force, st.passivity_energy_J, min_energy_J);
+  }
+}
+
+}  // namespace
+}  // namespace tissue::haptics
