@@ -27,6 +27,30 @@ RenderParams render_params_for(const config::DeviceSpec& device, const config::H
 
 }  // namespace
 
+namespace {
+
+// Copies what a validated model uses: the header, the contact linearisation
+// and the first vertex_count / triangle_count entries. A patch rarely fills
+// the fixed capacity, and the whole struct is several kilobytes: copying it
+// every tick would be most of the switch's cost.
+void copy_used_part(const LocalModel& from, LocalModel* to) noexcept {
+  to->version = from.version;
+  to->sim_time_s = from.sim_time_s;
+  to->built_ns = from.built_ns;
+  to->vertex_count = from.vertex_count;
+  to->triangle_count = from.triangle_count;
+  std::copy_n(from.vertex_m.begin(), from.vertex_count, to->vertex_m.begin());
+  std::copy_n(from.vertex_velocity_m_per_s.begin(), from.vertex_count, to->vertex_velocity_m_per_s.begin());
+  std::copy_n(from.vertex_node.begin(), from.vertex_count, to->vertex_node.begin());
+  std::copy_n(from.triangle.begin(), from.triangle_count, to->triangle.begin());
+  to->in_contact = from.in_contact;
+  to->position_ref_m = from.position_ref_m;
+  to->force_ref_N = from.force_ref_N;
+  to->contact_stiffness_N_per_m = from.contact_stiffness_N_per_m;
+}
+
+}  // namespace
+
 HapticLoop::HapticLoop(Device& device, const config::DeviceSpec& device_spec, const config::HapticSpec& haptic_spec,
                        LocalModelBuffer& models, ToolSampleRing& samples, const HapticLoopOptions& options)
     : device_(device),
@@ -117,7 +141,7 @@ void HapticLoop::tick(std::int64_t now_ns) noexcept {
         bump(rejected_models_);
       } else {
         const int next = 1 - active_;
-        model_slot_[next] = m;
+        copy_used_part(m, &model_slot_[next]);
         renderer_[next].set_model(&model_slot_[next]);
         // Both renderers continue from the same pre-tick proxy state.
         renderer_[next].carry_state_from(renderer_[active_]);
