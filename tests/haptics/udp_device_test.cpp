@@ -431,8 +431,8 @@ TEST(UdpDevice, StreamsWithAFakeDeviceThreadThroughLossAndReturn) {
     while (!quit.load()) {
       if (sending.load()) {
         ++sequence;
+        last_sent_sequence.store(sequence);  // before the send: the reader may see the pose at once
         fake.send(pose_packet(sequence, Vec3(sequence * kStep_m, 0, 0)));
-        last_sent_sequence.store(sequence);
       }
       while (const std::optional<Packet> force = fake.receive(std::chrono::milliseconds(0))) {
         forces_received.fetch_add(1);
