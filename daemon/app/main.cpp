@@ -47,6 +47,10 @@ int main(int argc, char** argv) {
     app.add_option("--set", batch_options.overrides,
                    "override a scene value (or, with --config, a daemon value): key.path=value (repeatable)");
     app.add_option("--report", batch_options.report_path, "write the JSON report to this file");
+    std::string record_name;
+    app.add_option("--record", record_name,
+                   "--config: record the session from the start to this file name in the config's state_dir "
+                   "(HDF5, see docs/session-format.md)");
     bool no_timing = false;
     app.add_flag("--no-timing", no_timing, "leave wall-clock timing out of the report (bit-identical reruns)");
     app.add_option("--progress", batch_options.progress_every_s,
@@ -71,6 +75,7 @@ int main(int argc, char** argv) {
       options.config_path = config_path;
       options.overrides = batch_options.overrides;
       options.duration_s = batch_options.duration_s;
+      options.record_name = record_name;
       tissue::service::Service service(options);
       return service.run();
     }

@@ -67,13 +67,15 @@ struct Command {
   }
 };
 
-constexpr std::array<Command, 7> kCommands{{{"status", {}},
+constexpr std::array<Command, 9> kCommands{{{"status", {}},
                                             {"pause", {}},
                                             {"resume", {}},
                                             {"reset", {}},
                                             {"load_scene", {"path"}},
                                             {"set", {"key", "value"}},
-                                            {"shutdown", {}}}};
+                                            {"shutdown", {}},
+                                            {"record_start", {"name"}},
+                                            {"record_stop", {}}}};
 
 std::string allowed_list(const Command& c) {
   std::string out = "id, cmd";
@@ -113,6 +115,10 @@ json dispatch(const Command& c, const json& request, ControlHandler& handler) {
   if (cmd == "reset") return handler.reset();
   if (cmd == "shutdown") return handler.shutdown();
   if (cmd == "load_scene") return handler.load_scene(required_string(request, "path", cmd, kMaxPathBytes));
+  if (cmd == "record_stop") return handler.record_stop();
+  if (cmd == "record_start")
+    return handler.record_start(request.contains("name") ? required_string(request, "name", cmd, kMaxFileNameBytes)
+                                                         : std::string());
   if (cmd == "set") {
     const std::string key = required_string(request, "key", cmd, kMaxKeyPathBytes);
     if (!is_valid_key_path(key))

@@ -45,16 +45,22 @@ class ControlHandler {
   // Answered before the daemon stops: the service schedules its shutdown and
   // returns.
   virtual nlohmann::json shutdown() = 0;
+  // Starts recording the session to a file in the daemon's state directory.
+  // `name` is empty when the request gave none (the daemon picks one); the
+  // daemon refuses names that are not a plain file name.
+  virtual nlohmann::json record_start(const std::string& name) = 0;
+  virtual nlohmann::json record_stop() = 0;
 };
 
 // Commands the protocol reserves for later issues: the server answers them
 // "unknown command" like any other unknown name until a handler method exists.
-//   record_start, record_stop, export_x3d
+//   export_x3d
 
 // Limits on request content, independent of the line length limit.
 inline constexpr std::size_t kMaxCommandNameBytes = 64;
 inline constexpr std::size_t kMaxKeyPathBytes = 256;
 inline constexpr std::size_t kMaxPathBytes = 4096;
+inline constexpr std::size_t kMaxFileNameBytes = 255;
 // Nesting of "id" and "value": the daemon echoes / forwards them, and
 // printing deeply nested JSON recurses.
 inline constexpr int kMaxJsonDepth = 16;

@@ -3,12 +3,16 @@
 #include <boost/asio/post.hpp>
 #include <cmath>
 #include <exception>
+#include <ctime>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <stdexcept>
 
 #include "config/daemon_config_yaml.hpp"
 #include "control/control_server.hpp"
 #include "control/systemd_notify.hpp"
+#include "record/recorder.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/haptic_side.hpp"
 
@@ -20,6 +24,23 @@ SimThreadOptions sim_options(const config::DaemonConfig& c) {
   SimThreadOptions o;
   o.priority = c.realtime.sched_fifo ? c.realtime.sim_priority : 0;
   return o;
+}
+
+std::string file_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// session-20261123-101500.h5 (UTC), the name when record_start gives none.
+std::string default_session_name() {
+  const std::time_t now = std::time(nullptr);
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  char name[64];
+  std::strftime(name, sizeof name, "session-%Y%m%d-%H%M%S.h5", &utc);
+  return name;
 }
 
 nlohmann::json status_json(const SimStatus& s) {
@@ -91,6 +112,41 @@ void Service::stop_threads() {
   if (haptics_) haptics_->stop();
   haptics_.reset();
   if (sim_) sim_->stop();
+  stop_recording();  // after the producers: everything they pushed is written
+}
+
+void Service::start_recording(const std::string& name) {
+  record::SessionMetadata meta;
+  meta.scene_name = scene_.name;
+  meta.scene_text = file_text(scene_path_);
+  meta.config_text = file_text(options_.config_path);
+  meta.software_version = TISSUE_VERSION;
+  record::RecorderOptions options;
+  options.on_error = [this](const std::string& message) {
+    // Recorder thread: hand the news to the io thread, touch nothing here.
+    boost::asio::post(io_, [this, message] {
+      std::fprintf(options_.err, "tissued: recording stopped: %s (the simulation goes on)\n", message.c_str());
+      std::fflush(options_.err);
+    });
+  };
+  recorder_ = record::Recorder::start(config_.state_dir, name.empty() ? default_session_name() : name, meta, options);
+  if (sim_) sim_->set_recorder(recorder_.get());
+  record_event(static_cast<int>(record::EventKind::kSceneLoaded), "recording " + scene_.name + " from " + scene_path_);
+  std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
+  std::fflush(options_.out);
+}
+
+void Service::stop_recording() {
+  if (!recorder_) return;
+  if (sim_) sim_->set_recorder(nullptr);  // returns once the sim thread no longer uses it
+  recorder_->stop();
+  recorder_.reset();
+}
+
+void Service::record_event(int kind, const std::string& text) {
+  if (!recorder_) return;
+  recorder_->push_event(record::EventSource::kControl,
+                        record::Event::make(recorder_->session_time_s_now(), static_cast<record::EventKind>(kind), text));
 }
 
 void Service::apply_scene(scene::Scene scene) {
@@ -212,6 +268,7 @@ int Service::run() {
     start_threads();
     server_ = std::make_unique<control::ControlServer>(io_, control::ServerSettings::from_spec(config_.control), *this);
     server_->start();
+    if (!options_.record_name.empty()) start_recording(options_.record_name);
   } catch (const std::exception& e) {
     std::fprintf(options_.err, "tissued: %s\n", e.what());
     stop_threads();
@@ -255,6 +312,22 @@ nlohmann::json Service::status() {
   j["scene"] = {{"name", scene_.name}, {"source", scene_path_}, {"tool", scene_.tool.has_value()}};
   j["threads"] = {{"sim", sim_->scheduling()}};
   j["haptics"] = haptics_ ? haptics_->status_json() : nlohmann::json(nullptr);
+  if (recorder_) {
+    const record::RecorderStats r = recorder_->stats();
+    const record::RecorderState state = recorder_->state();
+    j["recording"] = {{"file", recorder_->path()},
+                      {"state", state == record::RecorderState::kRecording ? "recording"
+                                : state == record::RecorderState::kFailed  ? "failed"
+                                                                           : "stopped"},
+                      {"error", recorder_->error()},
+                      {"haptic_rows", r.haptic_rows_written},
+                      {"sim_rows", r.sim_rows_written},
+                      {"mesh_frames", r.mesh_frames_written},
+                      {"drops", r.haptic_drops + r.sim_drops + r.mesh_frame_drops + r.event_drops},
+                      {"bytes", r.bytes_written}};
+  } else {
+    j["recording"] = nullptr;
+  }
   return j;
 }
 
@@ -286,6 +359,7 @@ nlohmann::json Service::load_scene(const std::string& path) {
     throw control::ControlError(e.what());  // names the file, the key and the reason
   }
   scene_path_ = path;
+  record_event(static_cast<int>(record::EventKind::kSceneLoaded), "scene " + scene_.name + " loaded from " + path);
   return {{"scene", scene_.name}, {"source", path}};
 }
 
@@ -314,7 +388,29 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
     throw control::ControlError(e.what());
   }
   options_.overrides.push_back(override);
+  record_event(static_cast<int>(record::EventKind::kParameterChanged), override + " (scene restarted)");
   return {{"key", key}, {"applied", "scene restarted with the new value"}};
+}
+
+nlohmann::json Service::record_start(const std::string& name) {
+  if (recorder_ && recorder_->state() == record::RecorderState::kRecording)
+    throw control::ControlError("already recording to " + recorder_->path() + "; record_stop first");
+  stop_recording();  // a failed earlier recording: close it out
+  try {
+    start_recording(name);
+  } catch (const std::exception& e) {
+    throw control::ControlError(e.what());  // names the file and the reason
+  }
+  return {{"file", recorder_->path()}};
+}
+
+nlohmann::json Service::record_stop() {
+  if (!recorder_) throw control::ControlError("not recording");
+  const std::string path = recorder_->path();
+  const std::string error = recorder_->error();
+  stop_recording();
+  // Stats are gone with the recorder; the file says it all (tissue session info).
+  return {{"file", path}, {"error", error.empty() ? nlohmann::json(nullptr) : nlohmann::json(error)}};
 }
 
 nlohmann::json Service::shutdown() {

@@ -24,6 +24,10 @@
 #include "scene/scene.hpp"
 #include "service/sim_thread.hpp"
 
+namespace tissue::record {
+class Recorder;
+}
+
 namespace tissue::control {
 class ControlServer;
 class SystemdNotifier;
@@ -40,6 +44,7 @@ struct ServiceOptions {
   // the others (material.youngs_modulus_Pa) to the scene.
   std::vector<std::string> overrides;
   double duration_s = 0.0;  // > 0: stop after this many wall seconds (tests, demos)
+  std::string record_name;  // non-empty: record from the start to state_dir/record_name
   std::FILE* out = stdout;  // live status lines
   std::FILE* err = stderr;  // one-line errors
 };
@@ -65,6 +70,8 @@ class Service : public control::ControlHandler {
   nlohmann::json load_scene(const std::string& path) override;
   nlohmann::json set(const std::string& key, const nlohmann::json& value) override;
   nlohmann::json shutdown() override;
+  nlohmann::json record_start(const std::string& name) override;
+  nlohmann::json record_stop() override;
 
  private:
   void load_config();  // throws config::ConfigError / scene::SceneError
@@ -78,6 +85,9 @@ class Service : public control::ControlHandler {
   void arm_status_timer();
   void arm_watchdog_timer();
   void print_status();
+  void start_recording(const std::string& name);  // throws record::RecordError
+  void stop_recording();
+  void record_event(int kind, const std::string& text);  // no-op when not recording
   std::vector<std::string> scene_overrides() const;
   std::vector<std::string> config_overrides() const;
 
@@ -100,6 +110,7 @@ class Service : public control::ControlHandler {
   // The real-time loop's heartbeat as the watchdog sees it: the haptic
   // thread's when there is one, else the sim thread's (copied at each poll).
   std::atomic<std::uint64_t> heartbeat_{0};
+  std::unique_ptr<record::Recorder> recorder_;
   bool stopping_ = false;
   std::string stop_reason_;
 };

@@ -8,6 +8,8 @@
 #include <chrono>
 #include <cstring>
 
+#include "record/recorder.hpp"
+
 namespace tissue::service {
 
 std::int64_t now_ns() {
@@ -48,6 +50,62 @@ void SimThread::stop() {
 void SimThread::replace_runner(std::unique_ptr<SimRunner> runner) {
   std::lock_guard<std::mutex> lock(pending_mutex_);
   pending_ = std::move(runner);
+}
+
+void SimThread::set_recorder(record::Recorder* recorder) {
+  recorder_.store(recorder, std::memory_order_release);
+  if (!thread_.joinable()) return;
+  // The iteration that read the old pointer has ended once the heartbeat has
+  // advanced twice (it increments at the start of every iteration, paused or
+  // not). Bounded: a stalled sim thread must not hang the control side.
+  const std::uint64_t target = heartbeat() + 2;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (heartbeat() < target && !stop_.load() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+}
+
+void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
+  for (const haptics::ToolSample& s : batch_) {
+    record::HapticRow row;
+    row.time_s = recorder.session_time_s(s.time_ns);
+    row.device_position_m = {s.device_position_m.x(), s.device_position_m.y(), s.device_position_m.z()};
+    row.proxy_position_m = {s.proxy_position_m.x(), s.proxy_position_m.y(), s.proxy_position_m.z()};
+    row.force_N = {s.force_on_device_N.x(), s.force_on_device_N.y(), s.force_on_device_N.z()};
+    row.contact = s.contact ? 1 : 0;
+    row.model_version = s.model_version;
+    recorder.push_haptic(row);
+  }
+  const physics::Simulation& sim = runner_->simulation();
+  const double session_s = recorder.session_time_s(t_ns);
+  record::SimRow row;
+  row.time_s = session_s;
+  row.sim_time_s = sim.time_s();
+  row.real_time_factor = rtf_;
+  row.step_ms = step_ms_last_;
+  row.nodes = sim.body().mesh().node_count();
+  row.tets = sim.body().mesh().tet_count();
+  row.springs = sim.body().mesh().edge_count();
+  row.refines = sim.counters().splits;
+  row.merges = sim.counters().merges;
+  row.kinetic_J = sim.kinetic_energy_J();
+  row.elastic_J = sim.elastic_energy_J();
+  recorder.push_sim(row);
+
+  if (!recorder.mesh_frame_due(session_s)) return;
+  mesh::extract_surface(sim.body().mesh(), &frame_surface_);
+  frame_vertices_m_.resize(frame_surface_.vertex_nodes.size());
+  frame_levels_.resize(frame_surface_.vertex_nodes.size());
+  for (std::size_t i = 0; i < frame_surface_.vertex_nodes.size(); ++i) {
+    const physics::Vec3& x = sim.body().x_m[frame_surface_.vertex_nodes[i]];
+    frame_vertices_m_[i] = {x.x(), x.y(), x.z()};
+    frame_levels_[i] = sim.body().mesh().node(frame_surface_.vertex_nodes[i]).depth;
+  }
+  record::MeshFrameView frame;
+  frame.time_s = session_s;
+  frame.vertices_m = frame_vertices_m_;
+  frame.triangles = frame_surface_.triangles;
+  frame.vertex_level = frame_levels_;
+  recorder.push_mesh_frame(frame);
 }
 
 std::string SimThread::scheduling() const {
@@ -119,6 +177,7 @@ void SimThread::run() {
   std::int64_t last_status_ns = 0;
   while (!stop_.load(std::memory_order_relaxed)) {
     heartbeat_.fetch_add(1, std::memory_order_relaxed);
+    record::Recorder* const recorder = recorder_.load(std::memory_order_acquire);
     // A new runner (reset / load / set) takes over between steps.
     if (std::unique_lock<std::mutex> lock(pending_mutex_, std::try_to_lock); lock.owns_lock() && pending_) {
       runner_ = std::move(pending_);
@@ -157,6 +216,7 @@ void SimThread::run() {
     step_ms_last_ = 1e-6 * static_cast<double>(t1 - t0);
     step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
     publish_model(t1, rebuilt);
+    if (recorder) record(*recorder, t1);
     if (t1 - last_status_ns >= static_cast<std::int64_t>(options_.status_every_s * 1e9)) {
       publish_status(t1);
       last_status_ns = t1;

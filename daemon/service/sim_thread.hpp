@@ -23,7 +23,12 @@
 #include "concurrency/spsc_ring.hpp"
 #include "haptics/haptic_loop.hpp"
 #include "haptics/local_model.hpp"
+#include "mesh/surface.hpp"
 #include "service/sim_runner.hpp"
+
+namespace tissue::record {
+class Recorder;
+}
 
 namespace tissue::service {
 
@@ -85,6 +90,13 @@ class SimThread {
   // it out: it keeps its rate and ramps the force out on a stale model.
   void inject_stall(std::chrono::nanoseconds duration) { stall_ns_.store(duration.count(), std::memory_order_relaxed); }
 
+  // Recording: the sim thread is the single producer of the session's
+  // haptic rows (from the tool samples it drains anyway), sim rows and mesh
+  // frames. Returns once the sim thread has taken the change, so after
+  // set_recorder(nullptr) the old recorder is no longer touched and may be
+  // stopped and destroyed. Any thread but the sim thread.
+  void set_recorder(record::Recorder* recorder);
+
   // One reader (the service's io thread).
   SimStatus status() { return *status_.read().value; }
   // Advances every loop iteration, paused or not: the watchdog's heartbeat
@@ -97,6 +109,7 @@ class SimThread {
   void run();
   void publish_model(std::int64_t now_ns, bool rebuilt);
   void publish_status(std::int64_t now_ns);
+  void record(record::Recorder& recorder, std::int64_t now_ns);
 
   std::unique_ptr<SimRunner> runner_;
   ToolSampleRing* samples_;
@@ -108,6 +121,7 @@ class SimThread {
   std::atomic<bool> paused_{false};
   std::atomic<std::uint64_t> heartbeat_{0};
   std::atomic<std::int64_t> stall_ns_{0};
+  std::atomic<record::Recorder*> recorder_{nullptr};
 
   std::mutex pending_mutex_;  // guards pending_ only; the sim thread only try_locks
   std::unique_ptr<SimRunner> pending_;
@@ -130,6 +144,11 @@ class SimThread {
   std::int64_t window_start_ns_ = 0;
   double step_ms_last_ = 0.0, step_ms_max_ = 0.0;
   double rtf_ = 0.0;
+  // Mesh frame scratch (sim thread): reused, so a frame allocates only when
+  // the surface grows.
+  mesh::SurfaceMesh frame_surface_;
+  std::vector<std::array<double, 3>> frame_vertices_m_;
+  std::vector<std::uint8_t> frame_levels_;
 };
 
 // steady_clock now in nanoseconds (the clock every timestamp here uses).

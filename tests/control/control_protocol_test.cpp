@@ -82,10 +82,25 @@ TEST(ControlProtocol, MalformedRequestsAreAnsweredNotThrown) {
   EXPECT_EQ(h.call_count(), 0u);
 }
 
+TEST(ControlProtocol, RecordCommandsTakeAnOptionalName) {
+  FakeHandler h;
+  EXPECT_EQ(handle(R"({"id":1,"cmd":"record_start","name":"s1.h5"})", h).at("result"), json({{"file", "s1.h5"}}));
+  EXPECT_EQ(handle(R"({"id":2,"cmd":"record_start"})", h).at("result"), json({{"file", ""}}));
+  EXPECT_TRUE(handle(R"({"id":3,"cmd":"record_stop"})", h).at("ok").get<bool>());
+  expect_error(handle(R"({"id":4,"cmd":"record_start","name":7})", h), 4, "must be a string, got a number");
+  expect_error(handle(R"({"id":5,"cmd":"record_start","name":""})", h), 5, "must not be empty");
+  expect_error(handle(json{{"id", 6}, {"cmd", "record_start"}, {"name", std::string(300, 'n')}}.dump(), h), 6,
+               "too long");
+  const auto calls = h.calls();
+  ASSERT_EQ(calls.size(), 3u);
+  EXPECT_EQ(calls[0].cmd, "record_start");
+  EXPECT_EQ(calls[2].cmd, "record_stop");
+}
+
 TEST(ControlProtocol, UnknownAndReservedCommands) {
   FakeHandler h;
   EXPECT_EQ(handle_request_line(R"({"id":9,"cmd":"x"})", h), R"({"id":9,"ok":false,"error":"unknown command 'x'"})");
-  for (const char* reserved : {"record_start", "record_stop", "export_x3d"})
+  for (const char* reserved : {"export_x3d"})
     expect_error(handle(json{{"id", 1}, {"cmd", reserved}}.dump(), h), 1,
                  std::string("unknown command '") + reserved + "'");
   // A huge name is cut in the message.

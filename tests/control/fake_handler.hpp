@@ -35,6 +35,10 @@ class FakeHandler : public ControlHandler {
     return record("set", {{"key", key}, {"value", value}}, {{"key", key}, {"value", value}});
   }
   nlohmann::json shutdown() override { return record("shutdown", nlohmann::json::object(), nullptr); }
+  nlohmann::json record_start(const std::string& name) override {
+    return record("record_start", {{"name", name}}, {{"file", name}});
+  }
+  nlohmann::json record_stop() override { return record("record_stop", nlohmann::json::object(), nullptr); }
 
   // The status result: depends on how many calls came before, so a test can
   // tell a fresh answer from a replayed one.

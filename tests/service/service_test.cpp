@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -15,6 +16,7 @@
 #include "control/control_client.hpp"
 #include "control/fake_systemd.hpp"
 #include "control/temp_dir.hpp"
+#include "record/session_tools.hpp"
 
 namespace tissue::service {
 namespace {
@@ -29,10 +31,11 @@ std::string scene_file(const std::string& name) { return std::string(TISSUE_SOUR
 
 // A config like config/tissued.yaml, but quick (status every 0.1 s), without
 // real-time requests, the socket in `dir`.
-std::string write_config(const TempDir& dir, const std::string& scene, const std::string& device_kind = "sim") {
+std::string write_config(const TempDir& dir, const std::string& scene, const std::string& device_kind = "sim",
+                         const std::string& state_dir = "") {
   const std::string path = dir / "tissued.yaml";
   std::ofstream(path) << "scene: " << scene << "\n"
-                      << "state_dir: " << dir.path() << "\n"
+                      << "state_dir: " << (state_dir.empty() ? dir.path() : state_dir) << "\n"
                       << "status_interval_s: 0.1\n"
                       << "device:\n  kind: " << device_kind << "\n"
                       << "  sim:\n    mode: hand\n    loop: true\n    waypoints:\n"
@@ -189,6 +192,60 @@ TEST(Service, SpeaksTheSystemdNotifyProtocol) {
   EXPECT_TRUE(wait_for("READY=1"));
   ASSERT_EQ(::raise(SIGTERM), 0);
   EXPECT_TRUE(wait_for("STOPPING=1"));
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+
+// Recording over the control socket: a session file in the state directory
+// with the haptic ticks, sim rows and mesh frames of the run; names that
+// would leave the state directory are refused and the daemon keeps serving.
+TEST(Service, RecordsASessionOnRequest) {
+  TempDir dir;
+  Running run(write_config(dir, scene_file("cantilever.yaml")));
+  ControlClient client = connect(dir / "ctl.sock");
+  const nlohmann::json bad = client.call("record_start", {{"name", "../escape.h5"}});
+  EXPECT_FALSE(bad["ok"].get<bool>()) << bad.dump();
+  EXPECT_FALSE(std::filesystem::exists(dir / "../escape.h5"));
+  EXPECT_FALSE(client.call("record_stop")["ok"].get<bool>());  // nothing to stop
+
+  const nlohmann::json started = client.call("record_start", {{"name", "s1.h5"}});
+  ASSERT_TRUE(started["ok"].get<bool>()) << started.dump();
+  EXPECT_FALSE(client.call("record_start", {{"name", "s2.h5"}})["ok"].get<bool>());  // one at a time
+  std::this_thread::sleep_for(600ms);
+  const nlohmann::json status = client.call("status")["result"]["recording"];
+  EXPECT_EQ(status["state"], "recording") << status.dump();
+  ASSERT_TRUE(client.call("load_scene", {{"path", scene_file("cantilever.yaml")}})["ok"].get<bool>());
+  const nlohmann::json stopped = client.call("record_stop");
+  ASSERT_TRUE(stopped["ok"].get<bool>()) << stopped.dump();
+  EXPECT_TRUE(client.call("status")["result"]["recording"].is_null());
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+
+  const record::SessionInfo info = record::read_session_info(dir / "s1.h5");
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.scene_name, "cantilever");
+  EXPECT_GT(info.rows.haptic_rows, 300u);  // ~600 ticks at 1 kHz; generous for sanitizers
+  EXPECT_GT(info.rows.sim_rows, 300u);
+  EXPECT_GT(info.rows.mesh_frames, 5u);   // 30 Hz
+  EXPECT_GE(info.rows.events, 2u);        // recording started, scene loaded
+}
+
+TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
+  TempDir dir;
+  // The state "directory" is a regular file: nothing can be created in it,
+  // whoever we are (CI runs as root, which ignores permission bits).
+  const std::string not_a_dir = dir / "state-is-a-file";
+  std::ofstream(not_a_dir) << "x";
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", not_a_dir));
+  ControlClient client = connect(dir / "ctl.sock");
+  const nlohmann::json r = client.call("record_start", {{"name", "s.h5"}});
+  EXPECT_FALSE(r["ok"].get<bool>()) << r.dump();
+  EXPECT_NE(r["error"].get<std::string>().find("state-is-a-file"), std::string::npos) << r.dump();
+  const nlohmann::json status = client.call("status");
+  EXPECT_TRUE(status["ok"].get<bool>());
+  EXPECT_TRUE(status["result"]["recording"].is_null());
+  EXPECT_GT(status["result"]["steps"].get<std::int64_t>(), 0);
+  client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
