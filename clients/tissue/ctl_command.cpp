@@ -124,7 +124,8 @@ Subcommand add_ctl_command(CLI::App& parent) {
   CLI::App* app = parent.add_subcommand("ctl", "Send one command to a running tissued and print the result");
   app->footer(
       "Usage: tissue ctl [--socket PATH | --tcp PORT] [--timeout S] CMD [ARGS...]\n"
-      "Commands: status, pause, resume, reset, load_scene PATH, set KEY VALUE, shutdown.\n"
+      "Commands: status, pause, resume, reset, load_scene PATH, set KEY VALUE, shutdown,\n"
+      "          record_start [name=FILE.h5], record_stop.\n"
       "Exit codes: 0 ok, 1 the daemon answered an error, 2 bad arguments, 3 cannot connect.");
   auto* socket_opt =
       app->add_option("--socket", options->socket_path, "Unix socket of the daemon")->capture_default_str();
