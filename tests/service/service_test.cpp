@@ -195,7 +195,6 @@ TEST(Service, SpeaksTheSystemdNotifyProtocol) {
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
-
 // Recording over the control socket: a session file in the state directory
 // with the haptic ticks, sim rows and mesh frames of the run; names that
 // would leave the state directory are refused and the daemon keeps serving.
@@ -226,8 +225,8 @@ TEST(Service, RecordsASessionOnRequest) {
   EXPECT_EQ(info.scene_name, "cantilever");
   EXPECT_GT(info.rows.haptic_rows, 300u);  // ~600 ticks at 1 kHz; generous for sanitizers
   EXPECT_GT(info.rows.sim_rows, 300u);
-  EXPECT_GT(info.rows.mesh_frames, 5u);   // 30 Hz
-  EXPECT_GE(info.rows.events, 2u);        // recording started, scene loaded
+  EXPECT_GT(info.rows.mesh_frames, 5u);  // 30 Hz
+  EXPECT_GE(info.rows.events, 2u);       // recording started, scene loaded
 }
 
 TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
