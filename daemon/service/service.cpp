@@ -2,8 +2,8 @@
 
 #include <boost/asio/post.hpp>
 #include <cmath>
-#include <exception>
 #include <ctime>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -145,8 +145,8 @@ void Service::stop_recording() {
 
 void Service::record_event(int kind, const std::string& text) {
   if (!recorder_) return;
-  recorder_->push_event(record::EventSource::kControl,
-                        record::Event::make(recorder_->session_time_s_now(), static_cast<record::EventKind>(kind), text));
+  recorder_->push_event(record::EventSource::kControl, record::Event::make(recorder_->session_time_s_now(),
+                                                                           static_cast<record::EventKind>(kind), text));
 }
 
 void Service::apply_scene(scene::Scene scene) {

@@ -92,20 +92,33 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
   recorder.push_sim(row);
 
   if (!recorder.mesh_frame_due(session_s)) return;
-  mesh::extract_surface(sim.body().mesh(), &frame_surface_);
-  frame_vertices_m_.resize(frame_surface_.vertex_nodes.size());
-  frame_levels_.resize(frame_surface_.vertex_nodes.size());
-  for (std::size_t i = 0; i < frame_surface_.vertex_nodes.size(); ++i) {
-    const physics::Vec3& x = sim.body().x_m[frame_surface_.vertex_nodes[i]];
-    frame_vertices_m_[i] = {x.x(), x.y(), x.z()};
-    frame_levels_[i] = sim.body().mesh().node(frame_surface_.vertex_nodes[i]).depth;
-  }
+  const MeshSnapshot& snap = build_snapshot();
   record::MeshFrameView frame;
   frame.time_s = session_s;
-  frame.vertices_m = frame_vertices_m_;
-  frame.triangles = frame_surface_.triangles;
-  frame.vertex_level = frame_levels_;
-  recorder.push_mesh_frame(frame);
+  frame.vertices_m = snap.vertices_m;
+  frame.triangles = snap.triangles;
+  frame.vertex_level = snap.vertex_level;
+  recorder.push_mesh_frame(frame);  // copies: the snapshot is published after this
+  snapshots_.publish();
+  last_snapshot_ns_ = t_ns;
+}
+
+MeshSnapshot& SimThread::build_snapshot() {
+  const physics::Simulation& sim = runner_->simulation();
+  mesh::extract_surface(sim.body().mesh(), &frame_surface_);
+  MeshSnapshot& snap = snapshots_.write_buffer();
+  const std::size_t n = frame_surface_.vertex_nodes.size();
+  snap.sequence = ++snapshot_sequence_;
+  snap.sim_time_s = sim.time_s();
+  snap.vertices_m.resize(n);
+  snap.vertex_level.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const physics::Vec3& x = sim.body().x_m[frame_surface_.vertex_nodes[i]];
+    snap.vertices_m[i] = {x.x(), x.y(), x.z()};
+    snap.vertex_level[i] = sim.body().mesh().node(frame_surface_.vertex_nodes[i]).depth;
+  }
+  snap.triangles.assign(frame_surface_.triangles.begin(), frame_surface_.triangles.end());
+  return snap;
 }
 
 std::string SimThread::scheduling() const {
@@ -217,6 +230,11 @@ void SimThread::run() {
     step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
     publish_model(t1, rebuilt);
     if (recorder) record(*recorder, t1);
+    if (t1 - last_snapshot_ns_ >= static_cast<std::int64_t>(options_.snapshot_every_s * 1e9)) {
+      build_snapshot();
+      snapshots_.publish();
+      last_snapshot_ns_ = t1;
+    }
     if (t1 - last_status_ns >= static_cast<std::int64_t>(options_.status_every_s * 1e9)) {
       publish_status(t1);
       last_status_ns = t1;

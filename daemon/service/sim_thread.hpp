@@ -57,12 +57,23 @@ struct SimStatus {
   char last_error[256] = {};  // the newest failed step's reason (NUL-terminated)
 };
 
+// The surface as the sim thread last saw it, for readers off the hot
+// threads (export, and the publishers to come). Positions in the scene frame.
+struct MeshSnapshot {
+  std::uint64_t sequence = 0;  // 0: none yet
+  double sim_time_s = 0.0;
+  std::vector<std::array<double, 3>> vertices_m;
+  std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise seen from outside
+  std::vector<std::uint8_t> vertex_level;               // bisection depth of the node (0: lattice node)
+};
+
 struct SimThreadOptions {
-  double max_lag_s = 0.1;          // behind by more than this: re-anchor the schedule
-  double shed_after_lag_s = 0.01;  // behind by more than this: pause adaptation
-  double status_every_s = 0.05;    // publish SimStatus this often (wall)
-  int priority = 0;                // SCHED_FIFO priority to try (0: leave the policy alone)
-  bool pace = true;                // false: as fast as possible (tests)
+  double max_lag_s = 0.1;                // behind by more than this: re-anchor the schedule
+  double shed_after_lag_s = 0.01;        // behind by more than this: pause adaptation
+  double status_every_s = 0.05;          // publish SimStatus this often (wall)
+  int priority = 0;                      // SCHED_FIFO priority to try (0: leave the policy alone)
+  bool pace = true;                      // false: as fast as possible (tests)
+  double snapshot_every_s = 1.0 / 30.0;  // MeshSnapshot rate (wall); recording frames come on top
 };
 
 class SimThread {
@@ -99,6 +110,9 @@ class SimThread {
 
   // One reader (the service's io thread).
   SimStatus status() { return *status_.read().value; }
+  // One reader (the service's io thread): the newest surface, stable until the
+  // next call.
+  const MeshSnapshot& snapshot() { return *snapshots_.read().value; }
   // Advances every loop iteration, paused or not: the watchdog's heartbeat
   // when there is no haptic thread.
   std::uint64_t heartbeat() const { return heartbeat_.load(std::memory_order_relaxed); }
@@ -110,6 +124,8 @@ class SimThread {
   void publish_model(std::int64_t now_ns, bool rebuilt);
   void publish_status(std::int64_t now_ns);
   void record(record::Recorder& recorder, std::int64_t now_ns);
+  // Fills the snapshot write buffer from the current mesh.
+  MeshSnapshot& build_snapshot();
 
   std::unique_ptr<SimRunner> runner_;
   ToolSampleRing* samples_;
@@ -127,6 +143,7 @@ class SimThread {
   std::unique_ptr<SimRunner> pending_;
 
   concurrency::LatestValue<SimStatus> status_;
+  concurrency::LatestValue<MeshSnapshot> snapshots_;
   mutable std::mutex scheduling_mutex_;
   std::string scheduling_;
 
@@ -144,11 +161,11 @@ class SimThread {
   std::int64_t window_start_ns_ = 0;
   double step_ms_last_ = 0.0, step_ms_max_ = 0.0;
   double rtf_ = 0.0;
-  // Mesh frame scratch (sim thread): reused, so a frame allocates only when
+  // Surface scratch (sim thread): reused, so a snapshot allocates only when
   // the surface grows.
   mesh::SurfaceMesh frame_surface_;
-  std::vector<std::array<double, 3>> frame_vertices_m_;
-  std::vector<std::uint8_t> frame_levels_;
+  std::uint64_t snapshot_sequence_ = 0;
+  std::int64_t last_snapshot_ns_ = 0;
 };
 
 // steady_clock now in nanoseconds (the clock every timestamp here uses).

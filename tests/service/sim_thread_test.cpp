@@ -177,5 +177,25 @@ TEST(SimThread, AStallKeepsTheHapticRateAndRampsTheForceOut) {
   EXPECT_EQ(loop.stats().force_N, 0.0);
 }
 
+// The surface snapshot for readers off the hot threads: published at its
+// rate, consistent (indices in range, one level per vertex), moving on.
+TEST(SimThread, PublishesSurfaceSnapshots) {
+  SimThreadOptions options;
+  options.snapshot_every_s = 0.01;
+  SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr, options);
+  EXPECT_EQ(thread.snapshot().sequence, 0u);
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return thread.snapshot().sequence > 0; }));
+  const MeshSnapshot first = thread.snapshot();
+  ASSERT_TRUE(wait_for([&] { return thread.snapshot().sequence > first.sequence + 3; }));
+  const MeshSnapshot& s = thread.snapshot();
+  EXPECT_GT(s.sim_time_s, first.sim_time_s);
+  ASSERT_FALSE(s.triangles.empty());
+  EXPECT_EQ(s.vertex_level.size(), s.vertices_m.size());
+  for (const auto& t : s.triangles)
+    for (std::uint32_t v : t) EXPECT_LT(v, s.vertices_m.size());
+  thread.stop();
+}
+
 }  // namespace
 }  // namespace tissue::service
