@@ -7,7 +7,9 @@
 #include <vector>
 
 #include "tissue/ctl_command.hpp"
+#include "tissue/session_command.hpp"
 #include "tissue/subcommand.hpp"
+#include "tissue/x3d_command.hpp"
 
 int main(int argc, char** argv) {
   using namespace tissue::cli;
@@ -15,6 +17,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   std::vector<Subcommand> subcommands;
   subcommands.push_back(add_ctl_command(app));
+  subcommands.push_back(add_session_command(app));
+  subcommands.push_back(add_x3d_command(app));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,13 @@
+// `tissue session info|repair|xdmf FILE`: offline tools for recorded
+// sessions (docs/session-format.md). They read files only; no daemon needed.
+// Exit codes: 0 ok, 1 the file is unreadable / corrupt / not a session
+// (the message names the file and what is wrong), 2 bad arguments.
+#pragma once
+
+#include "tissue/subcommand.hpp"
+
+namespace tissue::cli {
+
+Subcommand add_session_command(CLI::App& parent);
+
+}  // namespace tissue::cli

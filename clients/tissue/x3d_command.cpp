@@ -1,0 +1,179 @@
+#include "tissue/x3d_command.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "export/frame_source.hpp"
+#include "export/x3d.hpp"
+
+namespace tissue::cli {
+
+namespace {
+
+constexpr int kExitBadInput = 1;  // same value as kExitDaemonError: "the thing you asked about is broken"
+
+struct X3dCommandOptions {
+  std::string session;
+  std::optional<double> time_s;
+  std::optional<std::size_t> frame;
+  bool animate = false;
+  std::optional<double> from_s, to_s;
+  std::string colour = "level";
+  std::string out;
+};
+
+// Bad arguments, found only once the source is open (e.g. a frame number
+// past the end): reported like parse errors, exit 2.
+struct BadArguments : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s.precision(17);
+  s << v;
+  return s.str();
+}
+
+// Writes next to the target and renames, so a failed export never leaves a
+// truncated OUT behind (and never clobbers a good one).
+void write_file(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f) throw x3d::SourceError("cannot write '" + tmp + "': " + std::strerror(errno));
+    f.write(text.data(), static_cast<std::streamsize>(text.size()));
+    f.close();
+    if (!f) {
+      const int err = errno;
+      std::remove(tmp.c_str());
+      throw x3d::SourceError("cannot write '" + tmp + "': " + std::strerror(err));
+    }
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    std::remove(tmp.c_str());
+    throw x3d::SourceError("cannot write '" + path + "': " + std::strerror(err));
+  }
+}
+
+std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o, const x3d::X3dOptions& xo,
+                            std::string* summary) {
+  const std::size_t n = source.frame_count();
+  if (n == 0) throw x3d::SourceError(source.name() + ": the session holds no complete mesh frame");
+  std::size_t k = n - 1;
+  if (o.frame) {
+    if (*o.frame >= n)
+      throw BadArguments("--frame " + std::to_string(*o.frame) + ": " + source.name() + " has " + std::to_string(n) +
+                         " frames (0 to " + std::to_string(n - 1) + ")");
+    k = *o.frame;
+  } else if (o.time_s) {
+    const auto at = x3d::frame_at_time(source, *o.time_s);
+    if (!at)
+      throw BadArguments("--time " + fmt(*o.time_s) + ": " + source.name() + " has no frame that early (first at " +
+                         fmt(source.frame_time_s(0)) + " s)");
+    k = *at;
+  }
+  x3d::SurfaceFrame frame = source.read_frame(k);
+  try {
+    std::string text = x3d::x3d_snapshot(frame, xo);
+    *summary = "frame " + std::to_string(k) + " at t=" + fmt(frame.time_s) + " s, " +
+               std::to_string(frame.vertices_m.size()) + " vertices, " + std::to_string(frame.triangles.size()) +
+               " triangles";
+    return text;
+  } catch (const x3d::X3dInputError& e) {
+    throw x3d::SourceError(source.name() + ": frame " + std::to_string(k) + ": " + e.what());
+  }
+}
+
+std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& o, const x3d::X3dOptions& xo,
+                             std::string* summary) {
+  const std::size_t n = source.frame_count();
+  if (n == 0) throw x3d::SourceError(source.name() + ": the session holds no complete mesh frame");
+  const double t0 = o.from_s.value_or(source.frame_time_s(0));
+  const double t1 = o.to_s.value_or(source.frame_time_s(n - 1));
+  if (!(t0 < t1)) throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) + ": the window is empty");
+  std::vector<std::size_t> picked = x3d::frames_in_window(source, t0, t1);
+  std::vector<x3d::SurfaceFrame> frames;
+  std::size_t skipped_empty = 0;
+  for (const std::size_t k : picked) {
+    x3d::SurfaceFrame f = source.read_frame(k);
+    // A session may record an empty surface (before a scene is loaded);
+    // there is nothing to draw for it.
+    if (f.vertices_m.empty() || f.triangles.empty()) {
+      ++skipped_empty;
+      continue;
+    }
+    frames.push_back(std::move(f));
+  }
+  if (frames.size() < 2)
+    throw BadArguments("--animate: " + source.name() + " has " + std::to_string(frames.size()) +
+                       " non-empty frames between " + fmt(t0) + " s and " + fmt(t1) + " s; an animation needs 2");
+  try {
+    std::string text = x3d::x3d_animation(frames, xo);
+    const std::size_t runs = x3d::animation_runs(frames, xo).size();
+    *summary = std::to_string(frames.size()) + " frames from t=" + fmt(frames.front().time_s) + " s to " +
+               fmt(frames.back().time_s) + " s, " + std::to_string(runs) + " topology run(s)";
+    if (skipped_empty > 0) *summary += ", " + std::to_string(skipped_empty) + " empty frames skipped";
+    return text;
+  } catch (const x3d::X3dInputError& e) {
+    throw x3d::SourceError(source.name() + ": " + e.what());
+  }
+}
+
+int run_x3d(const X3dCommandOptions& o) {
+  x3d::X3dOptions xo;
+  xo.colour = o.colour == "strain" ? x3d::ColourMode::kStrain : x3d::ColourMode::kLevel;
+  try {
+    // The only source for now; live subscribers plug in here as FrameSources.
+    std::unique_ptr<x3d::FrameSource> source = x3d::open_session_source(o.session);
+    if (xo.colour == x3d::ColourMode::kStrain && !source->has_strain())
+      throw BadArguments("--colour strain: " + source->name() +
+                         " stores no per-vertex strain energy (session format version 1); use --colour level");
+    xo.title = "tissue: " + o.session;
+    std::string summary;
+    const std::string text =
+        o.animate ? export_animation(*source, o, xo, &summary) : export_snapshot(*source, o, xo, &summary);
+    write_file(o.out, text);
+    std::cout << "wrote " << o.out << ": " << summary << "\n";
+    return kExitOk;
+  } catch (const BadArguments& e) {
+    std::cerr << "tissue x3d: " << e.what() << "\n";
+    return kExitBadArguments;
+  } catch (const x3d::SourceError& e) {
+    std::cerr << "tissue x3d: " << e.what() << "\n";
+    return kExitBadInput;
+  }
+}
+
+}  // namespace
+
+Subcommand add_x3d_command(CLI::App& parent) {
+  auto o = std::make_shared<X3dCommandOptions>();
+  CLI::App* cmd = parent.add_subcommand("x3d", "Export the tissue surface of a recorded session as X3D (XML)");
+  cmd->add_option("--session", o->session, "Session file (.h5) to read frames from")->required();
+  CLI::Option* time = cmd->add_option("--time", o->time_s, "Snapshot of the frame shown at session time T (s)");
+  CLI::Option* frame = cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)");
+  time->excludes(frame);
+  CLI::Option* animate = cmd->add_flag("--animate", o->animate, "Animation over --from..--to (default: all frames)");
+  animate->excludes(time)->excludes(frame);
+  cmd->add_option("--from", o->from_s, "Animation window start, session time (s)")->needs(animate);
+  cmd->add_option("--to", o->to_s, "Animation window end, session time (s)")->needs(animate);
+  cmd->add_option("--colour", o->colour, "Vertex colours: level (bisection depth) or strain (energy density)")
+      ->check(CLI::IsMember({"level", "strain"}));
+  cmd->add_option("-o,--output", o->out, "Output file (.x3d)")->required();
+  return Subcommand{cmd, [o] { return run_x3d(*o); }};
+}
+
+}  // namespace tissue::cli

@@ -1,0 +1,296 @@
+#include "record/recorder.hpp"
+
+#include <sys/statvfs.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+#include "record/session_writer.hpp"
+
+namespace tissue::record {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+Clock::duration seconds(double s) {
+  return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+}
+
+}  // namespace
+
+std::unique_ptr<Recorder> Recorder::start(const std::string& state_dir, const std::string& name,
+                                          const SessionMetadata& metadata, RecorderOptions options) {
+  if (!(options.flush_interval_s > 0.0 && options.flush_interval_s <= 1.0))
+    throw RecordError("recorder: flush_interval_s must be in (0, 1] s, got " +
+                      std::to_string(options.flush_interval_s));
+  if (!(options.poll_interval_s > 0.0 && options.poll_interval_s <= options.flush_interval_s))
+    throw RecordError("recorder: poll_interval_s must be in (0, flush_interval_s]");
+  if (!(options.mesh_frame_interval_s >= 0.0) || !std::isfinite(options.mesh_frame_interval_s))
+    throw RecordError("recorder: mesh_frame_interval_s must be >= 0");
+  if (options.mesh_frame_buffers < 2 || options.mesh_frame_buffers > kMaxFrameBuffers)
+    throw RecordError("recorder: mesh_frame_buffers must be in [2, 16]");
+  auto writer = SessionWriter::open_in(state_dir, name, metadata);
+  auto recorder = std::unique_ptr<Recorder>(new Recorder(std::move(writer), std::move(options)));
+  recorder->thread_ = std::thread([r = recorder.get()] { r->run(); });
+  return recorder;
+}
+
+Recorder::Recorder(std::unique_ptr<SessionWriter> writer, RecorderOptions options)
+    : options_(std::move(options)), writer_(std::move(writer)), path_(writer_->path()), start_(Clock::now()) {
+  // Everything the producers touch is allocated here, never later.
+  frames_.resize(options_.mesh_frame_buffers);
+  for (std::uint32_t i = 0; i < frames_.size(); ++i) {
+    frames_[i].vertices_m.resize(options_.mesh_max_vertices);
+    frames_[i].triangles.resize(options_.mesh_max_triangles);
+    frames_[i].vertex_level.resize(options_.mesh_max_vertices);
+    free_frames_.try_push(i);
+  }
+  pending_haptic_.reserve(2 * kHapticRingRows);
+  pending_sim_.reserve(2 * kSimRingRows);
+  pending_events_.reserve(2 * kEventSourceCount * kEventRingRows);
+  next_flush_ = start_ + seconds(options_.flush_interval_s);
+  next_space_check_ = start_;
+}
+
+Recorder::~Recorder() { stop(); }
+
+bool Recorder::push_haptic(const HapticRow& row) noexcept {
+  if (!accepting()) {
+    refused_haptic_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  return haptic_ring_.try_push(row);
+}
+
+bool Recorder::push_sim(const SimRow& row) noexcept {
+  if (!accepting()) {
+    refused_sim_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  return sim_ring_.try_push(row);
+}
+
+bool Recorder::push_event(EventSource source, const Event& event) noexcept {
+  const int s = static_cast<int>(source);
+  if (s < 0 || s >= kEventSourceCount || !accepting()) {
+    refused_events_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  return event_rings_[s].try_push(event);
+}
+
+bool Recorder::mesh_frame_due(double time_s) const noexcept { return accepting() && time_s >= next_frame_due_s_; }
+
+bool Recorder::push_mesh_frame(const MeshFrameView& frame) noexcept {
+  const auto drop = [&] {
+    mesh_frame_drops_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  };
+  if (!accepting()) return drop();
+  if (frame.vertices_m.size() > options_.mesh_max_vertices || frame.triangles.size() > options_.mesh_max_triangles) {
+    mesh_frames_too_big_.fetch_add(1, std::memory_order_relaxed);
+    return drop();
+  }
+  std::uint32_t index = 0;
+  if (!free_frames_.try_pop(index)) return drop();
+  FrameBuffer& b = frames_[index];
+  b.time_s = frame.time_s;
+  b.vertex_count = frame.vertices_m.size();
+  b.triangle_count = frame.triangles.size();
+  b.has_levels = !frame.vertex_level.empty();
+  // Refused on the recorder thread, where an event can say why (building
+  // the message here would allocate).
+  b.levels_mismatch = b.has_levels && frame.vertex_level.size() != b.vertex_count;
+  std::copy(frame.vertices_m.begin(), frame.vertices_m.end(), b.vertices_m.begin());
+  std::copy(frame.triangles.begin(), frame.triangles.end(), b.triangles.begin());
+  if (b.has_levels && !b.levels_mismatch)
+    std::copy(frame.vertex_level.begin(), frame.vertex_level.end(), b.vertex_level.begin());
+  // ready_frames_ has as many slots as there are buffers: this cannot fail.
+  ready_frames_.try_push(index);
+  // Due times sit on a fixed grid (k * interval), so a sim loop ticking at
+  // an uneven rate still records the configured frame rate on average
+  // instead of drifting below it.
+  const double interval = options_.mesh_frame_interval_s;
+  next_frame_due_s_ = interval > 0.0 ? (std::floor(frame.time_s / interval) + 1.0) * interval : frame.time_s;
+  return true;
+}
+
+double Recorder::session_time_s(std::int64_t steady_ns) const noexcept {
+  const auto t = Clock::time_point(std::chrono::duration_cast<Clock::duration>(std::chrono::nanoseconds(steady_ns)));
+  return std::chrono::duration<double>(t - start_).count();
+}
+
+double Recorder::session_time_s_now() const noexcept {
+  return std::chrono::duration<double>(Clock::now() - start_).count();
+}
+
+std::string Recorder::error() const {
+  std::lock_guard lock(mutex_);
+  return error_;
+}
+
+RecorderStats Recorder::stats() const noexcept {
+  RecorderStats s;
+  s.haptic_rows_written = haptic_written_.load(std::memory_order_relaxed);
+  s.sim_rows_written = sim_written_.load(std::memory_order_relaxed);
+  s.mesh_frames_written = frames_written_.load(std::memory_order_relaxed);
+  s.events_written = events_written_.load(std::memory_order_relaxed);
+  s.haptic_drops = haptic_ring_.drops() + refused_haptic_.load(std::memory_order_relaxed);
+  s.sim_drops = sim_ring_.drops() + refused_sim_.load(std::memory_order_relaxed);
+  s.mesh_frame_drops = mesh_frame_drops_.load(std::memory_order_relaxed);
+  s.event_drops = refused_events_.load(std::memory_order_relaxed);
+  for (const auto& ring : event_rings_) s.event_drops += ring.drops();
+  s.mesh_frames_too_big = mesh_frames_too_big_.load(std::memory_order_relaxed);
+  s.mesh_frames_invalid = frames_invalid_.load(std::memory_order_relaxed);
+  s.bytes_written = bytes_written_.load(std::memory_order_relaxed);
+  s.flushes = flushes_.load(std::memory_order_relaxed);
+  return s;
+}
+
+void Recorder::set_failed(const std::string& message) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!error_.empty()) return;
+    error_ = message;
+  }
+  state_.store(RecorderState::kFailed, std::memory_order_release);
+  if (options_.on_error) {
+    try {
+      options_.on_error(message);
+    } catch (...) {
+      // A throwing callback must not take the recorder thread (and with it
+      // the daemon) down.
+    }
+  }
+}
+
+void Recorder::check_free_space() {
+  if (options_.min_free_bytes == 0) return;
+  const auto now = Clock::now();
+  if (now < next_space_check_) return;
+  next_space_check_ = now + std::chrono::seconds(1);
+  struct statvfs fs {};
+  const std::string dir = std::filesystem::path(path_).parent_path().string();
+  if (::statvfs(dir.empty() ? "." : dir.c_str(), &fs) != 0) return;
+  const std::uint64_t free_bytes = static_cast<std::uint64_t>(fs.f_bavail) * fs.f_frsize;
+  if (free_bytes < options_.min_free_bytes)
+    throw RecordError("session file '" + path_ + "': disk almost full (" + std::to_string(free_bytes >> 20) +
+                      " MiB free, reserve " + std::to_string(options_.min_free_bytes >> 20) +
+                      " MiB): recording stopped and the file closed");
+}
+
+// Returns false once recording has failed. Mesh frames are written as soon as
+// they are drained (their buffers go straight back to the sim thread); rows
+// are batched and written with the flush.
+bool Recorder::drain_and_write(bool force_flush) {
+  haptic_ring_.drain([&](const HapticRow& r) { pending_haptic_.push_back(r); });
+  sim_ring_.drain([&](const SimRow& r) { pending_sim_.push_back(r); });
+  for (auto& ring : event_rings_) ring.drain([&](const Event& e) { pending_events_.push_back(e); });
+
+  std::uint32_t index = 0;
+  while (ready_frames_.try_pop(index)) {
+    const FrameBuffer& b = frames_[index];
+    if (!b.levels_mismatch) {
+      MeshFrameView view;
+      view.time_s = b.time_s;
+      view.vertices_m = {b.vertices_m.data(), b.vertex_count};
+      view.triangles = {b.triangles.data(), b.triangle_count};
+      if (b.has_levels) view.vertex_level = {b.vertex_level.data(), b.vertex_count};
+      try {
+        writer_->append_mesh_frame(view);
+        frames_written_.fetch_add(1, std::memory_order_relaxed);
+      } catch (const std::invalid_argument& e) {
+        frames_invalid_.fetch_add(1, std::memory_order_relaxed);
+        pending_events_.push_back(
+            Event::make(b.time_s, EventKind::kWarning, std::string("mesh frame not recorded: ") + e.what()));
+      }
+    } else {
+      frames_invalid_.fetch_add(1, std::memory_order_relaxed);
+      pending_events_.push_back(Event::make(b.time_s, EventKind::kWarning,
+                                            "mesh frame not recorded: vertex_level size differs from vertex count"));
+    }
+    free_frames_.try_push(index);
+  }
+
+  const auto now = Clock::now();
+  const bool ring_pressure = pending_haptic_.size() >= kHapticRingRows;
+  if (!force_flush && !ring_pressure && now < next_flush_) return true;
+  writer_->append_haptic(pending_haptic_);
+  writer_->append_sim(pending_sim_);
+  writer_->append_events(pending_events_);
+  writer_->flush();
+  haptic_written_.fetch_add(pending_haptic_.size(), std::memory_order_relaxed);
+  sim_written_.fetch_add(pending_sim_.size(), std::memory_order_relaxed);
+  events_written_.fetch_add(pending_events_.size(), std::memory_order_relaxed);
+  bytes_written_.store(writer_->bytes_written(), std::memory_order_relaxed);
+  flushes_.fetch_add(1, std::memory_order_relaxed);
+  pending_haptic_.clear();
+  pending_sim_.clear();
+  pending_events_.clear();
+  next_flush_ = now + seconds(options_.flush_interval_s);
+  return true;
+}
+
+void Recorder::run() {
+  const auto poll = seconds(options_.poll_interval_s);
+  bool stopping = false;
+  while (true) {
+    {
+      std::unique_lock lock(mutex_);
+      wake_.wait_for(lock, poll, [&] { return stop_requested_; });
+      stopping = stop_requested_;
+    }
+    try {
+      check_free_space();
+      drain_and_write(stopping);
+    } catch (const std::exception& e) {
+      set_failed(e.what());
+      break;
+    }
+    if (stopping) break;
+  }
+
+  if (state() == RecorderState::kFailed) {
+    // Record the failure in the file when it still takes writes (e.g. the
+    // free-space reserve tripped); a broken file just gets closed.
+    try {
+      if (!writer_->failed()) {
+        const Event e = Event::make(session_time_s_now(), EventKind::kRecordingError, error());
+        writer_->append_events({&e, 1});
+        writer_->close();
+      } else {
+        writer_->close();
+      }
+    } catch (const std::exception&) {
+      // Already failed and reported; closing a broken file may fail too.
+    }
+    // Producers see kFailed and stop pushing; release what is in the rings.
+    haptic_ring_.drain([](const HapticRow&) {});
+    sim_ring_.drain([](const SimRow&) {});
+    for (auto& ring : event_rings_) ring.drain([](const Event&) {});
+    return;
+  }
+  try {
+    writer_->close();
+    state_.store(RecorderState::kStopped, std::memory_order_release);
+  } catch (const std::exception& e) {
+    set_failed(e.what());
+  }
+}
+
+void Recorder::stop() {
+  {
+    std::lock_guard lock(mutex_);
+    if (joined_) return;
+    stop_requested_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+  std::lock_guard lock(mutex_);
+  joined_ = true;
+}
+
+}  // namespace tissue::record

@@ -1,0 +1,185 @@
+// Recorder: records one session on its own thread.
+//
+// Producers (the haptic thread, the sim thread, the control/io thread) call
+// the push_* functions: they copy into preallocated lock-free rings and
+// return at once. They never allocate, lock, block or do I/O; when a ring is
+// full or the recording has failed or stopped, the push returns false and is
+// counted as a drop. Each push function has exactly ONE producer thread (the
+// rings are single-producer): haptic rows from the haptic thread, sim rows
+// and mesh frames from the sim thread, events from the thread named by
+// EventSource.
+//
+// The recorder thread drains the rings every poll interval, writes mesh
+// frames as they arrive and the row groups in batches, and flushes the file
+// at least every flush_interval_s, so a concurrent SWMR reader sees the
+// session grow and a crash loses at most about one flush interval.
+//
+// Failure (disk full, file too large, I/O error, disk space below the
+// reserve): recording stops, state() becomes kFailed, error() says which file
+// and why, on_error is called once (from the recorder thread) so the daemon
+// can log it and publish it as an event; producers keep running, their pushes
+// become counted drops.
+//
+// HDF5 is used only from the recorder thread (start() creates the file on the
+// calling thread, before the recorder thread exists).
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "concurrency/spsc_ring.hpp"
+#include "record/record_types.hpp"
+
+namespace tissue::record {
+
+class SessionWriter;
+
+struct RecorderOptions {
+  // Longest time between file flushes: bounds what a crash loses. (0, 1].
+  double flush_interval_s = 0.25;
+  // How often the recorder thread drains the rings (mesh frames are written
+  // when drained, so this also bounds how long a frame buffer stays busy).
+  double poll_interval_s = 0.01;
+  // mesh_frame_due() says yes once per interval on average (0: always). 1/30 s = 30 Hz.
+  double mesh_frame_interval_s = 1.0 / 30.0;
+  // Frame buffers are allocated once at start() with these capacities; a
+  // bigger frame is refused (counted in mesh_frames_too_big).
+  std::size_t mesh_max_vertices = 100'000;
+  std::size_t mesh_max_triangles = 200'000;
+  std::size_t mesh_frame_buffers = 4;  // 2..16
+  // Stop recording (cleanly closed) when the file system has less free space
+  // than this, rather than writing until ENOSPC. 0 disables the check.
+  std::uint64_t min_free_bytes = 64ull << 20;
+  // Called once from the recorder thread when recording fails (message =
+  // error()). Must not block for long.
+  std::function<void(const std::string& message)> on_error;
+};
+
+enum class RecorderState : int { kRecording, kFailed, kStopped };
+
+// Which thread pushes an event: one ring per source keeps every ring
+// single-producer.
+enum class EventSource : int { kControl = 0, kSim = 1, kHaptic = 2 };
+inline constexpr int kEventSourceCount = 3;
+
+struct RecorderStats {
+  std::uint64_t haptic_rows_written = 0, sim_rows_written = 0, mesh_frames_written = 0, events_written = 0;
+  std::uint64_t haptic_drops = 0, sim_drops = 0, mesh_frame_drops = 0, event_drops = 0;
+  std::uint64_t mesh_frames_too_big = 0;  // refused at push: over the buffer capacity (also in drops)
+  std::uint64_t mesh_frames_invalid = 0;  // refused by the writer: bad indices / levels
+  std::uint64_t bytes_written = 0;        // payload bytes handed to HDF5
+  std::uint64_t flushes = 0;
+};
+
+class Recorder {
+ public:
+  static constexpr std::size_t kHapticRingRows = 8192;  // 8 s at 1 kHz: rides out slow disk writes
+  static constexpr std::size_t kSimRingRows = 1024;
+  static constexpr std::size_t kEventRingRows = 256;
+
+  // Creates `state_dir/name` (SessionWriter::open_in rules: plain file name,
+  // existing directory, never overwrites) and starts the recorder thread.
+  // Throws RecordError naming the file and the reason. Call from a non-real-
+  // time thread.
+  static std::unique_ptr<Recorder> start(const std::string& state_dir, const std::string& name,
+                                         const SessionMetadata& metadata, RecorderOptions options = {});
+
+  // stop().
+  ~Recorder();
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  // ---- producer side: wait-free, no allocation --------------------------
+  bool push_haptic(const HapticRow& row) noexcept;  // haptic thread only
+  bool push_sim(const SimRow& row) noexcept;        // sim thread only
+  bool push_event(EventSource source, const Event& event) noexcept;
+  // Sim thread only: true when a frame is wanted at `time_s` (session time),
+  // so the surface is extracted only when it will be recorded.
+  bool mesh_frame_due(double time_s) const noexcept;
+  // Sim thread only: copies the frame into a free preallocated buffer.
+  // False (a drop) when no buffer is free, the frame is over capacity, or
+  // recording is not running.
+  bool push_mesh_frame(const MeshFrameView& frame) noexcept;
+
+  // Session time: seconds since start() on the steady clock. ToolSample's
+  // time_ns is steady_clock nanoseconds, so session_time_s(sample.time_ns).
+  double session_time_s(std::int64_t steady_ns) const noexcept;
+  double session_time_s_now() const noexcept;
+
+  // ---- control side -----------------------------------------------------
+  // Drains what was pushed, writes it, flushes and closes the file cleanly
+  // (closed_cleanly = 1). Idempotent. After a failure it only joins the
+  // thread. Never throws: see state() / error().
+  void stop();
+
+  RecorderState state() const noexcept { return state_.load(std::memory_order_acquire); }
+  // Empty unless state() == kFailed (or the final close failed).
+  std::string error() const;
+  RecorderStats stats() const noexcept;
+  const std::string& path() const { return path_; }
+
+ private:
+  struct FrameBuffer {
+    double time_s = 0.0;
+    std::size_t vertex_count = 0, triangle_count = 0;
+    bool has_levels = false;
+    bool levels_mismatch = false;
+    std::vector<std::array<double, 3>> vertices_m;
+    std::vector<std::array<std::uint32_t, 3>> triangles;
+    std::vector<std::uint8_t> vertex_level;
+  };
+  static constexpr std::size_t kMaxFrameBuffers = 16;
+
+  Recorder(std::unique_ptr<SessionWriter> writer, RecorderOptions options);
+  void run();
+  bool drain_and_write(bool force_flush);
+  void check_free_space();
+  void set_failed(const std::string& message);
+  bool accepting() const noexcept { return state_.load(std::memory_order_relaxed) == RecorderState::kRecording; }
+
+  RecorderOptions options_;
+  std::unique_ptr<SessionWriter> writer_;  // recorder thread only (after start)
+  std::string path_;
+  std::chrono::steady_clock::time_point start_;
+
+  concurrency::SpscRing<HapticRow, kHapticRingRows> haptic_ring_;
+  concurrency::SpscRing<SimRow, kSimRingRows> sim_ring_;
+  concurrency::SpscRing<Event, kEventRingRows> event_rings_[kEventSourceCount];
+  // Frame buffers move between the sim thread and the recorder thread by
+  // index: free_frames_ (recorder → sim) and ready_frames_ (sim → recorder).
+  std::vector<FrameBuffer> frames_;
+  concurrency::SpscRing<std::uint32_t, kMaxFrameBuffers> free_frames_;
+  concurrency::SpscRing<std::uint32_t, kMaxFrameBuffers> ready_frames_;
+  double next_frame_due_s_ = -1e300;  // sim thread only
+  std::atomic<std::uint64_t> mesh_frames_too_big_{0};
+  std::atomic<std::uint64_t> mesh_frame_drops_{0};
+  std::atomic<std::uint64_t> refused_haptic_{0}, refused_sim_{0}, refused_events_{0};
+
+  // Recorder-thread batch buffers (reserved at start).
+  std::vector<HapticRow> pending_haptic_;
+  std::vector<SimRow> pending_sim_;
+  std::vector<Event> pending_events_;
+  std::chrono::steady_clock::time_point next_flush_;
+  std::chrono::steady_clock::time_point next_space_check_;
+
+  std::atomic<RecorderState> state_{RecorderState::kRecording};
+  std::atomic<std::uint64_t> haptic_written_{0}, sim_written_{0}, frames_written_{0}, events_written_{0};
+  std::atomic<std::uint64_t> frames_invalid_{0}, bytes_written_{0}, flushes_{0};
+
+  mutable std::mutex mutex_;  // control side only: stop flag, error text
+  std::condition_variable wake_;
+  bool stop_requested_ = false;
+  std::string error_;
+  std::thread thread_;
+  bool joined_ = false;
+};
+
+}  // namespace tissue::record

@@ -1,0 +1,442 @@
+#include "record/session_tools.hpp"
+
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "record/h5_util.hpp"
+#include "record/session_layout.hpp"
+#include "record/session_writer.hpp"
+
+namespace tissue::record {
+
+namespace {
+
+using h5::Handle;
+
+[[noreturn]] void bad_file(const std::string& path, const std::string& what) {
+  throw RecordError("'" + path + "': " + what);
+}
+
+// What the first bytes say, before HDF5 is asked anything: foreign, empty
+// and truncated files get a plain answer, and the superblock's file
+// consistency flags (HDF5 file format spec, superblock v2/v3, byte 11: bit 0
+// open for write, bit 2 open for SWMR write) tell a live or crashed session
+// from a closed one without tripping over them.
+struct Preamble {
+  int superblock_version = 0;
+  std::uint8_t consistency_flags = 0;
+  std::uintmax_t size_bytes = 0;
+};
+
+Preamble read_preamble(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) bad_file(path, std::string("cannot open: ") + std::strerror(errno));
+  if (S_ISDIR(st.st_mode)) bad_file(path, "is a directory, not a session file");
+  if (!S_ISREG(st.st_mode)) bad_file(path, "is not a regular file");
+  Preamble p;
+  p.size_bytes = static_cast<std::uintmax_t>(st.st_size);
+  if (p.size_bytes == 0) bad_file(path, "is empty (0 bytes): not a session file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) bad_file(path, std::string("cannot open: ") + std::strerror(errno));
+  std::array<unsigned char, 12> head{};
+  in.read(reinterpret_cast<char*>(head.data()), head.size());
+  const std::size_t got = static_cast<std::size_t>(in.gcount());
+  static constexpr unsigned char kSignature[8] = {0x89, 'H', 'D', 'F', '\r', '\n', 0x1a, '\n'};
+  if (got < 8 || std::memcmp(head.data(), kSignature, 8) != 0)
+    bad_file(path, "is not an HDF5 file (no HDF5 signature at the start): not a session file");
+  if (got < head.size())
+    bad_file(path, "is truncated: " + std::to_string(got) + " bytes, shorter than an HDF5 superblock");
+  p.superblock_version = head[8];
+  if (p.superblock_version >= 2) p.consistency_flags = head[11];
+  return p;
+}
+
+// Opens for reading: SWMR read when the superblock says a writer has (or
+// had) it open, since an ordinary open refuses such a file.
+Handle open_for_reading(const std::string& path, const Preamble& pre) {
+  Handle fapl(H5Pcreate(H5P_FILE_ACCESS));
+  unsigned flags = H5F_ACC_RDONLY;
+  if (pre.consistency_flags != 0) {
+    if (pre.superblock_version < 3)
+      bad_file(path, "is marked open for writing but is not in the SWMR file format: cannot be read");
+    flags |= H5F_ACC_SWMR_READ;
+  }
+  Handle file(H5Fopen(path.c_str(), flags, fapl.get()));
+  if (!file) bad_file(path, h5::describe("cannot be opened as HDF5 (corrupt or truncated?)"));
+  return file;
+}
+
+Handle open_dataset(hid_t file, const std::string& path, const char* dataset) {
+  if (H5Lexists(file, kGroupPaths[0], H5P_DEFAULT) <= 0 && std::strncmp(dataset, "/haptic", 7) == 0)
+    bad_file(path, "has no /haptic group: not a tissue session file");
+  // H5Lexists on "/a/b" fails (rather than returning 0) when /a is missing.
+  const std::string ds(dataset);
+  const std::string group = ds.substr(0, ds.find('/', 1));
+  if (H5Lexists(file, group.c_str(), H5P_DEFAULT) <= 0 || H5Lexists(file, dataset, H5P_DEFAULT) <= 0)
+    bad_file(path, std::string("dataset ") + dataset + " is missing: not a complete tissue session file");
+  Handle d(H5Dopen2(file, dataset, H5P_DEFAULT));
+  if (!d) bad_file(path, h5::describe(std::string("cannot open dataset ") + dataset));
+  return d;
+}
+
+std::uint64_t dataset_rows(hid_t file, const std::string& path, DatasetId id) {
+  Handle d = open_dataset(file, path, kDatasets[id].path);
+  const std::int64_t n = h5::rows(d.get());
+  if (n < 0) bad_file(path, h5::describe(std::string("cannot read the shape of ") + kDatasets[id].path));
+  return static_cast<std::uint64_t>(n);
+}
+
+// Reads rows [first, first+count) of a 1-D dataset.
+template <typename T>
+std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, hid_t mem_type, std::uint64_t first,
+                           std::uint64_t count) {
+  std::vector<T> out(count);
+  if (count == 0) return out;
+  Handle d = open_dataset(file, path, kDatasets[id].path);
+  Handle space(H5Dget_space(d.get()));
+  const hsize_t start[1] = {first}, n[1] = {count};
+  Handle mem(H5Screate_simple(1, n, nullptr));
+  if (!space || H5Sget_simple_extent_ndims(space.get()) != 1 ||
+      H5Sselect_hyperslab(space.get(), H5S_SELECT_SET, start, nullptr, n, nullptr) < 0 ||
+      H5Sselect_valid(space.get()) <= 0)
+    bad_file(path, std::string("unexpected shape of ") + kDatasets[id].path);
+  if (H5Dread(d.get(), mem_type, mem.get(), space.get(), H5P_DEFAULT, out.data()) < 0)
+    bad_file(path, h5::describe(std::string("cannot read ") + kDatasets[id].path));
+  return out;
+}
+
+struct Counts {
+  GroupCounts rows;
+  std::array<std::uint64_t, kDatasetCount> extents{};
+  double last_time_s = 0.0;
+};
+
+// Complete rows per group: the shortest column of the group (columns are
+// flushed one after another), and for the mesh the frames whose index and
+// data are all present.
+Counts count_rows(hid_t file, const std::string& path) {
+  Counts c;
+  for (std::size_t i = 0; i < kDatasetCount; ++i) c.extents[i] = dataset_rows(file, path, static_cast<DatasetId>(i));
+  const auto group_min = [&](Group g, bool index_only) {
+    std::uint64_t m = UINT64_MAX;
+    for (std::size_t i = 0; i < kDatasetCount; ++i) {
+      if (kDatasets[i].group != g) continue;
+      if (index_only && (i == kMeshVertices || i == kMeshTriangles || i == kMeshVertexLevel)) continue;
+      m = std::min(m, c.extents[i]);
+    }
+    return m;
+  };
+  c.rows.haptic_rows = group_min(Group::kHaptic, false);
+  c.rows.sim_rows = group_min(Group::kSim, false);
+  c.rows.events = group_min(Group::kEvents, false);
+
+  const std::uint64_t indexed = group_min(Group::kMesh, true);
+  const auto voff = read_column<std::uint64_t>(file, path, kMeshVertexOffset, H5T_NATIVE_UINT64, 0, indexed);
+  const auto vcnt = read_column<std::uint64_t>(file, path, kMeshVertexCount, H5T_NATIVE_UINT64, 0, indexed);
+  const auto toff = read_column<std::uint64_t>(file, path, kMeshTriangleOffset, H5T_NATIVE_UINT64, 0, indexed);
+  const auto tcnt = read_column<std::uint64_t>(file, path, kMeshTriangleCount, H5T_NATIVE_UINT64, 0, indexed);
+  const std::uint64_t vertex_rows = std::min(c.extents[kMeshVertices], c.extents[kMeshVertexLevel]);
+  const std::uint64_t triangle_rows = c.extents[kMeshTriangles];
+  std::uint64_t v_end = 0, t_end = 0, frames = 0;
+  for (; frames < indexed; ++frames) {
+    const std::uint64_t f = frames;
+    // Frames are appended back to back; anything else is damage, and the
+    // frames before it are still good.
+    if (voff[f] != v_end || toff[f] != t_end) break;
+    if (vcnt[f] > vertex_rows - v_end || tcnt[f] > triangle_rows - t_end) break;
+    v_end += vcnt[f];
+    t_end += tcnt[f];
+  }
+  c.rows.mesh_frames = frames;
+  c.rows.mesh_vertices = v_end;
+  c.rows.mesh_triangles = t_end;
+
+  const auto last_time = [&](DatasetId id, std::uint64_t n) {
+    if (n == 0) return;
+    const double t = read_column<double>(file, path, id, H5T_NATIVE_DOUBLE, n - 1, 1)[0];
+    if (std::isfinite(t)) c.last_time_s = std::max(c.last_time_s, t);
+  };
+  last_time(kHapticTime, c.rows.haptic_rows);
+  last_time(kSimTime, c.rows.sim_rows);
+  last_time(kEventTime, c.rows.events);
+  last_time(kMeshFrameTime, c.rows.mesh_frames);
+  return c;
+}
+
+SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Counts* counts_out = nullptr) {
+  SessionInfo info;
+  info.path = path;
+  info.open_for_write_flag = pre.consistency_flags != 0;
+  if (!h5::read_i64_attribute(file, kAttrFormatVersion, &info.format_version))
+    bad_file(path, "HDF5 file without a format_version attribute: not a tissue session file");
+  if (info.format_version != kSessionFormatVersion)
+    bad_file(path, "session format version " + std::to_string(info.format_version) +
+                       " is not supported (this tool reads " + std::to_string(kSessionFormatVersion) + ")");
+  std::int64_t clean = 0;
+  h5::read_i64_attribute(file, kAttrClosedCleanly, &clean);
+  info.closed_cleanly = clean == 1 && !info.open_for_write_flag;
+  h5::read_string_attribute(file, kAttrSceneName, &info.scene_name);
+  h5::read_string_attribute(file, kAttrStartTime, &info.start_time_utc);
+  h5::read_string_attribute(file, kAttrEndTime, &info.end_time_utc);
+  h5::read_string_attribute(file, kAttrHostName, &info.host_name);
+  h5::read_string_attribute(file, kAttrSoftwareVersion, &info.software_version);
+  h5::read_string_attribute(file, kAttrRepairedTime, &info.repaired_utc);
+  Counts counts = count_rows(file, path);
+  info.rows = counts.rows;
+  double duration = 0.0;
+  if (info.closed_cleanly && h5::read_f64_attribute(file, kAttrDurationS, &duration) && std::isfinite(duration))
+    info.duration_s = duration;
+  else
+    info.duration_s = counts.last_time_s;
+  if (counts_out) *counts_out = counts;
+  return info;
+}
+
+std::string xml_escape(const std::string& s) {
+  std::string out;
+  for (char ch : s) {
+    switch (ch) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&apos;";
+        break;
+      default:
+        out += ch;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+SessionInfo read_session_info(const std::string& path) {
+  h5::QuietErrors quiet;
+  const Preamble pre = read_preamble(path);
+  Handle file = open_for_reading(path, pre);
+  return info_of(file.get(), path, pre);
+}
+
+std::string format_session_info(const SessionInfo& info) {
+  std::ostringstream o;
+  o << "file:             " << info.path << "\n";
+  o << "state:            ";
+  if (info.closed_cleanly)
+    o << "closed cleanly\n";
+  else if (info.open_for_write_flag)
+    o << "NOT closed cleanly: left by a crash (or still being recorded); run `tissue session repair` once no recorder "
+         "has it open\n";
+  else if (!info.repaired_utc.empty())
+    o << "NOT closed cleanly: left by a crash, repaired " << info.repaired_utc << "\n";
+  else
+    o << "NOT closed cleanly (the clean-close mark is missing)\n";
+  o << "scene:            " << (info.scene_name.empty() ? "(none)" : info.scene_name) << "\n";
+  o << "start time (UTC): " << info.start_time_utc << "\n";
+  if (!info.end_time_utc.empty()) o << "end time (UTC):   " << info.end_time_utc << "\n";
+  char duration[64];
+  std::snprintf(duration, sizeof duration, "%.3f s", info.duration_s);
+  o << "duration:         " << duration << (info.closed_cleanly ? "" : " (last time stamp recorded)") << "\n";
+  o << "host:             " << info.host_name << "\n";
+  o << "software version: " << info.software_version << "\n";
+  o << "format version:   " << info.format_version << "\n";
+  o << "rows:\n";
+  o << "  /haptic         " << info.rows.haptic_rows << " ticks\n";
+  o << "  /sim            " << info.rows.sim_rows << " samples\n";
+  o << "  /mesh           " << info.rows.mesh_frames << " frames (" << info.rows.mesh_vertices << " vertices, "
+    << info.rows.mesh_triangles << " triangles)\n";
+  o << "  /events         " << info.rows.events << " events\n";
+  return o.str();
+}
+
+RepairReport repair_session(const std::string& path) {
+  h5::QuietErrors quiet;
+  RepairReport report;
+  const Preamble pre = read_preamble(path);
+  {
+    Handle file = open_for_reading(path, pre);
+    const SessionInfo before = info_of(file.get(), path, pre);
+    report.before = before.rows;
+    if (!before.open_for_write_flag) {
+      if (before.closed_cleanly)
+        report.notes.push_back("closed cleanly: nothing to repair");
+      else
+        report.notes.push_back("already readable by ordinary readers: nothing to repair");
+      report.after = before;
+      return report;
+    }
+  }
+  report.repair_needed = true;
+
+  // h5clear -s: HDF5's private fapl property "clear_status_flags" makes the
+  // open ignore and reset the superblock's open-for-write flags (h5clear uses
+  // it the same way; there is no public API in 1.10.8).
+  Handle fapl(H5Pcreate(H5P_FILE_ACCESS));
+  hbool_t clear = true;
+  if (!fapl || H5Pset_libver_bounds(fapl.get(), H5F_LIBVER_LATEST, H5F_LIBVER_LATEST) < 0 ||
+      H5Pset(fapl.get(), "clear_status_flags", &clear) < 0)
+    bad_file(path, h5::describe("this HDF5 library cannot clear status flags"));
+  Handle file(H5Fopen(path.c_str(), H5F_ACC_RDWR, fapl.get()));
+  if (!file) bad_file(path, h5::describe("cannot be opened for repair"));
+  // --increment: after a crash the superblock's end-of-allocation can lie
+  // below data the writer already put in the file ("addr overflow" on read).
+  // Moving it past the end of file (plus 1 MiB, as h5clear does) covers it.
+  if (H5Fincrement_filesize(file.get(), 1 << 20) < 0) bad_file(path, h5::describe("cannot move the end of allocation"));
+
+  Counts counts;
+  const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts);
+  // Trim every column to what its whole group has, so plain readers see
+  // aligned columns and only complete mesh frames.
+  std::array<std::uint64_t, kDatasetCount> keep{};
+  for (std::size_t i = 0; i < kDatasetCount; ++i) {
+    switch (kDatasets[i].group) {
+      case Group::kHaptic:
+        keep[i] = counts.rows.haptic_rows;
+        break;
+      case Group::kSim:
+        keep[i] = counts.rows.sim_rows;
+        break;
+      case Group::kEvents:
+        keep[i] = counts.rows.events;
+        break;
+      case Group::kMesh:
+        keep[i] = counts.rows.mesh_frames;
+        break;
+    }
+  }
+  keep[kMeshVertices] = keep[kMeshVertexLevel] = counts.rows.mesh_vertices;
+  keep[kMeshTriangles] = counts.rows.mesh_triangles;
+  for (std::size_t i = 0; i < kDatasetCount; ++i) {
+    if (counts.extents[i] == keep[i]) continue;
+    Handle d = open_dataset(file.get(), path, kDatasets[i].path);
+    const hsize_t dims[2] = {keep[i], static_cast<hsize_t>(kDatasets[i].columns)};
+    if (H5Dset_extent(d.get(), dims) < 0) bad_file(path, h5::describe(std::string("cannot trim ") + kDatasets[i].path));
+    report.notes.push_back(std::string("trimmed ") + kDatasets[i].path + " from " + std::to_string(counts.extents[i]) +
+                           " to " + std::to_string(keep[i]) + " rows (incomplete last write)");
+  }
+  (void)mid;
+  try {
+    h5::write_string_attribute(file.get(), kAttrRepairedTime, utc_now_iso8601());
+  } catch (const RecordError& e) {
+    bad_file(path, e.what());
+  }
+  if (!file.reset()) bad_file(path, h5::describe("closing after repair failed"));
+
+  // Prove it: an ordinary open must work now.
+  const Preamble after = read_preamble(path);
+  if (after.consistency_flags != 0) bad_file(path, "repair did not clear the superblock's open-for-write flags");
+  Handle plain = open_for_reading(path, after);
+  report.after = info_of(plain.get(), path, after);
+  return report;
+}
+
+XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in) {
+  h5::QuietErrors quiet;
+  const Preamble pre = read_preamble(h5_path);
+  if (pre.consistency_flags != 0)
+    bad_file(
+        h5_path,
+        "is still marked open for writing (crashed or being recorded): ParaView cannot open it; run `tissue session "
+        "repair` first");
+  Handle file = open_for_reading(h5_path, pre);
+  Counts counts;
+  const SessionInfo info = info_of(file.get(), h5_path, pre, &counts);
+  const std::uint64_t frames = info.rows.mesh_frames;
+  const auto times = read_column<double>(file.get(), h5_path, kMeshFrameTime, H5T_NATIVE_DOUBLE, 0, frames);
+  const auto voff = read_column<std::uint64_t>(file.get(), h5_path, kMeshVertexOffset, H5T_NATIVE_UINT64, 0, frames);
+  const auto vcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshVertexCount, H5T_NATIVE_UINT64, 0, frames);
+  const auto toff = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleOffset, H5T_NATIVE_UINT64, 0, frames);
+  const auto tcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleCount, H5T_NATIVE_UINT64, 0, frames);
+
+  namespace fs = std::filesystem;
+  XdmfReport report;
+  report.out_path = out_path_in.empty() ? fs::path(h5_path).replace_extension(".xdmf").string() : out_path_in;
+  std::error_code ec;
+  const fs::path out_dir = fs::absolute(report.out_path, ec).parent_path();
+  fs::path h5_ref = fs::relative(fs::absolute(h5_path, ec), out_dir, ec);
+  if (ec || h5_ref.empty()) h5_ref = fs::absolute(h5_path, ec);
+  const std::string ref = xml_escape(h5_ref.string());
+
+  // Inner DataItems name the whole dataset with its full shape (XDMF
+  // readers check it against the file).
+  const std::uint64_t all_vertices = counts.extents[kMeshVertices];
+  const std::uint64_t all_triangles = counts.extents[kMeshTriangles];
+  const std::uint64_t all_levels = counts.extents[kMeshVertexLevel];
+
+  std::ostringstream x;
+  x << "<?xml version=\"1.0\" ?>\n";
+  x << "<!-- Written by `tissue session xdmf` from " << xml_escape(h5_path) << ": one grid per mesh frame. -->\n";
+  x << "<Xdmf Version=\"3.0\">\n <Domain>\n";
+  x << "  <Grid Name=\"session\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+  for (std::uint64_t f = 0; f < frames; ++f) {
+    if (tcnt[f] == 0 || vcnt[f] == 0) {
+      ++report.skipped_empty;
+      continue;
+    }
+    char time[40];
+    std::snprintf(time, sizeof time, "%.9g", times[f]);
+    x << "   <Grid Name=\"frame_" << f << "\" GridType=\"Uniform\">\n";
+    x << "    <Time Value=\"" << time << "\"/>\n";
+    x << "    <Topology TopologyType=\"Triangle\" NumberOfElements=\"" << tcnt[f] << "\">\n";
+    x << "     <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << tcnt[f] << " 3\" Type=\"HyperSlab\">\n";
+    x << "      <DataItem Dimensions=\"3 2\" Format=\"XML\">" << toff[f] << " 0 1 1 " << tcnt[f] << " 3</DataItem>\n";
+    x << "      <DataItem Dimensions=\"" << all_triangles << " 3\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">"
+      << ref << ":/mesh/triangles</DataItem>\n";
+    x << "     </DataItem>\n    </Topology>\n";
+    x << "    <Geometry GeometryType=\"XYZ\">\n";
+    x << "     <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << vcnt[f] << " 3\" Type=\"HyperSlab\">\n";
+    x << "      <DataItem Dimensions=\"3 2\" Format=\"XML\">" << voff[f] << " 0 1 1 " << vcnt[f] << " 3</DataItem>\n";
+    x << "      <DataItem Dimensions=\"" << all_vertices << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">"
+      << ref << ":/mesh/vertices_m</DataItem>\n";
+    x << "     </DataItem>\n    </Geometry>\n";
+    x << "    <Attribute Name=\"vertex_level\" AttributeType=\"Scalar\" Center=\"Node\">\n";
+    x << "     <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << vcnt[f] << "\" Type=\"HyperSlab\">\n";
+    x << "      <DataItem Dimensions=\"3 1\" Format=\"XML\">" << voff[f] << " 1 " << vcnt[f] << "</DataItem>\n";
+    x << "      <DataItem Dimensions=\"" << all_levels << "\" NumberType=\"UChar\" Precision=\"1\" Format=\"HDF\">"
+      << ref << ":/mesh/vertex_level</DataItem>\n";
+    x << "     </DataItem>\n    </Attribute>\n";
+    x << "   </Grid>\n";
+    ++report.frames;
+  }
+  x << "  </Grid>\n </Domain>\n</Xdmf>\n";
+
+  // Write to a temporary and rename, so a failed write never leaves half a
+  // sidecar behind.
+  const std::string tmp = report.out_path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw RecordError("cannot write XDMF sidecar '" + report.out_path + "': " + std::strerror(errno));
+    const std::string text = x.str();
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.close();
+    if (!out) {
+      fs::remove(tmp, ec);
+      throw RecordError("cannot write XDMF sidecar '" + report.out_path + "': write failed");
+    }
+  }
+  fs::rename(tmp, report.out_path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw RecordError("cannot write XDMF sidecar '" + report.out_path + "': " + ec.message());
+  }
+  return report;
+}
+
+}  // namespace tissue::record

@@ -1,0 +1,71 @@
+// Offline tools over session files: what `tissue session info | repair |
+// xdmf` do, as library functions the tests call directly. Every failure
+// throws RecordError naming the file and what is wrong with it; nothing here
+// crashes on random, truncated or foreign files (HDF5's own error printing
+// is silenced).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "record/record_types.hpp"
+
+namespace tissue::record {
+
+struct GroupCounts {
+  std::uint64_t haptic_rows = 0, sim_rows = 0, mesh_frames = 0, events = 0;
+  std::uint64_t mesh_vertices = 0, mesh_triangles = 0;  // rows used by the complete frames
+  bool operator==(const GroupCounts&) const = default;
+};
+
+struct SessionInfo {
+  std::string path;
+  std::int64_t format_version = 0;
+  bool closed_cleanly = false;
+  // The superblock still says "open for (SWMR) writing": the writer crashed
+  // (or is still running). Ordinary readers refuse such a file until it is
+  // repaired.
+  bool open_for_write_flag = false;
+  std::string repaired_utc;  // set by repair_session
+  std::string scene_name, start_time_utc, end_time_utc, host_name, software_version;
+  double duration_s = 0.0;  // clean close: the recorded duration; otherwise the last time stamp seen
+  // Rows every column of the group has (a crash between column flushes can
+  // leave columns of unequal length; readers should use these counts).
+  GroupCounts rows;
+};
+
+// Opens read-only (SWMR read when the superblock says it is still open for
+// writing, so it works on a live or crashed session too).
+SessionInfo read_session_info(const std::string& path);
+// Human-readable multi-line summary (what `tissue session info` prints).
+std::string format_session_info(const SessionInfo& info);
+
+struct RepairReport {
+  bool repair_needed = false;      // false: the file was already fine; nothing changed
+  GroupCounts before;              // complete rows found (SWMR view) before repair
+  SessionInfo after;               // read back with an ordinary (non-SWMR) open
+  std::vector<std::string> notes;  // what was trimmed, etc.
+};
+
+// Makes a session left by a crash readable by ordinary readers: clears the
+// superblock's open-for-write flags and moves the end-of-allocation past the
+// end of file (the effect of `h5clear -s --increment`), then trims columns to
+// the rows every column of their group has and the mesh to its last
+// complete frame, and stamps `repaired_utc`. Do not run it on a session that
+// is still being recorded.
+RepairReport repair_session(const std::string& path);
+
+struct XdmfReport {
+  std::string out_path;
+  std::uint64_t frames = 0;         // grids written
+  std::uint64_t skipped_empty = 0;  // frames without triangles (XDMF cannot express them)
+};
+
+// Writes an XDMF 3 sidecar: a temporal collection with one triangle grid per
+// complete mesh frame, HyperSlab DataItems into the flat /mesh datasets. The
+// HDF5 path in the XML is relative to the sidecar's directory when possible.
+// out_path empty: FILE with its extension replaced by .xdmf.
+XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path);
+
+}  // namespace tissue::record

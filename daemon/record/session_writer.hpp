@@ -1,0 +1,107 @@
+// SessionWriter: one HDF5 session file written in SWMR mode
+// (docs/session-format.md). Single-threaded: the Recorder's thread owns it.
+// A concurrent reader (another process, H5F_ACC_SWMR_READ + H5Drefresh) sees
+// the datasets grow after each flush(); after a crash everything flushed is
+// there (`tissue session repair` makes it readable by ordinary readers).
+//
+// Errors throw RecordError naming the file and the reason (disk full,
+// permission denied, ...). After the first failure the writer is failed: every
+// later append/flush throws the same error, close() only releases handles.
+#pragma once
+
+#include <hdf5.h>
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "record/h5_util.hpp"
+#include "record/record_types.hpp"
+#include "record/session_layout.hpp"
+
+namespace tissue::record {
+
+// Throws RecordError unless `name` is a plain file name: not empty, no '/',
+// no "..", no NUL. Sessions only ever land inside the state directory.
+void validate_session_name(const std::string& name);
+
+// Current UTC time as ISO-8601 with milliseconds, e.g. 2024-05-01T12:00:00.123Z.
+std::string utc_now_iso8601();
+
+class SessionWriter {
+ public:
+  // Creates `state_dir/name` (never overwrites: an existing file is an
+  // error). The directory must exist. Throws RecordError.
+  static std::unique_ptr<SessionWriter> open_in(const std::string& state_dir, const std::string& name,
+                                                const SessionMetadata& metadata);
+  // Same, for a full path (tests, tools). Prefer open_in in the daemon.
+  static std::unique_ptr<SessionWriter> create(const std::string& path, const SessionMetadata& metadata);
+
+  // Closes like close(), swallowing errors.
+  ~SessionWriter();
+  SessionWriter(const SessionWriter&) = delete;
+  SessionWriter& operator=(const SessionWriter&) = delete;
+
+  // Each append extends the group's datasets and writes the rows; they
+  // become visible to readers at the next flush().
+  void append_haptic(std::span<const HapticRow> rows);
+  void append_sim(std::span<const SimRow> rows);
+  void append_events(std::span<const Event> events);
+  // Throws std::invalid_argument (file untouched) when a triangle index is
+  // out of range, the level count does not match, or the frame is too big
+  // for int32 indices; RecordError on I/O failure.
+  void append_mesh_frame(const MeshFrameView& frame);
+
+  // H5Dflush on every dataset that grew since the last flush (data columns
+  // before the columns readers count by).
+  void flush();
+
+  // Flushes, closes the SWMR file, then reopens it in ordinary mode to set
+  // closed_cleanly = 1, end_time_utc and duration_s. Throws RecordError (the
+  // file then stays marked as not closed cleanly). Idempotent.
+  void close();
+
+  const std::string& path() const { return path_; }
+  bool failed() const { return !error_.empty(); }
+  const std::string& error() const { return error_; }
+  // Rows written so far per group: haptic, sim, mesh frames, events.
+  std::array<std::uint64_t, 4> group_rows() const;
+  std::uint64_t bytes_written() const { return bytes_written_; }
+
+ private:
+  static std::unique_ptr<SessionWriter> finish_create(const std::string& path, const SessionMetadata& metadata,
+                                                      h5::Handle file);
+  SessionWriter(std::string path, h5::Handle file, std::array<h5::Handle, kDatasetCount> datasets);
+
+  void append(DatasetId id, const void* data, std::uint64_t rows);
+  [[noreturn]] void fail(const std::string& what);
+  void detach_from_disk();
+  void throw_if_failed() const;
+
+  std::string path_;
+  h5::Handle file_;
+  std::array<h5::Handle, kDatasetCount> datasets_;
+  std::array<std::uint64_t, kDatasetCount> rows_{};
+  std::array<bool, kDatasetCount> dirty_{};
+  std::chrono::steady_clock::time_point opened_at_;
+  std::uint64_t bytes_written_ = 0;
+  std::string error_;
+  bool closed_ = false;
+
+  // Column scratch (reused, so steady state allocates nothing).
+  std::vector<double> f64_;
+  std::vector<std::array<double, 3>> vec3_;
+  std::vector<std::uint8_t> u8_;
+  std::vector<std::uint64_t> u64_;
+  std::vector<std::int64_t> i64_;
+  std::vector<std::int32_t> i32_;
+  std::vector<std::array<float, 3>> vertices_f32_;
+  std::vector<std::array<std::int32_t, 3>> triangles_i32_;
+  std::vector<char> strings_;
+};
+
+}  // namespace tissue::record

@@ -1,0 +1,139 @@
+// A separate process that records, for the tests that need one: killed with
+// SIGKILL mid-session (crash), watched by a SWMR reader, run under a small
+// RLIMIT_FSIZE (disk full) or without write permission.
+//
+//   record_session_helper record   DIR NAME SECONDS       1 kHz haptic, 50 Hz sim, 10 Hz mesh, 2 Hz events
+//   record_session_helper fsize    DIR NAME LIMIT_BYTES   same, under RLIMIT_FSIZE, until the recorder fails
+//   record_session_helper readonly DIR NAME               start a recording in DIR as an unprivileged user
+//
+// Rows follow record_test_support's generators, so the test checks every
+// row. Progress lines on stdout: "progress PUSHED_HAPTIC WRITTEN_HAPTIC
+// WRITTEN_FRAMES" after each recorder flush (written = flushed to the file).
+#include <signal.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <thread>
+
+#include "record/recorder.hpp"
+#include "record_test_support.hpp"
+
+using namespace tissue::record;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+// Pushes like the daemon's threads would, in one loop: a haptic row per
+// millisecond, a sim row every 20, a mesh frame every 100, an event every 500.
+// Returns the number of haptic rows pushed.
+std::uint64_t produce(Recorder& r, double seconds, bool stop_on_failure, std::uint64_t* pushed_after_failure) {
+  // Indices advance only on accepted pushes, so the file holds rows 0..n-1
+  // of each generator with no gaps.
+  std::uint64_t i = 0, sim = 0, frame = 0, event = 0, last_flushes = 0, after = 0;
+  const auto start = Clock::now();
+  auto next = start;
+  for (std::uint64_t tick = 0; std::chrono::duration<double>(Clock::now() - start).count() < seconds; ++tick) {
+    if (r.push_haptic(testing::haptic_row(i))) ++i;
+    if (tick % 20 == 0 && r.push_sim(testing::sim_row(sim))) ++sim;
+    if (tick % 100 == 0) {
+      const testing::TestFrame f = testing::test_frame(frame);  // allocation here is the test's, not the recorder's
+      if (r.push_mesh_frame(f.view())) ++frame;
+    }
+    if (tick % 500 == 0 && r.push_event(EventSource::kControl, testing::event_row(event))) ++event;
+    if (r.state() == RecorderState::kFailed) {
+      ++after;
+      if (stop_on_failure && after > 300) break;  // producers kept going for 300 ticks: enough
+    }
+    const RecorderStats s = r.stats();
+    if (s.flushes != last_flushes) {
+      last_flushes = s.flushes;
+      std::printf("progress %llu %llu %llu\n", static_cast<unsigned long long>(i),
+                  static_cast<unsigned long long>(s.haptic_rows_written),
+                  static_cast<unsigned long long>(s.mesh_frames_written));
+      std::fflush(stdout);
+    }
+    next += std::chrono::milliseconds(1);
+    std::this_thread::sleep_until(next);
+  }
+  if (pushed_after_failure) *pushed_after_failure = after;
+  return i;
+}
+
+RecorderOptions options() {
+  RecorderOptions o;
+  o.flush_interval_s = 0.2;
+  o.mesh_max_vertices = 1000;
+  o.mesh_max_triangles = 1000;
+  o.min_free_bytes = 0;  // the fsize test wants the hard failure path
+  return o;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 4) {
+    std::fprintf(stderr, "usage: %s record|fsize|readonly DIR NAME [ARG]\n", argv[0]);
+    return 2;
+  }
+  const std::string mode = argv[1], dir = argv[2], name = argv[3];
+  SessionMetadata meta;
+  meta.scene_name = "helper";
+  meta.software_version = "test";
+
+  if (mode == "readonly") {
+    // Root ignores permission bits: become nobody so the directory's mode counts.
+    if (::geteuid() == 0 && (::setresgid(65534, 65534, 65534) != 0 || ::setresuid(65534, 65534, 65534) != 0)) {
+      std::perror("dropping privileges");
+      return 4;
+    }
+    try {
+      auto r = Recorder::start(dir, name, meta, options());
+      std::printf("started (unexpected)\n");
+      return 3;
+    } catch (const RecordError& e) {
+      std::printf("error: %s\n", e.what());
+      return 0;
+    }
+  }
+
+  if (mode == "fsize") {
+    if (argc < 5) return 2;
+    // Writes past the limit fail with EFBIG instead of killing the process.
+    ::signal(SIGXFSZ, SIG_IGN);
+    const rlim_t limit = std::strtoull(argv[4], nullptr, 10);
+    const struct rlimit rl = {limit, limit};
+    if (::setrlimit(RLIMIT_FSIZE, &rl) != 0) {
+      std::perror("setrlimit");
+      return 4;
+    }
+    std::string callback_message;
+    RecorderOptions o = options();
+    o.on_error = [&](const std::string& m) { callback_message = m; };
+    auto r = Recorder::start(dir, name, meta, o);
+    std::uint64_t after = 0;
+    produce(*r, 20.0, true, &after);
+    const RecorderState state = r->state();
+    const RecorderStats s = r->stats();
+    r->stop();  // must not crash or hang on a broken file
+    std::printf("state %d\nerror %s\ncallback %s\npushes_after_failure %llu\nhaptic_drops %llu\n",
+                static_cast<int>(state), r->error().c_str(), callback_message.c_str(),
+                static_cast<unsigned long long>(after), static_cast<unsigned long long>(s.haptic_drops));
+    return state == RecorderState::kFailed ? 0 : 3;
+  }
+
+  if (mode == "record") {
+    const double seconds = std::strtod(argv[4 < argc ? 4 : 3], nullptr);
+    auto r = Recorder::start(dir, name, meta, options());
+    const std::uint64_t pushed = produce(*r, seconds, false, nullptr);
+    r->stop();
+    const RecorderStats s = r->stats();
+    std::printf("done %llu %llu %d\n", static_cast<unsigned long long>(pushed),
+                static_cast<unsigned long long>(s.haptic_rows_written), static_cast<int>(r->state()));
+    return r->state() == RecorderState::kStopped ? 0 : 3;
+  }
+  return 2;
+}

@@ -1,0 +1,265 @@
+#include "record_test_support.hpp"
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+namespace tissue::record::testing {
+
+TempDir::TempDir() {
+  const char* base = std::getenv("TMPDIR");
+  std::string tmpl = std::string(base && *base ? base : "/tmp") + "/trec.XXXXXX";
+  if (::mkdtemp(tmpl.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + tmpl);
+  path_ = tmpl;
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  std::filesystem::remove_all(path_, ec);
+}
+
+HapticRow haptic_row(std::uint64_t i) {
+  HapticRow r;
+  const double x = static_cast<double>(i);
+  r.time_s = x * 1e-3;
+  r.device_position_m = {0.01 * std::sin(x * 1e-2), 0.01 * std::cos(x * 1e-2), -1e-6 * x};
+  r.proxy_position_m = {r.device_position_m[0], r.device_position_m[1], std::max(0.0, r.device_position_m[2])};
+  r.force_N = {0.5 * std::sin(x), -0.25 * x * 1e-3, 3.0};
+  r.contact = static_cast<std::uint8_t>(i % 3 == 0);
+  r.model_version = i / 7 + (std::uint64_t{1} << 40);
+  return r;
+}
+
+SimRow sim_row(std::uint64_t i) {
+  SimRow r;
+  const double x = static_cast<double>(i);
+  r.time_s = x * 0.02;
+  r.sim_time_s = x * 0.019;
+  r.real_time_factor = 0.95 + 1e-3 * static_cast<double>(i % 50);
+  r.step_ms = 0.1 + 1e-4 * x;
+  r.nodes = 1000 + i;
+  r.tets = 4000 + 3 * i;
+  r.springs = 6000 + 5 * i;
+  r.refines = static_cast<std::int64_t>(i / 2);
+  r.merges = -static_cast<std::int64_t>(i / 5);  // not physical; proves the sign survives
+  r.kinetic_J = 1e-3 * x;
+  r.elastic_J = 2e-3 * x;
+  return r;
+}
+
+Event event_row(std::uint64_t i) {
+  // Every third message is longer than the field: it must come back cut to 255 bytes.
+  std::string text = "event " + std::to_string(i) + " \xc3\xa9";  // with a UTF-8 character
+  if (i % 3 == 2) text += std::string(400, 'x');
+  return Event::make(0.5 * static_cast<double>(i), static_cast<EventKind>(i % 6), text);
+}
+
+TestFrame test_frame(std::uint64_t f) {
+  TestFrame fr;
+  fr.time_s = static_cast<double>(f) / 30.0;
+  const std::uint32_t quads = 3 + static_cast<std::uint32_t>(f % 5);
+  for (std::uint32_t q = 0; q <= quads; ++q)
+    for (std::uint32_t row = 0; row < 2; ++row) {
+      fr.vertices_m.push_back({0.125 * q, 0.25 * row, 0.0625 * static_cast<double>(f)});
+      fr.vertex_level.push_back(static_cast<std::uint8_t>((q + f) % 7));
+    }
+  for (std::uint32_t q = 0; q < quads; ++q) {
+    const std::uint32_t a = 2 * q, b = 2 * q + 1, c = 2 * q + 2, d = 2 * q + 3;
+    fr.triangles.push_back({a, c, b});
+    fr.triangles.push_back({b, c, d});
+  }
+  return fr;
+}
+
+namespace {
+
+template <typename T>
+std::vector<T> read_all(hid_t file, const char* path, hid_t mem_type) {
+  std::vector<T> out;
+  const hid_t ds = H5Dopen2(file, path, H5P_DEFAULT);
+  if (ds < 0) {
+    ADD_FAILURE() << "cannot open " << path;
+    return out;
+  }
+  const hid_t space = H5Dget_space(ds);
+  const hssize_t n = H5Sget_simple_extent_npoints(space);
+  out.resize(static_cast<std::size_t>(n));
+  if (n > 0 && H5Dread(ds, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
+    ADD_FAILURE() << "cannot read " << path;
+  H5Sclose(space);
+  H5Dclose(ds);
+  return out;
+}
+
+}  // namespace
+
+std::vector<double> read_f64(hid_t file, const char* path) { return read_all<double>(file, path, H5T_NATIVE_DOUBLE); }
+std::vector<float> read_f32(hid_t file, const char* path) { return read_all<float>(file, path, H5T_NATIVE_FLOAT); }
+std::vector<std::uint64_t> read_u64(hid_t file, const char* path) {
+  return read_all<std::uint64_t>(file, path, H5T_NATIVE_UINT64);
+}
+std::vector<std::int64_t> read_i64(hid_t file, const char* path) {
+  return read_all<std::int64_t>(file, path, H5T_NATIVE_INT64);
+}
+std::vector<std::int32_t> read_i32(hid_t file, const char* path) {
+  return read_all<std::int32_t>(file, path, H5T_NATIVE_INT32);
+}
+std::vector<std::uint8_t> read_u8(hid_t file, const char* path) {
+  return read_all<std::uint8_t>(file, path, H5T_NATIVE_UINT8);
+}
+
+std::vector<std::string> read_messages(hid_t file, const char* path) {
+  const hid_t type = H5Tcopy(H5T_C_S1);
+  H5Tset_size(type, kEventMessageBytes);
+  H5Tset_strpad(type, H5T_STR_NULLTERM);
+  H5Tset_cset(type, H5T_CSET_UTF8);  // the file says UTF-8; HDF5 converts no character sets
+  std::vector<std::array<char, kEventMessageBytes>> raw =
+      read_all<std::array<char, kEventMessageBytes>>(file, path, type);
+  H5Tclose(type);
+  std::vector<std::string> out;
+  for (const auto& r : raw) out.emplace_back(r.data(), ::strnlen(r.data(), r.size()));
+  return out;
+}
+
+int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, std::uint64_t frames,
+                           std::uint64_t events) {
+  int bad = 0;
+  {
+    const auto t = read_f64(file, "/haptic/time_s");
+    const auto dev = read_f64(file, "/haptic/device_position_m");
+    const auto prx = read_f64(file, "/haptic/proxy_position_m");
+    const auto frc = read_f64(file, "/haptic/force_N");
+    const auto con = read_u8(file, "/haptic/contact");
+    const auto ver = read_u64(file, "/haptic/model_version");
+    EXPECT_EQ(t.size(), haptic);
+    EXPECT_EQ(dev.size(), 3 * haptic);
+    EXPECT_EQ(prx.size(), 3 * haptic);
+    EXPECT_EQ(frc.size(), 3 * haptic);
+    EXPECT_EQ(con.size(), haptic);
+    EXPECT_EQ(ver.size(), haptic);
+    if (t.size() != haptic || dev.size() != 3 * haptic || prx.size() != 3 * haptic || frc.size() != 3 * haptic ||
+        con.size() != haptic || ver.size() != haptic)
+      return 1;
+    for (std::uint64_t i = 0; i < haptic; ++i) {
+      const HapticRow r = haptic_row(i);
+      bool ok = t[i] == r.time_s && con[i] == r.contact && ver[i] == r.model_version;
+      for (int k = 0; k < 3; ++k)
+        ok = ok && dev[3 * i + k] == r.device_position_m[k] && prx[3 * i + k] == r.proxy_position_m[k] &&
+             frc[3 * i + k] == r.force_N[k];
+      if (!ok && bad++ < 5) ADD_FAILURE() << "haptic row " << i << " differs";
+    }
+  }
+  {
+    const auto t = read_f64(file, "/sim/time_s");
+    const auto st = read_f64(file, "/sim/sim_time_s");
+    const auto rtf = read_f64(file, "/sim/real_time_factor");
+    const auto ms = read_f64(file, "/sim/step_ms");
+    const auto nodes = read_u64(file, "/sim/nodes");
+    const auto tets = read_u64(file, "/sim/tets");
+    const auto springs = read_u64(file, "/sim/springs");
+    const auto refines = read_i64(file, "/sim/refines");
+    const auto merges = read_i64(file, "/sim/merges");
+    const auto ke = read_f64(file, "/sim/kinetic_J");
+    const auto ee = read_f64(file, "/sim/elastic_J");
+    EXPECT_EQ(t.size(), sim);
+    for (const std::size_t n : {st.size(), rtf.size(), ms.size(), nodes.size(), tets.size(), springs.size(),
+                                refines.size(), merges.size(), ke.size(), ee.size()})
+      if (n != sim) {
+        ADD_FAILURE() << "a /sim column has " << n << " rows, expected " << sim;
+        return bad + 1;
+      }
+    if (t.size() != sim) return bad + 1;
+    for (std::uint64_t i = 0; i < sim; ++i) {
+      const SimRow r = sim_row(i);
+      const bool ok = t[i] == r.time_s && st[i] == r.sim_time_s && rtf[i] == r.real_time_factor && ms[i] == r.step_ms &&
+                      nodes[i] == r.nodes && tets[i] == r.tets && springs[i] == r.springs && refines[i] == r.refines &&
+                      merges[i] == r.merges && ke[i] == r.kinetic_J && ee[i] == r.elastic_J;
+      if (!ok && bad++ < 5) ADD_FAILURE() << "sim row " << i << " differs";
+    }
+  }
+  {
+    const auto ft = read_f64(file, "/mesh/frame_time_s");
+    const auto voff = read_u64(file, "/mesh/vertex_offset");
+    const auto vcnt = read_u64(file, "/mesh/vertex_count");
+    const auto toff = read_u64(file, "/mesh/triangle_offset");
+    const auto tcnt = read_u64(file, "/mesh/triangle_count");
+    const auto verts = read_f32(file, "/mesh/vertices_m");
+    const auto tris = read_i32(file, "/mesh/triangles");
+    const auto lev = read_u8(file, "/mesh/vertex_level");
+    EXPECT_EQ(ft.size(), frames);
+    if (ft.size() != frames || voff.size() != frames || vcnt.size() != frames || toff.size() != frames ||
+        tcnt.size() != frames)
+      return bad + 1;
+    std::uint64_t v_end = 0, t_end = 0;
+    for (std::uint64_t f = 0; f < frames; ++f) {
+      const TestFrame fr = test_frame(f);
+      bool ok = ft[f] == fr.time_s && voff[f] == v_end && toff[f] == t_end && vcnt[f] == fr.vertices_m.size() &&
+                tcnt[f] == fr.triangles.size() && 3 * (v_end + vcnt[f]) <= verts.size() &&
+                v_end + vcnt[f] <= lev.size() && 3 * (t_end + tcnt[f]) <= tris.size();
+      if (ok) {
+        for (std::size_t v = 0; v < fr.vertices_m.size(); ++v) {
+          for (int k = 0; k < 3; ++k) ok = ok && verts[3 * (v_end + v) + k] == static_cast<float>(fr.vertices_m[v][k]);
+          ok = ok && lev[v_end + v] == fr.vertex_level[v];
+        }
+        for (std::size_t t = 0; t < fr.triangles.size(); ++t)
+          for (int k = 0; k < 3; ++k)
+            ok = ok && tris[3 * (t_end + t) + k] == static_cast<std::int32_t>(fr.triangles[t][k]);
+      }
+      if (!ok && bad++ < 5) ADD_FAILURE() << "mesh frame " << f << " differs";
+      v_end += fr.vertices_m.size();
+      t_end += fr.triangles.size();
+    }
+  }
+  {
+    const auto t = read_f64(file, "/events/time_s");
+    const auto kind = read_i32(file, "/events/kind");
+    const auto msg = read_messages(file, "/events/message");
+    EXPECT_EQ(t.size(), events);
+    if (t.size() != events || kind.size() != events || msg.size() != events) return bad + 1;
+    for (std::uint64_t i = 0; i < events; ++i) {
+      const Event e = event_row(i);
+      const bool ok =
+          t[i] == e.time_s && kind[i] == static_cast<std::int32_t>(e.kind) && msg[i] == std::string(e.message);
+      if (!ok && bad++ < 5) ADD_FAILURE() << "event " << i << " differs: '" << msg[i] << "'";
+    }
+  }
+  return bad;
+}
+
+std::string quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+RunResult run(const std::string& command, const TempDir& scratch) {
+  const std::string out = scratch / "run.stdout", err = scratch / "run.stderr";
+  const std::string line = "(" + command + ") >" + quote(out) + " 2>" + quote(err);
+  const int status = std::system(line.c_str());
+  RunResult r;
+  if (WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
+  if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+bool have_system_h5py() { return std::system("/usr/bin/python3 -c 'import h5py' >/dev/null 2>&1") == 0; }
+
+}  // namespace tissue::record::testing

@@ -1,0 +1,75 @@
+// Shared by the record suites: scratch directories, deterministic session
+// content (so a reader can check every row without keeping what was
+// written), HDF5 C-API readers, and running the `tissue` CLI and the helper.
+#pragma once
+
+#include <hdf5.h>
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "record/record_types.hpp"
+
+namespace tissue::record::testing {
+
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::string& path() const { return path_; }
+  std::string operator/(const std::string& name) const { return path_ + "/" + name; }
+
+ private:
+  std::string path_;
+};
+
+// Row i of a deterministic session (time_s = i ms).
+HapticRow haptic_row(std::uint64_t i);
+SimRow sim_row(std::uint64_t i);
+Event event_row(std::uint64_t i);
+
+// Frame f: a strip of quads whose size depends on f; coordinates are exact
+// in float32 so stored frames compare equal.
+struct TestFrame {
+  double time_s = 0.0;
+  std::vector<std::array<double, 3>> vertices_m;
+  std::vector<std::array<std::uint32_t, 3>> triangles;
+  std::vector<std::uint8_t> vertex_level;
+  MeshFrameView view() const { return {time_s, vertices_m, triangles, vertex_level}; }
+};
+TestFrame test_frame(std::uint64_t f);
+
+// Whole dataset, flattened, through the C API. `swmr` opens with
+// H5F_ACC_SWMR_READ. Fails the current test (and returns empty) on error.
+std::vector<double> read_f64(hid_t file, const char* path);
+std::vector<float> read_f32(hid_t file, const char* path);
+std::vector<std::uint64_t> read_u64(hid_t file, const char* path);
+std::vector<std::int64_t> read_i64(hid_t file, const char* path);
+std::vector<std::int32_t> read_i32(hid_t file, const char* path);
+std::vector<std::uint8_t> read_u8(hid_t file, const char* path);
+std::vector<std::string> read_messages(hid_t file, const char* path);
+
+// Checks every row of a session against the generators: haptic rows
+// [0, haptic), sim rows [0, sim), frames [0, frames), events [0, events).
+// Adds gtest failures; returns the number of mismatching rows.
+int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, std::uint64_t frames,
+                           std::uint64_t events);
+
+struct RunResult {
+  int exit_code = -1;  // -1: killed by a signal
+  int signal = 0;
+  std::string out, err;
+};
+// Runs a shell command line with stdout/stderr captured into `scratch`.
+RunResult run(const std::string& command, const TempDir& scratch);
+std::string quote(const std::string& s);
+std::string slurp(const std::string& path);
+
+// Whether Debian's python (with h5py) is usable for the cross-checks.
+bool have_system_h5py();
+
+}  // namespace tissue::record::testing

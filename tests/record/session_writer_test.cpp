@@ -1,0 +1,152 @@
+// SessionWriter: what goes in comes out, through the plain HDF5 C API.
+#include "record/session_writer.hpp"
+
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <filesystem>
+
+#include "record/session_layout.hpp"
+#include "record/session_tools.hpp"
+#include "record_test_support.hpp"
+
+namespace tissue::record {
+namespace {
+
+using testing::TempDir;
+
+SessionMetadata test_metadata() {
+  SessionMetadata m;
+  m.scene_name = "cantilever";
+  m.scene_text = "scene:\n  name: cantilever\n";
+  m.config_text = "record:\n  state_dir: /var/lib/tissued\n";
+  m.software_version = "tissued 0.1.0-test";
+  return m;
+}
+
+// Writes haptic/sim/mesh/events in several batches of uneven size (so rows
+// cross chunk boundaries) and closes cleanly.
+void write_session(const std::string& dir, const std::string& name, std::uint64_t haptic, std::uint64_t sim,
+                   std::uint64_t frames, std::uint64_t events) {
+  auto w = SessionWriter::open_in(dir, name, test_metadata());
+  std::vector<HapticRow> h;
+  for (std::uint64_t i = 0; i < haptic; ++i) {
+    h.push_back(testing::haptic_row(i));
+    if (h.size() == 333 || i + 1 == haptic) {
+      w->append_haptic(h);
+      h.clear();
+      w->flush();
+    }
+  }
+  std::vector<SimRow> s;
+  for (std::uint64_t i = 0; i < sim; ++i) s.push_back(testing::sim_row(i));
+  w->append_sim(s);
+  for (std::uint64_t f = 0; f < frames; ++f) w->append_mesh_frame(testing::test_frame(f).view());
+  std::vector<Event> e;
+  for (std::uint64_t i = 0; i < events; ++i) e.push_back(testing::event_row(i));
+  w->append_events(e);
+  EXPECT_EQ(w->group_rows(), (std::array<std::uint64_t, 4>{haptic, sim, frames, events}));
+  w->close();
+  EXPECT_FALSE(w->failed()) << w->error();
+}
+
+TEST(SessionWriter, EveryRowReadsBackEqualWithThePlainCApi) {
+  TempDir dir;
+  write_session(dir.path(), "s.h5", 2500, 120, 7, 10);
+  const hid_t file = H5Fopen((dir / "s.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  EXPECT_EQ(testing::expect_session_content(file, 2500, 120, 7, 10), 0);
+  // Units on every dataset.
+  for (const DatasetSpec& spec : kDatasets) {
+    const hid_t ds = H5Dopen2(file, spec.path, H5P_DEFAULT);
+    ASSERT_GE(ds, 0) << spec.path;
+    EXPECT_GT(H5Aexists(ds, "units"), 0) << spec.path;
+    H5Dclose(ds);
+  }
+  H5Fclose(file);
+}
+
+TEST(SessionWriter, LongEventMessagesAreCutAtAUtf8Boundary) {
+  const std::string text = std::string(254, 'a') + "\xc3\xa9" + "tail";  // é straddles byte 255
+  const Event e = Event::make(1.0, EventKind::kInfo, text);
+  EXPECT_EQ(std::string(e.message), std::string(254, 'a'));
+  EXPECT_EQ(std::string(Event::make(0, EventKind::kInfo, "short").message), "short");
+}
+
+TEST(SessionWriter, InfoReportsACleanCloseWithMetadataAndCounts) {
+  TempDir dir;
+  write_session(dir.path(), "s.h5", 1000, 50, 3, 4);
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_FALSE(info.open_for_write_flag);
+  EXPECT_EQ(info.scene_name, "cantilever");
+  EXPECT_EQ(info.software_version, "tissued 0.1.0-test");
+  EXPECT_FALSE(info.host_name.empty());
+  EXPECT_EQ(info.start_time_utc.size(), std::string("2024-01-01T00:00:00.000Z").size()) << info.start_time_utc;
+  EXPECT_EQ(info.start_time_utc.back(), 'Z');
+  EXPECT_FALSE(info.end_time_utc.empty());
+  EXPECT_EQ(info.rows.haptic_rows, 1000u);
+  EXPECT_EQ(info.rows.sim_rows, 50u);
+  EXPECT_EQ(info.rows.mesh_frames, 3u);
+  EXPECT_EQ(info.rows.events, 4u);
+  std::uint64_t v = 0, t = 0;
+  for (int f = 0; f < 3; ++f) {
+    v += testing::test_frame(f).vertices_m.size();
+    t += testing::test_frame(f).triangles.size();
+  }
+  EXPECT_EQ(info.rows.mesh_vertices, v);
+  EXPECT_EQ(info.rows.mesh_triangles, t);
+  EXPECT_NE(format_session_info(info).find("closed cleanly"), std::string::npos);
+}
+
+TEST(SessionWriter, OpenInRejectsNamesThatLeaveTheStateDirectory) {
+  TempDir dir;
+  for (const std::string bad : {"", "a/b.h5", "../x.h5", "..", "x..h5", "/etc/passwd"}) {
+    try {
+      SessionWriter::open_in(dir.path(), bad, test_metadata());
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const RecordError& e) {
+      EXPECT_NE(std::string(e.what()).find("rejected"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path()));
+}
+
+TEST(SessionWriter, NeverOverwritesAndNamesMissingStateDirectories) {
+  TempDir dir;
+  write_session(dir.path(), "s.h5", 10, 1, 1, 1);
+  try {
+    SessionWriter::open_in(dir.path(), "s.h5", test_metadata());
+    ADD_FAILURE() << "overwrote an existing session";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find("already exists"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(dir / "s.h5"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(read_session_info(dir / "s.h5").rows.haptic_rows, 10u);
+  try {
+    SessionWriter::open_in(dir / "missing", "s.h5", test_metadata());
+    ADD_FAILURE() << "accepted a missing state directory";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find(dir / "missing"), std::string::npos) << e.what();
+  }
+}
+
+TEST(SessionWriter, InvalidMeshFramesAreRefusedWithoutTouchingTheFile) {
+  TempDir dir;
+  auto w = SessionWriter::open_in(dir.path(), "s.h5", test_metadata());
+  testing::TestFrame bad_index = testing::test_frame(0);
+  bad_index.triangles[1][2] = static_cast<std::uint32_t>(bad_index.vertices_m.size());
+  EXPECT_THROW(w->append_mesh_frame(bad_index.view()), std::invalid_argument);
+  testing::TestFrame bad_levels = testing::test_frame(0);
+  bad_levels.vertex_level.pop_back();
+  EXPECT_THROW(w->append_mesh_frame(bad_levels.view()), std::invalid_argument);
+  w->append_mesh_frame(testing::test_frame(0).view());
+  w->close();
+  const hid_t file = H5Fopen((dir / "s.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  EXPECT_EQ(testing::expect_session_content(file, 0, 0, 1, 0), 0);
+  H5Fclose(file);
+}
+
+}  // namespace
+}  // namespace tissue::record
