@@ -19,6 +19,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <thread>
@@ -26,6 +27,7 @@
 #include "haptics/haptic_thread.hpp"
 #include "haptics/sim_device.hpp"
 #include "physics/simulation.hpp"
+#include "record/recorder.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/sim_thread.hpp"
 
@@ -161,7 +163,10 @@ Figures measure(double seconds, const config::RealtimeSpec& realtime) {
 }
 
 // The daemon pipeline (service::SimThread + HapticLoop), as tissued --config runs it.
-Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, scene::Scene scene) {
+// With `record_dir` set, the session is recorded there (HDF5, 30 Hz mesh
+// frames), as `tissued --record` does: the recording's cost to the haptic loop.
+Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, scene::Scene scene,
+                         const std::string& record_dir = "") {
   Figures f;
   if (!scene.tool) scene.tool = scene::ToolSpec{};
   const config::HapticSpec haptic_spec;
@@ -197,6 +202,13 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
   service::SimThread sim(std::make_unique<service::SimRunner>(scene), samples.get(), models.get(), sim_options);
   haptics::HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
   haptics::HapticThread thread(loop, haptic_spec, realtime);
+  std::unique_ptr<record::Recorder> recorder;
+  if (!record_dir.empty()) {
+    record::SessionMetadata meta;
+    meta.scene_name = scene.name;
+    recorder = record::Recorder::start(record_dir, "haptic_bench.h5", meta);
+    sim.set_recorder(recorder.get());
+  }
   sim.start();
   if (!thread.start(&error)) throw std::runtime_error(error);
   f.scheduling = thread.scheduling().summary();
@@ -204,7 +216,18 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
   thread.request_stop();
   thread.join();
   const service::SimStatus status = sim.status();
+  sim.set_recorder(nullptr);
   sim.stop();
+  if (recorder) {
+    recorder->stop();
+    const record::RecorderStats r = recorder->stats();
+    std::printf("  (recorded %llu haptic rows, %llu mesh frames, %.1f MB, drops %llu%s%s)\n",
+                static_cast<unsigned long long>(r.haptic_rows_written),
+                static_cast<unsigned long long>(r.mesh_frames_written), r.bytes_written / 1e6,
+                static_cast<unsigned long long>(r.haptic_drops + r.sim_drops + r.mesh_frame_drops),
+                recorder->error().empty() ? "" : "; error: ", recorder->error().c_str());
+    std::filesystem::remove(recorder->path());
+  }
   f.haptic = thread.timing();
   const haptics::HapticStats st = loop.stats();
   std::printf("  (pipeline: %llu ticks, %llu model updates, %llu sim steps, rtf %.2f, %zu tets, ring drops %llu)\n",
@@ -255,14 +278,18 @@ int main(int argc, char** argv) {
                   static_cast<unsigned long long>(background.steps.load()), elapsed_s,
                   background.error.empty() ? "" : "; first error: ", background.error.c_str());
   }
-  const Figures p = measure_pipeline(seconds, realtime, scene);
-  std::printf("  [daemon pipeline: sim thread + haptic thread on the real patch] %s\n", p.scheduling.c_str());
-  print_row("bare loop + sim thread", p.bare, false);
-  print_row("haptic thread", p.haptic, true);
-  const double ratio = p.bare.lateness_p99_ns > 0
-                           ? static_cast<double>(p.haptic.lateness_p99_ns) / static_cast<double>(p.bare.lateness_p99_ns)
-                           : 0.0;
-  std::printf("  lateness p99 ratio haptic/bare = %.2f (target <= 1.5); tick p99.9 = %.2f us (target <= 20)\n", ratio,
-              p.haptic.compute_p999_ns / 1e3);
+  const std::string record_dir = std::filesystem::temp_directory_path().string();
+  for (const bool recording : {false, true}) {
+    const Figures p = measure_pipeline(seconds, realtime, scene, recording ? record_dir : "");
+    std::printf("  [daemon pipeline%s: sim thread + haptic thread on the real patch] %s\n",
+                recording ? " + HDF5 recording" : "", p.scheduling.c_str());
+    print_row("bare loop + sim thread", p.bare, false);
+    print_row(recording ? "haptic thread, recording" : "haptic thread", p.haptic, true);
+    const double ratio = p.bare.lateness_p99_ns > 0 ? static_cast<double>(p.haptic.lateness_p99_ns) /
+                                                          static_cast<double>(p.bare.lateness_p99_ns)
+                                                    : 0.0;
+    std::printf("  lateness p99 ratio haptic/bare = %.2f (target <= 1.5); tick p99.9 = %.2f us (target <= 20)\n", ratio,
+                p.haptic.compute_p999_ns / 1e3);
+  }
   return 0;
 }
