@@ -16,15 +16,15 @@ using Vec3 = std::array<double, 3>;
 // Per-device force safety. Every limit applies after the coupling computes a
 // force and before the device sees it.
 struct ForceLimits {
-  double max_force_N = 3.0;                  // |F| clamp (Phantom Omni/Touch peak is 3.3 N)
-  double max_force_rate_N_per_s = 300.0;     // |dF/dt| clamp
-  double max_stiffness_N_per_m = 1000.0;     // rendered stiffness clamp (coupling and K_c)
-  double ramp_in_s = 0.5;                    // force scale ramps 0 -> 1 after start
-  double ramp_out_s = 0.05;                  // ... and 1 -> 0 on a fault or stop
-  double stale_model_s = 0.1;                // no new LocalModel for this long: ramp to zero
-  double device_timeout_s = 0.01;            // no valid device sample for this long: ramp to zero
-  double max_speed_m_per_s = 5.0;            // device input faster than this is rejected as a glitch
-  double workspace_radius_m = 1.0;           // device input farther than this from the origin is rejected
+  double max_force_N = 3.0;               // |F| clamp (Phantom Omni/Touch peak is 3.3 N)
+  double max_force_rate_N_per_s = 300.0;  // |dF/dt| clamp
+  double max_stiffness_N_per_m = 1000.0;  // rendered stiffness clamp (coupling and K_c)
+  double ramp_in_s = 0.5;                 // force scale ramps 0 -> 1 after start
+  double ramp_out_s = 0.05;               // ... and 1 -> 0 on a fault or stop
+  double stale_model_s = 0.1;             // no new LocalModel for this long: ramp to zero
+  double device_timeout_s = 0.01;         // no valid device sample for this long: ramp to zero
+  double max_speed_m_per_s = 5.0;         // device input faster than this is rejected as a glitch
+  double workspace_radius_m = 1.0;        // device input farther than this from the origin is rejected
 };
 
 // A scripted target position at a time (piecewise-linear in between).
@@ -74,7 +74,7 @@ struct HapticSpec {
   double rate_hz = 1000.0;
   double coupling_stiffness_N_per_m = 400.0;  // virtual coupling spring, proxy <-> device
   double coupling_damping_N_s_per_m = 1.0;
-  double crossfade_s = 0.01;                  // blend time when a new LocalModel arrives
+  double crossfade_s = 0.01;  // blend time when a new LocalModel arrives
 };
 
 struct RealtimeSpec {
@@ -87,19 +87,34 @@ struct RealtimeSpec {
 
 struct ControlSpec {
   std::string unix_socket_path = "/run/tissued/control.sock";  // empty: no Unix socket
-  int tcp_port = 0;  // 0: no TCP; otherwise bound to 127.0.0.1 only
+  int tcp_port = 0;                                            // 0: no TCP; otherwise bound to 127.0.0.1 only
   std::size_t max_line_bytes = 65536;
   int max_connections = 16;
 };
 
+// Live data out (proto/README.md). LCM by default sends to a multicast group
+// with ttl=0: subscribers on this host only. Off unless enabled.
+struct LcmPublishSpec {
+  bool enabled = false;
+  std::string url = "udpm://239.255.76.67:7667?ttl=0";
+};
+
+struct PublishSpec {
+  LcmPublishSpec lcm;
+  double mesh_rate_hz = 30.0;     // surface_mesh on channel TISSUE_SURFACE_MESH
+  double haptic_rate_hz = 100.0;  // haptic_state (decimated from 1 kHz) on TISSUE_HAPTIC_STATE
+  double stats_rate_hz = 5.0;     // sim_stats on TISSUE_SIM_STATS
+};
+
 struct DaemonConfig {
-  std::string source;      // file the config came from (for messages)
-  std::string scene_path;  // resolved against the config file's directory when relative
+  std::string source;                          // file the config came from (for messages)
+  std::string scene_path;                      // resolved against the config file's directory when relative
   std::string state_dir = "/var/lib/tissued";  // recordings and exports go here only
   DeviceSpec device;
   HapticSpec haptics;
   RealtimeSpec realtime;
   ControlSpec control;
+  PublishSpec publish;
   double status_interval_s = 1.0;  // live status line on stdout and STATUS= to systemd
 };
 

@@ -43,8 +43,8 @@ constexpr int kMaxRtPriority = 99;
 // CPU_SETSIZE: sched_setaffinity cannot name a CPU beyond it.
 constexpr int kMaxCpuIndex = 1023;
 
-const std::array<std::string_view, 7> kTopLevelKeys{"scene",    "state_dir", "status_interval_s", "device", "haptics",
-                                                    "realtime", "control"};
+const std::array<std::string_view, 8> kTopLevelKeys{"scene",   "state_dir", "status_interval_s", "device",
+                                                    "haptics", "realtime",  "control",           "publish"};
 
 const yaml_util::DocumentKind kConfigDocument{
     "daemon config", "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
@@ -65,8 +65,8 @@ class Converter : public yaml_util::Reader {
 
   DaemonConfig config(const YAML::Node& root) {
     if (!root.IsMap()) fail("", "a daemon config must be a map of sections, got " + yaml_util::describe(root));
-    const FieldMap f =
-        fields(root, "", {"scene", "state_dir", "status_interval_s", "device", "haptics", "realtime", "control"});
+    const FieldMap f = fields(
+        root, "", {"scene", "state_dir", "status_interval_s", "device", "haptics", "realtime", "control", "publish"});
     DaemonConfig c;
     c.source = source_;
     read(require(f, "scene", ""), "scene", c.scene_path);
@@ -76,6 +76,7 @@ class Converter : public yaml_util::Reader {
     if (const auto it = f.find("haptics"); it != f.end()) haptics(it->second, "haptics", c.haptics);
     if (const auto it = f.find("realtime"); it != f.end()) realtime(it->second, "realtime", c.realtime);
     if (const auto it = f.find("control"); it != f.end()) control(it->second, "control", c.control);
+    if (const auto it = f.find("publish"); it != f.end()) publish(it->second, "publish", c.publish);
     return c;
   }
 
@@ -156,6 +157,19 @@ class Converter : public yaml_util::Reader {
     opt(f, "haptic_cpu", p, r.haptic_cpu);
   }
 
+  void publish(const YAML::Node& n, const std::string& p, PublishSpec& s) const {
+    const FieldMap f = fields(n, p, {"lcm", "mesh_rate_hz", "haptic_rate_hz", "stats_rate_hz"});
+    if (const auto it = f.find("lcm"); it != f.end()) {
+      const std::string lp = join_key(p, "lcm");
+      const FieldMap g = fields(it->second, lp, {"enabled", "url"});
+      opt(g, "enabled", lp, s.lcm.enabled);
+      opt(g, "url", lp, s.lcm.url);
+    }
+    opt(f, "mesh_rate_hz", p, s.mesh_rate_hz);
+    opt(f, "haptic_rate_hz", p, s.haptic_rate_hz);
+    opt(f, "stats_rate_hz", p, s.stats_rate_hz);
+  }
+
   void control(const YAML::Node& n, const std::string& p, ControlSpec& c) const {
     const FieldMap f = fields(n, p, {"unix_socket_path", "tcp_port", "max_line_bytes", "max_connections"});
     if (const auto it = f.find("unix_socket_path"); it != f.end()) {
@@ -233,6 +247,16 @@ class Validator {
     if (k.max_connections < 1 || k.max_connections > kMaxConnections)
       fail("control.max_connections",
            "must be in [1, " + std::to_string(kMaxConnections) + "] (got " + std::to_string(k.max_connections) + ")");
+
+    const PublishSpec& pub = c_.publish;
+    for (const auto& [rate, key] :
+         {std::pair{pub.mesh_rate_hz, "publish.mesh_rate_hz"}, std::pair{pub.haptic_rate_hz, "publish.haptic_rate_hz"},
+          std::pair{pub.stats_rate_hz, "publish.stats_rate_hz"}})
+      if (!(rate > 0.0 && rate <= 1000.0)) fail(key, "must be in (0, 1000] Hz (got " + std::to_string(rate) + ")");
+    if (pub.lcm.url.rfind("udpm://", 0) != 0 && pub.lcm.url.rfind("memq://", 0) != 0 &&
+        pub.lcm.url.rfind("file://", 0) != 0)
+      fail("publish.lcm.url",
+           "must be an LCM provider URL: udpm://GROUP:PORT?ttl=N, memq:// or file://PATH (got '" + pub.lcm.url + "')");
   }
 
  private:

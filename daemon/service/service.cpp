@@ -1,5 +1,6 @@
 #include "service/service.hpp"
 
+#include <algorithm>
 #include <boost/asio/post.hpp>
 #include <cmath>
 #include <ctime>
@@ -15,6 +16,7 @@
 #include "record/recorder.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/haptic_side.hpp"
+#include "transport/lcm_publisher.hpp"
 
 namespace tissue::service {
 
@@ -23,6 +25,8 @@ namespace {
 SimThreadOptions sim_options(const config::DaemonConfig& c) {
   SimThreadOptions o;
   o.priority = c.realtime.sched_fifo ? c.realtime.sim_priority : 0;
+  // Status feeds the haptic_state messages too: refresh it at their rate.
+  o.status_every_s = 1.0 / std::max(c.publish.haptic_rate_hz, 20.0);
   return o;
 }
 
@@ -69,7 +73,10 @@ Service::Service(ServiceOptions options)
       signals_(io_, SIGINT, SIGTERM, SIGHUP),
       status_timer_(io_),
       watchdog_timer_(io_),
-      duration_timer_(io_) {}
+      duration_timer_(io_),
+      mesh_timer_(io_),
+      haptic_timer_(io_),
+      stats_timer_(io_) {}
 
 Service::~Service() { stop_threads(); }
 
@@ -174,6 +181,9 @@ void Service::request_stop(const std::string& why) {
   status_timer_.cancel();
   watchdog_timer_.cancel();
   duration_timer_.cancel();
+  mesh_timer_.cancel();
+  haptic_timer_.cancel();
+  stats_timer_.cancel();
   if (server_) server_->stop();
   // The threads stop in run() once the io_context has no more work.
 }
@@ -224,6 +234,37 @@ void Service::arm_signals() {
     request_stop(signo == SIGTERM ? "SIGTERM" : "SIGINT");
   });
 }
+
+void Service::start_publishing() {
+  if (!config_.publish.lcm.enabled) return;
+  try {
+    lcm_ = std::make_unique<transport::LcmPublisher>(config_.publish.lcm.url);
+  } catch (const std::exception& e) {
+    // Live data is optional: say why and keep serving.
+    std::fprintf(options_.err, "tissued: %s; LCM publishing is off\n", e.what());
+    return;
+  }
+  std::fprintf(options_.out, "tissued: publishing over LCM at %s (mesh %g Hz, haptic %g Hz, stats %g Hz)\n",
+               config_.publish.lcm.url.c_str(), config_.publish.mesh_rate_hz, config_.publish.haptic_rate_hz,
+               config_.publish.stats_rate_hz);
+  arm_publish_timer(mesh_timer_, config_.publish.mesh_rate_hz, &Service::publish_mesh);
+  if (haptics_) arm_publish_timer(haptic_timer_, config_.publish.haptic_rate_hz, &Service::publish_haptic);
+  arm_publish_timer(stats_timer_, config_.publish.stats_rate_hz, &Service::publish_stats);
+}
+
+void Service::arm_publish_timer(boost::asio::steady_timer& timer, double rate_hz, void (Service::*publish)()) {
+  timer.expires_after(
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / rate_hz)));
+  timer.async_wait([this, &timer, rate_hz, publish](const boost::system::error_code& ec) {
+    if (ec || stopping_) return;
+    (this->*publish)();
+    arm_publish_timer(timer, rate_hz, publish);
+  });
+}
+
+void Service::publish_mesh() { lcm_->publish_mesh(sim_->snapshot()); }
+void Service::publish_haptic() { lcm_->publish_haptic(sim_->status()); }
+void Service::publish_stats() { lcm_->publish_stats(sim_->status()); }
 
 void Service::arm_status_timer() {
   status_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
@@ -291,6 +332,7 @@ int Service::run() {
   }
   arm_status_timer();
   arm_watchdog_timer();
+  start_publishing();
   systemd_->ready();
 
   int code = kServiceOk;
@@ -312,6 +354,12 @@ nlohmann::json Service::status() {
   j["scene"] = {{"name", scene_.name}, {"source", scene_path_}, {"tool", scene_.tool.has_value()}};
   j["threads"] = {{"sim", sim_->scheduling()}};
   j["haptics"] = haptics_ ? haptics_->status_json() : nlohmann::json(nullptr);
+  j["publishing"] = lcm_ ? nlohmann::json{{"lcm_url", lcm_->url()},
+                                          {"meshes", lcm_->counts().meshes},
+                                          {"haptic_states", lcm_->counts().haptic_states},
+                                          {"stats", lcm_->counts().stats},
+                                          {"failures", lcm_->counts().failures}}
+                         : nlohmann::json(nullptr);
   if (recorder_) {
     const record::RecorderStats r = recorder_->stats();
     const record::RecorderState state = recorder_->state();

@@ -27,6 +27,9 @@
 namespace tissue::record {
 class Recorder;
 }
+namespace tissue::transport {
+class LcmPublisher;
+}
 
 namespace tissue::control {
 class ControlServer;
@@ -82,6 +85,12 @@ class Service : public control::ControlHandler {
   void reload();                         // SIGHUP: config and scene again
   void request_stop(const std::string& why);
   void arm_signals();
+  void start_publishing();
+  // Re-arms `timer` every 1/rate_hz seconds on the io thread, calling `publish`.
+  void arm_publish_timer(boost::asio::steady_timer& timer, double rate_hz, void (Service::*publish)());
+  void publish_mesh();
+  void publish_haptic();
+  void publish_stats();
   void arm_status_timer();
   void arm_watchdog_timer();
   void print_status();
@@ -99,6 +108,7 @@ class Service : public control::ControlHandler {
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
   boost::asio::steady_timer status_timer_, watchdog_timer_, duration_timer_;
+  boost::asio::steady_timer mesh_timer_, haptic_timer_, stats_timer_;
 
   std::unique_ptr<ToolSampleRing> samples_;    // haptic -> sim
   std::unique_ptr<LocalModelChannel> models_;  // sim -> haptic
@@ -111,6 +121,7 @@ class Service : public control::ControlHandler {
   // thread's when there is one, else the sim thread's (copied at each poll).
   std::atomic<std::uint64_t> heartbeat_{0};
   std::unique_ptr<record::Recorder> recorder_;
+  std::unique_ptr<transport::LcmPublisher> lcm_;  // null unless publish.lcm.enabled and LCM started
   bool stopping_ = false;
   std::string stop_reason_;
 };

@@ -167,6 +167,13 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.tool_pushing = last_step_.tool_pushing;
   const physics::Vec3 f = sim.tool_force_N();
   s.tool_force_N = {f.x(), f.y(), f.z()};
+  s.device_position_m = {last_tick_.device_position_m.x(), last_tick_.device_position_m.y(),
+                         last_tick_.device_position_m.z()};
+  s.proxy_position_m = {last_tick_.proxy_position_m.x(), last_tick_.proxy_position_m.y(),
+                        last_tick_.proxy_position_m.z()};
+  s.force_on_device_N = {last_tick_.force_on_device_N.x(), last_tick_.force_on_device_N.y(),
+                         last_tick_.force_on_device_N.z()};
+  s.tool_contact = last_tick_.contact;
   std::snprintf(s.last_error, sizeof s.last_error, "%s", last_error_.c_str());
   status_.publish();
   step_ms_max_ = 0.0;
@@ -210,6 +217,7 @@ void SimThread::run() {
         if (batch_.size() < batch_.capacity()) batch_.push_back(s);
       });
     samples_total_ += batch_.size();
+    if (!batch_.empty()) last_tick_ = batch_.back();
 
     if (const std::int64_t stall = stall_ns_.exchange(0, std::memory_order_relaxed); stall > 0)
       sleep_until_ns(now_ns() + stall);

@@ -54,6 +54,9 @@ struct SimStatus {
   std::uint64_t samples = 0;
   bool tool_pushing = false;
   std::array<double, 3> tool_force_N{};
+  // The newest haptic tick the sim thread drained (scene frame).
+  std::array<double, 3> device_position_m{}, proxy_position_m{}, force_on_device_N{};
+  bool tool_contact = false;
   char last_error[256] = {};  // the newest failed step's reason (NUL-terminated)
 };
 
@@ -149,6 +152,7 @@ class SimThread {
 
   // Sim-thread state.
   std::vector<haptics::ToolSample> batch_;
+  haptics::ToolSample last_tick_;
   haptics::LocalModel scratch_model_;
   std::uint64_t model_version_ = 0;
   std::uint64_t generation_ = 0;

@@ -1,0 +1,135 @@
+#include "transport/lcm_publisher.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <lcm/lcm-cpp.hpp>
+#include <optional>
+#include <vector>
+
+#include "transport/lcm_messages.hpp"
+
+namespace tissue::transport {
+namespace {
+
+using tissue_lcm::tissue::surface_mesh;
+
+// A strip of `quads` x 1 squares at z = 0, two triangles each.
+service::MeshSnapshot strip(int quads) {
+  service::MeshSnapshot s;
+  s.sequence = 1;
+  s.sim_time_s = 0.25;
+  for (int i = 0; i <= quads; ++i) {
+    s.vertices_m.push_back({0.001 * i, 0.0, 0.0});
+    s.vertices_m.push_back({0.001 * i, 0.001, 0.0});
+    s.vertex_level.push_back(static_cast<std::uint8_t>(i % 7));
+    s.vertex_level.push_back(static_cast<std::uint8_t>(i % 5));
+  }
+  for (std::uint32_t i = 0; i < static_cast<std::uint32_t>(quads); ++i) {
+    s.triangles.push_back({2 * i, 2 * i + 2, 2 * i + 3});
+    s.triangles.push_back({2 * i, 2 * i + 3, 2 * i + 1});
+  }
+  return s;
+}
+
+void expect_mesh_equals(const surface_mesh& m, const service::MeshSnapshot& s) {
+  ASSERT_EQ(m.vertex_count, static_cast<std::int32_t>(s.vertices_m.size()));
+  ASSERT_EQ(m.triangle_count, static_cast<std::int32_t>(s.triangles.size()));
+  EXPECT_EQ(m.time_s, s.sim_time_s);
+  for (std::size_t i = 0; i < s.vertices_m.size(); i += 97) {
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(m.vertex_m[3 * i + a], static_cast<float>(s.vertices_m[i][a]));
+    EXPECT_EQ(m.vertex_refinement_level[i], static_cast<std::int8_t>(s.vertex_level[i]));
+  }
+  for (std::size_t t = 0; t < s.triangles.size(); t += 89)
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(m.triangle_vertex[3 * t + k], static_cast<std::int32_t>(s.triangles[t][k]));
+  EXPECT_EQ(m.bounds_min_m[0], 0.0);
+  EXPECT_DOUBLE_EQ(m.bounds_max_m[0], s.vertices_m.back()[0]);
+  EXPECT_DOUBLE_EQ(m.bounds_max_m[1], 0.001);
+}
+
+TEST(LcmMessages, SurfaceMeshEncodesAndDecodesWithItsBounds) {
+  const service::MeshSnapshot s = strip(500);
+  surface_mesh m;
+  to_message(s, 42, &m);
+  EXPECT_EQ(m.sequence_number, 42);
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(m.getEncodedSize()));
+  ASSERT_EQ(m.encode(bytes.data(), 0, static_cast<int>(bytes.size())), static_cast<int>(bytes.size()));
+  surface_mesh back;
+  ASSERT_EQ(back.decode(bytes.data(), 0, static_cast<int>(bytes.size())), static_cast<int>(bytes.size()));
+  expect_mesh_equals(back, s);
+  EXPECT_EQ(back.triangle_strain_energy_density_J_per_m3.size(), s.triangles.size());
+}
+
+TEST(LcmMessages, StatusBecomesStatsAndHapticState) {
+  service::SimStatus st;
+  st.sim_time_s = 1.5;
+  st.nodes = 610;
+  st.tets = 2560;
+  st.refines = 485;
+  st.real_time_factor = 0.98;
+  st.device_position_m = {0.1, 0.2, 0.3};
+  st.force_on_device_N = {0, 0, 0.7};
+  st.tool_contact = true;
+  st.model_version = 99;
+  const auto stats = to_message(st, 3);
+  EXPECT_EQ(stats.node_count, 610);
+  EXPECT_EQ(stats.tet_count, 2560);
+  EXPECT_EQ(stats.refine_count, 485);
+  EXPECT_EQ(stats.real_time_factor, 0.98);
+  const auto haptic = haptic_message(st, 4);
+  EXPECT_EQ(haptic.device_position_m[2], 0.3);
+  EXPECT_EQ(haptic.force_N[2], 0.7);
+  EXPECT_TRUE(haptic.in_contact);
+  EXPECT_EQ(haptic.local_model_version, 99);
+}
+
+TEST(LcmPublisher, AnUnusableUrlIsAClearError) {
+  try {
+    LcmPublisher p("bogus://nowhere");
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("bogus://nowhere"), std::string::npos) << e.what();
+  }
+}
+
+// Over UDP multicast on a private loopback (the ctest entry runs this test
+// inside tests/transport/in_netns.sh): a > 2 MB mesh reaches two subscribers.
+struct Received {
+  std::optional<surface_mesh> mesh;
+  int stats = 0;
+  void on_mesh(const lcm::ReceiveBuffer*, const std::string&, const surface_mesh* m) { mesh = *m; }
+  void on_stats(const lcm::ReceiveBuffer*, const std::string&, const tissue_lcm::tissue::sim_stats*) { ++stats; }
+};
+
+TEST(LcmPublisherNetns, LargeMeshReachesTwoSubscribers) {
+  const char* url = std::getenv("TISSUE_TEST_LCM_URL");
+  if (!url) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  lcm::LCM sub_a(url), sub_b(url);
+  ASSERT_TRUE(sub_a.good() && sub_b.good());
+  Received a, b;
+  sub_a.subscribe(kSurfaceMeshChannel, &Received::on_mesh, &a);
+  sub_b.subscribe(kSurfaceMeshChannel, &Received::on_mesh, &b);
+  sub_a.subscribe(kSimStatsChannel, &Received::on_stats, &a);
+  LcmPublisher publisher(url);
+  const service::MeshSnapshot big = strip(70000);  // 140k vertices, 140k triangles: ~3.9 MB encoded
+  surface_mesh probe;
+  to_message(big, 1, &probe);
+  ASSERT_GT(probe.getEncodedSize(), 2 << 20);
+  publisher.publish_mesh(big);
+  publisher.publish_mesh(big);  // the same sequence again: not re-sent
+  publisher.publish_stats(service::SimStatus{});
+  EXPECT_EQ(publisher.counts().meshes, 1u);
+  for (int i = 0; i < 50 && !(a.mesh && b.mesh && a.stats > 0); ++i) {
+    sub_a.handleTimeout(100);
+    sub_b.handleTimeout(100);
+  }
+  ASSERT_TRUE(a.mesh.has_value());
+  ASSERT_TRUE(b.mesh.has_value());
+  expect_mesh_equals(*a.mesh, big);
+  expect_mesh_equals(*b.mesh, big);
+  EXPECT_EQ(a.stats, 1);
+}
+
+}  // namespace
+}  // namespace tissue::transport
