@@ -13,7 +13,17 @@ packages=(
   libosmesa6-dev libpng-dev
   libboost-dev libsystemd-dev
   clang-format iproute2
+  view3dscene
 )
+
+# Python: the LCM module for clients/python and its test (the PyPI wheel
+# decodes types from Debian's lcm-gen). Not fatal: only the Python client needs it.
+install_python_lcm() {
+  python3 -c 'import lcm' 2>/dev/null && return 0
+  python3 -m pip install --quiet lcm==1.5.3 2>/dev/null ||
+    python3 -m pip install --quiet --break-system-packages lcm==1.5.3 2>/dev/null ||
+    echo "install-deps: could not pip-install the Python 'lcm' module; clients/python needs it" >&2
+}
 
 missing=()
 for p in "${packages[@]}"; do
@@ -24,6 +34,7 @@ done
 
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#packages[@]} packages present"
+  install_python_lcm
   exit 0
 fi
 
@@ -36,3 +47,4 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 "${sudo_cmd[@]}" apt-get update -qq
 "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+install_python_lcm

@@ -1,0 +1,128 @@
+#!/usr/bin/env python3
+"""Live statistics from a running tissued, over LCM: the template to copy.
+
+Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
+writes an SVG of tets and real-time factor over time when it stops. Mesh and
+haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see
+proto/README.md for every field.
+
+  python3 clients/python/tissue_subscriber.py --seconds 10 --plot stats.svg
+
+Needs the PyPI `lcm` package (pip install lcm==1.5.3) and the Python types
+lcm-gen writes at build time (build/release/proto/generated/python; --types
+points elsewhere). The daemon publishes when its config says
+`publish: {lcm: {enabled: true}}`.
+Exit codes: 0 received at least one sim_stats message, 1 none arrived,
+2 bad arguments or missing modules.
+"""
+import argparse
+import os
+import select
+import sys
+import time
+
+DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
+
+
+def find_types(explicit):
+    here = os.path.dirname(os.path.abspath(__file__))
+    candidates = [explicit] if explicit else [
+        os.path.join(here, "..", "..", "build", tree, "proto", "generated", "python")
+        for tree in ("release", "dev", "asan", "tsan")
+    ]
+    for c in candidates:
+        if c and os.path.isfile(os.path.join(c, "tissue", "sim_stats.py")):
+            return os.path.abspath(c)
+    return None
+
+
+def write_svg(path, samples):
+    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib."""
+    width, height, pad = 640, 400, 50
+    t = [s[0] for s in samples]
+    series = [("tets", [s[1] for s in samples], "#1f77b4"), ("real-time factor", [s[2] for s in samples], "#d62728")]
+    t0, t1 = min(t), max(t)
+    span = (t1 - t0) or 1.0
+    panel_h = (height - 3 * pad) / 2
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}">',
+           f'<rect width="{width}" height="{height}" fill="white"/>']
+    for i, (name, values, colour) in enumerate(series):
+        top = pad + i * (panel_h + pad)
+        lo, hi = min(values), max(values)
+        rng = (hi - lo) or 1.0
+        points = " ".join(f"{pad + (x - t0) / span * (width - 2 * pad):.1f},{top + panel_h - (v - lo) / rng * panel_h:.1f}"
+                          for x, v in zip(t, values))
+        out.append(f'<rect x="{pad}" y="{top}" width="{width - 2 * pad}" height="{panel_h}" fill="none" stroke="#888"/>')
+        out.append(f'<polyline points="{points}" fill="none" stroke="{colour}" stroke-width="1.5"/>')
+        out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
+    out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.2f} .. {t1:.2f} s</text>')
+    out.append("</svg>")
+    with open(path, "w") as f:
+        f.write("\n".join(out) + "\n")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--url", default=DEFAULT_URL, help="LCM URL (default: %(default)s)")
+    ap.add_argument("--types", help="directory holding the generated 'tissue' Python package")
+    ap.add_argument("--seconds", type=float, default=10.0, help="how long to listen")
+    ap.add_argument("--plot", help="write an SVG of the statistics here when done")
+    args = ap.parse_args()
+    if not args.seconds > 0:
+        print("tissue_subscriber: --seconds must be > 0", file=sys.stderr)
+        return 2
+    try:
+        import lcm
+    except ImportError:
+        print("tissue_subscriber: the 'lcm' module is missing: pip install lcm==1.5.3", file=sys.stderr)
+        return 2
+    types = find_types(args.types)
+    if not types:
+        print("tissue_subscriber: no generated types (build the project, or pass --types DIR)", file=sys.stderr)
+        return 2
+    sys.path.insert(0, types)
+    from tissue import haptic_state, sim_stats, surface_mesh
+
+    try:
+        lc = lcm.LCM(args.url)
+    except (IOError, RuntimeError) as e:
+        print(f"tissue_subscriber: cannot listen at {args.url}: {e}", file=sys.stderr)
+        return 2
+    samples, counts = [], {"mesh": 0, "haptic": 0}
+
+    def on_stats(channel, data):
+        m = sim_stats.decode(data)
+        samples.append((m.time_s, m.tet_count, m.real_time_factor))
+        print(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
+              f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
+              f"E {m.kinetic_energy_J + m.elastic_energy_J:.3e} J  "
+              f"(meshes {counts['mesh']}, haptic states {counts['haptic']})", flush=True)
+
+    def on_mesh(channel, data):
+        surface_mesh.decode(data)  # decoding proves the message is whole
+        counts["mesh"] += 1
+
+    def on_haptic(channel, data):
+        haptic_state.decode(data)
+        counts["haptic"] += 1
+
+    lc.subscribe("TISSUE_SIM_STATS", on_stats)
+    lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
+    lc.subscribe("TISSUE_HAPTIC_STATE", on_haptic)
+    end = time.monotonic() + args.seconds
+    while (left := end - time.monotonic()) > 0:
+        ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))
+        if ready:
+            lc.handle()
+    if args.plot and samples:
+        write_svg(args.plot, samples)
+        print(f"wrote {args.plot}")
+    if not samples:
+        print(f"tissue_subscriber: no sim_stats at {args.url} in {args.seconds:g} s (is publish.lcm.enabled on?)",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
