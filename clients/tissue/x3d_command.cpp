@@ -3,13 +3,13 @@
 #include <CLI/CLI.hpp>
 
 #include <cerrno>
+#include <charconv>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <iostream>
 #include <memory>
 #include <optional>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -39,11 +39,11 @@ struct BadArguments : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// Shortest text that reads back as the same double: "0.1", not "0.10000000000000001".
 std::string fmt(double v) {
-  std::ostringstream s;
-  s.precision(17);
-  s << v;
-  return s.str();
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
 }
 
 // Writes next to the target and renames, so a failed export never leaves a
@@ -87,13 +87,15 @@ std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o
   }
   x3d::SurfaceFrame frame = source.read_frame(k);
   try {
+    // Validated here first so a bad stored frame is named by its number.
+    x3d::validate_frame(frame, xo.colour == x3d::ColourMode::kStrain, "frame " + std::to_string(k));
     std::string text = x3d::x3d_snapshot(frame, xo);
     *summary = "frame " + std::to_string(k) + " at t=" + fmt(frame.time_s) + " s, " +
                std::to_string(frame.vertices_m.size()) + " vertices, " + std::to_string(frame.triangles.size()) +
                " triangles";
     return text;
   } catch (const x3d::X3dInputError& e) {
-    throw x3d::SourceError(source.name() + ": frame " + std::to_string(k) + ": " + e.what());
+    throw x3d::SourceError(source.name() + ": " + e.what());
   }
 }
 
@@ -114,6 +116,13 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
     if (f.vertices_m.empty() || f.triangles.empty()) {
       ++skipped_empty;
       continue;
+    }
+    try {
+      // Validated on read so errors name the session's frame number, not
+      // the position in the window.
+      x3d::validate_frame(f, xo.colour == x3d::ColourMode::kStrain, "frame " + std::to_string(k));
+    } catch (const x3d::X3dInputError& e) {
+      throw x3d::SourceError(source.name() + ": " + e.what());
     }
     frames.push_back(std::move(f));
   }

@@ -58,8 +58,16 @@ struct OpenHapticsSpec {
   std::string device_name = "Default Device";
 };
 
+// Plays the device positions of a recorded session back (scene frame), at
+// `speed` times the recorded pace: the user's motion without the user.
+struct ReplayDeviceSpec {
+  std::string session;  // session file (.h5); relative paths resolve against the config's directory
+  double speed = 1.0;
+  bool loop = false;
+};
+
 struct DeviceSpec {
-  enum class Kind { kNone, kSim, kUdp, kOpenHaptics };
+  enum class Kind { kNone, kSim, kUdp, kOpenHaptics, kReplay };
   Kind kind = Kind::kSim;
   ForceLimits limits;
   // Device frame -> scene frame: p_scene = offset_m + scale * p_device.
@@ -68,6 +76,7 @@ struct DeviceSpec {
   SimDeviceSpec sim;
   UdpDeviceSpec udp;
   OpenHapticsSpec openhaptics;
+  ReplayDeviceSpec replay;
 };
 
 struct HapticSpec {

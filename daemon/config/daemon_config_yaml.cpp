@@ -49,11 +49,12 @@ const std::array<std::string_view, 8> kTopLevelKeys{"scene",   "state_dir", "sta
 const yaml_util::DocumentKind kConfigDocument{
     "daemon config", "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
 
-constexpr std::array<std::pair<std::string_view, DeviceSpec::Kind>, 4> kDeviceKinds{
+constexpr std::array<std::pair<std::string_view, DeviceSpec::Kind>, 5> kDeviceKinds{
     {{"none", DeviceSpec::Kind::kNone},
      {"sim", DeviceSpec::Kind::kSim},
      {"udp", DeviceSpec::Kind::kUdp},
-     {"openhaptics", DeviceSpec::Kind::kOpenHaptics}}};
+     {"openhaptics", DeviceSpec::Kind::kOpenHaptics},
+     {"replay", DeviceSpec::Kind::kReplay}}};
 constexpr std::array<std::pair<std::string_view, SimDeviceSpec::Mode>, 2> kSimModes{
     {{"trajectory", SimDeviceSpec::Mode::kTrajectory}, {"hand", SimDeviceSpec::Mode::kHand}}};
 
@@ -82,7 +83,7 @@ class Converter : public yaml_util::Reader {
 
  private:
   void device(const YAML::Node& n, const std::string& p, DeviceSpec& d) const {
-    const FieldMap f = fields(n, p, {"kind", "limits", "offset_m", "scale", "sim", "udp", "openhaptics"});
+    const FieldMap f = fields(n, p, {"kind", "limits", "offset_m", "scale", "sim", "udp", "openhaptics", "replay"});
     opt_choice<DeviceSpec::Kind>(f, "kind", p, kDeviceKinds, d.kind);
     if (const auto it = f.find("limits"); it != f.end()) limits(it->second, join_key(p, "limits"), d.limits);
     opt(f, "offset_m", p, d.offset_m);
@@ -100,6 +101,13 @@ class Converter : public yaml_util::Reader {
       const FieldMap g = fields(it->second, op, {"library", "device_name"});
       opt(g, "library", op, d.openhaptics.library);
       opt(g, "device_name", op, d.openhaptics.device_name);
+    }
+    if (const auto it = f.find("replay"); it != f.end()) {
+      const std::string rp = join_key(p, "replay");
+      const FieldMap g = fields(it->second, rp, {"session", "speed", "loop"});
+      opt(g, "session", rp, d.replay.session);
+      opt(g, "speed", rp, d.replay.speed);
+      opt(g, "loop", rp, d.replay.loop);
     }
   }
 
@@ -248,6 +256,13 @@ class Validator {
       fail("control.max_connections",
            "must be in [1, " + std::to_string(kMaxConnections) + "] (got " + std::to_string(k.max_connections) + ")");
 
+    if (c_.device.kind == DeviceSpec::Kind::kReplay) {
+      if (c_.device.replay.session.empty())
+        fail("device.replay.session", "a replay device needs the session file to play back");
+      if (!(c_.device.replay.speed > 0.0 && c_.device.replay.speed <= 100.0))
+        fail("device.replay.speed", "must be in (0, 100] (got " + std::to_string(c_.device.replay.speed) + ")");
+    }
+
     const PublishSpec& pub = c_.publish;
     for (const auto& [rate, key] :
          {std::pair{pub.mesh_rate_hz, "publish.mesh_rate_hz"}, std::pair{pub.haptic_rate_hz, "publish.haptic_rate_hz"},
@@ -353,6 +368,7 @@ DaemonConfig build(const std::string& text, const std::string& source, const std
       DaemonConfig c = Converter(source).config(doc.root);
       c.scene_path = resolve(c.scene_path, source);
       c.state_dir = resolve(c.state_dir, source);
+      if (!c.device.replay.session.empty()) c.device.replay.session = resolve(c.device.replay.session, source);
       validate_daemon_config(c);
       return c;
     } catch (const ConfigError& e) {

@@ -226,7 +226,46 @@ std::string xml_escape(const std::string& s) {
   return out;
 }
 
+// Reads rows [0, count) of an N x 3 float64 dataset.
+std::vector<std::array<double, 3>> read_vec3_rows(hid_t file, const std::string& path, DatasetId id,
+                                                  std::uint64_t count) {
+  std::vector<std::array<double, 3>> out(count);
+  if (count == 0) return out;
+  Handle d = open_dataset(file, path, kDatasets[id].path);
+  Handle space(H5Dget_space(d.get()));
+  const hsize_t start[2] = {0, 0}, n[2] = {count, 3};
+  Handle mem(H5Screate_simple(2, n, nullptr));
+  if (!space || H5Sget_simple_extent_ndims(space.get()) != 2 ||
+      H5Sselect_hyperslab(space.get(), H5S_SELECT_SET, start, nullptr, n, nullptr) < 0 ||
+      H5Sselect_valid(space.get()) <= 0)
+    bad_file(path, std::string("unexpected shape of ") + kDatasets[id].path);
+  if (H5Dread(d.get(), H5T_NATIVE_DOUBLE, mem.get(), space.get(), H5P_DEFAULT, out.data()) < 0)
+    bad_file(path, h5::describe(std::string("cannot read ") + kDatasets[id].path));
+  return out;
+}
+
 }  // namespace
+
+HapticTrack read_haptic_track(const std::string& path) {
+  h5::QuietErrors quiet;
+  const Preamble pre = read_preamble(path);
+  Handle file = open_for_reading(path, pre);
+  Counts counts;
+  info_of(file.get(), path, pre, &counts);
+  const std::uint64_t n = counts.rows.haptic_rows;
+  if (n == 0) bad_file(path, "the session has no haptic rows to replay");
+  HapticTrack track;
+  track.time_s = read_column<double>(file.get(), path, kHapticTime, H5T_NATIVE_DOUBLE, 0, n);
+  track.device_position_m = read_vec3_rows(file.get(), path, kHapticDevicePosition, n);
+  track.force_N = read_vec3_rows(file.get(), path, kHapticForce, n);
+  for (std::uint64_t i = 0; i < n; ++i) {
+    if (!std::isfinite(track.time_s[i]) || (i > 0 && track.time_s[i] < track.time_s[i - 1]))
+      bad_file(path, "/haptic/time_s is not finite and non-decreasing at row " + std::to_string(i));
+    for (double x : track.device_position_m[i])
+      if (!std::isfinite(x)) bad_file(path, "/haptic/device_position_m is not finite at row " + std::to_string(i));
+  }
+  return track;
+}
 
 SessionInfo read_session_info(const std::string& path) {
   h5::QuietErrors quiet;

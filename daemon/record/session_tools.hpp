@@ -5,6 +5,8 @@
 // is silenced).
 #pragma once
 
+#include <array>
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -40,6 +42,16 @@ struct SessionInfo {
 SessionInfo read_session_info(const std::string& path);
 // Human-readable multi-line summary (what `tissue session info` prints).
 std::string format_session_info(const SessionInfo& info);
+
+// The recorded haptic ticks (complete rows only), for replay.
+struct HapticTrack {
+  std::vector<double> time_s;                           // session time, non-decreasing
+  std::vector<std::array<double, 3>> device_position_m;  // scene frame
+  std::vector<std::array<double, 3>> force_N;           // rendered on the device
+};
+// Throws RecordError naming the file and what is wrong (not a session, no
+// haptic rows, times not increasing or not finite).
+HapticTrack read_haptic_track(const std::string& path);
 
 struct RepairReport {
   bool repair_needed = false;      // false: the file was already fine; nothing changed

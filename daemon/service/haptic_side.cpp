@@ -6,6 +6,8 @@
 #include "haptics/device.hpp"
 #include "haptics/haptic_loop.hpp"
 #include "haptics/haptic_thread.hpp"
+#include "haptics/replay_device.hpp"
+#include "record/session_tools.hpp"
 
 namespace tissue::service {
 
@@ -15,7 +17,16 @@ class HapticSideImpl final : public HapticSide {
  public:
   HapticSideImpl(const config::DaemonConfig& config, ToolSampleRing& samples, LocalModelChannel& models) {
     std::string error;
-    device_ = haptics::make_device(config.device, &error);
+    if (config.device.kind == config::DeviceSpec::Kind::kReplay) {
+      const record::HapticTrack track = record::read_haptic_track(config.device.replay.session);  // names the file
+      std::vector<haptics::Vec3> positions;
+      positions.reserve(track.device_position_m.size());
+      for (const auto& p : track.device_position_m) positions.emplace_back(p[0], p[1], p[2]);
+      device_ = std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
+                                                        config.device.replay.loop);
+    } else {
+      device_ = haptics::make_device(config.device, &error);
+    }
     if (!device_) throw std::runtime_error("haptic device: " + (error.empty() ? "none configured" : error));
     if (!device_->start(&error))
       throw std::runtime_error(std::string("haptic device ") + device_->name() + ": " + error);

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -246,6 +247,52 @@ TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
   EXPECT_GT(status["result"]["steps"].get<std::int64_t>(), 0);
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+
+// Replay (issue 6): a session recorded with the simulated hand, played back
+// through the replay device, renders the same forces within a tolerance
+// (the two runs share no clock, so compare the force profile, not ticks).
+TEST(Service, ReplayDeviceReproducesTheRecordedForces) {
+  TempDir dir;
+  {
+    Running run(write_config(dir, scene_file("cantilever.yaml")));
+    ControlClient client = connect(dir / "ctl.sock");
+    ASSERT_TRUE(client.call("record_start", {{"name", "original.h5"}})["ok"].get<bool>());
+    std::this_thread::sleep_for(1500ms);
+    client.call("shutdown");
+    ASSERT_EQ(run.wait(), kServiceOk);
+  }
+  const std::string config = dir / "replay.yaml";
+  std::ofstream(config) << "scene: " << scene_file("cantilever.yaml") << "\n"
+                        << "state_dir: " << dir.path() << "\n"
+                        << "device: {kind: replay, replay: {session: " << (dir / "original.h5") << "}}\n"
+                        << "realtime: {sched_fifo: false, lock_memory: false}\n"
+                        << "control: {unix_socket_path: " << (dir / "ctl2.sock") << "}\n";
+  {
+    Running run(config);
+    ControlClient client = connect(dir / "ctl2.sock");
+    ASSERT_TRUE(client.call("record_start", {{"name", "replayed.h5"}})["ok"].get<bool>());
+    std::this_thread::sleep_for(1500ms);
+    client.call("shutdown");
+    ASSERT_EQ(run.wait(), kServiceOk);
+  }
+  const record::HapticTrack original = record::read_haptic_track(dir / "original.h5");
+  const record::HapticTrack replayed = record::read_haptic_track(dir / "replayed.h5");
+  auto profile = [](const record::HapticTrack& t) {
+    double peak = 0.0, sum = 0.0;
+    for (const auto& f : t.force_N) {
+      const double m = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+      peak = std::max(peak, m);
+      sum += m;
+    }
+    return std::pair{peak, sum / static_cast<double>(t.force_N.size())};
+  };
+  const auto [peak_a, mean_a] = profile(original);
+  const auto [peak_b, mean_b] = profile(replayed);
+  ASSERT_GT(peak_a, 0.2) << "the hand never pressed: nothing to compare";
+  EXPECT_NEAR(peak_b, peak_a, 0.25 * peak_a);
+  EXPECT_NEAR(mean_b, mean_a, 0.3 * mean_a);
 }
 
 }  // namespace

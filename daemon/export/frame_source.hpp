@@ -1,0 +1,51 @@
+// Where export frames come from. Recorded sessions now (SessionFrameSource);
+// live LCM/DDS subscribers implement the same interface when the publishers
+// exist, and `tissue x3d` selects frames through it without knowing which.
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "export/x3d.hpp"
+
+namespace tissue::x3d {
+
+// The source cannot deliver: unreadable, corrupt or foreign input. The
+// message names the source (e.g. the file) and the reason.
+class SourceError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  // For messages: e.g. "'/data/s.h5'".
+  virtual std::string name() const = 0;
+  // Complete frames available, in time order.
+  virtual std::size_t frame_count() const = 0;
+  // Time of frame k (k < frame_count()) without reading its data.
+  virtual double frame_time_s(std::size_t k) const = 0;
+  // Frame k. Throws SourceError on I/O failure or impossible stored data
+  // (e.g. negative indices); std::out_of_range when k >= frame_count().
+  virtual SurfaceFrame read_frame(std::size_t k) = 0;
+  // Whether frames carry vertex_strain_energy_Pa.
+  virtual bool has_strain() const = 0;
+};
+
+// The frame on screen at time t: the last one with time_s <= t. Empty when
+// t is before the first frame (or there are no frames).
+std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s);
+
+// Frames with t0 <= time_s <= t1, in order.
+std::vector<std::size_t> frames_in_window(const FrameSource& source, double t0_s, double t1_s);
+
+// Opens a session file (docs/session-format.md), including one still being
+// recorded or left by a crash (SWMR read). Throws SourceError naming the file.
+std::unique_ptr<FrameSource> open_session_source(const std::string& path);
+
+}  // namespace tissue::x3d

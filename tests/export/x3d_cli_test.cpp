@@ -1,0 +1,220 @@
+// `tissue x3d` end to end on session files written with the recorder's
+// SessionWriter, and the session FrameSource it reads through.
+#include <gtest/gtest.h>
+#include <hdf5.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "export/export_test_support.hpp"
+#include "export/frame_source.hpp"
+#include "export/x3d.hpp"
+#include "record/session_writer.hpp"
+
+namespace tissue::x3d {
+namespace {
+
+using testing::attribute;
+using testing::count_elements;
+using testing::numbers;
+using testing::quote;
+using testing::RunResult;
+using testing::TempDir;
+
+// Coordinates are multiples of 1/64 m: exact in the session's float32.
+std::vector<SurfaceFrame> session_frames() {
+  std::vector<SurfaceFrame> f;
+  f.push_back(testing::box_frame(0.25, {0, 0, 0}, {0.125, 0.0625, 0.03125}));
+  f.push_back(testing::box_frame(0.5, {0.015625, 0, 0}, {0.140625, 0.0625, 0.03125}));
+  f.push_back(testing::box_frame(0.75, {0.03125, 0, 0}, {0.15625, 0.0625, 0.046875}));
+  f.push_back(testing::tetra_frame(1.0, 0.0625));
+  f.push_back(testing::tetra_frame(1.25, 0.078125));
+  return f;
+}
+
+std::string write_session(const TempDir& dir, const std::string& name, const std::vector<SurfaceFrame>& frames) {
+  const std::string path = dir / name;
+  record::SessionMetadata meta;
+  meta.scene_name = "x3d export test";
+  meta.software_version = "test";
+  auto writer = record::SessionWriter::create(path, meta);
+  for (const SurfaceFrame& f : frames)
+    writer->append_mesh_frame(record::MeshFrameView{f.time_s, f.vertices_m, f.triangles, f.vertex_level});
+  writer->close();
+  return path;
+}
+
+std::string tissue() { return quote(TISSUE_CLI_BINARY); }
+
+class X3dCli : public ::testing::Test {
+ protected:
+  void SetUp() override { session_ = write_session(dir_, "s.h5", session_frames()); }
+  RunResult x3d(const std::string& args) { return testing::run(tissue() + " x3d " + args, dir_); }
+  TempDir dir_;
+  std::string session_;
+};
+
+TEST_F(X3dCli, SessionSourceReadsFramesBack) {
+  const std::vector<SurfaceFrame> expected = session_frames();
+  auto source = open_session_source(session_);
+  ASSERT_EQ(source->frame_count(), expected.size());
+  EXPECT_FALSE(source->has_strain());
+  for (std::size_t k = 0; k < expected.size(); ++k) {
+    const SurfaceFrame f = source->read_frame(k);
+    EXPECT_EQ(source->frame_time_s(k), expected[k].time_s);
+    EXPECT_EQ(f.time_s, expected[k].time_s);
+    EXPECT_EQ(f.vertices_m, expected[k].vertices_m) << "frame " << k;
+    EXPECT_EQ(f.triangles, expected[k].triangles) << "frame " << k;
+    EXPECT_EQ(f.vertex_level, expected[k].vertex_level) << "frame " << k;
+  }
+  EXPECT_THROW(source->read_frame(expected.size()), std::out_of_range);
+  EXPECT_EQ(frame_at_time(*source, 0.1), std::nullopt);
+  EXPECT_EQ(frame_at_time(*source, 0.25), 0u);
+  EXPECT_EQ(frame_at_time(*source, 0.7), 1u);
+  EXPECT_EQ(frame_at_time(*source, 99.0), 4u);
+  EXPECT_EQ(frames_in_window(*source, 0.5, 1.0), (std::vector<std::size_t>{1, 2, 3}));
+}
+
+TEST_F(X3dCli, DefaultSnapshotIsTheLastFrame) {
+  const std::string out = dir_ / "last.x3d";
+  const RunResult r = x3d("--session " + quote(session_) + " -o " + quote(out));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  EXPECT_NE(r.out.find("frame 4"), std::string::npos) << r.out;
+  const std::string xml = testing::slurp(out);
+  EXPECT_NE(xml.find("<X3D profile='Interchange' version='3.3'"), std::string::npos);
+  const SurfaceFrame last = session_frames().back();
+  const std::vector<double> point = numbers(attribute(xml, "Coordinate", "point"));
+  ASSERT_EQ(point.size(), 3 * last.vertices_m.size());
+  for (std::size_t i = 0; i < point.size(); ++i) EXPECT_EQ(point[i], last.vertices_m[i / 3][i % 3]);
+  const std::vector<double> index = numbers(attribute(xml, "IndexedTriangleSet", "index"));
+  ASSERT_EQ(index.size(), 3 * last.triangles.size());
+  for (const double i : index) EXPECT_LT(i, static_cast<double>(last.vertices_m.size()));
+  EXPECT_FALSE(std::filesystem::exists(out + ".tmp"));
+}
+
+TEST_F(X3dCli, FrameAndTimeSelectTheSnapshot) {
+  const std::string out = dir_ / "f.x3d";
+  RunResult r = x3d("--session " + quote(session_) + " --frame 1 -o " + quote(out));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(numbers(attribute(testing::slurp(out), "Coordinate", "point"))[0], 0.015625);
+  r = x3d("--session " + quote(session_) + " --time 0.9 -o " + quote(out));  // frame 2 is on screen at 0.9 s
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string xml = testing::slurp(out);
+  EXPECT_EQ(numbers(attribute(xml, "Coordinate", "point"))[0], 0.03125);
+  EXPECT_EQ(numbers(attribute(xml, "Coordinate", "point")).size(), 24u);
+}
+
+TEST_F(X3dCli, AnimationOverAWindow) {
+  const std::string out = dir_ / "anim.x3d";
+  const RunResult r = x3d("--session " + quote(session_) + " --animate --from 0.5 --to 1.25 -o " + quote(out));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  const std::string xml = testing::slurp(out);
+  EXPECT_EQ(numbers(attribute(xml, "TimeSensor", "cycleInterval")), (std::vector<double>{0.75}));
+  EXPECT_EQ(count_elements(xml, "Shape"), 2u);  // box run (frames 1-2), tetra run (3-4)
+  EXPECT_EQ(count_elements(xml, "CoordinateInterpolator"), 2u);
+  EXPECT_EQ(numbers(attribute(xml, "IntegerSequencer", "key")), (std::vector<double>{0.0, 0.5 / 0.75}));
+  const std::string tool = testing::tovrmlx3d_path();
+  if (tool.empty()) GTEST_SKIP() << "tovrmlx3d not installed (apt-get install view3dscene)";
+  const RunResult v = testing::run(quote(tool) + " " + quote(out) + " --encoding xml", dir_);
+  EXPECT_EQ(v.exit_code, 0);
+  EXPECT_EQ(v.err, "");
+}
+
+TEST_F(X3dCli, SnapshotAcceptedByTovrml) {
+  const std::string tool = testing::tovrmlx3d_path();
+  if (tool.empty()) GTEST_SKIP() << "tovrmlx3d not installed (apt-get install view3dscene)";
+  const std::string out = dir_ / "snap.x3d";
+  ASSERT_EQ(x3d("--session " + quote(session_) + " --frame 0 -o " + quote(out)).exit_code, 0);
+  const RunResult v = testing::run(quote(tool) + " " + quote(out) + " --encoding xml", dir_);
+  EXPECT_EQ(v.exit_code, 0);
+  EXPECT_EQ(v.err, "");
+}
+
+TEST_F(X3dCli, UnreadableInputExitsOneNamingTheFile) {
+  const std::string out = dir_ / "o.x3d";
+  const std::string missing = dir_ / "missing.h5";
+  RunResult r = x3d("--session " + quote(missing) + " -o " + quote(out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find(missing), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("No such file"), std::string::npos) << r.err;
+
+  const std::string junk = dir_ / "junk.h5";
+  testing::write_text(junk, "this is not HDF5 at all, just text padding the header\n");
+  r = x3d("--session " + quote(junk) + " -o " + quote(out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find(junk), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("not an HDF5 file"), std::string::npos) << r.err;
+
+  const std::string empty = write_session(dir_, "empty.h5", {});
+  r = x3d("--session " + quote(empty) + " -o " + quote(out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("no complete mesh frame"), std::string::npos) << r.err;
+
+  r = x3d("--session " + quote(session_) + " -o " + quote(dir_ / "no/such/dir/o.x3d"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("cannot write"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// Overwrites /mesh/triangles row `row`, column 0, of a closed session.
+void poke_triangle_index(const std::string& path, hsize_t row, std::int32_t value) {
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const hid_t d = H5Dopen2(file, "/mesh/triangles", H5P_DEFAULT);
+  const hid_t space = H5Dget_space(d);
+  const hsize_t start[2] = {row, 0}, count[2] = {1, 1};
+  H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, count, nullptr);
+  const hid_t mem = H5Screate_simple(2, count, nullptr);
+  EXPECT_GE(H5Dwrite(d, H5T_NATIVE_INT32, mem, space, H5P_DEFAULT, &value), 0);
+  H5Sclose(mem);
+  H5Sclose(space);
+  H5Dclose(d);
+  H5Fclose(file);
+}
+
+TEST_F(X3dCli, ImpossibleStoredFramesExitOneNamingFrameAndField) {
+  const std::string out = dir_ / "o.x3d";
+  // Frame 1 starts at triangle row 12 (frame 0 is a 12-triangle box).
+  poke_triangle_index(session_, 12 + 3, 8);
+  RunResult r = x3d("--session " + quote(session_) + " --frame 1 -o " + quote(out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("'" + session_ +
+                       "': frame 1 (t=0.5 s): triangles[3][0] = 8 is out of range (the frame has 8 "
+                       "vertices)"),
+            std::string::npos)
+      << r.err;
+  r = x3d("--session " + quote(session_) + " --animate -o " + quote(out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("triangles[3][0] = 8 is out of range"), std::string::npos) << r.err;
+  poke_triangle_index(session_, 12 + 3, -4);
+  r = x3d("--session " + quote(session_) + " --frame 1 -o " + quote(out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("/mesh/triangles row 15 (frame 1) holds the negative index -4"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+TEST_F(X3dCli, BadArgumentsExitTwo) {
+  const std::string s = "--session " + quote(session_) + " -o " + quote(dir_ / "o.x3d");
+  const auto expect_2 = [&](const std::string& args, const std::string& fragment) {
+    const RunResult r = x3d(args);
+    EXPECT_EQ(r.exit_code, 2) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << args << "\n" << r.err;
+  };
+  expect_2(s + " --frame 5", "--frame 5: '" + session_ + "' has 5 frames (0 to 4)");
+  expect_2(s + " --time 0.1", "--time 0.1: '" + session_ + "' has no frame that early");
+  expect_2(s + " --frame 1 --time 0.5", "excludes");
+  expect_2(s + " --animate --frame 1", "excludes");
+  expect_2(s + " --from 0.5", "requires --animate");
+  expect_2(s + " --animate --from 2 --to 3", "0 non-empty frames between 2 s and 3 s");
+  expect_2(s + " --animate --from 1 --to 0.5", "the window is empty");
+  expect_2(s + " --colour purple", "purple");
+  expect_2(s + " --colour strain", "stores no per-vertex strain energy");
+  expect_2("-o " + quote(dir_ / "o.x3d"), "--session is required");
+  expect_2("--session " + quote(session_), "--output is required");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
+}
+
+}  // namespace
+}  // namespace tissue::x3d

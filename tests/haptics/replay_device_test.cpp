@@ -1,0 +1,62 @@
+#include "haptics/replay_device.hpp"
+
+#include <gtest/gtest.h>
+
+namespace tissue::haptics {
+namespace {
+
+constexpr std::int64_t kMs = 1000000;
+
+ReplayDevice three_points(double speed, bool loop) {
+  // 0 s at the origin, 1 s at x = 0.01, 2 s at x = 0.01, y = 0.02.
+  return ReplayDevice({0.0, 1.0, 2.0}, {Vec3(0, 0, 0), Vec3(0.01, 0, 0), Vec3(0.01, 0.02, 0)}, speed, loop);
+}
+
+TEST(ReplayDevice, InterpolatesAlongTheTrackFromTheFirstRead) {
+  ReplayDevice d = three_points(1.0, false);
+  std::string error;
+  ASSERT_TRUE(d.start(&error)) << error;
+  DeviceSample s;
+  const std::int64_t t0 = 5'000 * kMs;  // any clock origin: time counts from the first read
+  ASSERT_TRUE(d.read(t0, &s));
+  EXPECT_EQ(s.position_m, Vec3(0, 0, 0));
+  ASSERT_TRUE(d.read(t0 + 500 * kMs, &s));
+  EXPECT_NEAR((s.position_m - Vec3(0.005, 0, 0)).norm(), 0.0, 1e-15);
+  EXPECT_NEAR((s.velocity_m_per_s - Vec3(0.01, 0, 0)).norm(), 0.0, 1e-12);
+  ASSERT_TRUE(d.read(t0 + 1500 * kMs, &s));
+  EXPECT_NEAR((s.position_m - Vec3(0.01, 0.01, 0)).norm(), 0.0, 1e-15);
+  ASSERT_TRUE(d.read(t0 + 9000 * kMs, &s));  // past the end: held, at rest
+  EXPECT_EQ(s.position_m, Vec3(0.01, 0.02, 0));
+  EXPECT_EQ(s.velocity_m_per_s, Vec3::Zero());
+}
+
+TEST(ReplayDevice, SpeedAndLoop) {
+  ReplayDevice fast = three_points(2.0, false);
+  ASSERT_TRUE(fast.start(nullptr));
+  DeviceSample s;
+  fast.read(0, &s);
+  fast.read(250 * kMs, &s);  // 0.5 s into the track
+  EXPECT_NEAR(s.position_m.x(), 0.005, 1e-15);
+  EXPECT_NEAR(s.velocity_m_per_s.x(), 0.02, 1e-12);
+
+  ReplayDevice looping = three_points(1.0, true);
+  ASSERT_TRUE(looping.start(nullptr));
+  looping.read(0, &s);
+  looping.read(2500 * kMs, &s);  // 2.5 s wraps to 0.5 s
+  EXPECT_NEAR((s.position_m - Vec3(0.005, 0, 0)).norm(), 0.0, 1e-12);
+}
+
+TEST(ReplayDevice, BadTracksAreRefusedAtStart) {
+  std::string error;
+  EXPECT_FALSE(ReplayDevice({}, {}, 1.0, false).start(&error));
+  EXPECT_NE(error.find("empty"), std::string::npos) << error;
+  EXPECT_FALSE(ReplayDevice({0.0, 1.0}, {Vec3::Zero()}, 1.0, false).start(&error));
+  EXPECT_FALSE(ReplayDevice({1.0, 0.0}, {Vec3::Zero(), Vec3::Zero()}, 1.0, false).start(&error));
+  EXPECT_NE(error.find("row 1"), std::string::npos) << error;
+  EXPECT_FALSE(
+      ReplayDevice({0.0}, {Vec3(std::numeric_limits<double>::quiet_NaN(), 0, 0)}, 1.0, false).start(&error));
+  EXPECT_FALSE(ReplayDevice({0.0}, {Vec3::Zero()}, 0.0, false).start(&error));
+}
+
+}  // namespace
+}  // namespace tissue::haptics
