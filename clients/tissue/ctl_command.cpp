@@ -125,7 +125,7 @@ Subcommand add_ctl_command(CLI::App& parent) {
   app->footer(
       "Usage: tissue ctl [--socket PATH | --tcp PORT] [--timeout S] CMD [ARGS...]\n"
       "Commands: status, pause, resume, reset, load_scene PATH, set KEY VALUE, shutdown,\n"
-      "          record_start [name=FILE.h5], record_stop.\n"
+      "          record_start [name=FILE.h5], record_stop, export_x3d [name=FILE.x3d].\n"
       "Exit codes: 0 ok, 1 the daemon answered an error, 2 bad arguments, 3 cannot connect.");
   auto* socket_opt =
       app->add_option("--socket", options->socket_path, "Unix socket of the daemon")->capture_default_str();

@@ -67,15 +67,16 @@ struct Command {
   }
 };
 
-constexpr std::array<Command, 9> kCommands{{{"status", {}},
-                                            {"pause", {}},
-                                            {"resume", {}},
-                                            {"reset", {}},
-                                            {"load_scene", {"path"}},
-                                            {"set", {"key", "value"}},
-                                            {"shutdown", {}},
-                                            {"record_start", {"name"}},
-                                            {"record_stop", {}}}};
+constexpr std::array<Command, 10> kCommands{{{"status", {}},
+                                             {"pause", {}},
+                                             {"resume", {}},
+                                             {"reset", {}},
+                                             {"load_scene", {"path"}},
+                                             {"set", {"key", "value"}},
+                                             {"shutdown", {}},
+                                             {"record_start", {"name"}},
+                                             {"record_stop", {}},
+                                             {"export_x3d", {"name"}}}};
 
 std::string allowed_list(const Command& c) {
   std::string out = "id, cmd";
@@ -116,6 +117,9 @@ json dispatch(const Command& c, const json& request, ControlHandler& handler) {
   if (cmd == "shutdown") return handler.shutdown();
   if (cmd == "load_scene") return handler.load_scene(required_string(request, "path", cmd, kMaxPathBytes));
   if (cmd == "record_stop") return handler.record_stop();
+  if (cmd == "export_x3d")
+    return handler.export_x3d(request.contains("name") ? required_string(request, "name", cmd, kMaxFileNameBytes)
+                                                       : std::string());
   if (cmd == "record_start")
     return handler.record_start(request.contains("name") ? required_string(request, "name", cmd, kMaxFileNameBytes)
                                                          : std::string());

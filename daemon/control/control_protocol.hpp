@@ -50,11 +50,12 @@ class ControlHandler {
   // daemon refuses names that are not a plain file name.
   virtual nlohmann::json record_start(const std::string& name) = 0;
   virtual nlohmann::json record_stop() = 0;
+  // Writes the current surface as an X3D file in the state directory; `name`
+  // empty: the daemon picks one.
+  virtual nlohmann::json export_x3d(const std::string& name) = 0;
 };
 
-// Commands the protocol reserves for later issues: the server answers them
-// "unknown command" like any other unknown name until a handler method exists.
-//   export_x3d
+// Every command has a handler method; anything else is "unknown command".
 
 // Limits on request content, independent of the line length limit.
 inline constexpr std::size_t kMaxCommandNameBytes = 64;

@@ -45,9 +45,9 @@ std::string format_session_info(const SessionInfo& info);
 
 // The recorded haptic ticks (complete rows only), for replay.
 struct HapticTrack {
-  std::vector<double> time_s;                           // session time, non-decreasing
+  std::vector<double> time_s;                            // session time, non-decreasing
   std::vector<std::array<double, 3>> device_position_m;  // scene frame
-  std::vector<std::array<double, 3>> force_N;           // rendered on the device
+  std::vector<std::array<double, 3>> force_N;            // rendered on the device
 };
 // Throws RecordError naming the file and what is wrong (not a session, no
 // haptic rows, times not increasing or not finite).

@@ -13,6 +13,7 @@
 #include "config/daemon_config_yaml.hpp"
 #include "control/control_server.hpp"
 #include "control/systemd_notify.hpp"
+#include "export/x3d.hpp"
 #include "record/recorder.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/haptic_side.hpp"
@@ -459,6 +460,36 @@ nlohmann::json Service::record_stop() {
   stop_recording();
   // Stats are gone with the recorder; the file says it all (tissue session info).
   return {{"file", path}, {"error", error.empty() ? nlohmann::json(nullptr) : nlohmann::json(error)}};
+}
+
+nlohmann::json Service::export_x3d(const std::string& name) {
+  std::string file_name = name;
+  if (file_name.empty()) {
+    file_name = default_session_name();
+    file_name.replace(file_name.find("session-"), 8, "surface-");
+    file_name.replace(file_name.rfind(".h5"), 3, ".x3d");
+  }
+  // Same rule as recordings: a plain file name inside the state directory.
+  if (file_name.find('/') != std::string::npos || file_name == "." || file_name == "..")
+    throw control::ControlError("export_x3d: '" + file_name + "' is not a plain file name (files go to state_dir " +
+                                config_.state_dir + ")");
+  const MeshSnapshot& snap = sim_->snapshot();
+  if (snap.sequence == 0) throw control::ControlError("export_x3d: no surface yet; try again in a moment");
+  x3d::SurfaceFrame frame;
+  frame.time_s = snap.sim_time_s;
+  frame.vertices_m = snap.vertices_m;
+  frame.triangles = snap.triangles;
+  frame.vertex_level = snap.vertex_level;
+  x3d::X3dOptions options;
+  options.title = scene_.name + " at t = " + std::to_string(snap.sim_time_s) + " s";
+  const std::filesystem::path path = std::filesystem::path(config_.state_dir) / file_name;
+  if (std::filesystem::exists(path))
+    throw control::ControlError("export_x3d: " + path.string() + " exists; files are never overwritten");
+  std::ofstream out(path);
+  out << x3d::x3d_snapshot(frame, options);
+  out.close();
+  if (!out) throw control::ControlError("export_x3d: cannot write " + path.string());
+  return {{"file", path.string()}, {"sim_time_s", snap.sim_time_s}, {"triangles", snap.triangles.size()}};
 }
 
 nlohmann::json Service::shutdown() {

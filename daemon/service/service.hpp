@@ -75,6 +75,7 @@ class Service : public control::ControlHandler {
   nlohmann::json shutdown() override;
   nlohmann::json record_start(const std::string& name) override;
   nlohmann::json record_stop() override;
+  nlohmann::json export_x3d(const std::string& name) override;
 
  private:
   void load_config();  // throws config::ConfigError / scene::SceneError

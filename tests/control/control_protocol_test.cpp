@@ -95,14 +95,16 @@ TEST(ControlProtocol, RecordCommandsTakeAnOptionalName) {
   ASSERT_EQ(calls.size(), 3u);
   EXPECT_EQ(calls[0].cmd, "record_start");
   EXPECT_EQ(calls[2].cmd, "record_stop");
+  EXPECT_EQ(handle(R"({"id":7,"cmd":"export_x3d","name":"a.x3d"})", h).at("result"), json({{"file", "a.x3d"}}));
+  EXPECT_EQ(handle(R"({"id":8,"cmd":"export_x3d"})", h).at("result"), json({{"file", ""}}));
 }
 
 TEST(ControlProtocol, UnknownAndReservedCommands) {
   FakeHandler h;
   EXPECT_EQ(handle_request_line(R"({"id":9,"cmd":"x"})", h), R"({"id":9,"ok":false,"error":"unknown command 'x'"})");
-  for (const char* reserved : {"export_x3d"})
-    expect_error(handle(json{{"id", 1}, {"cmd", reserved}}.dump(), h), 1,
-                 std::string("unknown command '") + reserved + "'");
+  for (const char* unknown : {"export_vrml", "record"})
+    expect_error(handle(json{{"id", 1}, {"cmd", unknown}}.dump(), h), 1,
+                 std::string("unknown command '") + unknown + "'");
   // A huge name is cut in the message.
   const json r = handle(json{{"cmd", std::string(5000, 'q')}}.dump(), h);
   expect_error(r, nullptr, "unknown command 'qqq");

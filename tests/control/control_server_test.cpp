@@ -132,7 +132,7 @@ TEST(ControlServer, EveryCommandReachesTheHandler) {
   EXPECT_EQ(calls[4].args.at("key"), "material.youngs_modulus_Pa");
   EXPECT_EQ(calls[4].args.at("value"), 8e4);
   // Unknown commands and bad arguments do not reach it.
-  EXPECT_EQ(c.call("export_x3d").at("error"), "unknown command 'export_x3d'");
+  EXPECT_EQ(c.call("export_vrml").at("error"), "unknown command 'export_vrml'");
   EXPECT_EQ(c.call("set", {{"key", "a.b"}}).at("ok"), false);
   EXPECT_EQ(h.handler().call_count(), 6u);
 }

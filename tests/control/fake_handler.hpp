@@ -39,6 +39,9 @@ class FakeHandler : public ControlHandler {
     return record("record_start", {{"name", name}}, {{"file", name}});
   }
   nlohmann::json record_stop() override { return record("record_stop", nlohmann::json::object(), nullptr); }
+  nlohmann::json export_x3d(const std::string& name) override {
+    return record("export_x3d", {{"name", name}}, {{"file", name}});
+  }
 
   // The status result: depends on how many calls came before, so a test can
   // tell a fresh answer from a replayed one.

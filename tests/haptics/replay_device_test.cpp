@@ -53,8 +53,7 @@ TEST(ReplayDevice, BadTracksAreRefusedAtStart) {
   EXPECT_FALSE(ReplayDevice({0.0, 1.0}, {Vec3::Zero()}, 1.0, false).start(&error));
   EXPECT_FALSE(ReplayDevice({1.0, 0.0}, {Vec3::Zero(), Vec3::Zero()}, 1.0, false).start(&error));
   EXPECT_NE(error.find("row 1"), std::string::npos) << error;
-  EXPECT_FALSE(
-      ReplayDevice({0.0}, {Vec3(std::numeric_limits<double>::quiet_NaN(), 0, 0)}, 1.0, false).start(&error));
+  EXPECT_FALSE(ReplayDevice({0.0}, {Vec3(std::numeric_limits<double>::quiet_NaN(), 0, 0)}, 1.0, false).start(&error));
   EXPECT_FALSE(ReplayDevice({0.0}, {Vec3::Zero()}, 0.0, false).start(&error));
 }
 

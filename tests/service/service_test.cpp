@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <thread>
 
 #include "control/control_client.hpp"
@@ -249,7 +250,6 @@ TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
-
 // Replay (issue 6): a session recorded with the simulated hand, played back
 // through the replay device, renders the same forces within a tolerance
 // (the two runs share no clock, so compare the force profile, not ticks).
@@ -293,6 +293,28 @@ TEST(Service, ReplayDeviceReproducesTheRecordedForces) {
   ASSERT_GT(peak_a, 0.2) << "the hand never pressed: nothing to compare";
   EXPECT_NEAR(peak_b, peak_a, 0.25 * peak_a);
   EXPECT_NEAR(mean_b, mean_a, 0.3 * mean_a);
+}
+
+// export_x3d: the current surface as an X3D file in the state directory.
+TEST(Service, ExportsTheCurrentSurfaceAsX3d) {
+  TempDir dir;
+  Running run(write_config(dir, scene_file("cantilever.yaml")));
+  ControlClient client = connect(dir / "ctl.sock");
+  std::this_thread::sleep_for(200ms);  // a snapshot exists after the first 1/30 s
+  const nlohmann::json r = client.call("export_x3d", {{"name", "now.x3d"}});
+  ASSERT_TRUE(r["ok"].get<bool>()) << r.dump();
+  EXPECT_GT(r["result"]["triangles"].get<std::size_t>(), 100u);
+  std::ifstream in(dir / "now.x3d");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("<X3D"), std::string::npos);
+  EXPECT_NE(text.find("IndexedTriangleSet"), std::string::npos);
+  EXPECT_FALSE(client.call("export_x3d", {{"name", "now.x3d"}})["ok"].get<bool>());  // never overwrites
+  EXPECT_FALSE(client.call("export_x3d", {{"name", "../up.x3d"}})["ok"].get<bool>());
+  const nlohmann::json unnamed = client.call("export_x3d");
+  ASSERT_TRUE(unnamed["ok"].get<bool>()) << unnamed.dump();
+  EXPECT_TRUE(std::filesystem::exists(unnamed["result"]["file"].get<std::string>()));
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
 }
 
 }  // namespace
