@@ -195,7 +195,9 @@ class Converter : public yaml_util::Reader {
 
 // ------------------------------------------------------------- validation
 
-class Validator {
+class Validator : private yaml_util::ValueChecks<Validator> {
+  friend class yaml_util::ValueChecks<Validator>;
+
  public:
   explicit Validator(const DaemonConfig& c) : c_(c) {}
 
@@ -279,20 +281,6 @@ class Validator {
     throw ConfigError(c_.source, path, reason);
   }
 
-  void finite(double v, const std::string& path) const {
-    if (!std::isfinite(v)) fail(path, "must be a finite number (got " + fmt_num(v) + ")");
-  }
-  void finite(const Vec3& v, const std::string& path) const {
-    for (std::size_t i = 0; i < 3; ++i) finite(v[i], join_index(path, i));
-  }
-  void positive(double v, const std::string& path) const {
-    finite(v, path);
-    if (!(v > 0.0)) fail(path, "must be > 0 (got " + fmt_num(v) + ")");
-  }
-  void non_negative(double v, const std::string& path) const {
-    finite(v, path);
-    if (!(v >= 0.0)) fail(path, "must be >= 0 (got " + fmt_num(v) + ")");
-  }
   void priority(int v, const std::string& path) const {
     if (v < kMinRtPriority || v > kMaxRtPriority)
       fail(path, "must be a SCHED_FIFO priority in [" + std::to_string(kMinRtPriority) + ", " +

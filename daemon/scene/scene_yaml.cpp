@@ -215,7 +215,9 @@ class Converter : public yaml_util::Reader {
 
 // ------------------------------------------------------------- validation
 
-class Validator {
+class Validator : private yaml_util::ValueChecks<Validator> {
+  friend class yaml_util::ValueChecks<Validator>;
+
  public:
   explicit Validator(const Scene& s) : s_(s) {}
 
@@ -320,20 +322,6 @@ class Validator {
     throw SceneError(s_.source, path, reason);
   }
 
-  void finite(double v, const std::string& path) const {
-    if (!std::isfinite(v)) fail(path, "must be a finite number (got " + fmt_num(v) + ")");
-  }
-  void finite(const Vec3& v, const std::string& path) const {
-    for (std::size_t i = 0; i < 3; ++i) finite(v[i], join_index(path, i));
-  }
-  void positive(double v, const std::string& path) const {
-    finite(v, path);
-    if (!(v > 0.0)) fail(path, "must be > 0 (got " + fmt_num(v) + ")");
-  }
-  void non_negative(double v, const std::string& path) const {
-    finite(v, path);
-    if (!(v >= 0.0)) fail(path, "must be >= 0 (got " + fmt_num(v) + ")");
-  }
   void open_unit(double v, const std::string& path) const {
     finite(v, path);
     if (!(v > 0.0 && v < 1.0)) fail(path, "must be in (0, 1) (got " + fmt_num(v) + ")");

@@ -9,6 +9,8 @@
 // own public error type (SceneError, ConfigError) at its boundary.
 #pragma once
 
+#include <cmath>
+
 #include <yaml-cpp/yaml.h>
 
 #include <array>
@@ -208,5 +210,30 @@ std::string blame_override(const std::vector<Override>& overrides, const std::st
 // The whole file; missing, unreadable, not regular, or larger than max_bytes
 // is a PathError "cannot read <what>: ..." naming the path.
 std::string read_text_file(const std::string& path, std::uintmax_t max_bytes, const std::string& what);
+
+// Value checks shared by the scene and daemon-config validators (CRTP): each
+// reports through the derived class's fail(path, reason), which throws that
+// document's error type naming the file.
+template <typename Derived>
+class ValueChecks {
+ protected:
+  void finite(double v, const std::string& path) const {
+    if (!std::isfinite(v)) self().fail(path, "must be a finite number (got " + fmt_num(v) + ")");
+  }
+  void finite(const std::array<double, 3>& v, const std::string& path) const {
+    for (std::size_t i = 0; i < 3; ++i) finite(v[i], join_index(path, i));
+  }
+  void positive(double v, const std::string& path) const {
+    finite(v, path);
+    if (!(v > 0.0)) self().fail(path, "must be > 0 (got " + fmt_num(v) + ")");
+  }
+  void non_negative(double v, const std::string& path) const {
+    finite(v, path);
+    if (!(v >= 0.0)) self().fail(path, "must be >= 0 (got " + fmt_num(v) + ")");
+  }
+
+ private:
+  const Derived& self() const { return static_cast<const Derived&>(*this); }
+};
 
 }  // namespace tissue::yaml_util
