@@ -1,0 +1,127 @@
+#include "tissue/render_command.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "export/frame_source.hpp"
+#include "render/png_writer.hpp"
+#include "render/render.hpp"
+
+namespace tissue::cli {
+
+namespace {
+
+constexpr int kExitBadInput = 1;
+
+struct RenderCommandOptions {
+  std::string session;
+  std::optional<double> time_s;
+  std::optional<std::size_t> frame;
+  bool sequence = false;
+  std::optional<double> from_s, to_s;
+  render::RenderOptions image;
+  bool no_legend = false;
+  std::string out;
+};
+
+// OUT for frame i of a sequence: "%04d" in OUT is replaced, else -0000 goes
+// before the extension.
+std::string numbered(const std::string& out, std::size_t i) {
+  char num[24];
+  std::snprintf(num, sizeof num, "%04zu", i);
+  if (const auto p = out.find("%04d"); p != std::string::npos) return out.substr(0, p) + num + out.substr(p + 4);
+  const auto dot = out.rfind('.');
+  const auto slash = out.rfind('/');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return out + "-" + num;
+  return out.substr(0, dot) + "-" + num + out.substr(dot);
+}
+
+int run_render(RenderCommandOptions o) {
+  o.image.legend = !o.no_legend;
+  try {
+    std::unique_ptr<x3d::FrameSource> source = x3d::open_session_source(o.session);
+    const std::size_t n = source->frame_count();
+    if (n == 0) {
+      std::cerr << "tissue render: " << source->name() << ": the session holds no complete mesh frame\n";
+      return kExitBadInput;
+    }
+    std::vector<std::size_t> frames;
+    if (o.sequence) {
+      frames = x3d::frames_in_window(*source, o.from_s.value_or(source->frame_time_s(0)),
+                                     o.to_s.value_or(source->frame_time_s(n - 1)));
+      if (frames.empty()) {
+        std::cerr << "tissue render: no frame in the --from/--to window\n";
+        return kExitBadArguments;
+      }
+    } else if (o.frame) {
+      if (*o.frame >= n) {
+        std::cerr << "tissue render: --frame " << *o.frame << ": " << source->name() << " has " << n << " frames\n";
+        return kExitBadArguments;
+      }
+      frames = {*o.frame};
+    } else if (o.time_s) {
+      const auto at = x3d::frame_at_time(*source, *o.time_s);
+      if (!at) {
+        std::cerr << "tissue render: --time " << *o.time_s << ": no frame that early\n";
+        return kExitBadArguments;
+      }
+      frames = {*at};
+    } else {
+      frames = {n - 1};
+    }
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      const x3d::SurfaceFrame frame = source->read_frame(frames[i]);
+      const std::string path = o.sequence ? numbered(o.out, i) : o.out;
+      render::write_png(render::render_frame(frame, o.image), path);
+      std::cout << "wrote " << path << ": frame " << frames[i] << " at t=" << frame.time_s << " s, "
+                << frame.triangles.size() << " triangles\n";
+    }
+    return kExitOk;
+  } catch (const render::RenderError& e) {
+    std::cerr << "tissue render: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const x3d::X3dInputError& e) {
+    std::cerr << "tissue render: " << o.session << ": " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const x3d::SourceError& e) {
+    std::cerr << "tissue render: " << e.what() << "\n";
+    return kExitBadInput;
+  }
+}
+
+}  // namespace
+
+Subcommand add_render_command(CLI::App& parent) {
+  auto o = std::make_shared<RenderCommandOptions>();
+  CLI::App* cmd = parent.add_subcommand("render", "Draw the tissue surface of a recorded session to PNG (OSMesa)");
+  cmd->add_option("--session", o->session, "Session file (.h5) to read frames from")->required();
+  CLI::Option* time = cmd->add_option("--time", o->time_s, "The frame shown at session time T (s)");
+  CLI::Option* frame = cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)");
+  time->excludes(frame);
+  CLI::Option* seq = cmd->add_flag("--sequence", o->sequence, "Every frame in --from..--to, numbered files");
+  seq->excludes(time)->excludes(frame);
+  cmd->add_option("--from", o->from_s, "Sequence start, session time (s)")->needs(seq);
+  cmd->add_option("--to", o->to_s, "Sequence end, session time (s)")->needs(seq);
+  cmd->add_option("--width", o->image.width_px, "Image width (pixels)")->check(CLI::Range(16, 8192));
+  cmd->add_option("--height", o->image.height_px, "Image height (pixels)")->check(CLI::Range(16, 8192));
+  cmd->add_option("--azimuth", o->image.azimuth_deg, "Camera azimuth about +z from +x (degrees)")
+      ->capture_default_str();
+  cmd->add_option("--elevation", o->image.elevation_deg, "Camera elevation above the xy plane (degrees)")
+      ->check(CLI::Range(-90.0, 90.0))
+      ->capture_default_str();
+  cmd->add_flag("--no-legend", o->no_legend, "Leave out the level legend");
+  cmd->add_option("-o,--output", o->out, "Output PNG (a sequence numbers it: OUT-0000.png or OUT with %04d)")
+      ->required();
+  cmd->footer(
+      "Colours: bisection level of the finest vertex of each triangle (the X3D export's palette).\n"
+      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments.");
+  return Subcommand{cmd, [o] { return run_render(*o); }};
+}
+
+}  // namespace tissue::cli

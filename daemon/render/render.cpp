@@ -1,0 +1,152 @@
+#include "render/render.hpp"
+
+#include <GL/gl.h>
+#include <GL/osmesa.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+
+namespace tissue::render {
+
+namespace {
+
+using V3 = std::array<double, 3>;
+
+V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+V3 cross(const V3& a, const V3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+V3 normalized(const V3& a) {
+  const double n = std::sqrt(dot(a, a));
+  return n > 0.0 ? V3{a[0] / n, a[1] / n, a[2] / n} : V3{0, 0, 1};
+}
+
+struct ContextDeleter {
+  void operator()(osmesa_context* c) const { OSMesaDestroyContext(c); }
+};
+
+// 3x5 digits for the legend: one row of 3 bits per line, top first.
+constexpr std::array<std::array<std::uint8_t, 5>, 10> kDigits = {{{7, 5, 5, 5, 7},
+                                                                  {2, 6, 2, 2, 7},
+                                                                  {7, 1, 7, 4, 7},
+                                                                  {7, 1, 7, 1, 7},
+                                                                  {5, 5, 7, 1, 1},
+                                                                  {7, 4, 7, 1, 7},
+                                                                  {7, 4, 7, 5, 7},
+                                                                  {7, 1, 1, 1, 1},
+                                                                  {7, 5, 7, 5, 7},
+                                                                  {7, 5, 7, 1, 7}}};
+
+void fill_rect(Image& img, int x0, int y0, int w, int h, const std::array<std::uint8_t, 3>& c) {
+  for (int y = std::max(0, y0); y < std::min(img.height, y0 + h); ++y)
+    for (int x = std::max(0, x0); x < std::min(img.width, x0 + w); ++x) {
+      std::uint8_t* p = &img.rgba[4 * (static_cast<std::size_t>(y) * img.width + x)];
+      p[0] = c[0], p[1] = c[1], p[2] = c[2], p[3] = 255;
+    }
+}
+
+void draw_number(Image& img, int x, int y, int value, int scale) {
+  const std::string text = std::to_string(value);
+  for (char ch : text) {
+    const auto& glyph = kDigits[static_cast<std::size_t>(ch - '0')];
+    for (int row = 0; row < 5; ++row)
+      for (int col = 0; col < 3; ++col)
+        if (glyph[row] & (4 >> col)) fill_rect(img, x + col * scale, y + row * scale, scale, scale, {0, 0, 0});
+    x += 4 * scale;
+  }
+}
+
+std::array<std::uint8_t, 3> to_bytes(const std::array<float, 3>& c, double shade) {
+  std::array<std::uint8_t, 3> out{};
+  for (int i = 0; i < 3; ++i) out[i] = static_cast<std::uint8_t>(std::clamp(c[i] * shade, 0.0, 1.0) * 255.0 + 0.5);
+  return out;
+}
+
+}  // namespace
+
+Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
+  x3d::validate_frame(frame, false, "frame");
+  if (o.width_px < 16 || o.height_px < 16 || o.width_px > 8192 || o.height_px > 8192)
+    throw RenderError("render: image size must be 16..8192 pixels a side (got " + std::to_string(o.width_px) + "x" +
+                      std::to_string(o.height_px) + ")");
+  if (!std::isfinite(o.azimuth_deg) || !std::isfinite(o.elevation_deg))
+    throw RenderError("render: camera angles must be finite");
+
+  Image img;
+  img.width = o.width_px;
+  img.height = o.height_px;
+  img.rgba.assign(4 * static_cast<std::size_t>(img.width) * img.height, 0);
+  std::unique_ptr<osmesa_context, ContextDeleter> ctx(OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, nullptr));
+  if (!ctx) throw RenderError("render: OSMesa could not create a context");
+  if (!OSMesaMakeCurrent(ctx.get(), img.rgba.data(), GL_UNSIGNED_BYTE, img.width, img.height))
+    throw RenderError("render: OSMesa could not bind the image buffer");
+  OSMesaPixelStore(OSMESA_Y_UP, 0);  // row 0 at the top, as PNG wants
+
+  // Orthographic camera fitting the bounding sphere.
+  V3 lo{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+        std::numeric_limits<double>::infinity()};
+  V3 hi{-lo[0], -lo[1], -lo[2]};
+  for (const auto& v : frame.vertices_m)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], v[a]), hi[a] = std::max(hi[a], v[a]);
+  const V3 centre{(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2};
+  const double radius = std::max(1e-9, 0.5 * std::sqrt(dot(sub(hi, lo), sub(hi, lo))));
+  const double az = o.azimuth_deg * M_PI / 180.0, el = o.elevation_deg * M_PI / 180.0;
+  const V3 eye_dir{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};  // towards the camera
+  const V3 up_hint = std::abs(eye_dir[2]) > 0.99 ? V3{0, 1, 0} : V3{0, 0, 1};
+  const V3 right = normalized(cross(up_hint, eye_dir));
+  const V3 up = cross(eye_dir, right);
+
+  glViewport(0, 0, img.width, img.height);
+  glClearColor(o.background[0] / 255.0f, o.background[1] / 255.0f, o.background[2] / 255.0f, 1.0f);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glEnable(GL_DEPTH_TEST);
+  glMatrixMode(GL_PROJECTION);
+  glLoadIdentity();
+  const double aspect = static_cast<double>(img.width) / img.height;
+  const double half_h = 1.05 * radius * std::max(1.0, 1.0 / aspect), half_w = half_h * aspect;
+  glOrtho(-half_w, half_w, -half_h, half_h, 0.0, 4.0 * radius);
+  glMatrixMode(GL_MODELVIEW);
+  // View matrix: rows right/up/eye_dir, eye at centre + 2 r eye_dir.
+  const V3 eye{centre[0] + 2 * radius * eye_dir[0], centre[1] + 2 * radius * eye_dir[1],
+               centre[2] + 2 * radius * eye_dir[2]};
+  const GLdouble view[16] = {right[0], up[0], eye_dir[0], 0, right[1],         up[1],         eye_dir[1],         0,
+                             right[2], up[2], eye_dir[2], 0, -dot(right, eye), -dot(up, eye), -dot(eye_dir, eye), 1};
+  glLoadMatrixd(view);
+
+  std::vector<bool> level_seen(256, false);
+  glBegin(GL_TRIANGLES);
+  for (const auto& t : frame.triangles) {
+    const V3& a = frame.vertices_m[t[0]];
+    const V3& b = frame.vertices_m[t[1]];
+    const V3& c = frame.vertices_m[t[2]];
+    int level = 0;
+    if (!frame.vertex_level.empty())
+      for (std::uint32_t v : t) level = std::max<int>(level, frame.vertex_level[v]);
+    level_seen[static_cast<std::size_t>(level)] = true;
+    // A head light: faces turned to the camera are bright, grazing ones dim.
+    const double facing = std::abs(dot(normalized(cross(sub(b, a), sub(c, a))), eye_dir));
+    const auto colour = to_bytes(x3d::level_colour(static_cast<std::uint8_t>(level)), 0.35 + 0.65 * facing);
+    glColor3ub(colour[0], colour[1], colour[2]);
+    for (const V3* p : {&a, &b, &c}) glVertex3d((*p)[0], (*p)[1], (*p)[2]);
+  }
+  glEnd();
+  glFinish();
+
+  if (o.legend) {  // a swatch and the level number for each level drawn
+    const int scale = std::max(2, img.height / 200), box = 6 * scale;
+    int y = img.height - box - 2 * scale;
+    for (int level = 255; level >= 0; --level) {
+      if (!level_seen[static_cast<std::size_t>(level)]) continue;
+      fill_rect(img, 2 * scale, y, box, box, to_bytes(x3d::level_colour(static_cast<std::uint8_t>(level)), 1.0));
+      draw_number(img, 3 * scale + box, y + scale / 2, level, scale);
+      y -= box + scale;
+      if (y < 0) break;
+    }
+  }
+  return img;
+}
+
+}  // namespace tissue::render

@@ -1,0 +1,58 @@
+// `tissue render` end to end on a small session file.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "export/export_test_support.hpp"
+#include "record/session_writer.hpp"
+
+namespace tissue::render {
+namespace {
+
+using x3d::testing::quote;
+using x3d::testing::run;
+using x3d::testing::RunResult;
+using x3d::testing::TempDir;
+
+std::string write_session(const TempDir& dir) {
+  record::SessionMetadata meta;
+  meta.scene_name = "render-test";
+  const std::string path = dir / "s.h5";
+  auto writer = record::SessionWriter::create(path, meta);
+  for (int k = 0; k < 3; ++k) {
+    const x3d::SurfaceFrame f = x3d::testing::box_frame(0.1 * k, {0, 0, 0}, {0.1, 0.05, 0.02 + 0.01 * k});
+    writer->append_mesh_frame(record::MeshFrameView{f.time_s, f.vertices_m, f.triangles, f.vertex_level});
+  }
+  writer->close();
+  return path;
+}
+
+RunResult render(const TempDir& dir, const std::string& args) {
+  return run(quote(TISSUE_CLI_BINARY) + " render " + args, dir);
+}
+
+TEST(RenderCli, OneFrameAndANumberedSequence) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  RunResult r =
+      render(dir, "--session " + quote(session) + " --frame 1 --width 160 --height 120 -o " + quote(dir / "one.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_GT(std::filesystem::file_size(dir / "one.png"), 100u);
+  r = render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(dir / "f.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* name : {"f-0000.png", "f-0001.png", "f-0002.png"}) EXPECT_TRUE(std::filesystem::exists(dir / name));
+}
+
+TEST(RenderCli, ErrorsHaveExitCodes) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  EXPECT_EQ(render(dir, "--session " + quote(dir / "missing.h5") + " -o x.png").exit_code, 1);
+  EXPECT_EQ(render(dir, "--session " + quote(session) + " --frame 9 -o x.png").exit_code, 2);
+  EXPECT_EQ(render(dir, "--session " + quote(session) + " --width 3 -o x.png").exit_code, 2);
+  const RunResult unwritable = render(dir, "--session " + quote(session) + " -o /nonexistent-dir/x.png");
+  EXPECT_EQ(unwritable.exit_code, 1);
+  EXPECT_NE(unwritable.err.find("/nonexistent-dir/x.png"), std::string::npos) << unwritable.err;
+}
+
+}  // namespace
+}  // namespace tissue::render
