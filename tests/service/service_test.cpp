@@ -56,9 +56,12 @@ struct Running {
   int exit_code = -1;
   std::FILE* out = std::tmpfile();
 
-  explicit Running(const std::string& config_path, double duration_s = 0.0) {
+  explicit Running(const std::string& config_path, double duration_s = 0.0, std::vector<std::string> overrides = {},
+                   std::string record_name = "") {
     options.config_path = config_path;
     options.duration_s = duration_s;
+    options.overrides = std::move(overrides);
+    options.record_name = std::move(record_name);
     options.out = out;
     service = std::make_unique<Service>(options);
     thread = std::thread([this] { exit_code = service->run(); });
@@ -255,12 +258,11 @@ TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
 // (the two runs share no clock, so compare the force profile, not ticks).
 TEST(Service, ReplayDeviceReproducesTheRecordedForces) {
   TempDir dir;
+  // No load on the cantilever: the object rests until the hand presses, so the
+  // forces depend on the hand's path, not on when each run started.
+  const std::vector<std::string> unloaded = {"loads=[]"};
   {
-    Running run(write_config(dir, scene_file("cantilever.yaml")));
-    ControlClient client = connect(dir / "ctl.sock");
-    ASSERT_TRUE(client.call("record_start", {{"name", "original.h5"}})["ok"].get<bool>());
-    std::this_thread::sleep_for(1500ms);
-    client.call("shutdown");
+    Running run(write_config(dir, scene_file("cantilever.yaml")), 1.5, unloaded, "original.h5");
     ASSERT_EQ(run.wait(), kServiceOk);
   }
   const std::string config = dir / "replay.yaml";
@@ -270,11 +272,7 @@ TEST(Service, ReplayDeviceReproducesTheRecordedForces) {
                         << "realtime: {sched_fifo: false, lock_memory: false}\n"
                         << "control: {unix_socket_path: " << (dir / "ctl2.sock") << "}\n";
   {
-    Running run(config);
-    ControlClient client = connect(dir / "ctl2.sock");
-    ASSERT_TRUE(client.call("record_start", {{"name", "replayed.h5"}})["ok"].get<bool>());
-    std::this_thread::sleep_for(1500ms);
-    client.call("shutdown");
+    Running run(config, 1.5, unloaded, "replayed.h5");
     ASSERT_EQ(run.wait(), kServiceOk);
   }
   const record::HapticTrack original = record::read_haptic_track(dir / "original.h5");
