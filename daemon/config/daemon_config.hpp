@@ -108,8 +108,19 @@ struct LcmPublishSpec {
   std::string url = "udpm://239.255.76.67:7667?ttl=0";
 };
 
+// Fast DDS: loopback + shared memory by default (this host only); the lab
+// network with loopback_only: false.
+struct DdsPublishSpec {
+  bool enabled = false;
+  int domain_id = 0;
+  std::string topic_prefix = "tissue/";
+  bool loopback_only = true;
+  std::size_t max_mesh_bytes = std::size_t{8} << 20;
+};
+
 struct PublishSpec {
   LcmPublishSpec lcm;
+  DdsPublishSpec dds;
   double mesh_rate_hz = 30.0;     // surface_mesh on channel TISSUE_SURFACE_MESH
   double haptic_rate_hz = 100.0;  // haptic_state (decimated from 1 kHz) on TISSUE_HAPTIC_STATE
   double stats_rate_hz = 5.0;     // sim_stats on TISSUE_SIM_STATS

@@ -166,7 +166,17 @@ class Converter : public yaml_util::Reader {
   }
 
   void publish(const YAML::Node& n, const std::string& p, PublishSpec& s) const {
-    const FieldMap f = fields(n, p, {"lcm", "mesh_rate_hz", "haptic_rate_hz", "stats_rate_hz"});
+    const FieldMap f = fields(n, p, {"lcm", "dds", "mesh_rate_hz", "haptic_rate_hz", "stats_rate_hz"});
+    if (const auto it = f.find("dds"); it != f.end()) {
+      const std::string dp = join_key(p, "dds");
+      const FieldMap g =
+          fields(it->second, dp, {"enabled", "domain_id", "topic_prefix", "loopback_only", "max_mesh_bytes"});
+      opt(g, "enabled", dp, s.dds.enabled);
+      opt(g, "domain_id", dp, s.dds.domain_id);
+      opt(g, "topic_prefix", dp, s.dds.topic_prefix);
+      opt(g, "loopback_only", dp, s.dds.loopback_only);
+      opt(g, "max_mesh_bytes", dp, s.dds.max_mesh_bytes);
+    }
     if (const auto it = f.find("lcm"); it != f.end()) {
       const std::string lp = join_key(p, "lcm");
       const FieldMap g = fields(it->second, lp, {"enabled", "url"});
@@ -270,6 +280,12 @@ class Validator : private yaml_util::ValueChecks<Validator> {
          {std::pair{pub.mesh_rate_hz, "publish.mesh_rate_hz"}, std::pair{pub.haptic_rate_hz, "publish.haptic_rate_hz"},
           std::pair{pub.stats_rate_hz, "publish.stats_rate_hz"}})
       if (!(rate > 0.0 && rate <= 1000.0)) fail(key, "must be in (0, 1000] Hz (got " + std::to_string(rate) + ")");
+    if (pub.dds.domain_id < 0 || pub.dds.domain_id > 232)
+      fail("publish.dds.domain_id",
+           "must be a DDS domain id in [0, 232] (got " + std::to_string(pub.dds.domain_id) + ")");
+    if (pub.dds.max_mesh_bytes < (std::size_t{64} << 10) || pub.dds.max_mesh_bytes > (std::size_t{1} << 30))
+      fail("publish.dds.max_mesh_bytes",
+           "must be in [64 KiB, 1 GiB] (got " + std::to_string(pub.dds.max_mesh_bytes) + ")");
     if (pub.lcm.url.rfind("udpm://", 0) != 0 && pub.lcm.url.rfind("memq://", 0) != 0 &&
         pub.lcm.url.rfind("file://", 0) != 0)
       fail("publish.lcm.url",

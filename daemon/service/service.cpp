@@ -17,6 +17,7 @@
 #include "record/recorder.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/haptic_side.hpp"
+#include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 
 namespace tissue::service {
@@ -237,20 +238,37 @@ void Service::arm_signals() {
 }
 
 void Service::start_publishing() {
-  if (!config_.publish.lcm.enabled) return;
-  try {
-    lcm_ = std::make_unique<transport::LcmPublisher>(config_.publish.lcm.url);
-  } catch (const std::exception& e) {
-    // Live data is optional: say why and keep serving.
-    std::fprintf(options_.err, "tissued: %s; LCM publishing is off\n", e.what());
-    return;
+  const config::PublishSpec& pub = config_.publish;
+  // Live data is optional: a transport that cannot start says why and the
+  // daemon serves without it.
+  if (pub.lcm.enabled) {
+    try {
+      lcm_ = std::make_unique<transport::LcmPublisher>(pub.lcm.url);
+      std::fprintf(options_.out, "tissued: publishing over LCM at %s\n", pub.lcm.url.c_str());
+    } catch (const std::exception& e) {
+      std::fprintf(options_.err, "tissued: %s; LCM publishing is off\n", e.what());
+    }
   }
-  std::fprintf(options_.out, "tissued: publishing over LCM at %s (mesh %g Hz, haptic %g Hz, stats %g Hz)\n",
-               config_.publish.lcm.url.c_str(), config_.publish.mesh_rate_hz, config_.publish.haptic_rate_hz,
-               config_.publish.stats_rate_hz);
-  arm_publish_timer(mesh_timer_, config_.publish.mesh_rate_hz, &Service::publish_mesh);
-  if (haptics_) arm_publish_timer(haptic_timer_, config_.publish.haptic_rate_hz, &Service::publish_haptic);
-  arm_publish_timer(stats_timer_, config_.publish.stats_rate_hz, &Service::publish_stats);
+  if (pub.dds.enabled) {
+    try {
+      transport::DdsPublishOptions o;
+      o.domain_id = pub.dds.domain_id;
+      o.topic_prefix = pub.dds.topic_prefix;
+      o.loopback_only = pub.dds.loopback_only;
+      o.max_mesh_bytes = pub.dds.max_mesh_bytes;
+      dds_ = std::make_unique<transport::DdsPublisher>(o);
+      std::fprintf(options_.out, "tissued: publishing over DDS, domain %d, topics %s*%s\n", o.domain_id,
+                   o.topic_prefix.c_str(), o.loopback_only ? " (this host only)" : "");
+    } catch (const std::exception& e) {
+      std::fprintf(options_.err, "tissued: %s; DDS publishing is off\n", e.what());
+    }
+  }
+  if (!lcm_ && !dds_) return;
+  std::fprintf(options_.out, "tissued: mesh %g Hz, haptic state %g Hz, stats %g Hz\n", pub.mesh_rate_hz,
+               pub.haptic_rate_hz, pub.stats_rate_hz);
+  arm_publish_timer(mesh_timer_, pub.mesh_rate_hz, &Service::publish_mesh);
+  if (haptics_) arm_publish_timer(haptic_timer_, pub.haptic_rate_hz, &Service::publish_haptic);
+  arm_publish_timer(stats_timer_, pub.stats_rate_hz, &Service::publish_stats);
 }
 
 void Service::arm_publish_timer(boost::asio::steady_timer& timer, double rate_hz, void (Service::*publish)()) {
@@ -263,9 +281,22 @@ void Service::arm_publish_timer(boost::asio::steady_timer& timer, double rate_hz
   });
 }
 
-void Service::publish_mesh() { lcm_->publish_mesh(sim_->snapshot()); }
-void Service::publish_haptic() { lcm_->publish_haptic(sim_->status()); }
-void Service::publish_stats() { lcm_->publish_stats(sim_->status()); }
+// snapshot() and status() have one reader: read once, hand to both.
+void Service::publish_mesh() {
+  const MeshSnapshot& s = sim_->snapshot();
+  if (lcm_) lcm_->publish_mesh(s);
+  if (dds_) dds_->publish_mesh(s);
+}
+void Service::publish_haptic() {
+  const SimStatus s = sim_->status();
+  if (lcm_) lcm_->publish_haptic(s);
+  if (dds_) dds_->publish_haptic(s);
+}
+void Service::publish_stats() {
+  const SimStatus s = sim_->status();
+  if (lcm_) lcm_->publish_stats(s);
+  if (dds_) dds_->publish_stats(s);
+}
 
 void Service::arm_status_timer() {
   status_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
@@ -355,12 +386,18 @@ nlohmann::json Service::status() {
   j["scene"] = {{"name", scene_.name}, {"source", scene_path_}, {"tool", scene_.tool.has_value()}};
   j["threads"] = {{"sim", sim_->scheduling()}};
   j["haptics"] = haptics_ ? haptics_->status_json() : nlohmann::json(nullptr);
-  j["publishing"] = lcm_ ? nlohmann::json{{"lcm_url", lcm_->url()},
-                                          {"meshes", lcm_->counts().meshes},
-                                          {"haptic_states", lcm_->counts().haptic_states},
-                                          {"stats", lcm_->counts().stats},
-                                          {"failures", lcm_->counts().failures}}
-                         : nlohmann::json(nullptr);
+  j["publishing"] = {{"lcm", lcm_ ? nlohmann::json{{"url", lcm_->url()},
+                                                   {"meshes", lcm_->counts().meshes},
+                                                   {"haptic_states", lcm_->counts().haptic_states},
+                                                   {"stats", lcm_->counts().stats},
+                                                   {"failures", lcm_->counts().failures}}
+                                  : nlohmann::json(nullptr)},
+                     {"dds", dds_ ? nlohmann::json{{"domain_id", dds_->options().domain_id},
+                                                   {"meshes", dds_->counts().meshes},
+                                                   {"haptic_states", dds_->counts().haptic_states},
+                                                   {"stats", dds_->counts().stats},
+                                                   {"failures", dds_->counts().failures}}
+                                  : nlohmann::json(nullptr)}};
   if (recorder_) {
     const record::RecorderStats r = recorder_->stats();
     const record::RecorderState state = recorder_->state();

@@ -29,7 +29,8 @@ class Recorder;
 }
 namespace tissue::transport {
 class LcmPublisher;
-}
+class DdsPublisher;
+}  // namespace tissue::transport
 
 namespace tissue::control {
 class ControlServer;
@@ -123,6 +124,7 @@ class Service : public control::ControlHandler {
   std::atomic<std::uint64_t> heartbeat_{0};
   std::unique_ptr<record::Recorder> recorder_;
   std::unique_ptr<transport::LcmPublisher> lcm_;  // null unless publish.lcm.enabled and LCM started
+  std::unique_ptr<transport::DdsPublisher> dds_;  // null unless publish.dds.enabled and DDS started
   bool stopping_ = false;
   std::string stop_reason_;
 };

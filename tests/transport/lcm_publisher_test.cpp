@@ -95,12 +95,16 @@ TEST(LcmPublisher, AnUnusableUrlIsAClearError) {
 
 // Over UDP multicast on a private loopback (the ctest entry runs this test
 // inside tests/transport/in_netns.sh): a > 2 MB mesh reaches two subscribers.
+// Plain-function handlers (subscribeFunction): LCM's member-function
+// subscription template trips UBSan inside liblcm's header.
 struct Received {
   std::optional<surface_mesh> mesh;
   int stats = 0;
-  void on_mesh(const lcm::ReceiveBuffer*, const std::string&, const surface_mesh* m) { mesh = *m; }
-  void on_stats(const lcm::ReceiveBuffer*, const std::string&, const tissue_lcm::tissue::sim_stats*) { ++stats; }
 };
+void on_mesh(const lcm::ReceiveBuffer*, const std::string&, const surface_mesh* m, Received* r) { r->mesh = *m; }
+void on_stats(const lcm::ReceiveBuffer*, const std::string&, const tissue_lcm::tissue::sim_stats*, Received* r) {
+  ++r->stats;
+}
 
 TEST(LcmPublisherNetns, LargeMeshReachesTwoSubscribers) {
   const char* url = std::getenv("TISSUE_TEST_LCM_URL");
@@ -108,9 +112,9 @@ TEST(LcmPublisherNetns, LargeMeshReachesTwoSubscribers) {
   lcm::LCM sub_a(url), sub_b(url);
   ASSERT_TRUE(sub_a.good() && sub_b.good());
   Received a, b;
-  sub_a.subscribe(kSurfaceMeshChannel, &Received::on_mesh, &a);
-  sub_b.subscribe(kSurfaceMeshChannel, &Received::on_mesh, &b);
-  sub_a.subscribe(kSimStatsChannel, &Received::on_stats, &a);
+  sub_a.subscribeFunction(kSurfaceMeshChannel, &on_mesh, &a);
+  sub_b.subscribeFunction(kSurfaceMeshChannel, &on_mesh, &b);
+  sub_a.subscribeFunction(kSimStatsChannel, &on_stats, &a);
   LcmPublisher publisher(url);
   const service::MeshSnapshot big = strip(70000);  // 140k vertices, 140k triangles: ~3.9 MB encoded
   surface_mesh probe;
