@@ -21,6 +21,7 @@ run_tree() {  # name, ctest selection (e.g. "-L threaded" or ""), extra cmake ar
 run_tree release "" -DCMAKE_BUILD_TYPE=Release
 # Sanitizers: debug info, some optimisation so the suite stays fast.
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+  LSAN_OPTIONS="suppressions=$root/tests/lsan.supp:print_suppressions=0" \
   run_tree asan "" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTISSUE_SANITIZE=address,undefined -DTISSUE_BUILD_BENCH=OFF
 # Threads: the suites labelled `threaded` (hand-offs, haptic and sim threads,
 # control server, the service) once more under ThreadSanitizer.
