@@ -25,6 +25,6 @@ ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:ha
   run_tree asan "" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTISSUE_SANITIZE=address,undefined -DTISSUE_BUILD_BENCH=OFF
 # Threads: the suites labelled `threaded` (hand-offs, haptic and sim threads,
 # control server, the service) once more under ThreadSanitizer.
-TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 \
+TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$root/tests/tsan.supp" \
   run_tree tsan "-L threaded" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTISSUE_SANITIZE=thread -DTISSUE_BUILD_BENCH=OFF
 echo "=== all test trees passed ==="

@@ -257,6 +257,11 @@ TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
 // through the replay device, renders the same forces within a tolerance
 // (the two runs share no clock, so compare the force profile, not ticks).
 TEST(Service, ReplayDeviceReproducesTheRecordedForces) {
+#if defined(__SANITIZE_THREAD__)
+  // The comparison assumes both runs keep real time; under ThreadSanitizer's
+  // 5-15x slowdown the sim lags the hand and the forces differ for that reason.
+  GTEST_SKIP() << "timing-dependent: meaningful at full speed (Release and ASan trees run it)";
+#endif
   TempDir dir;
   // No load on the cantilever: the object rests until the hand presses, so the
   // forces depend on the hand's path, not on when each run started.
