@@ -58,9 +58,12 @@ void SimThread::set_recorder(record::Recorder* recorder) {
   // The iteration that read the old pointer has ended once the heartbeat has
   // advanced twice (it increments at the start of every iteration, paused or
   // not). Bounded: a stalled sim thread must not hang the control side.
-  const std::uint64_t target = heartbeat() + 2;
+  // Release (sim thread, each iteration start) / acquire (here): everything
+  // the sim thread did with the old recorder happens before our return.
+  const auto beats = [this] { return heartbeat_.load(std::memory_order_acquire); };
+  const std::uint64_t target = beats() + 2;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  while (heartbeat() < target && !stop_.load() && std::chrono::steady_clock::now() < deadline)
+  while (beats() < target && !stop_.load() && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::microseconds(200));
 }
 
@@ -196,7 +199,7 @@ void SimThread::run() {
   std::int64_t next_ns = now_ns();
   std::int64_t last_status_ns = 0;
   while (!stop_.load(std::memory_order_relaxed)) {
-    heartbeat_.fetch_add(1, std::memory_order_relaxed);
+    heartbeat_.fetch_add(1, std::memory_order_release);  // see set_recorder
     record::Recorder* const recorder = recorder_.load(std::memory_order_acquire);
     // A new runner (reset / load / set) takes over between steps.
     if (std::unique_lock<std::mutex> lock(pending_mutex_, std::try_to_lock); lock.owns_lock() && pending_) {
