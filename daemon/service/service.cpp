@@ -39,14 +39,14 @@ std::string file_text(const std::string& path) {
   return text.str();
 }
 
-// session-20261123-101500.h5 (UTC), the name when record_start gives none.
-std::string default_session_name() {
+// PREFIX-20261123-101500.EXT (UTC): the file name when a command gives none.
+std::string timestamped_name(const char* prefix, const char* extension) {
   const std::time_t now = std::time(nullptr);
   std::tm utc{};
   gmtime_r(&now, &utc);
-  char name[64];
-  std::strftime(name, sizeof name, "session-%Y%m%d-%H%M%S.h5", &utc);
-  return name;
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &utc);
+  return std::string(prefix) + "-" + stamp + extension;
 }
 
 nlohmann::json status_json(const SimStatus& s) {
@@ -138,7 +138,8 @@ void Service::start_recording(const std::string& name) {
       std::fflush(options_.err);
     });
   };
-  recorder_ = record::Recorder::start(config_.state_dir, name.empty() ? default_session_name() : name, meta, options);
+  recorder_ = record::Recorder::start(config_.state_dir, name.empty() ? timestamped_name("session", ".h5") : name, meta,
+                                      options);
   if (sim_) sim_->set_recorder(recorder_.get());
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), "recording " + scene_.name + " from " + scene_path_);
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
@@ -500,12 +501,7 @@ nlohmann::json Service::record_stop() {
 }
 
 nlohmann::json Service::export_x3d(const std::string& name) {
-  std::string file_name = name;
-  if (file_name.empty()) {
-    file_name = default_session_name();
-    file_name.replace(file_name.find("session-"), 8, "surface-");
-    file_name.replace(file_name.rfind(".h5"), 3, ".x3d");
-  }
+  const std::string file_name = name.empty() ? timestamped_name("surface", ".x3d") : name;
   // Same rule as recordings: a plain file name inside the state directory.
   if (file_name.find('/') != std::string::npos || file_name == "." || file_name == "..")
     throw control::ControlError("export_x3d: '" + file_name + "' is not a plain file name (files go to state_dir " +

@@ -1,5 +1,7 @@
 #include "transport/dds_messages.hpp"
 
+#include "transport/mesh_bounds.hpp"
+
 #include <algorithm>
 #include <limits>
 
@@ -14,28 +16,18 @@ void to_dds(const service::MeshSnapshot& s, std::int64_t sequence, ::tissue::sur
   std::vector<std::uint8_t>& level = out->vertex_refinement_level();
   xyz.resize(3 * n);
   level.resize(n);
-  std::array<double, 3> lo{}, hi{};
-  if (n > 0) {
-    lo.fill(std::numeric_limits<double>::infinity());
-    hi.fill(-std::numeric_limits<double>::infinity());
-  }
   for (std::size_t i = 0; i < n; ++i) {
-    for (std::size_t a = 0; a < 3; ++a) {
-      const double x = s.vertices_m[i][a];
-      xyz[3 * i + a] = static_cast<float>(x);
-      lo[a] = std::min(lo[a], x);
-      hi[a] = std::max(hi[a], x);
-    }
-    // A snapshot whose level array is short (should not happen) sends 0.
-    level[i] = i < s.vertex_level.size() ? s.vertex_level[i] : std::uint8_t{0};
+    for (std::size_t a = 0; a < 3; ++a) xyz[3 * i + a] = static_cast<float>(s.vertices_m[i][a]);
+    level[i] = vertex_level(s, i);
   }
   std::vector<std::int32_t>& tri = out->triangle_vertex();
   tri.resize(3 * t);
   for (std::size_t i = 0; i < t; ++i)
     for (std::size_t k = 0; k < 3; ++k) tri[3 * i + k] = static_cast<std::int32_t>(s.triangles[i][k]);
   out->triangle_strain_energy_density_J_per_m3().assign(t, 0.0f);
-  out->bounds_min_m(lo);
-  out->bounds_max_m(hi);
+  const MeshBounds b = mesh_bounds(s);
+  out->bounds_min_m(b.min_m);
+  out->bounds_max_m(b.max_m);
 }
 
 ::tissue::sim_stats to_dds_stats(const service::SimStatus& s, std::int64_t sequence) {

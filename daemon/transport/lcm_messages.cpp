@@ -1,7 +1,6 @@
 #include "transport/lcm_messages.hpp"
 
-#include <algorithm>
-#include <limits>
+#include "transport/mesh_bounds.hpp"
 
 namespace tissue::transport {
 
@@ -14,19 +13,9 @@ void to_message(const service::MeshSnapshot& s, std::int64_t sequence, tissue_lc
   out->vertex_coordinate_count = 3 * n;
   out->vertex_m.resize(3 * static_cast<std::size_t>(n));
   out->vertex_refinement_level.resize(static_cast<std::size_t>(n));
-  double lo[3], hi[3];
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = n > 0 ? std::numeric_limits<double>::infinity() : 0.0;
-    hi[a] = n > 0 ? -std::numeric_limits<double>::infinity() : 0.0;
-  }
   for (std::int32_t i = 0; i < n; ++i) {
-    for (int a = 0; a < 3; ++a) {
-      const double x = s.vertices_m[i][a];
-      out->vertex_m[3 * i + a] = static_cast<float>(x);
-      lo[a] = std::min(lo[a], x);
-      hi[a] = std::max(hi[a], x);
-    }
-    out->vertex_refinement_level[i] = static_cast<std::int8_t>(s.vertex_level[i]);
+    for (int a = 0; a < 3; ++a) out->vertex_m[3 * i + a] = static_cast<float>(s.vertices_m[i][a]);
+    out->vertex_refinement_level[i] = static_cast<std::int8_t>(vertex_level(s, static_cast<std::size_t>(i)));
   }
   out->triangle_count = t;
   out->triangle_index_count = 3 * t;
@@ -34,9 +23,10 @@ void to_message(const service::MeshSnapshot& s, std::int64_t sequence, tissue_lc
   for (std::int32_t i = 0; i < t; ++i)
     for (int k = 0; k < 3; ++k) out->triangle_vertex[3 * i + k] = static_cast<std::int32_t>(s.triangles[i][k]);
   out->triangle_strain_energy_density_J_per_m3.assign(static_cast<std::size_t>(t), 0.0f);
+  const MeshBounds bounds = mesh_bounds(s);
   for (int a = 0; a < 3; ++a) {
-    out->bounds_min_m[a] = lo[a];
-    out->bounds_max_m[a] = hi[a];
+    out->bounds_min_m[a] = bounds.min_m[a];
+    out->bounds_max_m[a] = bounds.max_m[a];
   }
 }
 
