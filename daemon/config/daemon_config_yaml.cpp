@@ -15,10 +15,6 @@
 
 namespace tissue::config {
 
-ConfigError::ConfigError(const std::string& source, const std::string& key_path, const std::string& reason)
-    : std::runtime_error(yaml_util::compose_what(source, key_path, reason, "<daemon config>")),
-      parts_(std::make_shared<const Parts>(Parts{source, key_path, reason})) {}
-
 namespace {
 
 using yaml_util::Choices;

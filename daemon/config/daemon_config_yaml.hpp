@@ -11,6 +11,8 @@
 // conversion, so they are checked exactly like the file.
 #pragma once
 
+#include "scene/yaml_util.hpp"
+
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -21,21 +23,10 @@
 
 namespace tissue::config {
 
-class ConfigError : public std::runtime_error {
+class ConfigError : public yaml_util::DocumentError {
  public:
-  // key_path may be empty (whole-file problems); what() then reads
-  // "<source>: <reason>".
-  ConfigError(const std::string& source, const std::string& key_path, const std::string& reason);
-
-  const std::string& source() const noexcept { return parts_->source; }
-  const std::string& key_path() const noexcept { return parts_->key_path; }
-  const std::string& reason() const noexcept { return parts_->reason; }
-
- private:
-  struct Parts {
-    std::string source, key_path, reason;
-  };
-  std::shared_ptr<const Parts> parts_;  // shared: copying an exception must not throw
+  ConfigError(const std::string& source, const std::string& key_path, const std::string& reason)
+      : DocumentError(source, key_path, reason, "<daemon config>") {}
 };
 
 // Reads, parses and validates a daemon config file. DaemonConfig::source is

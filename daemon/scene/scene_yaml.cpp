@@ -14,10 +14,6 @@
 
 namespace tissue::scene {
 
-SceneError::SceneError(const std::string& source, const std::string& key_path, const std::string& reason)
-    : std::runtime_error(yaml_util::compose_what(source, key_path, reason, "<scene>")),
-      parts_(std::make_shared<const Parts>(Parts{source, key_path, reason})) {}
-
 namespace {
 
 using yaml_util::Choices;

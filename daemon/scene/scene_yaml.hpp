@@ -12,6 +12,8 @@
 // in this header.
 #pragma once
 
+#include "scene/yaml_util.hpp"
+
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -21,21 +23,10 @@
 
 namespace tissue::scene {
 
-class SceneError : public std::runtime_error {
+class SceneError : public yaml_util::DocumentError {
  public:
-  // key_path may be empty (whole-document problems: missing file, syntax
-  // error, empty document); what() then reads "<source>: <reason>".
-  SceneError(const std::string& source, const std::string& key_path, const std::string& reason);
-
-  const std::string& source() const noexcept { return parts_->source; }
-  const std::string& key_path() const noexcept { return parts_->key_path; }
-  const std::string& reason() const noexcept { return parts_->reason; }
-
- private:
-  struct Parts {
-    std::string source, key_path, reason;
-  };
-  std::shared_ptr<const Parts> parts_;  // shared: copying an exception must not throw
+  SceneError(const std::string& source, const std::string& key_path, const std::string& reason)
+      : DocumentError(source, key_path, reason, "<scene>") {}
 };
 
 // Reads and parses a scene file. A missing, unreadable or oversized file is a

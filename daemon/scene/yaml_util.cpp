@@ -18,6 +18,11 @@
 
 namespace tissue::yaml_util {
 
+DocumentError::DocumentError(const std::string& source, const std::string& key_path, const std::string& reason,
+                             const char* unnamed)
+    : std::runtime_error(compose_what(source, key_path, reason, unnamed)),
+      parts_(std::make_shared<const Parts>(Parts{source, key_path, reason})) {}
+
 std::string compose_what(const std::string& source, const std::string& key_path, const std::string& reason,
                          const char* fallback_source) {
   std::string out = source.empty() ? std::string(fallback_source) : source;

@@ -211,6 +211,25 @@ std::string blame_override(const std::vector<Override>& overrides, const std::st
 // is a PathError "cannot read <what>: ..." naming the path.
 std::string read_text_file(const std::string& path, std::uintmax_t max_bytes, const std::string& what);
 
+// An error in a YAML document, naming the file, the key path and the reason;
+// the scene and daemon-config errors are this with their own type. key_path
+// may be empty (whole-document problems); what() then reads
+// "<source>: <reason>". `unnamed` stands for an empty source in what().
+class DocumentError : public std::runtime_error {
+ public:
+  DocumentError(const std::string& source, const std::string& key_path, const std::string& reason, const char* unnamed);
+
+  const std::string& source() const noexcept { return parts_->source; }
+  const std::string& key_path() const noexcept { return parts_->key_path; }
+  const std::string& reason() const noexcept { return parts_->reason; }
+
+ private:
+  struct Parts {
+    std::string source, key_path, reason;
+  };
+  std::shared_ptr<const Parts> parts_;  // shared: copying an exception must not throw
+};
+
 // Value checks shared by the scene and daemon-config validators (CRTP): each
 // reports through the derived class's fail(path, reason), which throws that
 // document's error type naming the file.
