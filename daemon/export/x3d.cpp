@@ -309,6 +309,29 @@ std::array<float, 3> strain_colour(double t) {
   return c;
 }
 
+std::vector<float> vertex_strain_from_triangles(std::size_t vertex_count,
+                                                const std::vector<std::array<std::uint32_t, 3>>& triangles,
+                                                const std::vector<float>& triangle_strain) {
+  if (triangle_strain.empty()) return {};
+  if (triangle_strain.size() != triangles.size())
+    throw X3dInputError("strain: " + std::to_string(triangle_strain.size()) + " per-triangle values for " +
+                        std::to_string(triangles.size()) + " triangles");
+  std::vector<double> sum(vertex_count, 0.0);
+  std::vector<std::uint32_t> uses(vertex_count, 0);
+  for (std::size_t t = 0; t < triangles.size(); ++t)
+    for (const std::uint32_t v : triangles[t]) {
+      if (v >= vertex_count)
+        throw X3dInputError("strain: triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) + " of " +
+                            std::to_string(vertex_count));
+      sum[v] += triangle_strain[t];
+      ++uses[v];
+    }
+  std::vector<float> out(vertex_count, 0.0f);
+  for (std::size_t v = 0; v < vertex_count; ++v)
+    if (uses[v] > 0) out[v] = static_cast<float>(sum[v] / uses[v]);
+  return out;
+}
+
 void validate_frame(const SurfaceFrame& f, bool need_strain, const std::string& label) {
   const std::string where = label + describe_time(f);
   if (!std::isfinite(f.time_s)) throw X3dInputError(label + ": time_s is not finite");

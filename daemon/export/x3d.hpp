@@ -55,6 +55,14 @@ std::array<float, 3> level_colour(std::uint8_t level);
 // The strain ramp (viridis, piecewise linear): t in [0,1], clamped.
 std::array<float, 3> strain_colour(double t);
 
+// Per-vertex strain-energy density from per-triangle values (what messages
+// and sessions carry): the mean over the triangles that use the vertex, 0 for
+// a vertex no triangle uses. Empty when `triangle_strain` is empty. Throws
+// X3dInputError when sizes disagree or an index is out of range.
+std::vector<float> vertex_strain_from_triangles(std::size_t vertex_count,
+                                                const std::vector<std::array<std::uint32_t, 3>>& triangles,
+                                                const std::vector<float>& triangle_strain);
+
 // Throws X3dInputError unless the frame is drawable: finite time and
 // coordinates, at least one vertex and one triangle, every index in range,
 // no triangle repeating a vertex, vertex_level empty or one per vertex, and

@@ -68,6 +68,9 @@ struct MeshSnapshot {
   std::vector<std::array<double, 3>> vertices_m;
   std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise seen from outside
   std::vector<std::uint8_t> vertex_level;               // bisection depth of the node (0: lattice node)
+  // Strain-energy density of the leaf tet behind each triangle, J/m^3 (= Pa),
+  // one per triangle; empty when not computed.
+  std::vector<float> triangle_strain_energy_J_per_m3;
 };
 
 struct SimThreadOptions {

@@ -341,5 +341,24 @@ TEST(X3dThirdParty, TovrmlAcceptsStrainFlipBook) {
   expect_tovrmlx3d_accepts(x3d_animation(mixed_frames(), o), "flip.x3d");
 }
 
+TEST(VertexStrainFromTriangles, MeanOverAdjacentTrianglesAndZeroForUnused) {
+  // Two triangles sharing the edge 1-2; vertex 4 is used by none.
+  const std::vector<std::array<std::uint32_t, 3>> tris = {{0, 1, 2}, {1, 3, 2}};
+  const std::vector<float> v = vertex_strain_from_triangles(5, tris, {2.0f, 6.0f});
+  ASSERT_EQ(v.size(), 5u);
+  EXPECT_FLOAT_EQ(v[0], 2.0f);
+  EXPECT_FLOAT_EQ(v[1], 4.0f);
+  EXPECT_FLOAT_EQ(v[2], 4.0f);
+  EXPECT_FLOAT_EQ(v[3], 6.0f);
+  EXPECT_FLOAT_EQ(v[4], 0.0f);
+  EXPECT_TRUE(vertex_strain_from_triangles(5, tris, {}).empty());
+}
+
+TEST(VertexStrainFromTriangles, RejectsSizeMismatchAndBadIndices) {
+  const std::vector<std::array<std::uint32_t, 3>> tris = {{0, 1, 2}};
+  EXPECT_THROW(vertex_strain_from_triangles(3, tris, {1.0f, 2.0f}), X3dInputError);
+  EXPECT_THROW(vertex_strain_from_triangles(2, tris, {1.0f}), X3dInputError);
+}
+
 }  // namespace
 }  // namespace tissue::x3d
