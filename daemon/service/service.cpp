@@ -29,6 +29,8 @@ SimThreadOptions sim_options(const config::DaemonConfig& c) {
   o.priority = c.realtime.sched_fifo ? c.realtime.sim_priority : 0;
   // Status feeds the haptic_state messages too: refresh it at their rate.
   o.status_every_s = 1.0 / std::max(c.publish.haptic_rate_hz, 20.0);
+  // Energies are only read by sim_stats and `status`: sum them at the stats rate.
+  o.energy_every_s = 1.0 / std::max(c.publish.stats_rate_hz, 1.0);
   return o;
 }
 
@@ -121,7 +123,8 @@ void Service::stop_threads() {
   if (haptics_) haptics_->stop();
   haptics_.reset();
   if (sim_) sim_->stop();
-  stop_recording();  // after the producers: everything they pushed is written
+  retired_recorders_.clear();  // the sim thread has joined: nothing holds them
+  stop_recording();            // after the producers: everything they pushed is written
 }
 
 void Service::start_recording(const std::string& name) {
@@ -140,7 +143,7 @@ void Service::start_recording(const std::string& name) {
   };
   recorder_ = record::Recorder::start(config_.state_dir, name.empty() ? timestamped_name("session", ".h5") : name, meta,
                                       options);
-  if (sim_) sim_->set_recorder(recorder_.get());
+  if (sim_ && sim_->set_recorder(recorder_.get())) retired_recorders_.clear();
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), "recording " + scene_.name + " from " + scene_path_);
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
   std::fflush(options_.out);
@@ -148,9 +151,14 @@ void Service::start_recording(const std::string& name) {
 
 void Service::stop_recording() {
   if (!recorder_) return;
-  if (sim_) sim_->set_recorder(nullptr);  // returns once the sim thread no longer uses it
-  recorder_->stop();
-  recorder_.reset();
+  const bool released = !sim_ || sim_->set_recorder(nullptr);
+  recorder_->stop();  // closes the file; later pushes from a stalled sim thread are refused
+  if (released) {
+    recorder_.reset();
+    retired_recorders_.clear();
+  } else {
+    retired_recorders_.push_back(std::move(recorder_));
+  }
 }
 
 void Service::record_event(int kind, const std::string& text) {

@@ -123,6 +123,10 @@ class Service : public control::ControlHandler {
   // thread's when there is one, else the sim thread's (copied at each poll).
   std::atomic<std::uint64_t> heartbeat_{0};
   std::unique_ptr<record::Recorder> recorder_;
+  // Stopped recorders the sim thread may still hold (it stalled through
+  // set_recorder's wait): freed once a later hand-over completes or the sim
+  // thread has stopped, never under it.
+  std::vector<std::unique_ptr<record::Recorder>> retired_recorders_;
   std::unique_ptr<transport::LcmPublisher> lcm_;  // null unless publish.lcm.enabled and LCM started
   std::unique_ptr<transport::DdsPublisher> dds_;  // null unless publish.dds.enabled and DDS started
   bool stopping_ = false;

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstring>
 
+#include "physics/forces.hpp"
 #include "record/recorder.hpp"
 
 namespace tissue::service {
@@ -52,19 +53,24 @@ void SimThread::replace_runner(std::unique_ptr<SimRunner> runner) {
   pending_ = std::move(runner);
 }
 
-void SimThread::set_recorder(record::Recorder* recorder) {
+bool SimThread::set_recorder(record::Recorder* recorder, double wait_s) {
   recorder_.store(recorder, std::memory_order_release);
-  if (!thread_.joinable()) return;
+  if (!thread_.joinable()) return true;
   // The iteration that read the old pointer has ended once the heartbeat has
   // advanced twice (it increments at the start of every iteration, paused or
-  // not). Bounded: a stalled sim thread must not hang the control side.
-  // Release (sim thread, each iteration start) / acquire (here): everything
-  // the sim thread did with the old recorder happens before our return.
+  // not). Release (sim thread, each iteration start) / acquire (here):
+  // everything the sim thread did with the old recorder happens before a
+  // `true` return.
   const auto beats = [this] { return heartbeat_.load(std::memory_order_acquire); };
   const std::uint64_t target = beats() + 2;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  while (beats() < target && !stop_.load() && std::chrono::steady_clock::now() < deadline)
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  while (beats() < target) {
+    // Stopping: the heartbeat may never advance again; the caller keeps the
+    // old recorder until stop() has joined.
+    if (stop_.load() || std::chrono::steady_clock::now() >= deadline) return false;
     std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  return true;
 }
 
 void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
@@ -156,8 +162,18 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.springs = sim.body().mesh().edge_count();
   s.refines = sim.counters().splits;
   s.merges = sim.counters().merges;
-  s.kinetic_energy_J = sim.kinetic_energy_J();
-  s.elastic_energy_J = sim.elastic_energy_J();
+  // The energies are O(mesh) sums: at the status rate (100 Hz for haptic
+  // messages) they would cost the sim thread for nothing, so they refresh at
+  // energy_every_s (the stats rate) and on a new runner.
+  if (energy_generation_ != generation_ || last_energy_ns_ == 0 ||
+      t_ns - last_energy_ns_ >= static_cast<std::int64_t>(options_.energy_every_s * 1e9)) {
+    kinetic_energy_J_ = sim.kinetic_energy_J();
+    elastic_energy_J_ = sim.elastic_energy_J();
+    last_energy_ns_ = t_ns;
+    energy_generation_ = generation_;
+  }
+  s.kinetic_energy_J = kinetic_energy_J_;
+  s.elastic_energy_J = elastic_energy_J_;
   s.real_time_factor = rtf_;
   s.step_ms_last = step_ms_last_;
   s.step_ms_max_window = step_ms_max_;

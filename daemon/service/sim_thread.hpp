@@ -80,6 +80,7 @@ struct SimThreadOptions {
   int priority = 0;                      // SCHED_FIFO priority to try (0: leave the policy alone)
   bool pace = true;                      // false: as fast as possible (tests)
   double snapshot_every_s = 1.0 / 30.0;  // MeshSnapshot rate (wall); recording frames come on top
+  double energy_every_s = 0.0;           // refresh SimStatus energies this often (wall; 0: every status)
 };
 
 class SimThread {
@@ -111,8 +112,12 @@ class SimThread {
   // haptic rows (from the tool samples it drains anyway), sim rows and mesh
   // frames. Returns once the sim thread has taken the change, so after
   // set_recorder(nullptr) the old recorder is no longer touched and may be
-  // stopped and destroyed. Any thread but the sim thread.
-  void set_recorder(record::Recorder* recorder);
+  // stopped and destroyed. Any thread but the sim thread. Waits at most
+  // `wait_s` (a stalled sim thread must not hang the control side): returns
+  // false when the sim thread has not taken the change by then, and the old
+  // recorder must then be kept alive (it may still be used) until a later
+  // set_recorder returns true or the thread has stopped.
+  bool set_recorder(record::Recorder* recorder, double wait_s = 5.0);
 
   // One reader (the service's io thread).
   SimStatus status() { return *status_.read().value; }
@@ -167,6 +172,10 @@ class SimThread {
   double window_sim_s_ = 0.0;
   std::int64_t window_start_ns_ = 0;
   double step_ms_last_ = 0.0, step_ms_max_ = 0.0;
+  // Energies as last summed (publish_status), and when.
+  double kinetic_energy_J_ = 0.0, elastic_energy_J_ = 0.0;
+  std::int64_t last_energy_ns_ = 0;
+  std::uint64_t energy_generation_ = 0;
   double rtf_ = 0.0;
   // Surface scratch (sim thread): reused, so a snapshot allocates only when
   // the surface grows.

@@ -2,12 +2,18 @@
 
 #include <gtest/gtest.h>
 
+#include <stdlib.h>
+
+#include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <thread>
+#include <vector>
 
 #include "haptics/haptic_thread.hpp"
 #include "haptics/sim_device.hpp"
 #include "physics/physics_test_support.hpp"
+#include "record/recorder.hpp"
 
 namespace tissue::service {
 namespace {
@@ -195,6 +201,68 @@ TEST(SimThread, PublishesSurfaceSnapshots) {
   for (const auto& t : s.triangles)
     for (std::uint32_t v : t) EXPECT_LT(v, s.vertices_m.size());
   thread.stop();
+}
+
+// A sim thread stalled through a recorder hand-over: set_recorder gives up
+// after its bound and says so (the caller must keep the old recorder alive),
+// and once the sim thread moves again a hand-over completes. While stalled
+// the old recorder is still the one the thread holds, so it must stay valid;
+// stopped, it refuses what the thread pushes instead of writing it.
+TEST(SimThread, RecorderHandOverReportsAStalledSimThread) {
+  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  {
+    auto recorder = record::Recorder::start(dir, "handover.h5", record::SessionMetadata{});
+    SimThreadOptions options;
+    SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr, options);
+    thread.start();
+    ASSERT_TRUE(thread.set_recorder(recorder.get()));
+    thread.inject_stall(800ms);
+    std::this_thread::sleep_for(100ms);  // the stall has begun (steps are 1 ms apart)
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_FALSE(thread.set_recorder(nullptr, 0.05));
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 600ms);  // bounded: well before the stall ends
+    recorder->stop();                                 // the file closes; the stalled thread still holds the recorder
+    EXPECT_TRUE(thread.set_recorder(nullptr, 10.0));  // the stall ends, the thread lets go
+    thread.stop();
+    EXPECT_TRUE(thread.set_recorder(nullptr, 0.0));  // a stopped thread holds nothing
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// Status at 200 Hz, energies at 4 Hz: the energies in consecutive statuses
+// repeat between refreshes while time moves on (the loaded cantilever's
+// kinetic energy changes every step, so fresh sums would all differ).
+TEST(SimThread, EnergiesRefreshAtTheirOwnRate) {
+  const auto distinct_energies = [](double energy_every_s, std::size_t* statuses) {
+    SimThreadOptions options;
+    options.status_every_s = 0.005;
+    options.energy_every_s = energy_every_s;
+    SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr, options);
+    thread.start();
+    std::vector<double> kinetic, times;
+    const auto end = std::chrono::steady_clock::now() + 400ms;
+    while (std::chrono::steady_clock::now() < end) {
+      const SimStatus s = thread.status();
+      if (times.empty() || s.sim_time_s != times.back()) {
+        times.push_back(s.sim_time_s);
+        kinetic.push_back(s.kinetic_energy_J);
+      }
+      std::this_thread::sleep_for(1ms);
+    }
+    thread.stop();
+    *statuses = times.size();
+    std::sort(kinetic.begin(), kinetic.end());
+    return static_cast<std::size_t>(std::unique(kinetic.begin(), kinetic.end()) - kinetic.begin());
+  };
+  std::size_t statuses = 0;
+  const std::size_t slow = distinct_energies(0.25, &statuses);
+  ASSERT_GE(statuses, 10u);  // statuses kept coming
+  EXPECT_LE(slow, 4u);       // 400 ms at 4 Hz: the first sum plus at most two refreshes (and one spare)
+  const std::size_t every = distinct_energies(0.0, &statuses);
+  ASSERT_GE(statuses, 10u);
+  EXPECT_GE(every, statuses / 2);  // summed for every status: the values move
 }
 
 }  // namespace
