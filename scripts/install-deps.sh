@@ -13,7 +13,7 @@ packages=(
   libosmesa6-dev libpng-dev
   libboost-dev libsystemd-dev
   clang-format iproute2
-  view3dscene
+  view3dscene xvfb xauth
 )
 
 # Python: the LCM module for clients/python and its test (the PyPI wheel

@@ -35,4 +35,22 @@ void write_png(const Image& image, const std::string& path) {
   if (std::fflush(file.get()) != 0) throw RenderError("cannot write " + path + ": " + std::strerror(errno));
 }
 
+Image read_png(const std::string& path) {
+  png_image header{};  // libpng's simplified API: no longjmp to manage
+  header.version = PNG_IMAGE_VERSION;
+  if (!png_image_begin_read_from_file(&header, path.c_str()))
+    throw RenderError("cannot read " + path + ": " + header.message);
+  header.format = PNG_FORMAT_RGBA;
+  Image image;
+  image.width = static_cast<int>(header.width);
+  image.height = static_cast<int>(header.height);
+  image.rgba.resize(PNG_IMAGE_SIZE(header));
+  if (!png_image_finish_read(&header, nullptr, image.rgba.data(), 0, nullptr)) {
+    const std::string reason = header.message;
+    png_image_free(&header);
+    throw RenderError("cannot read " + path + ": " + reason);
+  }
+  return image;
+}
+
 }  // namespace tissue::render

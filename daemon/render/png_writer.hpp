@@ -9,4 +9,9 @@ namespace tissue::render {
 // Writes `image` as an 8-bit RGBA PNG. Throws RenderError naming the file.
 void write_png(const Image& image, const std::string& path);
 
+// Reads any PNG as 8-bit RGBA (row 0 at the top), for checking pictures made
+// by this project or by third-party viewers. Throws RenderError naming the
+// file and libpng's reason.
+Image read_png(const std::string& path);
+
 }  // namespace tissue::render

@@ -104,8 +104,21 @@ TEST(Render, WritesAPngFile) {
   EXPECT_EQ(sig[1], 'P');
   EXPECT_EQ(sig[2], 'N');
   EXPECT_EQ(sig[3], 'G');
+  // What read_png returns is what was written, pixel for pixel.
+  const Image back = read_png(path);
+  EXPECT_EQ(back.width, image.width);
+  EXPECT_EQ(back.height, image.height);
+  EXPECT_EQ(back.rgba, image.rgba);
   std::filesystem::remove(path);
   EXPECT_THROW(write_png(render_frame(box_surface(false), o), "/nonexistent-dir/x.png"), RenderError);
+  EXPECT_THROW(read_png("/nonexistent-dir/x.png"), RenderError);
+  const std::string junk = (std::filesystem::temp_directory_path() / "tissue_render_junk.png").string();
+  std::FILE* j = std::fopen(junk.c_str(), "wb");
+  ASSERT_NE(j, nullptr);
+  std::fputs("\x89PNG not really", j);
+  std::fclose(j);
+  EXPECT_THROW(read_png(junk), RenderError);
+  std::filesystem::remove(junk);
 }
 
 }  // namespace
