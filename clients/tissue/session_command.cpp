@@ -1,12 +1,22 @@
 #include "tissue/session_command.hpp"
 
+#include <signal.h>
 #include <CLI/CLI.hpp>
 
+#include <atomic>
+#include <chrono>
+#include <cstdio>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
+#include <thread>
 
+#include "config/daemon_config.hpp"
 #include "record/session_tools.hpp"
+#include "replay/session_replay.hpp"
+#include "transport/dds_publisher.hpp"
+#include "transport/lcm_publisher.hpp"
 
 namespace tissue::cli {
 
@@ -14,13 +24,119 @@ namespace {
 
 constexpr int kExitBadFile = 1;  // same value as kExitDaemonError: "the thing you asked about is broken"
 
+// `replay`: where to publish and how fast.
+struct ReplayCommandOptions {
+  std::optional<std::string> lcm_url;  // set: publish over LCM there
+  bool dds = false;
+  int dds_domain = config::DdsPublishSpec{}.domain_id;
+  std::string dds_prefix = config::DdsPublishSpec{}.topic_prefix;
+  bool dds_remote = false;
+  double dds_wait_s = 1.0;
+  replay::ReplayOptions replay;
+};
+
 struct SessionOptions {
   std::string file;
   std::string xdmf_out;
+  ReplayCommandOptions replay;
   CLI::App* info = nullptr;
   CLI::App* repair = nullptr;
   CLI::App* xdmf = nullptr;
+  CLI::App* replay_cmd = nullptr;
 };
+
+// Set by SIGINT / SIGTERM: the replay stops at its next wait (within 20 ms)
+// and prints its summary. A lock-free atomic store is async-signal-safe.
+std::atomic<bool> g_stop_replay{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
+
+extern "C" void on_stop_signal(int) { g_stop_replay.store(true, std::memory_order_relaxed); }
+
+void install_stop_handlers() {
+  struct sigaction sa {};
+  sa.sa_handler = on_stop_signal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
+std::string fixed(double v, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+int run_replay(const std::string& file, const ReplayCommandOptions& o) {
+  if (!o.lcm_url && !o.dds) {
+    std::cerr << "tissue session replay: choose where to publish: --lcm [URL] and/or --dds\n";
+    return kExitBadArguments;
+  }
+  install_stop_handlers();
+  // The file first: a bad file is reported without touching the network.
+  std::unique_ptr<x3d::FrameSource> frames;
+  replay::SessionRows rows;
+  try {
+    frames = x3d::open_session_source(file);
+    rows = replay::read_session_rows(file);
+  } catch (const x3d::SourceError& e) {
+    std::cerr << "tissue session replay: " << e.what() << "\n";
+    return kExitBadFile;
+  } catch (const replay::ReplayError& e) {
+    std::cerr << "tissue session replay: " << e.what() << "\n";
+    return kExitBadFile;
+  }
+  std::unique_ptr<transport::LcmPublisher> lcm;
+  std::unique_ptr<transport::DdsPublisher> dds;
+  try {
+    if (o.lcm_url) lcm = std::make_unique<transport::LcmPublisher>(*o.lcm_url);
+    if (o.dds) {
+      transport::DdsPublishOptions d;
+      d.domain_id = o.dds_domain;
+      d.topic_prefix = o.dds_prefix;
+      d.loopback_only = !o.dds_remote;
+      dds = std::make_unique<transport::DdsPublisher>(d);
+    }
+  } catch (const std::runtime_error& e) {
+    std::cerr << "tissue session replay: " << e.what() << "\n";
+    return kExitCannotConnect;
+  }
+  if (dds) {
+    // DDS readers match only after discovery (~0.1-1 s); frames sent before
+    // are lost to them (the mesh topic keeps only the newest for late
+    // joiners). Wait a little for a mesh reader; start anyway after that.
+    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.dds_wait_s);
+    while (dds->matched_readers().meshes == 0 && std::chrono::steady_clock::now() < until &&
+           !g_stop_replay.load(std::memory_order_relaxed))
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  replay::PublisherSink sink(lcm.get(), dds.get());
+  replay::SteadyReplayClock clock;
+  replay::ReplaySummary sum;
+  try {
+    sum = replay::replay_session(*frames, rows, o.replay, sink, clock, g_stop_replay);
+  } catch (const replay::ReplayError& e) {
+    std::cerr << "tissue session replay: " << e.what() << "\n";
+    return kExitBadArguments;  // only options (window, speed, rates) fail here
+  } catch (const x3d::SourceError& e) {
+    std::cerr << "tissue session replay: " << e.what() << "\n";
+    return kExitBadFile;
+  }
+  std::cout << (sum.stopped ? "stopped: " : "replayed ") << file << ": " << sum.frames << " mesh frames, "
+            << sum.haptic_rows << " haptic states, " << sum.stats << " stats";
+  if (o.replay.loop) std::cout << ", " << sum.passes << " complete passes";
+  std::cout << "\n  " << fixed(sum.session_span_s, 3) << " s of session time in " << fixed(sum.wall_s, 3)
+            << " s wall: pace " << fixed(sum.pace(), 3) << "x (asked " << fixed(o.replay.speed, 3) << "x), "
+            << sum.late_items << " items sent > 10 ms late (worst " << fixed(1e3 * sum.max_lag_s, 1) << " ms)\n";
+  if (lcm)
+    std::cout << "  LCM " << lcm->url() << ": " << lcm->counts().meshes << " meshes, " << lcm->counts().haptic_states
+              << " haptic states, " << lcm->counts().stats << " stats sent, " << lcm->counts().failures
+              << " failures\n";
+  if (dds)
+    std::cout << "  DDS domain " << o.dds_domain << " topics " << o.dds_prefix << "*: " << dds->counts().meshes
+              << " meshes, " << dds->counts().haptic_states << " haptic states, " << dds->counts().stats
+              << " stats sent, " << dds->counts().failures << " failures\n";
+  return kExitOk;
+}
 
 void print_counts(const char* label, const record::GroupCounts& c) {
   std::cout << label << c.haptic_rows << " haptic ticks, " << c.sim_rows << " sim samples, " << c.mesh_frames
@@ -51,6 +167,7 @@ int run_session(const SessionOptions& o) {
       std::cout << "\n";
       return kExitOk;
     }
+    if (o.replay_cmd->parsed()) return run_replay(o.file, o.replay);
   } catch (const record::RecordError& e) {
     std::cerr << "tissue session: " << e.what() << "\n";
     return kExitBadFile;
@@ -58,11 +175,59 @@ int run_session(const SessionOptions& o) {
   return kExitBadArguments;
 }
 
+void add_replay_command(CLI::App* session, SessionOptions& options) {
+  ReplayCommandOptions& r = options.replay;
+  const config::PublishSpec defaults;
+  r.replay.timeline.haptic_rate_hz = defaults.haptic_rate_hz;
+  r.replay.timeline.stats_rate_hz = defaults.stats_rate_hz;
+  CLI::App* cmd = options.replay_cmd = session->add_subcommand(
+      "replay", "Publish a recorded session over LCM and/or Fast DDS at the recorded pace, as tissued would");
+  cmd->add_option("file", options.file, "Session file (.h5)")->required();
+  cmd->add_option("--lcm", r.lcm_url, "Publish over LCM at URL (publish.lcm.url)")
+      ->expected(0, 1)
+      ->default_str(defaults.lcm.url);
+  CLI::Option* dds = cmd->add_flag("--dds", r.dds, "Publish over Fast DDS (topics <prefix>surface_mesh, ...)");
+  cmd->add_option("--dds-domain", r.dds_domain, "DDS domain (publish.dds.domain_id)")
+      ->check(CLI::Range(0, 232))
+      ->capture_default_str()
+      ->needs(dds);
+  cmd->add_option("--dds-prefix", r.dds_prefix, "DDS topic prefix (publish.dds.topic_prefix)")
+      ->capture_default_str()
+      ->needs(dds);
+  cmd->add_flag("--dds-remote", r.dds_remote,
+                "DDS on every interface (publish.dds.loopback_only: false); default: this host only")
+      ->needs(dds);
+  cmd->add_option("--dds-wait", r.dds_wait_s, "Wait up to S seconds for a DDS mesh reader before starting")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str()
+      ->needs(dds);
+  cmd->add_option("--speed", r.replay.speed, "Session seconds per wall second (2: twice as fast)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--from", r.replay.timeline.from_s, "Start at this session time (s)");
+  cmd->add_option("--to", r.replay.timeline.to_s, "End at this session time (s)");
+  cmd->add_flag("--loop", r.replay.loop, "Start over after the end, until Ctrl-C");
+  cmd->add_option("--haptic-rate", r.replay.timeline.haptic_rate_hz,
+                  "haptic_state rate in Hz (publish.haptic_rate_hz); 0: every recorded tick")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--stats-rate", r.replay.timeline.stats_rate_hz,
+                  "sim_stats rate in Hz (publish.stats_rate_hz); 0: every recorded sample")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->footer(
+      "Same channels / topics and encoders as tissued (proto/README.md); message time_s is session time.\n"
+      "Ctrl-C or SIGTERM stops cleanly and prints the summary.\n"
+      "Exit codes: 0 ok (also when stopped), 1 the file is unreadable / corrupt / not a session,\n"
+      "2 bad arguments, 3 LCM or DDS cannot start.");
+}
+
 }  // namespace
 
 Subcommand add_session_command(CLI::App& parent) {
   auto options = std::make_shared<SessionOptions>();
-  CLI::App* session = parent.add_subcommand("session", "Inspect, repair and export recorded session files (HDF5)");
+  CLI::App* session =
+      parent.add_subcommand("session", "Inspect, repair, export and replay recorded session files (HDF5)");
   session->require_subcommand(1);
   options->info = session->add_subcommand("info", "Duration, row counts, scene, host, version, clean close or crash");
   options->info->add_option("file", options->file, "Session file (.h5)")->required();
@@ -74,6 +239,7 @@ Subcommand add_session_command(CLI::App& parent) {
       session->add_subcommand("xdmf", "Write an XDMF sidecar so ParaView opens the mesh frames as a time series");
   options->xdmf->add_option("file", options->file, "Session file (.h5)")->required();
   options->xdmf->add_option("-o,--output", options->xdmf_out, "Sidecar path (default: FILE with .xdmf)");
+  add_replay_command(session, *options);
   return Subcommand{session, [options] { return run_session(*options); }};
 }
 

@@ -1,0 +1,481 @@
+// Session replay (daemon/replay): the timeline, pacing against a fake clock
+// (no sleeping), the conversions, the row reader on good and bad files, and
+// `tissue session replay` end to end. The CLI cases publish to LCM's
+// in-process memq:// provider (no network). The ReplayNetns cases need
+// TISSUE_TEST_LCM_URL and run through the ctest entry inside a private
+// network namespace (tests/transport/in_netns.sh): a subscriber in this
+// process receives what the replay process publishes.
+#include "replay/session_replay.hpp"
+
+#include <gtest/gtest.h>
+#include <hdf5.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <lcm/lcm-cpp.hpp>
+#include <map>
+#include <random>
+#include <thread>
+
+#include "record/session_writer.hpp"
+#include "record_test_support.hpp"
+#include "replay_test_support.hpp"
+#include "transport/lcm_messages.hpp"
+
+namespace tissue::replay {
+namespace {
+
+using record::testing::quote;
+using record::testing::RunResult;
+using record::testing::TempDir;
+using testing::FakeClock;
+using testing::RecordingSink;
+using testing::VectorFrameSource;
+
+// ---------------------------------------------------------------- timeline
+
+TEST(ReplayTimeline, MergesTheStreamsInTimeOrderMeshFirstAtEqualTimes) {
+  TimelineOptions o;
+  o.haptic_rate_hz = 0;
+  o.stats_rate_hz = 0;
+  const auto items = build_timeline({0.0, 0.5, 1.0}, {0.0, 0.25, 0.5, 0.75}, {0.1, 0.5}, o);
+  const std::vector<TimelineItem> expected = {
+      {0.0, StreamKind::kMesh, 0},    {0.0, StreamKind::kHaptic, 0},  {0.1, StreamKind::kStats, 0},
+      {0.25, StreamKind::kHaptic, 1}, {0.5, StreamKind::kMesh, 1},    {0.5, StreamKind::kHaptic, 2},
+      {0.5, StreamKind::kStats, 1},   {0.75, StreamKind::kHaptic, 3}, {1.0, StreamKind::kMesh, 2}};
+  EXPECT_EQ(items, expected);
+}
+
+TEST(ReplayTimeline, WindowIsInclusiveAndApplesToEveryStream) {
+  TimelineOptions o;
+  o.haptic_rate_hz = 0;
+  o.stats_rate_hz = 0;
+  o.from_s = 0.5;
+  o.to_s = 0.75;
+  const auto items = build_timeline({0.0, 0.5, 1.0}, {0.25, 0.5, 0.75, 0.8}, {0.1, 0.6}, o);
+  const std::vector<TimelineItem> expected = {{0.5, StreamKind::kMesh, 1},
+                                              {0.5, StreamKind::kHaptic, 1},
+                                              {0.6, StreamKind::kStats, 1},
+                                              {0.75, StreamKind::kHaptic, 2}};
+  EXPECT_EQ(items, expected);
+}
+
+TEST(ReplayTimeline, DecimatesKiloHertzRowsToThePublishRate) {
+  std::vector<double> haptic;
+  for (int i = 0; i < 1000; ++i) haptic.push_back(i * 1e-3);  // as the recorder stores 1 kHz ticks
+  std::vector<double> sim;
+  for (int i = 0; i < 50; ++i) sim.push_back(i * 0.02);
+  TimelineOptions o;  // 100 Hz haptic, 5 Hz stats
+  const auto items = build_timeline({}, haptic, sim, o);
+  std::vector<std::size_t> h, s;
+  for (const TimelineItem& it : items) (it.kind == StreamKind::kHaptic ? h : s).push_back(it.index);
+  ASSERT_EQ(h.size(), 100u);
+  for (std::size_t k = 0; k < h.size(); ++k) EXPECT_EQ(h[k], 10 * k) << "every 10th tick";
+  EXPECT_EQ(s, (std::vector<std::size_t>{0, 10, 20, 30, 40}));
+  // After a gap the grid restarts at the first row after it.
+  const auto gap = build_timeline({}, {0.0, 0.01, 0.5, 0.505, 0.51}, {}, o);
+  std::vector<double> times;
+  for (const TimelineItem& it : gap) times.push_back(it.time_s);
+  EXPECT_EQ(times, (std::vector<double>{0.0, 0.01, 0.5, 0.51}));
+}
+
+TEST(ReplayTimeline, BadOptionsAreErrors) {
+  TimelineOptions o;
+  o.from_s = 2.0;
+  o.to_s = 1.0;
+  EXPECT_THROW(build_timeline({0.0}, {}, {}, o), ReplayError);
+  o = {};
+  o.haptic_rate_hz = -1.0;
+  EXPECT_THROW(build_timeline({0.0}, {}, {}, o), ReplayError);
+}
+
+// ---------------------------------------------------------------- pacing
+
+// Frames at 0, 0.1, ... 0.9 s; haptic rows every 10 ms; stats every 50 ms.
+struct Material {
+  VectorFrameSource frames{testing::moving_frames(10, 0.1)};
+  SessionRows rows = testing::rows(100, 0.01, 20, 0.05);
+};
+
+TEST(ReplayPacing, EveryItemGoesOutAtItsDueTimeAtSpeedOne) {
+  Material m;
+  FakeClock clock(1000.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{false};
+  ReplayOptions o;
+  o.timeline.haptic_rate_hz = 0;
+  o.timeline.stats_rate_hz = 0;
+  const ReplaySummary s = replay_session(m.frames, m.rows, o, sink, clock, stop);
+  EXPECT_EQ(s.frames, 10u);
+  EXPECT_EQ(s.haptic_rows, 100u);
+  EXPECT_EQ(s.stats, 20u);
+  EXPECT_EQ(s.passes, 1u);
+  EXPECT_FALSE(s.stopped);
+  EXPECT_EQ(s.late_items, 0u);
+  ASSERT_EQ(sink.sent.size(), 130u);
+  for (const auto& e : sink.sent) EXPECT_NEAR(e.wall_s - 1000.0, e.time_s, 1e-9) << "item at t=" << e.time_s;
+  EXPECT_DOUBLE_EQ(s.session_span_s, 0.99);
+  EXPECT_NEAR(s.wall_s, 0.99, 1e-9);
+  EXPECT_NEAR(s.pace(), 1.0, 1e-9);
+  // Mesh sequences count up from 1 and the frames are the source's.
+  std::uint64_t seq = 0;
+  for (const auto& e : sink.sent)
+    if (e.kind == StreamKind::kMesh) {
+      EXPECT_EQ(e.sequence, ++seq);
+      EXPECT_EQ(e.vertices, m.frames.frame(seq - 1).vertices_m.size());
+    }
+}
+
+TEST(ReplayPacing, SpeedFourTakesAQuarterOfTheTimeAndTheWindowStartsAtOnce) {
+  Material m;
+  FakeClock clock(50.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{false};
+  ReplayOptions o;
+  o.speed = 4.0;
+  o.timeline.from_s = 0.25;
+  o.timeline.to_s = 0.75;
+  const ReplaySummary s = replay_session(m.frames, m.rows, o, sink, clock, stop);
+  EXPECT_EQ(s.frames, 5u);  // 0.3 .. 0.7
+  ASSERT_FALSE(sink.sent.empty());
+  const double t0 = sink.sent.front().time_s, t1 = sink.sent.back().time_s;
+  EXPECT_GE(t0, 0.25);
+  EXPECT_LE(t1, 0.75);
+  EXPECT_DOUBLE_EQ(sink.sent.front().wall_s, 50.0) << "no wait before the first item of the window";
+  for (const auto& e : sink.sent) EXPECT_NEAR(e.wall_s - 50.0, (e.time_s - t0) / 4.0, 1e-9);
+  EXPECT_NEAR(s.wall_s, (t1 - t0) / 4.0, 1e-9);
+  EXPECT_GT(t1 - t0, 0.45);
+  EXPECT_NEAR(s.pace(), 4.0, 1e-9);
+}
+
+TEST(ReplayPacing, ASlowPublishDelaysOnlyTheItemsRightAfterIt) {
+  Material m;
+  FakeClock clock(0.0);
+  RecordingSink sink(&clock);
+  sink.mesh_cost_s = {{4, 0.25}};  // publishing frame 3 (t = 0.3 s, sequence 4) takes 250 ms
+  std::atomic<bool> stop{false};
+  ReplayOptions o;
+  o.timeline.haptic_rate_hz = 0;
+  o.timeline.stats_rate_hz = 0;
+  const ReplaySummary s = replay_session(m.frames, m.rows, o, sink, clock, stop);
+  const auto slow = std::find_if(sink.sent.begin(), sink.sent.end(), [](const auto& e) { return e.sequence == 4; });
+  ASSERT_NE(slow, sink.sent.end());
+  const double free_at_s = slow->wall_s + 0.25;
+  for (auto e = sink.sent.begin(); e != sink.sent.end(); ++e) {
+    if (e <= slow)
+      EXPECT_NEAR(e->wall_s, e->time_s, 1e-12) << "before the slow frame: on time";
+    else if (e->time_s < free_at_s)
+      EXPECT_NEAR(e->wall_s, free_at_s, 1e-12) << "held up by the slow frame, sent at once after it";
+    else
+      EXPECT_NEAR(e->wall_s, e->time_s, 1e-12) << "back on the original schedule";
+  }
+  EXPECT_GT(s.late_items, 20u);  // haptic rows 0.31 .. 0.54 and more
+  EXPECT_GT(s.max_lag_s, 0.2);
+  EXPECT_LE(s.max_lag_s, 0.25 + 1e-9);
+}
+
+TEST(ReplayPacing, LoopStartsTheNextPassWhenTheLastEndsUntilStopped) {
+  Material m;
+  FakeClock clock(0.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{false};
+  sink.stop_after = 25;  // 10 frames per pass: stop in the third pass
+  sink.stop = &stop;
+  ReplayOptions o;
+  o.loop = true;
+  o.timeline.haptic_rate_hz = 0;
+  o.timeline.stats_rate_hz = 0;
+  o.timeline.to_s = 0.9;  // frames, rows and stats up to 0.9 s: the span is 0.9 s
+  const ReplaySummary s = replay_session(m.frames, m.rows, o, sink, clock, stop);
+  EXPECT_TRUE(s.stopped);
+  EXPECT_EQ(s.passes, 2u);
+  std::vector<const RecordingSink::Sent*> meshes;
+  for (const auto& e : sink.sent)
+    if (e.kind == StreamKind::kMesh) meshes.push_back(&e);
+  ASSERT_GE(meshes.size(), 21u);
+  EXPECT_DOUBLE_EQ(meshes[10]->wall_s, 0.9) << "pass 2 starts where pass 1 ended";
+  EXPECT_DOUBLE_EQ(meshes[20]->wall_s, 1.8);
+  EXPECT_EQ(meshes[20]->sequence, 21u) << "sequences keep counting across passes";
+  EXPECT_EQ(s.frames, meshes.size());
+}
+
+TEST(ReplayPacing, StopEndsAWaitAndBadOptionsAreRefused) {
+  Material m;
+  FakeClock clock(0.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{true};
+  ReplaySummary s = replay_session(m.frames, m.rows, ReplayOptions{}, sink, clock, stop);
+  EXPECT_TRUE(s.stopped);
+  EXPECT_TRUE(sink.sent.empty());
+  stop = false;
+  ReplayOptions o;
+  o.speed = 0.0;
+  EXPECT_THROW(replay_session(m.frames, m.rows, o, sink, clock, stop), ReplayError);
+  o = {};
+  o.timeline.from_s = 5.0;  // after everything
+  EXPECT_THROW(replay_session(m.frames, m.rows, o, sink, clock, stop), ReplayError);
+  o = {};
+  o.loop = true;
+  o.timeline.from_s = o.timeline.to_s = 0.5;  // one instant: a loop would never advance
+  EXPECT_THROW(replay_session(m.frames, m.rows, o, sink, clock, stop), ReplayError);
+}
+
+TEST(ReplayPacing, SteadyClockWaitEndsSoonAfterStop) {
+  SteadyReplayClock clock;
+  std::atomic<bool> stop{false};
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    stop = true;
+  });
+  const double t0 = clock.now_s();
+  EXPECT_FALSE(clock.wait_until(t0 + 30.0, stop));
+  stopper.join();
+  EXPECT_LT(clock.now_s() - t0, 5.0) << "a 30 s wait must end on stop, not run out";
+  EXPECT_TRUE(clock.wait_until(clock.now_s() + 0.01, stop = false));
+}
+
+// ---------------------------------------------------------------- conversions
+
+TEST(ReplayConversions, SnapshotCarriesTheFrameAndStrainWhenPresent) {
+  x3d::SurfaceFrame f = testing::moving_frames(1, 0.1)[0];
+  service::MeshSnapshot s = to_snapshot(f, 7);
+  EXPECT_EQ(s.sequence, 7u);
+  EXPECT_EQ(s.sim_time_s, f.time_s);
+  EXPECT_EQ(s.vertices_m, f.vertices_m);
+  EXPECT_EQ(s.triangles, f.triangles);
+  EXPECT_EQ(s.vertex_level, f.vertex_level);
+  EXPECT_TRUE(s.triangle_strain_energy_J_per_m3.empty()) << "no strain in the frame: none in the snapshot";
+  f.vertex_strain_energy_Pa.resize(f.vertices_m.size());
+  for (std::size_t i = 0; i < f.vertices_m.size(); ++i) f.vertex_strain_energy_Pa[i] = static_cast<float>(3 * i);
+  s = to_snapshot(f, 8);
+  ASSERT_EQ(s.triangle_strain_energy_J_per_m3.size(), f.triangles.size());
+  for (std::size_t t = 0; t < f.triangles.size(); ++t) {
+    const auto& tri = f.triangles[t];
+    EXPECT_FLOAT_EQ(s.triangle_strain_energy_J_per_m3[t], static_cast<float>(tri[0] + tri[1] + tri[2]));
+  }
+}
+
+TEST(ReplayConversions, RowsBecomeTheStatusFieldsThePublishersRead) {
+  const record::HapticRow h = record::testing::haptic_row(3);  // contact on (3 % 3 == 0)
+  const service::SimStatus hs = haptic_status(h);
+  EXPECT_EQ(hs.sim_time_s, h.time_s);
+  EXPECT_EQ(hs.device_position_m, h.device_position_m);
+  EXPECT_EQ(hs.proxy_position_m, h.proxy_position_m);
+  EXPECT_EQ(hs.force_on_device_N, h.force_N);
+  EXPECT_TRUE(hs.tool_contact);
+  EXPECT_EQ(hs.model_version, h.model_version);
+  EXPECT_FALSE(haptic_status(record::testing::haptic_row(4)).tool_contact);
+  const record::SimRow r = record::testing::sim_row(9);
+  const service::SimStatus ss = sim_status(r);
+  EXPECT_EQ(ss.sim_time_s, r.time_s);
+  EXPECT_EQ(ss.real_time_factor, r.real_time_factor);
+  EXPECT_EQ(ss.step_ms_last, r.step_ms);
+  EXPECT_EQ(ss.nodes, r.nodes);
+  EXPECT_EQ(ss.tets, r.tets);
+  EXPECT_EQ(ss.springs, r.springs);
+  EXPECT_EQ(ss.refines, r.refines);
+  EXPECT_EQ(ss.merges, r.merges);
+  EXPECT_EQ(ss.kinetic_energy_J, r.kinetic_J);
+  EXPECT_EQ(ss.elastic_energy_J, r.elastic_J);
+}
+
+// ---------------------------------------------------------------- files
+
+TEST(ReplayRows, ReadsBackEveryRecordedRow) {
+  TempDir dir;
+  const std::string path = testing::write_session(dir / "s.h5", 45);
+  const SessionRows rows = read_session_rows(path);
+  ASSERT_EQ(rows.haptic.size(), 1500u);
+  ASSERT_EQ(rows.sim.size(), 75u);
+  for (std::uint64_t i = 0; i < rows.haptic.size(); ++i) {
+    const record::HapticRow e = record::testing::haptic_row(i);
+    const record::HapticRow& g = rows.haptic[i];
+    ASSERT_TRUE(g.time_s == e.time_s && g.device_position_m == e.device_position_m &&
+                g.proxy_position_m == e.proxy_position_m && g.force_N == e.force_N && g.contact == e.contact &&
+                g.model_version == e.model_version)
+        << "haptic row " << i;
+  }
+  for (std::uint64_t i = 0; i < rows.sim.size(); ++i) {
+    const record::SimRow e = record::testing::sim_row(i);
+    const record::SimRow& g = rows.sim[i];
+    ASSERT_TRUE(g.time_s == e.time_s && g.sim_time_s == e.sim_time_s && g.real_time_factor == e.real_time_factor &&
+                g.step_ms == e.step_ms && g.nodes == e.nodes && g.tets == e.tets && g.springs == e.springs &&
+                g.refines == e.refines && g.merges == e.merges && g.kinetic_J == e.kinetic_J &&
+                g.elastic_J == e.elastic_J)
+        << "sim row " << i;
+  }
+}
+
+TEST(ReplayRows, BadFilesAreErrorsNamingTheFile) {
+  TempDir dir;
+  for (const std::string& path : testing::bad_session_files(dir)) {
+    SCOPED_TRACE(path);
+    try {
+      read_session_rows(path);
+      ADD_FAILURE() << "accepted " << path;
+    } catch (const ReplayError& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+  }
+}
+
+// ---------------------------------------------------------------- CLI (no network)
+
+std::string tissue() { return quote(TISSUE_CLI_BINARY); }
+
+TEST(ReplayCli, ReplaysEverythingAndPrintsTheSummary) {
+  TempDir dir;
+  const std::string path = testing::write_session(dir / "s.h5", 45);  // frames at 30 Hz: 1.467 s
+  const RunResult r =
+      record::testing::run(tissue() + " session replay " + quote(path) + " --lcm memq:// --speed 8", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  // 45 frames; 1500 haptic rows at 1 kHz -> 150 at 100 Hz; 75 sim rows at 50 Hz -> 8 at 5 Hz.
+  EXPECT_NE(r.out.find("replayed " + path + ": 45 mesh frames, 150 haptic states, 8 stats"), std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("LCM memq://: 45 meshes, 150 haptic states, 8 stats sent, 0 failures"), std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("(asked 8.000x)"), std::string::npos) << r.out;
+}
+
+TEST(ReplayCli, BadFilesExitOneWithOneLineNamingTheFile) {
+  TempDir dir, scratch;
+  for (const std::string& path : testing::bad_session_files(dir)) {
+    SCOPED_TRACE(path);
+    const RunResult r = record::testing::run(tissue() + " session replay " + quote(path) + " --lcm memq://", scratch);
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_EQ(r.err.rfind("tissue session replay: '" + path + "': ", 0), 0u) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_EQ(r.err.find("HDF5-DIAG"), std::string::npos) << r.err;
+  }
+}
+
+TEST(ReplayCli, BadArgumentsExitTwoAndBadTransportsExitThree) {
+  TempDir dir;
+  const std::string path = testing::write_session(dir / "s.h5", 5);
+  const auto replay = [&](const std::string& args) {
+    return record::testing::run(tissue() + " session replay " + quote(path) + " " + args, dir);
+  };
+  RunResult r = replay("");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--lcm"), std::string::npos) << r.err;
+  EXPECT_EQ(replay("--lcm memq:// --speed 0").exit_code, 2);
+  EXPECT_EQ(replay("--lcm memq:// --dds-domain 3").exit_code, 2) << "--dds-domain needs --dds";
+  r = replay("--lcm memq:// --from 9 --to 10");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("nothing to replay"), std::string::npos) << r.err;
+  r = replay("--lcm nosuchprovider://x");
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("nosuchprovider://x"), std::string::npos) << r.err;
+}
+
+TEST(ReplayCli, SigtermStopsALoopCleanlyWithASummary) {
+  TempDir dir;
+  const std::string path = testing::write_session(dir / "s.h5", 45);
+  const auto t0 = std::chrono::steady_clock::now();
+  const RunResult r = record::testing::run(
+      tissue() + " session replay " + quote(path) + " --lcm memq:// --loop & p=$!; sleep 2; kill -TERM $p; wait $p",
+      dir);
+  const double took_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  EXPECT_EQ(r.out.rfind("stopped: " + path + ": ", 0), 0u) << r.out;
+  EXPECT_NE(r.out.find("1 complete passes"), std::string::npos) << "2 s at speed 1 of a 1.467 s session\n" << r.out;
+  EXPECT_LT(took_s, 10.0);
+}
+
+// ---------------------------------------------------------------- network (private namespace)
+
+// Arrival of one message at the in-process subscriber.
+struct Arrival {
+  double wall_s;
+  double time_s;
+  std::int64_t sequence;
+  std::int32_t value;  // mesh: vertex_count; haptic: in_contact
+};
+
+// Filled by the LCM handlers, which run inside handleTimeout on the
+// receiving thread.
+struct Received {
+  std::vector<Arrival> meshes, haptic;
+};
+
+double steady_now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+void on_mesh(const lcm::ReceiveBuffer*, const std::string&, const tissue_lcm::tissue::surface_mesh* m, Received* r) {
+  r->meshes.push_back({steady_now_s(), m->time_s, m->sequence_number, m->vertex_count});
+}
+
+void on_haptic(const lcm::ReceiveBuffer*, const std::string&, const tissue_lcm::tissue::haptic_state* m, Received* r) {
+  r->haptic.push_back({steady_now_s(), m->time_s, m->sequence_number, m->in_contact ? 1 : 0});
+}
+
+// Runs the replay CLI in the background while this thread receives.
+Received replay_into_lcm(const std::string& url, const std::string& path, const std::string& args, RunResult* result) {
+  lcm::LCM sub(url);
+  EXPECT_TRUE(sub.good());
+  Received got;
+  sub.subscribeFunction(transport::kSurfaceMeshChannel, &on_mesh, &got);
+  sub.subscribeFunction(transport::kHapticStateChannel, &on_haptic, &got);
+  TempDir scratch;
+  std::atomic<bool> done{false};
+  std::thread replay([&] {
+    *result = record::testing::run(tissue() + " session replay " + quote(path) + " --lcm " + quote(url) + " " + args,
+                                   scratch);
+    done = true;
+  });
+  while (!done) sub.handleTimeout(50);
+  for (int i = 0; i < 5; ++i) sub.handleTimeout(50);  // anything still in flight
+  replay.join();
+  return got;
+}
+
+TEST(ReplayNetns, LcmDeliversEveryFrameInOrderAtTheRecordedPace) {
+  const char* url = std::getenv("TISSUE_TEST_LCM_URL");
+  if (!url) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  TempDir dir;
+  constexpr std::uint64_t kFrames = 45;
+  const std::string path = testing::write_session(dir / "s.h5", kFrames);
+  const double recorded_span_s =
+      record::testing::test_frame(kFrames - 1).time_s - record::testing::test_frame(0).time_s;
+
+  double wall_span_s[2] = {};
+  const double speeds[2] = {1.0, 4.0};
+  for (int run = 0; run < 2; ++run) {
+    SCOPED_TRACE("speed " + std::to_string(speeds[run]));
+    RunResult r;
+    Received got = replay_into_lcm(url, path, "--speed " + std::to_string(speeds[run]), &r);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    ASSERT_EQ(got.meshes.size(), kFrames) << r.out;
+    for (std::size_t k = 0; k < kFrames; ++k) {
+      const record::testing::TestFrame f = record::testing::test_frame(k);
+      EXPECT_EQ(got.meshes[k].sequence, static_cast<std::int64_t>(k + 1)) << "in order, none lost";
+      EXPECT_EQ(got.meshes[k].time_s, f.time_s);
+      EXPECT_EQ(got.meshes[k].value, static_cast<std::int32_t>(f.vertices_m.size())) << "frame " << k;
+    }
+    // Haptic states: 100 Hz over the session, in order, contact as recorded.
+    EXPECT_GE(got.haptic.size(), 140u);
+    for (std::size_t i = 0; i < got.haptic.size(); ++i) {
+      EXPECT_EQ(got.haptic[i].sequence, static_cast<std::int64_t>(i + 1));
+      const std::uint64_t row = static_cast<std::uint64_t>(std::llround(got.haptic[i].time_s * 1e3));
+      EXPECT_EQ(got.haptic[i].value, record::testing::haptic_row(row).contact) << "haptic row " << row;
+    }
+    wall_span_s[run] = got.meshes.back().wall_s - got.meshes.front().wall_s;
+  }
+  // Generous bounds: the pacing itself is checked exactly with the fake clock.
+  EXPECT_GT(wall_span_s[0] / recorded_span_s, 0.85) << wall_span_s[0];
+  EXPECT_LT(wall_span_s[0] / recorded_span_s, 1.4) << wall_span_s[0];
+  const double ratio = wall_span_s[1] / wall_span_s[0];
+  std::printf("recorded span %.3f s; wall span at speed 1: %.3f s, at speed 4: %.3f s (ratio %.3f)\n", recorded_span_s,
+              wall_span_s[0], wall_span_s[1], ratio);
+  EXPECT_GT(ratio, 0.15) << "speed 4 vs 1";
+  EXPECT_LT(ratio, 0.40) << "speed 4 vs 1";
+}
+
+}  // namespace
+}  // namespace tissue::replay
