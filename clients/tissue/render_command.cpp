@@ -27,6 +27,7 @@ struct RenderCommandOptions {
   std::optional<double> from_s, to_s;
   render::RenderOptions image;
   bool no_legend = false;
+  std::string colour = "level";
   std::string out;
 };
 
@@ -44,8 +45,14 @@ std::string numbered(const std::string& out, std::size_t i) {
 
 int run_render(RenderCommandOptions o) {
   o.image.legend = !o.no_legend;
+  o.image.colour = o.colour == "strain" ? x3d::ColourMode::kStrain : x3d::ColourMode::kLevel;
   try {
     std::unique_ptr<x3d::FrameSource> source = x3d::open_session_source(o.session);
+    if (o.image.colour == x3d::ColourMode::kStrain && !source->has_strain()) {
+      std::cerr << "tissue render: --colour strain: " << source->name()
+                << " stores no strain energy (session format version 1, or recorded without it); use --colour level\n";
+      return kExitBadArguments;
+    }
     const std::size_t n = source->frame_count();
     if (n == 0) {
       std::cerr << "tissue render: " << source->name() << ": the session holds no complete mesh frame\n";
@@ -80,7 +87,12 @@ int run_render(RenderCommandOptions o) {
       const std::string path = o.sequence ? numbered(o.out, i) : o.out;
       render::write_png(render::render_frame(frame, o.image), path);
       std::cout << "wrote " << path << ": frame " << frames[i] << " at t=" << frame.time_s << " s, "
-                << frame.triangles.size() << " triangles\n";
+                << frame.triangles.size() << " triangles";
+      if (o.image.colour == x3d::ColourMode::kStrain) {  // the ramp legend has no numbers: its ends are here
+        const auto range = render::strain_range_Pa(frame, o.image);
+        std::cout << ", strain " << range[0] << " to " << range[1] << " Pa";
+      }
+      std::cout << "\n";
     }
     return kExitOk;
   } catch (const render::RenderError& e) {
@@ -115,11 +127,16 @@ Subcommand add_render_command(CLI::App& parent) {
   cmd->add_option("--elevation", o->image.elevation_deg, "Camera elevation above the xy plane (degrees)")
       ->check(CLI::Range(-90.0, 90.0))
       ->capture_default_str();
-  cmd->add_flag("--no-legend", o->no_legend, "Leave out the level legend");
+  cmd->add_flag("--no-legend", o->no_legend, "Leave out the legend (level swatches, or the strain ramp)");
+  cmd->add_option("--colour", o->colour, "Triangle colours: level (bisection depth) or strain (energy density)")
+      ->check(CLI::IsMember({"level", "strain"}))
+      ->capture_default_str();
   cmd->add_option("-o,--output", o->out, "Output PNG (a sequence numbers it: OUT-0000.png or OUT with %04d)")
       ->required();
   cmd->footer(
-      "Colours: bisection level of the finest vertex of each triangle (the X3D export's palette).\n"
+      "Colours: level: bisection level of the finest vertex of each triangle (the X3D export's palette);\n"
+      "strain: mean strain-energy density of the triangle's vertices on the X3D export's ramp, scaled to\n"
+      "the frame's min..max (printed; low at the bottom of the legend).\n"
       "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments.");
   return Subcommand{cmd, [o] { return run_render(*o); }};
 }

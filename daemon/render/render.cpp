@@ -67,8 +67,23 @@ std::array<std::uint8_t, 3> to_bytes(const std::array<float, 3>& c, double shade
 
 }  // namespace
 
+std::array<double, 2> strain_range_Pa(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
+  if (o.strain_range_Pa) {
+    const auto [lo, hi] = *o.strain_range_Pa;
+    if (!std::isfinite(lo) || !std::isfinite(hi) || !(lo < hi))
+      throw x3d::X3dInputError("render: the strain range must be finite with low < high");
+    return {lo, hi};
+  }
+  if (frame.vertex_strain_energy_Pa.empty()) return {0.0, 0.0};
+  const auto [lo, hi] = std::minmax_element(frame.vertex_strain_energy_Pa.begin(), frame.vertex_strain_energy_Pa.end());
+  return {static_cast<double>(*lo), static_cast<double>(*hi)};
+}
+
 Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
-  x3d::validate_frame(frame, false, "frame");
+  const bool strain = o.colour == x3d::ColourMode::kStrain;
+  x3d::validate_frame(frame, strain, "frame");
+  const std::array<double, 2> range = strain ? strain_range_Pa(frame, o) : std::array<double, 2>{0.0, 0.0};
+  const double span = range[1] - range[0];
   if (o.width_px < 16 || o.height_px < 16 || o.width_px > 8192 || o.height_px > 8192)
     throw RenderError("render: image size must be 16..8192 pixels a side (got " + std::to_string(o.width_px) + "x" +
                       std::to_string(o.height_px) + ")");
@@ -126,16 +141,28 @@ Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
     if (!frame.vertex_level.empty())
       for (std::uint32_t v : t) level = std::max<int>(level, frame.vertex_level[v]);
     level_seen[static_cast<std::size_t>(level)] = true;
+    std::array<float, 3> base = x3d::level_colour(static_cast<std::uint8_t>(level));
+    if (strain) {
+      double mean = 0.0;
+      for (std::uint32_t v : t) mean += frame.vertex_strain_energy_Pa[v] / 3.0;
+      // A constant field has no range: the low end of the ramp, as in X3D.
+      base = x3d::strain_colour(span > 0.0 ? (mean - range[0]) / span : 0.0);
+    }
     // A head light: faces turned to the camera are bright, grazing ones dim.
     const double facing = std::abs(dot(normalized(cross(sub(b, a), sub(c, a))), eye_dir));
-    const auto colour = to_bytes(x3d::level_colour(static_cast<std::uint8_t>(level)), 0.35 + 0.65 * facing);
+    const auto colour = to_bytes(base, 0.35 + 0.65 * facing);
     glColor3ub(colour[0], colour[1], colour[2]);
     for (const V3* p : {&a, &b, &c}) glVertex3d((*p)[0], (*p)[1], (*p)[2]);
   }
   glEnd();
   glFinish();
 
-  if (o.legend) {  // a swatch and the level number for each level drawn
+  if (o.legend && strain) {  // the ramp, low at the bottom (its ends are in the caller's caption)
+    const int scale = std::max(2, img.height / 200), w = 6 * scale, h = std::min(img.height / 3, 60 * scale);
+    const int x0 = 2 * scale, y0 = img.height - h - 2 * scale;
+    for (int i = 0; i < h; ++i)
+      fill_rect(img, x0, y0 + i, w, 1, to_bytes(x3d::strain_colour(1.0 - static_cast<double>(i) / (h - 1)), 1.0));
+  } else if (o.legend) {  // a swatch and the level number for each level drawn
     const int scale = std::max(2, img.height / 200), box = 6 * scale;
     int y = img.height - box - 2 * scale;
     for (int level = 255; level >= 0; --level) {

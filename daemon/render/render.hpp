@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -33,12 +34,24 @@ struct RenderOptions {
   // Camera direction: azimuth about +z from +x, elevation above the xy plane.
   // The view is orthographic and fits the frame's bounding sphere.
   double azimuth_deg = -60.0, elevation_deg = 30.0;
-  bool legend = true;  // level swatches with their numbers, bottom left
+  bool legend = true;  // level swatches with their numbers (strain: the ramp), bottom left
   std::array<std::uint8_t, 3> background{255, 255, 255};
+  // kLevel: bisection level; kStrain: strain-energy density (the frame must
+  // carry vertex_strain_energy_Pa), on the X3D export's ramp.
+  x3d::ColourMode colour = x3d::ColourMode::kLevel;
+  // Strain ramp ends (Pa); unset: the frame's own min..max.
+  std::optional<std::array<double, 2>> strain_range_Pa;
 };
 
-// Triangles take the palette colour (x3d::level_colour, the same as the X3D
-// export) of their finest vertex, shaded by the angle to a head light.
+// The strain range render_frame uses for `frame` with `options` (for
+// captions): options.strain_range_Pa or the frame's min..max. Throws
+// x3d::X3dInputError for a non-finite or empty given range.
+std::array<double, 2> strain_range_Pa(const x3d::SurfaceFrame& frame, const RenderOptions& options);
+
+// Level colouring: triangles take the palette colour (x3d::level_colour, the
+// same as the X3D export) of their finest vertex. Strain colouring: the ramp
+// colour (x3d::strain_colour) of the mean of their vertices' values. Both
+// shaded by the angle to a head light.
 // Renders one frame (validated like the X3D export: throws
 // x3d::X3dInputError for bad input, RenderError when OSMesa fails).
 Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& options);

@@ -81,6 +81,58 @@ TEST(Render, RefinedRegionChangesColour) {
   EXPECT_EQ(refined.pixel(cx, cy), coarse.pixel(cx, cy));  // the far end did not
 }
 
+// Strain colouring: a field rising along x is drawn from the low end of the
+// ramp (x = 0) to the high end (x = 0.4 m); seen from above the top face is
+// lit head-on, so the pixels are the ramp colours themselves.
+TEST(Render, StrainColoursFollowTheField) {
+  x3d::SurfaceFrame f = box_surface(false);
+  for (const auto& v : f.vertices_m) f.vertex_strain_energy_Pa.push_back(static_cast<float>(250.0 * v[0]));
+  RenderOptions o;
+  o.width_px = 400;
+  o.height_px = 300;
+  o.azimuth_deg = -90.0;
+  o.elevation_deg = 90.0;
+  o.legend = false;
+  o.colour = x3d::ColourMode::kStrain;
+  const auto range = strain_range_Pa(f, o);
+  EXPECT_FLOAT_EQ(range[0], 0.0);
+  EXPECT_FLOAT_EQ(range[1], 100.0);
+  const Image img = render_frame(f, o);
+  const double radius = 0.5 * std::sqrt(0.18);
+  const double px_per_m = o.height_px / (2 * 1.05 * radius);
+  const auto pixel_at = [&](double x_m) {
+    return img.pixel(static_cast<int>(o.width_px / 2 + (x_m - 0.2) * px_per_m), o.height_px / 2);
+  };
+  // A triangle takes the mean of its vertices: in the first 0.05 m cube that
+  // is 1/3 or 2/3 of the way across, t = 0.04 or 0.08 (and 0.92 / 0.96 at
+  // the other end).
+  const auto expect_near_ramp = [&](double x_m, double t_lo, double t_hi) {
+    const auto p = pixel_at(x_m);
+    double best = 1e9;
+    for (double t = t_lo; t <= t_hi; t += 0.005) {
+      const auto c = x3d::strain_colour(t);
+      double d = 0.0;
+      for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(p[k] - c[k] * 255.0));
+      best = std::min(best, d);
+    }
+    EXPECT_LT(best, 4.0) << "x=" << x_m << " is not on the ramp between " << t_lo << " and " << t_hi;
+  };
+  expect_near_ramp(0.02, 0.03, 0.09);
+  expect_near_ramp(0.38, 0.91, 0.97);
+  EXPECT_NE(pixel_at(0.02), pixel_at(0.38));
+  // A fixed range moves the colours: everything above 10 Pa saturates.
+  o.strain_range_Pa = std::array<double, 2>{0.0, 10.0};
+  const Image fixed = render_frame(f, o);
+  const auto p = fixed.pixel(static_cast<int>(o.width_px / 2 + 0.0 * px_per_m), o.height_px / 2);
+  const auto top = x3d::strain_colour(1.0);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(p[k], top[k] * 255.0, 12.0) << k;
+  // Strain colouring needs the values.
+  f.vertex_strain_energy_Pa.clear();
+  EXPECT_THROW(render_frame(f, o), x3d::X3dInputError);
+  o.strain_range_Pa = std::array<double, 2>{5.0, 5.0};
+  EXPECT_THROW(strain_range_Pa(f, o), x3d::X3dInputError);
+}
+
 TEST(Render, BadInputIsAClearError) {
   x3d::SurfaceFrame f = box_surface(false);
   f.triangles[3][1] = 100000;
@@ -95,7 +147,8 @@ TEST(Render, WritesAPngFile) {
   RenderOptions o;
   o.width_px = 64;
   o.height_px = 48;
-  write_png(render_frame(box_surface(true), o), path);
+  const Image image = render_frame(box_surface(true), o);
+  write_png(image, path);
   std::FILE* f = std::fopen(path.c_str(), "rb");
   ASSERT_NE(f, nullptr);
   unsigned char sig[8] = {};
