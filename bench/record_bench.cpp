@@ -131,7 +131,7 @@ int main(int argc, char** argv) {
           const double x = static_cast<double>(k % (n + 1)) / n, y = static_cast<double>(k / (n + 1)) / n;
           vertices[k] = {0.1 * x, 0.1 * y, 0.005 * std::sin(6.0 * x + t) * std::cos(4.0 * y)};
         }
-        rec->push_mesh_frame({t, vertices, triangles, levels});
+        rec->push_mesh_frame({t, vertices, triangles, levels, {}});  // no strain: stored as NaN, same bytes
       }
       next += 1'000'000'000 / 150;
       sleep_until_ns(next);

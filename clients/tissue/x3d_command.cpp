@@ -149,7 +149,8 @@ int run_x3d(const X3dCommandOptions& o) {
     std::unique_ptr<x3d::FrameSource> source = x3d::open_session_source(o.session);
     if (xo.colour == x3d::ColourMode::kStrain && !source->has_strain())
       throw BadArguments("--colour strain: " + source->name() +
-                         " stores no per-vertex strain energy (session format version 1); use --colour level");
+                         " stores no strain energy (session format version 1, or recorded without it); use --colour "
+                         "level");
     xo.title = "tissue: " + o.session;
     std::string summary;
     const std::string text =

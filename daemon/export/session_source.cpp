@@ -50,12 +50,26 @@ class SessionFrameSource final : public FrameSource {
       if (k > 0 && times_[k] < times_[k - 1])
         fail("/mesh/frame_time_s goes backwards at frame " + std::to_string(k) + " (frames must be in time order)");
     }
+    // Version 2 stores strain; a frame recorded without it holds NaN. The
+    // first frame with triangles says whether this recording computed it
+    // (the daemon does for every frame or for none).
+    file_has_strain_ = info.has_strain;
+    if (file_has_strain_) {
+      has_strain_ = true;
+      for (std::size_t k = 0; k < frames_; ++k)
+        if (triangle_count_[k] > 0) {
+          has_strain_ =
+              !std::isnan(read_column<float>(record::kMeshTriangleStrain, H5T_NATIVE_FLOAT, triangle_offset_[k], 1)[0]);
+          break;
+        }
+    }
   }
 
   std::string name() const override { return "'" + path_ + "'"; }
   std::size_t frame_count() const override { return frames_; }
   double frame_time_s(std::size_t k) const override { return times_.at(k); }
-  bool has_strain() const override { return false; }  // format version 1 stores none
+  // Format version 1 stores none; version 2 unless recorded without it.
+  bool has_strain() const override { return has_strain_; }
 
   SurfaceFrame read_frame(std::size_t k) override {
     if (k >= frames_)
@@ -85,6 +99,27 @@ class SessionFrameSource final : public FrameSource {
         f.triangles[t][c] = static_cast<std::uint32_t>(v);
       }
     f.vertex_level = read_column<std::uint8_t>(record::kMeshVertexLevel, H5T_NATIVE_UINT8, vertex_offset_[k], nv);
+    if (file_has_strain_ && nt > 0) {
+      std::vector<float> strain =
+          read_column<float>(record::kMeshTriangleStrain, H5T_NATIVE_FLOAT, triangle_offset_[k], nt);
+      const std::string dataset = record::kDatasets[record::kMeshTriangleStrain].path;
+      const bool not_computed = std::isnan(strain[0]);
+      for (std::size_t t = 0; t < nt; ++t) {
+        const float e = strain[t];
+        // All NaN: recorded without strain. Anything else must be a real
+        // energy density: finite and >= 0.
+        if (std::isnan(e) != not_computed || (!not_computed && (!std::isfinite(e) || e < 0.0f)))
+          fail(dataset + " row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
+               ") holds " + std::to_string(e) + " J/m^3: not a strain energy density (must be finite and >= 0)");
+      }
+      if (!not_computed) {
+        try {
+          f.vertex_strain_energy_Pa = vertex_strain_from_triangles(nv, f.triangles, strain);
+        } catch (const X3dInputError& e) {
+          fail("frame " + std::to_string(k) + ": " + e.what());
+        }
+      }
+    }
     return f;
   }
 
@@ -117,6 +152,8 @@ class SessionFrameSource final : public FrameSource {
   std::string path_;
   Handle file_;
   std::size_t frames_ = 0;
+  bool file_has_strain_ = false;  // the dataset exists (format version >= 2)
+  bool has_strain_ = false;       // and the frames carry values
   std::vector<double> times_;
   std::vector<std::uint64_t> vertex_offset_, vertex_count_, triangle_offset_, triangle_count_;
 };

@@ -17,6 +17,9 @@ struct SurfaceMesh {
   std::vector<std::array<std::uint32_t, 3>> triangles;
   // Bisection depth of the tet each triangle belongs to (for colouring).
   std::vector<std::uint8_t> triangle_depth;
+  // The leaf tet each triangle is a face of (same order as `triangles`):
+  // what per-triangle quantities such as strain energy density come from.
+  std::vector<TetId> triangle_tet;
 };
 
 // Faces of leaf tets that lie in a box face plane, outward oriented.

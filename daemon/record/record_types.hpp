@@ -69,11 +69,16 @@ struct Event {
 // A borrowed view of one surface mesh frame. Triangle indices are local to
 // the frame (0 .. vertices_m.size()-1). vertex_level may be empty (all 0) or
 // hold one value per vertex (bisection depth, for colouring).
+// triangle_strain_energy_J_per_m3 may be empty (not computed: stored as NaN,
+// which readers take as "no strain for this frame") or hold one finite,
+// non-negative value per triangle (strain-energy density of the leaf tet
+// behind the triangle, J/m^3 = Pa).
 struct MeshFrameView {
   double time_s = 0.0;
   std::span<const std::array<double, 3>> vertices_m;
   std::span<const std::array<std::uint32_t, 3>> triangles;
   std::span<const std::uint8_t> vertex_level;
+  std::span<const float> triangle_strain_energy_J_per_m3;
 };
 
 // What the file says about itself (root attributes, written once at open).

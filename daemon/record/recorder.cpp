@@ -46,6 +46,7 @@ Recorder::Recorder(std::unique_ptr<SessionWriter> writer, RecorderOptions option
     frames_[i].vertices_m.resize(options_.mesh_max_vertices);
     frames_[i].triangles.resize(options_.mesh_max_triangles);
     frames_[i].vertex_level.resize(options_.mesh_max_vertices);
+    frames_[i].triangle_strain_energy_J_per_m3.resize(options_.mesh_max_triangles);
     free_frames_.try_push(i);
   }
   pending_haptic_.reserve(2 * kHapticRingRows);
@@ -108,6 +109,11 @@ bool Recorder::push_mesh_frame(const MeshFrameView& frame) noexcept {
   std::copy(frame.triangles.begin(), frame.triangles.end(), b.triangles.begin());
   if (b.has_levels && !b.levels_mismatch)
     std::copy(frame.vertex_level.begin(), frame.vertex_level.end(), b.vertex_level.begin());
+  const auto& strain = frame.triangle_strain_energy_J_per_m3;
+  b.has_strain = !strain.empty();
+  b.strain_mismatch = b.has_strain && strain.size() != b.triangle_count;
+  if (b.has_strain && !b.strain_mismatch)
+    std::copy(strain.begin(), strain.end(), b.triangle_strain_energy_J_per_m3.begin());
   // ready_frames_ has as many slots as there are buffers: this cannot fail.
   ready_frames_.try_push(index);
   // Due times sit on a fixed grid (k * interval), so a sim loop ticking at
@@ -193,12 +199,14 @@ bool Recorder::drain_and_write(bool force_flush) {
   std::uint32_t index = 0;
   while (ready_frames_.try_pop(index)) {
     const FrameBuffer& b = frames_[index];
-    if (!b.levels_mismatch) {
+    if (!b.levels_mismatch && !b.strain_mismatch) {
       MeshFrameView view;
       view.time_s = b.time_s;
       view.vertices_m = {b.vertices_m.data(), b.vertex_count};
       view.triangles = {b.triangles.data(), b.triangle_count};
       if (b.has_levels) view.vertex_level = {b.vertex_level.data(), b.vertex_count};
+      if (b.has_strain)
+        view.triangle_strain_energy_J_per_m3 = {b.triangle_strain_energy_J_per_m3.data(), b.triangle_count};
       try {
         writer_->append_mesh_frame(view);
         frames_written_.fetch_add(1, std::memory_order_relaxed);
@@ -209,8 +217,10 @@ bool Recorder::drain_and_write(bool force_flush) {
       }
     } else {
       frames_invalid_.fetch_add(1, std::memory_order_relaxed);
-      pending_events_.push_back(Event::make(b.time_s, EventKind::kWarning,
-                                            "mesh frame not recorded: vertex_level size differs from vertex count"));
+      pending_events_.push_back(
+          Event::make(b.time_s, EventKind::kWarning,
+                      b.levels_mismatch ? "mesh frame not recorded: vertex_level size differs from vertex count"
+                                        : "mesh frame not recorded: strain value count differs from triangle count"));
     }
     free_frames_.try_push(index);
   }

@@ -132,9 +132,12 @@ class Recorder {
     std::size_t vertex_count = 0, triangle_count = 0;
     bool has_levels = false;
     bool levels_mismatch = false;
+    bool has_strain = false;
+    bool strain_mismatch = false;
     std::vector<std::array<double, 3>> vertices_m;
     std::vector<std::array<std::uint32_t, 3>> triangles;
     std::vector<std::uint8_t> vertex_level;
+    std::vector<float> triangle_strain_energy_J_per_m3;
   };
   static constexpr std::size_t kMaxFrameBuffers = 16;
 

@@ -14,7 +14,10 @@
 
 namespace tissue::record {
 
-inline constexpr std::int64_t kSessionFormatVersion = 1;
+// Version 2 added /mesh/triangle_strain_energy_J_per_m3. Readers accept
+// every version from 1 (a dataset's since_version says which files have it).
+inline constexpr std::int64_t kSessionFormatVersion = 2;
+inline constexpr std::int64_t kOldestReadableFormatVersion = 1;
 
 enum class ElementType : std::uint8_t { kF64, kF32, kU8, kI32, kU64, kI64, kString };
 
@@ -28,7 +31,11 @@ struct DatasetSpec {
   int columns;        // 1: shape (N); 3: shape (N, 3)
   const char* units;  // stored as the dataset's `units` attribute
   std::size_t chunk_rows;
+  std::int64_t since_version = 1;  // files of older format versions do not have it
 };
+
+// Files of format version `v` have a dataset iff this is true.
+constexpr bool dataset_in_version(const DatasetSpec& spec, std::int64_t v) { return spec.since_version <= v; }
 
 // Index into kDatasets. Order matters for flushing: within a group the data
 // columns come before the columns readers use to count rows (frame index
@@ -54,6 +61,7 @@ enum DatasetId : std::size_t {
   kMeshVertices,
   kMeshTriangles,
   kMeshVertexLevel,
+  kMeshTriangleStrain,
   kMeshVertexOffset,
   kMeshVertexCount,
   kMeshTriangleOffset,
@@ -88,6 +96,10 @@ inline constexpr std::array<DatasetSpec, kDatasetCount> kDatasets = {{
     {"/mesh/vertices_m", Group::kMesh, ElementType::kF32, 3, "m", 32768},
     {"/mesh/triangles", Group::kMesh, ElementType::kI32, 3, "1 (vertex index within the frame)", 32768},
     {"/mesh/vertex_level", Group::kMesh, ElementType::kU8, 1, "1 (bisection depth)", 65536},
+    // One row per /mesh/triangles row (same offset and count); NaN: the
+    // frame was recorded without strain.
+    {"/mesh/triangle_strain_energy_J_per_m3", Group::kMesh, ElementType::kF32, 1,
+     "J/m^3 (strain-energy density of the leaf tet behind the triangle)", 65536, 2},
     {"/mesh/vertex_offset", Group::kMesh, ElementType::kU64, 1, "1 (row of /mesh/vertices_m)", 256},
     {"/mesh/vertex_count", Group::kMesh, ElementType::kU64, 1, "1 (rows)", 256},
     {"/mesh/triangle_offset", Group::kMesh, ElementType::kU64, 1, "1 (row of /mesh/triangles)", 256},

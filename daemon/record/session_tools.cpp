@@ -115,21 +115,38 @@ std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, hi
 
 struct Counts {
   GroupCounts rows;
-  std::array<std::uint64_t, kDatasetCount> extents{};
+  std::array<std::uint64_t, kDatasetCount> extents{};  // 0 for datasets the file's version does not have
   double last_time_s = 0.0;
 };
 
+// The per-triangle strain dataset must be a plain column (one value per
+// /mesh/triangles row); anything else is a damaged or foreign file.
+void check_strain_shape(hid_t file, const std::string& path) {
+  const char* name = kDatasets[kMeshTriangleStrain].path;
+  Handle d = open_dataset(file, path, name);
+  Handle space(H5Dget_space(d.get()));
+  const int rank = space ? H5Sget_simple_extent_ndims(space.get()) : -1;
+  if (rank != 1)
+    bad_file(path, std::string("dataset ") + name + " has rank " + std::to_string(rank) +
+                       ", expected 1 (one strain value per triangle): corrupt session file");
+}
+
 // Complete rows per group: the shortest column of the group (columns are
 // flushed one after another), and for the mesh the frames whose index and
-// data are all present.
-Counts count_rows(hid_t file, const std::string& path) {
+// data are all present. `partial_ok`: the file was (or is) open for writing,
+// so data columns may be one write apart; otherwise the per-triangle columns
+// must have exactly one row per triangle.
+Counts count_rows(hid_t file, const std::string& path, std::int64_t version, bool partial_ok) {
   Counts c;
-  for (std::size_t i = 0; i < kDatasetCount; ++i) c.extents[i] = dataset_rows(file, path, static_cast<DatasetId>(i));
+  for (std::size_t i = 0; i < kDatasetCount; ++i)
+    if (dataset_in_version(kDatasets[i], version)) c.extents[i] = dataset_rows(file, path, static_cast<DatasetId>(i));
   const auto group_min = [&](Group g, bool index_only) {
     std::uint64_t m = UINT64_MAX;
     for (std::size_t i = 0; i < kDatasetCount; ++i) {
-      if (kDatasets[i].group != g) continue;
-      if (index_only && (i == kMeshVertices || i == kMeshTriangles || i == kMeshVertexLevel)) continue;
+      if (kDatasets[i].group != g || !dataset_in_version(kDatasets[i], version)) continue;
+      if (index_only &&
+          (i == kMeshVertices || i == kMeshTriangles || i == kMeshVertexLevel || i == kMeshTriangleStrain))
+        continue;
       m = std::min(m, c.extents[i]);
     }
     return m;
@@ -144,7 +161,17 @@ Counts count_rows(hid_t file, const std::string& path) {
   const auto toff = read_column<std::uint64_t>(file, path, kMeshTriangleOffset, H5T_NATIVE_UINT64, 0, indexed);
   const auto tcnt = read_column<std::uint64_t>(file, path, kMeshTriangleCount, H5T_NATIVE_UINT64, 0, indexed);
   const std::uint64_t vertex_rows = std::min(c.extents[kMeshVertices], c.extents[kMeshVertexLevel]);
-  const std::uint64_t triangle_rows = c.extents[kMeshTriangles];
+  std::uint64_t triangle_rows = c.extents[kMeshTriangles];
+  if (dataset_in_version(kDatasets[kMeshTriangleStrain], version)) {
+    check_strain_shape(file, path);
+    const std::uint64_t strain_rows = c.extents[kMeshTriangleStrain];
+    if (strain_rows != triangle_rows && !partial_ok)
+      bad_file(path, std::string("dataset ") + kDatasets[kMeshTriangleStrain].path + " has " +
+                         std::to_string(strain_rows) + " rows but /mesh/triangles has " +
+                         std::to_string(triangle_rows) + " (one strain value per triangle): corrupt session file");
+    // A crash between the two writes: only triangles with their strain count.
+    triangle_rows = std::min(triangle_rows, strain_rows);
+  }
   std::uint64_t v_end = 0, t_end = 0, frames = 0;
   for (; frames < indexed; ++frames) {
     const std::uint64_t f = frames;
@@ -171,15 +198,20 @@ Counts count_rows(hid_t file, const std::string& path) {
   return c;
 }
 
-SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Counts* counts_out = nullptr) {
+// `partial_ok`: tolerate columns one write apart even though the superblock
+// flag is clear (repair, after it has cleared the flag itself).
+SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Counts* counts_out = nullptr,
+                    bool partial_ok = false) {
   SessionInfo info;
   info.path = path;
   info.open_for_write_flag = pre.consistency_flags != 0;
   if (!h5::read_i64_attribute(file, kAttrFormatVersion, &info.format_version))
     bad_file(path, "HDF5 file without a format_version attribute: not a tissue session file");
-  if (info.format_version != kSessionFormatVersion)
+  if (info.format_version < kOldestReadableFormatVersion || info.format_version > kSessionFormatVersion)
     bad_file(path, "session format version " + std::to_string(info.format_version) +
-                       " is not supported (this tool reads " + std::to_string(kSessionFormatVersion) + ")");
+                       " is not supported (this tool reads " + std::to_string(kOldestReadableFormatVersion) + " to " +
+                       std::to_string(kSessionFormatVersion) + ")");
+  info.has_strain = dataset_in_version(kDatasets[kMeshTriangleStrain], info.format_version);
   std::int64_t clean = 0;
   h5::read_i64_attribute(file, kAttrClosedCleanly, &clean);
   info.closed_cleanly = clean == 1 && !info.open_for_write_flag;
@@ -189,7 +221,7 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   h5::read_string_attribute(file, kAttrHostName, &info.host_name);
   h5::read_string_attribute(file, kAttrSoftwareVersion, &info.software_version);
   h5::read_string_attribute(file, kAttrRepairedTime, &info.repaired_utc);
-  Counts counts = count_rows(file, path);
+  Counts counts = count_rows(file, path, info.format_version, partial_ok || info.open_for_write_flag);
   info.rows = counts.rows;
   double duration = 0.0;
   if (info.closed_cleanly && h5::read_f64_attribute(file, kAttrDurationS, &duration) && std::isfinite(duration))
@@ -300,7 +332,8 @@ std::string format_session_info(const SessionInfo& info) {
   o << "  /haptic         " << info.rows.haptic_rows << " ticks\n";
   o << "  /sim            " << info.rows.sim_rows << " samples\n";
   o << "  /mesh           " << info.rows.mesh_frames << " frames (" << info.rows.mesh_vertices << " vertices, "
-    << info.rows.mesh_triangles << " triangles)\n";
+    << info.rows.mesh_triangles << " triangles"
+    << (info.has_strain ? ", strain energy density per triangle" : ", no strain (format version 1)") << ")\n";
   o << "  /events         " << info.rows.events << " events\n";
   return o.str();
 }
@@ -340,7 +373,7 @@ RepairReport repair_session(const std::string& path) {
   if (H5Fincrement_filesize(file.get(), 1 << 20) < 0) bad_file(path, h5::describe("cannot move the end of allocation"));
 
   Counts counts;
-  const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts);
+  const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts, /*partial_ok=*/true);
   // Trim every column to what its whole group has, so plain readers see
   // aligned columns and only complete mesh frames.
   std::array<std::uint64_t, kDatasetCount> keep{};
@@ -361,16 +394,15 @@ RepairReport repair_session(const std::string& path) {
     }
   }
   keep[kMeshVertices] = keep[kMeshVertexLevel] = counts.rows.mesh_vertices;
-  keep[kMeshTriangles] = counts.rows.mesh_triangles;
+  keep[kMeshTriangles] = keep[kMeshTriangleStrain] = counts.rows.mesh_triangles;
   for (std::size_t i = 0; i < kDatasetCount; ++i) {
-    if (counts.extents[i] == keep[i]) continue;
+    if (!dataset_in_version(kDatasets[i], mid.format_version) || counts.extents[i] == keep[i]) continue;
     Handle d = open_dataset(file.get(), path, kDatasets[i].path);
     const hsize_t dims[2] = {keep[i], static_cast<hsize_t>(kDatasets[i].columns)};
     if (H5Dset_extent(d.get(), dims) < 0) bad_file(path, h5::describe(std::string("cannot trim ") + kDatasets[i].path));
     report.notes.push_back(std::string("trimmed ") + kDatasets[i].path + " from " + std::to_string(counts.extents[i]) +
                            " to " + std::to_string(keep[i]) + " rows (incomplete last write)");
   }
-  (void)mid;
   try {
     h5::write_string_attribute(file.get(), kAttrRepairedTime, utc_now_iso8601());
   } catch (const RecordError& e) {
@@ -418,6 +450,7 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   const std::uint64_t all_vertices = counts.extents[kMeshVertices];
   const std::uint64_t all_triangles = counts.extents[kMeshTriangles];
   const std::uint64_t all_levels = counts.extents[kMeshVertexLevel];
+  const std::uint64_t all_strain = counts.extents[kMeshTriangleStrain];
 
   std::ostringstream x;
   x << "<?xml version=\"1.0\" ?>\n";
@@ -451,6 +484,14 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
     x << "      <DataItem Dimensions=\"" << all_levels << "\" NumberType=\"UChar\" Precision=\"1\" Format=\"HDF\">"
       << ref << ":/mesh/vertex_level</DataItem>\n";
     x << "     </DataItem>\n    </Attribute>\n";
+    if (info.has_strain) {  // per triangle: a Cell attribute ParaView can colour by
+      x << "    <Attribute Name=\"strain_energy_density_J_per_m3\" AttributeType=\"Scalar\" Center=\"Cell\">\n";
+      x << "     <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << tcnt[f] << "\" Type=\"HyperSlab\">\n";
+      x << "      <DataItem Dimensions=\"3 1\" Format=\"XML\">" << toff[f] << " 1 " << tcnt[f] << "</DataItem>\n";
+      x << "      <DataItem Dimensions=\"" << all_strain << "\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">"
+        << ref << ":" << kDatasets[kMeshTriangleStrain].path << "</DataItem>\n";
+      x << "     </DataItem>\n    </Attribute>\n";
+    }
     x << "   </Grid>\n";
     ++report.frames;
   }

@@ -24,6 +24,9 @@ struct GroupCounts {
 struct SessionInfo {
   std::string path;
   std::int64_t format_version = 0;
+  // Format version 2 and later store per-triangle strain energy density
+  // (/mesh/triangle_strain_energy_J_per_m3); version 1 files do not.
+  bool has_strain = false;
   bool closed_cleanly = false;
   // The superblock still says "open for (SWMR) writing": the writer crashed
   // (or is still running). Ordinary readers refuse such a file until it is
@@ -75,7 +78,9 @@ struct XdmfReport {
 };
 
 // Writes an XDMF 3 sidecar: a temporal collection with one triangle grid per
-// complete mesh frame, HyperSlab DataItems into the flat /mesh datasets. The
+// complete mesh frame, HyperSlab DataItems into the flat /mesh datasets
+// (vertex_level as a Node attribute; strain energy density, when the file
+// has it, as a Cell attribute). The
 // HDF5 path in the XML is relative to the sidecar's directory when possible.
 // out_path empty: FILE with its extension replaced by .xdmf.
 XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path);

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
@@ -378,12 +379,28 @@ void SessionWriter::append_mesh_frame(const MeshFrameView& frame) {
     u8_.assign(nv, 0);
     levels = u8_.data();
   }
+  // NaN marks "not computed" in the file, so a computed value must never be
+  // NaN (or otherwise impossible): refuse it rather than store a lie.
+  const std::span<const float> strain_in = frame.triangle_strain_energy_J_per_m3;
+  if (!strain_in.empty() && strain_in.size() != nt)
+    throw std::invalid_argument("mesh frame has " + std::to_string(strain_in.size()) + " strain values for " +
+                                std::to_string(nt) + " triangles");
+  for (std::size_t t = 0; t < strain_in.size(); ++t)
+    if (!std::isfinite(strain_in[t]) || strain_in[t] < 0.0f)
+      throw std::invalid_argument("mesh frame triangle " + std::to_string(t) + " has strain energy density " +
+                                  std::to_string(strain_in[t]) + " J/m^3 (must be finite and >= 0)");
+  const float* strain = strain_in.data();
+  if (strain_in.empty()) {
+    strain_f32_.assign(nt, std::numeric_limits<float>::quiet_NaN());
+    strain = strain_f32_.data();
+  }
 
   const std::uint64_t vertex_offset = rows_[kMeshVertices];
   const std::uint64_t triangle_offset = rows_[kMeshTriangles];
   append(kMeshVertices, vertices_f32_.data(), nv);
   append(kMeshTriangles, triangles_i32_.data(), nt);
   append(kMeshVertexLevel, levels, nv);
+  append(kMeshTriangleStrain, strain, nt);
   const std::uint64_t vertex_count = nv, triangle_count = nt;
   append(kMeshVertexOffset, &vertex_offset, 1);
   append(kMeshVertexCount, &vertex_count, 1);

@@ -52,8 +52,9 @@ class SessionWriter {
   void append_sim(std::span<const SimRow> rows);
   void append_events(std::span<const Event> events);
   // Throws std::invalid_argument (file untouched) when a triangle index is
-  // out of range, the level count does not match, or the frame is too big
-  // for int32 indices; RecordError on I/O failure.
+  // out of range, the level or strain count does not match, a strain value
+  // is negative or not finite, or the frame is too big for int32 indices;
+  // RecordError on I/O failure.
   void append_mesh_frame(const MeshFrameView& frame);
 
   // H5Dflush on every dataset that grew since the last flush (data columns
@@ -101,6 +102,7 @@ class SessionWriter {
   std::vector<std::int32_t> i32_;
   std::vector<std::array<float, 3>> vertices_f32_;
   std::vector<std::array<std::int32_t, 3>> triangles_i32_;
+  std::vector<float> strain_f32_;
   std::vector<char> strings_;
 };
 

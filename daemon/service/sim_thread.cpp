@@ -107,6 +107,7 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
   frame.vertices_m = snap.vertices_m;
   frame.triangles = snap.triangles;
   frame.vertex_level = snap.vertex_level;
+  frame.triangle_strain_energy_J_per_m3 = snap.triangle_strain_energy_J_per_m3;
   recorder.push_mesh_frame(frame);  // copies: the snapshot is published after this
   snapshots_.publish();
   last_snapshot_ns_ = t_ns;
@@ -127,6 +128,13 @@ MeshSnapshot& SimThread::build_snapshot() {
     snap.vertex_level[i] = sim.body().mesh().node(frame_surface_.vertex_nodes[i]).depth;
   }
   snap.triangles.assign(frame_surface_.triangles.begin(), frame_surface_.triangles.end());
+  // resize, not assign-from-new: the buffer keeps its capacity, so steady
+  // sizes allocate nothing here (this runs on the sim thread).
+  const std::size_t nt = frame_surface_.triangle_tet.size();
+  snap.triangle_strain_energy_J_per_m3.resize(nt);
+  for (std::size_t t = 0; t < nt; ++t)
+    snap.triangle_strain_energy_J_per_m3[t] =
+        static_cast<float>(physics::strain_energy_density_Pa(sim.body(), frame_surface_.triangle_tet[t]));
   return snap;
 }
 

@@ -24,7 +24,9 @@ void to_dds(const service::MeshSnapshot& s, std::int64_t sequence, ::tissue::sur
   tri.resize(3 * t);
   for (std::size_t i = 0; i < t; ++i)
     for (std::size_t k = 0; k < 3; ++k) tri[3 * i + k] = static_cast<std::int32_t>(s.triangles[i][k]);
-  out->triangle_strain_energy_density_J_per_m3().assign(t, 0.0f);
+  std::vector<float>& strain = out->triangle_strain_energy_density_J_per_m3();
+  strain.resize(t);
+  for (std::size_t i = 0; i < t; ++i) strain[i] = triangle_strain(s, i);
   const MeshBounds b = mesh_bounds(s);
   out->bounds_min_m(b.min_m);
   out->bounds_max_m(b.max_m);

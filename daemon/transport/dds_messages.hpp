@@ -1,7 +1,8 @@
 // The daemon's state as Fast DDS messages (proto/idl/*.idl): pure conversions,
 // no I/O, so the encoding is tested without a network. Same conventions as
 // lcm_messages.hpp: float vertices, axis-aligned bounds of the vertices
-// (zeros for an empty mesh), strain energy per triangle sent as zeros.
+// (zeros for an empty mesh), strain energy per triangle from the snapshot
+// (zeros when the snapshot has none).
 #pragma once
 
 #include <cstdint>

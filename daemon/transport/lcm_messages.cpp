@@ -22,7 +22,9 @@ void to_message(const service::MeshSnapshot& s, std::int64_t sequence, tissue_lc
   out->triangle_vertex.resize(3 * static_cast<std::size_t>(t));
   for (std::int32_t i = 0; i < t; ++i)
     for (int k = 0; k < 3; ++k) out->triangle_vertex[3 * i + k] = static_cast<std::int32_t>(s.triangles[i][k]);
-  out->triangle_strain_energy_density_J_per_m3.assign(static_cast<std::size_t>(t), 0.0f);
+  out->triangle_strain_energy_density_J_per_m3.resize(static_cast<std::size_t>(t));
+  for (std::int32_t i = 0; i < t; ++i)
+    out->triangle_strain_energy_density_J_per_m3[i] = triangle_strain(s, static_cast<std::size_t>(i));
   const MeshBounds bounds = mesh_bounds(s);
   for (int a = 0; a < 3; ++a) {
     out->bounds_min_m[a] = bounds.min_m[a];

@@ -33,4 +33,10 @@ inline std::uint8_t vertex_level(const service::MeshSnapshot& s, std::size_t i) 
   return i < s.vertex_level.size() ? s.vertex_level[i] : std::uint8_t{0};
 }
 
+// Strain-energy density of the tet behind triangle i (J/m^3); a snapshot
+// without strain (empty, or short: a bug, never a crash) sends 0.
+inline float triangle_strain(const service::MeshSnapshot& s, std::size_t i) {
+  return i < s.triangle_strain_energy_J_per_m3.size() ? s.triangle_strain_energy_J_per_m3[i] : 0.0f;
+}
+
 }  // namespace tissue::transport

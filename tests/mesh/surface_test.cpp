@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <set>
@@ -46,6 +47,30 @@ SurfaceFacts facts_of(const KuhnMesh& mesh, const SurfaceMesh& s) {
   return f;
 }
 
+// Every triangle names a live leaf tet that really owns that face: the tet's
+// four nodes include the triangle's three, and its depth is the triangle's.
+void expect_triangles_face_their_tets(const KuhnMesh& mesh, const SurfaceMesh& s) {
+  ASSERT_EQ(s.triangle_tet.size(), s.triangles.size());
+  std::size_t leaf_tets = 0;
+  mesh.for_each_tet([&](TetId, const Tet&) { ++leaf_tets; });
+  std::set<TetId> distinct;
+  for (std::size_t i = 0; i < s.triangles.size(); ++i) {
+    const TetId t = s.triangle_tet[i];
+    ASSERT_TRUE(mesh.tet_alive(t)) << "triangle " << i;
+    const Tet& tet = mesh.tet(t);
+    for (const std::uint32_t v : s.triangles[i]) {
+      const NodeId n = s.vertex_nodes[v];
+      EXPECT_NE(std::find(tet.v.begin(), tet.v.end(), n), tet.v.end())
+          << "triangle " << i << " vertex " << v << " is not a node of tet " << t;
+    }
+    EXPECT_EQ(tet.depth, s.triangle_depth[i]) << "triangle " << i;
+    distinct.insert(t);
+  }
+  // Not one tet for everything: the faces are spread over the boundary tets.
+  EXPECT_GT(distinct.size(), 1u);
+  EXPECT_LE(distinct.size(), leaf_tets);
+}
+
 void expect_closed_box_surface(const KuhnMesh& mesh) {
   SurfaceMesh s;
   extract_surface(mesh, &s);
@@ -57,6 +82,7 @@ void expect_closed_box_surface(const KuhnMesh& mesh) {
   EXPECT_NEAR(f.area, 2 * (x * y + y * z + z * x), 1e-6 * x * y);
   EXPECT_NEAR(f.signed_volume, x * y * z, 1e-6 * x * y * z) << "triangles must face outward";
   ASSERT_EQ(s.triangle_depth.size(), s.triangles.size());
+  expect_triangles_face_their_tets(mesh, s);
 }
 
 TEST(Surface, CoarseBoxIsClosedOutwardWithEulerTwo) {

@@ -13,6 +13,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "record/h5_util.hpp"
+#include "record/session_layout.hpp"
+
 namespace tissue::record::testing {
 
 TempDir::TempDir() {
@@ -77,6 +80,8 @@ TestFrame test_frame(std::uint64_t f) {
     fr.triangles.push_back({a, c, b});
     fr.triangles.push_back({b, c, d});
   }
+  for (std::size_t t = 0; t < fr.triangles.size(); ++t)
+    fr.triangle_strain_energy_J_per_m3.push_back(static_cast<float>(f) * 100.0f + 0.5f * static_cast<float>(t));
   return fr;
 }
 
@@ -195,6 +200,7 @@ int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, 
     const auto verts = read_f32(file, "/mesh/vertices_m");
     const auto tris = read_i32(file, "/mesh/triangles");
     const auto lev = read_u8(file, "/mesh/vertex_level");
+    const auto strain = read_f32(file, "/mesh/triangle_strain_energy_J_per_m3");
     EXPECT_EQ(ft.size(), frames);
     if (ft.size() != frames || voff.size() != frames || vcnt.size() != frames || toff.size() != frames ||
         tcnt.size() != frames)
@@ -204,7 +210,8 @@ int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, 
       const TestFrame fr = test_frame(f);
       bool ok = ft[f] == fr.time_s && voff[f] == v_end && toff[f] == t_end && vcnt[f] == fr.vertices_m.size() &&
                 tcnt[f] == fr.triangles.size() && 3 * (v_end + vcnt[f]) <= verts.size() &&
-                v_end + vcnt[f] <= lev.size() && 3 * (t_end + tcnt[f]) <= tris.size();
+                v_end + vcnt[f] <= lev.size() && 3 * (t_end + tcnt[f]) <= tris.size() &&
+                t_end + tcnt[f] <= strain.size();
       if (ok) {
         for (std::size_t v = 0; v < fr.vertices_m.size(); ++v) {
           for (int k = 0; k < 3; ++k) ok = ok && verts[3 * (v_end + v) + k] == static_cast<float>(fr.vertices_m[v][k]);
@@ -213,6 +220,8 @@ int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, 
         for (std::size_t t = 0; t < fr.triangles.size(); ++t)
           for (int k = 0; k < 3; ++k)
             ok = ok && tris[3 * (t_end + t) + k] == static_cast<std::int32_t>(fr.triangles[t][k]);
+        for (std::size_t t = 0; t < fr.triangles.size(); ++t)
+          ok = ok && strain[t_end + t] == fr.triangle_strain_energy_J_per_m3[t];
       }
       if (!ok && bad++ < 5) ADD_FAILURE() << "mesh frame " << f << " differs";
       v_end += fr.vertices_m.size();
@@ -233,6 +242,39 @@ int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, 
     }
   }
   return bad;
+}
+
+hid_t open_for_edit(const std::string& path) {
+  const hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+  H5Pset_libver_bounds(fapl, H5F_LIBVER_LATEST, H5F_LIBVER_LATEST);
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDWR, fapl);
+  H5Pclose(fapl);
+  return file;
+}
+
+void make_version_1(const std::string& path) {
+  const hid_t file = open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  EXPECT_GE(H5Ldelete(file, kDatasets[kMeshTriangleStrain].path, H5P_DEFAULT), 0);
+  EXPECT_GE(H5Adelete(file, kAttrFormatVersion), 0);
+  h5::write_i64_attribute(file, kAttrFormatVersion, 1);
+  H5Fclose(file);
+}
+
+void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value) {
+  const hid_t file = open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << dataset;
+  const hid_t space = H5Dget_space(ds);
+  const hsize_t start[1] = {row}, count[1] = {1};
+  const hid_t mem = H5Screate_simple(1, count, nullptr);
+  EXPECT_GE(H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, count, nullptr), 0);
+  EXPECT_GE(H5Dwrite(ds, H5T_NATIVE_FLOAT, mem, space, H5P_DEFAULT, &value), 0);
+  H5Sclose(mem);
+  H5Sclose(space);
+  H5Dclose(ds);
+  H5Fclose(file);
 }
 
 std::string quote(const std::string& s) {

@@ -39,7 +39,8 @@ struct TestFrame {
   std::vector<std::array<double, 3>> vertices_m;
   std::vector<std::array<std::uint32_t, 3>> triangles;
   std::vector<std::uint8_t> vertex_level;
-  MeshFrameView view() const { return {time_s, vertices_m, triangles, vertex_level}; }
+  std::vector<float> triangle_strain_energy_J_per_m3;  // one per triangle, distinct, exact in float32
+  MeshFrameView view() const { return {time_s, vertices_m, triangles, vertex_level, triangle_strain_energy_J_per_m3}; }
 };
 TestFrame test_frame(std::uint64_t f);
 
@@ -58,6 +59,15 @@ std::vector<std::string> read_messages(hid_t file, const char* path);
 // Adds gtest failures; returns the number of mismatching rows.
 int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, std::uint64_t frames,
                            std::uint64_t events);
+
+// Opens a closed session read-write (latest format), to damage it or make
+// an older version of it. Returns a negative id on failure.
+hid_t open_for_edit(const std::string& path);
+// Turns a closed session into what the version-1 writer made: no
+// /mesh/triangle_strain_energy_J_per_m3, format_version 1. Fails the test on error.
+void make_version_1(const std::string& path);
+// Overwrites row `row` of a 1-D float32 dataset of a closed session.
+void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value);
 
 struct RunResult {
   int exit_code = -1;  // -1: killed by a signal

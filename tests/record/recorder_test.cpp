@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <limits>
 #include <thread>
 
 #include "record/session_tools.hpp"
@@ -105,7 +106,9 @@ TEST(Recorder, MeshFrameDueFollowsTheConfiguredRate) {
 
 TEST(Recorder, OversizedAndInvalidFramesAreCountedNotWritten) {
   TempDir dir;
-  auto rec = Recorder::start(dir.path(), "s.h5", meta(), fast_options());
+  RecorderOptions o = fast_options();
+  o.mesh_frame_buffers = 8;  // every frame below gets a buffer, however slow the recorder thread
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
   testing::TestFrame big;
   big.vertices_m.resize(65);
   EXPECT_FALSE(rec->push_mesh_frame(big.view()));
@@ -115,16 +118,22 @@ TEST(Recorder, OversizedAndInvalidFramesAreCountedNotWritten) {
   testing::TestFrame bad_levels = testing::test_frame(0);
   bad_levels.vertex_level.resize(2);
   EXPECT_TRUE(rec->push_mesh_frame(bad_levels.view()));
+  testing::TestFrame bad_strain_count = testing::test_frame(0);
+  bad_strain_count.triangle_strain_energy_J_per_m3.resize(2);
+  EXPECT_TRUE(rec->push_mesh_frame(bad_strain_count.view()));
+  testing::TestFrame nan_strain = testing::test_frame(0);
+  nan_strain.triangle_strain_energy_J_per_m3[1] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_TRUE(rec->push_mesh_frame(nan_strain.view()));
   ASSERT_TRUE(rec->push_mesh_frame(testing::test_frame(0).view()));
   rec->stop();
   const RecorderStats s = rec->stats();
   EXPECT_EQ(s.mesh_frames_too_big, 1u);
   EXPECT_EQ(s.mesh_frame_drops, 1u);
-  EXPECT_EQ(s.mesh_frames_invalid, 2u);
+  EXPECT_EQ(s.mesh_frames_invalid, 4u);
   EXPECT_EQ(s.mesh_frames_written, 1u);
   const SessionInfo info = read_session_info(dir / "s.h5");
   EXPECT_EQ(info.rows.mesh_frames, 1u);
-  EXPECT_EQ(info.rows.events, 2u);  // one warning per refused frame, saying why
+  EXPECT_EQ(info.rows.events, 4u);  // one warning per refused frame, saying why
 }
 
 TEST(Recorder, StartRejectsBadNamesAndDirectoriesWithTheReason) {

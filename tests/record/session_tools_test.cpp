@@ -9,6 +9,8 @@
 #include <fstream>
 #include <random>
 
+#include "record/h5_util.hpp"
+#include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 
@@ -197,24 +199,140 @@ for g in grids:
             import os
             with h5py.File(os.path.join(os.path.dirname(sys.argv[1]), fname), 'r') as f:
                 assert list(f[dpath].shape) == dims, (dpath, f[dpath].shape, dims)
+                if dpath == '/mesh/triangle_strain_energy_J_per_m3':
+                    assert count[0] == ntri, (count, ntri)
+                    strain = f[dpath][start[0]:start[0] + count[0]]
+                    assert (strain >= 0).all(), strain
                 if dpath == '/mesh/triangles':
                     assert count[0] == ntri
                     tri = f[dpath][start[0]:start[0] + count[0]]
                     nvert = int(g.find('Geometry/DataItem').get('Dimensions').split()[0])
                     assert tri.min() >= 0 and tri.max() < nvert
         checked += 1
+for g in grids:
+    cells = [a for a in g.findall('Attribute') if a.get('Name') == 'strain_energy_density_J_per_m3']
+    assert len(cells) == 1 and cells[0].get('Center') == 'Cell', [a.attrib for a in g.findall('Attribute')]
 print('ok', len(grids), checked, 'h5py' if h5py else 'no-h5py')
 )PY";
   std::ofstream(dir / "check.py") << script;
   const auto r = run("/usr/bin/python3 " + quote(dir / "check.py") + " " + quote(report.out_path), dir);
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
-  EXPECT_EQ(r.out.substr(0, 10), "ok 6 18 h5") << r.out;  // 6 grids x 3 hyperslabs, checked against h5py
+  EXPECT_EQ(r.out.substr(0, 10), "ok 6 24 h5") << r.out;  // 6 grids x 4 hyperslabs, checked against h5py
 
   const auto cli =
       run(tissue() + " session xdmf " + quote(dir / "s.h5") + " -o " + quote(dir / "out" + std::string(".xdmf")), dir);
   EXPECT_EQ(cli.exit_code, 0) << cli.err;
   EXPECT_NE(cli.out.find("6 mesh frames"), std::string::npos) << cli.out;
   EXPECT_EQ(testing::slurp(dir / "out.xdmf"), xml);
+}
+
+using testing::make_version_1;
+using testing::open_for_edit;
+
+TEST(SessionTools, InfoReportsThePerTriangleStrain) {
+  TempDir dir;
+  write_small_session(dir / "s.h5");
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_EQ(info.format_version, kSessionFormatVersion);
+  EXPECT_TRUE(info.has_strain);
+  EXPECT_NE(format_session_info(info).find("strain energy density per triangle"), std::string::npos)
+      << format_session_info(info);
+}
+
+TEST(SessionTools, VersionOneFilesWithoutStrainStillWork) {
+  TempDir dir;
+  write_small_session(dir / "s.h5", 4);
+  make_version_1(dir / "s.h5");
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_EQ(info.format_version, 1);
+  EXPECT_FALSE(info.has_strain);
+  EXPECT_EQ(info.rows.mesh_frames, 4u);
+  EXPECT_GT(info.rows.mesh_triangles, 0u);
+  EXPECT_NE(format_session_info(info).find("no strain (format version 1)"), std::string::npos);
+  const RepairReport repair = repair_session(dir / "s.h5");
+  EXPECT_FALSE(repair.repair_needed);
+  const XdmfReport x = write_xdmf(dir / "s.h5", "");
+  EXPECT_EQ(x.frames, 4u);
+  const std::string xml = testing::slurp(x.out_path);
+  EXPECT_EQ(xml.find("strain"), std::string::npos) << "a version-1 file has no strain to point at";
+  EXPECT_NE(xml.find("vertex_level"), std::string::npos);
+  const auto cli = run(tissue() + " session info " + quote(dir / "s.h5"), dir);
+  EXPECT_EQ(cli.exit_code, 0) << cli.err;
+  EXPECT_NE(cli.out.find("format version:   1"), std::string::npos) << cli.out;
+}
+
+TEST(SessionTools, AFutureFormatVersionIsRefusedByName) {
+  TempDir dir;
+  write_small_session(dir / "s.h5", 1);
+  const hid_t file = open_for_edit(dir / "s.h5");
+  ASSERT_GE(file, 0);
+  ASSERT_GE(H5Adelete(file, kAttrFormatVersion), 0);
+  h5::write_i64_attribute(file, kAttrFormatVersion, kSessionFormatVersion + 1);
+  H5Fclose(file);
+  try {
+    read_session_info(dir / "s.h5");
+    FAIL() << "accepted a newer format";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find("version " + std::to_string(kSessionFormatVersion + 1)), std::string::npos)
+        << e.what();
+  }
+}
+
+// A closed file whose strain column does not have one row per triangle is
+// damaged: every tool says so, naming the file and the dataset.
+TEST(SessionTools, StrainDatasetOfTheWrongLengthIsAClearError) {
+  TempDir dir;
+  const std::string strain = kDatasets[kMeshTriangleStrain].path;
+  std::vector<std::string> files;
+  for (const int delta : {-1, +3}) {
+    const std::string path = dir / ("strain" + std::to_string(delta) + ".h5");
+    write_small_session(path, 3);
+    const hid_t file = open_for_edit(path);
+    ASSERT_GE(file, 0);
+    const hid_t ds = H5Dopen2(file, strain.c_str(), H5P_DEFAULT);
+    ASSERT_GE(ds, 0);
+    const std::int64_t rows = h5::rows(ds);
+    ASSERT_GT(rows, 1);
+    const hsize_t dims[1] = {static_cast<hsize_t>(rows + delta)};
+    ASSERT_GE(H5Dset_extent(ds, dims), 0);
+    H5Dclose(ds);
+    H5Fclose(file);
+    files.push_back(path);
+  }
+  {  // rank 2 instead of a column
+    const std::string path = dir / "strain_rank2.h5";
+    write_small_session(path, 3);
+    const hid_t file = open_for_edit(path);
+    ASSERT_GE(file, 0);
+    ASSERT_GE(H5Ldelete(file, strain.c_str(), H5P_DEFAULT), 0);
+    const hsize_t dims[2] = {4, 2};
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const hid_t ds = H5Dcreate2(file, strain.c_str(), H5T_IEEE_F32LE, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    ASSERT_GE(ds, 0);
+    H5Dclose(ds);
+    H5Sclose(space);
+    H5Fclose(file);
+    files.push_back(path);
+  }
+  for (const std::string& path : files) {
+    SCOPED_TRACE(path);
+    for (int tool = 0; tool < 3; ++tool) {
+      try {
+        if (tool == 0) read_session_info(path);
+        if (tool == 1) repair_session(path);
+        if (tool == 2) write_xdmf(path, dir / "out.xdmf");
+        ADD_FAILURE() << "tool " << tool << " accepted " << path;
+      } catch (const RecordError& e) {
+        EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find(strain), std::string::npos) << e.what();
+      }
+    }
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.err;
+    EXPECT_NE(cli.err.find(strain), std::string::npos) << cli.err;
+    EXPECT_EQ(cli.err.find("HDF5-DIAG"), std::string::npos) << cli.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.xdmf"));
 }
 
 }  // namespace

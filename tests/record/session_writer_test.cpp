@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <cmath>
 #include <filesystem>
+#include <limits>
 
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
@@ -140,12 +142,46 @@ TEST(SessionWriter, InvalidMeshFramesAreRefusedWithoutTouchingTheFile) {
   testing::TestFrame bad_levels = testing::test_frame(0);
   bad_levels.vertex_level.pop_back();
   EXPECT_THROW(w->append_mesh_frame(bad_levels.view()), std::invalid_argument);
+  testing::TestFrame bad_strain_count = testing::test_frame(0);
+  bad_strain_count.triangle_strain_energy_J_per_m3.pop_back();
+  EXPECT_THROW(w->append_mesh_frame(bad_strain_count.view()), std::invalid_argument);
+  // NaN means "not computed" in the file: a computed NaN, an infinity or a
+  // negative energy must not be stored as if it were data.
+  for (const float e : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(), -1.0f}) {
+    testing::TestFrame bad_strain = testing::test_frame(0);
+    bad_strain.triangle_strain_energy_J_per_m3[2] = e;
+    EXPECT_THROW(w->append_mesh_frame(bad_strain.view()), std::invalid_argument) << e;
+  }
   w->append_mesh_frame(testing::test_frame(0).view());
   w->close();
   const hid_t file = H5Fopen((dir / "s.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
   ASSERT_GE(file, 0);
   EXPECT_EQ(testing::expect_session_content(file, 0, 0, 1, 0), 0);
   H5Fclose(file);
+}
+
+TEST(SessionWriter, StrainIsStoredPerTriangleAndAFrameWithoutItHoldsNaN) {
+  TempDir dir;
+  auto w = SessionWriter::open_in(dir.path(), "s.h5", test_metadata());
+  const testing::TestFrame with = testing::test_frame(1);
+  testing::TestFrame without = testing::test_frame(2);
+  without.triangle_strain_energy_J_per_m3.clear();
+  w->append_mesh_frame(with.view());
+  w->append_mesh_frame(without.view());
+  w->close();
+  const hid_t file = H5Fopen((dir / "s.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const auto strain = testing::read_f32(file, "/mesh/triangle_strain_energy_J_per_m3");
+  const auto tris = testing::read_i32(file, "/mesh/triangles");
+  ASSERT_EQ(3 * strain.size(), tris.size()) << "one strain row per triangle row";
+  ASSERT_EQ(strain.size(), with.triangles.size() + without.triangles.size());
+  for (std::size_t t = 0; t < with.triangles.size(); ++t)
+    EXPECT_EQ(strain[t], with.triangle_strain_energy_J_per_m3[t]) << t;
+  for (std::size_t t = with.triangles.size(); t < strain.size(); ++t) EXPECT_TRUE(std::isnan(strain[t])) << t;
+  H5Fclose(file);
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_EQ(info.format_version, 2);
+  EXPECT_TRUE(info.has_strain);
 }
 
 }  // namespace

@@ -21,7 +21,7 @@ std::string write_session(const TempDir& dir) {
   auto writer = record::SessionWriter::create(path, meta);
   for (int k = 0; k < 3; ++k) {
     const x3d::SurfaceFrame f = x3d::testing::box_frame(0.1 * k, {0, 0, 0}, {0.1, 0.05, 0.02 + 0.01 * k});
-    writer->append_mesh_frame(record::MeshFrameView{f.time_s, f.vertices_m, f.triangles, f.vertex_level});
+    writer->append_mesh_frame(record::MeshFrameView{f.time_s, f.vertices_m, f.triangles, f.vertex_level, {}});
   }
   writer->close();
   return path;

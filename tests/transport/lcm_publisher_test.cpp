@@ -30,6 +30,9 @@ service::MeshSnapshot strip(int quads) {
     s.triangles.push_back({2 * i, 2 * i + 2, 2 * i + 3});
     s.triangles.push_back({2 * i, 2 * i + 3, 2 * i + 1});
   }
+  // Distinct per triangle, so a dropped, zeroed or shifted value shows.
+  for (std::size_t t = 0; t < s.triangles.size(); ++t)
+    s.triangle_strain_energy_J_per_m3.push_back(12.5f + 0.25f * static_cast<float>(t));
   return s;
 }
 
@@ -41,6 +44,10 @@ void expect_mesh_equals(const surface_mesh& m, const service::MeshSnapshot& s) {
     for (int a = 0; a < 3; ++a) EXPECT_EQ(m.vertex_m[3 * i + a], static_cast<float>(s.vertices_m[i][a]));
     EXPECT_EQ(m.vertex_refinement_level[i], static_cast<std::int8_t>(s.vertex_level[i]));
   }
+  ASSERT_EQ(m.triangle_strain_energy_density_J_per_m3.size(), s.triangles.size());
+  for (std::size_t t = 0; t < s.triangles.size(); ++t)
+    EXPECT_EQ(m.triangle_strain_energy_density_J_per_m3[t], s.triangle_strain_energy_J_per_m3[t])
+        << "strain of triangle " << t;
   for (std::size_t t = 0; t < s.triangles.size(); t += 89)
     for (int k = 0; k < 3; ++k) EXPECT_EQ(m.triangle_vertex[3 * t + k], static_cast<std::int32_t>(s.triangles[t][k]));
   EXPECT_EQ(m.bounds_min_m[0], 0.0);
@@ -59,6 +66,20 @@ TEST(LcmMessages, SurfaceMeshEncodesAndDecodesWithItsBounds) {
   ASSERT_EQ(back.decode(bytes.data(), 0, static_cast<int>(bytes.size())), static_cast<int>(bytes.size()));
   expect_mesh_equals(back, s);
   EXPECT_EQ(back.triangle_strain_energy_density_J_per_m3.size(), s.triangles.size());
+}
+
+TEST(LcmMessages, ASnapshotWithoutOrWithShortStrainSendsZerosForTheMissingTriangles) {
+  service::MeshSnapshot s = strip(4);
+  s.triangle_strain_energy_J_per_m3.resize(3);  // short: a producer bug must not read past the end
+  surface_mesh m;
+  to_message(s, 1, &m);
+  ASSERT_EQ(m.triangle_strain_energy_density_J_per_m3.size(), 8u);
+  for (std::size_t t = 0; t < 8; ++t)
+    EXPECT_EQ(m.triangle_strain_energy_density_J_per_m3[t], t < 3 ? s.triangle_strain_energy_J_per_m3[t] : 0.0f) << t;
+  s.triangle_strain_energy_J_per_m3.clear();
+  to_message(s, 2, &m);  // reused message: the old values must not survive
+  ASSERT_EQ(m.triangle_strain_energy_density_J_per_m3.size(), 8u);
+  for (const float e : m.triangle_strain_energy_density_J_per_m3) EXPECT_EQ(e, 0.0f);
 }
 
 TEST(LcmMessages, StatusBecomesStatsAndHapticState) {
