@@ -1,5 +1,6 @@
 #include "physics/body.hpp"
 
+#include <atomic>
 #include <cmath>
 
 #include "mesh/refine_ops.hpp"
@@ -22,6 +23,12 @@ std::int64_t lattice_length2(const mesh::KuhnMesh& m, NodeId a, NodeId b) {
   std::int64_t s = 0;
   for (int i = 0; i < 3; ++i) s += (p[i] - q[i]) * (p[i] - q[i]);
   return s;
+}
+
+// Process-wide, so two bodies never share a version unless one is a copy.
+std::uint64_t next_parameters_version() {
+  static std::atomic<std::uint64_t> next{1};
+  return next.fetch_add(1, std::memory_order_relaxed);
 }
 
 }  // namespace
@@ -109,6 +116,7 @@ void Body::refresh_edge(EdgeId e) {
 }
 
 void Body::rebuild_parameters() {
+  parameters_version_ = next_parameters_version();
   resize_to_mesh();
   std::fill(weighted_volume_m3.begin(), weighted_volume_m3.end(), 0.0);
   std::fill(stiffness_N_per_m.begin(), stiffness_N_per_m.end(), 0.0);
@@ -158,6 +166,7 @@ void Body::merge(mesh::Key diamond) {
 }
 
 void Body::apply_log(const mesh::MeshChangeLog& log) {
+  parameters_version_ = next_parameters_version();
   resize_to_mesh();
   const double unit = mesh_.lattice_unit_m();
   auto touch_edge = [&](EdgeId e) {

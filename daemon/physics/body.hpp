@@ -64,6 +64,12 @@ class Body {
   // incremental updates must agree with it (a test checks that).
   void rebuild_parameters();
 
+  // Changes (to a value no other Body state ever had) whenever the mesh or
+  // the spring parameters change: split, merge, rebuild_parameters. Copies
+  // share it. Integrators key their per-topology caches (spring streams,
+  // orderings) on it.
+  std::uint64_t parameters_version() const { return parameters_version_; }
+
   // Total mass [kg] and momentum [kg m/s] of all nodes.
   double total_mass_kg() const;
   Vec3 momentum() const;
@@ -78,6 +84,7 @@ class Body {
 
   scene::Scene scene_;
   mesh::KuhnMesh mesh_;
+  std::uint64_t parameters_version_ = 0;
   mesh::MeshChangeLog log_;            // reused: no allocation in steady state
   std::vector<EdgeId> touched_edges_;  // reused scratch
   std::vector<NodeId> touched_nodes_;

@@ -8,6 +8,15 @@
 
 namespace tissue::physics {
 
+Simd detected_simd() {
+#if defined(__x86_64__)
+  static const Simd simd = __builtin_cpu_supports("avx2") ? Simd::kAvx2 : Simd::kScalar;
+  return simd;
+#else
+  return Simd::kScalar;
+#endif
+}
+
 double explicit_stable_dt_s(const Body& body) {
   const std::size_t nodes = body.x_m.size();
   std::vector<double> sum_k(nodes, 0.0), sum_c(nodes, 0.0);

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "physics/integrator.hpp"
+#include "physics/integrator_simd.hpp"
 
 namespace tissue::physics {
 
@@ -43,6 +44,25 @@ class ExplicitIntegrator final : public Integrator {
   StateSave save_;
 };
 
+// One spring of the implicit system, streamed in edge order. Its block
+//   B = h c d̂d̂ᵀ + h² k (d̂d̂ᵀ + t (I − d̂d̂ᵀ)) = along d̂d̂ᵀ + iso I
+// (t = max(0, 1 − L/l), the clamped transverse term) is stored as
+// e = √along d̂ and iso, B = eeᵀ + iso I: 40 B instead of ids + a 72 B
+// Matrix3d, and no multiply by `along` per product. e comes first so one
+// unaligned 256-bit load reads it (its fourth lane, iso, is masked off).
+// a4 and b4 are 4 × the unknown index, i.e. the first double of the unknown
+// in a Pad3 array seen as doubles (a scaled-index load, no shift); a
+// kinematic end maps to the sink slot.
+struct ImplicitSpring {
+  double e[3];
+  double iso;
+  std::uint32_t a4, b4;
+};
+
+// ap[a] += B (p[a] − p[b]), ap[b] −= B (p[a] − p[b]) for every spring, in
+// order. Both instruction sets give bit-identical results.
+void implicit_spring_matvec(Simd simd, const ImplicitSpring* springs, std::size_t count, const Pad3* p, Pad3* ap);
+
 class ImplicitIntegrator final : public Integrator {
  public:
   // How the CG matrix-vector product is evaluated. Both apply the same
@@ -51,7 +71,7 @@ class ImplicitIntegrator final : public Integrator {
   enum class Matvec { kMatrixFree, kAssembledBlockCsr };
 
   ImplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
-                     Matvec matvec = Matvec::kMatrixFree);
+                     Matvec matvec = Matvec::kMatrixFree, Simd simd = detected_simd());
   StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) override;
   void mesh_changed() override {}
   const char* name() const override { return "implicit"; }
@@ -61,35 +81,29 @@ class ImplicitIntegrator final : public Integrator {
   void system_product(const std::vector<Vec3>& p_by_node, std::vector<Vec3>& y_by_node);
 
  private:
-  // One spring of the system, streamed in edge order. Its block
-  //   B = h c d̂d̂ᵀ + h² k (d̂d̂ᵀ + t (I − d̂d̂ᵀ)) = along d̂d̂ᵀ + iso I
-  // (t = max(0, 1 − L/l), the clamped transverse term) is stored as d̂ and two
-  // scalars: 48 B instead of ids + a 72 B Matrix3d, 12 flops per product.
-  // a and b are unknown indices; a kinematic end maps to the sink slot.
-  struct Spring {
-    std::uint32_t a, b;
-    double d[3];
-    double along, iso;
-  };
-
   // ap = A p over the unknowns (after p = z + beta p when `update_p`);
-  // returns pᵀAp, accumulated in the same passes.
+  // returns pᵀAp.
   double apply(bool update_p, double beta);
-  double apply_matrix_free();
   double apply_assembled();
   void assemble();
+  // Unknown numbering and the spring visiting order, per mesh topology.
+  void build_layout(const Body& body);
 
   scene::IntegratorSpec spec_;
   double alpha_per_s_;
   Matvec matvec_;
+  Simd simd_;
   double h_ = 0.0;
   std::uint32_t unknowns_ = 0;                  // free nodes; index unknowns_ is the sink
   std::vector<std::uint32_t> unknown_of_node_;  // sink for kinematic and dead nodes
   std::vector<NodeId> node_of_unknown_;
-  std::vector<Spring> springs_;
+  std::uint64_t layout_version_ = 0;  // body.parameters_version() the layout was built for
+  std::vector<EdgeId> live_edges_;    // springs with a free end, in id order
+  std::vector<ImplicitSpring> springs_;
   // Per unknown (+ sink): (1 + h alpha) m, the Jacobi inverse, CG vectors.
   std::vector<double> mass_;
-  std::vector<Vec3> diag_inv_, force_, kv_, rhs_, dv_, r_, z_, p_, ap_;
+  std::vector<Vec3> force_, kv_;
+  std::vector<Pad3> diag_inv_, rhs_, dv_, r_, z_, p_, ap_;
   std::vector<Vec3> dv_by_node_;  // warm start: last step's solution
   // Assembled block-CSR (kAssembledBlockCsr): per unknown its diagonal block,
   // then its off-diagonal blocks −B with their column.

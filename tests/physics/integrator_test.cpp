@@ -201,56 +201,142 @@ Body jiggled_beam(std::uint32_t seed) {
   return body;
 }
 
-// The compact per-spring block (d̂, along, iso) applies the same operator as
-// the full 3x3 blocks M' + Σ (h c d̂d̂ᵀ + h² k [d̂d̂ᵀ + t (I − d̂d̂ᵀ)]), with
-// kinematic nodes not unknowns, to 1e-12, for both matvec paths.
+// A = M' + Σ (h c d̂d̂ᵀ + h² k [d̂d̂ᵀ + t (I − d̂d̂ᵀ)]) applied to p from the full
+// 3x3 blocks at `state` (kinematic nodes excluded: their p must be zero).
+std::vector<Vec3> full_hessian_product(const Body& state, double h, double alpha_per_s, const std::vector<Vec3>& p) {
+  std::vector<Vec3> reference(p.size());
+  for (std::size_t n = 0; n < p.size(); ++n) reference[n] = state.mass_kg[n] * (1.0 + h * alpha_per_s) * p[n];
+  state.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
+    const SpringFrame f = spring_frame(state, e);
+    const Eigen::Matrix3d along = f.direction * f.direction.transpose();
+    const double rest = state.rest_length_m[e];
+    const double t = f.length_m > rest ? 1.0 - rest / f.length_m : 0.0;
+    const Eigen::Matrix3d k = state.stiffness_N_per_m[e] * (along + t * (Eigen::Matrix3d::Identity() - along));
+    const Eigen::Matrix3d block = h * state.damping_N_s_per_m[e] * along + h * h * k;
+    const Vec3 q = block * (p[state.edge_a[e]] - p[state.edge_b[e]]);
+    reference[state.edge_a[e]] += q;
+    reference[state.edge_b[e]] -= q;
+  });
+  return reference;
+}
+
+// Random p over the free nodes of `state` (zero on kinematic ones).
+std::vector<Vec3> random_free_vector(const Body& state, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<Vec3> p(state.x_m.size());
+  for (auto& v : p) v = Vec3(u(rng), u(rng), u(rng));
+  for (std::size_t n = 0; n < p.size(); ++n)
+    if (state.inv_mass_per_kg[n] == 0.0) p[n].setZero();
+  return p;
+}
+
+// The integrator's product equals the reference on free nodes to 1e-12 of
+// its largest entry, and is zero on kinematic ones.
+void expect_product_matches(ImplicitIntegrator& integrator, const Body& state, double h, double alpha_per_s,
+                            const std::string& what) {
+  const std::vector<Vec3> p = random_free_vector(state, 3);
+  const std::vector<Vec3> reference = full_hessian_product(state, h, alpha_per_s, p);
+  double scale = 0.0;
+  for (std::size_t n = 0; n < p.size(); ++n)
+    if (state.inv_mass_per_kg[n] != 0.0) scale = std::max(scale, reference[n].cwiseAbs().maxCoeff());
+  std::vector<Vec3> y;
+  integrator.system_product(p, y);
+  ASSERT_EQ(y.size(), p.size());
+  for (std::size_t n = 0; n < p.size(); ++n) {
+    if (state.inv_mass_per_kg[n] == 0.0) {
+      EXPECT_EQ(y[n], Vec3::Zero()) << "kinematic node " << n << " is not an unknown; " << what;
+    } else {
+      EXPECT_LE((y[n] - reference[n]).cwiseAbs().maxCoeff(), 1e-12 * scale) << "node " << n << "; " << what;
+    }
+  }
+}
+
+// The compact per-spring block (√along d̂, iso) applies the same operator as
+// the full 3x3 blocks, with kinematic nodes not unknowns, to 1e-12, for both
+// matvec paths and both instruction sets.
 TEST(Integrator, ImplicitCompactBlocksMatchTheFullClampedHessian) {
   for (const double h : {1e-3, 1e-2}) {
     for (const auto matvec :
          {ImplicitIntegrator::Matvec::kMatrixFree, ImplicitIntegrator::Matvec::kAssembledBlockCsr}) {
-      Body body = jiggled_beam(7);
-      const Body before = body;
-      scene::MaterialSpec material = body.scene().material;
-      material.rayleigh_alpha_per_s = 3.0;
-      ImplicitIntegrator integrator(body.scene().integrator, material, matvec);
-      const std::vector<Vec3> no_force(body.x_m.size(), Vec3::Zero());
-      ASSERT_TRUE(integrator.step(body, no_force, h).ok);
-
-      // Reference: the full blocks at the state the step started from.
-      std::mt19937 rng(3);
-      std::uniform_real_distribution<double> u(-1.0, 1.0);
-      std::vector<Vec3> p(body.x_m.size());
-      for (auto& v : p) v = Vec3(u(rng), u(rng), u(rng));
-      for (std::size_t n = 0; n < p.size(); ++n)
-        if (before.inv_mass_per_kg[n] == 0.0) p[n].setZero();
-      std::vector<Vec3> reference(p.size());
-      for (std::size_t n = 0; n < p.size(); ++n)
-        reference[n] = before.mass_kg[n] * (1.0 + h * material.rayleigh_alpha_per_s) * p[n];
-      before.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
-        const SpringFrame f = spring_frame(before, e);
-        const Eigen::Matrix3d along = f.direction * f.direction.transpose();
-        const double rest = before.rest_length_m[e];
-        const double t = f.length_m > rest ? 1.0 - rest / f.length_m : 0.0;
-        const Eigen::Matrix3d k = before.stiffness_N_per_m[e] * (along + t * (Eigen::Matrix3d::Identity() - along));
-        const Eigen::Matrix3d block = h * before.damping_N_s_per_m[e] * along + h * h * k;
-        const Vec3 q = block * (p[before.edge_a[e]] - p[before.edge_b[e]]);
-        reference[before.edge_a[e]] += q;
-        reference[before.edge_b[e]] -= q;
-      });
-      double scale = 0.0;
-      for (std::size_t n = 0; n < p.size(); ++n)
-        if (before.inv_mass_per_kg[n] != 0.0) scale = std::max(scale, reference[n].cwiseAbs().maxCoeff());
-      std::vector<Vec3> y;
-      integrator.system_product(p, y);
-      for (std::size_t n = 0; n < p.size(); ++n) {
-        if (before.inv_mass_per_kg[n] == 0.0) {
-          EXPECT_EQ(y[n], Vec3::Zero()) << "kinematic node " << n << " is not an unknown";
-        } else {
-          EXPECT_LE((y[n] - reference[n]).cwiseAbs().maxCoeff(), 1e-12 * scale) << "node " << n << " h " << h;
-        }
+      for (const Simd simd : {Simd::kScalar, detected_simd()}) {
+        Body body = jiggled_beam(7);
+        const Body before = body;
+        scene::MaterialSpec material = body.scene().material;
+        material.rayleigh_alpha_per_s = 3.0;
+        ImplicitIntegrator integrator(body.scene().integrator, material, matvec, simd);
+        const std::vector<Vec3> no_force(body.x_m.size(), Vec3::Zero());
+        ASSERT_TRUE(integrator.step(body, no_force, h).ok);
+        expect_product_matches(integrator, before, h, material.rayleigh_alpha_per_s,
+                               "h " + std::to_string(h) + " simd " + std::to_string(static_cast<int>(simd)));
       }
     }
   }
+}
+
+// The AVX2 spring matvec sums in the scalar order without FMA: on random
+// springs (including kinematic ends in the sink) both give the same bits.
+TEST(Integrator, ImplicitMatvecInstructionSetsAreBitIdentical) {
+  if (detected_simd() == Simd::kScalar) GTEST_SKIP() << "no AVX2 on this CPU: only the scalar kernel exists";
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  constexpr std::uint32_t kUnknowns = 300;  // + the sink
+  std::vector<Pad3> p(kUnknowns + 1);
+  for (std::uint32_t i = 0; i < kUnknowns; ++i) p[i] = Pad3{{u(rng), u(rng), u(rng), 0.0}};
+  std::vector<ImplicitSpring> springs(2000);
+  std::uniform_int_distribution<std::uint32_t> node(0, kUnknowns);  // kUnknowns = sink
+  for (auto& s : springs) {
+    s = {{u(rng), u(rng), u(rng)}, std::abs(u(rng)), 4 * node(rng), 4 * node(rng)};
+  }
+  std::vector<Pad3> scalar(kUnknowns + 1), avx(kUnknowns + 1);
+  for (std::uint32_t i = 0; i < kUnknowns; ++i) scalar[i] = avx[i] = Pad3{{u(rng), u(rng), u(rng), 0.0}};
+  implicit_spring_matvec(Simd::kScalar, springs.data(), springs.size(), p.data(), scalar.data());
+  implicit_spring_matvec(Simd::kAvx2, springs.data(), springs.size(), p.data(), avx.data());
+  for (std::uint32_t i = 0; i <= kUnknowns; ++i)
+    for (int k = 0; k < 4; ++k) ASSERT_EQ(scalar[i].v[k], avx[i].v[k]) << "unknown " << i << " lane " << k;
+}
+
+// Whole trajectories: scalar and AVX2 kernels agree bit for bit, so batch
+// reports do not depend on the CPU.
+TEST(Integrator, ImplicitTrajectoryDoesNotDependOnTheInstructionSet) {
+  if (detected_simd() == Simd::kScalar) GTEST_SKIP() << "no AVX2 on this CPU: only the scalar kernel exists";
+  scene::Scene s = beam_scene();
+  s.integrator.cg_tolerance = 1e-300;
+  s.integrator.cg_max_iterations = 20;
+  std::vector<std::vector<Vec3>> finals;
+  for (const Simd simd : {Simd::kScalar, Simd::kAvx2}) {
+    Body body = jiggled_beam(13);
+    ImplicitIntegrator integrator(s.integrator, s.material, ImplicitIntegrator::Matvec::kMatrixFree, simd);
+    std::vector<Vec3> f(body.x_m.size(), Vec3(0, 0, -1e-3));
+    for (int i = 0; i < 30; ++i) ASSERT_TRUE(integrator.step(body, f, 1e-3).ok);
+    finals.push_back(body.x_m);
+  }
+  EXPECT_EQ(finals[0], finals[1]);
+}
+
+// The integrator caches its unknown numbering and spring list per mesh
+// topology (Body::parameters_version): a split made directly on the body,
+// with no mesh_changed() call, is still picked up by the next step.
+TEST(Integrator, ImplicitLayoutFollowsMeshChangesWithoutNotice) {
+  scene::Scene s = beam_scene();
+  s.adaptivity.enabled = true;
+  s.adaptivity.min_depth = 1;
+  s.adaptivity.max_depth = 2;
+  Body body(s);
+  ImplicitIntegrator integrator(body.scene().integrator, body.scene().material);
+  std::vector<Vec3> f(body.x_m.size(), Vec3(0, 0, -1e-2));
+  ASSERT_TRUE(integrator.step(body, f, 1e-3).ok);
+  const std::uint64_t version = body.parameters_version();
+  int splits = 0;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
+    if (splits == 0 && body.mesh().can_split(body.mesh().diamond_of(t))) splits = body.split(body.mesh().diamond_of(t));
+  });
+  ASSERT_GT(splits, 0);
+  EXPECT_NE(body.parameters_version(), version);
+  f.assign(body.x_m.size(), Vec3(0, 0, -1e-2));
+  const Body before = body;
+  ASSERT_TRUE(integrator.step(body, f, 1e-3).ok);
+  expect_product_matches(integrator, before, 1e-3, body.scene().material.rayleigh_alpha_per_s, "after a split");
 }
 
 // The assembled block-CSR and matrix-free paths give the same trajectory (to
