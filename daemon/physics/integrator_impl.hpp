@@ -28,19 +28,47 @@ class StateSave {
   std::vector<Vec3> x_, v_;
 };
 
+// Four springs of the explicit stream, structure of arrays (32 B per spring):
+// the AVX2 kernel takes lengths, square roots and divisions four at a time.
+// a4/b4 are 4 × node id (first double of the node in a Pad3 array).
+struct ExplicitSpringBatch {
+  std::uint32_t a4[4], b4[4];
+  double rest_m[4], k_N_per_m[4], c_N_s_per_m[4];
+};
+
+// f[a] += F, f[b] −= F for every spring of `batches`, F the spring and
+// damper force on a; x, v, f are padded per-node arrays and rest_m the rest
+// positions (for the rare spring collapsed below 1e-9 of its rest length).
+// Both instruction sets give bit-identical results.
+void explicit_spring_forces(Simd simd, const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x,
+                            const Pad3* v, const Vec3* rest_m, Pad3* f);
+
 class ExplicitIntegrator final : public Integrator {
  public:
-  ExplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material);
+  ExplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
+                     Simd simd = detected_simd());
   StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) override;
-  void mesh_changed() override { bound_valid_ = false; }
+  void mesh_changed() override { layout_version_ = 0; }
   const char* name() const override { return "explicit"; }
 
+  // `count` sub-steps of h under f_ext_N, without the stability refusal, the
+  // state save or the finiteness check of step(). For the benchmark.
+  void run_substeps(Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count);
+
  private:
+  // Spring stream, stable bound and padded state sized for the topology.
+  void build_layout(const Body& body);
+
   scene::IntegratorSpec spec_;
   double alpha_per_s_;
-  bool bound_valid_ = false;
+  Simd simd_;
+  std::uint64_t layout_version_ = 0;  // body.parameters_version() the layout was built for
   double stable_dt_s_ = 0.0;
-  std::vector<Vec3> force_;
+  std::vector<ExplicitSpringBatch> batches_;
+  // By node id, plus two pad nodes the filler springs of the last batch join
+  // (x = 0 and x = e_x, k = c = 0: an exactly zero force).
+  std::vector<Pad3> x_, v_, f_, f_ext_;
+  std::vector<double> inv_mass_;
   StateSave save_;
 };
 
