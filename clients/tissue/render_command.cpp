@@ -10,8 +10,10 @@
 #include <vector>
 
 #include "export/frame_source.hpp"
+#include "export/live_source.hpp"
 #include "render/png_writer.hpp"
 #include "render/render.hpp"
+#include "tissue/live_source_options.hpp"
 
 namespace tissue::cli {
 
@@ -29,6 +31,7 @@ struct RenderCommandOptions {
   bool no_legend = false;
   std::string colour = "level";
   std::string out;
+  LiveSourceOptions live;
 };
 
 // OUT for frame i of a sequence: "%04d" in OUT is replaced, else -0000 goes
@@ -47,7 +50,12 @@ int run_render(RenderCommandOptions o) {
   o.image.legend = !o.no_legend;
   o.image.colour = o.colour == "strain" ? x3d::ColourMode::kStrain : x3d::ColourMode::kLevel;
   try {
-    std::unique_ptr<x3d::FrameSource> source = x3d::open_session_source(o.session);
+    if (o.session.empty() && !o.live.live()) {
+      std::cerr << "tissue render: --session is required (or a live source: --lcm [URL] or --dds)\n";
+      return kExitBadArguments;
+    }
+    std::unique_ptr<x3d::FrameSource> source =
+        o.live.live() ? open_live_source(o.live, o.sequence) : x3d::open_session_source(o.session);
     if (o.image.colour == x3d::ColourMode::kStrain && !source->has_strain()) {
       std::cerr << "tissue render: --colour strain: " << source->name()
                 << " stores no strain energy (session format version 1, or recorded without it); use --colour level\n";
@@ -99,8 +107,15 @@ int run_render(RenderCommandOptions o) {
     std::cerr << "tissue render: " << e.what() << "\n";
     return kExitBadInput;
   } catch (const x3d::X3dInputError& e) {
-    std::cerr << "tissue render: " << o.session << ": " << e.what() << "\n";
+    std::cerr << "tissue render: " << (o.live.live() ? std::string("live frame") : o.session) << ": " << e.what()
+              << "\n";
     return kExitBadInput;
+  } catch (const x3d::NoLiveFrameError& e) {
+    std::cerr << "tissue render: " << e.what() << "\n";
+    return kExitNoLiveData;
+  } catch (const LiveStartError& e) {
+    std::cerr << "tissue render: " << e.what() << "\n";
+    return kExitCannotConnect;
   } catch (const x3d::SourceError& e) {
     std::cerr << "tissue render: " << e.what() << "\n";
     return kExitBadInput;
@@ -111,8 +126,9 @@ int run_render(RenderCommandOptions o) {
 
 Subcommand add_render_command(CLI::App& parent) {
   auto o = std::make_shared<RenderCommandOptions>();
-  CLI::App* cmd = parent.add_subcommand("render", "Draw the tissue surface of a recorded session to PNG (OSMesa)");
-  cmd->add_option("--session", o->session, "Session file (.h5) to read frames from")->required();
+  CLI::App* cmd =
+      parent.add_subcommand("render", "Draw the tissue surface of a recorded session or live data to PNG (OSMesa)");
+  CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
   CLI::Option* time = cmd->add_option("--time", o->time_s, "The frame shown at session time T (s)");
   CLI::Option* frame = cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)");
   time->excludes(frame);
@@ -133,11 +149,19 @@ Subcommand add_render_command(CLI::App& parent) {
       ->capture_default_str();
   cmd->add_option("-o,--output", o->out, "Output PNG (a sequence numbers it: OUT-0000.png or OUT with %04d)")
       ->required();
+  add_live_source_options(cmd, o->live, session, seq);
+  // Frame numbers and session times select among a session's frames only.
+  for (CLI::Option* opt : {time, frame}) opt->excludes(o->live.lcm_option)->excludes(o->live.dds_option);
+  cmd->get_option("--from")->needs(session);
+  cmd->get_option("--to")->needs(session);
   cmd->footer(
       "Colours: level: bisection level of the finest vertex of each triangle (the X3D export's palette);\n"
       "strain: mean strain-energy density of the triangle's vertices on the X3D export's ramp, scaled to\n"
       "the frame's min..max (printed; low at the bottom of the legend).\n"
-      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments.");
+      "Sources: --session FILE, or live: --lcm [URL] / --dds (the next frame received; --sequence: the frames\n"
+      "received for --seconds S).\n"
+      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments, 3 LCM/DDS cannot start,\n"
+      "4 live: no surface_mesh within --timeout S.");
   return Subcommand{cmd, [o] { return run_render(*o); }};
 }
 

@@ -15,7 +15,9 @@
 #include <vector>
 
 #include "export/frame_source.hpp"
+#include "export/live_source.hpp"
 #include "export/x3d.hpp"
+#include "tissue/live_source_options.hpp"
 
 namespace tissue::cli {
 
@@ -31,6 +33,7 @@ struct X3dCommandOptions {
   std::optional<double> from_s, to_s;
   std::string colour = "level";
   std::string out;
+  LiveSourceOptions live;
 };
 
 // Bad arguments, found only once the source is open (e.g. a frame number
@@ -145,13 +148,15 @@ int run_x3d(const X3dCommandOptions& o) {
   x3d::X3dOptions xo;
   xo.colour = o.colour == "strain" ? x3d::ColourMode::kStrain : x3d::ColourMode::kLevel;
   try {
-    // The only source for now; live subscribers plug in here as FrameSources.
-    std::unique_ptr<x3d::FrameSource> source = x3d::open_session_source(o.session);
+    if (o.session.empty() && !o.live.live())
+      throw BadArguments("--session is required (or a live source: --lcm [URL] or --dds)");
+    std::unique_ptr<x3d::FrameSource> source =
+        o.live.live() ? open_live_source(o.live, o.animate) : x3d::open_session_source(o.session);
     if (xo.colour == x3d::ColourMode::kStrain && !source->has_strain())
       throw BadArguments("--colour strain: " + source->name() +
                          " stores no strain energy (session format version 1, or recorded without it); use --colour "
                          "level");
-    xo.title = "tissue: " + o.session;
+    xo.title = "tissue: " + (o.live.live() ? source->name() : o.session);
     std::string summary;
     const std::string text =
         o.animate ? export_animation(*source, o, xo, &summary) : export_snapshot(*source, o, xo, &summary);
@@ -161,6 +166,12 @@ int run_x3d(const X3dCommandOptions& o) {
   } catch (const BadArguments& e) {
     std::cerr << "tissue x3d: " << e.what() << "\n";
     return kExitBadArguments;
+  } catch (const x3d::NoLiveFrameError& e) {
+    std::cerr << "tissue x3d: " << e.what() << "\n";
+    return kExitNoLiveData;
+  } catch (const LiveStartError& e) {
+    std::cerr << "tissue x3d: " << e.what() << "\n";
+    return kExitCannotConnect;
   } catch (const x3d::SourceError& e) {
     std::cerr << "tissue x3d: " << e.what() << "\n";
     return kExitBadInput;
@@ -171,8 +182,9 @@ int run_x3d(const X3dCommandOptions& o) {
 
 Subcommand add_x3d_command(CLI::App& parent) {
   auto o = std::make_shared<X3dCommandOptions>();
-  CLI::App* cmd = parent.add_subcommand("x3d", "Export the tissue surface of a recorded session as X3D (XML)");
-  cmd->add_option("--session", o->session, "Session file (.h5) to read frames from")->required();
+  CLI::App* cmd =
+      parent.add_subcommand("x3d", "Export the tissue surface of a recorded session or live data as X3D (XML)");
+  CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
   CLI::Option* time = cmd->add_option("--time", o->time_s, "Snapshot of the frame shown at session time T (s)");
   CLI::Option* frame = cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)");
   time->excludes(frame);
@@ -183,6 +195,16 @@ Subcommand add_x3d_command(CLI::App& parent) {
   cmd->add_option("--colour", o->colour, "Vertex colours: level (bisection depth) or strain (energy density)")
       ->check(CLI::IsMember({"level", "strain"}));
   cmd->add_option("-o,--output", o->out, "Output file (.x3d)")->required();
+  add_live_source_options(cmd, o->live, session, animate);
+  // Frame numbers and session times select among a session's frames only.
+  for (CLI::Option* opt : {time, frame}) opt->excludes(o->live.lcm_option)->excludes(o->live.dds_option);
+  cmd->get_option("--from")->needs(session);
+  cmd->get_option("--to")->needs(session);
+  cmd->footer(
+      "Sources: --session FILE, or live: --lcm [URL] / --dds (a snapshot of the next frame received; --animate:\n"
+      "the frames received for --seconds S).\n"
+      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments, 3 LCM/DDS cannot start,\n"
+      "4 live: no surface_mesh within --timeout S.");
   return Subcommand{cmd, [o] { return run_x3d(*o); }};
 }
 

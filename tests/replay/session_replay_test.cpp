@@ -394,7 +394,8 @@ struct Arrival {
   double wall_s;
   double time_s;
   std::int64_t sequence;
-  std::int32_t value;  // mesh: vertex_count; haptic: in_contact
+  std::int32_t value;         // mesh: vertex_count; haptic: in_contact
+  std::vector<float> strain;  // mesh: per triangle
 };
 
 // Filled by the LCM handlers, which run inside handleTimeout on the
@@ -408,11 +409,12 @@ double steady_now_s() {
 }
 
 void on_mesh(const lcm::ReceiveBuffer*, const std::string&, const tissue_lcm::tissue::surface_mesh* m, Received* r) {
-  r->meshes.push_back({steady_now_s(), m->time_s, m->sequence_number, m->vertex_count});
+  r->meshes.push_back(
+      {steady_now_s(), m->time_s, m->sequence_number, m->vertex_count, m->triangle_strain_energy_density_J_per_m3});
 }
 
 void on_haptic(const lcm::ReceiveBuffer*, const std::string&, const tissue_lcm::tissue::haptic_state* m, Received* r) {
-  r->haptic.push_back({steady_now_s(), m->time_s, m->sequence_number, m->in_contact ? 1 : 0});
+  r->haptic.push_back({steady_now_s(), m->time_s, m->sequence_number, m->in_contact ? 1 : 0, {}});
 }
 
 // Runs the replay CLI in the background while this thread receives.
@@ -457,6 +459,16 @@ TEST(ReplayNetns, LcmDeliversEveryFrameInOrderAtTheRecordedPace) {
       EXPECT_EQ(got.meshes[k].sequence, static_cast<std::int64_t>(k + 1)) << "in order, none lost";
       EXPECT_EQ(got.meshes[k].time_s, f.time_s);
       EXPECT_EQ(got.meshes[k].value, static_cast<std::int32_t>(f.vertices_m.size())) << "frame " << k;
+      // The session has strain: each triangle carries the mean of its
+      // vertices' strain (the per-vertex values the session source gives).
+      const std::vector<float> vertex =
+          x3d::vertex_strain_from_triangles(f.vertices_m.size(), f.triangles, f.triangle_strain_energy_J_per_m3);
+      ASSERT_EQ(got.meshes[k].strain.size(), f.triangles.size()) << "frame " << k;
+      for (std::size_t t = 0; t < f.triangles.size(); ++t) {
+        const auto& tri = f.triangles[t];
+        EXPECT_FLOAT_EQ(got.meshes[k].strain[t], (vertex[tri[0]] + vertex[tri[1]] + vertex[tri[2]]) / 3.0f)
+            << "frame " << k << " triangle " << t;
+      }
     }
     // Haptic states: 100 Hz over the session, in order, contact as recorded.
     EXPECT_GE(got.haptic.size(), 140u);

@@ -1,0 +1,52 @@
+// The live-source options `tissue x3d` and `tissue render` share: --lcm
+// [URL] | --dds [--dds-domain N] [--dds-prefix P] [--dds-remote], --seconds,
+// --timeout; and opening the chosen source (docs/replay-and-live.md).
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+#include "export/frame_source.hpp"
+
+namespace CLI {
+class App;
+class Option;
+}  // namespace CLI
+
+namespace tissue::cli {
+
+// Nothing arrived on the live source within --timeout.
+constexpr int kExitNoLiveData = 4;
+
+// LCM or DDS could not start (exit 3, kExitCannotConnect).
+struct LiveStartError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct LiveSourceOptions {
+  std::optional<std::string> lcm_url;
+  bool dds = false;
+  int dds_domain = 0;
+  std::string dds_prefix = "tissue/";
+  bool dds_remote = false;
+  double seconds = 2.0;     // frames collected for an animation / sequence (wall)
+  double timeout_s = 10.0;  // wait for the first frame
+  CLI::Option* lcm_option = nullptr;
+  CLI::Option* dds_option = nullptr;
+
+  bool live() const { return lcm_url.has_value() || dds; }
+};
+
+// Adds the options to `cmd`; `session` is the command's --session option
+// (exactly one of --session, --lcm, --dds is allowed), `many` the flag that
+// asks for several frames (--animate, --sequence) and uses --seconds.
+void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* session, CLI::Option* many);
+
+// Subscribes, collects one frame (or frames for --seconds when `many`) and
+// returns them as a FrameSource. Throws x3d::NoLiveFrameError when nothing
+// arrives within --timeout, LiveStartError when the transport cannot start.
+std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, bool many);
+
+}  // namespace tissue::cli

@@ -1,0 +1,56 @@
+// A FrameSource over live data: frames taken from a MeshSubscriber (LCM or
+// DDS, daemon/transport) for a wall-clock window or up to a count, then
+// served like a session's frames. `tissue x3d --lcm/--dds` and `tissue render
+// --lcm/--dds` read through it.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "export/frame_source.hpp"
+#include "transport/mesh_subscriber.hpp"
+
+namespace tissue::x3d {
+
+// Nothing arrived in time. Its own type so clients can give it its own exit
+// code; the message is "no surface_mesh on <source> within S s".
+class NoLiveFrameError : public SourceError {
+ public:
+  using SourceError::SourceError;
+};
+
+struct LiveCollectOptions {
+  double first_timeout_s = 10.0;  // wait this long (wall) for the first frame
+  double window_s = 0.0;          // then keep collecting this long (wall); 0: the first frame only
+  std::size_t max_frames = 0;     // stop once this many are collected; 0: no limit
+};
+
+class LiveFrameSource final : public FrameSource {
+ public:
+  // Collects from `subscriber` (blocking). Frames without triangles (an
+  // empty scene) are not kept; a frame whose time goes backwards (the daemon
+  // reset, a replay looped) is dropped, so frames stay in time order. Stops
+  // early when `stop` is set. Throws NoLiveFrameError when no frame arrives
+  // within first_timeout_s.
+  LiveFrameSource(transport::MeshSubscriber& subscriber, const LiveCollectOptions& options,
+                  const std::atomic<bool>* stop = nullptr);
+
+  std::string name() const override { return name_; }
+  std::size_t frame_count() const override { return frames_.size(); }
+  double frame_time_s(std::size_t k) const override { return frames_.at(k).time_s; }
+  SurfaceFrame read_frame(std::size_t k) override;
+  // True when every collected frame carries strain.
+  bool has_strain() const override;
+
+  std::size_t skipped_empty() const { return skipped_empty_; }
+  std::size_t dropped_backwards() const { return dropped_backwards_; }
+
+ private:
+  std::string name_;
+  std::vector<SurfaceFrame> frames_;
+  std::size_t skipped_empty_ = 0, dropped_backwards_ = 0;
+};
+
+}  // namespace tissue::x3d

@@ -1,0 +1,108 @@
+#include "transport/dds_subscriber.hpp"
+
+#include <chrono>
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <stdexcept>
+
+#include "tissue_dds/surface_meshPubSubTypes.h"
+#include "transport/dds_messages.hpp"
+#include "transport/dds_publisher.hpp"
+
+namespace tissue::transport {
+
+namespace dds = eprosima::fastdds::dds;
+
+struct DdsMeshSubscriber::Impl {
+  dds::DomainParticipant* participant = nullptr;
+  dds::Subscriber* subscriber = nullptr;
+  dds::TypeSupport type{new ::tissue::surface_meshPubSubType()};
+  dds::Topic* topic = nullptr;
+  dds::DataReader* reader = nullptr;
+  ::tissue::surface_mesh sample;  // reused storage
+
+  ~Impl() {
+    if (!participant) return;
+    if (reader) subscriber->delete_datareader(reader);
+    if (subscriber) participant->delete_subscriber(subscriber);
+    if (topic) participant->delete_topic(topic);
+    participant->delete_contained_entities();
+    dds::DomainParticipantFactory::get_instance()->delete_participant(participant);
+  }
+};
+
+DdsMeshSubscriber::DdsMeshSubscriber(const DdsSubscribeOptions& o) : options_(o), impl_(std::make_unique<Impl>()) {
+  const std::string where = "DDS subscribing on domain " + std::to_string(o.domain_id);
+  if (o.domain_id < 0 || o.domain_id > 232) throw std::runtime_error(where + ": domain id must be within 0..232");
+  impl_->participant = dds::DomainParticipantFactory::get_instance()->create_participant(
+      static_cast<dds::DomainId_t>(o.domain_id), dds_participant_qos(o.loopback_only, o.max_mesh_bytes, "tissue"));
+  if (!impl_->participant) throw std::runtime_error(where + ": cannot create the domain participant");
+  if (impl_->type.register_type(impl_->participant) != ReturnCode_t::RETCODE_OK)
+    throw std::runtime_error(where + ": cannot register type " + impl_->type.get_type_name());
+  impl_->subscriber = impl_->participant->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT);
+  if (!impl_->subscriber) throw std::runtime_error(where + ": cannot create the subscriber");
+  const std::string topic = o.topic_prefix + kSurfaceMeshTopic;
+  impl_->topic = impl_->participant->create_topic(topic, impl_->type.get_type_name(), dds::TOPIC_QOS_DEFAULT);
+  if (!impl_->topic) throw std::runtime_error(where + ": cannot create topic '" + topic + "'");
+  dds::DataReaderQos q = dds::DATAREADER_QOS_DEFAULT;
+  q.reliability().kind = dds::RELIABLE_RELIABILITY_QOS;
+  q.durability().kind = dds::TRANSIENT_LOCAL_DURABILITY_QOS;
+  q.history().kind = dds::KEEP_LAST_HISTORY_QOS;
+  // A few meshes of slack between next_frame() calls (an animation reads
+  // each one as it comes); older ones are replaced, never waited for.
+  q.history().depth = 8;
+  // fastddsgen's size estimate bounds sequences at 100 elements: payloads
+  // must grow to the real size (STACK.md), as on the writer.
+  q.endpoint().history_memory_policy = eprosima::fastrtps::rtps::PREALLOCATED_WITH_REALLOC_MEMORY_MODE;
+  q.data_sharing().off();
+  impl_->reader = impl_->subscriber->create_datareader(impl_->topic, q);
+  if (!impl_->reader) throw std::runtime_error(where + ": cannot create a reader on topic '" + topic + "'");
+}
+
+DdsMeshSubscriber::~DdsMeshSubscriber() = default;
+
+std::string DdsMeshSubscriber::name() const {
+  return "DDS topic " + options_.topic_prefix + kSurfaceMeshTopic + " (domain " + std::to_string(options_.domain_id) +
+         ")";
+}
+
+int DdsMeshSubscriber::matched_writers() const {
+  dds::SubscriptionMatchedStatus s;
+  return impl_->reader->get_subscription_matched_status(s) == ReturnCode_t::RETCODE_OK ? s.current_count : 0;
+}
+
+std::optional<x3d::SurfaceFrame> DdsMeshSubscriber::next_frame(double timeout_s) {
+  using Clock = std::chrono::steady_clock;
+  const auto deadline =
+      Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout_s));
+  for (;;) {
+    dds::SampleInfo info;
+    while (impl_->reader->take_next_sample(&impl_->sample, &info) == ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;  // a disposal or unregistration, not a mesh
+      ++counts_.received;
+      const ::tissue::surface_mesh& m = impl_->sample;
+      try {
+        x3d::SurfaceFrame f = frame_from_mesh_arrays(m.time_s(), m.vertex_m(), m.vertex_refinement_level(),
+                                                     m.triangle_vertex(), m.triangle_strain_energy_density_J_per_m3());
+        ++counts_.accepted;
+        return f;
+      } catch (const MeshRejected& e) {
+        count_rejection(counts_, e);
+      }
+    }
+    const auto left = deadline - Clock::now();
+    if (left <= Clock::duration::zero()) return std::nullopt;
+    // Wakes on a new sample; at most 100 ms at a time.
+    const double wait_s = std::min(0.1, std::chrono::duration<double>(left).count());
+    impl_->reader->wait_for_unread_message(eprosima::fastrtps::Duration_t(wait_s));
+  }
+}
+
+}  // namespace tissue::transport

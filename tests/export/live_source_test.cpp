@@ -1,0 +1,111 @@
+// LiveFrameSource (daemon/export/live_source) over a scripted subscriber:
+// what is collected, in what order, and the timeout error.
+#include "export/live_source.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <deque>
+#include <thread>
+
+#include "export/export_test_support.hpp"
+
+namespace tissue::x3d {
+namespace {
+
+// Hands out scripted frames, one per next_frame() call; after the script,
+// waits out the timeout like a quiet network.
+class ScriptedSubscriber final : public transport::MeshSubscriber {
+ public:
+  explicit ScriptedSubscriber(std::deque<SurfaceFrame> script) : script_(std::move(script)) {}
+  std::string name() const override { return "scripted topic"; }
+  std::optional<SurfaceFrame> next_frame(double timeout_s) override {
+    if (script_.empty()) {
+      std::this_thread::sleep_for(std::chrono::duration<double>(timeout_s));
+      return std::nullopt;
+    }
+    SurfaceFrame f = std::move(script_.front());
+    script_.pop_front();
+    return f;
+  }
+  const transport::MeshReceiveCounts& counts() const override { return counts_; }
+  transport::MeshReceiveCounts counts_;
+
+ private:
+  std::deque<SurfaceFrame> script_;
+};
+
+SurfaceFrame empty_frame(double t) {
+  SurfaceFrame f;
+  f.time_s = t;
+  return f;
+}
+
+TEST(LiveFrameSource, SnapshotIsTheFirstDrawableFrame) {
+  ScriptedSubscriber sub(
+      {empty_frame(0.1), testing::box_frame(0.2, {0, 0, 0}, {1, 1, 1}), testing::tetra_frame(0.3, 1.0)});
+  LiveCollectOptions o;
+  o.max_frames = 1;
+  LiveFrameSource src(sub, o);
+  ASSERT_EQ(src.frame_count(), 1u);
+  EXPECT_EQ(src.frame_time_s(0), 0.2);
+  EXPECT_EQ(src.read_frame(0).vertices_m.size(), 8u);
+  EXPECT_EQ(src.skipped_empty(), 1u);
+  EXPECT_EQ(src.name(), "scripted topic");
+  EXPECT_THROW(src.read_frame(1), std::out_of_range);
+}
+
+TEST(LiveFrameSource, WindowCollectsInTimeOrderDroppingFramesThatGoBack) {
+  ScriptedSubscriber sub({testing::box_frame(1.0, {0, 0, 0}, {1, 1, 1}), testing::box_frame(1.5, {0, 0, 0}, {1, 1, 2}),
+                          testing::tetra_frame(0.5, 1.0),  // a reset / replay loop: back in time
+                          testing::tetra_frame(2.0, 1.0)});
+  LiveCollectOptions o;
+  o.window_s = 0.5;  // the script runs out long before; the rest is waiting
+  LiveFrameSource src(sub, o);
+  ASSERT_EQ(src.frame_count(), 3u);
+  EXPECT_EQ(src.frame_time_s(0), 1.0);
+  EXPECT_EQ(src.frame_time_s(1), 1.5);
+  EXPECT_EQ(src.frame_time_s(2), 2.0);
+  EXPECT_EQ(src.dropped_backwards(), 1u);
+  EXPECT_EQ(frames_in_window(src, 1.2, 2.0), (std::vector<std::size_t>{1, 2}));
+}
+
+TEST(LiveFrameSource, StrainIsReportedOnlyWhenEveryFrameHasIt) {
+  SurfaceFrame a = testing::box_frame(1.0, {0, 0, 0}, {1, 1, 1});
+  a.vertex_strain_energy_Pa.assign(a.vertices_m.size(), 1.0f);
+  SurfaceFrame b = a;
+  b.time_s = 2.0;
+  LiveCollectOptions o;
+  o.max_frames = 2;
+  o.window_s = 10.0;
+  {
+    ScriptedSubscriber sub({a, b});
+    EXPECT_TRUE(LiveFrameSource(sub, o).has_strain());
+  }
+  b.vertex_strain_energy_Pa.clear();
+  ScriptedSubscriber sub({a, b});
+  EXPECT_FALSE(LiveFrameSource(sub, o).has_strain());
+}
+
+TEST(LiveFrameSource, NothingWithinTheTimeoutIsANamedError) {
+  ScriptedSubscriber sub({empty_frame(0.1)});
+  sub.counts_.rejected = 2;
+  sub.counts_.last_rejection = "triangle 1 uses vertex 9 of 4";
+  LiveCollectOptions o;
+  o.first_timeout_s = 0.3;
+  try {
+    LiveFrameSource src(sub, o);
+    FAIL() << "no error";
+  } catch (const NoLiveFrameError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(what.rfind("no surface_mesh on scripted topic within 0.3 s", 0), 0u) << what;
+    EXPECT_NE(what.find("2 malformed messages dropped, the last: triangle 1 uses vertex 9 of 4"), std::string::npos)
+        << what;
+  }
+  std::atomic<bool> stop{true};  // stopped before anything came: no error, no frames
+  ScriptedSubscriber quiet({});
+  EXPECT_EQ(LiveFrameSource(quiet, o, &stop).frame_count(), 0u);
+}
+
+}  // namespace
+}  // namespace tissue::x3d

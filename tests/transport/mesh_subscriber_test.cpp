@@ -1,0 +1,200 @@
+// Receiving meshes (daemon/transport/mesh_subscriber, lcm_subscriber): the
+// shared validation and the LCM byte-level checks, fed directly (no network).
+// Every malformed input must be counted and dropped with a reason, never
+// decoded into out-of-range indices or huge allocations (the ASan tree runs
+// this too).
+#include "transport/mesh_subscriber.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+#include <vector>
+
+#include "transport/lcm_messages.hpp"
+#include "transport/lcm_subscriber.hpp"
+
+namespace tissue::transport {
+namespace {
+
+// Two triangles over four vertices, strain 2 and 6.
+struct Arrays {
+  std::vector<float> xyz = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0};
+  std::vector<std::uint8_t> level = {0, 1, 2, 3};
+  std::vector<std::int32_t> tri = {0, 1, 2, 1, 3, 2};
+  std::vector<float> strain = {2.0f, 6.0f};
+  x3d::SurfaceFrame frame(double t = 0.5) const { return frame_from_mesh_arrays(t, xyz, level, tri, strain); }
+};
+
+std::string category_of(const Arrays& a, double t = 0.5) {
+  try {
+    a.frame(t);
+  } catch (const MeshRejected& e) {
+    return e.category() + ": " + e.what();
+  }
+  return "accepted";
+}
+
+TEST(MeshDecode, ValidArraysBecomeAFrameWithPerVertexStrain) {
+  const x3d::SurfaceFrame f = Arrays{}.frame();
+  EXPECT_EQ(f.time_s, 0.5);
+  ASSERT_EQ(f.vertices_m.size(), 4u);
+  EXPECT_EQ(f.vertices_m[3], (std::array<double, 3>{1, 1, 0}));
+  EXPECT_EQ(f.triangles[1], (std::array<std::uint32_t, 3>{1, 3, 2}));
+  EXPECT_EQ(f.vertex_level, (std::vector<std::uint8_t>{0, 1, 2, 3}));
+  EXPECT_EQ(f.vertex_strain_energy_Pa, (std::vector<float>{2.0f, 4.0f, 4.0f, 6.0f}));
+  x3d::validate_frame(f, true, "decoded");  // drawable with strain colours
+}
+
+TEST(MeshDecode, MalformedArraysAreRejectedWithAReason) {
+  Arrays a;
+  a.xyz.pop_back();
+  EXPECT_EQ(category_of(a).rfind("size: vertex_m holds 11 values", 0), 0u) << category_of(a);
+  a = {};
+  a.level.pop_back();
+  EXPECT_EQ(category_of(a).rfind("size: vertex_refinement_level", 0), 0u) << category_of(a);
+  a = {};
+  a.tri.pop_back();
+  EXPECT_EQ(category_of(a).rfind("size: triangle_vertex", 0), 0u) << category_of(a);
+  a = {};
+  a.strain.push_back(1.0f);
+  EXPECT_EQ(category_of(a).rfind("size: triangle_strain", 0), 0u) << category_of(a);
+  a = {};
+  a.tri[4] = 4;
+  EXPECT_EQ(category_of(a), "index: triangle 1 uses vertex 4 of 4");
+  a.tri[4] = -1;
+  EXPECT_EQ(category_of(a), "index: triangle 1 uses vertex -1 of 4");
+  a = {};
+  a.xyz[5] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(category_of(a), "non_finite: vertex 1 has a non-finite coordinate");
+  EXPECT_EQ(category_of(Arrays{}, std::numeric_limits<double>::infinity()), "non_finite: time_s is not finite");
+}
+
+TEST(MeshDecode, MissingOrNonFiniteStrainLeavesOnlyTheStrainOut) {
+  Arrays a;
+  a.strain.clear();
+  EXPECT_TRUE(a.frame().vertex_strain_energy_Pa.empty());
+  a.strain = {1.0f, std::numeric_limits<float>::infinity()};
+  const x3d::SurfaceFrame f = a.frame();
+  EXPECT_TRUE(f.vertex_strain_energy_Pa.empty());
+  EXPECT_EQ(f.triangles.size(), 2u);
+  a = {};
+  a.level.clear();  // "all level 0"
+  EXPECT_TRUE(a.frame().vertex_level.empty());
+}
+
+// An encoded surface_mesh from the daemon's own encoder.
+std::vector<std::uint8_t> encoded_mesh(int quads) {
+  service::MeshSnapshot s;
+  s.sequence = 1;
+  s.sim_time_s = 1.25;
+  for (int i = 0; i <= quads; ++i) {
+    s.vertices_m.push_back({0.01 * i, 0.0, 0.0});
+    s.vertices_m.push_back({0.01 * i, 0.01, 0.0});
+    s.vertex_level.push_back(1);
+    s.vertex_level.push_back(2);
+  }
+  for (std::uint32_t i = 0; i < static_cast<std::uint32_t>(quads); ++i) {
+    s.triangles.push_back({2 * i, 2 * i + 2, 2 * i + 3});
+    s.triangles.push_back({2 * i, 2 * i + 3, 2 * i + 1});
+  }
+  tissue_lcm::tissue::surface_mesh m;
+  to_message(s, 1, &m);
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(m.getEncodedSize()));
+  EXPECT_EQ(m.encode(bytes.data(), 0, static_cast<int>(bytes.size())), static_cast<int>(bytes.size()));
+  return bytes;
+}
+
+void put_be32(std::vector<std::uint8_t>& b, std::size_t at, std::int32_t v) {
+  const auto u = static_cast<std::uint32_t>(v);
+  for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(u >> (24 - 8 * i));
+}
+
+TEST(LcmMeshSubscriber, DecodesGoodMessagesAndCountsEveryMalformedOne) {
+  LcmMeshSubscriber sub("memq://");                        // in-process provider: nothing on the network
+  const std::vector<std::uint8_t> good = encoded_mesh(5);  // 12 vertices, 10 triangles
+  EXPECT_EQ(lcm_mesh_layout_error(good.data(), good.size()), "");
+  sub.on_message(good.data(), good.size());
+
+  std::vector<std::vector<std::uint8_t>> bad;
+  bad.push_back({});                                                       // empty
+  bad.push_back(std::vector<std::uint8_t>(good.begin(), good.end() - 1));  // truncated
+  bad.push_back(std::vector<std::uint8_t>(good.begin(), good.begin() + 30));
+  std::vector<std::uint8_t> b = good;
+  b.push_back(0);  // trailing byte
+  bad.push_back(b);
+  b = good;
+  b[0] ^= 0xff;  // another type's fingerprint
+  bad.push_back(b);
+  b = good;
+  put_be32(b, 24, 0x7fffffff);  // vertex_count: a 2^31 allocation if trusted
+  put_be32(b, 28, 0x7ffffffd);
+  bad.push_back(b);
+  b = good;
+  put_be32(b, 24, -4);  // negative count
+  put_be32(b, 28, -12);
+  bad.push_back(b);
+  b = good;
+  put_be32(b, 28, 35);  // coordinate count != 3 * vertex_count
+  bad.push_back(b);
+  b = good;
+  // The first triangle index (after header 32, coords 144, levels 12, counts 8) points past the vertices.
+  put_be32(b, 8 + 8 + 8 + 8 + 4 * 36 + 12 + 8, 12);
+  bad.push_back(b);
+  std::mt19937 rng(3);
+  for (int k = 0; k < 50; ++k) {  // random bytes, and random damage to a good message
+    std::vector<std::uint8_t> noise(rng() % 600);
+    for (auto& x : noise) x = static_cast<std::uint8_t>(rng());
+    bad.push_back(noise);
+    b = good;
+    for (int d = 0; d < 4; ++d) b[rng() % b.size()] = static_cast<std::uint8_t>(rng());
+    bad.push_back(b);
+  }
+  std::uint64_t accepted_damaged = 0;
+  for (const auto& m : bad) {
+    const std::uint64_t before = sub.counts().accepted;
+    sub.on_message(m.data(), m.size());
+    accepted_damaged += sub.counts().accepted - before;
+  }
+  const MeshReceiveCounts& c = sub.counts();
+  EXPECT_EQ(c.received, 1 + bad.size());
+  EXPECT_EQ(c.accepted + c.rejected, c.received);
+  // Damage to coordinates or levels can leave a valid mesh; everything up to
+  // the random cases must be rejected.
+  EXPECT_GE(c.rejected, 9u);
+  EXPECT_GE(c.rejected_by_reason.at("size"), 7u);
+  EXPECT_GE(c.rejected_by_reason.at("index"), 1u);
+  EXPECT_FALSE(c.last_rejection.empty());
+  std::optional<x3d::SurfaceFrame> f = sub.next_frame(0.0);
+  ASSERT_TRUE(f.has_value());
+  EXPECT_EQ(f->time_s, 1.25);
+  EXPECT_EQ(f->vertices_m.size(), 12u);
+  EXPECT_EQ(f->triangles.size(), 10u);
+  for (std::uint64_t k = 0; k < accepted_damaged; ++k) {
+    f = sub.next_frame(0.0);
+    ASSERT_TRUE(f.has_value());
+    x3d::validate_frame(*f, false, "damaged but accepted");  // whatever got through is drawable-safe
+  }
+  EXPECT_FALSE(sub.next_frame(0.05).has_value());
+}
+
+TEST(LcmMeshSubscriber, KeepsTheNewestFramesWhenTheReaderFallsBehind) {
+  LcmMeshSubscriber sub("memq://");
+  const std::vector<std::uint8_t> good = encoded_mesh(2);
+  for (std::size_t i = 0; i < LcmMeshSubscriber::kMaxPending + 5; ++i) sub.on_message(good.data(), good.size());
+  EXPECT_EQ(sub.counts().overflow, 5u);
+  std::size_t n = 0;
+  while (sub.next_frame(0.0)) ++n;
+  EXPECT_EQ(n, LcmMeshSubscriber::kMaxPending);
+}
+
+TEST(LcmMeshSubscriber, ABadUrlIsAnErrorNamingIt) {
+  try {
+    LcmMeshSubscriber sub("nosuchprovider://x");
+    FAIL() << "accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("nosuchprovider://x"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace tissue::transport
