@@ -1,0 +1,323 @@
+// transport_latency_bench: sim-to-subscriber latency of the surface mesh.
+//
+// Measures the time from handing a MeshSnapshot (default 100k triangles) to
+// the daemon's publisher (LcmPublisher / DdsPublisher: encode + send) until
+// the subscriber (LcmMeshSubscriber / DdsMeshSubscriber: receive + decode +
+// validate + convert to an x3d::SurfaceFrame, what `tissue x3d --lcm|--dds`
+// uses) holds the frame. One mesh in flight at a time (the next is published
+// once the previous arrived), so the figures are the unloaded latency, not a
+// throughput limit. Subscriber in the same process (a second thread) or in a
+// forked child (2 processes); both use CLOCK_MONOTONIC (steady_clock), which
+// is the same clock across processes. Prints p50 / p99 / max of the latency
+// and of the publish call alone, and the message size.
+//
+// Loopback only. LCM multicast needs a route and DDS discovery multicasts, so
+// run it in a private network namespace (root, or user namespaces), with a
+// private /dev/shm for Fast DDS's shared memory:
+//
+//   unshare -n -m sh -c 'mount -t tmpfs -o size=512m bench_shm /dev/shm &&
+//     ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo &&
+//     build/h2/bench/transport/transport_latency_bench --samples 200'
+//
+// Options: --samples N (200), --warmup N (10), --triangles T (100000),
+// --transport lcm|dds|both, --processes 1|2|both,
+// --lcm-url URL (udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608), --dds-domain N (42).
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tissue_dds/surface_mesh.h"
+#include "transport/dds_messages.hpp"
+#include "transport/dds_publisher.hpp"
+#include "transport/dds_subscriber.hpp"
+#include "transport/lcm_messages.hpp"
+#include "transport/lcm_publisher.hpp"
+#include "transport/lcm_subscriber.hpp"
+
+namespace {
+
+using namespace tissue;
+using Clock = std::chrono::steady_clock;
+
+double now_s() { return std::chrono::duration<double>(Clock::now().time_since_epoch()).count(); }
+
+struct Options {
+  int samples = 200, warmup = 10, triangles = 100000;
+  std::string transport = "both", processes = "both";
+  std::string lcm_url = transport::kLcmSubscribeUrl;
+  int dds_domain = 42;
+};
+
+// A flat n x n grid of quads (two triangles each): ~triangles/2 vertices,
+// like a closed surface; levels and per-triangle strain filled as the sim
+// thread fills them.
+service::MeshSnapshot grid_mesh(int triangles) {
+  const int n = std::max(1, static_cast<int>(std::lround(std::sqrt(triangles / 2.0))));
+  service::MeshSnapshot s;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      s.vertices_m.push_back({0.1 * i / n, 0.1 * j / n, 0.001 * std::sin(i * 0.1)});
+      s.vertex_level.push_back(static_cast<std::uint8_t>((i + j) % 6));
+    }
+  const auto at = [n](int i, int j) { return static_cast<std::uint32_t>(j * (n + 1) + i); };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      s.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      s.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  for (std::size_t t = 0; t < s.triangles.size(); ++t)
+    s.triangle_strain_energy_J_per_m3.push_back(static_cast<float>(t % 1000));
+  return s;
+}
+
+std::unique_ptr<transport::MeshSubscriber> make_subscriber(const std::string& kind, const Options& o) {
+  if (kind == "lcm") return std::make_unique<transport::LcmMeshSubscriber>(o.lcm_url);
+  transport::DdsSubscribeOptions d;
+  d.domain_id = o.dds_domain;
+  return std::make_unique<transport::DdsMeshSubscriber>(d);
+}
+
+// The daemon's publisher for `kind`, behind one call.
+struct Publisher {
+  std::unique_ptr<transport::LcmPublisher> lcm;
+  std::unique_ptr<transport::DdsPublisher> dds;
+  Publisher(const std::string& kind, const Options& o) {
+    if (kind == "lcm") {
+      lcm = std::make_unique<transport::LcmPublisher>(o.lcm_url);
+    } else {
+      transport::DdsPublishOptions d;
+      d.domain_id = o.dds_domain;
+      dds = std::make_unique<transport::DdsPublisher>(d);
+    }
+  }
+  void publish(const service::MeshSnapshot& s) { lcm ? lcm->publish_mesh(s) : dds->publish_mesh(s); }
+  std::uint64_t failures() const { return lcm ? lcm->counts().failures : dds->counts().failures; }
+  bool wait_for_reader(double timeout_s) const {
+    if (lcm) return true;  // no discovery
+    const double until = now_s() + timeout_s;
+    while (dds->matched_readers().meshes == 0)
+      if (now_s() > until)
+        return false;
+      else
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return true;
+  }
+};
+
+std::size_t message_bytes(const std::string& kind, const service::MeshSnapshot& s) {
+  if (kind == "lcm") {
+    tissue_lcm::tissue::surface_mesh m;
+    transport::to_message(s, 1, &m);
+    return static_cast<std::size_t>(m.getEncodedSize());
+  }
+  ::tissue::surface_mesh m;
+  transport::to_dds(s, 1, &m);
+  return ::tissue::surface_mesh::getCdrSerializedSize(m) + 4;  // + CDR encapsulation header
+}
+
+// Receipt time of mesh `id` (its time_s), from the subscriber thread or process.
+class Receipts {
+ public:
+  void put(std::int64_t id, double t_s) {
+    std::lock_guard lock(m_);
+    got_[id] = t_s;
+    cv_.notify_all();
+  }
+  std::optional<double> wait(std::int64_t id, double timeout_s) {
+    std::unique_lock lock(m_);
+    if (!cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return got_.count(id) > 0; }))
+      return std::nullopt;
+    return got_[id];
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::map<std::int64_t, double> got_;
+};
+
+struct Result {
+  std::vector<double> latency_s, publish_s;
+  int lost = 0;
+  std::uint64_t failures = 0;
+  bool ok = true;
+  std::string error;
+};
+
+// Publishes warmup + samples meshes one at a time; `received` waits for the
+// receipt time of mesh `id`.
+template <typename WaitFn>
+void run_samples(Publisher& pub, service::MeshSnapshot& mesh, const Options& o, WaitFn received, Result* r) {
+  for (int i = 1; i <= o.warmup + o.samples; ++i) {
+    mesh.sequence = static_cast<std::uint64_t>(i);
+    mesh.sim_time_s = i;  // the id the subscriber reports back
+    const double t0 = now_s();
+    pub.publish(mesh);
+    const double t1 = now_s();
+    const std::optional<double> t2 = received(i);
+    if (i <= o.warmup) continue;
+    if (!t2) {
+      ++r->lost;
+      continue;
+    }
+    r->latency_s.push_back(*t2 - t0);
+    r->publish_s.push_back(t1 - t0);
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // let both sides go idle between samples
+  }
+  r->failures = pub.failures();
+}
+
+Result one_process(const std::string& kind, const Options& o, service::MeshSnapshot mesh) {
+  Result r;
+  try {
+    auto sub = make_subscriber(kind, o);
+    Publisher pub(kind, o);
+    if (!pub.wait_for_reader(10.0)) throw std::runtime_error("no DDS reader matched within 10 s");
+    Receipts receipts;
+    std::atomic<bool> done{false};
+    std::thread reader([&] {
+      while (!done)
+        if (auto f = sub->next_frame(0.1)) receipts.put(std::llround(f->time_s), now_s());
+    });
+    run_samples(
+        pub, mesh, o, [&](std::int64_t id) { return receipts.wait(id, 2.0); }, &r);
+    done = true;
+    reader.join();
+  } catch (const std::exception& e) {
+    r.ok = false;
+    r.error = e.what();
+  }
+  return r;
+}
+
+struct Receipt {
+  std::int64_t id;
+  double t_s;
+};
+
+Result two_processes(const std::string& kind, const Options& o, service::MeshSnapshot mesh) {
+  Result r;
+  int to_parent[2];
+  if (::pipe(to_parent) != 0) {
+    r.ok = false;
+    r.error = "pipe failed";
+    return r;
+  }
+  const pid_t child = ::fork();
+  if (child == 0) {  // subscriber process: reports (id, receipt time) per frame
+    ::close(to_parent[0]);
+    try {
+      auto sub = make_subscriber(kind, o);
+      const Receipt ready{-1, 0.0};
+      if (::write(to_parent[1], &ready, sizeof ready) != sizeof ready) ::_exit(1);
+      for (;;)
+        if (auto f = sub->next_frame(0.1)) {
+          const Receipt rc{std::llround(f->time_s), now_s()};
+          if (::write(to_parent[1], &rc, sizeof rc) != sizeof rc) ::_exit(0);  // parent gone
+        }
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "subscriber process: %s\n", e.what());
+      ::_exit(1);
+    }
+  }
+  ::close(to_parent[1]);
+  const auto read_receipt = [&](double timeout_s) -> std::optional<Receipt> {
+    pollfd p{to_parent[0], POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(timeout_s * 1000)) <= 0) return std::nullopt;
+    Receipt rc;
+    if (::read(to_parent[0], &rc, sizeof rc) != sizeof rc) return std::nullopt;
+    return rc;
+  };
+  try {
+    if (!read_receipt(10.0)) throw std::runtime_error("the subscriber process did not start");
+    Publisher pub(kind, o);
+    if (!pub.wait_for_reader(10.0)) throw std::runtime_error("no DDS reader matched within 10 s");
+    run_samples(
+        pub, mesh, o,
+        [&](std::int64_t id) -> std::optional<double> {
+          const double until = now_s() + 2.0;
+          while (now_s() < until)
+            if (auto rc = read_receipt(until - now_s()); rc && rc->id == id) return rc->t_s;
+          return std::nullopt;
+        },
+        &r);
+  } catch (const std::exception& e) {
+    r.ok = false;
+    r.error = e.what();
+  }
+  ::kill(child, SIGTERM);
+  ::waitpid(child, nullptr, 0);
+  ::close(to_parent[0]);
+  return r;
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t i = static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size()))) - 1;
+  return v[std::min(i, v.size() - 1)];
+}
+
+void print(const std::string& kind, int processes, std::size_t bytes, const Result& r) {
+  const char* label = kind == "lcm" ? "LCM" : "DDS";
+  if (!r.ok) {
+    std::printf("%-4s %d proc  error: %s\n", label, processes, r.error.c_str());
+    return;
+  }
+  const auto ms = [](double s) { return 1e3 * s; };
+  std::printf("%-4s %d proc  %9.2f MB %6zu %9.2f %8.2f %8.2f   %8.2f %8.2f   %4d %4llu\n", label, processes,
+              bytes / 1e6, r.latency_s.size(), ms(percentile(r.latency_s, 0.5)), ms(percentile(r.latency_s, 0.99)),
+              ms(percentile(r.latency_s, 1.0)), ms(percentile(r.publish_s, 0.5)), ms(percentile(r.publish_s, 0.99)),
+              r.lost, static_cast<unsigned long long>(r.failures));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{"Sim-to-subscriber latency of the surface mesh over LCM and Fast DDS (loopback only)"};
+  app.add_option("--samples", o.samples)->check(CLI::Range(1, 100000));
+  app.add_option("--warmup", o.warmup)->check(CLI::Range(0, 10000));
+  app.add_option("--triangles", o.triangles)->check(CLI::Range(2, 10000000));
+  app.add_option("--transport", o.transport)->check(CLI::IsMember({"lcm", "dds", "both"}));
+  app.add_option("--processes", o.processes)->check(CLI::IsMember({"1", "2", "both"}));
+  app.add_option("--lcm-url", o.lcm_url);
+  app.add_option("--dds-domain", o.dds_domain)->check(CLI::Range(0, 232));
+  CLI11_PARSE(app, argc, argv);
+
+  const service::MeshSnapshot mesh = grid_mesh(o.triangles);
+  std::printf("mesh: %zu vertices, %zu triangles; %d samples after %d warm-up, one mesh in flight\n",
+              mesh.vertices_m.size(), mesh.triangles.size(), o.samples, o.warmup);
+  std::printf(
+      "latency = publish_mesh() called -> subscriber holds the decoded, validated frame;\n"
+      "pub. = the publish_mesh() call alone (encode + send)\n\n");
+  std::printf("%-11s %12s %6s %9s %8s %8s   %8s %8s   %4s %4s\n", "", "message", "count", "lat. p50", "p99", "max",
+              "pub. p50", "p99", "lost", "fail");
+  std::printf("%-11s %12s %6s %9s %8s %8s   %8s %8s\n", "", "", "", "ms", "ms", "ms", "ms", "ms");
+  for (const std::string kind : {"lcm", "dds"}) {
+    if (o.transport != "both" && o.transport != kind) continue;
+    const std::size_t bytes = message_bytes(kind, mesh);
+    // The two-process case goes first: it forks, and a child must not
+    // inherit middleware threads (LCM's end with its objects; Fast DDS's
+    // factory starts on first use, after the last fork).
+    if (o.processes != "1") print(kind, 2, bytes, two_processes(kind, o, mesh));
+    if (o.processes != "2") print(kind, 1, bytes, one_process(kind, o, mesh));
+  }
+  return 0;
+}
