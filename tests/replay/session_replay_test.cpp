@@ -383,7 +383,8 @@ TEST(ReplayCli, SigtermStopsALoopCleanlyWithASummary) {
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err, "");
   EXPECT_EQ(r.out.rfind("stopped: " + path + ": ", 0), 0u) << r.out;
-  EXPECT_NE(r.out.find("1 complete passes"), std::string::npos) << "2 s at speed 1 of a 1.467 s session\n" << r.out;
+  // How many passes fit in 2 s depends on the start-up time: only the summary's presence is checked.
+  EXPECT_NE(r.out.find(" complete passes\n"), std::string::npos) << r.out;
   EXPECT_LT(took_s, 10.0);
 }
 
