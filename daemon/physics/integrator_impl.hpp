@@ -97,9 +97,16 @@ class ImplicitIntegrator final : public Integrator {
   // operator (a test checks they agree); kMatrixFree is the default because it
   // benchmarks faster at every size (figures in integrator_implicit.cpp).
   enum class Matvec { kMatrixFree, kAssembledBlockCsr };
+  // CG preconditioner. kTwoLevel adds to Jacobi a coarse correction: free
+  // nodes grouped into aggregates (cells of a coarse grid over the rest
+  // shape, ~64 nodes each), the Galerkin coarse matrix Pᵀ A P of their rigid
+  // translations assembled and band-Cholesky factored every step, applied
+  // additively: M⁻¹ = D⁻¹ + P (Pᵀ A P)⁻¹ Pᵀ (SPD, so CG stays valid).
+  enum class Preconditioner { kJacobi, kTwoLevel };
 
   ImplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
-                     Matvec matvec = Matvec::kMatrixFree, Simd simd = detected_simd());
+                     Matvec matvec = Matvec::kMatrixFree, Simd simd = detected_simd(),
+                     Preconditioner preconditioner = Preconditioner::kJacobi);
   StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) override;
   void mesh_changed() override {}
   const char* name() const override { return "implicit"; }
@@ -107,6 +114,13 @@ class ImplicitIntegrator final : public Integrator {
   // y = A p with the system matrix of the last step, both indexed by node id
   // (entries of kinematic nodes in p are ignored, in y zero). For tests.
   void system_product(const std::vector<Vec3>& p_by_node, std::vector<Vec3>& y_by_node);
+  // z = M⁻¹ r with the preconditioner of the last step, by node id (only its
+  // coarse part P (Pᵀ A P)⁻¹ Pᵀ r when `coarse_only`; zero without one), and
+  // the aggregate of a node (kNoAggregate: kinematic, or Jacobi). For tests.
+  void precondition(const std::vector<Vec3>& r_by_node, std::vector<Vec3>& z_by_node, bool coarse_only = false);
+  static constexpr std::uint32_t kNoAggregate = 0xffffffffu;
+  std::uint32_t aggregate_of_node(NodeId n) const;
+  bool coarse_active() const { return coarse_ok_; }
 
  private:
   // ap = A p over the unknowns (after p = z + beta p when `update_p`);
@@ -116,10 +130,29 @@ class ImplicitIntegrator final : public Integrator {
   void assemble();
   // Unknown numbering and the spring visiting order, per mesh topology.
   void build_layout(const Body& body);
+  void build_aggregates(const Body& body);
+  // Assembles and factors Pᵀ A P; false when a pivot is not positive (the
+  // step then runs with Jacobi alone).
+  bool factor_coarse();
+  // z += P (Pᵀ A P)⁻¹ Pᵀ r; returns rᵀz.
+  double coarse_correct();
 
   scene::IntegratorSpec spec_;
   double alpha_per_s_;
   Matvec matvec_;
+  Preconditioner preconditioner_;
+  bool coarse_ok_ = false;
+  std::vector<std::uint32_t> aggregate_of_unknown_;  // kNoAggregate for the sink
+  std::uint32_t coarse_dofs_ = 0, band_ = 0;         // 3 per aggregate; lower bandwidth
+  std::vector<double> coarse_factor_;                // band Cholesky, (band_ + 1) per row
+  std::vector<double> coarse_rhs_;
+  std::vector<Pad3> coarse_pad_;  // Pᵀ r and the coarse solution, per aggregate
+  // Springs joining two aggregates (or an aggregate and a kinematic node):
+  // the only ones that reach Pᵀ A P.
+  struct CoarseSpring {
+    std::uint32_t spring, i, j;  // index into springs_, aggregates of its ends
+  };
+  std::vector<CoarseSpring> coarse_springs_;
   Simd simd_;
   double h_ = 0.0;
   std::uint32_t unknowns_ = 0;                  // free nodes; index unknowns_ is the sink
