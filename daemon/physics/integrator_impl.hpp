@@ -163,7 +163,6 @@ class ImplicitIntegrator final : public Integrator {
   std::vector<ImplicitSpring> springs_;
   // Per unknown (+ sink): (1 + h alpha) m, the Jacobi inverse, CG vectors.
   std::vector<double> mass_;
-  std::vector<Vec3> force_, kv_;
   std::vector<Pad3> diag_inv_, rhs_, dv_, r_, z_, p_, ap_;
   std::vector<Vec3> dv_by_node_;  // warm start: last step's solution
   // Assembled block-CSR (kAssembledBlockCsr): per unknown its diagonal block,

@@ -186,6 +186,186 @@ TISSUE_AVX2 void update_avx2(double step, const Pad3* p, const Pad3* ap, const P
 }
 #endif
 
+// --- The setup pass: one pass over the springs per step ---------------------
+// Per spring: its force and damper force, K v (clamped Hessian), into
+// rhs += ±h (f − h K v); the Jacobi diagonal; the compact record. Both
+// instruction sets in the same order (vector lanes only where the scalar
+// code repeats an operation per component): bit-identical.
+struct SetupInput {
+  const double* stiffness;
+  const double* damping;
+  const double* rest_length;
+  const NodeId* edge_a;
+  const NodeId* edge_b;
+  const Vec3* x;
+  const Vec3* v;
+  const Vec3* rest_position;
+  const std::uint32_t* unknown_of_node;
+  double h;
+};
+
+// The scalars of one spring after its direction and relative velocity.
+struct SpringScalars {
+  double f_mag, kad, k_iso, along, iso, root_along;
+};
+
+inline SpringScalars spring_scalars(double k, double c, double rest, double length, double inv_length, double dvd,
+                                    double h) {
+  // Clamped Hessian: the transverse term only while stretched keeps the
+  // system positive definite (Choi & Ko 2002).
+  const double transverse = length > rest ? 1.0 - rest * inv_length : 0.0;
+  const double k_along = k * (1.0 - transverse), k_iso = k * transverse;
+  const double along = h * c + (h * h) * k_along;
+  return {k * (length - rest) - c * dvd, k_along * dvd, k_iso, along, (h * h) * k_iso, std::sqrt(along)};
+}
+
+void setup_spring_scalar(const SetupInput& in, EdgeId e, Pad3* rhs, Pad3* diag, ImplicitSpring* record) {
+  const NodeId na = in.edge_a[e], nb = in.edge_b[e];
+  const std::uint32_t a = in.unknown_of_node[na], b = in.unknown_of_node[nb];
+  const double k = in.stiffness[e], c = in.damping[e], rest = in.rest_length[e], h = in.h;
+  const Vec3& xa = in.x[na];
+  const Vec3& xb = in.x[nb];
+  const double d[3] = {xb[0] - xa[0], xb[1] - xa[1], xb[2] - xa[2]};
+  const double length = std::sqrt((d[0] * d[0] + d[1] * d[1]) + (d[2] * d[2] + 0.0));
+  const double inv_length = 1.0 / length;
+  double dir[3];
+  if (length > 1e-9 * rest) {
+    for (int i = 0; i < 3; ++i) dir[i] = d[i] * inv_length;
+  } else {  // collapsed: the rest direction stands in (as spring_frame)
+    const Vec3 r = in.rest_position[nb] - in.rest_position[na];
+    const double rn = r.norm();
+    for (int i = 0; i < 3; ++i) dir[i] = rn > 0.0 ? r[i] / rn : 0.0;
+  }
+  const Vec3& va = in.v[na];
+  const Vec3& vb = in.v[nb];
+  const double dv[3] = {va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]};
+  const double dvd = (dv[0] * dir[0] + dv[1] * dir[1]) + (dv[2] * dir[2] + 0.0);
+  const SpringScalars s = spring_scalars(k, c, rest, length, inv_length, dvd, h);
+  for (int i = 0; i < 3; ++i) {
+    const double q = s.kad * dir[i] + s.k_iso * dv[i];
+    const double contribution = h * (s.f_mag * dir[i] - h * q);
+    rhs[a].v[i] += contribution;
+    rhs[b].v[i] -= contribution;
+    const double block_diag = s.along * (dir[i] * dir[i]) + s.iso;
+    diag[a].v[i] += block_diag;
+    diag[b].v[i] += block_diag;
+    record->e[i] = s.root_along * dir[i];
+  }
+  record->iso = s.iso;
+  record->a4 = 4 * a;
+  record->b4 = 4 * b;
+}
+
+void setup_scalar(const SetupInput& in, const EdgeId* live, std::size_t count, Pad3* rhs, Pad3* diag,
+                  ImplicitSpring* records) {
+  for (std::size_t i = 0; i < count; ++i) setup_spring_scalar(in, live[i], rhs, diag, records + i);
+}
+
+#if defined(__x86_64__)
+// Broadcast ((x + y) + (z + w)) of one vector to all lanes.
+TISSUE_AVX2 inline __m256d lane_sum_broadcast_avx2(__m256d m) {
+  const __m256d pairs = _mm256_add_pd(m, _mm256_permute_pd(m, 0b0101));
+  return _mm256_add_pd(pairs, _mm256_permute2f128_pd(pairs, pairs, 1));
+}
+
+// Sum of lanes of each of four vectors, as ((x + y) + (z + w)), lane j from mj.
+TISSUE_AVX2 inline __m256d lane_sums4_avx2(__m256d m0, __m256d m1, __m256d m2, __m256d m3) {
+  const __m256d t0 = _mm256_hadd_pd(m0, m1);  // m0.x+y, m1.x+y, m0.z+w, m1.z+w
+  const __m256d t1 = _mm256_hadd_pd(m2, m3);
+  return _mm256_add_pd(_mm256_blend_pd(t0, t1, 0b1100), _mm256_permute2f128_pd(t0, t1, 0x21));
+}
+
+// Four springs at a time: lengths, square roots, divisions and the spring
+// scalars in one vector each (the scalar-per-spring version spent ~35 cycles
+// per spring, mostly waiting on its sqrt → div → sqrt chain).
+TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_t count, Pad3* rhs_pad, Pad3* diag_pad,
+                            ImplicitSpring* records) {
+  const __m256i xyz_i = _mm256_setr_epi64x(-1, -1, -1, 0);
+  const __m256d xyz = _mm256_castsi256_pd(xyz_i);
+  const double h = in.h;
+  const __m256d hv = _mm256_set1_pd(h), hh = _mm256_set1_pd(h * h), one = _mm256_set1_pd(1.0);
+  double* const rhs = rhs_pad[0].v;
+  double* const diag = diag_pad[0].v;
+  std::size_t i = 0;
+  for (; i + 4 <= count; i += 4) {
+    EdgeId e[4];
+    NodeId na[4], nb[4];
+    __m256d d[4], dir[4], dv[4];
+    for (int j = 0; j < 4; ++j) {
+      e[j] = live[i + j];
+      na[j] = in.edge_a[e[j]];
+      nb[j] = in.edge_b[e[j]];
+      // Masked loads: a Vec3 is 24 B, the fourth lane would read the next node.
+      d[j] =
+          _mm256_sub_pd(_mm256_maskload_pd(in.x[nb[j]].data(), xyz_i), _mm256_maskload_pd(in.x[na[j]].data(), xyz_i));
+    }
+    const __m256d rest =
+        _mm256_setr_pd(in.rest_length[e[0]], in.rest_length[e[1]], in.rest_length[e[2]], in.rest_length[e[3]]);
+    const __m256d length = _mm256_sqrt_pd(lane_sums4_avx2(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1]),
+                                                          _mm256_mul_pd(d[2], d[2]), _mm256_mul_pd(d[3], d[3])));
+    if (_mm256_movemask_pd(_mm256_cmp_pd(length, _mm256_mul_pd(_mm256_set1_pd(1e-9), rest), _CMP_GT_OQ)) != 0xF) {
+      for (int j = 0; j < 4; ++j) setup_spring_scalar(in, e[j], rhs_pad, diag_pad, records + i + j);  // collapsed: rare
+      continue;
+    }
+    const __m256d inv_length = _mm256_div_pd(one, length);
+    alignas(32) double inv[4];
+    _mm256_store_pd(inv, inv_length);
+    for (int j = 0; j < 4; ++j) {
+      dir[j] = _mm256_mul_pd(d[j], _mm256_broadcast_sd(inv + j));
+      dv[j] =
+          _mm256_sub_pd(_mm256_maskload_pd(in.v[na[j]].data(), xyz_i), _mm256_maskload_pd(in.v[nb[j]].data(), xyz_i));
+    }
+    const __m256d dvd = lane_sums4_avx2(_mm256_mul_pd(dv[0], dir[0]), _mm256_mul_pd(dv[1], dir[1]),
+                                        _mm256_mul_pd(dv[2], dir[2]), _mm256_mul_pd(dv[3], dir[3]));
+    const __m256d k = _mm256_setr_pd(in.stiffness[e[0]], in.stiffness[e[1]], in.stiffness[e[2]], in.stiffness[e[3]]);
+    const __m256d c = _mm256_setr_pd(in.damping[e[0]], in.damping[e[1]], in.damping[e[2]], in.damping[e[3]]);
+    // spring_scalars(), lane-wise.
+    const __m256d transverse =
+        _mm256_and_pd(_mm256_cmp_pd(length, rest, _CMP_GT_OQ), _mm256_sub_pd(one, _mm256_mul_pd(rest, inv_length)));
+    const __m256d k_along = _mm256_mul_pd(k, _mm256_sub_pd(one, transverse));
+    const __m256d k_iso = _mm256_mul_pd(k, transverse);
+    const __m256d along = _mm256_add_pd(_mm256_mul_pd(hv, c), _mm256_mul_pd(hh, k_along));
+    alignas(32) double f_mag[4], kad[4], k_iso_s[4], along_s[4], iso[4], root_along[4];
+    _mm256_store_pd(f_mag, _mm256_sub_pd(_mm256_mul_pd(k, _mm256_sub_pd(length, rest)), _mm256_mul_pd(c, dvd)));
+    _mm256_store_pd(kad, _mm256_mul_pd(k_along, dvd));
+    _mm256_store_pd(k_iso_s, k_iso);
+    _mm256_store_pd(along_s, along);
+    _mm256_store_pd(iso, _mm256_mul_pd(hh, k_iso));
+    _mm256_store_pd(root_along, _mm256_sqrt_pd(along));
+    for (int j = 0; j < 4; ++j) {
+      const __m256d q = _mm256_add_pd(_mm256_mul_pd(_mm256_broadcast_sd(kad + j), dir[j]),
+                                      _mm256_mul_pd(_mm256_broadcast_sd(k_iso_s + j), dv[j]));
+      const __m256d contribution =
+          _mm256_mul_pd(hv, _mm256_sub_pd(_mm256_mul_pd(_mm256_broadcast_sd(f_mag + j), dir[j]), _mm256_mul_pd(hv, q)));
+      const __m256d block_diag =
+          _mm256_and_pd(_mm256_add_pd(_mm256_mul_pd(_mm256_broadcast_sd(along_s + j), _mm256_mul_pd(dir[j], dir[j])),
+                                      _mm256_broadcast_sd(iso + j)),
+                        xyz);
+      const std::uint32_t a4 = 4 * in.unknown_of_node[na[j]], b4 = 4 * in.unknown_of_node[nb[j]];
+      _mm256_store_pd(rhs + a4, _mm256_add_pd(_mm256_load_pd(rhs + a4), contribution));
+      _mm256_store_pd(rhs + b4, _mm256_sub_pd(_mm256_load_pd(rhs + b4), contribution));
+      _mm256_store_pd(diag + a4, _mm256_add_pd(_mm256_load_pd(diag + a4), block_diag));
+      _mm256_store_pd(diag + b4, _mm256_add_pd(_mm256_load_pd(diag + b4), block_diag));
+      // e = √along d̂ in lanes 0-2 and iso in lane 3: the record's first 32 B.
+      ImplicitSpring& record = records[i + j];
+      _mm256_storeu_pd(record.e, _mm256_blend_pd(_mm256_mul_pd(_mm256_broadcast_sd(root_along + j), dir[j]),
+                                                 _mm256_broadcast_sd(iso + j), 0b1000));
+      record.a4 = a4;
+      record.b4 = b4;
+    }
+  }
+  for (; i < count; ++i) setup_spring_scalar(in, live[i], rhs_pad, diag_pad, records + i);
+}
+#endif
+
+void setup_springs(Simd simd, const SetupInput& in, const EdgeId* live, std::size_t count, Pad3* rhs, Pad3* diag,
+                   ImplicitSpring* records) {
+#if defined(__x86_64__)
+  if (simd == Simd::kAvx2) return setup_avx2(in, live, count, rhs, diag, records);
+#endif
+  setup_scalar(in, live, count, rhs, diag, records);
+}
+
 // y[agg[i]] += r[i] (Pᵀ r), then z[i] += y[agg[i]] (P y) with rᵀz.
 void restrict_scalar(const Pad3* r, const std::uint32_t* aggregate, Pad3* y, std::size_t n) {
   for (std::size_t i = 0; i < n; ++i)
@@ -384,10 +564,14 @@ double ImplicitIntegrator::coarse_correct() {
   double* const y = coarse_rhs_.data();
   for (std::uint32_t i = 0; i < coarse_dofs_; ++i) y[i] = coarse_pad_[i / 3].v[i % 3];
   for (std::uint32_t row = 0; row < coarse_dofs_; ++row) {  // L y' = y, by rows of L
+    // Four partial sums: the band's dot products are latency-bound otherwise.
     const std::uint32_t first = row > band_ ? row - band_ : 0;
-    double sum = y[row];
-    for (std::uint32_t k = first; k < row; ++k) sum -= at(row, k) * y[k];
-    y[row] = sum / at(row, row);
+    double sum[4] = {y[row], 0.0, 0.0, 0.0};
+    std::uint32_t k = first;
+    for (; k + 4 <= row; k += 4)
+      for (int j = 0; j < 4; ++j) sum[j] -= at(row, k + j) * y[k + j];
+    for (; k < row; ++k) sum[0] -= at(row, k) * y[k];
+    y[row] = ((sum[0] + sum[1]) + (sum[2] + sum[3])) / at(row, row);
   }
   for (std::uint32_t row = coarse_dofs_; row-- > 0;) {  // Lᵀ x = y', by rows of L too
     y[row] /= at(row, row);
@@ -523,8 +707,6 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   if (body.parameters_version() != layout_version_) build_layout(body);
   const std::uint32_t sink = unknowns_;
   const std::size_t slots = unknowns_ + 1u;
-  force_.resize(slots);
-  kv_.resize(slots);
   for (auto* v : {&diag_inv_, &rhs_, &dv_, &r_, &z_, &p_, &ap_}) v->resize(slots);
   mass_.resize(slots);
   dv_by_node_.resize(nodes, Vec3::Zero());  // warm start, by node id across mesh changes
@@ -533,65 +715,25 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   for (std::uint32_t i = 0; i < unknowns_; ++i) {
     const NodeId n = node_of_unknown_[i];
     mass_[i] = body.mass_kg[n] * mass_scale;
-    force_[i] = f_ext_N[n] - alpha_per_s_ * body.mass_kg[n] * body.v_m_per_s[n];
-    kv_[i].setZero();
+    rhs_[i] = to_pad3(h * (f_ext_N[n] - alpha_per_s_ * body.mass_kg[n] * body.v_m_per_s[n]));
     diag_inv_[i] = Pad3{{mass_[i], mass_[i], mass_[i], 0.0}};  // the diagonal, inverted below
   }
-  // One pass over the edges: spring and damper forces, K v, the compact
-  // blocks and the diagonal. The sink slot collects shares nobody reads.
-  // Raw pointers: the body's vectors cannot alias the scratch, so the
-  // compiler reloads nothing per spring (with the vectors this pass took
-  // 15-30 ns per spring, about a quarter of a cg20 step).
-  const double* const stiffness = body.stiffness_N_per_m.data();
-  const double* const damping = body.damping_N_s_per_m.data();
-  const double* const rest_length = body.rest_length_m.data();
-  const NodeId* const edge_a = body.edge_a.data();
-  const NodeId* const edge_b = body.edge_b.data();
-  const Vec3* const x = body.x_m.data();
-  const Vec3* const v = body.v_m_per_s.data();
-  const std::uint32_t* const unknown_of_node = unknown_of_node_.data();
-  Vec3* const force = force_.data();
-  Vec3* const kv = kv_.data();
-  Pad3* const diag = diag_inv_.data();
-  ImplicitSpring* const records = springs_.data();
-  const std::size_t live = live_edges_.size();
-  for (std::size_t i = 0; i < live; ++i) {
-    const EdgeId e = live_edges_[i];
-    const double k = stiffness[e];
-    const NodeId na = edge_a[e], nb = edge_b[e];
-    const std::uint32_t a = unknown_of_node[na], b = unknown_of_node[nb];
-    const double c = damping[e], rest = rest_length[e];
-    // spring_frame(), inlined (a call per spring was 4% of the step), with
-    // one division instead of four.
-    Vec3 d = x[nb] - x[na];
-    const double length = d.norm();
-    const double inv_length = 1.0 / length;
-    if (length > 1e-9 * rest)
-      d *= inv_length;
-    else
-      d = spring_frame(body, e).direction;
-    const Vec3 dv_ab = v[na] - v[nb];
-    const Vec3 force_on_a = (k * (length - rest) - c * dv_ab.dot(d)) * d;  // as add_spring_forces
-    force[a] += force_on_a;
-    force[b] -= force_on_a;
-    // Clamped Hessian: the transverse term only while stretched keeps the
-    // system positive definite (Choi & Ko 2002).
-    const double transverse = length > rest ? 1.0 - rest * inv_length : 0.0;
-    const double k_along = k * (1.0 - transverse), k_iso = k * transverse;
-    const Vec3 q = (k_along * d.dot(dv_ab)) * d + k_iso * dv_ab;
-    kv[a] += q;
-    kv[b] -= q;
-    const double along = h * c + h * h * k_along, iso = h * h * k_iso;
-    const Vec3 block_diag = (along * d.cwiseAbs2()).array() + iso;
-    for (int j = 0; j < 3; ++j) {
-      diag[a].v[j] += block_diag[j];
-      diag[b].v[j] += block_diag[j];
-    }
-    const Vec3 scaled = std::sqrt(along) * d;
-    records[i] = {{scaled.x(), scaled.y(), scaled.z()}, iso, 4 * a, 4 * b};
-  }
+  rhs_[sink] = diag_inv_[sink] = Pad3{};
+  // One pass over the edges: rhs = h (f − h K v) with the spring and damper
+  // forces, the compact blocks and the diagonal. The sink slot collects
+  // shares nobody reads.
+  const SetupInput input{body.stiffness_N_per_m.data(),
+                         body.damping_N_s_per_m.data(),
+                         body.rest_length_m.data(),
+                         body.edge_a.data(),
+                         body.edge_b.data(),
+                         body.x_m.data(),
+                         body.v_m_per_s.data(),
+                         body.rest_m.data(),
+                         unknown_of_node_.data(),
+                         h};
+  setup_springs(simd_, input, live_edges_.data(), live_edges_.size(), rhs_.data(), diag_inv_.data(), springs_.data());
   for (std::uint32_t i = 0; i < unknowns_; ++i) {
-    rhs_[i] = to_pad3(h * (force_[i] - h * kv_[i]));
     for (int k = 0; k < 3; ++k) diag_inv_[i].v[k] = 1.0 / diag_inv_[i].v[k];
     diag_inv_[i].v[3] = 0.0;
     dv_[i] = to_pad3(dv_by_node_[node_of_unknown_[i]]);
