@@ -10,9 +10,12 @@
 // physics_bench BM_ExplicitSubstep, same session, load 2-3: 6.8-7.9 ns per
 // spring before (add_spring_forces + update), 2.9-3.1 ns at 10^3-10^5
 // springs and 4.5-4.7 ns at 4x10^5 after; against the bandwidth bound 5.1-
-// 5.7x at L1/L2-resident sizes (bound 0.5 ns per spring: ~1.4 cycles, less
-// than the divider alone needs for a sqrt and a division), 2.0x at 5x10^4
-// springs, 2.4x at 4x10^5 (was 12-14x, 4.2-5x).
+// 5.7x at L1/L2-resident sizes, 2.0x at 5x10^4 springs, 2.4x at 4x10^5 (was
+// 12-14x, 4.2-5x). At cache-resident sizes the bound is 0.5 ns per spring
+// (~1.4 cycles) while the kernel issues ~29 instructions per spring (~7.5
+// cycles at the measured ~3 ns): it is issue-bound, not divider-bound — a
+// division-free 1/√l (integer first guess + 4 Newton steps, deterministic on
+// every CPU) ran slower, 3.8 vs 3.1 ns per spring, and was dropped.
 #include <algorithm>
 #include <cmath>
 #include <sstream>
