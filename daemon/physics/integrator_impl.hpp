@@ -99,7 +99,7 @@ class ImplicitIntegrator final : public Integrator {
   enum class Matvec { kMatrixFree, kAssembledBlockCsr };
   // CG preconditioner. kTwoLevel adds to Jacobi a coarse correction: free
   // nodes grouped into aggregates (cells of a coarse grid over the rest
-  // shape, ~64 nodes each), the Galerkin coarse matrix Pᵀ A P of their rigid
+  // shape, ~27 nodes each), the Galerkin coarse matrix Pᵀ A P of their rigid
   // translations assembled and band-Cholesky factored every step, applied
   // additively: M⁻¹ = D⁻¹ + P (Pᵀ A P)⁻¹ Pᵀ (SPD, so CG stays valid).
   enum class Preconditioner { kJacobi, kTwoLevel };
