@@ -148,10 +148,15 @@ class ImplicitIntegrator final : public Integrator {
   std::vector<double> coarse_rhs_;
   std::vector<Pad3> coarse_pad_;  // Pᵀ r and the coarse solution, per aggregate
   // Springs joining two aggregates (or an aggregate and a kinematic node):
-  // the only ones that reach Pᵀ A P.
+  // the only ones that reach Pᵀ A P; grouped by aggregate pair.
   struct CoarseSpring {
-    std::uint32_t spring, i, j;  // index into springs_, aggregates of its ends
+    std::uint32_t spring, pair;  // index into springs_ and coarse_pairs_
   };
+  struct CoarsePair {
+    std::uint32_t hi, lo;  // aggregates, hi > lo; hi = kNoAggregate: lo's kinematic neighbours
+  };
+  std::vector<CoarsePair> coarse_pairs_;
+  std::vector<double> pair_blocks_;  // Σ B per pair, 6 symmetric entries
   std::vector<CoarseSpring> coarse_springs_;
   Simd simd_;
   double h_ = 0.0;
