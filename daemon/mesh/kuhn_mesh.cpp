@@ -1,6 +1,7 @@
 #include "mesh/kuhn_mesh.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -34,6 +35,13 @@ std::string describe_key(Key key) {
 int coarse_log2_for_depth(int max_depth) { return max_depth <= 0 ? 1 : (max_depth - 1) / 3 + 1; }
 
 }  // namespace
+
+std::uint64_t KuhnMesh::next_topology_version() {
+  // Atomic only so meshes built on different threads (daemon, tests) never
+  // share a number; no other state is shared.
+  static std::atomic<std::uint64_t> next{1};
+  return next.fetch_add(1, std::memory_order_relaxed);
+}
 
 KuhnMesh::KuhnMesh(const BoxSpec& spec) : spec_(spec) {
   auto reject = [](const std::string& field, const std::string& why) {
@@ -158,6 +166,7 @@ int KuhnMesh::split(Key diamond, MeshChangeLog* log) {
   if (info.depth >= spec_.max_depth)
     throw std::invalid_argument(describe_key(diamond) + " has tets at depth " + std::to_string(info.depth) +
                                 ", and max_depth is " + std::to_string(spec_.max_depth) + ": cannot split further");
+  topology_version_ = next_topology_version();
   return split_recursive(diamond, info, log);
 }
 
@@ -344,6 +353,7 @@ void KuhnMesh::merge(Key diamond, MeshChangeLog* log) {
     if (is_split(children[i]))
       throw std::invalid_argument(describe_key(diamond) + " cannot merge: its child " + describe_key(children[i]) +
                                   " is split (merge finer diamonds first)");
+  topology_version_ = next_topology_version();
 
   // The tets around z are exactly the children of the diamond's tets; they
   // sit in the child diamonds' lists (z is never on their refinement edges).

@@ -151,6 +151,11 @@ class KuhnMesh {
       if (edges_[e].six_volume > 0) f(e, edges_[e]);
   }
 
+  // Changes whenever the set of leaf tets may have changed (split, merge),
+  // and is unique across all meshes of the process: two equal versions mean
+  // the same topology, so a surface or layout derived from it can be reused.
+  std::uint64_t topology_version() const { return topology_version_; }
+
   // Bytes held by the mesh's pools and indices (capacity, not just size).
   std::size_t memory_bytes() const;
   // Pre-sizes pools and indices for about `tets` leaf tets.
@@ -177,6 +182,8 @@ class KuhnMesh {
   double lattice_unit_m_ = 0.0;
   std::int64_t coarse_six_volume_ = 0;
   std::int64_t total_six_volume_ = 0;
+  std::uint64_t topology_version_ = next_topology_version();
+  static std::uint64_t next_topology_version();
   std::size_t coarse_node_count_ = 0;
 
   std::vector<Node> nodes_;

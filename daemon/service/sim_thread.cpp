@@ -8,7 +8,6 @@
 #include <chrono>
 #include <cstring>
 
-#include "physics/forces.hpp"
 #include "record/recorder.hpp"
 
 namespace tissue::service {
@@ -114,27 +113,9 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
 }
 
 MeshSnapshot& SimThread::build_snapshot() {
-  const physics::Simulation& sim = runner_->simulation();
-  mesh::extract_surface(sim.body().mesh(), &frame_surface_);
   MeshSnapshot& snap = snapshots_.write_buffer();
-  const std::size_t n = frame_surface_.vertex_nodes.size();
+  build_mesh_snapshot(runner_->simulation(), &snapshot_scratch_, &snap);
   snap.sequence = ++snapshot_sequence_;
-  snap.sim_time_s = sim.time_s();
-  snap.vertices_m.resize(n);
-  snap.vertex_level.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const physics::Vec3& x = sim.body().x_m[frame_surface_.vertex_nodes[i]];
-    snap.vertices_m[i] = {x.x(), x.y(), x.z()};
-    snap.vertex_level[i] = sim.body().mesh().node(frame_surface_.vertex_nodes[i]).depth;
-  }
-  snap.triangles.assign(frame_surface_.triangles.begin(), frame_surface_.triangles.end());
-  // resize, not assign-from-new: the buffer keeps its capacity, so steady
-  // sizes allocate nothing here (this runs on the sim thread).
-  const std::size_t nt = frame_surface_.triangle_tet.size();
-  snap.triangle_strain_energy_J_per_m3.resize(nt);
-  for (std::size_t t = 0; t < nt; ++t)
-    snap.triangle_strain_energy_J_per_m3[t] =
-        static_cast<float>(physics::strain_energy_density_Pa(sim.body(), frame_surface_.triangle_tet[t]));
   return snap;
 }
 

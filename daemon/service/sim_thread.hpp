@@ -23,7 +23,7 @@
 #include "concurrency/spsc_ring.hpp"
 #include "haptics/haptic_loop.hpp"
 #include "haptics/local_model.hpp"
-#include "mesh/surface.hpp"
+#include "service/mesh_snapshot.hpp"
 #include "service/sim_runner.hpp"
 
 namespace tissue::record {
@@ -58,19 +58,6 @@ struct SimStatus {
   std::array<double, 3> device_position_m{}, proxy_position_m{}, force_on_device_N{};
   bool tool_contact = false;
   char last_error[256] = {};  // the newest failed step's reason (NUL-terminated)
-};
-
-// The surface as the sim thread last saw it, for readers off the hot
-// threads (export, and the publishers to come). Positions in the scene frame.
-struct MeshSnapshot {
-  std::uint64_t sequence = 0;  // 0: none yet
-  double sim_time_s = 0.0;
-  std::vector<std::array<double, 3>> vertices_m;
-  std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise seen from outside
-  std::vector<std::uint8_t> vertex_level;               // bisection depth of the node (0: lattice node)
-  // Strain-energy density of the leaf tet behind each triangle, J/m^3 (= Pa),
-  // one per triangle; empty when not computed.
-  std::vector<float> triangle_strain_energy_J_per_m3;
 };
 
 struct SimThreadOptions {
@@ -179,7 +166,7 @@ class SimThread {
   double rtf_ = 0.0;
   // Surface scratch (sim thread): reused, so a snapshot allocates only when
   // the surface grows.
-  mesh::SurfaceMesh frame_surface_;
+  SnapshotScratch snapshot_scratch_;
   std::uint64_t snapshot_sequence_ = 0;
   std::int64_t last_snapshot_ns_ = 0;
 };

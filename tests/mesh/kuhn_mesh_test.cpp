@@ -333,5 +333,23 @@ TEST(KuhnMesh, ClosureCostIsLinearInDepth) {
   for (int c : per_cycle) EXPECT_EQ(c, first) << "splits per cycle must not grow with depth";
 }
 
+TEST(KuhnMesh, TopologyVersionChangesWithEverySplitAndMergeAndIsUniquePerMesh) {
+  KuhnMesh m(BoxSpec{2, 2, 2, 0.1, 4});
+  const KuhnMesh other(BoxSpec{2, 2, 2, 0.1, 4});
+  EXPECT_NE(m.topology_version(), other.topology_version());
+  const Key d = m.diamond_of(0);
+  const std::uint64_t v0 = m.topology_version();
+  ASSERT_GT(m.split(d), 0);
+  const std::uint64_t v1 = m.topology_version();
+  EXPECT_NE(v1, v0);
+  EXPECT_EQ(m.split(d), 0);  // already split: nothing changed
+  EXPECT_EQ(m.topology_version(), v1);
+  m.merge(d);
+  EXPECT_NE(m.topology_version(), v1);
+  EXPECT_NE(m.topology_version(), v0);  // the same tets as at v0, but versions never repeat
+  const KuhnMesh copy = m;              // a copy has the same topology: the same version
+  EXPECT_EQ(copy.topology_version(), m.topology_version());
+}
+
 }  // namespace
 }  // namespace tissue::mesh

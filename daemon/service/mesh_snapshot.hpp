@@ -1,0 +1,41 @@
+// The surface handed from the sim thread to everything off the hot threads
+// (publishers, recorder, export): what it holds and how it is built.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "mesh/surface.hpp"
+#include "physics/simulation.hpp"
+
+namespace tissue::service {
+
+// The surface as the sim thread last saw it. Positions in the scene frame.
+struct MeshSnapshot {
+  std::uint64_t sequence = 0;  // 0: none yet
+  double sim_time_s = 0.0;
+  std::vector<std::array<double, 3>> vertices_m;
+  std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise seen from outside
+  std::vector<std::uint8_t> vertex_level;               // bisection depth of the node (0: lattice node)
+  // Strain-energy density of the leaf tet behind each triangle, J/m^3 (= Pa),
+  // one per triangle; empty when not computed.
+  std::vector<float> triangle_strain_energy_J_per_m3;
+};
+
+// What the builder keeps between snapshots: the surface of the topology it
+// last saw. Extraction walks every leaf tet and sorts the boundary faces;
+// between splits and merges only positions and strain change, so the
+// surface is reused while the mesh's topology_version() stays the same.
+struct SnapshotScratch {
+  mesh::SurfaceMesh surface;
+  std::uint64_t topology_version = 0;  // 0: nothing extracted yet
+  std::uint64_t extractions = 0;       // how often the surface was rebuilt (diagnostics, tests)
+};
+
+// Fills `out` (all but `sequence`) from the simulation's current state.
+// Reuses the storage of `out` and `scratch`: at steady sizes it allocates
+// nothing, so the sim thread can call it between steps.
+void build_mesh_snapshot(const physics::Simulation& sim, SnapshotScratch* scratch, MeshSnapshot* out);
+
+}  // namespace tissue::service
