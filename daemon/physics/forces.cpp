@@ -83,6 +83,18 @@ double strain_energy_density_Pa(const Body& body, TetId t) {
   return 0.5 * body.scene().material.youngs_modulus_Pa * sum;
 }
 
+double strain_energy_density_Pa(const std::array<const Vec3*, 4>& x_m, const std::array<double, 6>& rest_length_m,
+                                double youngs_modulus_Pa) {
+  double sum = 0.0;
+  for (int i = 0; i < 6; ++i) {
+    // The operations of tet_edge_strains, in its order: bit-identical.
+    const double strain =
+        (*x_m[mesh::kTetEdgeSlots[i][1]] - *x_m[mesh::kTetEdgeSlots[i][0]]).norm() / rest_length_m[i] - 1.0;
+    sum += strain * strain;
+  }
+  return 0.5 * youngs_modulus_Pa * sum;
+}
+
 std::size_t inverted_tet_count(const Body& body) {
   std::size_t inverted = 0;
   body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {

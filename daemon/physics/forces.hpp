@@ -2,6 +2,7 @@
 // stage): springs along every mesh edge with a damper in parallel.
 #pragma once
 
+#include <array>
 #include <vector>
 
 #include "physics/body.hpp"
@@ -40,6 +41,12 @@ double kinetic_energy_J(const Body& body);
 // omits: D_T = (1/V_T) Σ_e ½ k_e^T (l_e − L_e)² with k_e^T = E V_T / L_e², i.e.
 // (E/2) Σ_e ε_e²: level independent, so one threshold serves every depth.
 double strain_energy_density_Pa(const Body& body, TetId t);
+// The same density from a tet's four node positions and its six rest edge
+// lengths (mesh::kTetEdgeSlots order), bit-identical to the form above: for
+// callers that keep the rest lengths of tets they evaluate again and again
+// (the surface snapshot), saving the rest-length square roots.
+double strain_energy_density_Pa(const std::array<const Vec3*, 4>& x_m, const std::array<double, 6>& rest_length_m,
+                                double youngs_modulus_Pa);
 // Tets whose current signed volume is <= 0 (inverted or flat). Springs are
 // blind to inversion (a mirrored tet has no spring energy), so this count is
 // reported, not corrected.

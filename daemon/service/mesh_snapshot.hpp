@@ -27,10 +27,23 @@ struct MeshSnapshot {
 // last saw. Extraction walks every leaf tet and sorts the boundary faces;
 // between splits and merges only positions and strain change, so the
 // surface is reused while the mesh's topology_version() stays the same.
+// Strain needs, per triangle, the tet behind it: the distinct surface tets
+// with their nodes and rest edge lengths are kept too (rest lengths change
+// only with the topology), so a snapshot evaluates each tet once and takes
+// no square roots of rest vectors.
 struct SnapshotScratch {
   mesh::SurfaceMesh surface;
   std::uint64_t topology_version = 0;  // 0: nothing extracted yet
   std::uint64_t extractions = 0;       // how often the surface was rebuilt (diagnostics, tests)
+  struct SurfaceTet {
+    mesh::TetId tet;
+    std::array<mesh::NodeId, 4> nodes;
+    std::array<double, 6> rest_length_m;  // mesh::kTetEdgeSlots order
+  };
+  std::vector<SurfaceTet> tets;              // distinct tets behind the triangles
+  std::vector<std::uint32_t> triangle_slot;  // triangle -> index into tets
+  std::vector<float> tet_strain_J_per_m3;    // per snapshot, per entry of tets
+  std::vector<std::uint32_t> slot_of_tet;    // tet id -> slot while indexing; all "none" between
 };
 
 // Fills `out` (all but `sequence`) from the simulation's current state.
