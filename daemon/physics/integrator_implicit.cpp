@@ -43,16 +43,18 @@
 //  - Two-level preconditioner (Preconditioner::kTwoLevel, an option: the
 //    default stays Jacobi): Jacobi plus an additive coarse correction over
 //    aggregates of ~27 free nodes (cells of a grid over the rest box), Galerkin
-//    Pᵀ A P of their translations assembled from the springs that cross
-//    aggregates and band-Cholesky factored each step. It barely lowers the
-//    iterations to a 1e-6 residual (R2 38.8 -> 33.0) but the residual it
+//    Pᵀ A P of their translations summed per aggregate pair from the springs
+//    that cross aggregates, band-Cholesky factored each step. The residual it
 //    leaves is in high modes: the smooth bending converges in a few
-//    iterations. physics_bench BM_ImplicitPreconditioner, tip error against
-//    the run solved to 1e-10: dt = 10 ms cg20 R2 219 % -> 0.0004 %, R3
-//    diverged (1.2 m) -> 0.0025 % (5.2 ms per step); dt = 1 ms R3 cg5 two-level
-//    0.020 % at 2.4 ms = Jacobi cg20 0.020 % at 4.4 ms; R2 cg5 0.0037 % at 0.28
-//    ms vs Jacobi cg20 0.0016 % at 0.51 ms. Cost per iteration +20-25 %
-//    (restriction, band solve, prolongation).
+//    iterations. physics_bench BM_ImplicitPreconditioner (load 2-4.5), tip
+//    error against the run solved to 1e-10: dt = 10 ms cg20 R2 203 % (Jacobi)
+//    -> 0.00014 % (0.56 ms), R3 diverged (tip -0.79 m) -> 0.0007 % (6.1 ms per
+//    10 ms step); dt = 1 ms two-level cg5 R2 0.00019 % in 0.25 ms vs Jacobi
+//    cg20 0.0016 % in 0.49 ms, R3 0.0057 % in 2.9 ms vs 0.020 % in 4.2 ms. To a
+//    1e-6 residual: R2 38.8 -> 33.1 iterations, R3 77.5 -> 36.6 (13.3 -> 9.8
+//    ms). Cost (from cg5 vs cg20): per iteration +18 % at R2, +30 % at R3
+//    (restriction, band solve, prolongation); per step +0.04 ms at R2, +1 ms
+//    at R3 (assembling and factoring the coarse matrix).
 // Everything is sequential in a fixed order: bit-identical reruns.
 #include <algorithm>
 #include <cmath>
