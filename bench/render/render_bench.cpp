@@ -5,14 +5,16 @@
 // Surfaces are real Kuhn-mesh surfaces (a flat box, one corner refined, so
 // several levels show) of about 1k, 10k and 100k triangles, drawn at
 // 800 x 600 with the level palette and with the strain ramp. Each iteration
-// is one complete frame as the client makes it: context creation, upload,
-// draw, read-back, legend. BM_PngWrite adds the PNG encoding of one frame.
+// is one complete frame: upload, draw, read-back, legend, and either a new
+// OpenGL context (render_frame: one picture) or a kept one (Renderer: a
+// frame sequence). BM_PngWrite adds the PNG encoding of one frame.
 // STACK.md quotes 35-50 ms for 100k triangles at 800 x 600 on this machine.
 #include <benchmark/benchmark.h>
 
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <string>
 
 #include "mesh/kuhn_mesh.hpp"
 #include "mesh/refine_ops.hpp"
@@ -54,14 +56,21 @@ void BM_RenderFrame(benchmark::State& state) {
   const SurfaceFrame& f = cached_surface(static_cast<int>(state.range(0)));
   tissue::render::RenderOptions o;  // 800 x 600, legend on
   o.colour = state.range(1) ? tissue::x3d::ColourMode::kStrain : tissue::x3d::ColourMode::kLevel;
-  for (auto _ : state) benchmark::DoNotOptimize(tissue::render::render_frame(f, o));
+  // range(2): 1 = a Renderer kept across frames (a `tissue render` sequence),
+  // 0 = render_frame, which sets up a context per frame (a single picture).
+  tissue::render::Renderer renderer;
+  if (state.range(2))
+    for (auto _ : state) benchmark::DoNotOptimize(renderer.render(f, o));
+  else
+    for (auto _ : state) benchmark::DoNotOptimize(tissue::render::render_frame(f, o));
   state.counters["triangles"] = static_cast<double>(f.triangles.size());
   state.counters["frames_per_s"] =
       benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
-  state.SetLabel(state.range(1) ? "strain" : "level");
+  state.SetLabel(std::string(state.range(1) ? "strain" : "level") +
+                 (state.range(2) ? ", kept context" : ", new context"));
 }
 BENCHMARK(BM_RenderFrame)
-    ->ArgsProduct({{1'000, 10'000, 100'000}, {0, 1}})
+    ->ArgsProduct({{1'000, 10'000, 100'000}, {0, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->MinTime(1.0);

@@ -90,10 +90,11 @@ int run_render(RenderCommandOptions o) {
     } else {
       frames = {n - 1};
     }
+    render::Renderer renderer;  // one context for the whole sequence
     for (std::size_t i = 0; i < frames.size(); ++i) {
       const x3d::SurfaceFrame frame = source->read_frame(frames[i]);
       const std::string path = o.sequence ? numbered(o.out, i) : o.out;
-      render::write_png(render::render_frame(frame, o.image), path);
+      render::write_png(renderer.render(frame, o.image), path);
       std::cout << "wrote " << path << ": frame " << frames[i] << " at t=" << frame.time_s << " s, "
                 << frame.triangles.size() << " triangles";
       if (o.image.colour == x3d::ColourMode::kStrain) {  // the ramp legend has no numbers: its ends are here

@@ -79,7 +79,26 @@ std::array<double, 2> strain_range_Pa(const x3d::SurfaceFrame& frame, const Rend
   return {static_cast<double>(*lo), static_cast<double>(*hi)};
 }
 
-Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
+struct Renderer::Context {
+  std::unique_ptr<osmesa_context, ContextDeleter> gl;
+  // Flat-shaded triangles as client vertex arrays: three vertices and three
+  // copies of the triangle's colour each (one glDrawArrays instead of a GL
+  // call per vertex). Kept between frames.
+  std::vector<float> positions;
+  std::vector<std::uint8_t> colours;
+};
+
+Renderer::Renderer() : context_(std::make_unique<Context>()) {}
+Renderer::~Renderer() = default;
+Renderer::Renderer(Renderer&&) noexcept = default;
+Renderer& Renderer::operator=(Renderer&&) noexcept = default;
+
+Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& options) {
+  Renderer renderer;
+  return renderer.render(frame, options);
+}
+
+Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   const bool strain = o.colour == x3d::ColourMode::kStrain;
   x3d::validate_frame(frame, strain, "frame");
   const std::array<double, 2> range = strain ? strain_range_Pa(frame, o) : std::array<double, 2>{0.0, 0.0};
@@ -94,9 +113,11 @@ Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   img.width = o.width_px;
   img.height = o.height_px;
   img.rgba.assign(4 * static_cast<std::size_t>(img.width) * img.height, 0);
-  std::unique_ptr<osmesa_context, ContextDeleter> ctx(OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, nullptr));
-  if (!ctx) throw RenderError("render: OSMesa could not create a context");
-  if (!OSMesaMakeCurrent(ctx.get(), img.rgba.data(), GL_UNSIGNED_BYTE, img.width, img.height))
+  // One context for all frames: creating it (and llvmpipe's threads) costs
+  // more than drawing a small surface.
+  if (!context_->gl) context_->gl.reset(OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, nullptr));
+  if (!context_->gl) throw RenderError("render: OSMesa could not create a context");
+  if (!OSMesaMakeCurrent(context_->gl.get(), img.rgba.data(), GL_UNSIGNED_BYTE, img.width, img.height))
     throw RenderError("render: OSMesa could not bind the image buffer");
   OSMesaPixelStore(OSMESA_Y_UP, 0);  // row 0 at the top, as PNG wants
 
@@ -132,7 +153,12 @@ Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   glLoadMatrixd(view);
 
   std::vector<bool> level_seen(256, false);
-  glBegin(GL_TRIANGLES);
+  std::vector<float>& positions = context_->positions;
+  std::vector<std::uint8_t>& colours = context_->colours;
+  positions.clear();
+  colours.clear();
+  positions.reserve(9 * frame.triangles.size());
+  colours.reserve(9 * frame.triangles.size());
   for (const auto& t : frame.triangles) {
     const V3& a = frame.vertices_m[t[0]];
     const V3& b = frame.vertices_m[t[1]];
@@ -151,10 +177,21 @@ Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
     // A head light: faces turned to the camera are bright, grazing ones dim.
     const double facing = std::abs(dot(normalized(cross(sub(b, a), sub(c, a))), eye_dir));
     const auto colour = to_bytes(base, 0.35 + 0.65 * facing);
-    glColor3ub(colour[0], colour[1], colour[2]);
-    for (const V3* p : {&a, &b, &c}) glVertex3d((*p)[0], (*p)[1], (*p)[2]);
+    for (const V3* p : {&a, &b, &c}) {
+      // Relative to the centre: floats keep sub-micrometre detail of a
+      // metre-sized object wherever it sits.
+      for (int k = 0; k < 3; ++k) positions.push_back(static_cast<float>((*p)[k] - centre[k]));
+      colours.insert(colours.end(), colour.begin(), colour.end());
+    }
   }
-  glEnd();
+  glTranslated(centre[0], centre[1], centre[2]);
+  glEnableClientState(GL_VERTEX_ARRAY);
+  glEnableClientState(GL_COLOR_ARRAY);
+  glVertexPointer(3, GL_FLOAT, 0, positions.data());
+  glColorPointer(3, GL_UNSIGNED_BYTE, 0, colours.data());
+  glDrawArrays(GL_TRIANGLES, 0, static_cast<GLsizei>(positions.size() / 3));
+  glDisableClientState(GL_COLOR_ARRAY);
+  glDisableClientState(GL_VERTEX_ARRAY);
   glFinish();
 
   if (o.legend && strain) {  // the ramp, low at the bottom (its ends are in the caller's caption)

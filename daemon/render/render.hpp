@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -55,5 +56,21 @@ std::array<double, 2> strain_range_Pa(const x3d::SurfaceFrame& frame, const Rend
 // Renders one frame (validated like the X3D export: throws
 // x3d::X3dInputError for bad input, RenderError when OSMesa fails).
 Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& options);
+
+// The same, keeping the OpenGL context and buffers between frames (a frame
+// sequence pays the context set-up once). Frames are independent: each
+// render() gives exactly what render_frame() gives. One thread at a time.
+class Renderer {
+ public:
+  Renderer();
+  ~Renderer();
+  Renderer(Renderer&&) noexcept;
+  Renderer& operator=(Renderer&&) noexcept;
+  Image render(const x3d::SurfaceFrame& frame, const RenderOptions& options);
+
+ private:
+  struct Context;
+  std::unique_ptr<Context> context_;
+};
 
 }  // namespace tissue::render

@@ -133,6 +133,28 @@ TEST(Render, StrainColoursFollowTheField) {
   EXPECT_THROW(strain_range_Pa(f, o), x3d::X3dInputError);
 }
 
+// A Renderer keeps its context between frames, but every frame is drawn as
+// if alone: the same pixels as render_frame, whatever came before (another
+// size, colouring, camera).
+TEST(Render, ARendererGivesTheSamePicturesAsSingleFrames) {
+  RenderOptions small;
+  small.width_px = 200;
+  small.height_px = 120;
+  RenderOptions strain;
+  strain.colour = x3d::ColourMode::kStrain;
+  strain.azimuth_deg = 10.0;
+  strain.elevation_deg = 70.0;
+  x3d::SurfaceFrame strained = box_surface(true);
+  for (const auto& v : strained.vertices_m) strained.vertex_strain_energy_Pa.push_back(static_cast<float>(v[0]));
+  Renderer renderer;
+  for (int round = 0; round < 2; ++round) {
+    EXPECT_EQ(renderer.render(box_surface(true), RenderOptions{}).rgba,
+              render_frame(box_surface(true), RenderOptions{}).rgba);
+    EXPECT_EQ(renderer.render(box_surface(false), small).rgba, render_frame(box_surface(false), small).rgba);
+    EXPECT_EQ(renderer.render(strained, strain).rgba, render_frame(strained, strain).rgba);
+  }
+}
+
 TEST(Render, BadInputIsAClearError) {
   x3d::SurfaceFrame f = box_surface(false);
   f.triangles[3][1] = 100000;
