@@ -264,12 +264,6 @@ void setup_scalar(const SetupInput& in, const EdgeId* live, std::size_t count, P
 }
 
 #if defined(__x86_64__)
-// Broadcast ((x + y) + (z + w)) of one vector to all lanes.
-TISSUE_AVX2 inline __m256d lane_sum_broadcast_avx2(__m256d m) {
-  const __m256d pairs = _mm256_add_pd(m, _mm256_permute_pd(m, 0b0101));
-  return _mm256_add_pd(pairs, _mm256_permute2f128_pd(pairs, pairs, 1));
-}
-
 // Sum of lanes of each of four vectors, as ((x + y) + (z + w)), lane j from mj.
 TISSUE_AVX2 inline __m256d lane_sums4_avx2(__m256d m0, __m256d m1, __m256d m2, __m256d m3) {
   const __m256d t0 = _mm256_hadd_pd(m0, m1);  // m0.x+y, m1.x+y, m0.z+w, m1.z+w
