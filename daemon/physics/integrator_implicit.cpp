@@ -19,7 +19,9 @@
 //  - CG fused: p = z + βp with ap = M'p in one node pass; dv, r, z and both
 //    dots in one; scratch resized only, never re-zeroed. pᵀAp from a node
 //    pass after the spring loop: accumulating dpᵀB dp inside the spring loop
-//    was 10% slower (6.3 vs 7.2 ms at R3).
+//    was 10% slower (6.3 vs 7.2 ms at R3); with AVX2 (a 4-lane accumulator,
+//    pᵀM'p in the node pass) it measured R2 +2 %, R3 ±1 %, 4x10^5 springs
+//    −4 % (load 4.5): not kept.
 //  - The spring loop is instruction-bound (~50 scalar SSE2 instructions, ~4 ns
 //    per spring per matvec, IPC ~3.5); hand-written scalar code ran the same
 //    as Eigen's.
@@ -701,7 +703,9 @@ void ImplicitIntegrator::build_layout(const Body& body) {
   // springs never share a node (no store-to-load chain through ap[]),
   // measured the same within noise (R2 0.49-0.55 ms, R3 4.3-4.7 ms per cg20
   // step all three): the AVX2 matvec is bound by its ~25 instructions per
-  // spring, not by memory order, so the simplest order stays.
+  // spring, not by memory order, so the simplest order stays. Numbering the
+  // unknowns along a Morton curve of their lattice position (springs still
+  // in edge order) did not help either (4x10^5 springs 61 vs 50-58 ms).
   live_edges_.clear();
   for (EdgeId e = 0; e < edges; ++e) {
     if (body.stiffness_N_per_m[e] == 0.0) continue;  // dead edge slot
