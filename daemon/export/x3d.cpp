@@ -358,6 +358,14 @@ void validate_frame(const SurfaceFrame& f, bool need_strain, const std::string& 
   if (!f.vertex_level.empty() && f.vertex_level.size() != n)
     throw X3dInputError(where + ": vertex_level has " + std::to_string(f.vertex_level.size()) + " values for " +
                         std::to_string(n) + " vertices (must be empty or one per vertex)");
+  const std::vector<float>& ts = f.triangle_strain_energy_J_per_m3;
+  if (!ts.empty() && ts.size() != f.triangles.size())
+    throw X3dInputError(where + ": triangle_strain_energy_J_per_m3 has " + std::to_string(ts.size()) + " values for " +
+                        std::to_string(f.triangles.size()) + " triangles (must be empty or one per triangle)");
+  for (std::size_t t = 0; t < ts.size(); ++t)
+    if (!std::isfinite(ts[t]) || ts[t] < 0.0f)
+      throw X3dInputError(where + ": triangle_strain_energy_J_per_m3[" + std::to_string(t) +
+                          "] = " + std::to_string(ts[t]) + " is not a strain energy density (must be finite and >= 0)");
   if (need_strain) {
     if (f.vertex_strain_energy_Pa.size() != n)
       throw X3dInputError(where + ": strain colouring needs one vertex_strain_energy_Pa value per vertex, got " +

@@ -27,6 +27,14 @@ struct SurfaceFrame {
   // Strain energy density per vertex; may be empty (sessions of format
   // version 1 do not store it). Required only for ColourMode::kStrain.
   std::vector<float> vertex_strain_energy_Pa;
+  // Strain energy density per triangle (J/m^3 = Pa), as recorded: the values
+  // vertex_strain_energy_Pa is averaged from, kept so that a consumer that
+  // wants per-triangle values (replay sends them on the wire) gets them
+  // exactly instead of re-averaging the vertices. Empty when the source has
+  // none or does not keep them (format version 1, a frame recorded without
+  // strain, the live subscribers, which give per-vertex values only);
+  // otherwise one value per triangle.
+  std::vector<float> triangle_strain_energy_J_per_m3;
 };
 
 class X3dInputError : public std::invalid_argument {
@@ -65,8 +73,9 @@ std::vector<float> vertex_strain_from_triangles(std::size_t vertex_count,
 
 // Throws X3dInputError unless the frame is drawable: finite time and
 // coordinates, at least one vertex and one triangle, every index in range,
-// no triangle repeating a vertex, vertex_level empty or one per vertex, and
-// (when `need_strain`) one finite strain value per vertex. `label` prefixes
+// no triangle repeating a vertex, vertex_level empty or one per vertex,
+// triangle_strain_energy_J_per_m3 empty or one finite value >= 0 per triangle,
+// and (when `need_strain`) one finite strain value per vertex. `label` prefixes
 // messages, e.g. "frame 3".
 void validate_frame(const SurfaceFrame& frame, bool need_strain, const std::string& label);
 

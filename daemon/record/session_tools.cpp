@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <type_traits>
 
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
@@ -94,22 +95,48 @@ std::uint64_t dataset_rows(hid_t file, const std::string& path, DatasetId id) {
   return static_cast<std::uint64_t>(n);
 }
 
-// Reads rows [first, first+count) of a 1-D dataset.
+// The HDF5 memory type of T (H5T_NATIVE_* are run-time values, so this is a
+// function, not a table). HDF5 converts from the stored type on read.
 template <typename T>
-std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, hid_t mem_type, std::uint64_t first,
+hid_t memory_type() {
+  if constexpr (std::is_same_v<T, double>)
+    return H5T_NATIVE_DOUBLE;
+  else if constexpr (std::is_same_v<T, float>)
+    return H5T_NATIVE_FLOAT;
+  else if constexpr (std::is_same_v<T, std::uint8_t>)
+    return H5T_NATIVE_UINT8;
+  else if constexpr (std::is_same_v<T, std::int32_t>)
+    return H5T_NATIVE_INT32;
+  else if constexpr (std::is_same_v<T, std::uint64_t>)
+    return H5T_NATIVE_UINT64;
+  else if constexpr (std::is_same_v<T, std::int64_t>)
+    return H5T_NATIVE_INT64;
+  else
+    static_assert(sizeof(T) == 0, "no HDF5 memory type for this element type");
+}
+
+// Rows [first, first+count) of a dataset with 1 or 3 columns, flattened.
+// Every reader of a session goes through here, so the shape and range
+// checks (a damaged index must not read past a dataset) are in one place.
+template <typename T>
+std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, std::uint64_t first,
                            std::uint64_t count) {
-  std::vector<T> out(count);
+  const DatasetSpec& spec = kDatasets[id];
+  const hsize_t columns = static_cast<hsize_t>(spec.columns);
+  std::vector<T> out(count * columns);
   if (count == 0) return out;
-  Handle d = open_dataset(file, path, kDatasets[id].path);
+  Handle d = open_dataset(file, path, spec.path);
   Handle space(H5Dget_space(d.get()));
-  const hsize_t start[1] = {first}, n[1] = {count};
-  Handle mem(H5Screate_simple(1, n, nullptr));
-  if (!space || H5Sget_simple_extent_ndims(space.get()) != 1 ||
+  const int rank = columns == 1 ? 1 : 2;
+  const hsize_t start[2] = {first, 0}, n[2] = {count, columns};
+  Handle mem(H5Screate_simple(rank, n, nullptr));
+  if (!space || !mem || H5Sget_simple_extent_ndims(space.get()) != rank ||
       H5Sselect_hyperslab(space.get(), H5S_SELECT_SET, start, nullptr, n, nullptr) < 0 ||
       H5Sselect_valid(space.get()) <= 0)
-    bad_file(path, std::string("unexpected shape of ") + kDatasets[id].path);
-  if (H5Dread(d.get(), mem_type, mem.get(), space.get(), H5P_DEFAULT, out.data()) < 0)
-    bad_file(path, h5::describe(std::string("cannot read ") + kDatasets[id].path));
+    bad_file(path, std::string("unexpected shape of ") + spec.path + " (rows " + std::to_string(first) + " to " +
+                       std::to_string(first + count) + " not inside it)");
+  if (H5Dread(d.get(), memory_type<T>(), mem.get(), space.get(), H5P_DEFAULT, out.data()) < 0)
+    bad_file(path, h5::describe(std::string("cannot read ") + spec.path));
   return out;
 }
 
@@ -156,10 +183,10 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
   c.rows.events = group_min(Group::kEvents, false);
 
   const std::uint64_t indexed = group_min(Group::kMesh, true);
-  const auto voff = read_column<std::uint64_t>(file, path, kMeshVertexOffset, H5T_NATIVE_UINT64, 0, indexed);
-  const auto vcnt = read_column<std::uint64_t>(file, path, kMeshVertexCount, H5T_NATIVE_UINT64, 0, indexed);
-  const auto toff = read_column<std::uint64_t>(file, path, kMeshTriangleOffset, H5T_NATIVE_UINT64, 0, indexed);
-  const auto tcnt = read_column<std::uint64_t>(file, path, kMeshTriangleCount, H5T_NATIVE_UINT64, 0, indexed);
+  const auto voff = read_column<std::uint64_t>(file, path, kMeshVertexOffset, 0, indexed);
+  const auto vcnt = read_column<std::uint64_t>(file, path, kMeshVertexCount, 0, indexed);
+  const auto toff = read_column<std::uint64_t>(file, path, kMeshTriangleOffset, 0, indexed);
+  const auto tcnt = read_column<std::uint64_t>(file, path, kMeshTriangleCount, 0, indexed);
   const std::uint64_t vertex_rows = std::min(c.extents[kMeshVertices], c.extents[kMeshVertexLevel]);
   std::uint64_t triangle_rows = c.extents[kMeshTriangles];
   if (dataset_in_version(kDatasets[kMeshTriangleStrain], version)) {
@@ -188,7 +215,7 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
 
   const auto last_time = [&](DatasetId id, std::uint64_t n) {
     if (n == 0) return;
-    const double t = read_column<double>(file, path, id, H5T_NATIVE_DOUBLE, n - 1, 1)[0];
+    const double t = read_column<double>(file, path, id, n - 1, 1)[0];
     if (std::isfinite(t)) c.last_time_s = std::max(c.last_time_s, t);
   };
   last_time(kHapticTime, c.rows.haptic_rows);
@@ -258,52 +285,121 @@ std::string xml_escape(const std::string& s) {
   return out;
 }
 
-// Reads rows [0, count) of an N x 3 float64 dataset.
-std::vector<std::array<double, 3>> read_vec3_rows(hid_t file, const std::string& path, DatasetId id,
-                                                  std::uint64_t count) {
-  std::vector<std::array<double, 3>> out(count);
-  if (count == 0) return out;
-  Handle d = open_dataset(file, path, kDatasets[id].path);
-  Handle space(H5Dget_space(d.get()));
-  const hsize_t start[2] = {0, 0}, n[2] = {count, 3};
-  Handle mem(H5Screate_simple(2, n, nullptr));
-  if (!space || H5Sget_simple_extent_ndims(space.get()) != 2 ||
-      H5Sselect_hyperslab(space.get(), H5S_SELECT_SET, start, nullptr, n, nullptr) < 0 ||
-      H5Sselect_valid(space.get()) <= 0)
-    bad_file(path, std::string("unexpected shape of ") + kDatasets[id].path);
-  if (H5Dread(d.get(), H5T_NATIVE_DOUBLE, mem.get(), space.get(), H5P_DEFAULT, out.data()) < 0)
-    bad_file(path, h5::describe(std::string("cannot read ") + kDatasets[id].path));
-  return out;
+}  // namespace
+
+struct SessionFile::Impl {
+  std::string path;
+  SessionInfo info;
+  Handle file;
+};
+
+SessionFile::SessionFile(const std::string& path) : impl_(std::make_unique<Impl>()) {
+  h5::QuietErrors quiet;
+  impl_->path = path;
+  const Preamble pre = read_preamble(path);
+  impl_->file = open_for_reading(path, pre);
+  impl_->info = info_of(impl_->file.get(), path, pre);
+}
+
+SessionFile::~SessionFile() = default;
+SessionFile::SessionFile(SessionFile&&) noexcept = default;
+SessionFile& SessionFile::operator=(SessionFile&&) noexcept = default;
+
+const std::string& SessionFile::path() const { return impl_->path; }
+const SessionInfo& SessionFile::info() const { return impl_->info; }
+
+template <typename T>
+std::vector<T> SessionFile::rows(DatasetId id, std::uint64_t first, std::uint64_t count) const {
+  h5::QuietErrors quiet;
+  return read_column<T>(impl_->file.get(), impl_->path, id, first, count);
+}
+template std::vector<double> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
+template std::vector<float> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
+template std::vector<std::uint8_t> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
+template std::vector<std::int32_t> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
+template std::vector<std::uint64_t> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
+template std::vector<std::int64_t> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
+
+void SessionFile::fail(const std::string& what) const { bad_file(impl_->path, what); }
+
+SessionInfo read_session_info(const std::string& path) { return SessionFile(path).info(); }
+
+namespace {
+
+// Reads column `id` (the complete rows: rows.size()) into `field` of every row.
+template <typename Row, typename T>
+void read_into(const SessionFile& f, DatasetId id, std::vector<Row>& rows, T Row::*field) {
+  if constexpr (std::is_same_v<T, std::array<double, 3>>) {
+    const std::vector<double> flat = f.rows<double>(id, 0, rows.size());
+    for (std::size_t i = 0; i < rows.size(); ++i) rows[i].*field = {flat[3 * i], flat[3 * i + 1], flat[3 * i + 2]};
+  } else {
+    const std::vector<T> column = f.rows<T>(id, 0, rows.size());
+    for (std::size_t i = 0; i < rows.size(); ++i) rows[i].*field = column[i];
+  }
+}
+
+// Session times must be finite and in order: replay paces by them and the
+// replay device interpolates between them.
+template <typename Row>
+void read_times(const SessionFile& f, DatasetId id, std::vector<Row>& rows) {
+  read_into(f, id, rows, &Row::time_s);
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    if (!std::isfinite(rows[i].time_s) || (i > 0 && rows[i].time_s < rows[i - 1].time_s))
+      f.fail(std::string(kDatasets[id].path) + " is not finite and non-decreasing at row " + std::to_string(i));
+}
+
+std::vector<HapticRow> read_haptic_rows(const SessionFile& f) {
+  std::vector<HapticRow> rows(f.info().rows.haptic_rows);
+  read_times(f, kHapticTime, rows);
+  read_into(f, kHapticDevicePosition, rows, &HapticRow::device_position_m);
+  read_into(f, kHapticProxyPosition, rows, &HapticRow::proxy_position_m);
+  read_into(f, kHapticForce, rows, &HapticRow::force_N);
+  read_into(f, kHapticContact, rows, &HapticRow::contact);
+  read_into(f, kHapticModelVersion, rows, &HapticRow::model_version);
+  return rows;
+}
+
+std::vector<SimRow> read_sim_rows(const SessionFile& f) {
+  std::vector<SimRow> rows(f.info().rows.sim_rows);
+  read_times(f, kSimTime, rows);
+  read_into(f, kSimSimTime, rows, &SimRow::sim_time_s);
+  read_into(f, kSimRealTimeFactor, rows, &SimRow::real_time_factor);
+  read_into(f, kSimStepMs, rows, &SimRow::step_ms);
+  read_into(f, kSimNodes, rows, &SimRow::nodes);
+  read_into(f, kSimTets, rows, &SimRow::tets);
+  read_into(f, kSimSprings, rows, &SimRow::springs);
+  read_into(f, kSimRefines, rows, &SimRow::refines);
+  read_into(f, kSimMerges, rows, &SimRow::merges);
+  read_into(f, kSimKinetic, rows, &SimRow::kinetic_J);
+  read_into(f, kSimElastic, rows, &SimRow::elastic_J);
+  return rows;
 }
 
 }  // namespace
 
-HapticTrack read_haptic_track(const std::string& path) {
-  h5::QuietErrors quiet;
-  const Preamble pre = read_preamble(path);
-  Handle file = open_for_reading(path, pre);
-  Counts counts;
-  info_of(file.get(), path, pre, &counts);
-  const std::uint64_t n = counts.rows.haptic_rows;
-  if (n == 0) bad_file(path, "the session has no haptic rows to replay");
-  HapticTrack track;
-  track.time_s = read_column<double>(file.get(), path, kHapticTime, H5T_NATIVE_DOUBLE, 0, n);
-  track.device_position_m = read_vec3_rows(file.get(), path, kHapticDevicePosition, n);
-  track.force_N = read_vec3_rows(file.get(), path, kHapticForce, n);
-  for (std::uint64_t i = 0; i < n; ++i) {
-    if (!std::isfinite(track.time_s[i]) || (i > 0 && track.time_s[i] < track.time_s[i - 1]))
-      bad_file(path, "/haptic/time_s is not finite and non-decreasing at row " + std::to_string(i));
-    for (double x : track.device_position_m[i])
-      if (!std::isfinite(x)) bad_file(path, "/haptic/device_position_m is not finite at row " + std::to_string(i));
-  }
-  return track;
+SessionRows read_session_rows(const std::string& path) {
+  const SessionFile f(path);
+  return {read_haptic_rows(f), read_sim_rows(f)};
 }
 
-SessionInfo read_session_info(const std::string& path) {
-  h5::QuietErrors quiet;
-  const Preamble pre = read_preamble(path);
-  Handle file = open_for_reading(path, pre);
-  return info_of(file.get(), path, pre);
+HapticTrack read_haptic_track(const std::string& path) {
+  const SessionFile f(path);
+  if (f.info().rows.haptic_rows == 0) f.fail("the session has no haptic rows to replay");
+  const std::vector<HapticRow> rows = read_haptic_rows(f);
+  HapticTrack track;
+  track.time_s.reserve(rows.size());
+  track.device_position_m.reserve(rows.size());
+  track.force_N.reserve(rows.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    // The device drives the haptic loop with these: a NaN would reach the
+    // force renderer.
+    for (double x : rows[i].device_position_m)
+      if (!std::isfinite(x)) f.fail("/haptic/device_position_m is not finite at row " + std::to_string(i));
+    track.time_s.push_back(rows[i].time_s);
+    track.device_position_m.push_back(rows[i].device_position_m);
+    track.force_N.push_back(rows[i].force_N);
+  }
+  return track;
 }
 
 std::string format_session_info(const SessionInfo& info) {
@@ -430,11 +526,11 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   Counts counts;
   const SessionInfo info = info_of(file.get(), h5_path, pre, &counts);
   const std::uint64_t frames = info.rows.mesh_frames;
-  const auto times = read_column<double>(file.get(), h5_path, kMeshFrameTime, H5T_NATIVE_DOUBLE, 0, frames);
-  const auto voff = read_column<std::uint64_t>(file.get(), h5_path, kMeshVertexOffset, H5T_NATIVE_UINT64, 0, frames);
-  const auto vcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshVertexCount, H5T_NATIVE_UINT64, 0, frames);
-  const auto toff = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleOffset, H5T_NATIVE_UINT64, 0, frames);
-  const auto tcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleCount, H5T_NATIVE_UINT64, 0, frames);
+  const auto times = read_column<double>(file.get(), h5_path, kMeshFrameTime, 0, frames);
+  const auto voff = read_column<std::uint64_t>(file.get(), h5_path, kMeshVertexOffset, 0, frames);
+  const auto vcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshVertexCount, 0, frames);
+  const auto toff = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleOffset, 0, frames);
+  const auto tcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleCount, 0, frames);
 
   namespace fs = std::filesystem;
   XdmfReport report;

@@ -1,17 +1,19 @@
 // Offline tools over session files: what `tissue session info | repair |
-// xdmf` do, as library functions the tests call directly. Every failure
-// throws RecordError naming the file and what is wrong with it; nothing here
-// crashes on random, truncated or foreign files (HDF5's own error printing
-// is silenced).
+// xdmf` do, as library functions the tests call directly, and the one reader
+// of a session's rows (replay, the replay haptic device, the frame source).
+// Every failure throws RecordError naming the file and what is wrong with
+// it; nothing here crashes on random, truncated or foreign files (HDF5's own
+// error printing is silenced).
 #pragma once
 
 #include <array>
-
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "record/record_types.hpp"
+#include "record/session_layout.hpp"
 
 namespace tissue::record {
 
@@ -46,14 +48,56 @@ SessionInfo read_session_info(const std::string& path);
 // Human-readable multi-line summary (what `tissue session info` prints).
 std::string format_session_info(const SessionInfo& info);
 
-// The recorded haptic ticks (complete rows only), for replay.
+// ---------------------------------------------------------------- readers
+// The one reader of a session's rows (replay, the replay haptic device, the
+// frame source): the same file checks as read_session_info (foreign, empty,
+// truncated, crashed or live files), one open (SWMR read while a writer has
+// or had it open), and only the rows every column of a group has. Every
+// failure throws RecordError "'FILE': what", naming the dataset and reason.
+class SessionFile {
+ public:
+  explicit SessionFile(const std::string& path);
+  ~SessionFile();
+  SessionFile(SessionFile&&) noexcept;
+  SessionFile& operator=(SessionFile&&) noexcept;
+
+  const std::string& path() const;
+  // Counts of complete rows, format version, strain, state.
+  const SessionInfo& info() const;
+
+  // Rows [first, first + count) of dataset `id`, flattened (3 values a row
+  // for the N x 3 datasets), converted to T by HDF5. T is one of double,
+  // float, std::uint8_t, std::int32_t, std::uint64_t, std::int64_t. A range
+  // outside the dataset is an error naming it (never a read past its end).
+  template <typename T>
+  std::vector<T> rows(DatasetId id, std::uint64_t first, std::uint64_t count) const;
+
+  // Throws RecordError "'FILE': what".
+  [[noreturn]] void fail(const std::string& what) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Every column of /haptic and /sim (docs/session-format.md), complete rows
+// only, session times finite and non-decreasing. Held in memory (about 100
+// bytes per haptic tick).
+struct SessionRows {
+  std::vector<HapticRow> haptic;
+  std::vector<SimRow> sim;
+};
+SessionRows read_session_rows(const std::string& path);
+
+// The recorded hand motion for the replay haptic device: the haptic rows'
+// time, device position and force (read by read_session_rows' reader).
 struct HapticTrack {
   std::vector<double> time_s;                            // session time, non-decreasing
   std::vector<std::array<double, 3>> device_position_m;  // scene frame
   std::vector<std::array<double, 3>> force_N;            // rendered on the device
 };
 // Throws RecordError naming the file and what is wrong (not a session, no
-// haptic rows, times not increasing or not finite).
+// haptic rows, times not increasing or not finite, positions not finite).
 HapticTrack read_haptic_track(const std::string& path);
 
 struct RepairReport {

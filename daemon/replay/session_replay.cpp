@@ -1,143 +1,21 @@
 #include "replay/session_replay.hpp"
 
-#include <hdf5.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <thread>
 
-#include "record/h5_util.hpp"
-#include "record/session_layout.hpp"
-#include "record/session_tools.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 
 namespace tissue::replay {
 
-namespace {
-
-using record::h5::Handle;
-
-// Reads the haptic and sim groups. The file checks (foreign, truncated,
-// crashed, live) and the complete-row counts come from read_session_info,
-// as in the session FrameSource; this only reads columns.
-class RowReader {
- public:
-  explicit RowReader(const std::string& path) : path_(path) {
-    try {
-      info_ = record::read_session_info(path);
-    } catch (const record::RecordError& e) {
-      throw ReplayError(e.what());
-    }
-    unsigned flags = H5F_ACC_RDONLY;
-    // A live or crashed writer leaves the open-for-write flag: only SWMR
-    // read opens such a file (read_session_info checked it is SWMR-capable).
-    if (info_.open_for_write_flag) flags |= H5F_ACC_SWMR_READ;
-    file_ = Handle(H5Fopen(path.c_str(), flags, H5P_DEFAULT));
-    if (!file_) fail(record::h5::describe("cannot be opened as HDF5"));
-  }
-
-  const record::SessionInfo& info() const { return info_; }
-
-  [[noreturn]] void fail(const std::string& what) const { throw ReplayError("'" + path_ + "': " + what); }
-
-  // Rows [0, count) of a dataset with 1 or 3 columns, flattened.
-  template <typename T>
-  std::vector<T> column(record::DatasetId id, hid_t mem_type, std::uint64_t count) {
-    const record::DatasetSpec& spec = record::kDatasets[id];
-    const hsize_t columns = static_cast<hsize_t>(spec.columns);
-    std::vector<T> out(count * columns);
-    if (count == 0) return out;
-    Handle d(H5Dopen2(file_.get(), spec.path, H5P_DEFAULT));
-    if (!d) fail(record::h5::describe(std::string("cannot open dataset ") + spec.path));
-    Handle space(H5Dget_space(d.get()));
-    const int rank = columns == 1 ? 1 : 2;
-    const hsize_t start[2] = {0, 0}, n[2] = {count, columns};
-    Handle mem(H5Screate_simple(rank, n, nullptr));
-    if (!space || !mem || H5Sget_simple_extent_ndims(space.get()) != rank ||
-        H5Sselect_hyperslab(space.get(), H5S_SELECT_SET, start, nullptr, n, nullptr) < 0 ||
-        H5Sselect_valid(space.get()) <= 0)
-      fail(std::string("unexpected shape of ") + spec.path + " (" + std::to_string(count) + " rows expected)");
-    if (H5Dread(d.get(), mem_type, mem.get(), space.get(), H5P_DEFAULT, out.data()) < 0)
-      fail(record::h5::describe(std::string("cannot read ") + spec.path));
-    return out;
-  }
-
-  void check_times(const std::vector<double>& t, const char* dataset) const {
-    for (std::size_t i = 0; i < t.size(); ++i)
-      if (!std::isfinite(t[i]) || (i > 0 && t[i] < t[i - 1]))
-        fail(std::string(dataset) + " is not finite and non-decreasing at row " + std::to_string(i));
-  }
-
- private:
-  std::string path_;
-  record::SessionInfo info_;
-  Handle file_;
-};
-
-std::array<double, 3> row3(const std::vector<double>& flat, std::size_t i) {
-  return {flat[3 * i], flat[3 * i + 1], flat[3 * i + 2]};
-}
-
-}  // namespace
-
 SessionRows read_session_rows(const std::string& path) {
-  record::h5::QuietErrors quiet;
-  RowReader r(path);
-  SessionRows rows;
-  using namespace record;
-  {
-    const std::uint64_t n = r.info().rows.haptic_rows;
-    const auto t = r.column<double>(kHapticTime, H5T_NATIVE_DOUBLE, n);
-    r.check_times(t, kDatasets[kHapticTime].path);
-    const auto device = r.column<double>(kHapticDevicePosition, H5T_NATIVE_DOUBLE, n);
-    const auto proxy = r.column<double>(kHapticProxyPosition, H5T_NATIVE_DOUBLE, n);
-    const auto force = r.column<double>(kHapticForce, H5T_NATIVE_DOUBLE, n);
-    const auto contact = r.column<std::uint8_t>(kHapticContact, H5T_NATIVE_UINT8, n);
-    const auto version = r.column<std::uint64_t>(kHapticModelVersion, H5T_NATIVE_UINT64, n);
-    rows.haptic.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      HapticRow& h = rows.haptic[i];
-      h.time_s = t[i];
-      h.device_position_m = row3(device, i);
-      h.proxy_position_m = row3(proxy, i);
-      h.force_N = row3(force, i);
-      h.contact = contact[i];
-      h.model_version = version[i];
-    }
+  try {
+    return record::read_session_rows(path);
+  } catch (const record::RecordError& e) {
+    throw ReplayError(e.what());
   }
-  {
-    const std::uint64_t n = r.info().rows.sim_rows;
-    const auto t = r.column<double>(kSimTime, H5T_NATIVE_DOUBLE, n);
-    r.check_times(t, kDatasets[kSimTime].path);
-    const auto sim_time = r.column<double>(kSimSimTime, H5T_NATIVE_DOUBLE, n);
-    const auto rtf = r.column<double>(kSimRealTimeFactor, H5T_NATIVE_DOUBLE, n);
-    const auto step = r.column<double>(kSimStepMs, H5T_NATIVE_DOUBLE, n);
-    const auto nodes = r.column<std::uint64_t>(kSimNodes, H5T_NATIVE_UINT64, n);
-    const auto tets = r.column<std::uint64_t>(kSimTets, H5T_NATIVE_UINT64, n);
-    const auto springs = r.column<std::uint64_t>(kSimSprings, H5T_NATIVE_UINT64, n);
-    const auto refines = r.column<std::int64_t>(kSimRefines, H5T_NATIVE_INT64, n);
-    const auto merges = r.column<std::int64_t>(kSimMerges, H5T_NATIVE_INT64, n);
-    const auto kinetic = r.column<double>(kSimKinetic, H5T_NATIVE_DOUBLE, n);
-    const auto elastic = r.column<double>(kSimElastic, H5T_NATIVE_DOUBLE, n);
-    rows.sim.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      SimRow& s = rows.sim[i];
-      s.time_s = t[i];
-      s.sim_time_s = sim_time[i];
-      s.real_time_factor = rtf[i];
-      s.step_ms = step[i];
-      s.nodes = nodes[i];
-      s.tets = tets[i];
-      s.springs = springs[i];
-      s.refines = refines[i];
-      s.merges = merges[i];
-      s.kinetic_J = kinetic[i];
-      s.elastic_J = elastic[i];
-    }
-  }
-  return rows;
 }
 
 service::MeshSnapshot to_snapshot(const x3d::SurfaceFrame& f, std::uint64_t sequence) {
@@ -147,8 +25,15 @@ service::MeshSnapshot to_snapshot(const x3d::SurfaceFrame& f, std::uint64_t sequ
   s.vertices_m = f.vertices_m;
   s.triangles = f.triangles;
   s.vertex_level = f.vertex_level;
+  if (!f.triangle_strain_energy_J_per_m3.empty()) {
+    // What was recorded, exactly (the source checked one value per triangle).
+    s.triangle_strain_energy_J_per_m3 = f.triangle_strain_energy_J_per_m3;
+    return s;
+  }
   const std::vector<float>& v = f.vertex_strain_energy_Pa;
   if (!v.empty()) {
+    // Only per-vertex values (a source that has nothing finer): the mean of
+    // the triangle's vertices is the closest per-triangle value.
     s.triangle_strain_energy_J_per_m3.resize(f.triangles.size());
     for (std::size_t t = 0; t < f.triangles.size(); ++t) {
       double sum = 0.0;

@@ -17,6 +17,7 @@
 
 #include "export/frame_source.hpp"
 #include "record/record_types.hpp"
+#include "record/session_tools.hpp"
 #include "service/sim_thread.hpp"
 
 namespace tissue::transport {
@@ -32,15 +33,10 @@ class ReplayError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// The haptic and sim groups of a session: the rows every column of the group
-// has (docs/session-format.md, "shortest column"), times finite and
-// non-decreasing. Held in memory (about 100 bytes per haptic tick).
-struct SessionRows {
-  std::vector<record::HapticRow> haptic;
-  std::vector<record::SimRow> sim;
-};
-// Opens like the session tools (SWMR read for a live or crashed file).
-// Throws ReplayError naming the file and what is wrong.
+// The haptic and sim groups of a session: record::read_session_rows (every
+// column, complete rows, times finite and non-decreasing), its RecordError
+// turned into ReplayError (same message: the file and what is wrong).
+using SessionRows = record::SessionRows;
 SessionRows read_session_rows(const std::string& path);
 
 // ---------------------------------------------------------------- conversions
@@ -48,11 +44,12 @@ SessionRows read_session_rows(const std::string& path);
 // session time of the row or frame (one clock for all three streams; the
 // session stores no sim time per mesh frame).
 //
-// Strain: the snapshot carries one value per triangle. FrameSource frames
-// carry it per vertex (vertex_strain_from_triangles of what was recorded), so
-// each triangle gets the mean of its three vertices; a frame without strain
-// gives an empty vector (the encoders then send what they send for "not
-// computed").
+// Strain: the snapshot carries one value per triangle. A frame with the
+// recorded per-triangle values (triangle_strain_energy_J_per_m3, as the
+// session source gives) sends them unchanged; a frame with only per-vertex
+// values gives each triangle the mean of its three vertices; a frame without
+// strain gives an empty vector (the encoders then send what they send for
+// "not computed").
 service::MeshSnapshot to_snapshot(const x3d::SurfaceFrame& frame, std::uint64_t sequence);
 // The fields LcmPublisher::publish_haptic / DdsPublisher::publish_haptic read.
 service::SimStatus haptic_status(const record::HapticRow& row);

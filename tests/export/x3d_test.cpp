@@ -191,6 +191,20 @@ TEST(X3dSnapshot, DegenerateInputsAreRejected) {
   f = good;
   f.vertex_strain_energy_Pa[4] = std::numeric_limits<float>::quiet_NaN();
   expect_rejected(f, "vertex_strain_energy_Pa[4] is not finite", ColourMode::kStrain);
+  // Per-triangle strain is optional, but when present one finite value >= 0
+  // per triangle (12 triangles in the box).
+  f = good;
+  f.triangle_strain_energy_J_per_m3.assign(good.triangles.size(), 2.5f);
+  EXPECT_NO_THROW(x3d_snapshot(f, X3dOptions{}));
+  f.triangle_strain_energy_J_per_m3.pop_back();
+  expect_rejected(f, "triangle_strain_energy_J_per_m3 has 11 values for 12 triangles");
+  f.triangle_strain_energy_J_per_m3.assign(good.triangles.size() + 1, 2.5f);
+  expect_rejected(f, "triangle_strain_energy_J_per_m3 has 13 values for 12 triangles");
+  f.triangle_strain_energy_J_per_m3.assign(good.triangles.size(), 2.5f);
+  f.triangle_strain_energy_J_per_m3[7] = -1.0f;
+  expect_rejected(f, "triangle_strain_energy_J_per_m3[7] = -1.000000 is not a strain energy density");
+  f.triangle_strain_energy_J_per_m3[7] = std::numeric_limits<float>::quiet_NaN();
+  expect_rejected(f, "triangle_strain_energy_J_per_m3[7] = nan is not a strain energy density");
   // Level colouring does not need strain values at all.
   f = good;
   f.vertex_strain_energy_Pa.clear();

@@ -10,11 +10,13 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
+#include "record/session_writer.hpp"
 
 namespace tissue::record::testing {
 
@@ -83,6 +85,76 @@ TestFrame test_frame(std::uint64_t f) {
   for (std::size_t t = 0; t < fr.triangles.size(); ++t)
     fr.triangle_strain_energy_J_per_m3.push_back(static_cast<float>(f) * 100.0f + 0.5f * static_cast<float>(t));
   return fr;
+}
+
+bool same_row(const HapticRow& a, const HapticRow& b) {
+  return a.time_s == b.time_s && a.device_position_m == b.device_position_m &&
+         a.proxy_position_m == b.proxy_position_m && a.force_N == b.force_N && a.contact == b.contact &&
+         a.model_version == b.model_version;
+}
+
+bool same_row(const SimRow& a, const SimRow& b) {
+  return a.time_s == b.time_s && a.sim_time_s == b.sim_time_s && a.real_time_factor == b.real_time_factor &&
+         a.step_ms == b.step_ms && a.nodes == b.nodes && a.tets == b.tets && a.springs == b.springs &&
+         a.refines == b.refines && a.merges == b.merges && a.kinetic_J == b.kinetic_J && a.elastic_J == b.elastic_J;
+}
+
+std::string write_test_session(const std::string& path, const TestSession& c) {
+  SessionMetadata m;
+  m.scene_name = c.scene_name;
+  m.software_version = "test";
+  auto w = SessionWriter::create(path, m);
+  std::vector<HapticRow> h;
+  for (std::uint64_t i = 0; i < c.haptic; ++i) h.push_back(haptic_row(i));
+  w->append_haptic(h);
+  std::vector<SimRow> s;
+  for (std::uint64_t i = 0; i < c.sim; ++i) s.push_back(sim_row(i));
+  w->append_sim(s);
+  for (std::uint64_t f = 0; f < c.frames; ++f) {
+    TestFrame fr = test_frame(f);
+    if (!c.strain) fr.triangle_strain_energy_J_per_m3.clear();
+    w->append_mesh_frame(fr.view());
+  }
+  std::vector<Event> e;
+  for (std::uint64_t i = 0; i < c.events; ++i) e.push_back(event_row(i));
+  w->append_events(e);
+  w->close();
+  return path;
+}
+
+void write_bytes(const std::string& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+std::vector<std::string> bad_session_files(const TempDir& dir) {
+  std::vector<std::string> files;
+  const std::string bytes = slurp(write_test_session(dir / "good.h5"));
+  write_bytes(dir / "empty.h5", "");
+  files.push_back(dir / "empty.h5");
+  write_bytes(dir / "text.h5", "this is a scene file, not a session\nname: cantilever\n");
+  files.push_back(dir / "text.h5");
+  std::mt19937 rng(42);
+  std::string noise(65536, '\0');
+  for (char& c : noise) c = static_cast<char>(rng() & 0xff);
+  write_bytes(dir / "random.h5", noise);
+  files.push_back(dir / "random.h5");
+  // A valid signature followed by garbage: HDF5 itself has to reject it.
+  write_bytes(dir / "signature_then_noise.h5", bytes.substr(0, 8) + noise);
+  files.push_back(dir / "signature_then_noise.h5");
+  for (const std::size_t cut : {std::size_t{4}, std::size_t{11}, std::size_t{48}, std::size_t{500}, bytes.size() / 4,
+                                bytes.size() / 2, bytes.size() - 100, bytes.size() - 1}) {
+    const std::string name = dir / ("truncated_" + std::to_string(cut) + ".h5");
+    write_bytes(name, bytes.substr(0, cut));
+    files.push_back(name);
+  }
+  // A real HDF5 file that is not a session.
+  const hid_t f = H5Fcreate((dir / "foreign.h5").c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  H5Fclose(f);
+  files.push_back(dir / "foreign.h5");
+  files.push_back(dir / "does_not_exist.h5");
+  files.push_back(dir.path());  // a directory
+  return files;
 }
 
 namespace {
@@ -261,7 +333,10 @@ void make_version_1(const std::string& path) {
   H5Fclose(file);
 }
 
-void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value) {
+namespace {
+
+template <typename T>
+void overwrite(const std::string& path, const char* dataset, std::uint64_t row, hid_t mem_type, T value) {
   const hid_t file = open_for_edit(path);
   ASSERT_GE(file, 0) << path;
   const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
@@ -270,11 +345,21 @@ void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t r
   const hsize_t start[1] = {row}, count[1] = {1};
   const hid_t mem = H5Screate_simple(1, count, nullptr);
   EXPECT_GE(H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, count, nullptr), 0);
-  EXPECT_GE(H5Dwrite(ds, H5T_NATIVE_FLOAT, mem, space, H5P_DEFAULT, &value), 0);
+  EXPECT_GE(H5Dwrite(ds, mem_type, mem, space, H5P_DEFAULT, &value), 0);
   H5Sclose(mem);
   H5Sclose(space);
   H5Dclose(ds);
   H5Fclose(file);
+}
+
+}  // namespace
+
+void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value) {
+  overwrite(path, dataset, row, H5T_NATIVE_FLOAT, value);
+}
+
+void overwrite_f64(const std::string& path, const char* dataset, std::uint64_t row, double value) {
+  overwrite(path, dataset, row, H5T_NATIVE_DOUBLE, value);
 }
 
 std::string quote(const std::string& s) {

@@ -44,6 +44,30 @@ struct TestFrame {
 };
 TestFrame test_frame(std::uint64_t f);
 
+// Exact equality of every field (rows read back must be what was written).
+bool same_row(const HapticRow& a, const HapticRow& b);
+bool same_row(const SimRow& a, const SimRow& b);
+
+// A closed session written with SessionWriter: haptic_row(0 .. haptic-1),
+// sim_row(0 .. sim-1), test_frame(0 .. frames-1) (without their strain when
+// `strain` is false: stored as NaN, "not computed"), event_row(0 .. events-1).
+struct TestSession {
+  std::uint64_t haptic = 1500, sim = 40, frames = 5, events = 1;
+  bool strain = true;
+  std::string scene_name = "probe";
+};
+// Returns `path`.
+std::string write_test_session(const std::string& path, const TestSession& content = {});
+
+void write_bytes(const std::string& path, const std::string& bytes);
+
+// Files every session reader and tool must refuse with a clear error naming
+// the file: empty, text, random bytes, an HDF5 signature then noise, a good
+// session truncated at several points (inside the signature, the superblock,
+// the metadata and the data), an HDF5 file that is not a session, a missing
+// file and a directory. Written into `dir`.
+std::vector<std::string> bad_session_files(const TempDir& dir);
+
 // Whole dataset, flattened, through the C API. `swmr` opens with
 // H5F_ACC_SWMR_READ. Fails the current test (and returns empty) on error.
 std::vector<double> read_f64(hid_t file, const char* path);
@@ -66,8 +90,9 @@ hid_t open_for_edit(const std::string& path);
 // Turns a closed session into what the version-1 writer made: no
 // /mesh/triangle_strain_energy_J_per_m3, format_version 1. Fails the test on error.
 void make_version_1(const std::string& path);
-// Overwrites row `row` of a 1-D float32 dataset of a closed session.
+// Overwrites row `row` of a 1-D float32 / float64 dataset of a closed session.
 void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value);
+void overwrite_f64(const std::string& path, const char* dataset, std::uint64_t row, double value);
 
 struct RunResult {
   int exit_code = -1;  // -1: killed by a signal

@@ -1,5 +1,5 @@
 // Per-triangle strain in session files, read back through the export side's
-// session FrameSource (what `tissue x3d` / `tissue render` use): values of
+// session FrameSource (what `tissue x3d` / `tissue render` / replay use): values of
 // version-2 files, version-1 files without them, frames recorded without
 // them, and damaged values.
 #include <gtest/gtest.h>
@@ -10,7 +10,6 @@
 #include "export/frame_source.hpp"
 #include "export/x3d.hpp"
 #include "record/session_layout.hpp"
-#include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 
 namespace tissue::record {
@@ -19,19 +18,15 @@ namespace {
 using testing::TempDir;
 
 void write_frames(const std::string& path, std::uint64_t frames, bool with_strain) {
-  SessionMetadata m;
-  m.scene_name = "strain";
-  m.software_version = "test";
-  auto w = SessionWriter::create(path, m);
-  for (std::uint64_t f = 0; f < frames; ++f) {
-    testing::TestFrame fr = testing::test_frame(f);
-    if (!with_strain) fr.triangle_strain_energy_J_per_m3.clear();
-    w->append_mesh_frame(fr.view());
-  }
-  w->close();
+  testing::TestSession content;
+  content.haptic = content.sim = content.events = 0;
+  content.frames = frames;
+  content.strain = with_strain;
+  content.scene_name = "strain";
+  testing::write_test_session(path, content);
 }
 
-TEST(SessionStrain, SourceTurnsStoredTriangleStrainIntoVertexStrain) {
+TEST(SessionStrain, SourceGivesStoredTriangleStrainAndItsVertexMeans) {
   TempDir dir;
   write_frames(dir / "s.h5", 4, true);
   auto source = x3d::open_session_source(dir / "s.h5");
@@ -44,6 +39,8 @@ TEST(SessionStrain, SourceTurnsStoredTriangleStrainIntoVertexStrain) {
         x3d::vertex_strain_from_triangles(fr.vertices_m.size(), fr.triangles, fr.triangle_strain_energy_J_per_m3);
     ASSERT_EQ(f.vertex_strain_energy_Pa.size(), fr.vertices_m.size()) << "frame " << k;
     EXPECT_EQ(f.vertex_strain_energy_Pa, expected) << "frame " << k;
+    // The recorded per-triangle values too, bit for bit (replay sends them).
+    EXPECT_EQ(f.triangle_strain_energy_J_per_m3, fr.triangle_strain_energy_J_per_m3) << "frame " << k;
     EXPECT_NO_THROW(x3d::validate_frame(f, true, "frame"));
   }
 }
@@ -62,6 +59,7 @@ TEST(SessionStrain, VersionOneFilesAndFramesWithoutStrainHaveNone) {
       const x3d::SurfaceFrame f = source->read_frame(k);
       EXPECT_EQ(f.triangles, testing::test_frame(k).triangles);
       EXPECT_TRUE(f.vertex_strain_energy_Pa.empty()) << "frame " << k;
+      EXPECT_TRUE(f.triangle_strain_energy_J_per_m3.empty()) << "frame " << k;
     }
   }
 }

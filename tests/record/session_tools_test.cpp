@@ -1,17 +1,19 @@
-// Session tools (info / repair / xdmf), as library calls and through the
+// Session tools (info / repair / xdmf) and the session readers (SessionFile,
+// read_session_rows, read_haptic_track), as library calls and through the
 // `tissue session` CLI: good files, bad arguments, and files that are not
 // sessions at all. No input may crash them (the ASan tree runs this too).
 #include "record/session_tools.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <filesystem>
 #include <fstream>
-#include <random>
+#include <limits>
 
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
-#include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 
 namespace tissue::record {
@@ -22,85 +24,42 @@ using testing::run;
 using testing::TempDir;
 
 void write_small_session(const std::string& path, std::uint64_t frames = 5) {
-  SessionMetadata m;
-  m.scene_name = "probe";
-  m.software_version = "test";
-  auto w = SessionWriter::create(path, m);
-  std::vector<HapticRow> h;
-  for (std::uint64_t i = 0; i < 1500; ++i) h.push_back(testing::haptic_row(i));
-  w->append_haptic(h);
-  std::vector<SimRow> s;
-  for (std::uint64_t i = 0; i < 40; ++i) s.push_back(testing::sim_row(i));
-  w->append_sim(s);
-  for (std::uint64_t f = 0; f < frames; ++f) w->append_mesh_frame(testing::test_frame(f).view());
-  const Event e = testing::event_row(0);
-  w->append_events({&e, 1});
-  w->close();
-}
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  testing::TestSession content;
+  content.frames = frames;
+  testing::write_test_session(path, content);
 }
 
 std::string tissue() { return quote(TISSUE_CLI_BINARY); }
 
-// Files every tool must refuse with a message and exit code 1.
-std::vector<std::string> make_bad_files(const TempDir& dir) {
-  std::vector<std::string> files;
-  const std::string good = dir / "good.h5";
-  write_small_session(good);
-  const std::string bytes = testing::slurp(good);
-
-  write_bytes(dir / "empty.h5", "");
-  files.push_back(dir / "empty.h5");
-  write_bytes(dir / "text.h5", "this is a scene file, not a session\nname: cantilever\n");
-  files.push_back(dir / "text.h5");
-  std::mt19937 rng(42);
-  std::string noise(65536, '\0');
-  for (char& c : noise) c = static_cast<char>(rng() & 0xff);
-  write_bytes(dir / "random.h5", noise);
-  files.push_back(dir / "random.h5");
-  // A valid signature followed by garbage: HDF5 itself has to reject it.
-  write_bytes(dir / "signature_then_noise.h5", bytes.substr(0, 8) + noise);
-  files.push_back(dir / "signature_then_noise.h5");
-  for (const std::size_t cut : {std::size_t{4}, std::size_t{11}, std::size_t{48}, std::size_t{500}, bytes.size() / 4,
-                                bytes.size() / 2, bytes.size() - 100, bytes.size() - 1}) {
-    const std::string name = dir / ("truncated_" + std::to_string(cut) + ".h5");
-    write_bytes(name, bytes.substr(0, cut));
-    files.push_back(name);
-  }
-  // A real HDF5 file that is not a session.
-  const hid_t f = H5Fcreate((dir / "foreign.h5").c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-  H5Fclose(f);
-  files.push_back(dir / "foreign.h5");
-  files.push_back(dir / "does_not_exist.h5");
-  files.push_back(dir.path());  // a directory
-  return files;
-}
-
-TEST(SessionTools, BadFilesGetAClearErrorFromEveryLibraryTool) {
-  TempDir dir;
-  for (const std::string& path : make_bad_files(dir)) {
-    SCOPED_TRACE(path);
-    for (int tool = 0; tool < 3; ++tool) {
-      try {
-        if (tool == 0) read_session_info(path);
-        if (tool == 1) repair_session(path);
-        if (tool == 2) write_xdmf(path, dir / "out.xdmf");
-        ADD_FAILURE() << "tool " << tool << " accepted " << path;
-      } catch (const RecordError& e) {
-        EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
-      }
+// Every library tool and reader refuses `path` with a RecordError naming the
+// file (and `also`, e.g. the damaged dataset, when given); xdmf writes nothing.
+void expect_every_tool_refuses(const std::string& path, const TempDir& dir, const std::string& also = "") {
+  SCOPED_TRACE(path);
+  for (int tool = 0; tool < 5; ++tool) {
+    try {
+      if (tool == 0) read_session_info(path);
+      if (tool == 1) repair_session(path);
+      if (tool == 2) write_xdmf(path, dir / "out.xdmf");
+      if (tool == 3) read_session_rows(path);
+      if (tool == 4) read_haptic_track(path);
+      ADD_FAILURE() << "tool " << tool << " accepted " << path;
+    } catch (const RecordError& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << "tool " << tool << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find(also), std::string::npos) << "tool " << tool << ": " << e.what();
     }
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "out.xdmf"));
 }
 
+TEST(SessionTools, BadFilesGetAClearErrorFromEveryLibraryTool) {
+  TempDir dir;
+  for (const std::string& path : testing::bad_session_files(dir)) expect_every_tool_refuses(path, dir);
+}
+
 TEST(SessionTools, BadFilesMakeTheCliExitOneWithItsOwnMessage) {
   TempDir dir;
   TempDir scratch;
-  for (const std::string& path : make_bad_files(dir)) {
+  for (const std::string& path : testing::bad_session_files(dir)) {
     for (const char* tool : {"info", "repair", "xdmf"}) {
       SCOPED_TRACE(std::string(tool) + " " + path);
       const auto r = run(tissue() + " session " + tool + " " + quote(path), scratch);
@@ -117,14 +76,14 @@ TEST(SessionTools, TruncatedSessionSaysWhatIsWrong) {
   TempDir dir;
   write_small_session(dir / "good.h5");
   const std::string bytes = testing::slurp(dir / "good.h5");
-  write_bytes(dir / "cut.h5", bytes.substr(0, bytes.size() / 2));
+  testing::write_bytes(dir / "cut.h5", bytes.substr(0, bytes.size() / 2));
   try {
     read_session_info(dir / "cut.h5");
     FAIL() << "accepted a truncated file";
   } catch (const RecordError& e) {
     EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
   }
-  write_bytes(dir / "text.h5", "hello");
+  testing::write_bytes(dir / "text.h5", "hello");
   try {
     read_session_info(dir / "text.h5");
     FAIL() << "accepted a text file";
@@ -315,24 +274,105 @@ TEST(SessionTools, StrainDatasetOfTheWrongLengthIsAClearError) {
     files.push_back(path);
   }
   for (const std::string& path : files) {
-    SCOPED_TRACE(path);
-    for (int tool = 0; tool < 3; ++tool) {
-      try {
-        if (tool == 0) read_session_info(path);
-        if (tool == 1) repair_session(path);
-        if (tool == 2) write_xdmf(path, dir / "out.xdmf");
-        ADD_FAILURE() << "tool " << tool << " accepted " << path;
-      } catch (const RecordError& e) {
-        EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
-        EXPECT_NE(std::string(e.what()).find(strain), std::string::npos) << e.what();
-      }
-    }
+    expect_every_tool_refuses(path, dir, strain);
     const auto cli = run(tissue() + " session info " + quote(path), dir);
     EXPECT_EQ(cli.exit_code, 1) << cli.err;
     EXPECT_NE(cli.err.find(strain), std::string::npos) << cli.err;
     EXPECT_EQ(cli.err.find("HDF5-DIAG"), std::string::npos) << cli.err;
   }
-  EXPECT_FALSE(std::filesystem::exists(dir / "out.xdmf"));
+}
+
+// ---------------------------------------------------------------- readers
+
+TEST(SessionReader, ReadsBackEveryRecordedRow) {
+  TempDir dir;
+  testing::TestSession content;
+  content.sim = 75;
+  const SessionRows rows = read_session_rows(testing::write_test_session(dir / "s.h5", content));
+  ASSERT_EQ(rows.haptic.size(), 1500u);
+  ASSERT_EQ(rows.sim.size(), 75u);
+  for (std::uint64_t i = 0; i < rows.haptic.size(); ++i)
+    ASSERT_TRUE(testing::same_row(rows.haptic[i], testing::haptic_row(i))) << "haptic row " << i;
+  for (std::uint64_t i = 0; i < rows.sim.size(); ++i)
+    ASSERT_TRUE(testing::same_row(rows.sim[i], testing::sim_row(i))) << "sim row " << i;
+}
+
+TEST(SessionReader, HapticTrackIsTheRecordedHandMotion) {
+  TempDir dir;
+  const HapticTrack track = read_haptic_track(testing::write_test_session(dir / "s.h5"));
+  ASSERT_EQ(track.time_s.size(), 1500u);
+  ASSERT_EQ(track.device_position_m.size(), 1500u);
+  ASSERT_EQ(track.force_N.size(), 1500u);
+  for (std::uint64_t i = 0; i < 1500; ++i) {
+    const HapticRow r = testing::haptic_row(i);
+    ASSERT_TRUE(track.time_s[i] == r.time_s && track.device_position_m[i] == r.device_position_m &&
+                track.force_N[i] == r.force_N)
+        << "row " << i;
+  }
+  testing::TestSession no_hand;
+  no_hand.haptic = 0;
+  const std::string empty = testing::write_test_session(dir / "no_haptic.h5", no_hand);
+  try {
+    read_haptic_track(empty);
+    FAIL() << "a session without haptic rows gave a track";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find(empty), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("no haptic rows"), std::string::npos) << e.what();
+  }
+}
+
+// Replay paces by the session times and the replay device interpolates
+// between them: a NaN or a step back is an error naming the file, the
+// dataset and the row.
+TEST(SessionReader, TimesThatAreNotFiniteOrGoBackAreClearErrors) {
+  TempDir dir;
+  struct Damage {
+    DatasetId id;
+    std::uint64_t row;
+    double value;
+  };
+  for (const Damage d : {Damage{kHapticTime, 10, std::numeric_limits<double>::quiet_NaN()},
+                         Damage{kHapticTime, 700, 0.5}, Damage{kSimTime, 5, -1.0}}) {
+    const char* dataset = kDatasets[d.id].path;
+    // (No "literal" + std::string here: GCC 12 warns falsely, -Wrestrict, on that at -O3.)
+    const std::string path = dir / (std::to_string(d.id) + "_" + std::to_string(d.row) + ".h5");
+    SCOPED_TRACE(path);
+    testing::write_test_session(path);
+    testing::overwrite_f64(path, dataset, d.row, d.value);
+    for (int reader = 0; reader < 2; ++reader) {
+      if (reader == 1 && d.id != kHapticTime) continue;  // the track reads only /haptic
+      try {
+        if (reader == 0) read_session_rows(path);
+        if (reader == 1) read_haptic_track(path);
+        ADD_FAILURE() << "reader " << reader << " accepted " << dataset << "[" << d.row << "] = " << d.value;
+      } catch (const RecordError& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find(path), std::string::npos) << what;
+        EXPECT_NE(what.find(dataset), std::string::npos) << what;
+        EXPECT_NE(what.find("row " + std::to_string(d.row)), std::string::npos) << what;
+      }
+    }
+  }
+}
+
+TEST(SessionReader, RowsOutsideADatasetAreAClearErrorNotAReadPastItsEnd) {
+  TempDir dir;
+  const std::string path = testing::write_test_session(dir / "s.h5");
+  const SessionFile file(path);
+  EXPECT_EQ(file.info().rows.haptic_rows, 1500u);
+  EXPECT_EQ(file.rows<double>(kHapticTime, 1490, 10).back(), testing::haptic_row(1499).time_s);
+  const std::vector<double> force = file.rows<double>(kHapticForce, 2, 1);  // N x 3: one row is 3 values
+  ASSERT_EQ(force.size(), 3u);
+  EXPECT_EQ((std::array<double, 3>{force[0], force[1], force[2]}), testing::haptic_row(2).force_N);
+  try {
+    file.rows<double>(kHapticTime, 1490, 20);
+    FAIL() << "read rows 1490 to 1510 of a 1500-row dataset";
+  } catch (const RecordError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(path), std::string::npos) << what;
+    EXPECT_NE(what.find("/haptic/time_s"), std::string::npos) << what;
+    EXPECT_NE(what.find("rows 1490 to 1510"), std::string::npos) << what;
+  }
 }
 
 }  // namespace

@@ -1,12 +1,5 @@
 #include "replay_test_support.hpp"
 
-#include <hdf5.h>
-
-#include <fstream>
-#include <random>
-
-#include "record/session_writer.hpp"
-
 namespace tissue::replay::testing {
 
 void RecordingSink::mesh(const service::MeshSnapshot& s) {
@@ -51,56 +44,13 @@ SessionRows rows(std::size_t haptic, double haptic_dt_s, std::size_t sim, double
 }
 
 std::string write_session(const std::string& path, std::uint64_t frames) {
-  record::SessionMetadata m;
-  m.scene_name = "replay test";
-  m.software_version = "test";
-  auto w = record::SessionWriter::create(path, m);
-  const std::uint64_t haptic = frames * 1000 / 30, sim = frames * 50 / 30;
-  std::vector<record::HapticRow> h;
-  for (std::uint64_t i = 0; i < haptic; ++i) h.push_back(record::testing::haptic_row(i));
-  w->append_haptic(h);
-  std::vector<record::SimRow> s;
-  for (std::uint64_t i = 0; i < sim; ++i) s.push_back(record::testing::sim_row(i));
-  w->append_sim(s);
-  for (std::uint64_t f = 0; f < frames; ++f) w->append_mesh_frame(record::testing::test_frame(f).view());
-  w->close();
-  return path;
-}
-
-namespace {
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
-}  // namespace
-
-std::vector<std::string> bad_session_files(const record::testing::TempDir& dir) {
-  std::vector<std::string> files;
-  const std::string good = write_session(dir / "good.h5", 5);
-  const std::string bytes = record::testing::slurp(good);
-  write_bytes(dir / "empty.h5", "");
-  files.push_back(dir / "empty.h5");
-  write_bytes(dir / "text.h5", "this is a scene file, not a session\nname: cantilever\n");
-  files.push_back(dir / "text.h5");
-  std::mt19937 rng(7);
-  std::string noise(65536, '\0');
-  for (char& c : noise) c = static_cast<char>(rng() & 0xff);
-  write_bytes(dir / "random.h5", noise);
-  files.push_back(dir / "random.h5");
-  write_bytes(dir / "signature_then_noise.h5", bytes.substr(0, 8) + noise);
-  files.push_back(dir / "signature_then_noise.h5");
-  for (const std::size_t cut :
-       {std::size_t{11}, std::size_t{500}, bytes.size() / 4, bytes.size() / 2, bytes.size() - 100, bytes.size() - 1}) {
-    const std::string name = dir / ("truncated_" + std::to_string(cut) + ".h5");
-    write_bytes(name, bytes.substr(0, cut));
-    files.push_back(name);
-  }
-  const hid_t f = H5Fcreate((dir / "foreign.h5").c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-  H5Fclose(f);
-  files.push_back(dir / "foreign.h5");
-  files.push_back(dir / "does_not_exist.h5");
-  files.push_back(dir.path());
-  return files;
+  record::testing::TestSession content;
+  content.haptic = frames * 1000 / 30;
+  content.sim = frames * 50 / 30;
+  content.frames = frames;
+  content.events = 0;
+  content.scene_name = "replay test";
+  return record::testing::write_test_session(path, content);
 }
 
 }  // namespace tissue::replay::testing

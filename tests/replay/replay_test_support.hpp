@@ -1,7 +1,6 @@
 // Shared by the replay suites: a fake clock and a sink that records what was
-// sent when, an in-memory FrameSource, deterministic rows, session files
-// (good ones written with the recorder's SessionWriter, bad ones of every
-// kind the session tools refuse).
+// sent when, an in-memory FrameSource, deterministic rows, good session
+// files (record_test_support writes them, and the bad ones).
 #pragma once
 
 #include <atomic>
@@ -77,13 +76,10 @@ std::vector<x3d::SurfaceFrame> moving_frames(std::size_t n, double dt_s);
 // haptic_row(i) / sim_row(i) of record_test_support, re-timed to i * dt.
 SessionRows rows(std::size_t haptic, double haptic_dt_s, std::size_t sim, double sim_dt_s);
 
-// A closed session: test_frame(0 .. frames-1) (30 Hz), haptic rows for the
-// same span at 1 kHz (frames * 1000 / 30 rows), sim rows at 50 Hz. Returns path.
+// A closed session (record::testing::write_test_session): test_frame(0 ..
+// frames-1) (30 Hz), haptic rows for the same span at 1 kHz (frames * 1000 /
+// 30 rows), sim rows at 50 Hz, no events. Returns path. Files no reader
+// accepts: record::testing::bad_session_files.
 std::string write_session(const std::string& path, std::uint64_t frames);
-
-// Files every reader must refuse naming the file: empty, text, random bytes,
-// an HDF5 signature then noise, a good session truncated at several points,
-// an HDF5 file that is not a session, a missing file and a directory.
-std::vector<std::string> bad_session_files(const record::testing::TempDir& dir);
 
 }  // namespace tissue::replay::testing

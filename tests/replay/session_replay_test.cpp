@@ -1,5 +1,5 @@
 // Session replay (daemon/replay): the timeline, pacing against a fake clock
-// (no sleeping), the conversions, the row reader on good and bad files, and
+// (no sleeping), the conversions, the row reader's errors on bad files, and
 // `tissue session replay` end to end. The CLI cases publish to LCM's
 // in-process memq:// provider (no network). The ReplayNetns cases need
 // TISSUE_TEST_LCM_URL and run through the ctest entry inside a private
@@ -8,19 +8,14 @@
 #include "replay/session_replay.hpp"
 
 #include <gtest/gtest.h>
-#include <hdf5.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <lcm/lcm-cpp.hpp>
-#include <map>
-#include <random>
 #include <thread>
 
-#include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 #include "replay_test_support.hpp"
 #include "transport/lcm_messages.hpp"
@@ -254,7 +249,22 @@ TEST(ReplayConversions, SnapshotCarriesTheFrameAndStrainWhenPresent) {
   ASSERT_EQ(s.triangle_strain_energy_J_per_m3.size(), f.triangles.size());
   for (std::size_t t = 0; t < f.triangles.size(); ++t) {
     const auto& tri = f.triangles[t];
-    EXPECT_FLOAT_EQ(s.triangle_strain_energy_J_per_m3[t], static_cast<float>(tri[0] + tri[1] + tri[2]));
+    EXPECT_FLOAT_EQ(s.triangle_strain_energy_J_per_m3[t], static_cast<float>(tri[0] + tri[1] + tri[2]))
+        << "only per-vertex strain: each triangle gets the mean of its vertices";
+  }
+  // Per-triangle values present (next to the per-vertex ones): sent unchanged.
+  f.triangle_strain_energy_J_per_m3 = record::testing::test_frame(0).triangle_strain_energy_J_per_m3;
+  s = to_snapshot(f, 9);
+  EXPECT_EQ(s.triangle_strain_energy_J_per_m3, f.triangle_strain_energy_J_per_m3);
+  // And from a session file through the session source, as the replay reads
+  // it: every frame's per-triangle strain is the recorded one, bit for bit.
+  TempDir dir;
+  auto source = x3d::open_session_source(testing::write_session(dir / "s.h5", 6));
+  ASSERT_EQ(source->frame_count(), 6u);
+  for (std::size_t k = 0; k < 6; ++k) {
+    const record::testing::TestFrame recorded = record::testing::test_frame(k);
+    s = to_snapshot(source->read_frame(k), k + 1);
+    EXPECT_EQ(s.triangle_strain_energy_J_per_m3, recorded.triangle_strain_energy_J_per_m3) << "frame " << k;
   }
 }
 
@@ -283,35 +293,13 @@ TEST(ReplayConversions, RowsBecomeTheStatusFieldsThePublishersRead) {
 }
 
 // ---------------------------------------------------------------- files
-
-TEST(ReplayRows, ReadsBackEveryRecordedRow) {
-  TempDir dir;
-  const std::string path = testing::write_session(dir / "s.h5", 45);
-  const SessionRows rows = read_session_rows(path);
-  ASSERT_EQ(rows.haptic.size(), 1500u);
-  ASSERT_EQ(rows.sim.size(), 75u);
-  for (std::uint64_t i = 0; i < rows.haptic.size(); ++i) {
-    const record::HapticRow e = record::testing::haptic_row(i);
-    const record::HapticRow& g = rows.haptic[i];
-    ASSERT_TRUE(g.time_s == e.time_s && g.device_position_m == e.device_position_m &&
-                g.proxy_position_m == e.proxy_position_m && g.force_N == e.force_N && g.contact == e.contact &&
-                g.model_version == e.model_version)
-        << "haptic row " << i;
-  }
-  for (std::uint64_t i = 0; i < rows.sim.size(); ++i) {
-    const record::SimRow e = record::testing::sim_row(i);
-    const record::SimRow& g = rows.sim[i];
-    ASSERT_TRUE(g.time_s == e.time_s && g.sim_time_s == e.sim_time_s && g.real_time_factor == e.real_time_factor &&
-                g.step_ms == e.step_ms && g.nodes == e.nodes && g.tets == e.tets && g.springs == e.springs &&
-                g.refines == e.refines && g.merges == e.merges && g.kinetic_J == e.kinetic_J &&
-                g.elastic_J == e.elastic_J)
-        << "sim row " << i;
-  }
-}
+// The rows themselves are read by record::read_session_rows (tested in
+// tests/record/session_tools_test.cpp); replay turns its errors into
+// ReplayError, which the CLI reports with exit code 1.
 
 TEST(ReplayRows, BadFilesAreErrorsNamingTheFile) {
   TempDir dir;
-  for (const std::string& path : testing::bad_session_files(dir)) {
+  for (const std::string& path : record::testing::bad_session_files(dir)) {
     SCOPED_TRACE(path);
     try {
       read_session_rows(path);
@@ -343,7 +331,7 @@ TEST(ReplayCli, ReplaysEverythingAndPrintsTheSummary) {
 
 TEST(ReplayCli, BadFilesExitOneWithOneLineNamingTheFile) {
   TempDir dir, scratch;
-  for (const std::string& path : testing::bad_session_files(dir)) {
+  for (const std::string& path : record::testing::bad_session_files(dir)) {
     SCOPED_TRACE(path);
     const RunResult r = record::testing::run(tissue() + " session replay " + quote(path) + " --lcm memq://", scratch);
     EXPECT_EQ(r.exit_code, 1) << r.err;
@@ -460,16 +448,8 @@ TEST(ReplayNetns, LcmDeliversEveryFrameInOrderAtTheRecordedPace) {
       EXPECT_EQ(got.meshes[k].sequence, static_cast<std::int64_t>(k + 1)) << "in order, none lost";
       EXPECT_EQ(got.meshes[k].time_s, f.time_s);
       EXPECT_EQ(got.meshes[k].value, static_cast<std::int32_t>(f.vertices_m.size())) << "frame " << k;
-      // The session has strain: each triangle carries the mean of its
-      // vertices' strain (the per-vertex values the session source gives).
-      const std::vector<float> vertex =
-          x3d::vertex_strain_from_triangles(f.vertices_m.size(), f.triangles, f.triangle_strain_energy_J_per_m3);
-      ASSERT_EQ(got.meshes[k].strain.size(), f.triangles.size()) << "frame " << k;
-      for (std::size_t t = 0; t < f.triangles.size(); ++t) {
-        const auto& tri = f.triangles[t];
-        EXPECT_FLOAT_EQ(got.meshes[k].strain[t], (vertex[tri[0]] + vertex[tri[1]] + vertex[tri[2]]) / 3.0f)
-            << "frame " << k << " triangle " << t;
-      }
+      // The session has strain: each triangle carries its recorded value.
+      EXPECT_EQ(got.meshes[k].strain, f.triangle_strain_energy_J_per_m3) << "frame " << k;
     }
     // Haptic states: 100 Hz over the session, in order, contact as recorded.
     EXPECT_GE(got.haptic.size(), 140u);
