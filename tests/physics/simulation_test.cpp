@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "mesh/refine_ops.hpp"
 #include "physics/physics_test_support.hpp"
 
@@ -91,6 +93,30 @@ TEST(Simulation, LoadedBeamNeverHoldsMoreEnergyThanTheWorkDoneOnIt) {
     EXPECT_LE(sim.kinetic_energy_J() + sim.elastic_energy_J(), sim.counters().external_work_J * (1 + 1e-6) + 1e-15);
   }
   EXPECT_GT(sim.counters().external_work_J, 0.0);
+}
+
+// The scene chooses the CG preconditioner (integrator.cg_preconditioner):
+// at dt = 10 ms, 20 iterations carry the beam's bending with the two-level
+// one and not with Jacobi (Integrator.TwoLevelKeepsTwentyIterations... holds
+// the integrator-level figures); here the choice must reach the integrator.
+TEST(Simulation, TheSceneChoosesTheCgPreconditioner) {
+  const auto tip_mm = [](scene::CgPreconditioner preconditioner, double tolerance, int iterations) {
+    scene::Scene s = beam_scene();
+    s.adaptivity.min_depth = 2;
+    s.integrator.dt_s = 1e-2;
+    s.integrator.cg_tolerance = tolerance;
+    s.integrator.cg_max_iterations = iterations;
+    s.integrator.cg_preconditioner = preconditioner;
+    Simulation sim(s);
+    EXPECT_TRUE(run_until(sim, 0.4));
+    return -1e3 * sim.probe_displacement_m(0).z();
+  };
+  const double reference = tip_mm(scene::CgPreconditioner::kJacobi, 1e-10, 5000);
+  const double jacobi = tip_mm(scene::CgPreconditioner::kJacobi, 1e-300, 20);
+  const double two_level = tip_mm(scene::CgPreconditioner::kTwoLevel, 1e-300, 20);
+  EXPECT_NEAR(two_level, reference, 0.01 * std::abs(reference));
+  EXPECT_GT(std::abs(jacobi - reference), 3.0 * std::abs(two_level - reference))
+      << "jacobi " << jacobi << " two-level " << two_level << " reference " << reference;
 }
 
 TEST(Simulation, ProbeOutsideTheObjectIsRejected) {

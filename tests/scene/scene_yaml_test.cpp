@@ -223,6 +223,12 @@ TEST(SceneYaml, EveryKeyOfTheBaseSceneIsRead) {
   EXPECT_DOUBLE_EQ(s.integrator.cg_tolerance, 1e-6);
   EXPECT_EQ(s.integrator.cg_max_iterations, 100);
 
+  EXPECT_EQ(s.integrator.cg_preconditioner, CgPreconditioner::kJacobi);  // the default
+  const Scene p = parse_scene(
+      base_with("cg_max_iterations: 100", "cg_max_iterations: 5\n  cg_preconditioner: two_level"), "test.yaml");
+  EXPECT_EQ(p.integrator.cg_preconditioner, CgPreconditioner::kTwoLevel);
+  expect_error(base_with("cg_max_iterations: 100", "cg_max_iterations: 5\n  cg_preconditioner: multigrid"),
+               "integrator.cg_preconditioner", "unknown value");
   const Scene t = parse_scene(base_with("kind: implicit", "kind: projective") + "", "test.yaml");
   EXPECT_EQ(t.integrator.kind, IntegratorKind::kProjective);
   const Scene u = parse_scene(base_with("criterion: strain_energy", "criterion: stretch"), "test.yaml");
@@ -579,13 +585,13 @@ TEST(SceneYamlFuzz, MutatedScenesEitherParseOrThrowSceneError) {
   EXPECT_GT(rejected, 100);
 }
 
-
 // The optional tool: absent means no tool at all; present, every field is
 // read and validated like the rest.
 TEST(SceneYaml, ToolSectionIsOptionalAndRead) {
   EXPECT_FALSE(parse_scene(kBase, "base.yaml").tool.has_value());
-  const Scene s = parse_scene(kBase + "tool:\n  patch_radius_m: 0.03\n  engage_distance_m: 0.004\n"
-                                      "  freeze_radius_m: 0\n  max_force_N: 7.5\n",
+  const Scene s = parse_scene(kBase +
+                                  "tool:\n  patch_radius_m: 0.03\n  engage_distance_m: 0.004\n"
+                                  "  freeze_radius_m: 0\n  max_force_N: 7.5\n",
                               "tool.yaml");
   ASSERT_TRUE(s.tool.has_value());
   EXPECT_EQ(s.tool->patch_radius_m, 0.03);
