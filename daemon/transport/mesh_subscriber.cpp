@@ -43,12 +43,14 @@ x3d::SurfaceFrame frame_from_mesh_arrays(double time_s, std::span<const float> v
       f.triangles[t][c] = static_cast<std::uint32_t>(v);
     }
   f.vertex_level.assign(vertex_level.begin(), vertex_level.end());
+  // Strain-energy densities are finite and >= 0; anything else (an old or
+  // foreign publisher) leaves the frame without strain rather than dropping it.
   bool strain_ok = !triangle_strain.empty();
-  for (const float s : triangle_strain) strain_ok = strain_ok && std::isfinite(s);
+  for (const float s : triangle_strain) strain_ok = strain_ok && std::isfinite(s) && s >= 0.0f;
   if (strain_ok) {
+    f.triangle_strain_energy_J_per_m3.assign(triangle_strain.begin(), triangle_strain.end());
     // Sizes and indices were checked above: this cannot throw.
-    f.vertex_strain_energy_Pa = x3d::vertex_strain_from_triangles(
-        nv, f.triangles, std::vector<float>(triangle_strain.begin(), triangle_strain.end()));
+    f.vertex_strain_energy_Pa = x3d::vertex_strain_from_triangles(nv, f.triangles, f.triangle_strain_energy_J_per_m3);
   }
   return f;
 }

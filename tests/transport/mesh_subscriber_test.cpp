@@ -42,7 +42,8 @@ TEST(MeshDecode, ValidArraysBecomeAFrameWithPerVertexStrain) {
   EXPECT_EQ(f.triangles[1], (std::array<std::uint32_t, 3>{1, 3, 2}));
   EXPECT_EQ(f.vertex_level, (std::vector<std::uint8_t>{0, 1, 2, 3}));
   EXPECT_EQ(f.vertex_strain_energy_Pa, (std::vector<float>{2.0f, 4.0f, 4.0f, 6.0f}));
-  x3d::validate_frame(f, true, "decoded");  // drawable with strain colours
+  EXPECT_EQ(f.triangle_strain_energy_J_per_m3, (std::vector<float>{2.0f, 6.0f}));  // as sent
+  x3d::validate_frame(f, true, "decoded");                                         // drawable with strain colours
 }
 
 TEST(MeshDecode, MalformedArraysAreRejectedWithAReason) {
@@ -76,7 +77,11 @@ TEST(MeshDecode, MissingOrNonFiniteStrainLeavesOnlyTheStrainOut) {
   a.strain = {1.0f, std::numeric_limits<float>::infinity()};
   const x3d::SurfaceFrame f = a.frame();
   EXPECT_TRUE(f.vertex_strain_energy_Pa.empty());
+  EXPECT_TRUE(f.triangle_strain_energy_J_per_m3.empty());
   EXPECT_EQ(f.triangles.size(), 2u);
+  a.strain = {1.0f, -2.0f};  // a density is never negative
+  EXPECT_TRUE(a.frame().triangle_strain_energy_J_per_m3.empty());
+  EXPECT_TRUE(a.frame().vertex_strain_energy_Pa.empty());
   a = {};
   a.level.clear();  // "all level 0"
   EXPECT_TRUE(a.frame().vertex_level.empty());
