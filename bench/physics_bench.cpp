@@ -22,6 +22,7 @@
 #include <ctime>
 #include <vector>
 
+#include "bench_timing.hpp"
 #include "physics/boundary.hpp"
 #include "physics/forces.hpp"
 #include "physics/integrator.hpp"
@@ -178,16 +179,8 @@ scene::Scene performance_beam(int resolution, int geometry, scene::IntegratorKin
   return s;
 }
 
-double thread_cpu_ns() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return 1e9 * static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_nsec);
-}
-
-double median(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
+using bench::median;
+using bench::thread_cpu_ns;
 
 // fixed_cg_iterations > 0: exactly that many CG iterations (cg20); 0: the
 // default tolerance mode (relative residual 1e-6, at most 100 iterations).

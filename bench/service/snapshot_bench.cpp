@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "../bench_timing.hpp"
 #include "concurrency/latest_value.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/mesh_snapshot.hpp"
@@ -29,16 +30,8 @@ namespace {
 
 using tissue::service::MeshSnapshot;
 
-double thread_cpu_ns() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return 1e9 * static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_nsec);
-}
-
-double median(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
+using tissue::bench::median;
+using tissue::bench::thread_cpu_ns;
 
 struct Case {
   std::string name;
