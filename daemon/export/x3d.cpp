@@ -1,4 +1,5 @@
 #include "export/x3d.hpp"
+#include "util/xml.hpp"
 
 #include <algorithm>
 #include <charconv>
@@ -62,33 +63,6 @@ void put(std::string& out, std::uint64_t v) {
   out.append(buf, r.ptr);
 }
 
-std::string escape_xml(std::string_view s) {
-  std::string out;
-  out.reserve(s.size());
-  for (const char c : s) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '\'':
-        out += "&apos;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
-
 // An X3D SFString inside an MFString attribute is double-quoted; '"' and
 // '\' are backslash-escaped first, then the whole is XML-escaped.
 std::string mf_string_item(std::string_view s) {
@@ -98,7 +72,7 @@ std::string mf_string_item(std::string_view s) {
     q += c;
   }
   q += '"';
-  return escape_xml(q);
+  return util::escape_xml(q);
 }
 
 std::string describe_time(const SurfaceFrame& f) {
@@ -160,9 +134,9 @@ void header(std::string& x, const X3dOptions& options, const StrainRange& range,
   // IntegerSequencer is not in the Interchange profile; the component
   // statement adds exactly it, so plain viewers still accept the profile.
   if (event_utilities) x += "    <component name='EventUtilities' level='1'/>\n";
-  x += "    <meta name='title' content='" + escape_xml(options.title) + "'/>\n";
+  x += "    <meta name='title' content='" + util::escape_xml(options.title) + "'/>\n";
   x += "    <meta name='generator' content='tissued tissue_export (docs/x3d-export.md)'/>\n";
-  x += "    <meta name='description' content='" + escape_xml(what) + "'/>\n";
+  x += "    <meta name='description' content='" + util::escape_xml(what) + "'/>\n";
   if (options.colour == ColourMode::kLevel) {
     x += "    <meta name='tissue.colour' content='bisection level per vertex, palette of ";
     put(x, std::uint64_t{kLevelPaletteSize});
@@ -192,7 +166,7 @@ void camera(std::string& x, const Bounds& b, const X3dOptions& options) {
   radius_m = 0.5 * std::sqrt(radius_m);
   if (!(radius_m > 0.0) || !std::isfinite(radius_m)) radius_m = 0.01;  // all vertices coincide
   const double distance_m = 1.1 * radius_m / std::sin(0.5 * kFieldOfView_rad);
-  x += "    <WorldInfo title='" + escape_xml(options.title) + "' info='" +
+  x += "    <WorldInfo title='" + util::escape_xml(options.title) + "' info='" +
        mf_string_item("units: metres; exported by tissued") + "'/>\n";
   x += "    <NavigationInfo type='\"EXAMINE\" \"ANY\"' avatarSize='";
   put(x, 0.01 * radius_m);
@@ -202,7 +176,7 @@ void camera(std::string& x, const Bounds& b, const X3dOptions& options) {
   put(x, 0.02 * radius_m);
   x += "' speed='";
   put(x, radius_m);
-  x += "'/>\n    <Viewpoint description='" + escape_xml(options.title) + "' position='";
+  x += "'/>\n    <Viewpoint description='" + util::escape_xml(options.title) + "' position='";
   put(x, centre[0]);
   x += ' ';
   put(x, centre[1]);

@@ -15,6 +15,7 @@
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
+#include "util/xml.hpp"
 
 namespace tissue::record {
 
@@ -257,32 +258,6 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
     info.duration_s = counts.last_time_s;
   if (counts_out) *counts_out = counts;
   return info;
-}
-
-std::string xml_escape(const std::string& s) {
-  std::string out;
-  for (char ch : s) {
-    switch (ch) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      case '\'':
-        out += "&apos;";
-        break;
-      default:
-        out += ch;
-    }
-  }
-  return out;
 }
 
 }  // namespace
@@ -539,7 +514,7 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   const fs::path out_dir = fs::absolute(report.out_path, ec).parent_path();
   fs::path h5_ref = fs::relative(fs::absolute(h5_path, ec), out_dir, ec);
   if (ec || h5_ref.empty()) h5_ref = fs::absolute(h5_path, ec);
-  const std::string ref = xml_escape(h5_ref.string());
+  const std::string ref = util::escape_xml(h5_ref.string());
 
   // Inner DataItems name the whole dataset with its full shape (XDMF
   // readers check it against the file).
@@ -550,7 +525,7 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
 
   std::ostringstream x;
   x << "<?xml version=\"1.0\" ?>\n";
-  x << "<!-- Written by `tissue session xdmf` from " << xml_escape(h5_path) << ": one grid per mesh frame. -->\n";
+  x << "<!-- Written by `tissue session xdmf` from " << util::escape_xml(h5_path) << ": one grid per mesh frame. -->\n";
   x << "<Xdmf Version=\"3.0\">\n <Domain>\n";
   x << "  <Grid Name=\"session\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
   for (std::uint64_t f = 0; f < frames; ++f) {
