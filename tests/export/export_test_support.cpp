@@ -109,54 +109,6 @@ std::vector<double> numbers(const std::string& text) {
   return out;
 }
 
-TempDir::TempDir() {
-  std::string templ = (std::filesystem::temp_directory_path() / "tissue_export_XXXXXX").string();
-  if (::mkdtemp(templ.data()) == nullptr) throw std::runtime_error("mkdtemp failed");
-  path_ = templ;
-}
-
-TempDir::~TempDir() {
-  std::error_code ec;
-  std::filesystem::remove_all(path_, ec);
-}
-
-std::string quote(const std::string& s) {
-  std::string q = "'";
-  for (const char c : s) {
-    if (c == '\'')
-      q += "'\\''";
-    else
-      q += c;
-  }
-  return q + "'";
-}
-
-std::string slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-void write_text(const std::string& path, const std::string& text) {
-  std::ofstream f(path, std::ios::binary);
-  f << text;
-  ASSERT_TRUE(f.good()) << path;
-}
-
-RunResult run(const std::string& command, const TempDir& scratch) {
-  static int counter = 0;
-  const std::string out = scratch / ("run" + std::to_string(counter) + ".out");
-  const std::string err = scratch / ("run" + std::to_string(counter) + ".err");
-  ++counter;
-  const int status = std::system((command + " >" + quote(out) + " 2>" + quote(err)).c_str());
-  RunResult r;
-  if (status != -1 && WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
-
 std::string tovrmlx3d_path() {
   const char* path = std::getenv("PATH");
   std::stringstream dirs(path ? path : "");

@@ -9,8 +9,16 @@
 #include <vector>
 
 #include "export/x3d.hpp"
+#include "support/process_support.hpp"
 
 namespace tissue::x3d::testing {
+
+using tissue::testing::quote;
+using tissue::testing::run;
+using tissue::testing::RunResult;
+using tissue::testing::slurp;
+using tissue::testing::TempDir;
+using tissue::testing::write_text;
 
 // Axis-aligned box [lo, hi]: 8 vertices, 12 triangles CCW seen from outside;
 // levels 0..7 per vertex.
@@ -27,28 +35,7 @@ std::size_t count_elements(const std::string& xml, const std::string& element);
 // Whitespace/comma separated numbers (X3D MF fields); fails the test on junk.
 std::vector<double> numbers(const std::string& text);
 
-class TempDir {
- public:
-  TempDir();
-  ~TempDir();
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  std::string operator/(const std::string& name) const { return path_ + "/" + name; }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
-
-struct RunResult {
-  int exit_code = -1;  // -1: killed by a signal
-  std::string out, err;
-};
 // Runs a shell command line, capturing stdout and stderr into `scratch`.
-RunResult run(const std::string& command, const TempDir& scratch);
-std::string quote(const std::string& s);
-std::string slurp(const std::string& path);
-void write_text(const std::string& path, const std::string& text);
 // Path of tovrmlx3d (package view3dscene), empty when not installed.
 std::string tovrmlx3d_path();
 

@@ -20,18 +20,6 @@
 
 namespace tissue::record::testing {
 
-TempDir::TempDir() {
-  const char* base = std::getenv("TMPDIR");
-  std::string tmpl = std::string(base && *base ? base : "/tmp") + "/trec.XXXXXX";
-  if (::mkdtemp(tmpl.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + tmpl);
-  path_ = tmpl;
-}
-
-TempDir::~TempDir() {
-  std::error_code ec;
-  std::filesystem::remove_all(path_, ec);
-}
-
 HapticRow haptic_row(std::uint64_t i) {
   HapticRow r;
   const double x = static_cast<double>(i);
@@ -360,31 +348,6 @@ void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t r
 
 void overwrite_f64(const std::string& path, const char* dataset, std::uint64_t row, double value) {
   overwrite(path, dataset, row, H5T_NATIVE_DOUBLE, value);
-}
-
-std::string quote(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
-std::string slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-RunResult run(const std::string& command, const TempDir& scratch) {
-  const std::string out = scratch / "run.stdout", err = scratch / "run.stderr";
-  const std::string line = "(" + command + ") >" + quote(out) + " 2>" + quote(err);
-  const int status = std::system(line.c_str());
-  RunResult r;
-  if (WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
-  if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
 }
 
 bool have_system_h5py() { return std::system("/usr/bin/python3 -c 'import h5py' >/dev/null 2>&1") == 0; }

@@ -11,21 +11,15 @@
 #include <vector>
 
 #include "record/record_types.hpp"
+#include "support/process_support.hpp"
 
 namespace tissue::record::testing {
 
-class TempDir {
- public:
-  TempDir();
-  ~TempDir();
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  const std::string& path() const { return path_; }
-  std::string operator/(const std::string& name) const { return path_ + "/" + name; }
-
- private:
-  std::string path_;
-};
+using tissue::testing::quote;
+using tissue::testing::run;
+using tissue::testing::RunResult;
+using tissue::testing::slurp;
+using tissue::testing::TempDir;
 
 // Row i of a deterministic session (time_s = i ms).
 HapticRow haptic_row(std::uint64_t i);
@@ -94,15 +88,7 @@ void make_version_1(const std::string& path);
 void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value);
 void overwrite_f64(const std::string& path, const char* dataset, std::uint64_t row, double value);
 
-struct RunResult {
-  int exit_code = -1;  // -1: killed by a signal
-  int signal = 0;
-  std::string out, err;
-};
 // Runs a shell command line with stdout/stderr captured into `scratch`.
-RunResult run(const std::string& command, const TempDir& scratch);
-std::string quote(const std::string& s);
-std::string slurp(const std::string& path);
 
 // Whether Debian's python (with h5py) is usable for the cross-checks.
 bool have_system_h5py();

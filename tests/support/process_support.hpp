@@ -1,0 +1,42 @@
+// Shared by every suite that touches files or runs programs: a scratch
+// directory that cleans up after itself, and running a shell command line
+// with its output captured.
+#pragma once
+
+#include <string>
+
+namespace tissue::testing {
+
+// A fresh private directory under $TMPDIR (or /tmp), removed with everything
+// in it at the end of the test. Its path is short (a long $TMPDIR is ignored)
+// because Unix socket paths inside it must fit 107 bytes.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::string& path() const { return path_; }
+  std::string operator/(const std::string& name) const { return path_ + "/" + name; }
+
+ private:
+  std::string path_;
+};
+
+struct RunResult {
+  int exit_code = -1;  // -1: killed by a signal
+  int signal = 0;      // the signal that ended it, 0 if none
+  std::string out, err;
+};
+
+// Runs a shell command line (sh -c), its stdout and stderr captured through
+// files in `scratch` (each run gets its own, kept for a failing test to show).
+RunResult run(const std::string& command, const TempDir& scratch);
+// `s` single-quoted for the shell.
+std::string quote(const std::string& s);
+// A file's bytes; empty when it cannot be read.
+std::string slurp(const std::string& path);
+// Writes `text` to `path` (a failed write fails the test).
+void write_text(const std::string& path, const std::string& text);
+
+}  // namespace tissue::testing
