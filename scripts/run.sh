@@ -29,4 +29,7 @@ echo "tissued: serving for 20 s; meanwhile: $bin/clients/tissue ctl --socket $ru
 "$bin/clients/tissue" session info "$run_dir/$session"
 "$bin/clients/tissue" x3d --session "$run_dir/$session" --time 0.9 -o "$run_dir/surface-$stamp.x3d"
 "$bin/clients/tissue" render --session "$run_dir/$session" --time 0.9 -o "$run_dir/surface-$stamp.png"
-echo "run.sh: session, X3D and PNG are in $run_dir"
+"$bin/clients/tissue" render --session "$run_dir/$session" --time 0.9 --colour strain \
+  -o "$run_dir/strain-$stamp.png"
+echo "run.sh: session, X3D and PNGs (levels, strain) are in $run_dir;" \
+  "replay it live with: $bin/clients/tissue session replay $run_dir/$session --lcm"
