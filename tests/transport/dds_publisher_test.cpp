@@ -39,7 +39,8 @@
 // the wrong size inside RTPSReader::~RTPSReader: a bug in the library (not
 // built with ASan), reported on every delete_datareader. Only that check is
 // off for this binary; ASAN_OPTIONS from the environment still apply on top.
-extern "C" const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
+// Weak: daemon/transport/dds_subscriber.cpp says the same.
+extern "C" __attribute__((weak)) const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
 #endif
 
 namespace tissue::transport {
