@@ -30,6 +30,18 @@ x3d::SurfaceFrame box_surface(bool refine_corner) {
   return f;
 }
 
+// 400 x 300, looking straight down: the box's top face fills a known
+// rectangle, lit head-on.
+RenderOptions top_view(bool legend) {
+  RenderOptions o;
+  o.width_px = 400;
+  o.height_px = 300;
+  o.azimuth_deg = -90.0;
+  o.elevation_deg = 90.0;
+  o.legend = legend;
+  return o;
+}
+
 bool is_background(const Image& img, int x, int y) {
   const auto p = img.pixel(x, y);
   return p[0] == 255 && p[1] == 255 && p[2] == 255;
@@ -38,12 +50,7 @@ bool is_background(const Image& img, int x, int y) {
 // Seen from straight above, the orthographic picture of the box is a
 // rectangle of the box's x-y extent at the camera's scale.
 TEST(Render, ObjectCoversItsProjectedBounds) {
-  RenderOptions o;
-  o.width_px = 400;
-  o.height_px = 300;
-  o.azimuth_deg = -90.0;
-  o.elevation_deg = 90.0;
-  o.legend = false;
+  RenderOptions o = top_view(false);
   const Image img = render_frame(box_surface(false), o);
   int covered = 0;
   for (int y = 0; y < img.height; ++y)
@@ -61,11 +68,7 @@ TEST(Render, ObjectCoversItsProjectedBounds) {
 // Refinement shows: the refined corner is drawn in another palette colour
 // than the coarse rest, and the legend lists both levels.
 TEST(Render, RefinedRegionChangesColour) {
-  RenderOptions o;
-  o.width_px = 400;
-  o.height_px = 300;
-  o.azimuth_deg = -90.0;
-  o.elevation_deg = 90.0;
+  RenderOptions o = top_view(true);
   const Image coarse = render_frame(box_surface(false), o);
   const Image refined = render_frame(box_surface(true), o);
   // x = 0.38 m (near the refined end) and x = 0.02 m (far from it), y = 0.05 m.
@@ -87,12 +90,7 @@ TEST(Render, RefinedRegionChangesColour) {
 TEST(Render, StrainColoursFollowTheField) {
   x3d::SurfaceFrame f = box_surface(false);
   for (const auto& v : f.vertices_m) f.vertex_strain_energy_Pa.push_back(static_cast<float>(250.0 * v[0]));
-  RenderOptions o;
-  o.width_px = 400;
-  o.height_px = 300;
-  o.azimuth_deg = -90.0;
-  o.elevation_deg = 90.0;
-  o.legend = false;
+  RenderOptions o = top_view(false);
   o.colour = x3d::ColourMode::kStrain;
   const auto range = strain_range_Pa(f, o);
   EXPECT_FLOAT_EQ(range[0], 0.0);
