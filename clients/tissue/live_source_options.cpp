@@ -2,7 +2,6 @@
 
 #include <CLI/CLI.hpp>
 
-#include "config/daemon_config.hpp"
 #include "export/live_source.hpp"
 #include "transport/dds_subscriber.hpp"
 #include "transport/lcm_subscriber.hpp"
@@ -10,23 +9,11 @@
 namespace tissue::cli {
 
 void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* session, CLI::Option* many) {
-  const config::DdsPublishSpec dds_defaults;
-  o.dds_domain = dds_defaults.domain_id;
-  o.dds_prefix = dds_defaults.topic_prefix;
   o.lcm_option = cmd->add_option("--lcm", o.lcm_url,
                                  "Live frames from LCM (channel TISSUE_SURFACE_MESH) at URL instead of a session")
                      ->expected(0, 1)
                      ->default_str(transport::kLcmSubscribeUrl);
-  o.dds_option = cmd->add_flag("--dds", o.dds, "Live frames from Fast DDS (topic <prefix>surface_mesh)");
-  cmd->add_option("--dds-domain", o.dds_domain, "DDS domain (as publish.dds.domain_id)")
-      ->check(CLI::Range(0, 232))
-      ->capture_default_str()
-      ->needs(o.dds_option);
-  cmd->add_option("--dds-prefix", o.dds_prefix, "DDS topic prefix (as publish.dds.topic_prefix)")
-      ->capture_default_str()
-      ->needs(o.dds_option);
-  cmd->add_flag("--dds-remote", o.dds_remote, "DDS on every interface (a publisher on another host)")
-      ->needs(o.dds_option);
+  o.dds_option = add_dds_options(cmd, o.dds, "Live frames from Fast DDS (topic <prefix>surface_mesh)");
   CLI::Option* seconds =
       cmd->add_option("--seconds", o.seconds, "Live: collect frames for S seconds (wall) after the first one")
           ->check(CLI::PositiveNumber)
@@ -48,11 +35,7 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
     if (o.lcm_url) {
       sub = std::make_unique<transport::LcmMeshSubscriber>(*o.lcm_url);
     } else {
-      transport::DdsSubscribeOptions d;
-      d.domain_id = o.dds_domain;
-      d.topic_prefix = o.dds_prefix;
-      d.loopback_only = !o.dds_remote;
-      sub = std::make_unique<transport::DdsMeshSubscriber>(d);
+      sub = std::make_unique<transport::DdsMeshSubscriber>(o.dds.subscribe_options());
     }
   } catch (const std::runtime_error& e) {
     throw LiveStartError(e.what());

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "export/frame_source.hpp"
+#include "tissue/dds_cli.hpp"
 
 namespace CLI {
 class App;
@@ -27,16 +28,13 @@ struct LiveStartError : std::runtime_error {
 
 struct LiveSourceOptions {
   std::optional<std::string> lcm_url;
-  bool dds = false;
-  int dds_domain = 0;
-  std::string dds_prefix = "tissue/";
-  bool dds_remote = false;
+  DdsCliOptions dds;
   double seconds = 2.0;     // frames collected for an animation / sequence (wall)
   double timeout_s = 10.0;  // wait for the first frame
   CLI::Option* lcm_option = nullptr;
   CLI::Option* dds_option = nullptr;
 
-  bool live() const { return lcm_url.has_value() || dds; }
+  bool live() const { return lcm_url.has_value() || dds.enabled; }
 };
 
 // Adds the options to `cmd`; `session` is the command's --session option

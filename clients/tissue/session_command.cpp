@@ -15,6 +15,7 @@
 #include "config/daemon_config.hpp"
 #include "record/session_tools.hpp"
 #include "replay/session_replay.hpp"
+#include "tissue/dds_cli.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 
@@ -27,10 +28,7 @@ constexpr int kExitBadFile = 1;  // same value as kExitDaemonError: "the thing y
 // `replay`: where to publish and how fast.
 struct ReplayCommandOptions {
   std::optional<std::string> lcm_url;  // set: publish over LCM there
-  bool dds = false;
-  int dds_domain = config::DdsPublishSpec{}.domain_id;
-  std::string dds_prefix = config::DdsPublishSpec{}.topic_prefix;
-  bool dds_remote = false;
+  DdsCliOptions dds;
   double dds_wait_s = 1.0;
   replay::ReplayOptions replay;
 };
@@ -67,7 +65,7 @@ std::string fixed(double v, int digits) {
 }
 
 int run_replay(const std::string& file, const ReplayCommandOptions& o) {
-  if (!o.lcm_url && !o.dds) {
+  if (!o.lcm_url && !o.dds.enabled) {
     std::cerr << "tissue session replay: choose where to publish: --lcm [URL] and/or --dds\n";
     return kExitBadArguments;
   }
@@ -89,13 +87,7 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
   std::unique_ptr<transport::DdsPublisher> dds;
   try {
     if (o.lcm_url) lcm = std::make_unique<transport::LcmPublisher>(*o.lcm_url);
-    if (o.dds) {
-      transport::DdsPublishOptions d;
-      d.domain_id = o.dds_domain;
-      d.topic_prefix = o.dds_prefix;
-      d.loopback_only = !o.dds_remote;
-      dds = std::make_unique<transport::DdsPublisher>(d);
-    }
+    if (o.dds.enabled) dds = std::make_unique<transport::DdsPublisher>(o.dds.publish_options());
   } catch (const std::runtime_error& e) {
     std::cerr << "tissue session replay: " << e.what() << "\n";
     return kExitCannotConnect;
@@ -132,7 +124,7 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
               << " haptic states, " << lcm->counts().stats << " stats sent, " << lcm->counts().failures
               << " failures\n";
   if (dds)
-    std::cout << "  DDS domain " << o.dds_domain << " topics " << o.dds_prefix << "*: " << dds->counts().meshes
+    std::cout << "  DDS domain " << o.dds.domain_id << " topics " << o.dds.topic_prefix << "*: " << dds->counts().meshes
               << " meshes, " << dds->counts().haptic_states << " haptic states, " << dds->counts().stats
               << " stats sent, " << dds->counts().failures << " failures\n";
   return kExitOk;
@@ -186,17 +178,7 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
   cmd->add_option("--lcm", r.lcm_url, "Publish over LCM at URL (publish.lcm.url)")
       ->expected(0, 1)
       ->default_str(defaults.lcm.url);
-  CLI::Option* dds = cmd->add_flag("--dds", r.dds, "Publish over Fast DDS (topics <prefix>surface_mesh, ...)");
-  cmd->add_option("--dds-domain", r.dds_domain, "DDS domain (publish.dds.domain_id)")
-      ->check(CLI::Range(0, 232))
-      ->capture_default_str()
-      ->needs(dds);
-  cmd->add_option("--dds-prefix", r.dds_prefix, "DDS topic prefix (publish.dds.topic_prefix)")
-      ->capture_default_str()
-      ->needs(dds);
-  cmd->add_flag("--dds-remote", r.dds_remote,
-                "DDS on every interface (publish.dds.loopback_only: false); default: this host only")
-      ->needs(dds);
+  CLI::Option* dds = add_dds_options(cmd, r.dds, "Publish over Fast DDS (topics <prefix>surface_mesh, ...)");
   cmd->add_option("--dds-wait", r.dds_wait_s, "Wait up to S seconds for a DDS mesh reader before starting")
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str()

@@ -1,0 +1,38 @@
+#include "tissue/dds_cli.hpp"
+
+#include <CLI/CLI.hpp>
+
+namespace tissue::cli {
+
+transport::DdsPublishOptions DdsCliOptions::publish_options() const {
+  transport::DdsPublishOptions d;
+  d.domain_id = domain_id;
+  d.topic_prefix = topic_prefix;
+  d.loopback_only = !remote;
+  return d;
+}
+
+transport::DdsSubscribeOptions DdsCliOptions::subscribe_options() const {
+  transport::DdsSubscribeOptions d;
+  d.domain_id = domain_id;
+  d.topic_prefix = topic_prefix;
+  d.loopback_only = !remote;
+  return d;
+}
+
+CLI::Option* add_dds_options(CLI::App* cmd, DdsCliOptions& o, const std::string& dds_help) {
+  CLI::Option* dds = cmd->add_flag("--dds", o.enabled, dds_help);
+  cmd->add_option("--dds-domain", o.domain_id, "DDS domain (publish.dds.domain_id)")
+      ->check(CLI::Range(0, 232))
+      ->capture_default_str()
+      ->needs(dds);
+  cmd->add_option("--dds-prefix", o.topic_prefix, "DDS topic prefix (publish.dds.topic_prefix)")
+      ->capture_default_str()
+      ->needs(dds);
+  cmd->add_flag("--dds-remote", o.remote,
+                "DDS on every interface (publish.dds.loopback_only: false); default: this host only")
+      ->needs(dds);
+  return dds;
+}
+
+}  // namespace tissue::cli

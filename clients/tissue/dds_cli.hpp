@@ -1,0 +1,33 @@
+// The DDS options every client that talks DDS takes (`--dds`, `--dds-domain`,
+// `--dds-prefix`, `--dds-remote`), named and defaulted like the daemon's
+// publish.dds.* keys, and their conversion to publisher or subscriber options.
+#pragma once
+
+#include <string>
+
+#include "config/daemon_config.hpp"
+#include "transport/dds_publisher.hpp"
+#include "transport/dds_subscriber.hpp"
+
+namespace CLI {
+class App;
+class Option;
+}  // namespace CLI
+
+namespace tissue::cli {
+
+struct DdsCliOptions {
+  bool enabled = false;  // --dds given
+  int domain_id = config::DdsPublishSpec{}.domain_id;
+  std::string topic_prefix = config::DdsPublishSpec{}.topic_prefix;
+  bool remote = false;  // --dds-remote: every interface, not this host only
+
+  transport::DdsPublishOptions publish_options() const;
+  transport::DdsSubscribeOptions subscribe_options() const;
+};
+
+// Adds --dds (described by `dds_help`) and the options that need it; returns
+// the --dds option (for excludes/needs).
+CLI::Option* add_dds_options(CLI::App* cmd, DdsCliOptions& o, const std::string& dds_help);
+
+}  // namespace tissue::cli
