@@ -24,11 +24,6 @@
 #include "physics/integrator.hpp"
 #include "physics/integrator_impl.hpp"
 
-#if defined(__x86_64__)
-#include <immintrin.h>
-#define TISSUE_AVX2 __attribute__((target("avx2")))
-#endif
-
 namespace tissue::physics {
 
 Simd detected_simd() {

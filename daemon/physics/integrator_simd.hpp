@@ -16,6 +16,12 @@
 #include <cstddef>
 #include <cstdint>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+// Marks a function compiled for AVX2 (called only after detected_simd()).
+#define TISSUE_AVX2 __attribute__((target("avx2")))
+#endif
+
 namespace tissue::physics {
 
 struct alignas(32) Pad3 {
@@ -26,5 +32,14 @@ enum class Simd : std::uint8_t { kScalar, kAvx2 };
 
 // kAvx2 when the CPU has AVX2 (x86-64 only), else kScalar. Cached.
 Simd detected_simd();
+
+#if defined(__x86_64__)
+// ((a0 + a1) + a2) + a3: the scalar kernels' summation order.
+TISSUE_AVX2 inline double sum_lanes_avx2(__m256d acc) {
+  alignas(32) double a[4];
+  _mm256_store_pd(a, acc);
+  return ((a[0] + a[1]) + a[2]) + a[3];
+}
+#endif
 
 }  // namespace tissue::physics
