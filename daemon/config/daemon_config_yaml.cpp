@@ -62,8 +62,7 @@ class Converter : public yaml_util::Reader {
 
   DaemonConfig config(const YAML::Node& root) {
     if (!root.IsMap()) fail("", "a daemon config must be a map of sections, got " + yaml_util::describe(root));
-    const FieldMap f = fields(
-        root, "", {"scene", "state_dir", "status_interval_s", "device", "haptics", "realtime", "control", "publish"});
+    const FieldMap f = fields(root, "", kTopLevelKeys);
     DaemonConfig c;
     c.source = source_;
     read(require(f, "scene", ""), "scene", c.scene_path);

@@ -18,11 +18,9 @@
 
 namespace tissue::yaml_util {
 
-DocumentError::DocumentError(const std::string& source, const std::string& key_path, const std::string& reason,
-                             const char* unnamed)
-    : std::runtime_error(compose_what(source, key_path, reason, unnamed)),
-      parts_(std::make_shared<const Parts>(Parts{source, key_path, reason})) {}
+namespace {
 
+// "<source>: <key_path>: <reason>", `fallback_source` for an empty source.
 std::string compose_what(const std::string& source, const std::string& key_path, const std::string& reason,
                          const char* fallback_source) {
   std::string out = source.empty() ? std::string(fallback_source) : source;
@@ -35,8 +33,11 @@ std::string compose_what(const std::string& source, const std::string& key_path,
   return out;
 }
 
-PathError::PathError(const std::string& source, const std::string& key_path, const std::string& reason)
-    : std::runtime_error(compose_what(source, key_path, reason, "<yaml>")),
+}  // namespace
+
+KeyPathError::KeyPathError(const std::string& source, const std::string& key_path, const std::string& reason,
+                           const char* unnamed)
+    : std::runtime_error(compose_what(source, key_path, reason, unnamed)),
       parts_(std::make_shared<const Parts>(Parts{source, key_path, reason})) {}
 
 // ---------------------------------------------------------------- formatting
@@ -71,7 +72,7 @@ std::string printable_bare(std::string_view s) {
 
 std::string printable(std::string_view s) { return "'" + printable_bare(s) + "'"; }
 
-std::string join_list(std::initializer_list<std::string_view> items) {
+std::string join_list(KeyList items) {
   std::string out;
   for (const auto& s : items) {
     if (!out.empty()) out += ", ";
@@ -112,7 +113,7 @@ std::size_t edit_distance(std::string_view a, std::string_view b) {
 
 }  // namespace
 
-std::optional<std::string_view> suggest(std::string_view key, std::initializer_list<std::string_view> allowed) {
+std::optional<std::string_view> suggest(std::string_view key, KeyList allowed) {
   if (key.empty() || key.size() > 64) return std::nullopt;
   std::optional<std::string_view> best;
   std::size_t best_d = std::max<std::size_t>(2, key.size() / 3) + 1;
@@ -211,8 +212,7 @@ NumberParse parse_int(std::string_view s, int* out) {
 
 void Reader::fail(const std::string& path, const std::string& reason) const { throw PathError(source_, path, reason); }
 
-FieldMap Reader::fields(const YAML::Node& n, const std::string& path,
-                        std::initializer_list<std::string_view> allowed) const {
+FieldMap Reader::fields(const YAML::Node& n, const std::string& path, KeyList allowed) const {
   if (!n.IsMap()) fail(path, "expected a map with keys " + join_list(allowed) + ", got " + describe(n));
   FieldMap out;
   for (auto it = n.begin(); it != n.end(); ++it) {

@@ -31,14 +31,17 @@
 
 namespace tissue::yaml_util {
 
-// "<source>: <key_path>: <reason>" (key_path may be empty).
-class PathError : public std::runtime_error {
+// "<source>: <key_path>: <reason>" (key_path may be empty; what() then reads
+// "<source>: <reason>", and `unnamed` stands in for an empty source). The
+// parts stay readable for callers that re-raise or report them.
+class KeyPathError : public std::runtime_error {
  public:
-  PathError(const std::string& source, const std::string& key_path, const std::string& reason);
-
   const std::string& source() const noexcept { return parts_->source; }
   const std::string& key_path() const noexcept { return parts_->key_path; }
   const std::string& reason() const noexcept { return parts_->reason; }
+
+ protected:
+  KeyPathError(const std::string& source, const std::string& key_path, const std::string& reason, const char* unnamed);
 
  private:
   struct Parts {
@@ -47,22 +50,26 @@ class PathError : public std::runtime_error {
   std::shared_ptr<const Parts> parts_;  // shared: copying an exception must not throw
 };
 
-// The what() text of a PathError-shaped error; `fallback_source` stands in for
-// an empty source.
-std::string compose_what(const std::string& source, const std::string& key_path, const std::string& reason,
-                         const char* fallback_source);
+// What the shared machinery throws; each loader re-raises it as its own
+// DocumentError type at its boundary.
+class PathError : public KeyPathError {
+ public:
+  PathError(const std::string& source, const std::string& key_path, const std::string& reason)
+      : KeyPathError(source, key_path, reason, "<yaml>") {}
+};
 
 // ---------------------------------------------------------------- formatting
 
 std::string fmt_num(double v);                   // shortest round-trip text; nan, inf, -inf
 std::string printable_bare(std::string_view s);  // printable ASCII, \xNN otherwise, at most 40 chars
 std::string printable(std::string_view s);       // the same in single quotes
-std::string join_list(std::initializer_list<std::string_view> items);
+using KeyList = std::span<const std::string_view>;
+std::string join_list(KeyList items);
 std::string join_key(const std::string& path, std::string_view key);
 std::string join_index(const std::string& path, std::size_t i);
 std::string count_of(std::size_t n, const char* noun);
 // The allowed key closest to a short typo, if any is close.
-std::optional<std::string_view> suggest(std::string_view key, std::initializer_list<std::string_view> allowed);
+std::optional<std::string_view> suggest(std::string_view key, KeyList allowed);
 
 // ----------------------------------------------------------------- scalars
 
@@ -105,7 +112,10 @@ class Reader {
 
   // The entries of a map, checked against the allowed keys (unknown keys get
   // a "did you mean" and the list of allowed ones; duplicates are errors).
-  FieldMap fields(const YAML::Node& n, const std::string& path, std::initializer_list<std::string_view> allowed) const;
+  FieldMap fields(const YAML::Node& n, const std::string& path, KeyList allowed) const;
+  FieldMap fields(const YAML::Node& n, const std::string& path, std::initializer_list<std::string_view> allowed) const {
+    return fields(n, path, KeyList(allowed.begin(), allowed.size()));
+  }
   const YAML::Node& require(const FieldMap& f, std::string_view key, const std::string& path) const;
 
   template <class T>
@@ -212,22 +222,11 @@ std::string blame_override(const std::vector<Override>& overrides, const std::st
 std::string read_text_file(const std::string& path, std::uintmax_t max_bytes, const std::string& what);
 
 // An error in a YAML document, naming the file, the key path and the reason;
-// the scene and daemon-config errors are this with their own type. key_path
-// may be empty (whole-document problems); what() then reads
-// "<source>: <reason>". `unnamed` stands for an empty source in what().
-class DocumentError : public std::runtime_error {
+// the scene and daemon-config errors are this with their own type.
+class DocumentError : public KeyPathError {
  public:
-  DocumentError(const std::string& source, const std::string& key_path, const std::string& reason, const char* unnamed);
-
-  const std::string& source() const noexcept { return parts_->source; }
-  const std::string& key_path() const noexcept { return parts_->key_path; }
-  const std::string& reason() const noexcept { return parts_->reason; }
-
- private:
-  struct Parts {
-    std::string source, key_path, reason;
-  };
-  std::shared_ptr<const Parts> parts_;  // shared: copying an exception must not throw
+  DocumentError(const std::string& source, const std::string& key_path, const std::string& reason, const char* unnamed)
+      : KeyPathError(source, key_path, reason, unnamed) {}
 };
 
 // Value checks shared by the scene and daemon-config validators (CRTP): each
