@@ -87,7 +87,9 @@ void BM_ExplicitSubstep(benchmark::State& state) {
   physics::Simulation sim(beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit));
   physics::Body& body = sim.mutable_body();
   std::vector<physics::Vec3> f(body.x_m.size());
-  const double h = 1e-5;
+  // Half the stable sub-step: a fixed h would be unstable from depth 10 on,
+  // and the exploding state would time the kernel's non-finite fallback.
+  const double h = 0.5 * physics::explicit_stable_dt_s(body);
   const double bound = bound_ns_per_spring(body);
   physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
   const std::vector<physics::Vec3> no_force(body.x_m.size(), physics::Vec3::Zero());
@@ -111,8 +113,10 @@ void BM_ExplicitSubstep(benchmark::State& state) {
                              kSubsteps);
     benchmark::DoNotOptimize(body.x_m.data());
   }
+  if (!physics::state_is_finite(body)) state.SkipWithError("state became non-finite: the timing is not valid");
   std::sort(per_substep_ns.begin(), per_substep_ns.end());
   report(state, body, per_substep_ns[per_substep_ns.size() / 2], bound);  // median
+  state.counters["h_us"] = h * 1e6;
 }
 
 // Whole steps of each rung at dt = 1 ms (explicit includes its sub-steps).
@@ -411,7 +415,10 @@ void BM_AdaptationShare(benchmark::State& state) {
 
 }  // namespace
 
-BENCHMARK(BM_ExplicitSubstep)->ArgsProduct({{0, 3, 6, 9}, {0, 1}})->Iterations(21)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ExplicitSubstep)
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}})
+    ->Iterations(21)
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_Step, explicit, scene::IntegratorKind::kExplicit, 0)
     ->Arg(0)
     ->Arg(3)
@@ -423,6 +430,7 @@ BENCHMARK_CAPTURE(BM_Step, implicit_cg20, scene::IntegratorKind::kImplicit, 20)
     ->Arg(3)
     ->Arg(6)
     ->Arg(9)
+    ->Arg(11)
     ->Iterations(5)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_Step, implicit_tol1e6, scene::IntegratorKind::kImplicit, 0)
@@ -435,6 +443,19 @@ BENCHMARK_CAPTURE(BM_Step, projective, scene::IntegratorKind::kProjective, 0)
     ->Arg(0)
     ->Arg(3)
     ->Arg(6)
+    ->Iterations(5)
+    ->Unit(benchmark::kMillisecond);
+// Ten local/global iterations, as projective dynamics is usually run (the
+// default tolerance can take the full 100-iteration cap on fine meshes).
+// Depths 10 and 11 take ~1 and ~7 minutes (the sparse direct factorisation:
+// 2.1 GB at depth 11); filter them out for a quick run.
+BENCHMARK_CAPTURE(BM_Step, projective_it10, scene::IntegratorKind::kProjective, 10)
+    ->Arg(0)
+    ->Arg(3)
+    ->Arg(6)
+    ->Arg(9)
+    ->Arg(10)
+    ->Arg(11)
     ->Iterations(5)
     ->Unit(benchmark::kMillisecond);
 // R2/R3 (PERFORMANCE.md): {resolution, dt ms, geometry}.

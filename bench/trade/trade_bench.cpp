@@ -82,7 +82,8 @@ bool g_cost_uses_cpu = false;
 struct Options {
   bool table1 = false, sweep = false, beam_theory = false, quick = false;
   std::string csv_path, svg_path;
-  std::string sweep_scene = "cantilever";  // or "beam"
+  std::string sweep_scene = "cantilever";  // or "beam", "beam-r"
+  std::string preconditioner = "jacobi";   // implicit CG: jacobi | two_level
   std::string metric = "rms";              // plotted error: rms | max | tip
   std::vector<double> th_Pa;               // empty: the scene's default list
   std::vector<int> max_depths;             // empty: {3, 6} (quick: {3})
@@ -105,9 +106,10 @@ std::vector<std::string> split_list(const std::string& s) {
 void usage() {
   std::puts(
       "usage: trade_bench [--table1] [--sweep] [--beam-theory] [--quick]\n"
-      "  sweep: [--csv FILE] [--svg FILE] [--scene cantilever|beam] [--th 2,20,...]\n"
+      "  sweep: [--csv FILE] [--svg FILE] [--scene cantilever|beam|beam-r] [--th 2,20,...]\n"
       "         [--depths 3,6] [--integrators implicit,explicit,projective] [--dts 0.001,0.005]\n"
       "         [--duration S] [--metric rms|max|tip] [--run-cap S] [--clock wall|cpu]\n"
+      "         [--preconditioner jacobi|two_level]\n"
       "  beam-theory: [--beam-depth D]\n"
       "no mode flag: all three modes");
 }
@@ -152,6 +154,10 @@ Options parse(int argc, char** argv) {
       const std::string c = value(i);
       if (c != "wall" && c != "cpu") throw std::invalid_argument("--clock must be wall or cpu");
       o.cpu_clock = c == "cpu";
+    } else if (a == "--preconditioner") {
+      o.preconditioner = value(i);
+      if (o.preconditioner != "jacobi" && o.preconditioner != "two_level")
+        throw std::invalid_argument("--preconditioner must be jacobi or two_level");
     } else if (a == "--beam-depth") {
       o.beam_max_depth = std::stoi(value(i));
     } else if (a == "-h" || a == "--help") {
@@ -162,8 +168,8 @@ Options parse(int argc, char** argv) {
     }
   }
   if (!o.table1 && !o.sweep && !o.beam_theory) o.table1 = o.sweep = o.beam_theory = true;
-  if (o.sweep_scene != "cantilever" && o.sweep_scene != "beam")
-    throw std::invalid_argument("--scene must be cantilever or beam");
+  if (o.sweep_scene != "cantilever" && o.sweep_scene != "beam" && o.sweep_scene != "beam-r")
+    throw std::invalid_argument("--scene must be cantilever, beam or beam-r");
   if (o.metric != "rms" && o.metric != "max" && o.metric != "tip")
     throw std::invalid_argument("--metric must be rms, max or tip");
   return o;
@@ -242,11 +248,13 @@ sc::Scene paper_cantilever(const MeshChoice& m, sc::IntegratorKind kind, double 
 
 // PERFORMANCE.md beam: 8x2x2 cubes of 5 cm, x = 0 fixed, 0.05 N down on
 // x = 0.4, gravity off. Probe 0 = tip (free face centre: the neutral axis).
-sc::Scene beam(const MeshChoice& m, sc::IntegratorKind kind, double dt_s, double ramp_s) {
+// r_ladder: 12x3x3 cubes of 1/30 m instead, whose uniform depths 0, 3, 6, 9
+// are PERFORMANCE.md's R1..R4 (cube edges 33, 17, 8.3, 4.2 mm).
+sc::Scene beam(const MeshChoice& m, sc::IntegratorKind kind, double dt_s, double ramp_s, bool r_ladder = false) {
   sc::Scene s;
-  s.name = "beam";
-  s.object.cubes = {8, 2, 2};
-  s.object.cube_size_m = 0.05;
+  s.name = r_ladder ? "beam-r" : "beam";
+  s.object.cubes = r_ladder ? std::array<int, 3>{12, 3, 3} : std::array<int, 3>{8, 2, 2};
+  s.object.cube_size_m = r_ladder ? 0.4 / 12 : 0.05;
   s.material.youngs_modulus_Pa = 5.0e4;
   s.material.density_kg_per_m3 = 100.0;
   s.fixed.push_back({box({0.0, 0.0, 0.0}, {0.0, 0.1, 0.1})});
@@ -679,6 +687,8 @@ struct Point {
   RunStats st;
   std::size_t nodes = 0, tets = 0, springs = 0, peak_nodes = 0, peak_tets = 0;
   long splits = 0, merges = 0;
+  int deepest = 0;                  // deepest leaf tet at the end
+  std::size_t tets_at_deepest = 0;  // and how many leaves sit there
   Vec3 tip = Vec3::Zero();
   Field field;  // dropped once errors are filled
   bool captured = false;
@@ -697,6 +707,7 @@ struct Point {
 
 struct SweepSetup {
   std::string scene;
+  sc::CgPreconditioner preconditioner = sc::CgPreconditioner::kJacobi;
   double duration_s;
   std::vector<double> th_Pa;
   std::vector<int> max_depths;
@@ -706,14 +717,17 @@ struct SweepSetup {
 };
 
 sc::Scene sweep_scene(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kind, double dt) {
-  if (s.scene == "beam") {
+  sc::Scene out;
+  if (s.scene == "beam" || s.scene == "beam-r") {
     // Static-ish: ramp the load over a quarter of the run and damp the first
     // bending mode (2.3 Hz) about critically with mass-proportional damping.
-    sc::Scene b = beam(m, kind, dt, 0.25 * s.duration_s);
-    b.material.rayleigh_alpha_per_s = 30.0;
-    return b;
+    out = beam(m, kind, dt, 0.25 * s.duration_s, s.scene == "beam-r");
+    out.material.rayleigh_alpha_per_s = 30.0;
+  } else {
+    out = paper_cantilever(m, kind, dt, std::numeric_limits<double>::infinity());
   }
-  return paper_cantilever(m, kind, dt, std::numeric_limits<double>::infinity());
+  out.integrator.cg_preconditioner = s.preconditioner;
+  return out;
 }
 
 Point run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kind, double dt) {
@@ -734,6 +748,10 @@ Point run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kin
   p.peak_tets = sim.counters().peak_tets;
   p.splits = sim.counters().splits;
   p.merges = sim.counters().merges;
+  sim.body().mesh().for_each_tet([&](ph::TetId, const tissue::mesh::Tet& t) {
+    if (t.depth > p.deepest) p.deepest = t.depth, p.tets_at_deepest = 0;
+    if (t.depth == p.deepest) ++p.tets_at_deepest;
+  });
   if (p.st.ok && !p.st.capped) {
     p.tip = sim.probe_displacement_m(0);
     p.field = capture(sim.body());
@@ -772,7 +790,7 @@ void write_csv(const std::string& path, const std::string& scene, const std::vec
   f << "scene,integrator,dt_s,max_depth,mode,level,th_Pa,status,message,steps,sim_s,wall_s,cpu_s,"
        "cost_wall_per_sim,cost_cpu_per_sim,"
        "nodes_end,tets_end,springs_end,peak_nodes,peak_tets,splits,merges,tip_uz_m,tip_err_rel,rms_err_rel,"
-       "max_err_rel,unlocated,mean_solver_iterations,max_substeps,last_mesh_change_s\n";
+       "max_err_rel,unlocated,mean_solver_iterations,max_substeps,last_mesh_change_s,deepest_level,tets_at_deepest\n";
   for (const auto& p : points) {
     f << scene << ',' << p.integrator << ',' << p.dt_s << ',' << p.max_depth << ','
       << (p.adaptive ? "adaptive" : "uniform") << ',' << (p.adaptive ? std::string() : std::to_string(p.level)) << ','
@@ -783,7 +801,7 @@ void write_csv(const std::string& path, const std::string& scene, const std::vec
       << p.springs << ',' << p.peak_nodes << ',' << p.peak_tets << ',' << p.splits << ',' << p.merges << ','
       << (p.captured ? csv_num(p.tip[2]) : "") << ',' << csv_num(p.tip_err) << ',' << csv_num(p.rms_err) << ','
       << csv_num(p.max_err) << ',' << p.unlocated << ',' << csv_num(p.st.mean_iterations()) << ',' << p.st.max_substeps
-      << ',' << csv_num(p.st.last_adapt_s) << '\n';
+      << ',' << csv_num(p.st.last_adapt_s) << ',' << p.deepest << ',' << p.tets_at_deepest << '\n';
   }
 }
 
@@ -942,12 +960,12 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
 void run_sweep(const Options& o) {
   SweepSetup s;
   s.scene = o.sweep_scene;
-  s.duration_s = o.sweep_duration_s > 0 ? o.sweep_duration_s
-                 : s.scene == "beam"    ? (o.quick ? 0.5 : 1.0)
-                                        : (o.quick ? 0.2 : 0.5);
+  s.preconditioner = o.preconditioner == "two_level" ? sc::CgPreconditioner::kTwoLevel : sc::CgPreconditioner::kJacobi;
+  const bool is_beam = s.scene == "beam" || s.scene == "beam-r";
+  s.duration_s = o.sweep_duration_s > 0 ? o.sweep_duration_s : is_beam ? (o.quick ? 0.5 : 1.0) : (o.quick ? 0.2 : 0.5);
   if (!o.th_Pa.empty())
     s.th_Pa = o.th_Pa;
-  else if (s.scene == "beam")
+  else if (is_beam)
     s.th_Pa = o.quick ? std::vector<double>{0.01, 0.1} : std::vector<double>{0.003, 0.01, 0.03, 0.1, 0.3};
   else
     s.th_Pa = o.quick ? std::vector<double>{5, 20, 80} : std::vector<double>{5, 20, 40, 80, 300};
@@ -961,8 +979,8 @@ void run_sweep(const Options& o) {
   const int deepest = *std::max_element(s.max_depths.begin(), s.max_depths.end());
 
   std::printf("\n## Sweep: %s (%s), state at t = %.2f s%s\n\n", s.scene.c_str(),
-              s.scene == "beam" ? "0.05 N ramped over the first quarter, Rayleigh alpha 30/s: static-ish"
-                                : "seed §4.1, constant 5 N: static from ~0.3 s on",
+              is_beam ? "0.05 N ramped over the first quarter, Rayleigh alpha 30/s: static-ish"
+                      : "seed §4.1, constant 5 N: static from ~0.3 s on",
               s.duration_s, o.quick ? " (--quick)" : "");
   std::printf("Th (Pa):");
   for (double t : s.th_Pa) std::printf(" %g", t);
@@ -1035,15 +1053,17 @@ void run_sweep(const Options& o) {
   const double sweep_wall = seconds_between(sweep0, Clock::now());
 
   std::printf(
-      "| integrator | dt (ms) | max depth | mesh | status | tets (end) | peak tets | cost wall (cpu) s/s | tip err | "
-      "node RMS err | node max err | mean iters | max substeps | last mesh change (s) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "| integrator | dt (ms) | max depth | mesh | status | tets (end) | peak tets | deepest leaf (tets there) | "
+      "cost wall (cpu) s/s | tip err | node RMS err | node max err | mean iters | max substeps | last mesh change (s) "
+      "|\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& p : points) {
     const std::string mesh = p.adaptive ? "adaptive Th " + fmt("%g", p.th_Pa) : "uniform L" + std::to_string(p.level);
     std::string status = p.status();
     if (!p.st.ok && !p.skipped) status += " at t=" + fmt("%.3g", p.st.error_time_s) + " s";
-    std::printf("| %s | %g | %d | %s | %s | %zu | %zu | %s | %s | %s | %s | %.1f | %d | %s |\n", p.integrator.c_str(),
-                p.dt_s * 1e3, p.max_depth, mesh.c_str(), status.c_str(), p.tets, p.peak_tets,
+    std::printf("| %s | %g | %d | %s | %s | %zu | %zu | %d (%zu) | %s | %s | %s | %s | %.1f | %d | %s |\n",
+                p.integrator.c_str(), p.dt_s * 1e3, p.max_depth, mesh.c_str(), status.c_str(), p.tets, p.peak_tets,
+                p.deepest, p.tets_at_deepest,
                 std::isfinite(p.st.wall_cost())
                     ? (fmt("%.3g", p.st.wall_cost()) + " (" + fmt("%.3g", p.st.cpu_cost()) + ")").c_str()
                     : "n/a",

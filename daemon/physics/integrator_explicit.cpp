@@ -15,7 +15,15 @@
 // (~1.4 cycles) while the kernel issues ~29 instructions per spring (~7.5
 // cycles at the measured ~3 ns): it is issue-bound, not divider-bound — a
 // division-free 1/√l (integer first guess + 4 Newton steps, deterministic on
-// every CPU) ran slower, 3.8 vs 3.1 ns per spring, and was dropped.
+// every CPU) ran slower, 3.8 vs 3.1 ns per spring, and was dropped. Also
+// tried and dropped (BM_ExplicitSubstep at 10^3..1.6x10^6 springs, alternated
+// with this kernel in one session, load ~1): batches whose four springs share
+// one end, summing its force in a register (f[a] touched once per batch),
+// together with nodes renumbered along a Morton curve, ran the same to 9 %
+// slower; software prefetch of the stream and of the next batches' nodes
+// 0-10 % slower; huge pages (MADV_HUGEPAGE) no change. Without the square
+// root and division the force pass is only ~15 % faster, without the scatter
+// ~10 %: the cost is spread over the shuffles and loads of every spring.
 #include <algorithm>
 #include <cmath>
 #include <sstream>
