@@ -413,6 +413,27 @@ void BM_AdaptationShare(benchmark::State& state) {
   state.counters["transient_adaptation_share"] = (cadence_mean - other_mean) / s.adaptivity.every_steps / mean_step;
 }
 
+// The two O(mesh) energy sums the daemon writes into every recorded sim row,
+// beside the step they follow (shipped default: implicit, 1e-6 tolerance).
+void BM_EnergySumsPerStep(benchmark::State& state) {
+  physics::Simulation sim(beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kImplicit));
+  sim.step();
+  double step_ns = 0.0, energy_ns = 0.0, sink = 0.0;
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    sim.step();
+    const auto t1 = std::chrono::steady_clock::now();
+    sink += sim.kinetic_energy_J() + sim.elastic_energy_J();
+    const auto t2 = std::chrono::steady_clock::now();
+    step_ns += std::chrono::duration<double, std::nano>(t1 - t0).count();
+    energy_ns += std::chrono::duration<double, std::nano>(t2 - t1).count();
+  }
+  benchmark::DoNotOptimize(sink);
+  state.counters["step_ms"] = step_ns / static_cast<double>(state.iterations()) * 1e-6;
+  state.counters["energy_ms"] = energy_ns / static_cast<double>(state.iterations()) * 1e-6;
+  state.counters["energy_share"] = energy_ns / step_ns;
+}
+
 }  // namespace
 
 BENCHMARK(BM_ExplicitSubstep)
@@ -472,4 +493,5 @@ BENCHMARK(BM_ImplicitPreconditioner)
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_AdaptationShare)->Iterations(3)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_EnergySumsPerStep)->Arg(0)->Arg(3)->Arg(6)->Iterations(50)->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

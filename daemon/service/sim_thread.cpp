@@ -95,6 +95,9 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
   row.springs = sim.body().mesh().edge_count();
   row.refines = sim.counters().splits;
   row.merges = sim.counters().merges;
+  // Every recorded row carries its energies (a session is where a lab checks
+  // energy behaviour after the fact); physics_bench BM_EnergySumsPerStep puts
+  // the two sums at 1.3-3.7 % of the step they follow, and only while recording.
   row.kinetic_J = sim.kinetic_energy_J();
   row.elastic_J = sim.elastic_energy_J();
   recorder.push_sim(row);
