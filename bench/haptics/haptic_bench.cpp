@@ -3,7 +3,9 @@
 // For each background load (idle, and the adaptive cantilever simulation
 // stepping continuously on another thread) it measures, in the same run and
 // with the same thread settings (SCHED_FIFO when permitted, 1 ns timer slack):
-//   - a bare clock_nanosleep(TIMER_ABSTIME) loop: lateness p50/p99/p99.9;
+//   - a bare clock_nanosleep(TIMER_ABSTIME) loop: lateness p50/p99/p99.9, and
+//     the time a fixed ~3 us arithmetic workload takes in each period (the
+//     machine's own tail, read beside the tick's);
 //   - the HapticThread driving a HapticLoop with a SimDevice hand pressing a
 //     deformable patch while a publisher thread feeds a new LocalModel every
 //     millisecond: period lateness and tick compute time p50/p99/p99.9.
@@ -101,9 +103,40 @@ void print_row(const char* name, const haptics::TimingSummary& t, bool with_comp
 }
 
 struct Figures {
-  haptics::TimingSummary bare, haptic;
+  haptics::TimingSummary bare, haptic;  // bare: its compute columns are the fixed work's
+  haptics::TimingSummary control;       // the fixed work after each tick, in the haptic thread
+  // Stalls (>= kStallNs) in ticks and in the fixed work after them, and the
+  // computing time each was exposed over (count x median).
+  std::uint64_t tick_stalls = 0, control_stalls = 0;
+  double tick_exposure_s = 0.0, control_exposure_s = 0.0;
   std::string scheduling;
 };
+
+// A tick or fixed-work sample this long is a stall: an order of magnitude
+// above either's median.
+constexpr std::int64_t kStallNs = 40000;
+
+void count_stalls(const haptics::HapticThread& thread, Figures& f) {
+  f.tick_stalls = thread.compute().count_at_least(kStallNs);
+  f.control_stalls = thread.control().count_at_least(kStallNs);
+  f.tick_exposure_s = 1e-9 * static_cast<double>(thread.compute().count() * thread.compute().percentile_ns(0.5));
+  f.control_exposure_s = 1e-9 * static_cast<double>(thread.control().count() * thread.control().percentile_ns(0.5));
+}
+
+// Iterations of the bare loop's fixed work that take about `target_ns` here
+// (median of a short calibration run), so its tail can be read beside a
+// tick's: what the machine alone adds to a few microseconds of computing.
+int g_work_iterations = 0;
+int calibrate_work_iterations(double target_ns) {
+  int iterations = 1000;
+  for (int round = 0; round < 3; ++round) {
+    LatencyHistogram lateness(1000, 50000), work(50, 40000);
+    haptics::run_bare_timer_loop(5000.0, 300, lateness, &work, iterations);
+    const double median_ns = static_cast<double>(std::max<std::int64_t>(work.percentile_ns(0.5), 50));
+    iterations = std::max(1, static_cast<int>(iterations * target_ns / median_ns));
+  }
+  return iterations;
+}
 
 Figures measure(double seconds, const config::RealtimeSpec& realtime) {
   Figures f;
@@ -111,13 +144,13 @@ Figures measure(double seconds, const config::RealtimeSpec& realtime) {
   const auto periods = static_cast<std::uint64_t>(seconds * haptic_spec.rate_hz);
 
   // Bare timer loop on a thread with the same settings as the haptic thread.
-  LatencyHistogram bare(1000, 50000), none(50, 1);
+  LatencyHistogram bare(1000, 50000), work(50, 40000);
   std::thread bare_thread([&] {
     haptics::configure_current_thread(realtime, realtime.haptic_priority);
-    haptics::run_bare_timer_loop(haptic_spec.rate_hz, periods, bare);
+    haptics::run_bare_timer_loop(haptic_spec.rate_hz, periods, bare, &work, g_work_iterations);
   });
   bare_thread.join();
-  f.bare = haptics::summarize(bare, none, 0);
+  f.bare = haptics::summarize(bare, work, 0);
 
   // The haptic thread, fed by a 1 kHz model publisher and drained like the sim would.
   config::DeviceSpec device_spec;
@@ -132,6 +165,7 @@ Figures measure(double seconds, const config::RealtimeSpec& realtime) {
   auto samples = std::make_unique<haptics::ToolSampleRing>();
   haptics::HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
   haptics::HapticThread thread(loop, haptic_spec, realtime);
+  thread.set_control_work(g_work_iterations);
   const haptics::LocalModel patch = make_patch();
   std::atomic<bool> stop_publisher{false};
   std::uint64_t contact_samples = 0;
@@ -155,6 +189,8 @@ Figures measure(double seconds, const config::RealtimeSpec& realtime) {
   stop_publisher.store(true);
   publisher.join();
   f.haptic = thread.timing();
+  f.control = haptics::summarize(thread.lateness(), thread.control(), 0);
+  count_stalls(thread, f);
   const haptics::HapticStats st = loop.stats();
   std::printf("  (haptic loop: %llu ticks, %llu model updates, %llu contact samples, ring drops %llu)\n",
               static_cast<unsigned long long>(st.ticks), static_cast<unsigned long long>(st.model_updates),
@@ -177,14 +213,14 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
   {  // Bare loop with the sim thread stepping the same scene (no tool input).
     service::SimThread sim(std::make_unique<service::SimRunner>(scene), nullptr, nullptr, sim_options);
     sim.start();
-    LatencyHistogram bare(1000, 50000), none(50, 1);
+    LatencyHistogram bare(1000, 50000), work(50, 40000);
     std::thread bare_thread([&] {
       haptics::configure_current_thread(realtime, realtime.haptic_priority);
-      haptics::run_bare_timer_loop(haptic_spec.rate_hz, periods, bare);
+      haptics::run_bare_timer_loop(haptic_spec.rate_hz, periods, bare, &work, g_work_iterations);
     });
     bare_thread.join();
     sim.stop();
-    f.bare = haptics::summarize(bare, none, 0);
+    f.bare = haptics::summarize(bare, work, 0);
   }
 
   // The hand of config/tissued.yaml: down onto the top face near the free
@@ -202,6 +238,7 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
   service::SimThread sim(std::make_unique<service::SimRunner>(scene), samples.get(), models.get(), sim_options);
   haptics::HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
   haptics::HapticThread thread(loop, haptic_spec, realtime);
+  thread.set_control_work(g_work_iterations);
   std::unique_ptr<record::Recorder> recorder;
   if (!record_dir.empty()) {
     record::SessionMetadata meta;
@@ -229,6 +266,8 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
     std::filesystem::remove(recorder->path());
   }
   f.haptic = thread.timing();
+  f.control = haptics::summarize(thread.lateness(), thread.control(), 0);
+  count_stalls(thread, f);
   const haptics::HapticStats st = loop.stats();
   std::printf("  (pipeline: %llu ticks, %llu model updates, %llu sim steps, rtf %.2f, %zu tets, ring drops %llu)\n",
               static_cast<unsigned long long>(st.ticks), static_cast<unsigned long long>(st.model_updates),
@@ -238,6 +277,21 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
 }
 
 }  // namespace
+
+// A tick's tail beside the fixed work's, timed right after every tick in the
+// same thread and period: p99.9 - p50 of each, and stalls (>= 40 us) per
+// second of computing. Stalls at the same rate in both (the fixed work runs
+// the same instructions every time) come from the machine, not the tick.
+void print_tails(const Figures& f) {
+  auto tail_us = [](const haptics::TimingSummary& t) { return (t.compute_p999_ns - t.compute_p50_ns) / 1e3; };
+  auto rate = [](std::uint64_t n, double s) { return s > 0.0 ? static_cast<double>(n) / s : 0.0; };
+  std::printf("  tail p99.9 - p50: tick %.2f us, fixed work after each tick %.2f us (bare loop %.2f us)\n",
+              tail_us(f.haptic), tail_us(f.control), tail_us(f.bare));
+  std::printf("  stalls >= 40 us: ticks %llu in %.3f s of computing (%.0f/s), fixed work %llu in %.3f s (%.0f/s)\n",
+              static_cast<unsigned long long>(f.tick_stalls), f.tick_exposure_s, rate(f.tick_stalls, f.tick_exposure_s),
+              static_cast<unsigned long long>(f.control_stalls), f.control_exposure_s,
+              rate(f.control_stalls, f.control_exposure_s));
+}
 
 int main(int argc, char** argv) {
   CLI::App app{"haptic_bench: 1 kHz haptic thread lateness and tick cost vs a bare timer loop"};
@@ -253,7 +307,10 @@ int main(int argc, char** argv) {
   realtime.sched_fifo = fifo;
   const scene::Scene scene = scene::load_scene_file(scene_path);
 
+  g_work_iterations = calibrate_work_iterations(3000.0);
   std::printf("haptic_bench: %.1f s per configuration, 1 kHz; background scene %s\n", seconds, scene_path.c_str());
+  std::printf("  bare loop rows: lateness, then the time of a fixed ~3 us workload per period (%d iterations)\n",
+              g_work_iterations);
   std::printf("  %-22s %8s  %7s %7s %8s %8s   %6s %6s %7s %7s\n", "", "periods", "late50", "late99", "late99.9",
               "lateMax", "tick50", "tick99", "tick99.9", "tickMax");
   std::printf("  %-22s %8s  %7s %7s %8s %8s   %6s %6s %7s %7s\n", "", "", "us", "us", "us", "us", "us", "us", "us",
@@ -266,13 +323,14 @@ int main(int argc, char** argv) {
     const double elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     background.join();
     std::printf("  [%s] %s\n", loaded ? "cantilever sim running" : "idle background", f.scheduling.c_str());
-    print_row(loaded ? "bare loop + sim" : "bare loop", f.bare, false);
+    print_row(loaded ? "bare loop + sim" : "bare loop", f.bare, true);
     print_row(loaded ? "haptic thread + sim" : "haptic thread", f.haptic, true);
     const double ratio = f.bare.lateness_p99_ns > 0 ? static_cast<double>(f.haptic.lateness_p99_ns) /
                                                           static_cast<double>(f.bare.lateness_p99_ns)
                                                     : 0.0;
     std::printf("  lateness p99 ratio haptic/bare = %.2f (target <= 1.5); tick p99.9 = %.2f us (target <= 20)\n", ratio,
                 f.haptic.compute_p999_ns / 1e3);
+    print_tails(f);
     if (loaded)
       std::printf("  background sim: %llu steps in %.1f s%s%s\n",
                   static_cast<unsigned long long>(background.steps.load()), elapsed_s,
@@ -283,13 +341,14 @@ int main(int argc, char** argv) {
     const Figures p = measure_pipeline(seconds, realtime, scene, recording ? record_dir : "");
     std::printf("  [daemon pipeline%s: sim thread + haptic thread on the real patch] %s\n",
                 recording ? " + HDF5 recording" : "", p.scheduling.c_str());
-    print_row("bare loop + sim thread", p.bare, false);
+    print_row("bare loop + sim thread", p.bare, true);
     print_row(recording ? "haptic thread, recording" : "haptic thread", p.haptic, true);
     const double ratio = p.bare.lateness_p99_ns > 0 ? static_cast<double>(p.haptic.lateness_p99_ns) /
                                                           static_cast<double>(p.bare.lateness_p99_ns)
                                                     : 0.0;
     std::printf("  lateness p99 ratio haptic/bare = %.2f (target <= 1.5); tick p99.9 = %.2f us (target <= 20)\n", ratio,
                 p.haptic.compute_p999_ns / 1e3);
+    print_tails(p);
   }
   return 0;
 }

@@ -13,6 +13,7 @@
 #include <cstring>
 #include <fstream>
 #include <string>
+#include <vector>
 
 namespace tissue::haptics {
 namespace {
@@ -171,16 +172,31 @@ TimingSummary summarize(const LatencyHistogram& lateness, const LatencyHistogram
   return t;
 }
 
-void run_bare_timer_loop(double rate_hz, std::uint64_t periods, LatencyHistogram& lateness) {
+double fixed_work(int iterations, const double* table) {
+  double x = 1.0;
+  for (int k = 0; k < iterations; ++k)
+    x = std::sqrt(x * 1.0000001 + table[(static_cast<std::size_t>(k) * 67) % kFixedWorkTableSize]);
+  return x;
+}
+
+void run_bare_timer_loop(double rate_hz, std::uint64_t periods, LatencyHistogram& lateness, LatencyHistogram* work_time,
+                         int work_iterations) {
   const std::int64_t period_ns = period_ns_for(rate_hz);
   std::uint64_t skipped = 0;
   std::int64_t next_ns = monotonic_now_ns() + period_ns;
+  const std::vector<double> table(work_time ? kFixedWorkTableSize : 0, 1.0);  // touched before the loop
+  volatile double sink = 0.0;
   for (std::uint64_t i = 0; i < periods; ++i) {
     sleep_until_ns(next_ns);
     const std::int64_t wake_ns = monotonic_now_ns();
     lateness.record(wake_ns - next_ns);
+    if (work_time) {
+      sink = fixed_work(work_iterations, table.data());
+      work_time->record(monotonic_now_ns() - wake_ns);
+    }
     next_ns = advance(next_ns, period_ns, monotonic_now_ns(), &skipped);
   }
+  (void)sink;
 }
 
 HapticThread::HapticThread(HapticLoop& loop, const config::HapticSpec& haptics, const config::RealtimeSpec& realtime)
@@ -216,6 +232,11 @@ bool HapticThread::start(std::string* error) {
   return true;
 }
 
+void HapticThread::set_control_work(int iterations) {
+  control_iterations_ = iterations;
+  control_table_.assign(iterations > 0 ? kFixedWorkTableSize : 0, 1.0);
+}
+
 void HapticThread::join() {
   if (thread_.joinable()) thread_.join();
 }
@@ -236,7 +257,13 @@ void HapticThread::run() {
     lateness_.record(wake_ns - next_ns);
     compute_.record(done_ns - wake_ns);
     if (loop_.stopped()) break;
-    next_ns = advance(next_ns, period_ns, done_ns, &skipped);
+    std::int64_t end_ns = done_ns;
+    if (control_iterations_ > 0) {
+      control_sink_ = fixed_work(control_iterations_, control_table_.data());
+      end_ns = monotonic_now_ns();
+      control_.record(end_ns - done_ns);
+    }
+    next_ns = advance(next_ns, period_ns, end_ns, &skipped);
     overruns_.store(skipped, std::memory_order_relaxed);
   }
   running_.store(false, std::memory_order_release);

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "config/daemon_config.hpp"
 #include "haptics/haptic_loop.hpp"
@@ -60,9 +61,20 @@ TimingSummary summarize(const LatencyHistogram& lateness, const LatencyHistogram
 // Monotonic clock in ns (same clock as std::chrono::steady_clock on Linux).
 std::int64_t monotonic_now_ns() noexcept;
 
+// A fixed workload for timing controls: `iterations` dependent square roots
+// reading a table of kFixedWorkTableSize doubles (32 KB, as a tick reads its
+// model and rings), the same instructions on every call. Timed beside a
+// tick, its tail is what the machine alone (preemption, host interrupts,
+// stalls of a virtual CPU) adds to a few microseconds of computing.
+constexpr std::size_t kFixedWorkTableSize = 4096;
+double fixed_work(int iterations, const double* table);
+
 // A bare clock_nanosleep loop at rate_hz for `periods` periods on the calling
 // thread, recording lateness: the baseline the haptic thread is judged against.
-void run_bare_timer_loop(double rate_hz, std::uint64_t periods, LatencyHistogram& lateness);
+// With `work_time`, each period also runs fixed_work(work_iterations) and
+// records how long it took.
+void run_bare_timer_loop(double rate_hz, std::uint64_t periods, LatencyHistogram& lateness,
+                         LatencyHistogram* work_time = nullptr, int work_iterations = 0);
 
 class HapticThread {
  public:
@@ -88,6 +100,12 @@ class HapticThread {
   const LatencyHistogram& lateness() const noexcept { return lateness_; }
   const LatencyHistogram& compute() const noexcept { return compute_; }
 
+  // Benchmarks only, before start(): after every tick, run fixed_work of
+  // `iterations` in the same thread and period and record its time in
+  // control() — a control measured in exactly the tick's conditions.
+  void set_control_work(int iterations);
+  const LatencyHistogram& control() const noexcept { return control_; }
+
  private:
   void run();
 
@@ -97,6 +115,10 @@ class HapticThread {
   SchedulingReport scheduling_;
   LatencyHistogram lateness_{1000, 50000};
   LatencyHistogram compute_{50, 40000};
+  LatencyHistogram control_{50, 40000};
+  int control_iterations_ = 0;
+  volatile double control_sink_ = 0.0;
+  std::vector<double> control_table_;
   std::atomic<std::uint64_t> overruns_{0};
   std::atomic<bool> configured_{false};
   std::atomic<bool> running_{false};

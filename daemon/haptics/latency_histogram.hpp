@@ -44,6 +44,16 @@ class LatencyHistogram {
   std::int64_t max_ns() const noexcept { return max_ns_.load(std::memory_order_relaxed); }
   std::int64_t bucket_width_ns() const noexcept { return bucket_width_ns_; }
 
+  // Samples of at least threshold_ns (counted from whole buckets at or above
+  // it, so thresholds on a bucket edge are exact; overflow included).
+  std::uint64_t count_at_least(std::int64_t threshold_ns) const noexcept {
+    const std::int64_t first = std::max<std::int64_t>(0, threshold_ns + bucket_width_ns_ - 1) / bucket_width_ns_;
+    std::uint64_t n = overflow_.load(std::memory_order_relaxed);
+    for (std::size_t i = static_cast<std::size_t>(std::min<std::int64_t>(first, bucket_count_)); i < bucket_count_; ++i)
+      n += counts_[i].load(std::memory_order_relaxed);
+    return n;
+  }
+
   // Upper edge of the bucket holding the q-quantile (0 < q <= 1), so the
   // figure is never optimistic; max_ns() when it falls in the overflow.
   std::int64_t percentile_ns(double q) const noexcept {

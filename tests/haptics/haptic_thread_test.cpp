@@ -108,9 +108,44 @@ TEST(LatencyHistogram, PercentilesAreBucketUpperEdges) {
   EXPECT_EQ(h.count(), 1000u);
   EXPECT_EQ(h.percentile_ns(0.5), 25000);
   EXPECT_EQ(h.percentile_ns(0.99), 50000);
+  EXPECT_EQ(h.count_at_least(40000), 200u);  // 40,000 .. 49,950
+  EXPECT_EQ(h.count_at_least(0), 1000u);
   h.record(10'000'000);  // overflow
   EXPECT_EQ(h.percentile_ns(1.0), 10'000'000);
   EXPECT_EQ(h.max_ns(), 10'000'000);
+  EXPECT_EQ(h.count_at_least(40000), 201u);
+  EXPECT_EQ(h.count_at_least(200'000), 1u);  // past the last bucket: the overflow only
+}
+
+// The benchmark control: fixed work after every tick, timed in its own
+// histogram, one sample per tick; off unless asked for.
+TEST(HapticThread, ControlWorkIsTimedAfterEveryTickOnlyWhenAsked) {
+  for (const int iterations : {0, 200}) {
+    config::DeviceSpec spec;
+    spec.sim.waypoints = {{0.0, {0, 0, 0.01}}};  // held above the (absent) object
+    SimDevice device(spec.sim);
+    std::string error;
+    ASSERT_TRUE(device.start(&error)) << error;
+    config::HapticSpec haptics;
+    auto models = std::make_unique<LocalModelBuffer>();
+    auto samples = std::make_unique<ToolSampleRing>();
+    HapticLoop loop(device, spec, haptics, *models, *samples);
+    config::RealtimeSpec realtime;
+    realtime.sched_fifo = false;
+    HapticThread thread(loop, haptics, realtime);
+    thread.set_control_work(iterations);
+    ASSERT_TRUE(thread.start(&error)) << error;
+    while (loop.heartbeat().load() < 50) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    thread.request_stop();
+    thread.join();
+    if (iterations == 0) {
+      EXPECT_EQ(thread.control().count(), 0u);
+    } else {
+      EXPECT_GE(thread.control().count(), 49u);
+      EXPECT_LE(thread.control().count(), thread.compute().count());
+      EXPECT_GT(thread.control().percentile_ns(0.5), 0);
+    }
+  }
 }
 
 }  // namespace
