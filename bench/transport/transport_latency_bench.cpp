@@ -88,7 +88,7 @@ service::MeshSnapshot grid_mesh(int triangles) {
 
 std::unique_ptr<transport::MeshSubscriber> make_subscriber(const std::string& kind, const Options& o) {
   if (kind == "lcm") return std::make_unique<transport::LcmMeshSubscriber>(o.lcm_url);
-  transport::DdsSubscribeOptions d;
+  transport::DdsOptions d;
   d.domain_id = o.dds_domain;
   return std::make_unique<transport::DdsMeshSubscriber>(d);
 }
@@ -101,7 +101,7 @@ struct Publisher {
     if (kind == "lcm") {
       lcm = std::make_unique<transport::LcmPublisher>(o.lcm_url);
     } else {
-      transport::DdsPublishOptions d;
+      transport::DdsOptions d;
       d.domain_id = o.dds_domain;
       dds = std::make_unique<transport::DdsPublisher>(d);
     }

@@ -4,16 +4,8 @@
 
 namespace tissue::cli {
 
-transport::DdsPublishOptions DdsCliOptions::publish_options() const {
-  transport::DdsPublishOptions d;
-  d.domain_id = domain_id;
-  d.topic_prefix = topic_prefix;
-  d.loopback_only = !remote;
-  return d;
-}
-
-transport::DdsSubscribeOptions DdsCliOptions::subscribe_options() const {
-  transport::DdsSubscribeOptions d;
+transport::DdsOptions DdsCliOptions::options() const {
+  transport::DdsOptions d;
   d.domain_id = domain_id;
   d.topic_prefix = topic_prefix;
   d.loopback_only = !remote;

@@ -1,13 +1,12 @@
 // The DDS options every client that talks DDS takes (`--dds`, `--dds-domain`,
 // `--dds-prefix`, `--dds-remote`), named and defaulted like the daemon's
-// publish.dds.* keys, and their conversion to publisher or subscriber options.
+// publish.dds.* keys, and their conversion to transport options.
 #pragma once
 
 #include <string>
 
 #include "config/daemon_config.hpp"
-#include "transport/dds_publisher.hpp"
-#include "transport/dds_subscriber.hpp"
+#include "transport/dds_options.hpp"
 
 namespace CLI {
 class App;
@@ -22,8 +21,8 @@ struct DdsCliOptions {
   std::string topic_prefix = config::DdsPublishSpec{}.topic_prefix;
   bool remote = false;  // --dds-remote: every interface, not this host only
 
-  transport::DdsPublishOptions publish_options() const;
-  transport::DdsSubscribeOptions subscribe_options() const;
+  // For a publisher (session replay) or a subscriber (live sources) alike.
+  transport::DdsOptions options() const;
 };
 
 // Adds --dds (described by `dds_help`) and the options that need it; returns

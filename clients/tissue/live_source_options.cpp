@@ -35,7 +35,7 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
     if (o.lcm_url) {
       sub = std::make_unique<transport::LcmMeshSubscriber>(*o.lcm_url);
     } else {
-      sub = std::make_unique<transport::DdsMeshSubscriber>(o.dds.subscribe_options());
+      sub = std::make_unique<transport::DdsMeshSubscriber>(o.dds.options());
     }
   } catch (const std::runtime_error& e) {
     throw LiveStartError(e.what());

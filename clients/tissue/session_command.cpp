@@ -87,7 +87,7 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
   std::unique_ptr<transport::DdsPublisher> dds;
   try {
     if (o.lcm_url) lcm = std::make_unique<transport::LcmPublisher>(*o.lcm_url);
-    if (o.dds.enabled) dds = std::make_unique<transport::DdsPublisher>(o.dds.publish_options());
+    if (o.dds.enabled) dds = std::make_unique<transport::DdsPublisher>(o.dds.options());
   } catch (const std::runtime_error& e) {
     std::cerr << "tissue session replay: " << e.what() << "\n";
     return kExitCannotConnect;

@@ -260,7 +260,7 @@ void Service::start_publishing() {
   }
   if (pub.dds.enabled) {
     try {
-      transport::DdsPublishOptions o;
+      transport::DdsOptions o;
       o.domain_id = pub.dds.domain_id;
       o.topic_prefix = pub.dds.topic_prefix;
       o.loopback_only = pub.dds.loopback_only;

@@ -97,7 +97,7 @@ struct DdsPublisher::Impl {
     participant = nullptr;
   }
 
-  void open(const DdsPublishOptions& o) {
+  void open(const DdsOptions& o) {
     const std::string where = "DDS publishing on domain " + std::to_string(o.domain_id);
     if (o.domain_id < 0 || o.domain_id > kMaxDomainId)
       throw std::runtime_error(where + ": domain id must be within 0.." + std::to_string(kMaxDomainId));
@@ -143,7 +143,7 @@ struct DdsPublisher::Impl {
   }
 };
 
-DdsPublisher::DdsPublisher(const DdsPublishOptions& options) : options_(options), impl_(std::make_unique<Impl>()) {
+DdsPublisher::DdsPublisher(const DdsOptions& options) : options_(options), impl_(std::make_unique<Impl>()) {
   impl_->open(options_);  // on a throw, impl_'s destructor deletes what was created
 }
 

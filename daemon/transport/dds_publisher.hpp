@@ -35,19 +35,13 @@
 #include <string>
 
 #include "service/sim_thread.hpp"
+#include "transport/dds_options.hpp"
 
 namespace eprosima::fastdds::dds {
 class DomainParticipantQos;
 }
 
 namespace tissue::transport {
-
-struct DdsPublishOptions {
-  int domain_id = 0;                      // 0..232 (Fast DDS's default port mapping)
-  std::string topic_prefix = "tissue/";   // topics: <prefix>surface_mesh, <prefix>haptic_state, <prefix>sim_stats
-  bool loopback_only = true;              // see above
-  std::size_t max_mesh_bytes = 8u << 20;  // larger serialized meshes are not sent (counted as failures)
-};
 
 struct DdsPublishCounts {
   std::uint64_t meshes = 0, haptic_states = 0, stats = 0, failures = 0;
@@ -77,7 +71,7 @@ class DdsPublisher {
  public:
   // Throws std::runtime_error naming the domain or topic and the reason when
   // an entity cannot be created (everything created so far is deleted).
-  explicit DdsPublisher(const DdsPublishOptions& options);
+  explicit DdsPublisher(const DdsOptions& options);
   ~DdsPublisher();  // deletes writers, publisher, topics, then the participant
   DdsPublisher(const DdsPublisher&) = delete;
   DdsPublisher& operator=(const DdsPublisher&) = delete;
@@ -88,11 +82,11 @@ class DdsPublisher {
   void publish_haptic(const service::SimStatus& status);
 
   const DdsPublishCounts& counts() const { return counts_; }
-  const DdsPublishOptions& options() const { return options_; }
+  const DdsOptions& options() const { return options_; }
   DdsMatchedReaders matched_readers() const;
 
  private:
-  DdsPublishOptions options_;
+  DdsOptions options_;
   DdsPublishCounts counts_;
   std::uint64_t last_mesh_sequence_ = 0;
   std::int64_t mesh_seq_ = 0, haptic_seq_ = 0, stats_seq_ = 0;

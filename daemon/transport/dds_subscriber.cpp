@@ -48,7 +48,7 @@ struct DdsMeshSubscriber::Impl {
   }
 };
 
-DdsMeshSubscriber::DdsMeshSubscriber(const DdsSubscribeOptions& o) : options_(o), impl_(std::make_unique<Impl>()) {
+DdsMeshSubscriber::DdsMeshSubscriber(const DdsOptions& o) : options_(o), impl_(std::make_unique<Impl>()) {
   const std::string where = "DDS subscribing on domain " + std::to_string(o.domain_id);
   if (o.domain_id < 0 || o.domain_id > 232) throw std::runtime_error(where + ": domain id must be within 0..232");
   impl_->participant = dds::DomainParticipantFactory::get_instance()->create_participant(

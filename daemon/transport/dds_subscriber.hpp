@@ -1,7 +1,7 @@
 // Receives `surface_mesh` on the Fast DDS topic <prefix>surface_mesh as export
 // frames (for `tissue x3d --dds`, `tissue render --dds`). The participant uses
 // the publisher's transports (dds_participant_qos: loopback UDP + shared
-// memory unless `remote`), the reader is RELIABLE and TRANSIENT_LOCAL, so it
+// memory unless !loopback_only), the reader is RELIABLE and TRANSIENT_LOCAL, so it
 // gets the publisher's current mesh as soon as it matches (the writer keeps
 // the newest one for late joiners) and then every new one it can keep up with.
 #pragma once
@@ -10,21 +10,15 @@
 #include <optional>
 #include <string>
 
+#include "transport/dds_options.hpp"
 #include "transport/mesh_subscriber.hpp"
 
 namespace tissue::transport {
 
-struct DdsSubscribeOptions {
-  int domain_id = 0;
-  std::string topic_prefix = "tissue/";
-  bool loopback_only = true;              // false: UDP on every interface (a publisher on another host)
-  std::size_t max_mesh_bytes = 8u << 20;  // sizes the shared-memory segment (as the publisher's)
-};
-
 class DdsMeshSubscriber final : public MeshSubscriber {
  public:
   // Throws std::runtime_error naming the domain or topic and the reason.
-  explicit DdsMeshSubscriber(const DdsSubscribeOptions& options);
+  explicit DdsMeshSubscriber(const DdsOptions& options);
   ~DdsMeshSubscriber() override;
   DdsMeshSubscriber(const DdsMeshSubscriber&) = delete;
   DdsMeshSubscriber& operator=(const DdsMeshSubscriber&) = delete;
@@ -36,7 +30,7 @@ class DdsMeshSubscriber final : public MeshSubscriber {
   int matched_writers() const;
 
  private:
-  DdsSubscribeOptions options_;
+  DdsOptions options_;
   MeshReceiveCounts counts_;
   struct Impl;
   std::unique_ptr<Impl> impl_;

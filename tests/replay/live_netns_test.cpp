@@ -136,7 +136,7 @@ TEST_F(LiveNetns, RenderAndX3dFromADdsReplay) {
 }
 
 TEST_F(LiveNetns, DdsReplayDeliversTheFramesInOrderAtThePace) {
-  transport::DdsSubscribeOptions o;
+  transport::DdsOptions o;
   o.domain_id = std::atoi(domain_.c_str());
   transport::DdsMeshSubscriber sub(o);
   RunResult result;

@@ -191,7 +191,7 @@ TEST(DdsMessages, StatusBecomesStatsAndHapticState) {
   EXPECT_EQ(haptic.local_model_version(), 99);
 }
 
-void expect_error_naming(const DdsPublishOptions& o, const std::string& needle) {
+void expect_error_naming(const DdsOptions& o, const std::string& needle) {
   try {
     DdsPublisher p(o);
     FAIL() << "expected an error";
@@ -202,7 +202,7 @@ void expect_error_naming(const DdsPublishOptions& o, const std::string& needle) 
 
 // Rejected before any participant exists: no network needed.
 TEST(DdsPublisher, BadOptionsAreClearErrors) {
-  DdsPublishOptions o;
+  DdsOptions o;
   o.domain_id = 233;
   expect_error_naming(o, "domain 233");
   o.domain_id = -1;
@@ -308,12 +308,12 @@ class DdsPublisherNetns : public ::testing::Test {
     if (!domain) GTEST_SKIP() << "run through the ctest entry (private network namespace and /dev/shm)";
     options_.domain_id = std::atoi(domain);
   }
-  DdsPublishOptions options_;
+  DdsOptions options_;
 };
 
 TEST_F(DdsPublisherNetns, StartsAndStopsWithEitherTransportSettingAndAnyPrefix) {
   for (const bool loopback : {true, false}) {
-    DdsPublishOptions o = options_;
+    DdsOptions o = options_;
     o.loopback_only = loopback;
     o.topic_prefix = "lab7/";
     DdsPublisher publisher(o);
