@@ -23,6 +23,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <thread>
 
@@ -165,7 +166,7 @@ Figures measure(double seconds, const config::RealtimeSpec& realtime) {
   auto samples = std::make_unique<haptics::ToolSampleRing>();
   haptics::HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
   haptics::HapticThread thread(loop, haptic_spec, realtime);
-  thread.set_control_work(g_work_iterations);
+  if (!thread.set_control_work(g_work_iterations)) throw std::logic_error("control work set after start");
   const haptics::LocalModel patch = make_patch();
   std::atomic<bool> stop_publisher{false};
   std::uint64_t contact_samples = 0;
@@ -238,7 +239,7 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
   service::SimThread sim(std::make_unique<service::SimRunner>(scene), samples.get(), models.get(), sim_options);
   haptics::HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
   haptics::HapticThread thread(loop, haptic_spec, realtime);
-  thread.set_control_work(g_work_iterations);
+  if (!thread.set_control_work(g_work_iterations)) throw std::logic_error("control work set after start");
   std::unique_ptr<record::Recorder> recorder;
   if (!record_dir.empty()) {
     record::SessionMetadata meta;

@@ -8,6 +8,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -232,9 +233,11 @@ bool HapticThread::start(std::string* error) {
   return true;
 }
 
-void HapticThread::set_control_work(int iterations) {
-  control_iterations_ = iterations;
-  control_table_.assign(iterations > 0 ? kFixedWorkTableSize : 0, 1.0);
+bool HapticThread::set_control_work(int iterations) {
+  if (thread_.joinable()) return false;  // the running loop reads these without synchronisation
+  control_iterations_ = std::max(0, iterations);
+  control_table_.assign(control_iterations_ > 0 ? kFixedWorkTableSize : 0, 1.0);
+  return true;
 }
 
 void HapticThread::join() {

@@ -100,10 +100,11 @@ class HapticThread {
   const LatencyHistogram& lateness() const noexcept { return lateness_; }
   const LatencyHistogram& compute() const noexcept { return compute_; }
 
-  // Benchmarks only, before start(): after every tick, run fixed_work of
-  // `iterations` in the same thread and period and record its time in
-  // control() — a control measured in exactly the tick's conditions.
-  void set_control_work(int iterations);
+  // Benchmarks only: after every tick, run fixed_work of `iterations` (≤ 0:
+  // none) in the same thread and period and record its time in control() —
+  // a control measured in exactly the tick's conditions. Only before
+  // start(): false (and nothing changed) once the thread was started.
+  bool set_control_work(int iterations);
   const LatencyHistogram& control() const noexcept { return control_; }
 
  private:

@@ -133,8 +133,9 @@ TEST(HapticThread, ControlWorkIsTimedAfterEveryTickOnlyWhenAsked) {
     config::RealtimeSpec realtime;
     realtime.sched_fifo = false;
     HapticThread thread(loop, haptics, realtime);
-    thread.set_control_work(iterations);
+    ASSERT_TRUE(thread.set_control_work(iterations));
     ASSERT_TRUE(thread.start(&error)) << error;
+    EXPECT_FALSE(thread.set_control_work(iterations + 100)) << "changed under the running loop";
     while (loop.heartbeat().load() < 50) std::this_thread::sleep_for(std::chrono::milliseconds(5));
     thread.request_stop();
     thread.join();
