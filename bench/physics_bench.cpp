@@ -119,6 +119,91 @@ void BM_ExplicitSubstep(benchmark::State& state) {
   state.counters["h_us"] = h * 1e6;
 }
 
+#if defined(__x86_64__)
+// The memory-access floor of the explicit sub-step: the integrator's own
+// spring stream and padded node layout, every load and store the kernel
+// makes (both ends' x and v, f[a] += F and f[b] −= F, then the node update),
+// but a linear force F = k Δx + c Δv: no length, square root, division or
+// lane sums. No kernel that reads this stream and scatters per spring can
+// beat it, so its x_bound says how close to the bandwidth bound this data
+// layout can come at each size. (Benchmark only: not a physical law.)
+TISSUE_AVX2 void access_floor_substep(const std::vector<physics::ExplicitSpringBatch>& stream, double h,
+                                      const double* inv_mass, physics::Pad3* x_pad, physics::Pad3* v_pad,
+                                      physics::Pad3* f_pad, std::size_t nodes) {
+  const double* x = x_pad[0].v;
+  const double* v = v_pad[0].v;
+  double* f = f_pad[0].v;
+  for (const physics::ExplicitSpringBatch& s : stream) {
+    for (int j = 0; j < 4; ++j) {
+      const std::uint32_t a4 = s.a4[j], b4 = s.b4[j];
+      const __m256d dx = _mm256_sub_pd(_mm256_load_pd(x + b4), _mm256_load_pd(x + a4));
+      const __m256d dv = _mm256_sub_pd(_mm256_load_pd(v + b4), _mm256_load_pd(v + a4));
+      const __m256d force = _mm256_add_pd(_mm256_mul_pd(_mm256_broadcast_sd(s.k_N_per_m + j), dx),
+                                          _mm256_mul_pd(_mm256_broadcast_sd(s.c_N_s_per_m + j), dv));
+      _mm256_store_pd(f + a4, _mm256_add_pd(_mm256_load_pd(f + a4), force));
+      _mm256_store_pd(f + b4, _mm256_sub_pd(_mm256_load_pd(f + b4), force));
+    }
+  }
+  const __m256d hv = _mm256_set1_pd(h);
+  for (std::size_t i = 0; i < nodes; ++i) {
+    const __m256d vi = _mm256_add_pd(_mm256_load_pd(v_pad[i].v),
+                                     _mm256_mul_pd(_mm256_set1_pd(h * inv_mass[i]), _mm256_load_pd(f_pad[i].v)));
+    _mm256_store_pd(v_pad[i].v, vi);
+    _mm256_store_pd(x_pad[i].v, _mm256_add_pd(_mm256_load_pd(x_pad[i].v), _mm256_mul_pd(hv, vi)));
+    _mm256_store_pd(f_pad[i].v, _mm256_setzero_pd());
+  }
+}
+
+// Args: depth. Same timing as BM_ExplicitSubstep (median of 10-sub-step
+// rounds); floor_vs_kernel is this floor over the shipped kernel timed
+// alternately in the same benchmark.
+void BM_ExplicitAccessFloor(benchmark::State& state) {
+  if (physics::detected_simd() != physics::Simd::kAvx2) {
+    state.SkipWithError("needs AVX2");
+    return;
+  }
+  constexpr int kSubsteps = 10;
+  physics::Simulation sim(beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit));
+  physics::Body& body = sim.mutable_body();
+  const std::size_t nodes = body.x_m.size();
+  const double h = 0.5 * physics::explicit_stable_dt_s(body);
+  const double bound = bound_ns_per_spring(body);
+  physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
+  const std::vector<physics::Vec3> no_force(nodes, physics::Vec3::Zero());
+  integrator.run_substeps(body, no_force, h, 1);
+  // The floor's own state (pad nodes included), tiny velocities so the
+  // linear force stays finite and small over the run.
+  std::vector<physics::Pad3> x(nodes + 2), v(nodes + 2), f(nodes + 2);
+  std::vector<double> inv_mass(nodes + 2, 0.0);
+  for (std::size_t n = 0; n < nodes; ++n) {
+    x[n] = physics::Pad3{{body.x_m[n].x(), body.x_m[n].y(), body.x_m[n].z(), 0.0}};
+    inv_mass[n] = body.inv_mass_per_kg[n];
+  }
+  std::vector<double> floor_ns, kernel_ns;
+  for (auto _ : state) {
+    auto t0 = std::chrono::steady_clock::now();
+    for (int s = 0; s < kSubsteps; ++s)
+      access_floor_substep(integrator.spring_stream(), h, inv_mass.data(), x.data(), v.data(), f.data(), nodes);
+    floor_ns.push_back(std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                       kSubsteps);
+    benchmark::DoNotOptimize(x.data());
+    t0 = std::chrono::steady_clock::now();
+    integrator.run_substeps(body, no_force, h, kSubsteps);
+    kernel_ns.push_back(std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                        kSubsteps);
+    benchmark::DoNotOptimize(body.x_m.data());
+  }
+  bool finite = physics::state_is_finite(body);
+  for (std::size_t n = 0; n < nodes; ++n)
+    for (int k = 0; k < 4; ++k) finite = finite && std::isfinite(x[n].v[k]) && std::isfinite(v[n].v[k]);
+  if (!finite) state.SkipWithError("state became non-finite: the timing is not valid");
+  const double floor = bench::median(floor_ns), kernel = bench::median(kernel_ns);
+  report(state, body, floor, bound);
+  state.counters["kernel_x_bound"] = kernel / static_cast<double>(body.mesh().edge_count()) / bound;
+  state.counters["floor_vs_kernel"] = floor / kernel;
+}
+#endif
+
 // Whole steps of each rung at dt = 1 ms (explicit includes its sub-steps).
 void BM_Step(benchmark::State& state, scene::IntegratorKind kind, int fixed_cg_iterations) {
   scene::Scene s = beam(static_cast<int>(state.range(0)), kind);
@@ -440,6 +525,9 @@ BENCHMARK(BM_ExplicitSubstep)
     ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}})
     ->Iterations(21)
     ->Unit(benchmark::kMillisecond);
+#if defined(__x86_64__)
+BENCHMARK(BM_ExplicitAccessFloor)->DenseRange(0, 9, 3)->Arg(10)->Arg(11)->Iterations(21)->Unit(benchmark::kMillisecond);
+#endif
 BENCHMARK_CAPTURE(BM_Step, explicit, scene::IntegratorKind::kExplicit, 0)
     ->Arg(0)
     ->Arg(3)

@@ -54,6 +54,9 @@ class ExplicitIntegrator final : public Integrator {
   // `count` sub-steps of h under f_ext_N, without the stability refusal, the
   // state save or the finiteness check of step(). For the benchmark.
   void run_substeps(Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count);
+  // The spring stream as last built (empty before the first step). For the
+  // benchmark's memory-access floor, which runs its own loop over it.
+  const std::vector<ExplicitSpringBatch>& spring_stream() const { return batches_; }
 
  private:
   // Spring stream, stable bound and padded state sized for the topology.
