@@ -80,7 +80,7 @@ double bound_ns_per_spring(const physics::Body& body) {
 // velocity/position update that also resets the force accumulator), timed
 // over kSubsteps sub-steps so the copy of the state into and out of the
 // integrator's padded arrays (once per step) is amortised as in a real step
-// (a 1 ms step at R3 takes 6-7 sub-steps undamped). Second argument 1 times
+// (a 1 ms step at R3 takes 5-6 sub-steps undamped). Second argument 1 times
 // the code this replaced instead: add_spring_forces + a plain update loop.
 void BM_ExplicitSubstep(benchmark::State& state) {
   constexpr int kSubsteps = 10;

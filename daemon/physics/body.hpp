@@ -70,6 +70,11 @@ class Body {
   // orderings) on it.
   std::uint64_t parameters_version() const { return parameters_version_; }
 
+  // Σ w V share [m³] a tet at `depth` with corners v gives each of its edges
+  // (kTetEdgeSlots order): its stiffness share is E · share / L². Stiffness
+  // and mass are sums of such per-tet shares (eqs. (2), (3)).
+  std::array<double, 6> tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const;
+
   // Total mass [kg] and momentum [kg m/s] of all nodes.
   double total_mass_kg() const;
   Vec3 momentum() const;
@@ -78,8 +83,6 @@ class Body {
   void apply_log(const mesh::MeshChangeLog& log);
   void resize_to_mesh();
   void classify_node(NodeId n);
-  // Σ w V share [m³] a tet gives each of its edges (kTetEdgeSlots order).
-  std::array<double, 6> tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const;
   void refresh_edge(EdgeId e);
 
   scene::Scene scene_;

@@ -9,6 +9,7 @@
 // state, refused sub-stepping), and says why.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -39,13 +40,24 @@ class Integrator {
 
 std::unique_ptr<Integrator> make_integrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material);
 
-// Safe explicit step [s] from Gershgorin bounds on the mass-normalised
-// stiffness (ω² ≤ max_i 2 Σk / m_i, 0.57x the true limit on these meshes) and
-// spring damping (γ ≤ max_i 2 Σc / m_i): h ≤ (2/ω)(√(1+ζ²) − ζ), ζ = γ/(2ω).
-// Stiffness-proportional damping thus shrinks it (ζ = βω/2 at the highest
-// mode): heavily damped scenes belong on the implicit rung. Mass-proportional
-// damping is integrated implicitly and does not limit it.
+// Safe explicit step [s]: h ≤ (2/ω)(√(1+ζ²) − ζ), ζ = γ/(2ω), from upper
+// bounds on the highest mass-normalised stiffness ω² and damping rate γ: the
+// smaller of a Gershgorin bound (ω² ≤ max_i 2 Σk / m_i, γ ≤ max_i 2 Σc / m_i)
+// and the element bound below (γ ≤ max(c/k) · that). Stiffness-proportional
+// damping shrinks it (ζ = βω/2 at the highest mode): heavily damped scenes
+// belong on the implicit rung. Mass-proportional damping is integrated
+// implicitly and does not limit it.
 double explicit_stable_dt_s(const Body& body);
+
+// An upper bound on the body's highest ω² = λmax(M⁻¹K) at rest [1/s²]: the
+// largest λmax(K_t, M_t) of any tet, K_t its eq. (3) stiffness shares and M_t
+// a quarter of its mass on each corner. Holds because K = Σ K_t and M = Σ M_t
+// (the element eigenvalue theorem: a sum's Rayleigh quotient is at most the
+// largest of its parts'); fixed nodes only lower the true value.
+double element_frequency2_bound_per_s2(const Body& body);
+
+// λmax(K_t, M_t) [1/s²] of the tet at `depth` with corners v.
+double tet_frequency2_per_s2(const Body& body, const std::array<NodeId, 4>& v, int depth);
 
 // True when every live node's position and velocity is finite and below
 // 1e100 in magnitude: beyond that, squared lengths overflow and forces

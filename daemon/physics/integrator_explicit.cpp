@@ -24,13 +24,16 @@
 // 0-10 % slower; huge pages (MADV_HUGEPAGE) no change. Without the square
 // root and division the force pass is only ~15 % faster, without the scatter
 // ~10 %: the cost is spread over the shuffles and loads of every spring.
+#include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <sstream>
 
 #include "physics/forces.hpp"
 #include "physics/integrator.hpp"
 #include "physics/integrator_impl.hpp"
+#include "physics/spring_law.hpp"
 
 namespace tissue::physics {
 
@@ -41,6 +44,43 @@ Simd detected_simd() {
 #else
   return Simd::kScalar;
 #endif
+}
+
+double tet_frequency2_per_s2(const Body& body, const std::array<NodeId, 4>& v, int depth) {
+  const auto shares = body.tet_edge_shares_m3(v, depth);
+  const double youngs_Pa = body.scene().material.youngs_modulus_Pa;
+  Eigen::Matrix<double, 12, 12> k = Eigen::Matrix<double, 12, 12>::Zero();
+  for (int e = 0; e < 6; ++e) {
+    const int i = mesh::kTetEdgeSlots[e][0], j = mesh::kTetEdgeSlots[e][1];
+    const Vec3 d = body.rest_m[v[j]] - body.rest_m[v[i]];
+    const double length = d.norm();
+    const Vec3 unit_d = d / length;
+    const Eigen::Matrix3d block = spring_stiffness_N_per_m(youngs_Pa, shares[e], length) * unit_d * unit_d.transpose();
+    k.block<3, 3>(3 * i, 3 * i) += block;
+    k.block<3, 3>(3 * j, 3 * j) += block;
+    k.block<3, 3>(3 * i, 3 * j) -= block;
+    k.block<3, 3>(3 * j, 3 * i) -= block;
+  }
+  const double unit = body.mesh().lattice_unit_m();
+  const double volume_m3 = static_cast<double>(body.mesh().six_volume_at_depth(depth)) * unit * unit * unit / 6.0;
+  const double corner_mass_kg = body.scene().material.density_kg_per_m3 * volume_m3 / 4.0;  // eq. (2)
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 12, 12>> solver(k, Eigen::EigenvaluesOnly);
+  return solver.eigenvalues().maxCoeff() / corner_mass_kg;
+}
+
+double element_frequency2_bound_per_s2(const Body& body) {
+  // Tets of one depth are congruent in this hierarchy (Maubach bisection of
+  // Kuhn cubes; a test checks it on adaptively refined meshes), so λ depends
+  // on the depth alone: one 12x12 eigenproblem per depth present.
+  std::array<double, 64> by_depth{};
+  double bound = 0.0;
+  body.mesh().for_each_tet([&](TetId, const mesh::Tet& t) {
+    double& lambda = by_depth.at(t.depth);
+    if (lambda > 0.0) return;
+    lambda = tet_frequency2_per_s2(body, t.v, t.depth);
+    bound = std::max(bound, lambda);
+  });
+  return bound;
 }
 
 double explicit_stable_dt_s(const Body& body) {
@@ -58,6 +98,19 @@ double explicit_stable_dt_s(const Body& body) {
     omega2 = std::max(omega2, 2.0 * sum_k[n] * body.inv_mass_per_kg[n]);
     gamma = std::max(gamma, 2.0 * sum_c[n] * body.inv_mass_per_kg[n]);
   }
+  // Both are upper bounds: keep the smaller. With c ≤ r k on every spring,
+  // C ⪯ r K, so the damping rate is bounded by r times the stiffness bound.
+  const double element = element_frequency2_bound_per_s2(body);
+  double damping_per_stiffness_s = 0.0;
+  body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
+    const double k = body.stiffness_N_per_m[e], c = body.damping_N_s_per_m[e];
+    if (k > 0.0)
+      damping_per_stiffness_s = std::max(damping_per_stiffness_s, c / k);
+    else if (c > 0.0)
+      damping_per_stiffness_s = INFINITY;  // a damper without a spring: no such bound
+  });
+  omega2 = std::min(omega2, element);
+  gamma = std::min(gamma, damping_per_stiffness_s * element);
   if (omega2 <= 0.0) return gamma > 0.0 ? 2.0 / gamma : INFINITY;
   const double omega = std::sqrt(omega2);
   const double zeta = gamma / (2.0 * omega);
