@@ -24,6 +24,13 @@
 // 0-10 % slower; huge pages (MADV_HUGEPAGE) no change. Without the square
 // root and division the force pass is only ~15 % faster, without the scatter
 // ~10 %: the cost is spread over the shuffles and loads of every spring.
+// Later (physics_bench BM_ExplicitAccessFloor, this stream and layout with a
+// linear force and no arithmetic beyond it): the loads and stores alone take
+// ~half the kernel's time at cache-resident sizes and ~3/4 from 4x10^5
+// springs. Tried and dropped against that: nodes updated as soon as their
+// last spring has run (springs ordered by larger end, chunked updates;
+// bit-identical) ±7 %, no gain; a float-seeded 1/√l (float sqrt and division,
+// two Newton steps in double) 30-45 % slower than sqrt + division.
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
