@@ -193,15 +193,6 @@ void update_scalar(double h, double damping_divisor, const double* inv_mass, con
 }
 
 #if defined(__x86_64__)
-// Sum of lanes 0..3 of each of four vectors, as ((x + y) + (z + w)).
-TISSUE_AVX2 inline __m256d lane_sums_avx2(__m256d m0, __m256d m1, __m256d m2, __m256d m3) {
-  const __m256d t0 = _mm256_hadd_pd(m0, m1);  // m0.x+y, m1.x+y, m0.z+w, m1.z+w
-  const __m256d t1 = _mm256_hadd_pd(m2, m3);
-  const __m256d low = _mm256_blend_pd(t0, t1, 0b1100);        // m0.xy, m1.xy, m2.zw, m3.zw
-  const __m256d high = _mm256_permute2f128_pd(t0, t1, 0x21);  // m0.zw, m1.zw, m2.xy, m3.xy
-  return _mm256_add_pd(low, high);
-}
-
 TISSUE_AVX2 void forces_avx2(const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x_pad,
                              const Pad3* v_pad, const Vec3* rest_m, Pad3* f_pad) {
   const double* x = x_pad[0].v;

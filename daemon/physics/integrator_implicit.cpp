@@ -241,13 +241,6 @@ void setup_scalar(const SetupInput& in, const EdgeId* live, std::size_t count, P
 }
 
 #if defined(__x86_64__)
-// Sum of lanes of each of four vectors, as ((x + y) + (z + w)), lane j from mj.
-TISSUE_AVX2 inline __m256d lane_sums4_avx2(__m256d m0, __m256d m1, __m256d m2, __m256d m3) {
-  const __m256d t0 = _mm256_hadd_pd(m0, m1);  // m0.x+y, m1.x+y, m0.z+w, m1.z+w
-  const __m256d t1 = _mm256_hadd_pd(m2, m3);
-  return _mm256_add_pd(_mm256_blend_pd(t0, t1, 0b1100), _mm256_permute2f128_pd(t0, t1, 0x21));
-}
-
 // Four springs at a time: lengths, square roots, divisions and the spring
 // scalars in one vector each (the scalar-per-spring version spent ~35 cycles
 // per spring, mostly waiting on its sqrt → div → sqrt chain).
@@ -274,7 +267,7 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
     }
     const __m256d rest =
         _mm256_setr_pd(in.rest_length[e[0]], in.rest_length[e[1]], in.rest_length[e[2]], in.rest_length[e[3]]);
-    const __m256d length = _mm256_sqrt_pd(lane_sums4_avx2(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1]),
+    const __m256d length = _mm256_sqrt_pd(lane_sums_avx2(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1]),
                                                           _mm256_mul_pd(d[2], d[2]), _mm256_mul_pd(d[3], d[3])));
     if (_mm256_movemask_pd(_mm256_cmp_pd(length, _mm256_mul_pd(_mm256_set1_pd(1e-9), rest), _CMP_GT_OQ)) != 0xF) {
       for (int j = 0; j < 4; ++j) setup_spring_scalar(in, e[j], rhs_pad, diag_pad, records + i + j);  // collapsed: rare
@@ -288,7 +281,7 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
       dv[j] =
           _mm256_sub_pd(_mm256_maskload_pd(in.v[na[j]].data(), xyz_i), _mm256_maskload_pd(in.v[nb[j]].data(), xyz_i));
     }
-    const __m256d dvd = lane_sums4_avx2(_mm256_mul_pd(dv[0], dir[0]), _mm256_mul_pd(dv[1], dir[1]),
+    const __m256d dvd = lane_sums_avx2(_mm256_mul_pd(dv[0], dir[0]), _mm256_mul_pd(dv[1], dir[1]),
                                         _mm256_mul_pd(dv[2], dir[2]), _mm256_mul_pd(dv[3], dir[3]));
     const __m256d k = _mm256_setr_pd(in.stiffness[e[0]], in.stiffness[e[1]], in.stiffness[e[2]], in.stiffness[e[3]]);
     const __m256d c = _mm256_setr_pd(in.damping[e[0]], in.damping[e[1]], in.damping[e[2]], in.damping[e[3]]);

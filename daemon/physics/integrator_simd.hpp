@@ -40,6 +40,17 @@ TISSUE_AVX2 inline double sum_lanes_avx2(__m256d acc) {
   _mm256_store_pd(a, acc);
   return ((a[0] + a[1]) + a[2]) + a[3];
 }
+
+// Lane j of the result is mj's lanes summed as ((x + y) + (z + w)): four
+// springs' dot products in one vector (lane 3 of a padded vector is 0, so
+// this is the scalar kernels' ((x + y) + (z + 0))).
+TISSUE_AVX2 inline __m256d lane_sums_avx2(__m256d m0, __m256d m1, __m256d m2, __m256d m3) {
+  const __m256d t0 = _mm256_hadd_pd(m0, m1);  // m0.x+y, m1.x+y, m0.z+w, m1.z+w
+  const __m256d t1 = _mm256_hadd_pd(m2, m3);
+  const __m256d low = _mm256_blend_pd(t0, t1, 0b1100);        // m0.xy, m1.xy, m2.zw, m3.zw
+  const __m256d high = _mm256_permute2f128_pd(t0, t1, 0x21);  // m0.zw, m1.zw, m2.xy, m3.xy
+  return _mm256_add_pd(low, high);
+}
 #endif
 
 }  // namespace tissue::physics
