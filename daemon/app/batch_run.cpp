@@ -35,6 +35,15 @@ double percentile(const std::vector<double>& sorted, double p) {
 
 bool says_nonfinite(const std::string& error) { return error.find("non-finite") != std::string::npos; }
 
+// What the integrator spent per step and what accuracy it gave up (steps
+// whose solver stopped at cg_max_iterations short of cg_tolerance).
+nlohmann::json solver_json(const physics::SimCounters& c) {
+  const double steps = static_cast<double>(std::max<std::int64_t>(c.steps, 1));
+  return {{"substeps", {{"mean", static_cast<double>(c.substeps) / steps}, {"max", c.max_substeps}}},
+          {"iterations", {{"mean", static_cast<double>(c.solver_iterations) / steps}, {"max", c.max_solver_iterations}}},
+          {"unconverged_steps", c.unconverged_steps}};
+}
+
 struct Tally {
   std::size_t nodes, tets, springs;
 };
@@ -189,6 +198,7 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
       {"external_work_J", c.external_work_J},
       {"nonfinite_events", says_nonfinite(error) ? 1 : 0},
       {"rejected_steps", c.rejected_steps},
+      {"solver", solver_json(c)},
       {"error", error.empty() ? nlohmann::json(nullptr) : nlohmann::json(error)},
       {"probes", std::move(probes)},
   };
@@ -259,6 +269,16 @@ int batch_command(const BatchOptions& options) {
       return code;
     }
     if (!write_error.empty()) return fail(kExitReport, write_error);
+    if (const physics::SimCounters& c = sim->counters(); c.unconverged_steps > 0) {
+      // The run succeeded, but part of it is less accurate than the scene asked.
+      std::fflush(stdout);
+      std::fprintf(stderr,
+                   "tissued: warning: %lld of %lld steps stopped at integrator.cg_max_iterations = %d short of "
+                   "integrator.cg_tolerance = %g; raise cg_max_iterations, lower dt_s, or (slender or heavily damped "
+                   "objects) try cg_preconditioner: two_level\n",
+                   static_cast<long long>(c.unconverged_steps), static_cast<long long>(c.steps),
+                   scene.integrator.cg_max_iterations, scene.integrator.cg_tolerance);
+    }
     if (talk) {
       std::printf("done: %.6g s simulated in %lld steps", sim->time_s(), static_cast<long long>(sim->counters().steps));
       if (report.contains("timing")) {

@@ -10,6 +10,8 @@
 //   result  {sim_time_s, steps, nodes/tets/springs {final, peak}, refines,
 //            merges, energy_J {kinetic, elastic}, external_work_J,
 //            nonfinite_events, rejected_steps, error (null | message),
+//            solver {substeps {mean, max}, iterations {mean, max},
+//                    unconverged_steps},
 //            probes {NAME: {final_displacement_m [x,y,z], peak_magnitude_m}}}
 //   timing  {wall_s, step_ms {p50, p99, max}, real_time_factor}
 // Everything except `timing` depends only on the scene and the overrides, so

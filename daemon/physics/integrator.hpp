@@ -25,6 +25,9 @@ struct StepOutcome {
   int substeps = 1;           // explicit
   int solver_iterations = 0;  // implicit CG / projective local-global
   double solver_residual = 0.0;
+  // False when the solver stopped at integrator.cg_max_iterations before
+  // reaching integrator.cg_tolerance: the step ran, less accurately.
+  bool solver_converged = true;
 };
 
 class Integrator {

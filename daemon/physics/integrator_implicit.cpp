@@ -579,6 +579,7 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   }
   out.solver_iterations = it;
   out.solver_residual = residual;
+  out.solver_converged = residual <= spec_.cg_tolerance;
 
   for (std::uint32_t i = 0; i < unknowns_; ++i) {
     const NodeId n = node_of_unknown_[i];

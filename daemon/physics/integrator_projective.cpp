@@ -108,6 +108,7 @@ StepOutcome ProjectiveIntegrator::step(Body& body, const std::vector<Vec3>& f_ex
   }
   out.solver_iterations = it;
   out.solver_residual = change;
+  out.solver_converged = change <= tolerance_m;
   for (std::size_t n = 0; n < nodes; ++n) {
     if (body.inv_mass_per_kg[n] == 0.0) continue;
     body.v_m_per_s[n] = (body.x_m[n] - x_prev_[n]) / h / (1.0 + h * alpha_per_s_);

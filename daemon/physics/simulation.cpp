@@ -1,5 +1,6 @@
 #include "physics/simulation.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "physics/forces.hpp"
@@ -38,6 +39,7 @@ StepResult Simulation::step() {
   result.substeps = out.substeps;
   result.solver_iterations = out.solver_iterations;
   result.solver_residual = out.solver_residual;
+  result.solver_converged = out.solver_converged;
   if (!out.ok) {
     result.ok = false;
     result.error = out.error;
@@ -46,6 +48,12 @@ StepResult Simulation::step() {
   }
   for (std::size_t n = 0; n < f_ext_N_.size(); ++n)
     if (body_.inv_mass_per_kg[n] != 0.0) counters_.external_work_J += f_ext_N_[n].dot(body_.x_m[n] - x_before_[n]);
+
+  counters_.substeps += out.substeps;
+  counters_.max_substeps = std::max(counters_.max_substeps, out.substeps);
+  counters_.solver_iterations += out.solver_iterations;
+  counters_.max_solver_iterations = std::max(counters_.max_solver_iterations, out.solver_iterations);
+  if (!out.solver_converged) ++counters_.unconverged_steps;
 
   time_s_ = t_next;
   ++counters_.steps;

@@ -27,6 +27,7 @@ struct StepResult {
   int substeps = 1;
   int solver_iterations = 0;
   double solver_residual = 0.0;
+  bool solver_converged = true;  // see StepOutcome
   AdaptStats adapted;
 };
 
@@ -37,6 +38,13 @@ struct SimCounters {
   std::int64_t rejected_steps = 0;  // non-finite or refused
   std::size_t peak_nodes = 0, peak_tets = 0, peak_springs = 0;
   double external_work_J = 0.0;  // work of loads and gravity on free nodes
+  // What the integrator spent on the steps taken (the speed side of the
+  // speed/accuracy knobs): explicit sub-steps, implicit CG or projective
+  // local/global iterations, and the steps whose solver stopped at
+  // cg_max_iterations short of cg_tolerance (the accuracy given up).
+  std::int64_t substeps = 0, solver_iterations = 0;
+  int max_substeps = 0, max_solver_iterations = 0;
+  std::int64_t unconverged_steps = 0;
 };
 
 class Simulation {

@@ -135,6 +135,17 @@ TEST(BatchReport, FieldsHaveTheRightTypes) {
   EXPECT_EQ(res["rejected_steps"].get<long long>(), 0);
   EXPECT_TRUE(res["error"].is_null());
 
+  // What the integrator spent: implicit CG iterations, one "sub-step" per step.
+  const json& solver = res["solver"];
+  EXPECT_TRUE(solver["iterations"]["mean"].is_number_float());
+  EXPECT_TRUE(solver["iterations"]["max"].is_number_integer());
+  EXPECT_GT(solver["iterations"]["mean"].get<double>(), 0.0);
+  EXPECT_GE(solver["iterations"]["max"].get<double>(), solver["iterations"]["mean"].get<double>());
+  EXPECT_EQ(solver["substeps"]["mean"].get<double>(), 1.0);
+  EXPECT_EQ(solver["substeps"]["max"].get<long long>(), 1);
+  EXPECT_TRUE(solver["unconverged_steps"].is_number_integer());
+  EXPECT_EQ(solver["unconverged_steps"].get<long long>(), 0);  // the shipped tolerance is reached
+
   ASSERT_TRUE(res["probes"].is_object());
   ASSERT_EQ(res["probes"].size(), 2u);
   for (const char* name : {"tip", "tip_centre"}) {
@@ -320,6 +331,24 @@ TEST_F(TissuedProcess, RefusedExplicitStepExits3WithTheReasonInTheReport) {
   EXPECT_EQ(r["result"]["rejected_steps"].get<long long>(), 1);
   EXPECT_EQ(r["result"]["nonfinite_events"].get<long long>(), 0);
   EXPECT_EQ(r["scene"]["integrator"], "explicit");
+}
+
+// A run whose solver stops at cg_max_iterations still succeeds (exit 0), but
+// says on stderr how many steps gave up accuracy and which keys to change.
+TEST_F(TissuedProcess, CappedSolverWarnsNamingTheKeys) {
+  const fs::path report = dir_ / "r.json";
+  const Process p = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.05", "--set",
+                         "integrator.cg_max_iterations=1", "--set", "integrator.cg_tolerance=1e-12", "--progress", "0",
+                         "--report", report.string()});
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  EXPECT_TRUE(contains(p.err, "warning: 50 of 50 steps")) << p.err;
+  EXPECT_TRUE(contains(p.err, "integrator.cg_max_iterations = 1")) << p.err;
+  EXPECT_TRUE(contains(p.err, "integrator.cg_tolerance")) << p.err;
+  EXPECT_EQ(std::count(p.err.begin(), p.err.end(), '\n'), 1) << p.err;  // one line
+  const json r = json::parse(read_file(report));
+  EXPECT_EQ(r["result"]["solver"]["unconverged_steps"].get<long long>(), 50);
+  EXPECT_EQ(r["result"]["solver"]["iterations"]["max"].get<long long>(), 1);
+  EXPECT_TRUE(r["result"]["error"].is_null());
 }
 
 }  // namespace

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "mesh/refine_ops.hpp"
 #include "physics/physics_test_support.hpp"
@@ -117,6 +119,52 @@ TEST(Simulation, TheSceneChoosesTheCgPreconditioner) {
   EXPECT_NEAR(two_level, reference, 0.01 * std::abs(reference));
   EXPECT_GT(std::abs(jacobi - reference), 3.0 * std::abs(two_level - reference))
       << "jacobi " << jacobi << " two-level " << two_level << " reference " << reference;
+}
+
+// The counters say what each step cost the integrator and which steps
+// stopped at cg_max_iterations short of cg_tolerance (the accuracy given up).
+TEST(Simulation, CountsSolverWorkAndUnconvergedSteps) {
+  const auto run = [](scene::IntegratorKind kind, double tolerance, int iterations) {
+    scene::Scene s = beam_scene();
+    s.integrator.kind = kind;
+    s.integrator.cg_tolerance = tolerance;
+    s.integrator.cg_max_iterations = iterations;
+    Simulation sim(s);
+    std::int64_t iterations_sum = 0, substeps_sum = 0, unconverged = 0;
+    int iterations_max = 0, substeps_max = 0;
+    for (int i = 0; i < 20; ++i) {
+      const StepResult r = sim.step();
+      EXPECT_TRUE(r.ok) << r.error;
+      iterations_sum += r.solver_iterations;
+      iterations_max = std::max(iterations_max, r.solver_iterations);
+      substeps_sum += r.substeps;
+      substeps_max = std::max(substeps_max, r.substeps);
+      unconverged += r.solver_converged ? 0 : 1;
+    }
+    const SimCounters& c = sim.counters();
+    EXPECT_EQ(c.steps, 20);
+    EXPECT_EQ(c.solver_iterations, iterations_sum);
+    EXPECT_EQ(c.max_solver_iterations, iterations_max);
+    EXPECT_EQ(c.substeps, substeps_sum);
+    EXPECT_EQ(c.max_substeps, substeps_max);
+    EXPECT_EQ(c.unconverged_steps, unconverged);
+    return c;
+  };
+  // Converged implicit steps: some iterations, none given up.
+  const SimCounters converged = run(scene::IntegratorKind::kImplicit, 1e-6, 200);
+  EXPECT_GT(converged.solver_iterations, 0);
+  EXPECT_EQ(converged.unconverged_steps, 0);
+  // One iteration cannot reach 1e-12 while the load bends the beam: every step is capped.
+  const SimCounters capped = run(scene::IntegratorKind::kImplicit, 1e-12, 1);
+  EXPECT_EQ(capped.max_solver_iterations, 1);
+  EXPECT_EQ(capped.unconverged_steps, 20);
+  const SimCounters projective = run(scene::IntegratorKind::kProjective, 1e-12, 1);
+  EXPECT_EQ(projective.unconverged_steps, 20);
+  // Explicit: the automatic sub-steps are counted (the damped beam needs many).
+  const SimCounters explicit_run = run(scene::IntegratorKind::kExplicit, 1e-6, 200);
+  EXPECT_GT(explicit_run.max_substeps, 1);
+  EXPECT_EQ(explicit_run.substeps, 20 * static_cast<std::int64_t>(explicit_run.max_substeps));  // same mesh, same dt
+  EXPECT_EQ(explicit_run.unconverged_steps, 0);
 }
 
 TEST(Simulation, ProbeOutsideTheObjectIsRejected) {
