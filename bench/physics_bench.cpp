@@ -205,8 +205,10 @@ void BM_ExplicitAccessFloor(benchmark::State& state) {
 #endif
 
 // Whole steps of each rung at dt = 1 ms (explicit includes its sub-steps).
-void BM_Step(benchmark::State& state, scene::IntegratorKind kind, int fixed_cg_iterations) {
+void BM_Step(benchmark::State& state, scene::IntegratorKind kind, int fixed_cg_iterations,
+             scene::CgPreconditioner preconditioner = scene::CgPreconditioner::kJacobi) {
   scene::Scene s = beam(static_cast<int>(state.range(0)), kind);
+  s.integrator.cg_preconditioner = preconditioner;
   if (fixed_cg_iterations > 0) {
     s.integrator.cg_tolerance = 1e-300;  // run exactly the cap: cost per iteration is comparable
     s.integrator.cg_max_iterations = fixed_cg_iterations;
@@ -280,6 +282,7 @@ void BM_PerformanceBeam(benchmark::State& state, scene::IntegratorKind kind, int
   const int resolution = static_cast<int>(state.range(0));
   const double dt_s = 1e-3 * static_cast<double>(state.range(1));
   scene::Scene s = performance_beam(resolution, static_cast<int>(state.range(2)), kind, dt_s);
+  s.integrator.cg_preconditioner = scene::CgPreconditioner::kJacobi;  // the figures of the "(Jacobi)" rows
   if (fixed_cg_iterations > 0) {
     s.integrator.cg_tolerance = 1e-300;
     s.integrator.cg_max_iterations = fixed_cg_iterations;
@@ -440,6 +443,43 @@ void BM_ImplicitPreconditioner(benchmark::State& state) {
   state.counters["tip_error_pct"] = 100.0 * std::abs(tip_mm - reference_mm) / std::abs(reference_mm);
 }
 
+// Where the two-level preconditioner pays in the default tolerance mode
+// (relative residual 1e-6), by size and by shape: the slender 0.4 m beam
+// (12x3x3 cubes, depths 0..6: 208 .. 8,281 nodes) and the shipped
+// cantilever's compact 0.1 m cube (4x4x4 cubes, depths 0..6: 125 .. 4,913
+// nodes), dt = 1 or 10 ms; both preconditioners run alternately three times
+// (200 timed steps each), medians of thread CPU time per step. The figures
+// behind ImplicitIntegrator::kAutoTwoLevelUnknowns, the size from which the
+// default (cg_preconditioner: auto) takes two-level (README "Integrators").
+// Args: depth, dt in ms, shape (0 beam, 1 cube).
+void BM_PreconditionerCrossover(benchmark::State& state) {
+  scene::Scene s = beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kImplicit);
+  if (state.range(2) == 1) {  // the shipped cantilever's cube, its 5 N tip load
+    s.object.cubes = {4, 4, 4};
+    s.object.cube_size_m = 0.025;
+    s.fixed = {{scene::Region::box({0, 0, 0}, {0, 0.1, 0.1})}};
+    s.loads = {{"tip", scene::Region::box({0.1, 0, 0}, {0.1, 0.1, 0.1}), {0, 0, -5}, {}}};
+  }
+  s.integrator.dt_s = 1e-3 * static_cast<double>(state.range(1));
+  std::vector<double> jacobi_ns, two_level_ns;
+  double jacobi_iterations = 0, two_level_iterations = 0, jacobi_tip = 0, two_level_tip = 0;
+  for (auto _ : state)
+    for (int round = 0; round < 3; ++round) {
+      jacobi_tip = implicit_run(s, s.integrator, physics::ImplicitIntegrator::Preconditioner::kJacobi, &jacobi_ns,
+                                &jacobi_iterations);
+      two_level_tip = implicit_run(s, s.integrator, physics::ImplicitIntegrator::Preconditioner::kTwoLevel,
+                                   &two_level_ns, &two_level_iterations);
+    }
+  if (!std::isfinite(jacobi_tip) || !std::isfinite(two_level_tip)) state.SkipWithError("a run failed");
+  const physics::Body body(s);
+  state.counters["nodes"] = static_cast<double>(body.mesh().node_count());
+  state.counters["jacobi_ms"] = median(jacobi_ns) * 1e-6;
+  state.counters["two_level_ms"] = median(two_level_ns) * 1e-6;
+  state.counters["two_level_vs_jacobi"] = median(two_level_ns) / median(jacobi_ns);
+  state.counters["jacobi_iterations"] = jacobi_iterations;
+  state.counters["two_level_iterations"] = two_level_iterations;
+}
+
 // The paper's adaptive cantilever under load: share of the step time spent
 // in adaptation at the default cadence (every 5 steps). Two identical runs
 // refine for 200 steps (deterministic: the same mesh); then one keeps
@@ -528,13 +568,28 @@ BENCHMARK(BM_ExplicitSubstep)
 #if defined(__x86_64__)
 BENCHMARK(BM_ExplicitAccessFloor)->DenseRange(0, 9, 3)->Arg(10)->Arg(11)->Iterations(21)->Unit(benchmark::kMillisecond);
 #endif
+// The beam keeps the scene default Rayleigh beta = 0.01 s, which the explicit
+// rung pays for in sub-steps (measured: 28 per 1 ms step at depth 0, 1,749 at
+// depth 9; undamped, BM_PerformanceBeam/explicit needs 3-6 at R2-R3).
 BENCHMARK_CAPTURE(BM_Step, explicit, scene::IntegratorKind::kExplicit, 0)
     ->Arg(0)
     ->Arg(3)
     ->Arg(6)
+    ->Arg(9)
     ->Iterations(3)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_Step, implicit_cg20, scene::IntegratorKind::kImplicit, 20)
+    ->Arg(0)
+    ->Arg(3)
+    ->Arg(6)
+    ->Arg(9)
+    ->Arg(11)
+    ->Iterations(5)
+    ->Unit(benchmark::kMillisecond);
+// The two-level preconditioner at 5 iterations (more accurate than Jacobi at
+// 20 on these beams: README), coarse factorisation included in every step.
+BENCHMARK_CAPTURE(BM_Step, implicit_two_level_cg5, scene::IntegratorKind::kImplicit, 5,
+                  scene::CgPreconditioner::kTwoLevel)
     ->Arg(0)
     ->Arg(3)
     ->Arg(6)
@@ -578,6 +633,10 @@ BENCHMARK_CAPTURE(BM_PerformanceBeam, explicit, scene::IntegratorKind::kExplicit
 BENCHMARK(BM_ImplicitMatvec)->ArgsProduct({{2, 3}, {0, 1}})->Iterations(1)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ImplicitPreconditioner)
     ->ArgsProduct({{2, 3}, {1, 10}, {0, 1}, {5, 7, 10, 20, 0}})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PreconditionerCrossover)
+    ->ArgsProduct({{0, 1, 2, 3, 4, 5, 6}, {1, 10}, {0, 1}})
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_AdaptationShare)->Iterations(3)->Unit(benchmark::kMillisecond);

@@ -105,7 +105,15 @@ class ImplicitIntegrator final : public Integrator {
   // shape, ~27 nodes each), the Galerkin coarse matrix Pᵀ A P of their rigid
   // translations assembled and band-Cholesky factored every step, applied
   // additively: M⁻¹ = D⁻¹ + P (Pᵀ A P)⁻¹ Pᵀ (SPD, so CG stays valid).
-  enum class Preconditioner { kJacobi, kTwoLevel };
+  // kAuto: kTwoLevel from kAutoTwoLevelUnknowns free nodes on, else kJacobi,
+  // decided again at every mesh change.
+  enum class Preconditioner { kJacobi, kTwoLevel, kAuto };
+  // Where two-level starts paying (physics_bench BM_PreconditionerCrossover,
+  // tolerance 1e-6, thread CPU per step, two-level / Jacobi): the compact
+  // cube 0.87-0.89 from 729 nodes (429: 1.01), the slender beam 0.96 from
+  // 2,089 nodes (1,225: 1.14), 0.70 at 8,281; Jacobi's iterations grow with
+  // the mesh (27 -> 100) where two-level's stay at 26-45.
+  static constexpr std::uint32_t kAutoTwoLevelUnknowns = 1000;
 
   ImplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
                      Matvec matvec = Matvec::kMatrixFree, Simd simd = detected_simd(),
@@ -124,6 +132,9 @@ class ImplicitIntegrator final : public Integrator {
   static constexpr std::uint32_t kNoAggregate = 0xffffffffu;
   std::uint32_t aggregate_of_node(NodeId n) const;
   bool coarse_active() const { return coarse_ok_; }
+  // Whether the current layout uses the two-level preconditioner (kAuto's
+  // choice, or the fixed one).
+  bool two_level() const { return two_level_; }
 
  private:
   // ap = A p over the unknowns (after p = z + beta p when `update_p`);
@@ -144,6 +155,7 @@ class ImplicitIntegrator final : public Integrator {
   double alpha_per_s_;
   Matvec matvec_;
   Preconditioner preconditioner_;
+  bool two_level_ = false;  // per layout: see kAuto
   bool coarse_ok_ = false;
   std::vector<std::uint32_t> aggregate_of_unknown_;  // kNoAggregate for the sink
   std::uint32_t coarse_dofs_ = 0, band_ = 0;         // 3 per aggregate; lower bandwidth
@@ -179,6 +191,9 @@ class ImplicitIntegrator final : public Integrator {
   std::vector<std::uint32_t> row_start_, col_;
   StateSave save_;
 };
+
+// The scene's choice (integrator.cg_preconditioner) as the integrator's.
+ImplicitIntegrator::Preconditioner implicit_preconditioner(scene::CgPreconditioner choice);
 
 class ProjectiveIntegrator final : public Integrator {
  public:

@@ -367,6 +367,18 @@ void implicit_spring_matvec(Simd simd, const ImplicitSpring* springs, std::size_
   matvec_scalar(springs, count, p, ap);
 }
 
+ImplicitIntegrator::Preconditioner implicit_preconditioner(scene::CgPreconditioner choice) {
+  switch (choice) {
+    case scene::CgPreconditioner::kJacobi:
+      return ImplicitIntegrator::Preconditioner::kJacobi;
+    case scene::CgPreconditioner::kTwoLevel:
+      return ImplicitIntegrator::Preconditioner::kTwoLevel;
+    case scene::CgPreconditioner::kAuto:
+      break;
+  }
+  return ImplicitIntegrator::Preconditioner::kAuto;
+}
+
 ImplicitIntegrator::ImplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
                                        Matvec matvec, Simd simd, Preconditioner preconditioner)
     : spec_(spec),
@@ -470,7 +482,9 @@ void ImplicitIntegrator::build_layout(const Body& body) {
     live_edges_.push_back(e);
   }
   springs_.resize(live_edges_.size());
-  if (preconditioner_ == Preconditioner::kTwoLevel) build_aggregates(body);
+  two_level_ = preconditioner_ == Preconditioner::kTwoLevel ||
+               (preconditioner_ == Preconditioner::kAuto && unknowns_ >= kAutoTwoLevelUnknowns);
+  if (two_level_) build_aggregates(body);
   layout_version_ = body.parameters_version();
 }
 
@@ -535,7 +549,7 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   for (auto* v : {&diag_inv_, &rhs_, &dv_, &r_, &z_, &p_, &ap_}) (*v)[sink] = Pad3{};
   mass_[sink] = 0.0;
   if (matvec_ == Matvec::kAssembledBlockCsr) assemble();
-  coarse_ok_ = preconditioner_ == Preconditioner::kTwoLevel && factor_coarse();
+  coarse_ok_ = two_level_ && factor_coarse();
 
   const double rhs_norm = std::sqrt(dot(simd_, rhs_.data(), rhs_.data(), unknowns_));
   if (!std::isfinite(rhs_norm)) {

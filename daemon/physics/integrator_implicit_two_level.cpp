@@ -1,5 +1,6 @@
-// The two-level preconditioner of the implicit integrator (an option, scene
-// key integrator.cg_preconditioner: two_level; Jacobi stays the default):
+// The two-level preconditioner of the implicit integrator (scene key
+// integrator.cg_preconditioner: two_level, or auto on meshes from
+// ImplicitIntegrator::kAutoTwoLevelUnknowns free nodes):
 // Jacobi plus an additive coarse correction, M⁻¹ = D⁻¹ + P (Pᵀ A P)⁻¹ Pᵀ,
 // P the translations of aggregates of ~27 free nodes (cells of a grid over
 // the rest box), the Galerkin Pᵀ A P summed per aggregate pair from the

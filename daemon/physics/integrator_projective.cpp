@@ -131,10 +131,8 @@ std::unique_ptr<Integrator> make_integrator(const scene::IntegratorSpec& spec, c
     case scene::IntegratorKind::kExplicit:
       return std::make_unique<ExplicitIntegrator>(spec, material);
     case scene::IntegratorKind::kImplicit:
-      return std::make_unique<ImplicitIntegrator>(
-          spec, material, ImplicitIntegrator::Matvec::kMatrixFree, detected_simd(),
-          spec.cg_preconditioner == scene::CgPreconditioner::kTwoLevel ? ImplicitIntegrator::Preconditioner::kTwoLevel
-                                                                       : ImplicitIntegrator::Preconditioner::kJacobi);
+      return std::make_unique<ImplicitIntegrator>(spec, material, ImplicitIntegrator::Matvec::kMatrixFree,
+                                                  detected_simd(), implicit_preconditioner(spec.cg_preconditioner));
     case scene::IntegratorKind::kProjective:
       return std::make_unique<ProjectiveIntegrator>(spec, material);
   }

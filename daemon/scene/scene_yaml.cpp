@@ -46,8 +46,10 @@ constexpr std::array<std::pair<std::string_view, IntegratorKind>, 3> kIntegrator
      {"implicit", IntegratorKind::kImplicit},
      {"projective", IntegratorKind::kProjective}}};
 
-constexpr std::array<std::pair<std::string_view, CgPreconditioner>, 2> kPreconditioners{
-    {{"jacobi", CgPreconditioner::kJacobi}, {"two_level", CgPreconditioner::kTwoLevel}}};
+constexpr std::array<std::pair<std::string_view, CgPreconditioner>, 3> kPreconditioners{
+    {{"auto", CgPreconditioner::kAuto},
+     {"jacobi", CgPreconditioner::kJacobi},
+     {"two_level", CgPreconditioner::kTwoLevel}}};
 
 // Scene sections -> Scene; key checking and typed reads come from the shared Reader.
 class Converter : public yaml_util::Reader {

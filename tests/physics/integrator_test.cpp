@@ -595,6 +595,37 @@ TEST(Integrator, TwoLevelKeepsTwentyIterationsAccurateAtTenMilliseconds) {
       << "jacobi " << jacobi << " two-level " << two_level << " reference " << reference;
 }
 
+// kAuto (the scene default) is Jacobi below kAutoTwoLevelUnknowns free nodes
+// and two-level from there on, and runs exactly as the fixed choice would.
+TEST(Integrator, AutoPreconditionerPicksByTheNumberOfFreeNodes) {
+  for (const int depth : {0, 6}) {  // the beam: 81 nodes (72 free); 2,673 nodes (2,592 free)
+    scene::Scene s = beam_scene();
+    s.adaptivity.min_depth = depth;
+    const bool large = depth == 6;
+    std::vector<std::vector<Vec3>> finals;
+    for (const auto preconditioner :
+         {ImplicitIntegrator::Preconditioner::kAuto, large ? ImplicitIntegrator::Preconditioner::kTwoLevel
+                                                           : ImplicitIntegrator::Preconditioner::kJacobi}) {
+      Body body(s);
+      std::size_t free_nodes = 0;
+      for (const double w : body.inv_mass_per_kg) free_nodes += w != 0.0 ? 1 : 0;
+      EXPECT_EQ(free_nodes >= ImplicitIntegrator::kAutoTwoLevelUnknowns, large) << "depth " << depth;
+      ImplicitIntegrator integrator(s.integrator, s.material, ImplicitIntegrator::Matvec::kMatrixFree, detected_simd(),
+                                    preconditioner);
+      const std::vector<Vec3> f(body.x_m.size(), Vec3(0, 0, -2e-3));
+      for (int i = 0; i < 3; ++i) ASSERT_TRUE(integrator.step(body, f, 1e-3).ok);
+      EXPECT_EQ(integrator.two_level(), large) << "depth " << depth;
+      EXPECT_EQ(integrator.coarse_active(), large) << "depth " << depth;
+      finals.push_back(body.x_m);
+    }
+    EXPECT_EQ(finals[0], finals[1]) << "depth " << depth << ": auto differs from its choice";
+  }
+  EXPECT_EQ(implicit_preconditioner(scene::CgPreconditioner::kAuto), ImplicitIntegrator::Preconditioner::kAuto);
+  EXPECT_EQ(implicit_preconditioner(scene::CgPreconditioner::kJacobi), ImplicitIntegrator::Preconditioner::kJacobi);
+  EXPECT_EQ(implicit_preconditioner(scene::CgPreconditioner::kTwoLevel),
+            ImplicitIntegrator::Preconditioner::kTwoLevel);
+}
+
 // The assembled block-CSR and matrix-free paths give the same trajectory (to
 // rounding: they sum in a different order), and each is bit-reproducible.
 TEST(Integrator, ImplicitAssembledAndMatrixFreePathsAgree) {

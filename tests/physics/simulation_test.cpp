@@ -7,6 +7,7 @@
 #include <cstdint>
 
 #include "mesh/refine_ops.hpp"
+#include "physics/integrator_impl.hpp"
 #include "physics/physics_test_support.hpp"
 
 namespace tissue::physics {
@@ -165,6 +166,30 @@ TEST(Simulation, CountsSolverWorkAndUnconvergedSteps) {
   EXPECT_GT(explicit_run.max_substeps, 1);
   EXPECT_EQ(explicit_run.substeps, 20 * static_cast<std::int64_t>(explicit_run.max_substeps));  // same mesh, same dt
   EXPECT_EQ(explicit_run.unconverged_steps, 0);
+}
+
+// By default (cg_preconditioner: auto) an adaptive mesh that grows past
+// kAutoTwoLevelUnknowns free nodes changes to the two-level preconditioner at
+// the next mesh change: the cantilever refining to depth 5 under its load.
+TEST(Simulation, AutoPreconditionerChangesAsTheMeshGrows) {
+  scene::Scene s = cantilever_scene();
+  s.adaptivity.max_depth = 5;
+  s.adaptivity.refine_threshold_Pa = 5.0;
+  ASSERT_EQ(s.integrator.cg_preconditioner, scene::CgPreconditioner::kAuto);  // the default
+  Simulation sim(s);
+  const auto& implicit = dynamic_cast<const ImplicitIntegrator&>(sim.integrator());
+  ASSERT_TRUE(sim.step().ok);
+  EXPECT_FALSE(implicit.two_level());  // 125 nodes
+  bool changed = false;
+  for (int i = 0; i < 400 && !changed; ++i) {
+    const StepResult r = sim.step();
+    ASSERT_TRUE(r.ok) << r.error;
+    changed = implicit.two_level();
+  }
+  ASSERT_TRUE(changed) << "still Jacobi at " << sim.body().mesh().node_count() << " nodes";
+  std::size_t free_nodes = 0;
+  sim.body().mesh().for_each_node([&](NodeId n, const mesh::Node&) { free_nodes += sim.body().inv_mass_per_kg[n] != 0.0; });
+  EXPECT_GE(free_nodes, ImplicitIntegrator::kAutoTwoLevelUnknowns);
 }
 
 TEST(Simulation, ProbeOutsideTheObjectIsRejected) {

@@ -223,7 +223,15 @@ TEST(SceneYaml, EveryKeyOfTheBaseSceneIsRead) {
   EXPECT_DOUBLE_EQ(s.integrator.cg_tolerance, 1e-6);
   EXPECT_EQ(s.integrator.cg_max_iterations, 100);
 
-  EXPECT_EQ(s.integrator.cg_preconditioner, CgPreconditioner::kJacobi);  // the default
+  EXPECT_EQ(s.integrator.cg_preconditioner, CgPreconditioner::kAuto);  // the default
+  EXPECT_EQ(parse_scene(base_with("cg_max_iterations: 100", "cg_max_iterations: 100\n  cg_preconditioner: jacobi"),
+                        "test.yaml")
+                .integrator.cg_preconditioner,
+            CgPreconditioner::kJacobi);
+  EXPECT_EQ(parse_scene(base_with("cg_max_iterations: 100", "cg_max_iterations: 100\n  cg_preconditioner: auto"),
+                        "test.yaml")
+                .integrator.cg_preconditioner,
+            CgPreconditioner::kAuto);
   const Scene p = parse_scene(
       base_with("cg_max_iterations: 100", "cg_max_iterations: 5\n  cg_preconditioner: two_level"), "test.yaml");
   EXPECT_EQ(p.integrator.cg_preconditioner, CgPreconditioner::kTwoLevel);
