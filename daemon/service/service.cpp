@@ -66,6 +66,10 @@ nlohmann::json status_json(const SimStatus& s) {
           {"adaptation_shed", s.adaptation_shed},
           {"overruns", s.overruns},
           {"failed_steps", s.failed_steps},
+          {"solver",
+           {{"substeps_per_step", s.substeps_per_step},
+            {"iterations_per_step", s.solver_iterations_per_step},
+            {"unconverged_steps", s.unconverged_steps}}},
           {"last_error", s.last_error[0] ? nlohmann::json(std::string(s.last_error)) : nlohmann::json(nullptr)},
           {"tool", {{"pushing", s.tool_pushing}, {"force_N", s.tool_force_N}, {"model_version", s.model_version}}}};
 }

@@ -50,6 +50,11 @@ struct SimStatus {
   bool adaptation_shed = false;  // adaptation paused because the loop fell behind
   std::int64_t overruns = 0;     // schedule re-anchored after falling max_lag_s behind
   std::int64_t failed_steps = 0;
+  // Solver work since the runner started (physics::SimCounters): mean
+  // explicit sub-steps and CG / local-global iterations per step, and the
+  // steps whose solver stopped at cg_max_iterations short of cg_tolerance.
+  double substeps_per_step = 0.0, solver_iterations_per_step = 0.0;
+  std::int64_t unconverged_steps = 0;
   std::uint64_t model_version = 0;
   std::uint64_t samples = 0;
   bool tool_pushing = false;

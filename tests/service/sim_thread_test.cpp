@@ -105,6 +105,35 @@ TEST(SimThread, ReplacingTheRunnerStartsANewGeneration) {
   thread.stop();  // idempotent
 }
 
+// The status carries the solver's work: CG iterations per step and the
+// steps that stopped at cg_max_iterations (none with the shipped tolerance;
+// every one when one iteration must reach 1e-12).
+TEST(SimThread, StatusCarriesTheSolverWork) {
+  SimThreadOptions options;
+  options.status_every_s = 0.005;
+  options.pace = false;
+  for (const bool capped : {false, true}) {
+    scene::Scene s = physics::testing::cantilever_scene();
+    if (capped) {
+      s.integrator.cg_max_iterations = 1;
+      s.integrator.cg_tolerance = 1e-12;
+    }
+    SimThread thread(std::make_unique<SimRunner>(s), nullptr, nullptr, options);
+    thread.start();
+    ASSERT_TRUE(wait_for([&] { return thread.status().steps > 20; }));
+    thread.stop();
+    const SimStatus st = thread.status();
+    EXPECT_EQ(st.substeps_per_step, 1.0);
+    if (capped) {
+      EXPECT_EQ(st.solver_iterations_per_step, 1.0);
+      EXPECT_EQ(st.unconverged_steps, st.steps);
+    } else {
+      EXPECT_GT(st.solver_iterations_per_step, 1.0);
+      EXPECT_EQ(st.unconverged_steps, 0);
+    }
+  }
+}
+
 // A stall (here: steps far slower than dt) sheds adaptation and re-anchors
 // the schedule instead of bursting.
 TEST(SimThread, FallingBehindShedsAdaptationAndCountsOverruns) {
