@@ -9,6 +9,7 @@
 #include "physics/diagnostics.hpp"
 #include "physics/forces.hpp"
 #include "physics/integrator.hpp"
+#include "physics/integrator_impl.hpp"
 #include "physics/physics_test_support.hpp"
 
 namespace tissue::physics {
@@ -18,10 +19,26 @@ using testing::box;
 using testing::sphere;
 using testing::total_energy_J;
 
-const scene::IntegratorKind kAll[] = {scene::IntegratorKind::kExplicit, scene::IntegratorKind::kImplicit,
-                                      scene::IntegratorKind::kProjective};
+// The rungs: implicit once per preconditioner (the default `auto` picks
+// two-level from 1,000 free nodes, more than these small bodies have).
+struct Rung {
+  scene::IntegratorKind kind;
+  scene::CgPreconditioner preconditioner;
+  const char* name;
+  bool is_explicit() const { return kind == scene::IntegratorKind::kExplicit; }
+};
+const Rung kAll[] = {{scene::IntegratorKind::kExplicit, scene::CgPreconditioner::kAuto, "explicit"},
+                     {scene::IntegratorKind::kImplicit, scene::CgPreconditioner::kJacobi, "implicit jacobi"},
+                     {scene::IntegratorKind::kImplicit, scene::CgPreconditioner::kTwoLevel, "implicit two-level"},
+                     {scene::IntegratorKind::kProjective, scene::CgPreconditioner::kAuto, "projective"}};
 
-scene::Scene small_bar(scene::IntegratorKind kind, double youngs_Pa, double dt_s, int depth) {
+scene::Scene on_rung(scene::Scene s, const Rung& rung) {
+  s.integrator.kind = rung.kind;
+  s.integrator.cg_preconditioner = rung.preconditioner;
+  return s;
+}
+
+scene::Scene small_bar(const Rung& rung, double youngs_Pa, double dt_s, int depth) {
   scene::Scene s;
   s.object.cubes = {2, 1, 1};
   s.object.cube_size_m = 0.05;
@@ -29,9 +46,8 @@ scene::Scene small_bar(scene::IntegratorKind kind, double youngs_Pa, double dt_s
   s.gravity_m_per_s2 = {0, 0, -9.81};
   s.fixed.push_back({box({0, 0, 0}, {0, 0.05, 0.05})});
   s.adaptivity.min_depth = depth;
-  s.integrator.kind = kind;
   s.integrator.dt_s = dt_s;
-  return s;
+  return on_rung(s, rung);
 }
 
 // Audits `steps` steps: finite, and never more energy than E0 + work done
@@ -44,33 +60,35 @@ std::string run_checked(Simulation& sim, int steps, double slack) {
 }
 
 TEST(Stability, EveryRungAtBothEndsOfStiffnessAndStep) {
-  for (auto kind : kAll)
+  for (const Rung& rung : kAll)
     for (double youngs : {1e3, 1e9})
       for (double dt : {1e-5, 1.0 / 30})
         for (int depth : {0, 2}) {
           SCOPED_TRACE(::testing::Message()
-                       << "kind " << int(kind) << " E " << youngs << " dt " << dt << " depth " << depth);
-          Simulation sim(small_bar(kind, youngs, dt, depth));
-          const std::string refused =
-              run_checked(sim, dt < 1e-3 ? 200 : 30, kind == scene::IntegratorKind::kExplicit ? 0.05 : 1e-6);
+                       << rung.name << " E " << youngs << " dt " << dt << " depth " << depth);
+          Simulation sim(small_bar(rung, youngs, dt, depth));
+          const std::string refused = run_checked(sim, dt < 1e-3 ? 200 : 30, rung.is_explicit() ? 0.05 : 1e-6);
+          if (rung.preconditioner == scene::CgPreconditioner::kTwoLevel) {  // the coarse correction really ran
+            EXPECT_TRUE(dynamic_cast<const ImplicitIntegrator&>(sim.integrator()).coarse_active());
+          }
           if (!refused.empty()) {
             // Only explicit may refuse, and only above its sub-step cap.
-            EXPECT_EQ(kind, scene::IntegratorKind::kExplicit) << refused;
+            EXPECT_TRUE(rung.is_explicit()) << refused;
             EXPECT_NE(refused.find("max_substeps"), std::string::npos) << refused;
           }
         }
 }
 
 TEST(Stability, ThousandNewtonPointLoadOnSoftTissue) {
-  for (auto kind : kAll) {
-    scene::Scene s = small_bar(kind, 5e4, 1e-3, 1);
+  for (const Rung& rung : kAll) {
+    scene::Scene s = small_bar(rung, 5e4, 1e-3, 1);
     s.gravity_m_per_s2 = {0, 0, 0};
     s.loads.push_back({"yank", sphere({0.1, 0.025, 0.025}, 1e-4), {0, 0, -1000.0}, {}});
     s.integrator.max_substeps = 100000;
     Simulation sim(s);
-    run_checked(sim, 100, kind == scene::IntegratorKind::kExplicit ? 0.05 : 1e-6);
+    run_checked(sim, 100, rung.is_explicit() ? 0.05 : 1e-6);
     // Springs do not resist inversion; the count is reported, never hidden.
-    RecordProperty("inverted_" + std::string(sim.integrator().name()),
+    RecordProperty("inverted_" + std::string(rung.name),
                    static_cast<int>(inverted_tet_count(sim.body())));
   }
 }
@@ -78,10 +96,8 @@ TEST(Stability, ThousandNewtonPointLoadOnSoftTissue) {
 // A mirrored start (every tet inverted) has no spring energy: springs cannot
 // see inversion. It must be detected and stay finite and bounded.
 TEST(Stability, MirroredInitialMeshIsDetectedAndStaysBounded) {
-  for (auto kind : kAll) {
-    scene::Scene s = testing::free_cube_scene(2, 1);
-    s.integrator.kind = kind;
-    Simulation sim(s);
+  for (const Rung& rung : kAll) {
+    Simulation sim(on_rung(testing::free_cube_scene(2, 1), rung));
     Body& body = sim.mutable_body();
     body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n].z() = 0.1 - body.rest_m[n].z(); });
     EXPECT_EQ(inverted_tet_count(sim.body()), sim.body().mesh().tet_count());
@@ -91,35 +107,34 @@ TEST(Stability, MirroredInitialMeshIsDetectedAndStaysBounded) {
 }
 
 TEST(Stability, AllNodesCollapsedToOnePoint) {
-  for (auto kind : kAll) {
-    scene::Scene s = testing::free_cube_scene(2, 1);
-    s.integrator.kind = kind;
+  for (const Rung& rung : kAll) {
+    scene::Scene s = on_rung(testing::free_cube_scene(2, 1), rung);
     s.integrator.max_substeps = 100000;
     Simulation sim(s);
     Body& body = sim.mutable_body();
     body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n] = Vec3(0.05, 0.05, 0.05); });
-    run_checked(sim, 100, kind == scene::IntegratorKind::kExplicit ? 0.05 : 1e-6);
+    run_checked(sim, 100, rung.is_explicit() ? 0.05 : 1e-6);
   }
 }
 
 TEST(Stability, SquashedToFiveThirtyAndSeventyPercent) {
   for (double keep : {0.05, 0.30, 0.70})
-    for (auto kind : kAll) {
-      SCOPED_TRACE(::testing::Message() << "squash to " << keep << " kind " << int(kind));
-      scene::Scene s = testing::free_cube_scene(2, 1);
-      s.integrator.kind = kind;
+    for (const Rung& rung : kAll) {
+      SCOPED_TRACE(::testing::Message() << "squash to " << keep << " " << rung.name);
+      scene::Scene s = on_rung(testing::free_cube_scene(2, 1), rung);
       s.integrator.max_substeps = 100000;
       Simulation sim(s);
       Body& body = sim.mutable_body();
       body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n].z() = keep * body.rest_m[n].z(); });
-      run_checked(sim, 200, kind == scene::IntegratorKind::kExplicit ? 0.05 : 1e-6);
+      run_checked(sim, 200, rung.is_explicit() ? 0.05 : 1e-6);
     }
 }
 
 // Split and merge on every step while the body moves.
 TEST(Stability, SplitMergeChurnEveryStep) {
-  for (auto kind : kAll) {
-    scene::Scene s = small_bar(kind, 5e4, 1e-3, 0);
+  for (const Rung& rung : kAll) {
+    SCOPED_TRACE(rung.name);
+    scene::Scene s = small_bar(rung, 5e4, 1e-3, 0);
     s.adaptivity.enabled = true;
     s.adaptivity.max_depth = 4;
     s.adaptivity.refine_threshold_Pa = 1e9;  // the built-in pass stays idle; the test churns
