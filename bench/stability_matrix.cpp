@@ -23,7 +23,8 @@ int main(int argc, char** argv) {
   const scene::IntegratorKind kinds[] = {scene::IntegratorKind::kExplicit, scene::IntegratorKind::kImplicit,
                                          scene::IntegratorKind::kImplicit, scene::IntegratorKind::kProjective};
   const scene::CgPreconditioner preconditioners[] = {scene::CgPreconditioner::kAuto, scene::CgPreconditioner::kJacobi,
-                                                     scene::CgPreconditioner::kTwoLevel, scene::CgPreconditioner::kAuto};
+                                                     scene::CgPreconditioner::kTwoLevel,
+                                                     scene::CgPreconditioner::kAuto};
   const char* names[] = {"explicit", "implicit", "impl-2lvl", "projective"};
   int cases = 0, passed = 0, refused = 0, failed = 0;
   std::printf("%-10s %8s %9s %5s %6s %10s %8s %s\n", "rung", "E_Pa", "dt_s", "depth", "steps", "excess", "inverted",

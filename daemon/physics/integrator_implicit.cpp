@@ -268,7 +268,7 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
     const __m256d rest =
         _mm256_setr_pd(in.rest_length[e[0]], in.rest_length[e[1]], in.rest_length[e[2]], in.rest_length[e[3]]);
     const __m256d length = _mm256_sqrt_pd(lane_sums_avx2(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1]),
-                                                          _mm256_mul_pd(d[2], d[2]), _mm256_mul_pd(d[3], d[3])));
+                                                         _mm256_mul_pd(d[2], d[2]), _mm256_mul_pd(d[3], d[3])));
     if (_mm256_movemask_pd(_mm256_cmp_pd(length, _mm256_mul_pd(_mm256_set1_pd(1e-9), rest), _CMP_GT_OQ)) != 0xF) {
       for (int j = 0; j < 4; ++j) setup_spring_scalar(in, e[j], rhs_pad, diag_pad, records + i + j);  // collapsed: rare
       continue;
@@ -282,7 +282,7 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
           _mm256_sub_pd(_mm256_maskload_pd(in.v[na[j]].data(), xyz_i), _mm256_maskload_pd(in.v[nb[j]].data(), xyz_i));
     }
     const __m256d dvd = lane_sums_avx2(_mm256_mul_pd(dv[0], dir[0]), _mm256_mul_pd(dv[1], dir[1]),
-                                        _mm256_mul_pd(dv[2], dir[2]), _mm256_mul_pd(dv[3], dir[3]));
+                                       _mm256_mul_pd(dv[2], dir[2]), _mm256_mul_pd(dv[3], dir[3]));
     const __m256d k = _mm256_setr_pd(in.stiffness[e[0]], in.stiffness[e[1]], in.stiffness[e[2]], in.stiffness[e[3]]);
     const __m256d c = _mm256_setr_pd(in.damping[e[0]], in.damping[e[1]], in.damping[e[2]], in.damping[e[3]]);
     // spring_scalars(), lane-wise.

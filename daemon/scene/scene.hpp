@@ -136,11 +136,11 @@ enum class CgPreconditioner { kAuto, kJacobi, kTwoLevel };
 struct IntegratorSpec {
   IntegratorKind kind = IntegratorKind::kImplicit;
   double dt_s = 1e-3;
-  int max_substeps = 1000;                                         // explicit: refuse beyond this
-  double substep_safety = 0.8;                                     // explicit: fraction of the stable bound
-  double cg_tolerance = 1e-6;                                      // implicit: relative residual
-  int cg_max_iterations = 100;                                     // implicit
-  CgPreconditioner cg_preconditioner = CgPreconditioner::kAuto;    // implicit
+  int max_substeps = 1000;                                       // explicit: refuse beyond this
+  double substep_safety = 0.8;                                   // explicit: fraction of the stable bound
+  double cg_tolerance = 1e-6;                                    // implicit: relative residual
+  int cg_max_iterations = 100;                                   // implicit
+  CgPreconditioner cg_preconditioner = CgPreconditioner::kAuto;  // implicit
 };
 
 struct ProbeSpec {

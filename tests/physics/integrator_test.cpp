@@ -604,8 +604,8 @@ TEST(Integrator, AutoPreconditionerPicksByTheNumberOfFreeNodes) {
     const bool large = depth == 6;
     std::vector<std::vector<Vec3>> finals;
     for (const auto preconditioner :
-         {ImplicitIntegrator::Preconditioner::kAuto, large ? ImplicitIntegrator::Preconditioner::kTwoLevel
-                                                           : ImplicitIntegrator::Preconditioner::kJacobi}) {
+         {ImplicitIntegrator::Preconditioner::kAuto,
+          large ? ImplicitIntegrator::Preconditioner::kTwoLevel : ImplicitIntegrator::Preconditioner::kJacobi}) {
       Body body(s);
       std::size_t free_nodes = 0;
       for (const double w : body.inv_mass_per_kg) free_nodes += w != 0.0 ? 1 : 0;
@@ -622,8 +622,7 @@ TEST(Integrator, AutoPreconditionerPicksByTheNumberOfFreeNodes) {
   }
   EXPECT_EQ(implicit_preconditioner(scene::CgPreconditioner::kAuto), ImplicitIntegrator::Preconditioner::kAuto);
   EXPECT_EQ(implicit_preconditioner(scene::CgPreconditioner::kJacobi), ImplicitIntegrator::Preconditioner::kJacobi);
-  EXPECT_EQ(implicit_preconditioner(scene::CgPreconditioner::kTwoLevel),
-            ImplicitIntegrator::Preconditioner::kTwoLevel);
+  EXPECT_EQ(implicit_preconditioner(scene::CgPreconditioner::kTwoLevel), ImplicitIntegrator::Preconditioner::kTwoLevel);
 }
 
 // The assembled block-CSR and matrix-free paths give the same trajectory (to

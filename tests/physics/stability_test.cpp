@@ -64,8 +64,7 @@ TEST(Stability, EveryRungAtBothEndsOfStiffnessAndStep) {
     for (double youngs : {1e3, 1e9})
       for (double dt : {1e-5, 1.0 / 30})
         for (int depth : {0, 2}) {
-          SCOPED_TRACE(::testing::Message()
-                       << rung.name << " E " << youngs << " dt " << dt << " depth " << depth);
+          SCOPED_TRACE(::testing::Message() << rung.name << " E " << youngs << " dt " << dt << " depth " << depth);
           Simulation sim(small_bar(rung, youngs, dt, depth));
           const std::string refused = run_checked(sim, dt < 1e-3 ? 200 : 30, rung.is_explicit() ? 0.05 : 1e-6);
           if (rung.preconditioner == scene::CgPreconditioner::kTwoLevel) {  // the coarse correction really ran
@@ -88,8 +87,7 @@ TEST(Stability, ThousandNewtonPointLoadOnSoftTissue) {
     Simulation sim(s);
     run_checked(sim, 100, rung.is_explicit() ? 0.05 : 1e-6);
     // Springs do not resist inversion; the count is reported, never hidden.
-    RecordProperty("inverted_" + std::string(rung.name),
-                   static_cast<int>(inverted_tet_count(sim.body())));
+    RecordProperty("inverted_" + std::string(rung.name), static_cast<int>(inverted_tet_count(sim.body())));
   }
 }
 

@@ -228,10 +228,10 @@ TEST(SceneYaml, EveryKeyOfTheBaseSceneIsRead) {
                         "test.yaml")
                 .integrator.cg_preconditioner,
             CgPreconditioner::kJacobi);
-  EXPECT_EQ(parse_scene(base_with("cg_max_iterations: 100", "cg_max_iterations: 100\n  cg_preconditioner: auto"),
-                        "test.yaml")
-                .integrator.cg_preconditioner,
-            CgPreconditioner::kAuto);
+  EXPECT_EQ(
+      parse_scene(base_with("cg_max_iterations: 100", "cg_max_iterations: 100\n  cg_preconditioner: auto"), "test.yaml")
+          .integrator.cg_preconditioner,
+      CgPreconditioner::kAuto);
   const Scene p = parse_scene(
       base_with("cg_max_iterations: 100", "cg_max_iterations: 5\n  cg_preconditioner: two_level"), "test.yaml");
   EXPECT_EQ(p.integrator.cg_preconditioner, CgPreconditioner::kTwoLevel);

@@ -232,9 +232,9 @@ TEST(Service, RecordsASessionOnRequest) {
   EXPECT_TRUE(info.closed_cleanly);
   EXPECT_EQ(info.scene_name, "cantilever");
   EXPECT_GT(info.rows.haptic_rows, 300u);  // ~600 ticks at 1 kHz; generous for sanitizers
-  EXPECT_GT(info.rows.sim_rows, 100u);  // one per sim step: fewer when the sim runs slow (sanitizers)
-  EXPECT_GT(info.rows.mesh_frames, 5u);  // 30 Hz
-  EXPECT_GE(info.rows.events, 2u);       // recording started, scene loaded
+  EXPECT_GT(info.rows.sim_rows, 100u);     // one per sim step: fewer when the sim runs slow (sanitizers)
+  EXPECT_GT(info.rows.mesh_frames, 5u);    // 30 Hz
+  EXPECT_GE(info.rows.events, 2u);         // recording started, scene loaded
 }
 
 TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
