@@ -31,6 +31,12 @@
 // last spring has run (springs ordered by larger end, chunked updates;
 // bit-identical) ±7 %, no gain; a float-seeded 1/√l (float sqrt and division,
 // two Newton steps in double) 30-45 % slower than sqrt + division.
+// A stream without dampers (every c = 0: Rayleigh beta = 0 and the paper's
+// damping off) runs kernels that read no velocities and skip the damper
+// terms, same bits as c = 0 (tested): whole undamped explicit steps of the
+// PERFORMANCE.md beams (BM_PerformanceBeam/explicit, R2/R3, three rounds
+// alternating with the build before, 2026-11-25, load 1.8-2.6) 11-18 %
+// faster, e.g. R3 exact counts 0.70-0.71 -> 0.60-0.62 CPU ms per step.
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
@@ -141,27 +147,37 @@ namespace {
 // bit-identical results. F on a = (k (l − L) + c (v_b − v_a)·d̂) d̂, written
 // as ((k (l − L) + c ((Δv·Δx) / l)) / l) Δx with one division.
 
+// kDamped false: a stream whose every c is zero; velocities are not read and
+// the damper term is left out (the damped formula with c = 0 gives the same
+// bits: k (l − L) + 0 is exact).
+template <bool kDamped>
 void spring_scalar(const ExplicitSpringBatch& s, int j, const double* x, const double* v, const Vec3* rest_m,
                    double* f) {
   const std::uint32_t a4 = s.a4[j], b4 = s.b4[j];
   const double rest = s.rest_m[j], k = s.k_N_per_m[j], c = s.c_N_s_per_m[j];
   const double dx[3] = {x[b4] - x[a4], x[b4 + 1] - x[a4 + 1], x[b4 + 2] - x[a4 + 2]};
-  const double dv[3] = {v[b4] - v[a4], v[b4 + 1] - v[a4 + 1], v[b4 + 2] - v[a4 + 2]};
+  double dv[3] = {0.0, 0.0, 0.0};
+  if constexpr (kDamped)
+    for (int i = 0; i < 3; ++i) dv[i] = v[b4 + i] - v[a4 + i];
   const double l2 = (dx[0] * dx[0] + dx[1] * dx[1]) + (dx[2] * dx[2] + 0.0);
-  const double vd = (dv[0] * dx[0] + dv[1] * dx[1]) + (dv[2] * dx[2] + 0.0);
   const double l = std::sqrt(l2);
   double force[3];
   if (l > 1e-9 * rest) {
     const double inv = 1.0 / l;
-    const double coef = (k * (l - rest) + c * (vd * inv)) * inv;
+    double along = k * (l - rest);
+    if constexpr (kDamped) {
+      const double vd = (dv[0] * dx[0] + dv[1] * dx[1]) + (dv[2] * dx[2] + 0.0);
+      along = along + c * (vd * inv);
+    }
+    const double coef = along * inv;
     for (int i = 0; i < 3; ++i) force[i] = coef * dx[i];
   } else {
     // Collapsed spring: the rest direction stands in (as spring_frame).
     Vec3 d = rest_m[b4 / 4] - rest_m[a4 / 4];
     const double r = d.norm();
     d = r > 0.0 ? Vec3(d / r) : Vec3::Zero();
-    const double closing = dv[0] * d.x() + dv[1] * d.y() + dv[2] * d.z();
-    const double magnitude = k * (l - rest) + c * closing;
+    double magnitude = k * (l - rest);
+    if constexpr (kDamped) magnitude = magnitude + c * (dv[0] * d.x() + dv[1] * d.y() + dv[2] * d.z());
     for (int i = 0; i < 3; ++i) force[i] = magnitude * d[i];
   }
   for (int i = 0; i < 3; ++i) {
@@ -170,10 +186,11 @@ void spring_scalar(const ExplicitSpringBatch& s, int j, const double* x, const d
   }
 }
 
+template <bool kDamped>
 void forces_scalar(const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x, const Pad3* v,
                    const Vec3* rest_m, Pad3* f) {
   for (std::size_t i = 0; i < count; ++i)
-    for (int j = 0; j < 4; ++j) spring_scalar(batches[i], j, x[0].v, v[0].v, rest_m, f[0].v);
+    for (int j = 0; j < 4; ++j) spring_scalar<kDamped>(batches[i], j, x[0].v, v[0].v, rest_m, f[0].v);
 }
 
 // v += h w f (then / (1 + h α) when damped), x += h v, f = f_ext: one pass.
@@ -193,10 +210,11 @@ void update_scalar(double h, double damping_divisor, const double* inv_mass, con
 }
 
 #if defined(__x86_64__)
+template <bool kDamped>
 TISSUE_AVX2 void forces_avx2(const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x_pad,
                              const Pad3* v_pad, const Vec3* rest_m, Pad3* f_pad) {
   const double* x = x_pad[0].v;
-  const double* v = v_pad[0].v;
+  const double* v = kDamped ? v_pad[0].v : nullptr;
   double* f = f_pad[0].v;
   const __m256d xyz = _mm256_castsi256_pd(_mm256_setr_epi64x(-1, -1, -1, 0));
   const __m256d collapse = _mm256_set1_pd(1e-9);
@@ -206,23 +224,25 @@ TISSUE_AVX2 void forces_avx2(const ExplicitSpringBatch* batches, std::size_t cou
     for (int j = 0; j < 4; ++j) {
       const std::uint32_t a4 = s.a4[j], b4 = s.b4[j];
       dx[j] = _mm256_sub_pd(_mm256_load_pd(x + b4), _mm256_load_pd(x + a4));
-      dv[j] = _mm256_sub_pd(_mm256_load_pd(v + b4), _mm256_load_pd(v + a4));
+      if constexpr (kDamped) dv[j] = _mm256_sub_pd(_mm256_load_pd(v + b4), _mm256_load_pd(v + a4));
     }
     const __m256d l2 = lane_sums_avx2(_mm256_mul_pd(dx[0], dx[0]), _mm256_mul_pd(dx[1], dx[1]),
                                       _mm256_mul_pd(dx[2], dx[2]), _mm256_mul_pd(dx[3], dx[3]));
-    const __m256d vd = lane_sums_avx2(_mm256_mul_pd(dv[0], dx[0]), _mm256_mul_pd(dv[1], dx[1]),
-                                      _mm256_mul_pd(dv[2], dx[2]), _mm256_mul_pd(dv[3], dx[3]));
     const __m256d l = _mm256_sqrt_pd(l2);
     const __m256d rest = _mm256_loadu_pd(s.rest_m);
     if (_mm256_movemask_pd(_mm256_cmp_pd(l, _mm256_mul_pd(collapse, rest), _CMP_GT_OQ)) != 0xF) {
-      forces_scalar(&s, 1, x_pad, v_pad, rest_m, f_pad);  // a collapsed (or non-finite) spring: rare
+      forces_scalar<kDamped>(&s, 1, x_pad, v_pad, rest_m, f_pad);  // a collapsed (or non-finite) spring: rare
       continue;
     }
     const __m256d inv = _mm256_div_pd(_mm256_set1_pd(1.0), l);
-    const __m256d elastic = _mm256_mul_pd(_mm256_loadu_pd(s.k_N_per_m), _mm256_sub_pd(l, rest));
-    const __m256d damper = _mm256_mul_pd(_mm256_loadu_pd(s.c_N_s_per_m), _mm256_mul_pd(vd, inv));
+    __m256d along = _mm256_mul_pd(_mm256_loadu_pd(s.k_N_per_m), _mm256_sub_pd(l, rest));
+    if constexpr (kDamped) {
+      const __m256d vd = lane_sums_avx2(_mm256_mul_pd(dv[0], dx[0]), _mm256_mul_pd(dv[1], dx[1]),
+                                        _mm256_mul_pd(dv[2], dx[2]), _mm256_mul_pd(dv[3], dx[3]));
+      along = _mm256_add_pd(along, _mm256_mul_pd(_mm256_loadu_pd(s.c_N_s_per_m), _mm256_mul_pd(vd, inv)));
+    }
     alignas(32) double coef[4];
-    _mm256_store_pd(coef, _mm256_mul_pd(_mm256_add_pd(elastic, damper), inv));
+    _mm256_store_pd(coef, _mm256_mul_pd(along, inv));
     for (int j = 0; j < 4; ++j) {
       const __m256d force = _mm256_and_pd(_mm256_mul_pd(_mm256_broadcast_sd(coef + j), dx[j]), xyz);
       const std::uint32_t a4 = s.a4[j], b4 = s.b4[j];
@@ -264,9 +284,13 @@ Pad3 padded(const Vec3& v) { return Pad3{{v.x(), v.y(), v.z(), 0.0}}; }
 void explicit_spring_forces(Simd simd, const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x,
                             const Pad3* v, const Vec3* rest_m, Pad3* f) {
 #if defined(__x86_64__)
-  if (simd == Simd::kAvx2) return forces_avx2(batches, count, x, v, rest_m, f);
+  if (simd == Simd::kAvx2)
+    return v ? forces_avx2<true>(batches, count, x, v, rest_m, f) : forces_avx2<false>(batches, count, x, v, rest_m, f);
 #endif
-  forces_scalar(batches, count, x, v, rest_m, f);
+  if (v)
+    forces_scalar<true>(batches, count, x, v, rest_m, f);
+  else
+    forces_scalar<false>(batches, count, x, v, rest_m, f);
 }
 
 ExplicitIntegrator::ExplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
@@ -292,6 +316,9 @@ void ExplicitIntegrator::build_layout(const Body& body) {
     batch.k_N_per_m[j] = body.stiffness_N_per_m[e];
     batch.c_N_s_per_m[j] = body.damping_N_s_per_m[e];
   }
+  damped_ = std::any_of(batches_.begin(), batches_.end(), [](const ExplicitSpringBatch& b) {
+    return b.c_N_s_per_m[0] != 0.0 || b.c_N_s_per_m[1] != 0.0 || b.c_N_s_per_m[2] != 0.0 || b.c_N_s_per_m[3] != 0.0;
+  });
   for (auto* v : {&x_, &v_, &f_, &f_ext_}) v->assign(nodes + 2, Pad3{});
   x_[nodes + 1].v[0] = 1.0;  // the filler springs: length 1 = rest, no stiffness
   inv_mass_.assign(nodes + 2, 0.0);
@@ -312,8 +339,8 @@ void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext
   // them. Mass-proportional damping is taken implicitly (free of any bound).
   const double divisor = 1.0 + h_s * alpha_per_s_;
   for (int s = 0; s < count; ++s) {
-    explicit_spring_forces(simd_, batches_.data(), batches_.size(), x_.data(), v_.data(), body.rest_m.data(),
-                           f_.data());
+    explicit_spring_forces(simd_, batches_.data(), batches_.size(), x_.data(), damped_ ? v_.data() : nullptr,
+                           body.rest_m.data(), f_.data());
     update(simd_, h_s, divisor, inv_mass_.data(), f_ext_.data(), x_.data(), v_.data(), f_.data(), nodes);
   }
   for (std::size_t n = 0; n < nodes; ++n) {

@@ -39,7 +39,9 @@ struct ExplicitSpringBatch {
 // f[a] += F, f[b] −= F for every spring of `batches`, F the spring and
 // damper force on a; x, v, f are padded per-node arrays and rest_m the rest
 // positions (for the rare spring collapsed below 1e-9 of its rest length).
-// Both instruction sets give bit-identical results.
+// Both instruction sets give bit-identical results. v = nullptr: every
+// spring's c is zero (no damper: velocities are not read); the result is
+// that of c = 0.
 void explicit_spring_forces(Simd simd, const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x,
                             const Pad3* v, const Vec3* rest_m, Pad3* f);
 
@@ -68,6 +70,7 @@ class ExplicitIntegrator final : public Integrator {
   std::uint64_t layout_version_ = 0;  // body.parameters_version() the layout was built for
   double stable_dt_s_ = 0.0;
   std::vector<ExplicitSpringBatch> batches_;
+  bool damped_ = true;  // some spring in the stream has a damper
   // By node id, plus two pad nodes the filler springs of the last batch join
   // (x = 0 and x = e_x, k = c = 0: an exactly zero force).
   std::vector<Pad3> x_, v_, f_, f_ext_;

@@ -218,9 +218,10 @@ TEST(Integrator, NonFiniteStateIsRejectedAndTheLastFiniteStateKept) {
 // A beam (depth 1) with every free node jiggled, so springs are stretched
 // (transverse term on), compressed (clamped off) and one collapsed onto its
 // end (rest-direction fallback), and random velocities.
-Body jiggled_beam(std::uint32_t seed) {
+Body jiggled_beam(std::uint32_t seed, bool damped = true) {
   scene::Scene s = beam_scene();
   s.adaptivity.min_depth = 1;
+  if (!damped) s.material.rayleigh_beta_s = 0.0;  // no spring has a damper
   Body body(s);
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -379,36 +380,40 @@ TEST(Integrator, ImplicitLayoutFollowsMeshChangesWithoutNotice) {
 // The explicit spring stream gives the forces of add_spring_forces (the
 // reference: one spring at a time from the body) to rounding, with scalar
 // and AVX2 kernels bit-identical, on a jiggled beam whose collapsed spring
-// takes the rest-direction fallback.
+// takes the rest-direction fallback; with dampers, and without (the stream
+// then runs the undamped kernels).
 TEST(Integrator, ExplicitSpringStreamMatchesTheReferenceForces) {
-  Body body = jiggled_beam(19);
-  std::vector<Vec3> reference(body.x_m.size(), Vec3::Zero());
-  add_spring_forces(body, reference);
-  std::vector<std::vector<Vec3>> results;
-  for (const Simd simd : {Simd::kScalar, detected_simd()}) {
-    // One sub-step of h from rest velocities' state: v' = v + h w f, so f is
-    // recovered exactly enough from v' − v on free nodes.
-    Body copy = body;
-    ExplicitIntegrator integrator(body.scene().integrator, body.scene().material, simd);
-    const std::vector<Vec3> no_force(body.x_m.size(), Vec3::Zero());
-    const double h = 1e-6;
-    integrator.run_substeps(copy, no_force, h, 1);
-    std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
-    for (std::size_t n = 0; n < f.size(); ++n)
-      if (body.inv_mass_per_kg[n] != 0.0)
-        f[n] = (copy.v_m_per_s[n] - body.v_m_per_s[n]) / (h * body.inv_mass_per_kg[n]);
-    results.push_back(copy.x_m);
-    double scale = 0.0;
-    for (std::size_t n = 0; n < f.size(); ++n)
-      if (body.inv_mass_per_kg[n] != 0.0) scale = std::max(scale, reference[n].cwiseAbs().maxCoeff());
-    ASSERT_GT(scale, 0.0);
-    for (std::size_t n = 0; n < f.size(); ++n) {
-      if (body.inv_mass_per_kg[n] != 0.0) {
-        EXPECT_LE((f[n] - reference[n]).cwiseAbs().maxCoeff(), 1e-6 * scale) << "node " << n;
+  for (const bool damped : {true, false}) {
+    SCOPED_TRACE(damped ? "damped" : "undamped");
+    Body body = jiggled_beam(19, damped);
+    std::vector<Vec3> reference(body.x_m.size(), Vec3::Zero());
+    add_spring_forces(body, reference);
+    std::vector<std::vector<Vec3>> results;
+    for (const Simd simd : {Simd::kScalar, detected_simd()}) {
+      // One sub-step of h from rest velocities' state: v' = v + h w f, so f is
+      // recovered exactly enough from v' − v on free nodes.
+      Body copy = body;
+      ExplicitIntegrator integrator(body.scene().integrator, body.scene().material, simd);
+      const std::vector<Vec3> no_force(body.x_m.size(), Vec3::Zero());
+      const double h = 1e-6;
+      integrator.run_substeps(copy, no_force, h, 1);
+      std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
+      for (std::size_t n = 0; n < f.size(); ++n)
+        if (body.inv_mass_per_kg[n] != 0.0)
+          f[n] = (copy.v_m_per_s[n] - body.v_m_per_s[n]) / (h * body.inv_mass_per_kg[n]);
+      results.push_back(copy.x_m);
+      double scale = 0.0;
+      for (std::size_t n = 0; n < f.size(); ++n)
+        if (body.inv_mass_per_kg[n] != 0.0) scale = std::max(scale, reference[n].cwiseAbs().maxCoeff());
+      ASSERT_GT(scale, 0.0);
+      for (std::size_t n = 0; n < f.size(); ++n) {
+        if (body.inv_mass_per_kg[n] != 0.0) {
+          EXPECT_LE((f[n] - reference[n]).cwiseAbs().maxCoeff(), 1e-6 * scale) << "node " << n;
+        }
       }
     }
+    EXPECT_EQ(results.front(), results.back()) << "scalar and AVX2 sub-steps differ";
   }
-  EXPECT_EQ(results.front(), results.back()) << "scalar and AVX2 sub-steps differ";
 }
 
 // The kernels themselves on random springs (shared nodes, a collapsed one,
@@ -443,6 +448,24 @@ TEST(Integrator, ExplicitForceInstructionSetsAreBitIdentical) {
   explicit_spring_forces(Simd::kAvx2, batches.data(), batches.size(), x.data(), v.data(), rest.data(), avx.data());
   for (std::uint32_t i = 0; i < kNodes; ++i)
     for (int k = 0; k < 4; ++k) ASSERT_EQ(scalar[i].v[k], avx[i].v[k]) << "node " << i << " lane " << k;
+
+  // The undamped kernels (v = nullptr, for streams without dampers): the same
+  // bits from both instruction sets, and the damped kernels' result at c = 0.
+  for (auto& b : batches)
+    for (double& c : b.c_N_s_per_m) c = 0.0;
+  std::vector<Pad3> damped_zero(kNodes), scalar_undamped(kNodes), avx_undamped(kNodes);
+  explicit_spring_forces(Simd::kAvx2, batches.data(), batches.size(), x.data(), v.data(), rest.data(),
+                         damped_zero.data());
+  explicit_spring_forces(Simd::kScalar, batches.data(), batches.size(), x.data(), nullptr, rest.data(),
+                         scalar_undamped.data());
+  explicit_spring_forces(Simd::kAvx2, batches.data(), batches.size(), x.data(), nullptr, rest.data(),
+                         avx_undamped.data());
+  for (std::uint32_t i = 0; i < kNodes; ++i)
+    for (int k = 0; k < 4; ++k) {
+      ASSERT_EQ(scalar_undamped[i].v[k], avx_undamped[i].v[k]) << "node " << i << " lane " << k;
+      ASSERT_EQ(damped_zero[i].v[k], avx_undamped[i].v[k]) << "node " << i << " lane " << k;
+    }
+  EXPECT_NE(damped_zero[5].v[0], avx[5].v[0]);  // the dampers did act in the first run
 }
 
 // Explicit trajectories (many sub-steps, damping on) do not depend on the
