@@ -83,7 +83,7 @@ struct Options {
   bool table1 = false, sweep = false, beam_theory = false, quick = false;
   std::string csv_path, svg_path;
   std::string sweep_scene = "cantilever";  // or "beam", "beam-r"
-  std::string preconditioner = "jacobi";   // implicit CG: jacobi | two_level
+  std::string preconditioner = "jacobi";   // implicit CG: jacobi | two_level | auto (the scene default)
   std::string metric = "rms";              // plotted error: rms | max | tip
   std::vector<double> th_Pa;               // empty: the scene's default list
   std::vector<int> max_depths;             // empty: {3, 6} (quick: {3})
@@ -109,7 +109,7 @@ void usage() {
       "  sweep: [--csv FILE] [--svg FILE] [--scene cantilever|beam|beam-r] [--th 2,20,...]\n"
       "         [--depths 3,6] [--integrators implicit,explicit,projective] [--dts 0.001,0.005]\n"
       "         [--duration S] [--metric rms|max|tip] [--run-cap S] [--clock wall|cpu]\n"
-      "         [--preconditioner jacobi|two_level]\n"
+      "         [--preconditioner jacobi|two_level|auto]   (default jacobi, as the README's tables)\n"
       "  beam-theory: [--beam-depth D]\n"
       "no mode flag: all three modes");
 }
@@ -156,8 +156,8 @@ Options parse(int argc, char** argv) {
       o.cpu_clock = c == "cpu";
     } else if (a == "--preconditioner") {
       o.preconditioner = value(i);
-      if (o.preconditioner != "jacobi" && o.preconditioner != "two_level")
-        throw std::invalid_argument("--preconditioner must be jacobi or two_level");
+      if (o.preconditioner != "jacobi" && o.preconditioner != "two_level" && o.preconditioner != "auto")
+        throw std::invalid_argument("--preconditioner must be jacobi, two_level or auto");
     } else if (a == "--beam-depth") {
       o.beam_max_depth = std::stoi(value(i));
     } else if (a == "-h" || a == "--help") {
@@ -960,7 +960,9 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
 void run_sweep(const Options& o) {
   SweepSetup s;
   s.scene = o.sweep_scene;
-  s.preconditioner = o.preconditioner == "two_level" ? sc::CgPreconditioner::kTwoLevel : sc::CgPreconditioner::kJacobi;
+  s.preconditioner = o.preconditioner == "two_level" ? sc::CgPreconditioner::kTwoLevel
+                     : o.preconditioner == "auto"    ? sc::CgPreconditioner::kAuto
+                                                     : sc::CgPreconditioner::kJacobi;
   const bool is_beam = s.scene == "beam" || s.scene == "beam-r";
   s.duration_s = o.sweep_duration_s > 0 ? o.sweep_duration_s : is_beam ? (o.quick ? 0.5 : 1.0) : (o.quick ? 0.2 : 0.5);
   if (!o.th_Pa.empty())
