@@ -112,10 +112,12 @@ class ImplicitIntegrator final : public Integrator {
   // decided again at every mesh change.
   enum class Preconditioner { kJacobi, kTwoLevel, kAuto };
   // Where two-level starts paying (physics_bench BM_PreconditionerCrossover,
-  // tolerance 1e-6, thread CPU per step, two-level / Jacobi): the compact
-  // cube 0.87-0.89 from 729 nodes (429: 1.01), the slender beam 0.96 from
-  // 2,089 nodes (1,225: 1.14), 0.70 at 8,281; Jacobi's iterations grow with
-  // the mesh (27 -> 100) where two-level's stay at 26-45.
+  // tolerance 1e-6, dt = 1 ms, thread CPU per step, two-level / Jacobi): the
+  // compact cube 0.87-0.96 from 729 nodes (429: 1.01), the slender beam 0.96
+  // from 2,089 nodes (1,225: 1.14), 0.70 at 8,281; Jacobi's iterations grow
+  // with the mesh (27 -> 100, the cap) where two-level's stay at 26-45. At
+  // dt = 10 ms on the beam two-level costs 1.1-1.3x, but Jacobi stops at the
+  // cap there, short of the tolerance.
   static constexpr std::uint32_t kAutoTwoLevelUnknowns = 1000;
 
   ImplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
