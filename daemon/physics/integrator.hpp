@@ -51,6 +51,13 @@ std::unique_ptr<Integrator> make_integrator(const scene::IntegratorSpec& spec, c
 // belong on the implicit rung. Mass-proportional damping is integrated
 // implicitly and does not limit it.
 double explicit_stable_dt_s(const Body& body);
+// The same bound, and what it would be without the spring dampers (to tell a
+// user how much the damping costs the explicit rung).
+struct ExplicitStableStep {
+  double dt_s = 0.0;           // explicit_stable_dt_s
+  double undamped_dt_s = 0.0;  // 2/ω from the same ω² bound
+};
+ExplicitStableStep explicit_stable_step(const Body& body);
 
 // An upper bound on the body's highest ω² = λmax(M⁻¹K) at rest [1/s²]: the
 // largest λmax(K_t, M_t) of any tet, K_t its eq. (3) stiffness shares and M_t

@@ -41,6 +41,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iomanip>
 #include <sstream>
 
 #include "physics/forces.hpp"
@@ -96,7 +97,9 @@ double element_frequency2_bound_per_s2(const Body& body) {
   return bound;
 }
 
-double explicit_stable_dt_s(const Body& body) {
+double explicit_stable_dt_s(const Body& body) { return explicit_stable_step(body).dt_s; }
+
+ExplicitStableStep explicit_stable_step(const Body& body) {
   const std::size_t nodes = body.x_m.size();
   std::vector<double> sum_k(nodes, 0.0), sum_c(nodes, 0.0);
   body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
@@ -124,10 +127,10 @@ double explicit_stable_dt_s(const Body& body) {
   });
   omega2 = std::min(omega2, element);
   gamma = std::min(gamma, damping_per_stiffness_s * element);
-  if (omega2 <= 0.0) return gamma > 0.0 ? 2.0 / gamma : INFINITY;
+  if (omega2 <= 0.0) return {gamma > 0.0 ? 2.0 / gamma : INFINITY, INFINITY};
   const double omega = std::sqrt(omega2);
   const double zeta = gamma / (2.0 * omega);
-  return 2.0 / omega * (std::sqrt(1.0 + zeta * zeta) - zeta);
+  return {2.0 / omega * (std::sqrt(1.0 + zeta * zeta) - zeta), 2.0 / omega};
 }
 
 bool state_is_finite(const Body& body) {
@@ -298,7 +301,7 @@ ExplicitIntegrator::ExplicitIntegrator(const scene::IntegratorSpec& spec, const 
     : spec_(spec), alpha_per_s_(material.rayleigh_alpha_per_s), simd_(simd) {}
 
 void ExplicitIntegrator::build_layout(const Body& body) {
-  stable_dt_s_ = explicit_stable_dt_s(body);
+  stable_ = explicit_stable_step(body);
   const std::size_t nodes = body.x_m.size(), edges = body.stiffness_N_per_m.size();
   const auto pad0 = static_cast<std::uint32_t>(4 * nodes), pad1 = pad0 + 4;
   batches_.clear();
@@ -352,13 +355,20 @@ void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext
 StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) {
   if (body.parameters_version() != layout_version_) build_layout(body);
   StepOutcome out;
-  const double limit = spec_.substep_safety * stable_dt_s_;
+  const double limit = spec_.substep_safety * stable_.dt_s;
   const double needed = std::ceil(dt_s / limit);
   if (!(needed <= spec_.max_substeps)) {
     std::ostringstream os;
     os << "explicit integrator: dt_s = " << dt_s << " needs " << needed << " sub-steps (stable sub-step " << limit
        << " s), more than integrator.max_substeps = " << spec_.max_substeps
        << "; lower dt_s, raise max_substeps, or use the implicit integrator";
+    // Stiffness-proportional (or the paper's) spring dampers are explicit
+    // here: say so when they, not the springs, set the sub-step.
+    if (stable_.dt_s < 0.5 * stable_.undamped_dt_s)
+      os << " (the spring dampers cut the stable sub-step " << std::setprecision(2)
+         << stable_.undamped_dt_s / stable_.dt_s
+         << "-fold: lower material.rayleigh_beta_s, or with damping: paper switch to rayleigh, or take the implicit "
+            "integrator, which damps implicitly)";
     out.ok = false;
     out.error = os.str();
     return out;

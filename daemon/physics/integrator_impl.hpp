@@ -68,7 +68,7 @@ class ExplicitIntegrator final : public Integrator {
   double alpha_per_s_;
   Simd simd_;
   std::uint64_t layout_version_ = 0;  // body.parameters_version() the layout was built for
-  double stable_dt_s_ = 0.0;
+  ExplicitStableStep stable_;
   std::vector<ExplicitSpringBatch> batches_;
   bool damped_ = true;  // some spring in the stream has a damper
   // By node id, plus two pad nodes the filler springs of the last batch join

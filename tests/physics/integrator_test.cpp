@@ -71,6 +71,22 @@ TEST(Integrator, ExplicitRefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
   EXPECT_EQ(sim.body().x_m, x_before);
   EXPECT_EQ(sim.time_s(), 0.0);
   EXPECT_EQ(sim.counters().rejected_steps, 1);
+  // The beam's dampers (Rayleigh beta = 0.01 s) set its sub-step: the message
+  // says so and names the key; without them it does not.
+  EXPECT_NE(r.error.find("spring dampers cut the stable sub-step"), std::string::npos) << r.error;
+  EXPECT_NE(r.error.find("material.rayleigh_beta_s"), std::string::npos) << r.error;
+  s.material.rayleigh_beta_s = 0.0;
+  Simulation undamped(s);
+  const StepResult u = undamped.step();
+  EXPECT_FALSE(u.ok);
+  EXPECT_NE(u.error.find("max_substeps"), std::string::npos);
+  EXPECT_EQ(u.error.find("dampers"), std::string::npos) << u.error;
+  const ExplicitStableStep bound = explicit_stable_step(undamped.body());
+  EXPECT_EQ(bound.dt_s, bound.undamped_dt_s);
+  EXPECT_EQ(bound.dt_s, explicit_stable_dt_s(undamped.body()));
+  const ExplicitStableStep damped = explicit_stable_step(sim.body());
+  EXPECT_LT(damped.dt_s, 0.5 * damped.undamped_dt_s);
+  EXPECT_EQ(damped.undamped_dt_s, bound.undamped_dt_s);  // same springs
 }
 
 // The stable step is safe (below 2/ω_max) and, with the element bound,
