@@ -193,7 +193,8 @@ template <bool kDamped>
 void forces_scalar(const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x, const Pad3* v,
                    const Vec3* rest_m, Pad3* f) {
   for (std::size_t i = 0; i < count; ++i)
-    for (int j = 0; j < 4; ++j) spring_scalar<kDamped>(batches[i], j, x[0].v, v[0].v, rest_m, f[0].v);
+    for (int j = 0; j < 4; ++j)
+      spring_scalar<kDamped>(batches[i], j, x[0].v, kDamped ? v[0].v : nullptr, rest_m, f[0].v);
 }
 
 // v += h w f (then / (1 + h α) when damped), x += h v, f = f_ext: one pass.
