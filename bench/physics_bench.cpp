@@ -70,9 +70,10 @@ void report(benchmark::State& state, const physics::Body& body, double ns_per_ca
   state.counters["x_bound"] = ns_per_call / springs / bound_ns_per_spring;
 }
 
-double bound_ns_per_spring(const physics::Body& body) {
+// spring_bytes: 32 with dampers; 24 without (no damping coefficient to read).
+double bound_ns_per_spring(const physics::Body& body, double spring_bytes = 32.0) {
   const double springs = static_cast<double>(body.mesh().edge_count());
-  const double bytes = 32.0 * springs + 152.0 * static_cast<double>(body.mesh().node_count());
+  const double bytes = spring_bytes * springs + 152.0 * static_cast<double>(body.mesh().node_count());
   return bytes / measured_bandwidth_bytes_per_ns(static_cast<std::size_t>(bytes)) / springs;
 }
 
@@ -83,15 +84,20 @@ double bound_ns_per_spring(const physics::Body& body) {
 // integrator's padded arrays (once per step) is amortised as in a real step
 // (a 1 ms step at R3 takes 5-6 sub-steps undamped). Second argument 1 times
 // the code this replaced instead: add_spring_forces + a plain update loop.
+// Third argument 1: springs without dampers (Rayleigh beta = 0, the undamped
+// kernels), against the bound for 24 B per spring (no damping coefficient).
 void BM_ExplicitSubstep(benchmark::State& state) {
   constexpr int kSubsteps = 10;
-  physics::Simulation sim(beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit));
+  scene::Scene scene = beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit);
+  const bool undamped = state.range(2) == 1;
+  if (undamped) scene.material.rayleigh_beta_s = 0.0;
+  physics::Simulation sim(scene);
   physics::Body& body = sim.mutable_body();
   std::vector<physics::Vec3> f(body.x_m.size());
   // Half the stable sub-step: a fixed h would be unstable from depth 10 on,
   // and the exploding state would time the kernel's non-finite fallback.
   const double h = 0.5 * physics::explicit_stable_dt_s(body);
-  const double bound = bound_ns_per_spring(body);
+  const double bound = bound_ns_per_spring(body, undamped ? 24.0 : 32.0);
   physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
   const std::vector<physics::Vec3> no_force(body.x_m.size(), physics::Vec3::Zero());
   integrator.run_substeps(body, no_force, h, 1);  // builds the spring stream once, outside the timing
@@ -750,7 +756,11 @@ void BM_EnergySumsPerStep(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(BM_ExplicitSubstep)
-    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}})
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}, {0}})
+    ->Iterations(21)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ExplicitSubstep)
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {1}})
     ->Iterations(21)
     ->Unit(benchmark::kMillisecond);
 #if defined(__x86_64__)
