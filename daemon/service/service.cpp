@@ -225,10 +225,16 @@ void Service::print_status() {
   const SimStatus s = sim_->status();
   char haptic[160] = "";
   if (haptics_) haptics_->summary(haptic, sizeof haptic);
-  std::fprintf(
-      options_.out, "t %8.2f s | nodes %6zu tets %7zu | refines %6lld merges %6lld | rtf %.2f step %.2f ms%s%s%s\n",
-      s.sim_time_s, s.nodes, s.tets, static_cast<long long>(s.refines), static_cast<long long>(s.merges),
-      s.real_time_factor, s.step_ms_last, s.paused ? " | paused" : "", s.adaptation_shed ? " | shedding" : "", haptic);
+  // Steps whose CG stopped at cg_max_iterations: faster, less accurate than
+  // the scene asked; shown only when there are any.
+  char capped[64] = "";
+  if (s.unconverged_steps > 0)
+    std::snprintf(capped, sizeof capped, " | CG capped in %lld steps", static_cast<long long>(s.unconverged_steps));
+  std::fprintf(options_.out,
+               "t %8.2f s | nodes %6zu tets %7zu | refines %6lld merges %6lld | rtf %.2f step %.2f ms%s%s%s%s\n",
+               s.sim_time_s, s.nodes, s.tets, static_cast<long long>(s.refines), static_cast<long long>(s.merges),
+               s.real_time_factor, s.step_ms_last, capped, s.paused ? " | paused" : "",
+               s.adaptation_shed ? " | shedding" : "", haptic);
   std::fflush(options_.out);
   if (systemd_) {
     char line[160];

@@ -127,6 +127,30 @@ TEST(Service, NoToolOrNoDeviceMeansNoHapticThread) {
   EXPECT_EQ(run2.wait(), kServiceOk);
 }
 
+std::string file_text(std::FILE* f) {
+  std::rewind(f);
+  std::string text;
+  char buffer[4096];
+  for (std::size_t n; (n = std::fread(buffer, 1, sizeof buffer, f)) > 0;) text.append(buffer, n);
+  return text;
+}
+
+// The status line says when CG stops at its cap (a scene asking for 1e-12
+// in one iteration), and says nothing of it otherwise.
+TEST(Service, StatusLineShowsCappedSolverSteps) {
+  for (const bool capped : {false, true}) {
+    TempDir dir;
+    std::vector<std::string> overrides;
+    if (capped) overrides = {"integrator.cg_max_iterations=1", "integrator.cg_tolerance=1e-12"};
+    Running run(write_config(dir, scene_file("beam.yaml")), 0.5, overrides);
+    EXPECT_EQ(run.wait(), kServiceOk);
+    const std::string out = file_text(run.out);
+    EXPECT_NE(out.find("rtf "), std::string::npos) << out;  // status lines were written
+    const bool says_capped = out.find("CG capped in ") != std::string::npos;
+    EXPECT_EQ(says_capped, capped) << out;
+  }
+}
+
 TEST(Service, BadConfigExitsWithCodeTwoNamingTheFile) {
   TempDir dir;
   const std::string path = dir / "bad.yaml";
