@@ -331,6 +331,11 @@ void ExplicitIntegrator::build_layout(const Body& body) {
 }
 
 void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count) {
+  advance(body, f_ext_N, h_s, count);
+  store(body);
+}
+
+void ExplicitIntegrator::advance(const Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count) {
   if (body.parameters_version() != layout_version_) build_layout(body);
   const std::size_t nodes = body.x_m.size();
   for (std::size_t n = 0; n < nodes; ++n) {
@@ -347,7 +352,19 @@ void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext
                            body.rest_m.data(), f_.data());
     update(simd_, h_s, divisor, inv_mass_.data(), f_ext_.data(), x_.data(), v_.data(), f_.data(), nodes);
   }
-  for (std::size_t n = 0; n < nodes; ++n) {
+}
+
+bool ExplicitIntegrator::advanced_state_is_finite(const Body& body) const {
+  constexpr double kLimit = 1e100;  // as state_is_finite
+  bool finite = true;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    for (int k = 0; k < 3; ++k) finite = finite && std::abs(x_[n].v[k]) < kLimit && std::abs(v_[n].v[k]) < kLimit;
+  });
+  return finite;  // NaN fails every comparison, so it is caught too
+}
+
+void ExplicitIntegrator::store(Body& body) const {
+  for (std::size_t n = 0; n < body.x_m.size(); ++n) {
     body.x_m[n] = Vec3(x_[n].v[0], x_[n].v[1], x_[n].v[2]);
     body.v_m_per_s[n] = Vec3(v_[n].v[0], v_[n].v[1], v_[n].v[2]);
   }
@@ -375,13 +392,15 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     return out;
   }
   out.substeps = std::max(1, static_cast<int>(needed));
-  save_.save(body);
-  run_substeps(body, f_ext_N, dt_s / out.substeps, out.substeps);
-  if (!state_is_finite(body)) {
-    save_.restore(body);
+  // The sub-steps run on the integrator's own copy: the body changes only
+  // when the result is finite (no save and restore of the body needed).
+  advance(body, f_ext_N, dt_s / out.substeps, out.substeps);
+  if (!advanced_state_is_finite(body)) {
     out.ok = false;
     out.error = "explicit integrator: state became non-finite; step rejected, previous state kept";
+    return out;
   }
+  store(body);
   return out;
 }
 

@@ -63,6 +63,12 @@ class ExplicitIntegrator final : public Integrator {
  private:
   // Spring stream, stable bound and padded state sized for the topology.
   void build_layout(const Body& body);
+  // Copies the body's state in and runs `count` sub-steps on the padded copy.
+  void advance(const Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count);
+  // state_is_finite for the padded copy, over the body's live nodes.
+  bool advanced_state_is_finite(const Body& body) const;
+  // Copies the padded state back to the body.
+  void store(Body& body) const;
 
   scene::IntegratorSpec spec_;
   double alpha_per_s_;
@@ -75,7 +81,6 @@ class ExplicitIntegrator final : public Integrator {
   // (x = 0 and x = e_x, k = c = 0: an exactly zero force).
   std::vector<Pad3> x_, v_, f_, f_ext_;
   std::vector<double> inv_mass_;
-  StateSave save_;
 };
 
 // One spring of the implicit system, streamed in edge order. Its block

@@ -217,12 +217,14 @@ TEST(Integrator, NonFiniteStateIsRejectedAndTheLastFiniteStateKept) {
     bool failed = false;
     for (int i = 0; i < 50 && !failed; ++i) {
       const auto x_before = sim.body().x_m;
+      const auto v_before = sim.body().v_m_per_s;
       const double t_before = sim.time_s();
       const StepResult r = sim.step();
       if (!r.ok) {
         failed = true;
         EXPECT_NE(r.error.find("non-finite"), std::string::npos) << r.error;
         EXPECT_EQ(sim.body().x_m, x_before);
+        EXPECT_EQ(sim.body().v_m_per_s, v_before);
         EXPECT_EQ(sim.time_s(), t_before);
       }
       EXPECT_TRUE(state_is_finite(sim.body())) << sim.integrator().name();
