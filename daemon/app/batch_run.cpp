@@ -38,11 +38,9 @@ bool says_nonfinite(const std::string& error) { return error.find("non-finite") 
 // What the integrator spent per step and what accuracy it gave up (steps
 // whose solver stopped at cg_max_iterations short of cg_tolerance).
 nlohmann::json solver_json(const physics::SimCounters& c) {
-  const double steps = static_cast<double>(std::max<std::int64_t>(c.steps, 1));
-  return {
-      {"substeps", {{"mean", static_cast<double>(c.substeps) / steps}, {"max", c.max_substeps}}},
-      {"iterations", {{"mean", static_cast<double>(c.solver_iterations) / steps}, {"max", c.max_solver_iterations}}},
-      {"unconverged_steps", c.unconverged_steps}};
+  return {{"substeps", {{"mean", c.substeps_per_step()}, {"max", c.max_substeps}}},
+          {"iterations", {{"mean", c.solver_iterations_per_step()}, {"max", c.max_solver_iterations}}},
+          {"unconverged_steps", c.unconverged_steps}};
 }
 
 struct Tally {

@@ -173,11 +173,9 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.adaptation_shed = shed_;
   s.overruns = overruns_;
   s.failed_steps = failed_steps_;
-  const physics::SimCounters& c = sim.counters();
-  const double steps = static_cast<double>(std::max<std::int64_t>(c.steps, 1));
-  s.substeps_per_step = static_cast<double>(c.substeps) / steps;
-  s.solver_iterations_per_step = static_cast<double>(c.solver_iterations) / steps;
-  s.unconverged_steps = c.unconverged_steps;
+  s.substeps_per_step = sim.counters().substeps_per_step();
+  s.solver_iterations_per_step = sim.counters().solver_iterations_per_step();
+  s.unconverged_steps = sim.counters().unconverged_steps;
   s.model_version = model_version_;
   s.samples = samples_total_;
   s.tool_pushing = last_step_.tool_pushing;
