@@ -149,8 +149,11 @@ TEST(Simulation, CountsSolverWorkAndUnconvergedSteps) {
     EXPECT_EQ(c.substeps, substeps_sum);
     EXPECT_EQ(c.max_substeps, substeps_max);
     EXPECT_EQ(c.unconverged_steps, unconverged);
+    EXPECT_DOUBLE_EQ(c.solver_iterations_per_step(), static_cast<double>(iterations_sum) / 20.0);
+    EXPECT_DOUBLE_EQ(c.substeps_per_step(), static_cast<double>(substeps_sum) / 20.0);
     return c;
   };
+  EXPECT_EQ(SimCounters{}.solver_iterations_per_step(), 0.0);  // no step yet: no mean
   // Converged implicit steps: some iterations, none given up.
   const SimCounters converged = run(scene::IntegratorKind::kImplicit, 1e-6, 200);
   EXPECT_GT(converged.solver_iterations, 0);
