@@ -10,6 +10,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
@@ -57,7 +58,10 @@ struct ExplicitStableStep {
   double dt_s = 0.0;           // explicit_stable_dt_s
   double undamped_dt_s = 0.0;  // 2/ω from the same ω² bound
 };
-ExplicitStableStep explicit_stable_step(const Body& body);
+// frequency2_bound_per_s2: a further upper bound on λmax(M⁻¹K) to take when
+// it is lower (the explicit rung's Lanczos bound, frequency_estimate.hpp);
+// it tightens the damping bound too (γ ≤ max(c/k) λmax).
+ExplicitStableStep explicit_stable_step(const Body& body, double frequency2_bound_per_s2 = INFINITY);
 
 // An upper bound on the body's highest ω² = λmax(M⁻¹K) at rest [1/s²]: the
 // largest λmax(K_t, M_t) of any tet, K_t its eq. (3) stiffness shares and M_t

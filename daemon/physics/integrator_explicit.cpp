@@ -37,6 +37,22 @@
 // PERFORMANCE.md beams (BM_PerformanceBeam/explicit, R2/R3, three rounds
 // alternating with the build before, 2026-11-25, load 1.8-2.6) 11-18 %
 // faster, e.g. R3 exact counts 0.70-0.71 -> 0.60-0.62 CPU ms per step.
+//
+// Tried and dropped (2026-11-25): taking the spring dampers out of the force
+// and applying them after each kick as a polynomial p(h M⁻¹C) with p in
+// [0, 1] on the damping spectrum (p = q², q a damped Chebyshev polynomial
+// with p(0) = 1, p'(0) = −1), which keeps symplectic Euler stable at the
+// undamped sub-step with ~√(hγ) damper passes instead of ~hγ sub-steps. It
+// ran stable, but q's zeros leave modes with no velocity at all each
+// sub-step, so they stop creeping back (overdamped modes relax at ω²/γ; a
+// factor r per sub-step gives rs/(1 − r) per step instead): the shipped
+// cantilever at explicit kept 3.1e-5 J of elastic energy 1 s after the
+// release where the force-damped run relaxed to 6e-28 J, and its mesh kept
+// 194 nodes instead of simplifying back to 125 (tissued --batch --scene
+// config/scenes/cantilever.yaml --duration 2 --set integrator.kind=explicit).
+// Right creep needs p ≈ 1/(1 + z) to relative accuracy, ~√(hγ) ln(hγ)/2
+// passes: no cheaper than the sub-steps on the shipped scenes (hγ ≈ 40 at
+// the undamped sub-step: ~16 passes against ~15 sub-steps).
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
@@ -45,6 +61,7 @@
 #include <sstream>
 
 #include "physics/forces.hpp"
+#include "physics/frequency_estimate.hpp"
 #include "physics/integrator.hpp"
 #include "physics/integrator_impl.hpp"
 #include "physics/spring_law.hpp"
@@ -99,7 +116,7 @@ double element_frequency2_bound_per_s2(const Body& body) {
 
 double explicit_stable_dt_s(const Body& body) { return explicit_stable_step(body).dt_s; }
 
-ExplicitStableStep explicit_stable_step(const Body& body) {
+ExplicitStableStep explicit_stable_step(const Body& body, double frequency2_bound_per_s2) {
   const std::size_t nodes = body.x_m.size();
   std::vector<double> sum_k(nodes, 0.0), sum_c(nodes, 0.0);
   body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
@@ -116,7 +133,7 @@ ExplicitStableStep explicit_stable_step(const Body& body) {
   }
   // Both are upper bounds: keep the smaller. With c ≤ r k on every spring,
   // C ⪯ r K, so the damping rate is bounded by r times the stiffness bound.
-  const double element = element_frequency2_bound_per_s2(body);
+  const double rest_bound = std::min(element_frequency2_bound_per_s2(body), frequency2_bound_per_s2);
   double damping_per_stiffness_s = 0.0;
   body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge&) {
     const double k = body.stiffness_N_per_m[e], c = body.damping_N_s_per_m[e];
@@ -125,8 +142,8 @@ ExplicitStableStep explicit_stable_step(const Body& body) {
     else if (c > 0.0)
       damping_per_stiffness_s = INFINITY;  // a damper without a spring: no such bound
   });
-  omega2 = std::min(omega2, element);
-  gamma = std::min(gamma, damping_per_stiffness_s * element);
+  omega2 = std::min(omega2, rest_bound);
+  gamma = std::min(gamma, damping_per_stiffness_s * rest_bound);
   if (omega2 <= 0.0) return {gamma > 0.0 ? 2.0 / gamma : INFINITY, INFINITY};
   const double omega = std::sqrt(omega2);
   const double zeta = gamma / (2.0 * omega);
@@ -303,6 +320,14 @@ ExplicitIntegrator::ExplicitIntegrator(const scene::IntegratorSpec& spec, const 
 
 void ExplicitIntegrator::build_layout(const Body& body) {
   stable_ = explicit_stable_step(body);
+  tightened_ = false;
+  lanczos_.reset();
+  lanczos_credit_ = 0.0;
+  layout_substeps_ = 0;
+  std::size_t free_nodes = 0;
+  for (const double w : body.inv_mass_per_kg) free_nodes += w > 0.0;
+  lanczos_wait_substeps_ = kLanczosWaitCostMultiple * kLanczosIterationCost *
+                           lanczos_iterations(3 * free_nodes, kLanczosRelativeGap, kLanczosFailureProbability);
   const std::size_t nodes = body.x_m.size(), edges = body.stiffness_N_per_m.size();
   const auto pad0 = static_cast<std::uint32_t>(4 * nodes), pad1 = pad0 + 4;
   batches_.clear();
@@ -370,6 +395,22 @@ void ExplicitIntegrator::store(Body& body) const {
   }
 }
 
+void ExplicitIntegrator::spend_on_estimate(const Body& body, int substeps) {
+  const std::int64_t before = layout_substeps_;
+  layout_substeps_ += substeps;
+  if (tightened_ || layout_substeps_ <= lanczos_wait_substeps_) return;
+  if (!lanczos_) lanczos_.emplace(body, kLanczosRelativeGap, kLanczosFailureProbability);
+  const auto paid = static_cast<double>(layout_substeps_ - std::max(before, lanczos_wait_substeps_));
+  lanczos_credit_ += kLanczosShare * paid / static_cast<double>(kLanczosIterationCost);
+  const int iterations = static_cast<int>(lanczos_credit_);
+  lanczos_credit_ -= iterations;
+  if (!lanczos_->iterate(iterations)) return;
+  estimate_ = lanczos_->estimate();
+  lanczos_.reset();
+  if (estimate_.bound_per_s2 > 0.0) stable_ = explicit_stable_step(body, estimate_.bound_per_s2);
+  tightened_ = true;
+}
+
 StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) {
   if (body.parameters_version() != layout_version_) build_layout(body);
   StepOutcome out;
@@ -401,6 +442,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     return out;
   }
   store(body);
+  spend_on_estimate(body, out.substeps);
   return out;
 }
 

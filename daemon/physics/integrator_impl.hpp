@@ -5,8 +5,10 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
+#include "physics/frequency_estimate.hpp"
 #include "physics/integrator.hpp"
 #include "physics/integrator_simd.hpp"
 
@@ -59,6 +61,28 @@ class ExplicitIntegrator final : public Integrator {
   // The spring stream as last built (empty before the first step). For the
   // benchmark's memory-access floor, which runs its own loop over it.
   const std::vector<ExplicitSpringBatch>& spring_stream() const { return batches_; }
+  // The stable step in use, and whether the Lanczos bound has tightened it
+  // (see below) for the current layout. For tests and the benchmark.
+  const ExplicitStableStep& stable_step() const { return stable_; }
+  bool tightened() const { return tightened_; }
+  const FrequencyEstimate& estimate() const { return estimate_; }
+
+  // The sub-step starts from the guaranteed bounds (explicit_stable_step).
+  // Once the current mesh has run kLanczosWaitCostMultiple times the Lanczos
+  // estimate's cost in sub-steps, the estimate starts, spread over the
+  // following steps at kLanczosShare of their cost (no step pays for all of
+  // it: 10 ms at 5x10^4 springs), and its bound (frequency_estimate.hpp:
+  // above λmax except with probability 1e-9) is taken when lower. A mesh that
+  // changes sooner pays nothing; one that changes just before the estimate
+  // completes has paid at most 1/4 extra; one that stays gets the tight
+  // sub-step after ~4x the estimate's cost (a few hundred sub-steps).
+  static constexpr double kLanczosRelativeGap = 0.1, kLanczosFailureProbability = 1e-9;
+  static constexpr std::int64_t kLanczosWaitCostMultiple = 2;
+  static constexpr double kLanczosShare = 0.5;
+  // One Lanczos iteration (scalar pass over the springs and nodes) in
+  // explicit sub-steps: 1.0-1.8 from 10^3 to 4x10^5 springs (physics_bench
+  // BM_FrequencyEstimate, iteration_vs_substep).
+  static constexpr std::int64_t kLanczosIterationCost = 2;
 
  private:
   // Spring stream, stable bound and padded state sized for the topology.
@@ -69,12 +93,20 @@ class ExplicitIntegrator final : public Integrator {
   bool advanced_state_is_finite(const Body& body) const;
   // Copies the padded state back to the body.
   void store(Body& body) const;
+  // Counts a step's sub-steps on this layout and, past the wait, runs the
+  // Lanczos iterations they pay for; takes its bound once it is done.
+  void spend_on_estimate(const Body& body, int substeps);
 
   scene::IntegratorSpec spec_;
   double alpha_per_s_;
   Simd simd_;
   std::uint64_t layout_version_ = 0;  // body.parameters_version() the layout was built for
   ExplicitStableStep stable_;
+  bool tightened_ = false;
+  std::int64_t layout_substeps_ = 0, lanczos_wait_substeps_ = 0;  // sub-steps run on this layout
+  std::optional<RestFrequencyLanczos> lanczos_;                   // under way
+  double lanczos_credit_ = 0.0;                                   // iterations paid for, not yet run
+  FrequencyEstimate estimate_;
   std::vector<ExplicitSpringBatch> batches_;
   bool damped_ = true;  // some spring in the stream has a damper
   // By node id, plus two pad nodes the filler springs of the last batch join

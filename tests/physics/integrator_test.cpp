@@ -9,6 +9,7 @@
 
 #include "physics/boundary.hpp"
 #include "physics/forces.hpp"
+#include "physics/frequency_estimate.hpp"
 #include "physics/integrator_impl.hpp"
 #include "physics/physics_test_support.hpp"
 
@@ -97,31 +98,67 @@ TEST(Integrator, ExplicitBoundIsSafeAndNotTooConservative) {
     s.material.rayleigh_beta_s = 0.0;
     s.adaptivity.min_depth = depth;
     Body body(s);
-    // Power iteration on M^-1 K at rest (K assembled densely: small mesh).
-    const int n = static_cast<int>(body.x_m.size());
-    Eigen::MatrixXd k = Eigen::MatrixXd::Zero(3 * n, 3 * n);
-    body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
-      const Vec3 d = (body.rest_m[edge.b] - body.rest_m[edge.a]).normalized();
-      const Eigen::Matrix3d block = body.stiffness_N_per_m[e] * d * d.transpose();
-      k.block<3, 3>(3 * edge.a, 3 * edge.a) += block;
-      k.block<3, 3>(3 * edge.b, 3 * edge.b) += block;
-      k.block<3, 3>(3 * edge.a, 3 * edge.b) -= block;
-      k.block<3, 3>(3 * edge.b, 3 * edge.a) -= block;
-    });
-    Eigen::VectorXd w(3 * n);
-    for (int i = 0; i < n; ++i) w.segment<3>(3 * i).setConstant(body.inv_mass_per_kg[i]);
-    Eigen::VectorXd v = Eigen::VectorXd::Ones(3 * n);
-    double lambda = 0;
-    for (int it = 0; it < 3000; ++it) {
-      Eigen::VectorXd next = w.cwiseProduct(k * v);
-      lambda = next.norm() / v.norm();
-      v = next / next.norm();
-    }
-    const double true_limit = 2.0 / std::sqrt(lambda);
+    const double true_limit = 2.0 / std::sqrt(testing::dense_rest_frequency2_per_s2(body));
     const double bound = explicit_stable_dt_s(body);
     EXPECT_LE(bound, true_limit * 1.0001) << "depth " << depth;
     EXPECT_GE(bound, 0.76 * true_limit) << "depth " << depth;
   }
+}
+
+// The explicit sub-step tightens to the Lanczos bound once the mesh has
+// stood still for four times the estimate's cost, stays within the true
+// limit, and goes back to the guaranteed bounds when the mesh changes.
+TEST(Integrator, ExplicitSubstepTightensOnAStillMeshAndResetsWhenItChanges) {
+  scene::Scene s = beam_scene();  // Rayleigh beta = 0.01 s: the dampers set the sub-step
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 2;
+  Body body(s);
+  ExplicitIntegrator integrator(s.integrator, s.material);
+  std::vector<Vec3> f(body.x_m.size(), Vec3(0, 0, -1e-3));
+  StepOutcome first = integrator.step(body, f, 1e-3);
+  ASSERT_TRUE(first.ok) << first.error;
+  EXPECT_FALSE(integrator.tightened());
+  const ExplicitStableStep guaranteed = explicit_stable_step(body);
+  EXPECT_EQ(integrator.stable_step().dt_s, guaranteed.dt_s);
+  std::int64_t substeps = first.substeps;
+  StepOutcome last;
+  while (!integrator.tightened() && substeps < 100000) {
+    last = integrator.step(body, f, 1e-3);
+    ASSERT_TRUE(last.ok) << last.error;
+    substeps += last.substeps;
+  }
+  ASSERT_TRUE(integrator.tightened());
+  std::size_t free_nodes = 0;
+  for (const double w : body.inv_mass_per_kg) free_nodes += w > 0.0;
+  // It waited for twice the estimate's cost in sub-steps, then spent half of
+  // each step's cost on it: done after ~4x its cost, and no sooner.
+  const int iterations = lanczos_iterations(3 * free_nodes, ExplicitIntegrator::kLanczosRelativeGap,
+                                            ExplicitIntegrator::kLanczosFailureProbability);
+  EXPECT_EQ(integrator.estimate().iterations, iterations);
+  const double cost = static_cast<double>(ExplicitIntegrator::kLanczosIterationCost * iterations);
+  const double expected =
+      ExplicitIntegrator::kLanczosWaitCostMultiple * cost + cost / ExplicitIntegrator::kLanczosShare;
+  EXPECT_GE(static_cast<double>(substeps), expected);
+  EXPECT_LT(static_cast<double>(substeps - last.substeps), expected);
+  const ExplicitStableStep& tight = integrator.stable_step();
+  const double true_limit = 2.0 / std::sqrt(testing::dense_rest_frequency2_per_s2(body));
+  EXPECT_LE(tight.undamped_dt_s, true_limit);
+  EXPECT_GE(tight.undamped_dt_s, std::sqrt(0.9) * 0.999 * true_limit);  // the 10 % gap in λ, nothing more
+  EXPECT_GT(tight.undamped_dt_s, 1.2 * guaranteed.undamped_dt_s);
+  EXPECT_GT(tight.dt_s, 1.4 * guaranteed.dt_s);  // damping-limited: the step scales with 1/λ
+  const StepOutcome tightened_step = integrator.step(body, f, 1e-3);
+  ASSERT_TRUE(tightened_step.ok);
+  EXPECT_LT(tightened_step.substeps, first.substeps);
+
+  bool split = false;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
+    if (!split && body.mesh().can_split(body.mesh().diamond_of(t))) split = body.split(body.mesh().diamond_of(t)) > 0;
+  });
+  ASSERT_TRUE(split);
+  f.assign(body.x_m.size(), Vec3(0, 0, -1e-3));
+  ASSERT_TRUE(integrator.step(body, f, 1e-3).ok);
+  EXPECT_FALSE(integrator.tightened());
+  EXPECT_EQ(integrator.stable_step().dt_s, explicit_stable_step(body).dt_s);
 }
 
 // The element bound takes one tet per depth because tets of one depth are

@@ -1,6 +1,26 @@
 #include "physics/physics_test_support.hpp"
 
+#include <Eigen/Dense>
+#include <cmath>
+
 namespace tissue::physics::testing {
+
+double dense_rest_frequency2_per_s2(const Body& body) {
+  const int n = static_cast<int>(body.x_m.size());
+  Eigen::MatrixXd k = Eigen::MatrixXd::Zero(3 * n, 3 * n);
+  body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+    const Vec3 d = (body.rest_m[edge.b] - body.rest_m[edge.a]).normalized();
+    const Eigen::Matrix3d block = body.stiffness_N_per_m[e] * d * d.transpose();
+    k.block<3, 3>(3 * edge.a, 3 * edge.a) += block;
+    k.block<3, 3>(3 * edge.b, 3 * edge.b) += block;
+    k.block<3, 3>(3 * edge.a, 3 * edge.b) -= block;
+    k.block<3, 3>(3 * edge.b, 3 * edge.a) -= block;
+  });
+  Eigen::VectorXd sqrt_w(3 * n);  // zero on kinematic nodes: their rows and columns drop out
+  for (int i = 0; i < n; ++i) sqrt_w.segment<3>(3 * i).setConstant(std::sqrt(body.inv_mass_per_kg[i]));
+  const Eigen::MatrixXd s = sqrt_w.asDiagonal() * k * sqrt_w.asDiagonal();
+  return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(s, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff();
+}
 
 scene::Scene beam_scene(double tip_force_N) {
   scene::Scene s;

@@ -21,6 +21,11 @@ scene::Scene cantilever_scene(double release_s = 1.0);
 // A small free cube (no fixed nodes) for conservation tests.
 scene::Scene free_cube_scene(int cubes = 2, int depth = 0);
 
+// λmax(M⁻¹K) [1/s²] over the free nodes at rest, K along the springs' rest
+// directions, by a dense symmetric eigensolver (small meshes only): the
+// reference the stable-step bounds and the Lanczos estimate are held to.
+double dense_rest_frequency2_per_s2(const Body& body);
+
 // Kinetic + elastic energy [J].
 double total_energy_J(const Simulation& sim);
 
