@@ -73,9 +73,12 @@ void report(benchmark::State& state, const physics::Body& body, double ns_per_ca
 }
 
 // spring_bytes: 32 with dampers; 24 without (no damping coefficient to read).
-double bound_ns_per_spring(const physics::Body& body, double spring_bytes = 32.0) {
+// Single precision (explicit_precision: float): 32 / 28 B per spring (ids,
+// rest edge vector, rest length, stiffness, damping) and half the node
+// bytes, 76.
+double bound_ns_per_spring(const physics::Body& body, double spring_bytes = 32.0, double node_bytes = 152.0) {
   const double springs = static_cast<double>(body.mesh().edge_count());
-  const double bytes = spring_bytes * springs + 152.0 * static_cast<double>(body.mesh().node_count());
+  const double bytes = spring_bytes * springs + node_bytes * static_cast<double>(body.mesh().node_count());
   return bytes / measured_bandwidth_bytes_per_ns(static_cast<std::size_t>(bytes)) / springs;
 }
 
@@ -93,13 +96,16 @@ void BM_ExplicitSubstep(benchmark::State& state) {
   scene::Scene scene = beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit);
   const bool undamped = state.range(2) == 1;
   if (undamped) scene.material.rayleigh_beta_s = 0.0;
+  const bool single = state.range(3) == 1;
+  if (single) scene.integrator.explicit_precision = scene::ExplicitPrecision::kFloat;
   physics::Simulation sim(scene);
   physics::Body& body = sim.mutable_body();
   std::vector<physics::Vec3> f(body.x_m.size());
   // Half the stable sub-step: a fixed h would be unstable from depth 10 on,
   // and the exploding state would time the kernel's non-finite fallback.
   const double h = 0.5 * physics::explicit_stable_dt_s(body);
-  const double bound = bound_ns_per_spring(body, undamped ? 24.0 : 32.0);
+  const double bound = single ? bound_ns_per_spring(body, undamped ? 28.0 : 32.0, 76.0)
+                              : bound_ns_per_spring(body, undamped ? 24.0 : 32.0);
   physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
   const std::vector<physics::Vec3> no_force(body.x_m.size(), physics::Vec3::Zero());
   integrator.run_substeps(body, no_force, h, 1);  // builds the spring stream once, outside the timing
@@ -592,6 +598,7 @@ void BM_ExplicitVsPlainStepper(benchmark::State& state) {
   scene::Scene s = performance_beam(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)),
                                     scene::IntegratorKind::kExplicit, 1e-3);
   s.material.rayleigh_beta_s = 0.0;
+  if (state.range(2) == 1) s.integrator.explicit_precision = scene::ExplicitPrecision::kFloat;
   physics::Simulation sim(s);
   const physics::Body& body = sim.body();
   const std::size_t nodes = body.x_m.size();
@@ -803,12 +810,18 @@ void BM_EnergySumsPerStep(benchmark::State& state) {
 
 }  // namespace
 
+// Args: depth, old code (1: add_spring_forces + plain update), undamped,
+// single precision.
 BENCHMARK(BM_ExplicitSubstep)
-    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}, {0}})
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}, {0}, {0}})
     ->Iterations(21)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ExplicitSubstep)
-    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {1}})
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {0, 1}, {1}})
+    ->Iterations(21)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ExplicitSubstep)
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {1}, {0}})
     ->Iterations(21)
     ->Unit(benchmark::kMillisecond);
 #if defined(__x86_64__)
@@ -874,7 +887,12 @@ BENCHMARK(BM_PreconditionerCrossover)
     ->ArgsProduct({{0, 1, 2, 3, 4, 5, 6}, {1, 10}, {0, 1}})
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_ExplicitVsPlainStepper)->ArgsProduct({{2, 3}, {0, 1}})->Iterations(1)->Unit(benchmark::kMillisecond);
+// Args: resolution, geometry (0 exact beam | 1 exact counts), our precision
+// (0 double | 1 float: integrator.explicit_precision).
+BENCHMARK(BM_ExplicitVsPlainStepper)
+    ->ArgsProduct({{2, 3}, {0, 1}, {0, 1}})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ImplicitVsExplicitSubstep)->DenseRange(0, 9, 3)->Arg(11)->Iterations(1)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FrequencyEstimate)->DenseRange(0, 9, 3)->Iterations(5)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_AdaptationShare)->Iterations(3)->Unit(benchmark::kMillisecond);

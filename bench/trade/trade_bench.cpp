@@ -82,17 +82,18 @@ bool g_cost_uses_cpu = false;
 struct Options {
   bool table1 = false, sweep = false, beam_theory = false, quick = false;
   std::string csv_path, svg_path;
-  std::string sweep_scene = "cantilever";  // or "beam", "beam-r"
-  std::string preconditioner = "jacobi";   // implicit CG: jacobi | two_level | auto (the scene default)
-  std::string metric = "rms";              // plotted error: rms | max | tip
-  std::vector<double> th_Pa;               // empty: the scene's default list
-  std::vector<int> max_depths;             // empty: {3, 6} (quick: {3})
-  std::vector<std::string> integrators;    // empty: all three
-  std::vector<double> dts_s;               // empty: {1 ms, 5 ms}
-  double sweep_duration_s = 0.0;           // 0: the scene's default
-  double run_wall_cap_s = 0.0;             // 0: default (quick 3 s, full 30 s)
-  int beam_max_depth = -1;                 // -1: 6 (quick: 4)
-  bool cpu_clock = false;                  // --clock cpu: verdicts and plot use thread CPU time
+  std::string sweep_scene = "cantilever";     // or "beam", "beam-r"
+  std::string preconditioner = "jacobi";      // implicit CG: jacobi | two_level | auto (the scene default)
+  std::string explicit_precision = "double";  // explicit rung: double | float
+  std::string metric = "rms";                 // plotted error: rms | max | tip
+  std::vector<double> th_Pa;                  // empty: the scene's default list
+  std::vector<int> max_depths;                // empty: {3, 6} (quick: {3})
+  std::vector<std::string> integrators;       // empty: all three
+  std::vector<double> dts_s;                  // empty: {1 ms, 5 ms}
+  double sweep_duration_s = 0.0;              // 0: the scene's default
+  double run_wall_cap_s = 0.0;                // 0: default (quick 3 s, full 30 s)
+  int beam_max_depth = -1;                    // -1: 6 (quick: 4)
+  bool cpu_clock = false;                     // --clock cpu: verdicts and plot use thread CPU time
 };
 
 std::vector<std::string> split_list(const std::string& s) {
@@ -110,6 +111,7 @@ void usage() {
       "         [--depths 3,6] [--integrators implicit,explicit,projective] [--dts 0.001,0.005]\n"
       "         [--duration S] [--metric rms|max|tip] [--run-cap S] [--clock wall|cpu]\n"
       "         [--preconditioner jacobi|two_level|auto]   (default jacobi, as the README's tables)\n"
+      "         [--explicit-precision double|float]   (the explicit rung's arithmetic, default double)\n"
       "  beam-theory: [--beam-depth D]\n"
       "no mode flag: all three modes");
 }
@@ -158,6 +160,10 @@ Options parse(int argc, char** argv) {
       o.preconditioner = value(i);
       if (o.preconditioner != "jacobi" && o.preconditioner != "two_level" && o.preconditioner != "auto")
         throw std::invalid_argument("--preconditioner must be jacobi, two_level or auto");
+    } else if (a == "--explicit-precision") {
+      o.explicit_precision = value(i);
+      if (o.explicit_precision != "double" && o.explicit_precision != "float")
+        throw std::invalid_argument("--explicit-precision must be double or float");
     } else if (a == "--beam-depth") {
       o.beam_max_depth = std::stoi(value(i));
     } else if (a == "-h" || a == "--help") {
@@ -710,6 +716,7 @@ struct Point {
 struct SweepSetup {
   std::string scene;
   sc::CgPreconditioner preconditioner = sc::CgPreconditioner::kJacobi;
+  sc::ExplicitPrecision explicit_precision = sc::ExplicitPrecision::kDouble;
   double duration_s;
   std::vector<double> th_Pa;
   std::vector<int> max_depths;
@@ -729,6 +736,7 @@ sc::Scene sweep_scene(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKi
     out = paper_cantilever(m, kind, dt, std::numeric_limits<double>::infinity());
   }
   out.integrator.cg_preconditioner = s.preconditioner;
+  out.integrator.explicit_precision = s.explicit_precision;
   return out;
 }
 
@@ -967,6 +975,8 @@ void run_sweep(const Options& o) {
   s.preconditioner = o.preconditioner == "two_level" ? sc::CgPreconditioner::kTwoLevel
                      : o.preconditioner == "auto"    ? sc::CgPreconditioner::kAuto
                                                      : sc::CgPreconditioner::kJacobi;
+  s.explicit_precision =
+      o.explicit_precision == "float" ? sc::ExplicitPrecision::kFloat : sc::ExplicitPrecision::kDouble;
   const bool is_beam = s.scene == "beam" || s.scene == "beam-r";
   s.duration_s = o.sweep_duration_s > 0 ? o.sweep_duration_s : is_beam ? (o.quick ? 0.5 : 1.0) : (o.quick ? 0.2 : 0.5);
   if (!o.th_Pa.empty())

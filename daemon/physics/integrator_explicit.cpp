@@ -328,6 +328,11 @@ void ExplicitIntegrator::build_layout(const Body& body) {
   for (const double w : body.inv_mass_per_kg) free_nodes += w > 0.0;
   lanczos_wait_substeps_ = kLanczosWaitCostMultiple * kLanczosIterationCost *
                            lanczos_iterations(3 * free_nodes, kLanczosRelativeGap, kLanczosFailureProbability);
+  layout_version_ = body.parameters_version();
+  if (single_precision()) {
+    float_.build(body);
+    return;
+  }
   const std::size_t nodes = body.x_m.size(), edges = body.stiffness_N_per_m.size();
   const auto pad0 = static_cast<std::uint32_t>(4 * nodes), pad1 = pad0 + 4;
   batches_.clear();
@@ -352,7 +357,6 @@ void ExplicitIntegrator::build_layout(const Body& body) {
   x_[nodes + 1].v[0] = 1.0;  // the filler springs: length 1 = rest, no stiffness
   inv_mass_.assign(nodes + 2, 0.0);
   std::copy(body.inv_mass_per_kg.begin(), body.inv_mass_per_kg.end(), inv_mass_.begin());
-  layout_version_ = body.parameters_version();
 }
 
 void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count) {
@@ -362,6 +366,11 @@ void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext
 
 void ExplicitIntegrator::advance(const Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count) {
   if (body.parameters_version() != layout_version_) build_layout(body);
+  if (single_precision()) {
+    float_.load(body, f_ext_N);
+    float_.substeps(simd_, h_s, alpha_per_s_, count);
+    return;
+  }
   const std::size_t nodes = body.x_m.size();
   for (std::size_t n = 0; n < nodes; ++n) {
     x_[n] = padded(body.x_m[n]);
@@ -380,6 +389,7 @@ void ExplicitIntegrator::advance(const Body& body, const std::vector<Vec3>& f_ex
 }
 
 bool ExplicitIntegrator::advanced_state_is_finite(const Body& body) const {
+  if (single_precision()) return float_.finite(body);
   constexpr double kLimit = 1e100;  // as state_is_finite
   bool finite = true;
   body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
@@ -389,6 +399,7 @@ bool ExplicitIntegrator::advanced_state_is_finite(const Body& body) const {
 }
 
 void ExplicitIntegrator::store(Body& body) const {
+  if (single_precision()) return float_.store(body);
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
     body.x_m[n] = Vec3(x_[n].v[0], x_[n].v[1], x_[n].v[2]);
     body.v_m_per_s[n] = Vec3(v_[n].v[0], v_[n].v[1], v_[n].v[2]);

@@ -47,13 +47,62 @@ struct ExplicitSpringBatch {
 void explicit_spring_forces(Simd simd, const ExplicitSpringBatch* batches, std::size_t count, const Pad3* x,
                             const Pad3* v, const Vec3* rest_m, Pad3* f);
 
+// The single-precision explicit path (integrator_explicit_float.cpp).
+// A node's displacement from rest, velocity or force: four floats (the
+// fourth 0), one SSE register.
+struct alignas(16) Pad3f {
+  float v[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+};
+
+// Eight springs, structure of arrays (32 B per spring): rest edge vector
+// e = X_b − X_a, rest length L = |e|, stiffness, damping; a4/b4 are 4 × node
+// id (first float of the node in a Pad3f array).
+struct ExplicitSpringBatchF {
+  std::uint32_t a4[8], b4[8];
+  float ex[8], ey[8], ez[8];
+  float rest_m[8], k_N_per_m[8], c_N_s_per_m[8];
+};
+
+// f[a] += F, f[b] −= F for every spring, F the spring and damper force on a
+// at displacements u and velocities v (v = nullptr: no spring has a damper).
+// Both instruction sets give bit-identical results.
+void explicit_spring_forces_float(Simd simd, const ExplicitSpringBatchF* batches, std::size_t count, const Pad3f* u,
+                                  const Pad3f* v, Pad3f* f);
+
+// The explicit integrator's state and spring stream in single precision.
+class ExplicitFloatState {
+ public:
+  // Spring stream and padded arrays for the body's topology.
+  void build(const Body& body);
+  // Copies positions (as displacements), velocities and external forces in.
+  void load(const Body& body, const std::vector<Vec3>& f_ext_N);
+  // `count` sub-steps of h (mass damping α taken implicitly, as in double).
+  void substeps(Simd simd, double h_s, double alpha_per_s, int count);
+  // Every live node's displacement and velocity finite and below 1e30.
+  bool finite(const Body& body) const;
+  // Adds the free nodes' increments (u and v now minus as loaded) to the
+  // body's double state; kinematic nodes move in double by the last
+  // substeps() call's h and count. Call before the body changes.
+  void store(Body& body) const;
+  const std::vector<ExplicitSpringBatchF>& stream() const { return batches_; }
+
+ private:
+  std::vector<ExplicitSpringBatchF> batches_;
+  bool damped_ = true;
+  // By node id, plus two pad nodes the filler springs join.
+  std::vector<Pad3f> u_, v_, f_, f_ext_;
+  std::vector<float> inv_mass_;
+  double h_s_ = 0.0;  // the last substeps() call's, for store()
+  int count_ = 0;
+};
+
 class ExplicitIntegrator final : public Integrator {
  public:
   ExplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
                      Simd simd = detected_simd());
   StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) override;
   void mesh_changed() override { layout_version_ = 0; }
-  const char* name() const override { return "explicit"; }
+  const char* name() const override { return single_precision() ? "explicit float" : "explicit"; }
 
   // `count` sub-steps of h under f_ext_N, without the stability refusal, the
   // state save or the finiteness check of step(). For the benchmark.
@@ -61,6 +110,8 @@ class ExplicitIntegrator final : public Integrator {
   // The spring stream as last built (empty before the first step). For the
   // benchmark's memory-access floor, which runs its own loop over it.
   const std::vector<ExplicitSpringBatch>& spring_stream() const { return batches_; }
+  // integrator.explicit_precision: float.
+  bool single_precision() const { return spec_.explicit_precision == scene::ExplicitPrecision::kFloat; }
   // The stable step in use, and whether the Lanczos bound has tightened it
   // (see below) for the current layout. For tests and the benchmark.
   const ExplicitStableStep& stable_step() const { return stable_; }
@@ -113,6 +164,7 @@ class ExplicitIntegrator final : public Integrator {
   // (x = 0 and x = e_x, k = c = 0: an exactly zero force).
   std::vector<Pad3> x_, v_, f_, f_ext_;
   std::vector<double> inv_mass_;
+  ExplicitFloatState float_;  // used instead of the above with explicit_precision: float
 };
 
 // One spring of the implicit system, streamed in edge order. Its block

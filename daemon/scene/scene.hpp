@@ -133,14 +133,20 @@ enum class IntegratorKind { kExplicit, kImplicit, kProjective };
 // free nodes on, re-deciding whenever the mesh changes.
 enum class CgPreconditioner { kAuto, kJacobi, kTwoLevel };
 
+// Arithmetic of the explicit rung's sub-steps. kFloat: single precision on
+// displacements from rest (so strains keep ~7 digits), half the bytes and
+// twice the SIMD lanes; the body's state stays double between steps.
+enum class ExplicitPrecision { kDouble, kFloat };
+
 struct IntegratorSpec {
   IntegratorKind kind = IntegratorKind::kImplicit;
   double dt_s = 1e-3;
-  int max_substeps = 1000;                                       // explicit: refuse beyond this
-  double substep_safety = 0.8;                                   // explicit: fraction of the stable bound
-  double cg_tolerance = 1e-6;                                    // implicit: relative residual
-  int cg_max_iterations = 100;                                   // implicit
-  CgPreconditioner cg_preconditioner = CgPreconditioner::kAuto;  // implicit
+  int max_substeps = 1000;                                            // explicit: refuse beyond this
+  double substep_safety = 0.8;                                        // explicit: fraction of the stable bound
+  ExplicitPrecision explicit_precision = ExplicitPrecision::kDouble;  // explicit
+  double cg_tolerance = 1e-6;                                         // implicit: relative residual
+  int cg_max_iterations = 100;                                        // implicit
+  CgPreconditioner cg_preconditioner = CgPreconditioner::kAuto;       // implicit
 };
 
 struct ProbeSpec {

@@ -51,6 +51,9 @@ constexpr std::array<std::pair<std::string_view, CgPreconditioner>, 3> kPrecondi
      {"jacobi", CgPreconditioner::kJacobi},
      {"two_level", CgPreconditioner::kTwoLevel}}};
 
+constexpr std::array<std::pair<std::string_view, ExplicitPrecision>, 2> kExplicitPrecisions{
+    {{"double", ExplicitPrecision::kDouble}, {"float", ExplicitPrecision::kFloat}}};
+
 // Scene sections -> Scene; key checking and typed reads come from the shared Reader.
 class Converter : public yaml_util::Reader {
  public:
@@ -203,13 +206,14 @@ class Converter : public yaml_util::Reader {
   }
 
   void integrator(const YAML::Node& n, const std::string& p, IntegratorSpec& g) const {
-    const FieldMap f = fields(
-        n, p,
-        {"kind", "dt_s", "max_substeps", "substep_safety", "cg_tolerance", "cg_max_iterations", "cg_preconditioner"});
+    const FieldMap f = fields(n, p,
+                              {"kind", "dt_s", "max_substeps", "substep_safety", "explicit_precision", "cg_tolerance",
+                               "cg_max_iterations", "cg_preconditioner"});
     opt_choice<IntegratorKind>(f, "kind", p, kIntegrators, g.kind);
     opt(f, "dt_s", p, g.dt_s);
     opt(f, "max_substeps", p, g.max_substeps);
     opt(f, "substep_safety", p, g.substep_safety);
+    opt_choice<ExplicitPrecision>(f, "explicit_precision", p, kExplicitPrecisions, g.explicit_precision);
     opt(f, "cg_tolerance", p, g.cg_tolerance);
     opt(f, "cg_max_iterations", p, g.cg_max_iterations);
     opt_choice<CgPreconditioner>(f, "cg_preconditioner", p, kPreconditioners, g.cg_preconditioner);

@@ -64,6 +64,30 @@ TEST(BatchReport, SameSceneGivesIdenticalResult) {
   EXPECT_EQ(report_text(a), report_text(b));
 }
 
+// The explicit rung in single precision: deterministic too, named in the
+// report, and its probe within ~1e-6 of the double run's.
+TEST(BatchReport, ExplicitFloatIsDeterministicAndNamed) {
+  BatchOptions options;
+  options.duration_s = 0.2;
+  options.timing = false;
+  const auto run = [&](const char* precision) {
+    return run_batch(scene::load_scene_file_with_overrides(
+                         scene_path("beam"),
+                         {"integrator.kind=explicit", std::string("integrator.explicit_precision=") + precision}),
+                     options, nullptr);
+  };
+  const json a = run("float"), b = run("float"), d = run("double");
+  ASSERT_TRUE(a["result"]["error"].is_null()) << a["result"]["error"];
+  EXPECT_EQ(report_text(a), report_text(b));
+  EXPECT_EQ(a["scene"]["integrator"], "explicit float");
+  EXPECT_EQ(d["scene"]["integrator"], "explicit");
+  const double tip_f = a["result"]["probes"]["tip"]["peak_magnitude_m"].get<double>();
+  const double tip_d = d["result"]["probes"]["tip"]["peak_magnitude_m"].get<double>();
+  EXPECT_GT(tip_d, 0.0);
+  EXPECT_NE(tip_f, tip_d);  // it did run in float
+  EXPECT_NEAR(tip_f, tip_d, 1e-5 * tip_d);
+}
+
 TEST(BatchReport, StepsUntilTheDurationDespiteRoundedTimeSums) {
   // Ten steps of 0.01 s sum to 0.09999999999999999 s: an eleventh would overshoot.
   const scene::Scene scene = scene::load_scene_file_with_overrides(scene_path("beam"), {"integrator.dt_s=0.01"});

@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <random>
 
 namespace tissue::physics::testing {
 
@@ -20,6 +21,27 @@ double dense_rest_frequency2_per_s2(const Body& body) {
   for (int i = 0; i < n; ++i) sqrt_w.segment<3>(3 * i).setConstant(std::sqrt(body.inv_mass_per_kg[i]));
   const Eigen::MatrixXd s = sqrt_w.asDiagonal() * k * sqrt_w.asDiagonal();
   return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(s, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff();
+}
+
+Body jiggled_beam(std::uint32_t seed, bool damped) {
+  scene::Scene s = beam_scene();
+  s.adaptivity.min_depth = 1;
+  if (!damped) s.material.rayleigh_beta_s = 0.0;  // no spring has a damper
+  Body body(s);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if (body.inv_mass_per_kg[n] == 0.0) return;
+    body.x_m[n] += 0.01 * Vec3(u(rng), u(rng), u(rng));
+    body.v_m_per_s[n] = 0.1 * Vec3(u(rng), u(rng), u(rng));
+  });
+  bool collapsed = false;
+  body.mesh().for_each_edge([&](EdgeId, const mesh::Edge& edge) {
+    if (collapsed || body.inv_mass_per_kg[edge.b] == 0.0) return;
+    body.x_m[edge.b] = body.x_m[edge.a];
+    collapsed = true;
+  });
+  return body;
 }
 
 scene::Scene beam_scene(double tip_force_N) {

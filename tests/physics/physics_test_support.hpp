@@ -2,6 +2,8 @@
 // physics, not the loader).
 #pragma once
 
+#include <cstdint>
+
 #include "physics/simulation.hpp"
 #include "scene/scene.hpp"
 
@@ -25,6 +27,12 @@ scene::Scene free_cube_scene(int cubes = 2, int depth = 0);
 // directions, by a dense symmetric eigensolver (small meshes only): the
 // reference the stable-step bounds and the Lanczos estimate are held to.
 double dense_rest_frequency2_per_s2(const Body& body);
+
+// A beam (depth 1) with every free node jiggled, so springs are stretched
+// (transverse term on), compressed (clamped off) and one collapsed onto its
+// end (rest-direction fallback), and random velocities. damped = false: no
+// spring has a damper (Rayleigh beta 0).
+Body jiggled_beam(std::uint32_t seed, bool damped = true);
 
 // Kinetic + elastic energy [J].
 double total_energy_J(const Simulation& sim);

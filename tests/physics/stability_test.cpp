@@ -23,20 +23,27 @@ using testing::total_energy_J;
 
 // The rungs: implicit once per preconditioner (the default `auto` picks
 // two-level from 1,000 free nodes, more than these small bodies have).
+// The explicit rung once per precision.
 struct Rung {
   scene::IntegratorKind kind;
   scene::CgPreconditioner preconditioner;
+  scene::ExplicitPrecision precision;
   const char* name;
   bool is_explicit() const { return kind == scene::IntegratorKind::kExplicit; }
 };
-const Rung kAll[] = {{scene::IntegratorKind::kExplicit, scene::CgPreconditioner::kAuto, "explicit"},
-                     {scene::IntegratorKind::kImplicit, scene::CgPreconditioner::kJacobi, "implicit jacobi"},
-                     {scene::IntegratorKind::kImplicit, scene::CgPreconditioner::kTwoLevel, "implicit two-level"},
-                     {scene::IntegratorKind::kProjective, scene::CgPreconditioner::kAuto, "projective"}};
+constexpr auto kDouble = scene::ExplicitPrecision::kDouble;
+const Rung kAll[] = {
+    {scene::IntegratorKind::kExplicit, scene::CgPreconditioner::kAuto, kDouble, "explicit"},
+    {scene::IntegratorKind::kExplicit, scene::CgPreconditioner::kAuto, scene::ExplicitPrecision::kFloat,
+     "explicit float"},
+    {scene::IntegratorKind::kImplicit, scene::CgPreconditioner::kJacobi, kDouble, "implicit jacobi"},
+    {scene::IntegratorKind::kImplicit, scene::CgPreconditioner::kTwoLevel, kDouble, "implicit two-level"},
+    {scene::IntegratorKind::kProjective, scene::CgPreconditioner::kAuto, kDouble, "projective"}};
 
 scene::Scene on_rung(scene::Scene s, const Rung& rung) {
   s.integrator.kind = rung.kind;
   s.integrator.cg_preconditioner = rung.preconditioner;
+  s.integrator.explicit_precision = rung.precision;
   return s;
 }
 
@@ -135,28 +142,31 @@ TEST(Stability, SquashedToFiveThirtyAndSeventyPercent) {
 // depths, and from squashed starts: steps of 60 guaranteed sub-steps
 // tighten within a few steps, and the rest of the run is audited as above.
 TEST(Stability, ExplicitTightenedSubstepAtTheExtremes) {
-  const auto check = [](scene::Scene s, const char* what, const std::function<void(Body&)>& deform) {
-    SCOPED_TRACE(what);
-    s.integrator.kind = scene::IntegratorKind::kExplicit;
-    s.integrator.dt_s = 60.0 * explicit_stable_dt_s(Body(s));
-    Simulation sim(s);
-    deform(sim.mutable_body());
-    EXPECT_EQ(run_checked(sim, 60, 0.05), "");
-    const auto& integrator = dynamic_cast<const ExplicitIntegrator&>(sim.integrator());
-    EXPECT_TRUE(integrator.tightened());
-    EXPECT_GT(integrator.stable_step().undamped_dt_s, 1.1 * explicit_stable_step(sim.body()).undamped_dt_s);
-  };
-  const auto keep = [](Body&) {};
-  for (double youngs : {1e3, 1e9})
-    for (int depth : {0, 2}) {
-      const std::string what = "E " + std::to_string(youngs) + " depth " + std::to_string(depth);
-      check(small_bar(kAll[0], youngs, 1e-3, depth), what.c_str(), keep);
+  for (const auto precision : {kDouble, scene::ExplicitPrecision::kFloat}) {
+    const auto check = [precision](scene::Scene s, const char* what, const std::function<void(Body&)>& deform) {
+      SCOPED_TRACE(what);
+      s.integrator.kind = scene::IntegratorKind::kExplicit;
+      s.integrator.explicit_precision = precision;
+      s.integrator.dt_s = 60.0 * explicit_stable_dt_s(Body(s));
+      Simulation sim(s);
+      deform(sim.mutable_body());
+      EXPECT_EQ(run_checked(sim, 60, 0.05), "");
+      const auto& integrator = dynamic_cast<const ExplicitIntegrator&>(sim.integrator());
+      EXPECT_TRUE(integrator.tightened());
+      EXPECT_GT(integrator.stable_step().undamped_dt_s, 1.1 * explicit_stable_step(sim.body()).undamped_dt_s);
+    };
+    const auto keep = [](Body&) {};
+    for (double youngs : {1e3, 1e9})
+      for (int depth : {0, 2}) {
+        const std::string what = "E " + std::to_string(youngs) + " depth " + std::to_string(depth);
+        check(small_bar(kAll[0], youngs, 1e-3, depth), what.c_str(), keep);  // on_rung; precision set in check
+      }
+    for (double kept : {0.05, 0.30, 0.70}) {
+      const std::string what = "squashed to " + std::to_string(kept);
+      check(testing::free_cube_scene(2, 1), what.c_str(), [&](Body& body) {
+        body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n].z() = kept * body.rest_m[n].z(); });
+      });
     }
-  for (double kept : {0.05, 0.30, 0.70}) {
-    const std::string what = "squashed to " + std::to_string(kept);
-    check(testing::free_cube_scene(2, 1), what.c_str(), [&](Body& body) {
-      body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n].z() = kept * body.rest_m[n].z(); });
-    });
   }
 }
 

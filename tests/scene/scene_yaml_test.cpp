@@ -237,6 +237,13 @@ TEST(SceneYaml, EveryKeyOfTheBaseSceneIsRead) {
   EXPECT_EQ(p.integrator.cg_preconditioner, CgPreconditioner::kTwoLevel);
   expect_error(base_with("cg_max_iterations: 100", "cg_max_iterations: 5\n  cg_preconditioner: multigrid"),
                "integrator.cg_preconditioner", "unknown value");
+  EXPECT_EQ(s.integrator.explicit_precision, ExplicitPrecision::kDouble);  // the default
+  EXPECT_EQ(parse_scene(base_with("cg_max_iterations: 100", "cg_max_iterations: 100\n  explicit_precision: float"),
+                        "test.yaml")
+                .integrator.explicit_precision,
+            ExplicitPrecision::kFloat);
+  expect_error(base_with("cg_max_iterations: 100", "cg_max_iterations: 100\n  explicit_precision: half"),
+               "integrator.explicit_precision", "unknown value");
   const Scene t = parse_scene(base_with("kind: implicit", "kind: projective") + "", "test.yaml");
   EXPECT_EQ(t.integrator.kind, IntegratorKind::kProjective);
   const Scene u = parse_scene(base_with("criterion: strain_energy", "criterion: stretch"), "test.yaml");
