@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <memory>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -67,20 +66,7 @@ TEST(FrequencyEstimate, RitzValueIsBelowTheTrueMaximumAndTheBoundAbove) {
     Body body(s);
     check(body, "depth " + std::to_string(depth));
   }
-  scene::Scene s = beam_scene();
-  s.adaptivity.enabled = true;
-  s.adaptivity.max_depth = 5;
-  Body body(s);
-  std::mt19937 rng(11);
-  for (int round = 0; round < 40; ++round) {
-    std::vector<mesh::Key> candidates;
-    body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
-      if (tet.depth < 5 && body.mesh().can_split(body.mesh().diamond_of(t)))
-        candidates.push_back(body.mesh().diamond_of(t));
-    });
-    if (candidates.empty()) break;
-    body.split(candidates[std::uniform_int_distribution<std::size_t>(0, candidates.size() - 1)(rng)]);
-  }
+  const Body body = testing::randomly_refined_beam(11);
   check(body, "mixed depths 0..5");
 }
 

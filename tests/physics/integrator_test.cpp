@@ -166,20 +166,7 @@ TEST(Integrator, ExplicitSubstepTightensOnAStillMeshAndResetsWhenItChanges) {
 // congruent: every tet of an adaptively refined beam (depths 0..5 mixed)
 // gives its depth's value, and the bound is the largest.
 TEST(Integrator, TetsOfOneDepthShareTheirFrequencyBound) {
-  scene::Scene s = beam_scene();
-  s.adaptivity.enabled = true;
-  s.adaptivity.max_depth = 5;
-  Body body(s);
-  std::mt19937 rng(5);
-  for (int round = 0; round < 40; ++round) {
-    std::vector<mesh::Key> candidates;
-    body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
-      if (tet.depth < 5 && body.mesh().can_split(body.mesh().diamond_of(t)))
-        candidates.push_back(body.mesh().diamond_of(t));
-    });
-    if (candidates.empty()) break;
-    body.split(candidates[std::uniform_int_distribution<std::size_t>(0, candidates.size() - 1)(rng)]);
-  }
+  const Body body = testing::randomly_refined_beam(5);
   std::map<int, double> by_depth;
   body.mesh().for_each_tet([&](TetId, const mesh::Tet& t) {
     const double lambda = tet_frequency2_per_s2(body, t.v, t.depth);

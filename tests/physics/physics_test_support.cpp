@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <cmath>
 #include <random>
+#include <vector>
 
 namespace tissue::physics::testing {
 
@@ -41,6 +42,24 @@ Body jiggled_beam(std::uint32_t seed, bool damped) {
     body.x_m[edge.b] = body.x_m[edge.a];
     collapsed = true;
   });
+  return body;
+}
+
+Body randomly_refined_beam(std::uint32_t seed, int max_depth) {
+  scene::Scene s = beam_scene();
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = max_depth;
+  Body body(s);
+  std::mt19937 rng(seed);
+  for (int round = 0; round < 40; ++round) {
+    std::vector<mesh::Key> candidates;
+    body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      if (tet.depth < max_depth && body.mesh().can_split(body.mesh().diamond_of(t)))
+        candidates.push_back(body.mesh().diamond_of(t));
+    });
+    if (candidates.empty()) break;
+    body.split(candidates[std::uniform_int_distribution<std::size_t>(0, candidates.size() - 1)(rng)]);
+  }
   return body;
 }
 

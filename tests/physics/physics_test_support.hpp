@@ -34,6 +34,10 @@ double dense_rest_frequency2_per_s2(const Body& body);
 // spring has a damper (Rayleigh beta 0).
 Body jiggled_beam(std::uint32_t seed, bool damped = true);
 
+// beam_scene with adaptivity on up to max_depth, and 40 randomly chosen
+// diamonds split (mixed depths 0..max_depth).
+Body randomly_refined_beam(std::uint32_t seed, int max_depth = 5);
+
 // Kinetic + elastic energy [J].
 double total_energy_J(const Simulation& sim);
 
