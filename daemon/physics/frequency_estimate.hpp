@@ -9,7 +9,7 @@
 // 1992, Thm. 4.2) bound how far below it can still be: after k iterations on
 // n unknowns, P(θ < (1 − ε) λmax) ≤ 1.648 √n e^(−√ε (2k − 1)) over the start
 // vector. So θ / (1 − ε) is an upper bound except with a probability chosen
-// up front (1e-9 by default: 30-45 iterations from 10² to 10⁶ unknowns at
+// up front (1e-9 by default: 38-45 iterations from 10² to 10⁶ unknowns at
 // ε = 0.1, i.e. a sub-step 0.95x the true limit instead of 0.77x).
 #pragma once
 
