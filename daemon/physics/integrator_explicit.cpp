@@ -53,6 +53,11 @@
 // Right creep needs p ≈ 1/(1 + z) to relative accuracy, ~√(hγ) ln(hγ)/2
 // passes: no cheaper than the sub-steps on the shipped scenes (hγ ≈ 40 at
 // the undamped sub-step: ~16 passes against ~15 sub-steps).
+// Also dropped (same day, BM_ExplicitSubstep/{6,9,10,11}/0/{0,1}/0, two
+// rounds alternating): the stream sorted by each spring's lower node id,
+// 9-13 % slower at 4x10^5-8x10^5 springs (damped 4.71-4.95 vs 4.26-4.39 ns
+// per spring) and no better elsewhere: consecutive springs then share a node
+// and chain their force stores; edge-creation order shares fewer.
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
