@@ -176,6 +176,7 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.substeps_per_step = sim.counters().substeps_per_step();
   s.solver_iterations_per_step = sim.counters().solver_iterations_per_step();
   s.unconverged_steps = sim.counters().unconverged_steps;
+  std::snprintf(s.integrator, sizeof s.integrator, "%s", sim.integrator().name());
   s.model_version = model_version_;
   s.samples = samples_total_;
   s.tool_pushing = last_step_.tool_pushing;

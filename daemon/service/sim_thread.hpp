@@ -55,6 +55,7 @@ struct SimStatus {
   // steps whose solver stopped at cg_max_iterations short of cg_tolerance.
   double substeps_per_step = 0.0, solver_iterations_per_step = 0.0;
   std::int64_t unconverged_steps = 0;
+  char integrator[32] = {};  // the rung running (physics::Integrator::name(), e.g. "explicit float")
   std::uint64_t model_version = 0;
   std::uint64_t samples = 0;
   bool tool_pushing = false;

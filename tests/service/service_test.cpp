@@ -100,6 +100,7 @@ TEST(Service, ServesStatusWithTheHapticSideAndShutsDownCleanly) {
   EXPECT_GT(r["solver"]["iterations_per_step"].get<double>(), 0.0) << r.dump();  // the implicit CG at work
   EXPECT_EQ(r["solver"]["substeps_per_step"].get<double>(), 1.0) << r.dump();
   EXPECT_EQ(r["solver"]["unconverged_steps"].get<std::int64_t>(), 0) << r.dump();
+  EXPECT_EQ(r["solver"]["integrator"], "implicit") << r.dump();  // the shipped cantilever's rung
   ASSERT_TRUE(r["haptics"].is_object()) << r.dump();
   EXPECT_GT(r["haptics"]["ticks"].get<std::uint64_t>(), 100u);
   EXPECT_GT(r["haptics"]["model_version"].get<std::uint64_t>(), 0u);

@@ -124,6 +124,7 @@ TEST(SimThread, StatusCarriesTheSolverWork) {
     thread.stop();
     const SimStatus st = thread.status();
     EXPECT_EQ(st.substeps_per_step, 1.0);
+    EXPECT_STREQ(st.integrator, "implicit");
     if (capped) {
       EXPECT_EQ(st.solver_iterations_per_step, 1.0);
       EXPECT_EQ(st.unconverged_steps, st.steps);
@@ -132,6 +133,24 @@ TEST(SimThread, StatusCarriesTheSolverWork) {
       EXPECT_EQ(st.unconverged_steps, 0);
     }
   }
+}
+
+// The status names the rung that runs, as the batch report does: here the
+// explicit one in single precision, with its sub-steps.
+TEST(SimThread, StatusNamesTheIntegrator) {
+  SimThreadOptions options;
+  options.status_every_s = 0.005;
+  options.pace = false;
+  scene::Scene s = physics::testing::cantilever_scene();
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.integrator.explicit_precision = scene::ExplicitPrecision::kFloat;
+  SimThread thread(std::make_unique<SimRunner>(s), nullptr, nullptr, options);
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return thread.status().steps > 5; }));
+  thread.stop();
+  const SimStatus st = thread.status();
+  EXPECT_STREQ(st.integrator, "explicit float");
+  EXPECT_GT(st.substeps_per_step, 1.0);
 }
 
 // A stall (here: steps far slower than dt) sheds adaptation and re-anchors
