@@ -255,6 +255,22 @@ double Body::total_mass_kg() const {
   return m;
 }
 
+std::size_t free_node_count(const Body& body) {
+  std::size_t n = 0;
+  for (const double w : body.inv_mass_per_kg) n += w > 0.0;
+  return n;
+}
+
+std::vector<EdgeId> moving_springs(const Body& body) {
+  std::vector<EdgeId> out;
+  for (EdgeId e = 0; e < body.stiffness_N_per_m.size(); ++e) {
+    if (body.stiffness_N_per_m[e] == 0.0) continue;  // dead edge slot
+    if (body.inv_mass_per_kg[body.edge_a[e]] == 0.0 && body.inv_mass_per_kg[body.edge_b[e]] == 0.0) continue;
+    out.push_back(e);
+  }
+  return out;
+}
+
 Vec3 Body::momentum() const {
   Vec3 p = Vec3::Zero();
   mesh_.for_each_node([&](NodeId n, const mesh::Node&) { p += mass_kg[n] * v_m_per_s[n]; });

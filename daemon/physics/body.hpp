@@ -94,4 +94,12 @@ class Body {
   std::vector<std::uint8_t> edge_touched_, node_touched_;
 };
 
+// Nodes with an inverse mass above zero (neither fixed, prescribed nor dead).
+std::size_t free_node_count(const Body& body);
+
+// The springs a step must run, in edge id order: live (stiffness above
+// zero) with at least one free end. The integrators' spring streams and the
+// frequency estimate are built from this one list.
+std::vector<EdgeId> moving_springs(const Body& body);
+
 }  // namespace tissue::physics

@@ -31,16 +31,11 @@ double dot(const std::vector<Vec3>& p, const std::vector<Vec3>& q) {
 
 RestFrequencyLanczos::RestFrequencyLanczos(const Body& body, double relative_gap, double failure_probability)
     : relative_gap_(relative_gap) {
-  const std::size_t nodes = body.x_m.size();
+  const std::size_t nodes = body.x_m.size(), free_nodes = free_node_count(body);
   sqrt_w_.resize(nodes);
-  std::size_t free_nodes = 0;
-  for (std::size_t n = 0; n < nodes; ++n) {
-    sqrt_w_[n] = std::sqrt(body.inv_mass_per_kg[n]);
-    free_nodes += body.inv_mass_per_kg[n] > 0.0;
-  }
-  for (EdgeId e = 0; e < body.stiffness_N_per_m.size(); ++e) {
+  for (std::size_t n = 0; n < nodes; ++n) sqrt_w_[n] = std::sqrt(body.inv_mass_per_kg[n]);
+  for (const EdgeId e : moving_springs(body)) {
     const NodeId a = body.edge_a[e], b = body.edge_b[e];
-    if (body.stiffness_N_per_m[e] == 0.0 || (sqrt_w_[a] == 0.0 && sqrt_w_[b] == 0.0)) continue;
     springs_.push_back({a, b, body.stiffness_N_per_m[e], (body.rest_m[b] - body.rest_m[a]).normalized()});
   }
   if (free_nodes == 0 || springs_.empty()) {

@@ -331,23 +331,20 @@ void ExplicitIntegrator::build_layout(const Body& body) {
   lanczos_.reset();
   lanczos_credit_ = 0.0;
   layout_substeps_ = 0;
-  std::size_t free_nodes = 0;
-  for (const double w : body.inv_mass_per_kg) free_nodes += w > 0.0;
-  lanczos_wait_substeps_ = kLanczosWaitCostMultiple * kLanczosIterationCost *
-                           lanczos_iterations(3 * free_nodes, kLanczosRelativeGap, kLanczosFailureProbability);
+  lanczos_wait_substeps_ =
+      kLanczosWaitCostMultiple * kLanczosIterationCost *
+      lanczos_iterations(3 * free_node_count(body), kLanczosRelativeGap, kLanczosFailureProbability);
   layout_version_ = body.parameters_version();
   if (single_precision()) {
     float_.build(body);
     return;
   }
-  const std::size_t nodes = body.x_m.size(), edges = body.stiffness_N_per_m.size();
+  const std::size_t nodes = body.x_m.size();
   const auto pad0 = static_cast<std::uint32_t>(4 * nodes), pad1 = pad0 + 4;
   batches_.clear();
   std::size_t filled = 0;
-  for (EdgeId e = 0; e < edges; ++e) {
-    if (body.stiffness_N_per_m[e] == 0.0) continue;  // dead edge slot
+  for (const EdgeId e : moving_springs(body)) {
     const NodeId a = body.edge_a[e], b = body.edge_b[e];
-    if (body.inv_mass_per_kg[a] == 0.0 && body.inv_mass_per_kg[b] == 0.0) continue;  // moves nothing
     if (filled % 4 == 0) batches_.push_back({{pad0, pad0, pad0, pad0}, {pad1, pad1, pad1, pad1}, {1, 1, 1, 1}, {}, {}});
     ExplicitSpringBatch& batch = batches_.back();
     const std::size_t j = filled++ % 4;

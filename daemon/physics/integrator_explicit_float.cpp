@@ -207,14 +207,12 @@ void explicit_spring_forces_float(Simd simd, const ExplicitSpringBatchF* batches
 }
 
 void ExplicitFloatState::build(const Body& body) {
-  const std::size_t nodes = body.x_m.size(), edges = body.stiffness_N_per_m.size();
+  const std::size_t nodes = body.x_m.size();
   const auto pad0 = static_cast<std::uint32_t>(4 * nodes), pad1 = pad0 + 4;
   batches_.clear();
   std::size_t filled = 0;
-  for (EdgeId e = 0; e < edges; ++e) {
-    if (body.stiffness_N_per_m[e] == 0.0) continue;  // dead edge slot
+  for (const EdgeId e : moving_springs(body)) {
     const NodeId a = body.edge_a[e], b = body.edge_b[e];
-    if (body.inv_mass_per_kg[a] == 0.0 && body.inv_mass_per_kg[b] == 0.0) continue;  // moves nothing
     if (filled % 8 == 0) {
       // Fillers join the two pad nodes (u = 0) along e = (1, 0, 0) at rest
       // length 1 with no stiffness: an exactly zero force.

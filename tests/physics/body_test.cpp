@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
+#include <vector>
 
 #include "physics/forces.hpp"
 #include "physics/physics_test_support.hpp"
@@ -49,6 +51,35 @@ void randomise_state(Body& body, std::mt19937& rng) {
     body.x_m[n] = body.rest_m[n] + 1e-3 * Vec3(u(rng), u(rng), u(rng));
     body.v_m_per_s[n] = Vec3(u(rng), u(rng), u(rng));
   });
+}
+
+// free_node_count and moving_springs against the mesh itself, on a beam
+// with a fixed face after split/merge churn (dead node and edge slots):
+// every live spring with a free end, in id order, and nothing else.
+TEST(Body, MovingSpringsAreTheLiveOnesWithAFreeEnd) {
+  scene::Scene s = testing::beam_scene();
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 4;
+  Body body(s);
+  std::mt19937 rng(17);
+  ASSERT_GT(churn(body, rng, 300), 50);
+  std::size_t free = 0, kinematic = 0;
+  body.mesh().for_each_node(
+      [&](NodeId n, const mesh::Node&) { (body.inv_mass_per_kg[n] > 0.0 ? free : kinematic) += 1; });
+  ASSERT_GT(kinematic, 0u);
+  EXPECT_EQ(free_node_count(body), free);
+  std::vector<EdgeId> expected;
+  std::size_t fixed_to_fixed = 0;
+  body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+    if (body.inv_mass_per_kg[edge.a] > 0.0 || body.inv_mass_per_kg[edge.b] > 0.0)
+      expected.push_back(e);
+    else
+      ++fixed_to_fixed;
+  });
+  ASSERT_GT(fixed_to_fixed, 0u);                                       // the clamped face's own springs are left out
+  ASSERT_LT(body.mesh().edge_count(), body.stiffness_N_per_m.size());  // dead slots exist
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(moving_springs(body), expected);
 }
 
 TEST(Body, MassesSumToDensityTimesVolumeThroughChurn) {

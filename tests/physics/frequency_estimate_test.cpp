@@ -15,12 +15,6 @@ namespace {
 using testing::beam_scene;
 using testing::dense_rest_frequency2_per_s2;
 
-std::size_t free_nodes(const Body& body) {
-  std::size_t n = 0;
-  for (const double w : body.inv_mass_per_kg) n += w > 0.0;
-  return n;
-}
-
 // k is the smallest iteration count for which Kuczyński & Woźniakowski's
 // failure probability 1.648 √n e^(−√ε (2k − 1)) is at most δ; it grows
 // with ln n and ln(1/δ), so even a million nodes need few iterations.
@@ -55,7 +49,7 @@ void check(const Body& body, const std::string& what) {
   // In practice it converges far inside the guaranteed 10 %: 0.999-1.000
   // of λmax on these meshes after ~40 iterations.
   EXPECT_GE(e.ritz_per_s2, 0.99 * lambda) << what;
-  EXPECT_EQ(e.iterations, lanczos_iterations(3 * free_nodes(body), 0.1, 1e-9)) << what;
+  EXPECT_EQ(e.iterations, lanczos_iterations(3 * free_node_count(body), 0.1, 1e-9)) << what;
   EXPECT_EQ(rest_frequency2_estimate(body).ritz_per_s2, e.ritz_per_s2) << what << ": not deterministic";
 }
 

@@ -129,8 +129,7 @@ TEST(Integrator, ExplicitSubstepTightensOnAStillMeshAndResetsWhenItChanges) {
     substeps += last.substeps;
   }
   ASSERT_TRUE(integrator.tightened());
-  std::size_t free_nodes = 0;
-  for (const double w : body.inv_mass_per_kg) free_nodes += w > 0.0;
+  const std::size_t free_nodes = free_node_count(body);
   // It waited for twice the estimate's cost in sub-steps, then spent half of
   // each step's cost on it: done after ~4x its cost, and no sooner.
   const int iterations = lanczos_iterations(3 * free_nodes, ExplicitIntegrator::kLanczosRelativeGap,
@@ -650,9 +649,7 @@ TEST(Integrator, AutoPreconditionerPicksByTheNumberOfFreeNodes) {
          {ImplicitIntegrator::Preconditioner::kAuto,
           large ? ImplicitIntegrator::Preconditioner::kTwoLevel : ImplicitIntegrator::Preconditioner::kJacobi}) {
       Body body(s);
-      std::size_t free_nodes = 0;
-      for (const double w : body.inv_mass_per_kg) free_nodes += w != 0.0 ? 1 : 0;
-      EXPECT_EQ(free_nodes >= ImplicitIntegrator::kAutoTwoLevelUnknowns, large) << "depth " << depth;
+      EXPECT_EQ(free_node_count(body) >= ImplicitIntegrator::kAutoTwoLevelUnknowns, large) << "depth " << depth;
       ImplicitIntegrator integrator(s.integrator, s.material, ImplicitIntegrator::Matvec::kMatrixFree, detected_simd(),
                                     preconditioner);
       const std::vector<Vec3> f(body.x_m.size(), Vec3(0, 0, -2e-3));
