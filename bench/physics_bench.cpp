@@ -91,6 +91,10 @@ double bound_ns_per_spring(const physics::Body& body, double spring_bytes = 32.0
 // the code this replaced instead: add_spring_forces + a plain update loop.
 // Third argument 1: springs without dampers (Rayleigh beta = 0, the undamped
 // kernels), against the bound for 24 B per spring (no damping coefficient).
+// Fourth: explicit_precision float. Fifth argument 1: the gathered stream
+// forced where the integrator would take the offset layout, 2: the offset
+// layout forced where it would not (counter `offset`: which one ran, `fill`:
+// its share of filled lanes; the bound is on the bytes of the one that ran).
 void BM_ExplicitSubstep(benchmark::State& state) {
   constexpr int kSubsteps = 10;
   scene::Scene scene = beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit);
@@ -104,11 +108,20 @@ void BM_ExplicitSubstep(benchmark::State& state) {
   // Half the stable sub-step: a fixed h would be unstable from depth 10 on,
   // and the exploding state would time the kernel's non-finite fallback.
   const double h = 0.5 * physics::explicit_stable_dt_s(body);
-  const double bound = single ? bound_ns_per_spring(body, undamped ? 28.0 : 32.0, 76.0)
-                              : bound_ns_per_spring(body, undamped ? 24.0 : 32.0);
   physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
+  if (state.range(4) == 1) integrator.set_layout(physics::ExplicitIntegrator::Layout::kGathered);
+  if (state.range(4) == 2) integrator.set_layout(physics::ExplicitIntegrator::Layout::kOffset);
   const std::vector<physics::Vec3> no_force(body.x_m.size(), physics::Vec3::Zero());
   integrator.run_substeps(body, no_force, h, 1);  // builds the spring stream once, outside the timing
+  // The bound on the bytes of the stream in use: the offset layout reads no
+  // node ids (its own bytes per spring, empty lanes included).
+  const double spring_bytes = integrator.offset_layout()
+                                  ? integrator.offset_stream_bytes_per_spring()
+                                  : (single ? (undamped ? 28.0 : 32.0) : (undamped ? 24.0 : 32.0));
+  const double bound = bound_ns_per_spring(body, spring_bytes, single ? 76.0 : 152.0);
+  state.counters["offset"] = integrator.offset_layout() ? 1.0 : 0.0;
+  state.counters["fill"] = physics::plan_offset_layout(body, single ? 8 : 4).fill;
+  state.counters["stream_B"] = spring_bytes;
   std::vector<double> per_substep_ns;
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -222,6 +235,7 @@ void BM_ExplicitAccessFloor(benchmark::State& state) {
   const double h = 0.5 * physics::explicit_stable_dt_s(body);
   const double bound = bound_ns_per_spring(body);
   physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
+  integrator.set_layout(physics::ExplicitIntegrator::Layout::kGathered);  // the floor of the gathered stream
   const std::vector<physics::Vec3> no_force(nodes, physics::Vec3::Zero());
   integrator.run_substeps(body, no_force, h, 1);
   // The floor's own state (pad nodes included), tiny velocities so the
@@ -813,15 +827,21 @@ void BM_EnergySumsPerStep(benchmark::State& state) {
 // Args: depth, old code (1: add_spring_forces + plain update), undamped,
 // single precision.
 BENCHMARK(BM_ExplicitSubstep)
-    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}, {0}, {0}})
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}, {0}, {0}, {0, 1}})
     ->Iterations(21)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ExplicitSubstep)
-    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {0, 1}, {1}})
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {0, 1}, {1}, {0, 1}})
     ->Iterations(21)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ExplicitSubstep)
-    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {1}, {0}})
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0}, {1}, {0}, {0, 1}})
+    ->Iterations(21)
+    ->Unit(benchmark::kMillisecond);
+// Where the offset layout stops paying: forced on the meshes it is not taken
+// on (depth 11, and depths 1-2 of a short beam), against the gathered stream.
+BENCHMARK(BM_ExplicitSubstep)
+    ->ArgsProduct({{1, 2, 11}, {0}, {0, 1}, {0, 1}, {1, 2}})
     ->Iterations(21)
     ->Unit(benchmark::kMillisecond);
 #if defined(__x86_64__)

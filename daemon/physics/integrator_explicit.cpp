@@ -1,5 +1,10 @@
 // Symplectic Euler with automatic sub-steps, and the explicit stable bound.
 //
+// Two spring streams: on a mesh whose tets all have one depth (a lattice)
+// the sub-steps run on the offset layout of integrator_explicit_offset.cpp
+// (no gathers or scatters); every other mesh, and the one-depth meshes whose
+// lanes it would fill too sparsely, runs on the gathered stream below.
+//
 // The sub-step runs on the integrator's own copy of the state: positions,
 // velocities and forces padded to 4 doubles by node id (one AVX register),
 // springs in a 32 B-per-spring stream of live springs with a free end, four
@@ -335,6 +340,14 @@ void ExplicitIntegrator::build_layout(const Body& body) {
       kLanczosWaitCostMultiple * kLanczosIterationCost *
       lanczos_iterations(3 * free_node_count(body), kLanczosRelativeGap, kLanczosFailureProbability);
   layout_version_ = body.parameters_version();
+  // The offset layout where the mesh is a lattice (integrator_explicit_offset.cpp);
+  // the gathered stream below everywhere else.
+  offset_ = false;
+  if (layout_choice_ != Layout::kGathered) {
+    const bool force = layout_choice_ == Layout::kOffset;
+    offset_ = single_precision() ? offset_float_.build(body, force) : offset_double_.build(body, force);
+    if (offset_) return;
+  }
   if (single_precision()) {
     float_.build(body);
     return;
@@ -370,6 +383,16 @@ void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext
 
 void ExplicitIntegrator::advance(const Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count) {
   if (body.parameters_version() != layout_version_) build_layout(body);
+  if (offset_) {
+    if (single_precision()) {
+      offset_float_.load(body, f_ext_N);
+      offset_float_.substeps(simd_, h_s, alpha_per_s_, count);
+    } else {
+      offset_double_.load(body, f_ext_N);
+      offset_double_.substeps(simd_, h_s, alpha_per_s_, count);
+    }
+    return;
+  }
   if (single_precision()) {
     float_.load(body, f_ext_N);
     float_.substeps(simd_, h_s, alpha_per_s_, count);
@@ -393,6 +416,7 @@ void ExplicitIntegrator::advance(const Body& body, const std::vector<Vec3>& f_ex
 }
 
 bool ExplicitIntegrator::advanced_state_is_finite(const Body& body) const {
+  if (offset_) return single_precision() ? offset_float_.finite() : offset_double_.finite();
   if (single_precision()) return float_.finite(body);
   constexpr double kLimit = 1e100;  // as state_is_finite
   bool finite = true;
@@ -403,6 +427,7 @@ bool ExplicitIntegrator::advanced_state_is_finite(const Body& body) const {
 }
 
 void ExplicitIntegrator::store(Body& body) const {
+  if (offset_) return single_precision() ? offset_float_.store(body) : offset_double_.store(body);
   if (single_precision()) return float_.store(body);
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
     body.x_m[n] = Vec3(x_[n].v[0], x_[n].v[1], x_[n].v[2]);

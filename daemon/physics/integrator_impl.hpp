@@ -4,8 +4,10 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
+#include <array>
 #include <cstdint>
 #include <optional>
+#include <type_traits>
 #include <vector>
 
 #include "physics/frequency_estimate.hpp"
@@ -96,6 +98,107 @@ class ExplicitFloatState {
   int count_ = 0;
 };
 
+// The offset layout of the explicit sub-steps (integrator_explicit_offset.cpp):
+// on a mesh of one depth, nodes numbered in lattice order and kept as
+// structure of arrays (component i of position p at [i * stride + p]), and
+// springs taken W at a time as (a0 + j, b0 + j), j < W, a0 a multiple of W,
+// b0 − a0 the offset they share — plain vector loads and stores at both ends.
+struct OffsetBatchD {
+  static constexpr int kLanes = 4;
+  std::uint32_t a0, b0;
+  double rest_m[4], k_N_per_m[4], c_N_s_per_m[4];  // k = 0: an empty lane
+};
+struct OffsetBatchF {
+  static constexpr int kLanes = 8;
+  std::uint32_t a0, b0;
+  float ex[8], ey[8], ez[8];  // rest edge vector, position b0 + j minus a0 + j
+  float rest_m[8], k_N_per_m[8], c_N_s_per_m[8];
+};
+// Batches [first, end) share a0 (the a-side forces are summed in registers).
+struct OffsetGroup {
+  std::uint32_t a0, first, end;
+};
+
+// Which node sits at which position and which spring in which lane.
+struct OffsetPlan {
+  std::vector<NodeId> node_at;  // live nodes, lexicographic in lattice (z, y, x)
+  std::size_t stride = 0;       // per component: ≥ nodes + W, whole vectors
+  struct Batch {
+    std::uint32_t a0, b0;
+    std::array<EdgeId, 8> edge;  // lane j joins positions a0 + j and b0 + j; mesh::kInvalidId: empty
+  };
+  std::vector<Batch> batches;  // by (a0, b0)
+  std::vector<OffsetGroup> groups;
+  double fill = 0.0;  // springs / (W × batches)
+};
+// The plan for `lanes` (4 or 8) lanes, for any mesh (its fill says whether
+// it pays).
+OffsetPlan plan_offset_layout(const Body& body, int lanes);
+// Whether every live tet has one depth: the meshes whose nodes form a lattice.
+bool mesh_has_one_depth(const Body& body);
+
+// f −= / += the spring and damper forces of every batch (x: positions in
+// double, displacements from rest in float; v = nullptr: no dampers).
+// Both instruction sets give bit-identical results.
+template <typename Real>
+void offset_spring_forces(Simd simd,
+                          const std::conditional_t<std::is_same_v<Real, float>, OffsetBatchF, OffsetBatchD>* batches,
+                          const OffsetGroup* groups, std::size_t group_count, std::size_t stride, const Real* x,
+                          const Real* v, const Vec3* rest_by_position, Real* f);
+
+// v += h w f (then / divisor) where w ≠ 0, x += h v, f = f_ext over the
+// structure-of-arrays state (stride a multiple of the lanes). Both
+// instruction sets give bit-identical results.
+template <typename Real>
+void offset_update(Simd simd, Real h, Real divisor, const Real* inv_mass, std::size_t stride, const Real* f_ext,
+                   Real* x, Real* v, Real* f);
+
+// The explicit state on the offset layout, in double or float (same duties
+// as ExplicitFloatState).
+template <typename Real>
+class ExplicitOffsetState {
+ public:
+  using Batch = std::conditional_t<std::is_same_v<Real, float>, OffsetBatchF, OffsetBatchD>;
+  // Below this share of filled lanes the gathered stream is cheaper
+  // (physics_bench BM_ExplicitSubstep with either layout forced, beams of
+  // one depth, 2026-11-25): at 0.6-0.76 filled the offset layout ran 1.1-1.4x
+  // faster; at 0.45 (a depth-2 beam in row-parity order: 4.0 vs 2.7 ns per
+  // spring; at depth 11, 1.6x10^6 springs: 11.4 vs 5.5) and 0.26 it ran
+  // 1.5-3x slower. Adaptively refined meshes fill ~0.4 in lattice order
+  // (measured while planning) and are not planned at all (not one depth).
+  static constexpr double kMinOffsetFill = 0.6;
+  // Builds the layout when the mesh has one depth and fills at least
+  // kMinOffsetFill of the lanes, or always when `force` (returns true);
+  // otherwise clears it.
+  bool build(const Body& body, bool force = false);
+  void load(const Body& body, const std::vector<Vec3>& f_ext_N);
+  void substeps(Simd simd, double h_s, double alpha_per_s, int count);
+  bool finite() const;
+  void store(Body& body) const;
+  // The share of lanes holding a spring in the last plan (0 without one).
+  double fill() const { return fill_; }
+  const std::vector<Batch>& batches() const { return batches_; }
+  // Bytes of the stream a sub-step reads per spring: batch headers, the
+  // lanes' parameters it loads (no damping coefficient without dampers),
+  // group records; empty lanes included. For the benchmark's bound.
+  double stream_bytes_per_spring() const;
+
+ private:
+  std::vector<NodeId> node_at_;
+  std::size_t stride_ = 0;
+  std::vector<Batch> batches_;
+  std::vector<OffsetGroup> groups_;
+  bool damped_ = false;
+  double fill_ = 0.0;
+  std::vector<Vec3> rest_by_position_;   // for the collapsed-spring direction
+  std::vector<Real> x_, v_, f_, f_ext_;  // 3 × stride
+  std::vector<Real> inv_mass_;           // stride
+  double h_s_ = 0.0;                     // the last substeps() call's, for store()
+  int count_ = 0;
+};
+extern template class ExplicitOffsetState<double>;
+extern template class ExplicitOffsetState<float>;
+
 class ExplicitIntegrator final : public Integrator {
  public:
   ExplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
@@ -103,6 +206,21 @@ class ExplicitIntegrator final : public Integrator {
   StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) override;
   void mesh_changed() override { layout_version_ = 0; }
   const char* name() const override { return single_precision() ? "explicit float" : "explicit"; }
+
+  // Which spring stream the sub-steps run on: kAuto takes the offset layout
+  // where it pays (ExplicitOffsetState::build), else the gathered stream;
+  // the others force one (kOffset on any mesh: for tests and the benchmark).
+  enum class Layout { kAuto, kGathered, kOffset };
+  void set_layout(Layout layout) {
+    layout_choice_ = layout;
+    layout_version_ = 0;
+  }
+  // Whether the current mesh runs on the offset layout, and its stream bytes
+  // per spring (ExplicitOffsetState::stream_bytes_per_spring).
+  bool offset_layout() const { return offset_; }
+  double offset_stream_bytes_per_spring() const {
+    return single_precision() ? offset_float_.stream_bytes_per_spring() : offset_double_.stream_bytes_per_spring();
+  }
 
   // `count` sub-steps of h under f_ext_N, without the stability refusal, the
   // state save or the finiteness check of step(). For the benchmark.
@@ -165,6 +283,10 @@ class ExplicitIntegrator final : public Integrator {
   std::vector<Pad3> x_, v_, f_, f_ext_;
   std::vector<double> inv_mass_;
   ExplicitFloatState float_;  // used instead of the above with explicit_precision: float
+  Layout layout_choice_ = Layout::kAuto;
+  bool offset_ = false;  // the offset layout below runs instead of the streams above
+  ExplicitOffsetState<double> offset_double_;
+  ExplicitOffsetState<float> offset_float_;
 };
 
 // One spring of the implicit system, streamed in edge order. Its block
