@@ -147,6 +147,42 @@ void BM_ExplicitSubstep(benchmark::State& state) {
   state.counters["h_us"] = h * 1e6;
 }
 
+// What taking the offset layout costs when a mesh of one depth is built (or
+// merges back to one depth): plan_offset_layout for W = 4 (double, the
+// default), per spring, and in explicit sub-steps of the same mesh
+// (`plan_vs_substep`, timed as BM_ExplicitSubstep on the integrator's own
+// stream).
+void BM_OffsetPlan(benchmark::State& state) {
+  physics::Simulation sim(beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit));
+  physics::Body& body = sim.mutable_body();
+  double fill = 0.0;
+  std::vector<double> plan_ns;
+  for (auto _ : state) {
+    const double t0 = bench::thread_cpu_ns();
+    const physics::OffsetPlan plan = physics::plan_offset_layout(body, 4);
+    plan_ns.push_back(bench::thread_cpu_ns() - t0);
+    fill = plan.fill;
+    benchmark::DoNotOptimize(plan.batches.data());
+  }
+  physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
+  const std::vector<physics::Vec3> no_force(body.x_m.size(), physics::Vec3::Zero());
+  const double h = 0.5 * physics::explicit_stable_dt_s(body);
+  integrator.run_substeps(body, no_force, h, 1);
+  std::vector<double> substep_ns;
+  for (int round = 0; round < 5; ++round) {
+    const double t0 = bench::thread_cpu_ns();
+    integrator.run_substeps(body, no_force, h, 10);
+    substep_ns.push_back((bench::thread_cpu_ns() - t0) / 10.0);
+  }
+  const double springs = static_cast<double>(body.mesh().edge_count());
+  const double plan = bench::median(plan_ns);
+  state.counters["springs"] = springs;
+  state.counters["fill_w4"] = fill;
+  state.counters["plan_ms"] = plan * 1e-6;
+  state.counters["plan_ns_per_spring"] = plan / springs;
+  state.counters["plan_vs_substep"] = plan / bench::median(substep_ns);
+}
+
 // The explicit rung's Lanczos bound (frequency_estimate.hpp) on the beam at
 // a depth: its cost against the explicit sub-step it is amortised over
 // (alternating rounds; `iteration_vs_substep` sets
@@ -689,8 +725,9 @@ void BM_ExplicitVsPlainStepper(benchmark::State& state) {
 // step (dt = 1 ms, exactly 20 Jacobi-CG iterations; exactly 5 two-level ones,
 // the more accurate of the two on these beams; and the scene default, auto
 // at cg20) against one explicit sub-step (BM_ExplicitSubstep's timing: the
-// kernel amortised over 10 sub-steps at half the stable sub-step), on the
-// same mesh, alternating rounds. Target: ≤ 25.
+// kernel amortised over 10 sub-steps at half the stable sub-step; on the
+// layout the integrator takes, and `_gathered` on the gathered stream), on
+// the same mesh, alternating rounds. Target: ≤ 25.
 // Arg: refinement depth of the 12x3x3 beam (as BM_Step).
 void BM_ImplicitVsExplicitSubstep(benchmark::State& state) {
   const int depth = static_cast<int>(state.range(0));
@@ -708,10 +745,15 @@ void BM_ImplicitVsExplicitSubstep(benchmark::State& state) {
   physics::Body& body = explicit_sim.mutable_body();
   const double h = 0.5 * physics::explicit_stable_dt_s(body);
   physics::ExplicitIntegrator integrator(explicit_sim.scene().integrator, explicit_sim.scene().material);
+  // The same sub-step on the gathered stream, for the ratios of meshes that
+  // are not of one depth (BM_ExplicitSubstep's fifth argument).
+  physics::ExplicitIntegrator gathered(explicit_sim.scene().integrator, explicit_sim.scene().material);
+  gathered.set_layout(physics::ExplicitIntegrator::Layout::kGathered);
   const std::vector<physics::Vec3> no_force(body.x_m.size(), physics::Vec3::Zero());
   integrator.run_substeps(body, no_force, h, 1);  // builds the stream outside the timing
+  gathered.run_substeps(body, no_force, h, 1);
   const int rounds = depth >= 9 ? 3 : 5, steps = depth >= 9 ? 3 : 10;
-  std::vector<double> substep_ns, jacobi_ns, two_level_ns, auto_ns;
+  std::vector<double> substep_ns, gathered_ns, jacobi_ns, two_level_ns, auto_ns;
   const auto time_steps = [&](physics::Simulation& sim, std::vector<double>& out) {
     for (int i = 0; i < steps; ++i) {
       const double c0 = thread_cpu_ns();
@@ -727,6 +769,9 @@ void BM_ImplicitVsExplicitSubstep(benchmark::State& state) {
         const double c0 = thread_cpu_ns();
         integrator.run_substeps(body, no_force, h, 10);
         substep_ns.push_back((thread_cpu_ns() - c0) / 10);
+        const double g0 = thread_cpu_ns();
+        gathered.run_substeps(body, no_force, h, 10);
+        gathered_ns.push_back((thread_cpu_ns() - g0) / 10);
       }
       if (!time_steps(*jacobi, jacobi_ns) || !time_steps(*two_level, two_level_ns) ||
           !time_steps(*automatic, auto_ns)) {
@@ -741,6 +786,9 @@ void BM_ImplicitVsExplicitSubstep(benchmark::State& state) {
   state.counters["jacobi_cg20_x"] = median(jacobi_ns) / substep;
   state.counters["two_level_cg5_x"] = median(two_level_ns) / substep;
   state.counters["auto_cg20_x"] = median(auto_ns) / substep;
+  state.counters["offset_layout"] = integrator.offset_layout() ? 1.0 : 0.0;
+  state.counters["jacobi_cg20_x_gathered"] = median(jacobi_ns) / median(gathered_ns);
+  state.counters["two_level_cg5_x_gathered"] = median(two_level_ns) / median(gathered_ns);
 }
 
 // The paper's adaptive cantilever under load: share of the step time spent
@@ -915,6 +963,7 @@ BENCHMARK(BM_ExplicitVsPlainStepper)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ImplicitVsExplicitSubstep)->DenseRange(0, 9, 3)->Arg(11)->Iterations(1)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FrequencyEstimate)->DenseRange(0, 9, 3)->Iterations(5)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_OffsetPlan)->DenseRange(0, 9, 3)->Arg(11)->Iterations(3)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_AdaptationShare)->Iterations(3)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_EnergySumsPerStep)->Arg(0)->Arg(3)->Arg(6)->Iterations(50)->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

@@ -513,11 +513,14 @@ bool mesh_has_one_depth(const Body& body) {
 }
 
 OffsetPlan plan_offset_layout(const Body& body, int lanes) {
-  // Both node orders are planned and the one filling more lanes is kept
-  // (only meshes of one depth are planned, once per mesh).
+  // The parity order first (the cheaper: no per-node signatures); the
+  // signature order too unless parity already fills kParityEnough of the
+  // lanes, and the one filling more is kept.
+  constexpr double kParityEnough = 0.85;
   std::vector<NodeId> live;
   body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { live.push_back(n); });
   OffsetPlan by_parity = plan_in_order(body, lanes, order_by_parity(body, live));
+  if (by_parity.fill >= kParityEnough) return by_parity;
   OffsetPlan by_signature = plan_in_order(body, lanes, order_by_signature(body, live));
   return by_signature.fill > by_parity.fill ? by_signature : by_parity;
 }

@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -30,17 +29,7 @@ Body uniform_beam(int depth, bool damped = true) {
   return Body(s);
 }
 
-// Moves every free node a little and gives it a velocity (as jiggled_beam,
-// for any body).
-void jiggle(Body& body, std::uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-    if (body.inv_mass_per_kg[n] == 0.0) return;
-    body.x_m[n] += 0.003 * Vec3(u(rng), u(rng), u(rng));
-    body.v_m_per_s[n] = 0.1 * Vec3(u(rng), u(rng), u(rng));
-  });
-}
+void jiggle(Body& body, std::uint32_t seed) { testing::jiggle_free_nodes(body, seed, 0.003, 0.1); }
 
 // Every spring with a free end sits in exactly one lane, and that lane joins
 // the positions of its two nodes; positions are a permutation of the live

@@ -24,18 +24,22 @@ double dense_rest_frequency2_per_s2(const Body& body) {
   return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(s, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff();
 }
 
+void jiggle_free_nodes(Body& body, std::uint32_t seed, double amplitude_m, double speed_m_per_s) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if (body.inv_mass_per_kg[n] == 0.0) return;
+    body.x_m[n] += amplitude_m * Vec3(u(rng), u(rng), u(rng));
+    body.v_m_per_s[n] = speed_m_per_s * Vec3(u(rng), u(rng), u(rng));
+  });
+}
+
 Body jiggled_beam(std::uint32_t seed, bool damped) {
   scene::Scene s = beam_scene();
   s.adaptivity.min_depth = 1;
   if (!damped) s.material.rayleigh_beta_s = 0.0;  // no spring has a damper
   Body body(s);
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-    if (body.inv_mass_per_kg[n] == 0.0) return;
-    body.x_m[n] += 0.01 * Vec3(u(rng), u(rng), u(rng));
-    body.v_m_per_s[n] = 0.1 * Vec3(u(rng), u(rng), u(rng));
-  });
+  jiggle_free_nodes(body, seed, 0.01, 0.1);
   bool collapsed = false;
   body.mesh().for_each_edge([&](EdgeId, const mesh::Edge& edge) {
     if (collapsed || body.inv_mass_per_kg[edge.b] == 0.0) return;

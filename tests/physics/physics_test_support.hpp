@@ -34,6 +34,10 @@ double dense_rest_frequency2_per_s2(const Body& body);
 // spring has a damper (Rayleigh beta 0).
 Body jiggled_beam(std::uint32_t seed, bool damped = true);
 
+// Moves every free node by up to amplitude_m per axis and gives it a random
+// velocity of up to speed_m_per_s per axis (seeded: the same every run).
+void jiggle_free_nodes(Body& body, std::uint32_t seed, double amplitude_m, double speed_m_per_s);
+
 // beam_scene with adaptivity on up to max_depth, and 40 randomly chosen
 // diamonds split (mixed depths 0..max_depth).
 Body randomly_refined_beam(std::uint32_t seed, int max_depth = 5);
