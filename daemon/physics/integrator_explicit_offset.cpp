@@ -4,11 +4,12 @@
 // On a mesh whose tets all have one depth, numbering the nodes row by row
 // (lexicographic in lattice z, then y; within a row, nodes of one kind
 // together, in x order) makes most springs join positions p and p + δ for a
-// handful of offsets δ that repeat along every row. Two kinds of row split
-// are planned and the one filling more lanes kept: by parity (the Kuhn split
-// alternates between neighbouring cubes) and by each node's signature (its
-// springs' lattice offsets), which also finds the period of the depths 2 mod
-// 3 (beam at depth 11: 0.95-0.98 of the lanes filled, 0.26-0.45 by parity).
+// handful of offsets δ that repeat along every row. Rows are split by parity
+// (the Kuhn split alternates between neighbouring cubes) and, where that
+// fills under 85 % of the lanes, also by each node's signature (its springs'
+// lattice offsets), keeping the fuller: the signature finds the period of
+// the depths 2 mod 3 too (beam at depth 11: 0.95-0.98 of the lanes filled,
+// 0.26-0.45 by parity).
 // Springs are then taken W at a time as (a0 + j, a0 + j + δ), j < W, a0 a
 // multiple of W (W = 4 doubles or 8 floats, one AVX register): with the node
 // state as structure of arrays, both ends' coordinates are plain vector
