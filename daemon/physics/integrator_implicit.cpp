@@ -43,6 +43,17 @@
 //  - Block-Jacobi (3x3 per node) needed more iterations than Jacobi at the
 //    1e-6 tolerance (R2 38.8 -> 42.5, R3 77.5 -> 80.3), so Jacobi stays.
 //  - Two-level preconditioner (an option): integrator_implicit_two_level.cpp.
+//  - Tried and dropped (2026-11-25): the matvec on the explicit sub-steps'
+//    offset layout (integrator_explicit_offset.cpp; blocks four to a batch
+//    between lattice positions, written into the lanes after the setup pass),
+//    with p and the springs' part of ap transposed to and from structure of
+//    arrays by position around each product. A benchmark alternating it with
+//    this matvec on copies of one body (cg20, not kept) ran 1.07-1.20x
+//    slower per step, Jacobi and two-level, 10^3-4x10^5 springs: on its own
+//    the offset product is ~1.4-1.6 ns per spring (issue-bound like this one
+//    at cache-resident sizes, ahead only where this one waits on memory), and
+//    the transposes eat the rest. It would need the CG vectors, the setup
+//    pass and the coarse correction in the layout's order throughout.
 // Everything is sequential in a fixed order: bit-identical reruns.
 #include <algorithm>
 #include <cmath>
