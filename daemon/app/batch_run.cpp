@@ -40,7 +40,8 @@ bool says_nonfinite(const std::string& error) { return error.find("non-finite") 
 nlohmann::json solver_json(const physics::SimCounters& c) {
   return {{"substeps", {{"mean", c.substeps_per_step()}, {"max", c.max_substeps}}},
           {"iterations", {{"mean", c.solver_iterations_per_step()}, {"max", c.max_solver_iterations}}},
-          {"unconverged_steps", c.unconverged_steps}};
+          {"unconverged_steps", c.unconverged_steps},
+          {"offset_layout_steps", c.offset_layout_steps}};
 }
 
 struct Tally {

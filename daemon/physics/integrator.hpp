@@ -29,6 +29,9 @@ struct StepOutcome {
   // False when the solver stopped at integrator.cg_max_iterations before
   // reaching integrator.cg_tolerance: the step ran, less accurately.
   bool solver_converged = true;
+  // Explicit: the sub-steps ran on the offset layout (a mesh of one depth;
+  // integrator_explicit_offset.cpp) rather than the gathered stream.
+  bool offset_layout = false;
 };
 
 class Integrator {

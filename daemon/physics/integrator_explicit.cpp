@@ -473,6 +473,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     return out;
   }
   out.substeps = std::max(1, static_cast<int>(needed));
+  out.offset_layout = offset_;
   // The sub-steps run on the integrator's own copy: the body changes only
   // when the result is finite (no save and restore of the body needed).
   advance(body, f_ext_N, dt_s / out.substeps, out.substeps);

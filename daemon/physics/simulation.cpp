@@ -54,6 +54,7 @@ StepResult Simulation::step() {
   counters_.solver_iterations += out.solver_iterations;
   counters_.max_solver_iterations = std::max(counters_.max_solver_iterations, out.solver_iterations);
   if (!out.solver_converged) ++counters_.unconverged_steps;
+  if (out.offset_layout) ++counters_.offset_layout_steps;
 
   time_s_ = t_next;
   ++counters_.steps;

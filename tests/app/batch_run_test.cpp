@@ -88,6 +88,27 @@ TEST(BatchReport, ExplicitFloatIsDeterministicAndNamed) {
   EXPECT_NEAR(tip_f, tip_d, 1e-5 * tip_d);
 }
 
+// The report counts the explicit steps run on the offset layout: every step
+// of the shipped beam (one depth), none of an implicit run, and on the
+// adaptive cantilever (its 4x4x4 base fills too few lanes, then it refines)
+// fewer than all.
+TEST(BatchReport, CountsTheStepsRunOnTheOffsetLayout) {
+  BatchOptions options;
+  options.duration_s = 0.05;
+  options.timing = false;
+  const auto offset_steps = [&](const char* scene_name, const char* kind) {
+    const json r = run_batch(
+        scene::load_scene_file_with_overrides(scene_path(scene_name), {std::string("integrator.kind=") + kind}),
+        options, nullptr);
+    EXPECT_TRUE(r["result"]["error"].is_null()) << r["result"]["error"];
+    EXPECT_EQ(r["result"]["steps"].get<long long>(), 50);
+    return r["result"]["solver"]["offset_layout_steps"].get<long long>();
+  };
+  EXPECT_EQ(offset_steps("beam", "explicit"), 50);
+  EXPECT_EQ(offset_steps("beam", "implicit"), 0);
+  EXPECT_LT(offset_steps("cantilever", "explicit"), 50);
+}
+
 TEST(BatchReport, StepsUntilTheDurationDespiteRoundedTimeSums) {
   // Ten steps of 0.01 s sum to 0.09999999999999999 s: an eleventh would overshoot.
   const scene::Scene scene = scene::load_scene_file_with_overrides(scene_path("beam"), {"integrator.dt_s=0.01"});
