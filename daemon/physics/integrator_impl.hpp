@@ -99,7 +99,7 @@ class ExplicitFloatState {
 };
 
 // The offset layout of the explicit sub-steps (integrator_explicit_offset.cpp):
-// on a mesh of one depth, nodes numbered in lattice order and kept as
+// on a mesh of one depth, nodes numbered row by row along the lattice and kept as
 // structure of arrays (component i of position p at [i * stride + p]), and
 // springs taken W at a time as (a0 + j, b0 + j), j < W, a0 a multiple of W,
 // b0 − a0 the offset they share — plain vector loads and stores at both ends.
@@ -121,7 +121,7 @@ struct OffsetGroup {
 
 // Which node sits at which position and which spring in which lane.
 struct OffsetPlan {
-  std::vector<NodeId> node_at;  // live nodes, lexicographic in lattice (z, y, x)
+  std::vector<NodeId> node_at;  // live nodes by row (lattice z, y), each row split by parity or signature
   std::size_t stride = 0;       // per component: ≥ nodes + W, whole vectors
   struct Batch {
     std::uint32_t a0, b0;
@@ -137,8 +137,9 @@ OffsetPlan plan_offset_layout(const Body& body, int lanes);
 // Whether every live tet has one depth: the meshes whose nodes form a lattice.
 bool mesh_has_one_depth(const Body& body);
 
-// f −= / += the spring and damper forces of every batch (x: positions in
-// double, displacements from rest in float; v = nullptr: no dampers).
+// f[a] += F, f[b] −= F for every lane, F the spring and damper force on its
+// lower end a (x: positions in double, displacements from rest in float;
+// v = nullptr: no dampers).
 // Both instruction sets give bit-identical results.
 template <typename Real>
 void offset_spring_forces(Simd simd,
