@@ -275,25 +275,31 @@ bool ExplicitFloatState::finite(const Body& body) const {
   return ok;  // NaN fails every comparison
 }
 
+void store_float_stepped_node(Body& body, NodeId n, bool kinematic, const float (&u)[3], const float (&v)[3],
+                              double h_s, int count) {
+  if (kinematic) {
+    // Moved in double with its (unchanged) velocity, sub-step by sub-step as
+    // the double path does, so a prescribed displacement lands exactly where
+    // it does there.
+    for (int s = 0; s < count; ++s) body.x_m[n] = body.x_m[n] + h_s * body.v_m_per_s[n];
+    return;
+  }
+  // Free: the step's increments, exact in double (a difference of two floats
+  // is), added to the double state. Writing x = X + u instead would round the
+  // whole state to float displacements every step: a mirrored or far-moved
+  // body (|u| ~ 0.1 m) would gain ~1e-14 J of rounding energy out of nothing,
+  // where the increments of a body at rest are exactly 0.
+  const Pad3f u0 = padded_float(body.x_m[n] - body.rest_m[n]), v0 = padded_float(body.v_m_per_s[n]);
+  for (int k = 0; k < 3; ++k) {
+    body.x_m[n][k] += static_cast<double>(u[k]) - static_cast<double>(u0.v[k]);
+    body.v_m_per_s[n][k] += static_cast<double>(v[k]) - static_cast<double>(v0.v[k]);
+  }
+}
+
 void ExplicitFloatState::store(Body& body) const {
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
-    if (inv_mass_[n] == 0.0f) {
-      // Kinematic: moved in double with its (unchanged) velocity, sub-step by
-      // sub-step as the double path does, so a prescribed displacement lands
-      // exactly where it does there.
-      for (int s = 0; s < count_; ++s) body.x_m[n] = body.x_m[n] + h_s_ * body.v_m_per_s[n];
-      continue;
-    }
-    // Free: the step's increments, exact in double (a difference of two
-    // floats is), added to the double state. Writing x = X + u instead would
-    // round the whole state to float displacements every step: a mirrored
-    // or far-moved body (|u| ~ 0.1 m) would gain ~1e-14 J of rounding energy
-    // out of nothing, where the increments of a body at rest are exactly 0.
-    const Pad3f u0 = padded_float(body.x_m[n] - body.rest_m[n]), v0 = padded_float(body.v_m_per_s[n]);
-    for (int k = 0; k < 3; ++k) {
-      body.x_m[n][k] += static_cast<double>(u_[n].v[k]) - static_cast<double>(u0.v[k]);
-      body.v_m_per_s[n][k] += static_cast<double>(v_[n].v[k]) - static_cast<double>(v0.v[k]);
-    }
+    const float u[3] = {u_[n].v[0], u_[n].v[1], u_[n].v[2]}, v[3] = {v_[n].v[0], v_[n].v[1], v_[n].v[2]};
+    store_float_stepped_node(body, static_cast<NodeId>(n), inv_mass_[n] == 0.0f, u, v, h_s_, count_);
   }
 }
 

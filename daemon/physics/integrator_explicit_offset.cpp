@@ -662,17 +662,10 @@ void ExplicitOffsetState<Real>::store(Body& body) const {
         body.x_m[n][i] = x_[i * stride_ + p];
         body.v_m_per_s[n][i] = v_[i * stride_ + p];
       }
-    } else if (inv_mass_[p] == 0.0f) {
-      // Kinematic: moved in double, sub-step by sub-step, as ExplicitFloatState.
-      for (int s = 0; s < count_; ++s) body.x_m[n] = body.x_m[n] + h_s_ * body.v_m_per_s[n];
     } else {
-      // Free: the step's increments, exact in double, as ExplicitFloatState.
-      const Vec3 u0 = body.x_m[n] - body.rest_m[n];
-      for (int i = 0; i < 3; ++i) {
-        body.x_m[n][i] += static_cast<double>(x_[i * stride_ + p]) - static_cast<double>(static_cast<float>(u0[i]));
-        body.v_m_per_s[n][i] +=
-            static_cast<double>(v_[i * stride_ + p]) - static_cast<double>(static_cast<float>(body.v_m_per_s[n][i]));
-      }
+      const float u[3] = {x_[p], x_[stride_ + p], x_[2 * stride_ + p]};
+      const float v[3] = {v_[p], v_[stride_ + p], v_[2 * stride_ + p]};
+      store_float_stepped_node(body, n, inv_mass_[p] == 0.0f, u, v, h_s_, count_);
     }
   }
 }

@@ -71,6 +71,13 @@ struct ExplicitSpringBatchF {
 void explicit_spring_forces_float(Simd simd, const ExplicitSpringBatchF* batches, std::size_t count, const Pad3f* u,
                                   const Pad3f* v, Pad3f* f);
 
+// Writes back one node stepped in float (both float layouts): a kinematic
+// node moves in double by `count` sub-steps of h_s at its velocity; a free
+// one takes its increments u − u0, v − v0 (u0, v0 its state as loaded, u the
+// displacement from rest), exact in double.
+void store_float_stepped_node(Body& body, NodeId n, bool kinematic, const float (&u)[3], const float (&v)[3],
+                              double h_s, int count);
+
 // The explicit integrator's state and spring stream in single precision.
 class ExplicitFloatState {
  public:
