@@ -7,16 +7,32 @@
 
 namespace tissue::physics {
 
+namespace {
+
+void set_kinematic_velocity(Body& body, NodeId n, double t_next_s, double dt_s) {
+  if (body.kind[n] == NodeKind::kFixed) {
+    body.v_m_per_s[n] = (body.rest_m[n] - body.x_m[n]) / dt_s;
+  } else if (body.kind[n] == NodeKind::kPrescribed) {
+    const auto& p = body.scene().prescribed[static_cast<std::size_t>(body.prescribed_index[n])];
+    const Vec3 d(p.displacement_m[0], p.displacement_m[1], p.displacement_m[2]);
+    body.v_m_per_s[n] = (body.rest_m[n] + p.profile.at(t_next_s) * d - body.x_m[n]) / dt_s;
+  }
+}
+
+}  // namespace
+
 void set_kinematic_velocities(Body& body, double t_next_s, double dt_s) {
-  const auto& prescribed = body.scene().prescribed;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { set_kinematic_velocity(body, n, t_next_s, dt_s); });
+}
+
+void set_kinematic_velocities(Body& body, const std::vector<NodeId>& kinematic, double t_next_s, double dt_s) {
+  for (const NodeId n : kinematic) set_kinematic_velocity(body, n, t_next_s, dt_s);
+}
+
+void kinematic_nodes(const Body& body, std::vector<NodeId>& out) {
+  out.clear();
   body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-    if (body.kind[n] == NodeKind::kFixed) {
-      body.v_m_per_s[n] = (body.rest_m[n] - body.x_m[n]) / dt_s;
-    } else if (body.kind[n] == NodeKind::kPrescribed) {
-      const auto& p = prescribed[static_cast<std::size_t>(body.prescribed_index[n])];
-      const Vec3 d(p.displacement_m[0], p.displacement_m[1], p.displacement_m[2]);
-      body.v_m_per_s[n] = (body.rest_m[n] + p.profile.at(t_next_s) * d - body.x_m[n]) / dt_s;
-    }
+    if (body.kind[n] == NodeKind::kFixed || body.kind[n] == NodeKind::kPrescribed) out.push_back(n);
   });
 }
 

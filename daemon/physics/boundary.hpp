@@ -12,6 +12,11 @@ namespace tissue::physics {
 // dt_s, it lands on its target at t_next_s: fixed nodes on their rest
 // position, prescribed ones on rest + profile(t) * displacement.
 void set_kinematic_velocities(Body& body, double t_next_s, double dt_s);
+// The same for the listed nodes only (a list from kinematic_nodes: a step
+// then touches the few boundary nodes, not every node of the mesh).
+void set_kinematic_velocities(Body& body, const std::vector<NodeId>& kinematic, double t_next_s, double dt_s);
+// The live fixed and prescribed nodes, ascending; valid until the mesh changes.
+void kinematic_nodes(const Body& body, std::vector<NodeId>& out);
 
 // Splits each scene load among the nodes of its region. A surface load
 // (region containing boundary triangles) is shared by lumped triangle area,

@@ -240,15 +240,15 @@ void ExplicitFloatState::build(const Body& body) {
   damped_ = std::any_of(batches_.begin(), batches_.end(), [](const ExplicitSpringBatchF& b) {
     return std::any_of(std::begin(b.c_N_s_per_m), std::end(b.c_N_s_per_m), [](float c) { return c != 0.0f; });
   });
-  for (auto* p : {&u_, &v_, &f_, &f_ext_}) p->assign(nodes + 2, Pad3f{});
+  for (auto* p : {&u_, &v_, &f_, &f_ext_, &u0_, &v0_}) p->assign(nodes + 2, Pad3f{});
   inv_mass_.assign(nodes + 2, 0.0f);
   for (std::size_t n = 0; n < nodes; ++n) inv_mass_[n] = static_cast<float>(body.inv_mass_per_kg[n]);
 }
 
 void ExplicitFloatState::load(const Body& body, const std::vector<Vec3>& f_ext_N) {
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
-    u_[n] = padded_float(body.x_m[n] - body.rest_m[n]);
-    v_[n] = padded_float(body.v_m_per_s[n]);
+    u0_[n] = u_[n] = padded_float(body.x_m[n] - body.rest_m[n]);
+    v0_[n] = v_[n] = padded_float(body.v_m_per_s[n]);
     f_ext_[n] = f_[n] = padded_float(f_ext_N[n]);
   }
 }
@@ -275,31 +275,11 @@ bool ExplicitFloatState::finite(const Body& body) const {
   return ok;  // NaN fails every comparison
 }
 
-void store_float_stepped_node(Body& body, NodeId n, bool kinematic, const float (&u)[3], const float (&v)[3],
-                              double h_s, int count) {
-  if (kinematic) {
-    // Moved in double with its (unchanged) velocity, sub-step by sub-step as
-    // the double path does, so a prescribed displacement lands exactly where
-    // it does there.
-    for (int s = 0; s < count; ++s) body.x_m[n] = body.x_m[n] + h_s * body.v_m_per_s[n];
-    return;
-  }
-  // Free: the step's increments, exact in double (a difference of two floats
-  // is), added to the double state. Writing x = X + u instead would round the
-  // whole state to float displacements every step: a mirrored or far-moved
-  // body (|u| ~ 0.1 m) would gain ~1e-14 J of rounding energy out of nothing,
-  // where the increments of a body at rest are exactly 0.
-  const Pad3f u0 = padded_float(body.x_m[n] - body.rest_m[n]), v0 = padded_float(body.v_m_per_s[n]);
-  for (int k = 0; k < 3; ++k) {
-    body.x_m[n][k] += static_cast<double>(u[k]) - static_cast<double>(u0.v[k]);
-    body.v_m_per_s[n][k] += static_cast<double>(v[k]) - static_cast<double>(v0.v[k]);
-  }
-}
-
 void ExplicitFloatState::store(Body& body) const {
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
     const float u[3] = {u_[n].v[0], u_[n].v[1], u_[n].v[2]}, v[3] = {v_[n].v[0], v_[n].v[1], v_[n].v[2]};
-    store_float_stepped_node(body, static_cast<NodeId>(n), inv_mass_[n] == 0.0f, u, v, h_s_, count_);
+    const float u0[3] = {u0_[n].v[0], u0_[n].v[1], u0_[n].v[2]}, v0[3] = {v0_[n].v[0], v0_[n].v[1], v0_[n].v[2]};
+    store_float_stepped_node(body, static_cast<NodeId>(n), inv_mass_[n] == 0.0f, u, v, u0, v0, h_s_, count_);
   }
 }
 

@@ -75,8 +75,26 @@ void explicit_spring_forces_float(Simd simd, const ExplicitSpringBatchF* batches
 // node moves in double by `count` sub-steps of h_s at its velocity; a free
 // one takes its increments u − u0, v − v0 (u0, v0 its state as loaded, u the
 // displacement from rest), exact in double.
-void store_float_stepped_node(Body& body, NodeId n, bool kinematic, const float (&u)[3], const float (&v)[3],
-                              double h_s, int count);
+// Inline: it runs once per node per step, from both layouts' store loops.
+inline void store_float_stepped_node(Body& body, NodeId n, bool kinematic, const float (&u)[3], const float (&v)[3],
+                                     const float (&u0)[3], const float (&v0)[3], double h_s, int count) {
+  if (kinematic) {
+    // Moved in double with its (unchanged) velocity, sub-step by sub-step as
+    // the double path does, so a prescribed displacement lands exactly where
+    // it does there.
+    for (int s = 0; s < count; ++s) body.x_m[n] = body.x_m[n] + h_s * body.v_m_per_s[n];
+    return;
+  }
+  // Free: the step's increments, exact in double (a difference of two floats
+  // is), added to the double state. Writing x = X + u instead would round the
+  // whole state to float displacements every step: a mirrored or far-moved
+  // body (|u| ~ 0.1 m) would gain ~1e-14 J of rounding energy out of nothing,
+  // where the increments of a body at rest are exactly 0.
+  for (int k = 0; k < 3; ++k) {
+    body.x_m[n][k] += static_cast<double>(u[k]) - static_cast<double>(u0[k]);
+    body.v_m_per_s[n][k] += static_cast<double>(v[k]) - static_cast<double>(v0[k]);
+  }
+}
 
 // The explicit integrator's state and spring stream in single precision.
 class ExplicitFloatState {
@@ -100,6 +118,7 @@ class ExplicitFloatState {
   bool damped_ = true;
   // By node id, plus two pad nodes the filler springs join.
   std::vector<Pad3f> u_, v_, f_, f_ext_;
+  std::vector<Pad3f> u0_, v0_;  // as loaded: store() adds the increments
   std::vector<float> inv_mass_;
   double h_s_ = 0.0;  // the last substeps() call's, for store()
   int count_ = 0;
@@ -200,6 +219,7 @@ class ExplicitOffsetState {
   double fill_ = 0.0;
   std::vector<Vec3> rest_by_position_;   // for the collapsed-spring direction
   std::vector<Real> x_, v_, f_, f_ext_;  // 3 × stride
+  std::vector<Real> x0_, v0_;            // float: as loaded (store() adds the increments); double: unused
   std::vector<Real> inv_mass_;           // stride
   double h_s_ = 0.0;                     // the last substeps() call's, for store()
   int count_ = 0;

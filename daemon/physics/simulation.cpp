@@ -29,11 +29,21 @@ StepResult Simulation::step() {
   const double dt = scene().integrator.dt_s;
   const double t_next = time_s_ + dt;
 
-  set_kinematic_velocities(body_, t_next, dt);
+  if (kinematic_version_ != body_.parameters_version()) {
+    kinematic_nodes(body_, kinematic_);
+    kinematic_version_ = body_.parameters_version();
+    loaded_before_.reserve(body_.x_m.size());  // no allocation in the steps until the next mesh change
+  }
+  set_kinematic_velocities(body_, kinematic_, t_next, dt);
   loads_.external_forces(body_, t_next, f_ext_N_);
   if (tool_ && tool_->active)
     for (int i = 0; i < 3; ++i) f_ext_N_[tool_->nodes[i]] += tool_->weights[i] * tool_->force_N;
-  x_before_ = body_.x_m;
+  // The external work needs the positions before the step of the free nodes
+  // a force acts on only (a tip load: a few dozen nodes of thousands).
+  loaded_before_.clear();
+  for (std::size_t n = 0; n < f_ext_N_.size(); ++n)
+    if (body_.inv_mass_per_kg[n] != 0.0 && !f_ext_N_[n].isZero(0.0))
+      loaded_before_.push_back({static_cast<NodeId>(n), body_.x_m[n]});
 
   const StepOutcome out = integrator_->step(body_, f_ext_N_, dt);
   result.substeps = out.substeps;
@@ -46,8 +56,8 @@ StepResult Simulation::step() {
     ++counters_.rejected_steps;
     return result;
   }
-  for (std::size_t n = 0; n < f_ext_N_.size(); ++n)
-    if (body_.inv_mass_per_kg[n] != 0.0) counters_.external_work_J += f_ext_N_[n].dot(body_.x_m[n] - x_before_[n]);
+  for (const auto& [n, x_before] : loaded_before_)
+    counters_.external_work_J += f_ext_N_[n].dot(body_.x_m[n] - x_before);
 
   counters_.substeps += out.substeps;
   counters_.max_substeps = std::max(counters_.max_substeps, out.substeps);

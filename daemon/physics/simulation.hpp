@@ -8,8 +8,10 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "physics/adaptivity.hpp"
@@ -121,7 +123,9 @@ class Simulation {
 
   std::vector<Probe> probes_;
   std::vector<Vec3> f_ext_N_;
-  std::vector<Vec3> x_before_;
+  std::vector<std::pair<NodeId, Vec3>> loaded_before_;  // free nodes with an external force, x before the step
+  std::vector<NodeId> kinematic_;                       // fixed and prescribed nodes
+  std::uint64_t kinematic_version_ = 0;                 // body parameters_version the list is for
   SimCounters counters_;
   double time_s_ = 0.0;
 };

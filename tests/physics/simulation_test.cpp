@@ -47,6 +47,45 @@ TEST(Simulation, PrescribedDisplacementIsFollowedExactly) {
   EXPECT_NEAR(sim.probe_displacement_m(0).x(), 0.0, 1e-12);
 }
 
+// The step sets kinematic velocities from a list of the fixed and
+// prescribed nodes: nodes a split adds on a prescribed face must join it.
+// Split mid-ramp, they carry the ramp's velocity; if the list were not
+// rebuilt they would keep it past the ramp's end and overshoot.
+TEST(Simulation, PrescribedNodesMadeByASplitFollowTheProfile) {
+  scene::Scene s = cantilever_scene();
+  s.loads.clear();
+  scene::PrescribedSpec push{"push", box({0.1, 0.0, 0.0}, {0.1, 0.1, 0.1}), {0, 0, -0.01}, {}};
+  push.profile.ramp_s = 0.2;
+  s.prescribed.push_back(push);
+  Simulation sim(s);
+  sim.set_adaptation_paused(true);  // only the splits below change the mesh
+  auto prescribed_nodes = [&] {
+    std::vector<NodeId> nodes;
+    sim.body().mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (sim.body().kind[n] == NodeKind::kPrescribed) nodes.push_back(n);
+    });
+    return nodes;
+  };
+  const std::size_t before = prescribed_nodes().size();
+  ASSERT_TRUE(run_until(sim, 0.1));
+  for (int pass = 0; pass < 3; ++pass) {  // the first splits take the cubes' diagonals, inside
+    std::vector<mesh::Key> diamonds;
+    sim.body().mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      for (NodeId n : tet.v)
+        if (sim.body().kind[n] == NodeKind::kPrescribed) diamonds.push_back(sim.body().mesh().diamond_of(t));
+    });
+    for (mesh::Key d : diamonds)
+      if (sim.body().mesh().can_split(d)) sim.split_diamond(d);
+  }
+  ASSERT_GT(prescribed_nodes().size(), before);
+  ASSERT_TRUE(run_until(sim, 0.3));
+  for (NodeId n : prescribed_nodes()) {
+    const Vec3 u = sim.body().x_m[n] - sim.body().rest_m[n];
+    EXPECT_NEAR(u.z(), -0.01, 1e-12) << "node " << n;
+    EXPECT_NEAR(u.x(), 0.0, 1e-12) << "node " << n;
+  }
+}
+
 // A face load is shared by area: its resultant and its centre stay exact
 // however unevenly the face is refined.
 TEST(Simulation, SurfaceLoadKeepsItsResultantAndCentreUnderUnevenRefinement) {
@@ -96,6 +135,31 @@ TEST(Simulation, LoadedBeamNeverHoldsMoreEnergyThanTheWorkDoneOnIt) {
     EXPECT_LE(sim.kinetic_energy_J() + sim.elastic_energy_J(), sim.counters().external_work_J * (1 + 1e-6) + 1e-15);
   }
   EXPECT_GT(sim.counters().external_work_J, 0.0);
+}
+
+// A constant load's work telescopes: Σ over steps of f · Δx is f · (x − x0)
+// at the end. The step sums it over the loaded nodes only; a node left out
+// (or a wrong position before the step) breaks the equality.
+TEST(Simulation, WorkOfAConstantLoadIsTheLoadTimesTheDisplacement) {
+  for (const auto kind : {scene::IntegratorKind::kExplicit, scene::IntegratorKind::kImplicit}) {
+    scene::Scene s = beam_scene(0.05);
+    s.integrator.kind = kind;
+    s.gravity_m_per_s2 = {0.0, 0.0, -9.81};  // every free node loaded, the tip ones twice
+    Simulation sim(s);
+    ASSERT_TRUE(run_until(sim, 0.2));
+    std::vector<Vec3> f;
+    LoadDistribution loads;
+    loads.rebuild(sim.body());
+    loads.external_forces(sim.body(), sim.time_s(), f);
+    double work_J = 0.0, scale_J = 0.0;
+    sim.body().mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (sim.body().inv_mass_per_kg[n] == 0.0) return;
+      work_J += f[n].dot(sim.body().x_m[n] - sim.body().rest_m[n]);
+      scale_J += f[n].norm() * (sim.body().x_m[n] - sim.body().rest_m[n]).norm();
+    });
+    ASSERT_GT(scale_J, 0.0);
+    EXPECT_NEAR(sim.counters().external_work_J, work_J, 1e-9 * scale_J);
+  }
 }
 
 // The scene chooses the CG preconditioner (integrator.cg_preconditioner):
