@@ -656,10 +656,19 @@ bool ExplicitOffsetState<Real>::finite() const {
   const Real limit = std::is_same_v<Real, float> ? Real(1e30f) : Real(1e100);
   // Branch-free over whole arrays (vectorised; the padding positions hold
   // zeros): the check was a tenth of a loaded R3 step with short-circuits.
-  int bad = 0;  // an int, not a bool: GCC vectorises this reduction
-  for (const std::vector<Real>* a : {&x_, &v_})
-    for (const Real value : *a) bad |= !(std::abs(value) < limit);
-  return bad == 0;  // NaN fails every comparison
+  // NaN fails every comparison. The flag's form is what GCC 12 vectorises:
+  // an int OR in float, a select in double (neither does both).
+  if constexpr (std::is_same_v<Real, float>) {
+    std::int32_t bad = 0;
+    for (const std::vector<Real>* a : {&x_, &v_})
+      for (const Real value : *a) bad |= !(std::abs(value) < limit);
+    return bad == 0;
+  } else {
+    Real bad = 0;
+    for (const std::vector<Real>* a : {&x_, &v_})
+      for (const Real value : *a) bad = std::abs(value) < limit ? bad : Real(1);
+    return bad == Real(0);
+  }
 }
 
 template <typename Real>

@@ -261,28 +261,31 @@ TEST(OffsetLayout, StepsFollowTheGatheredTrajectory) {
   }
 }
 
-// A state gone non-finite on the layout is rejected and the body kept.
+// A state gone non-finite (or past the finiteness limit: 1e150 N is finite
+// in double) on the layout is rejected and the body kept.
 TEST(OffsetLayout, NonFiniteStepIsRejectedAndTheStateKept) {
-  for (const auto precision : {scene::ExplicitPrecision::kDouble, scene::ExplicitPrecision::kFloat}) {
-    Body body = uniform_beam(2);
-    scene::IntegratorSpec spec = body.scene().integrator;
-    spec.explicit_precision = precision;
-    ExplicitIntegrator integrator(spec, body.scene().material);
-    integrator.set_layout(Layout::kOffset);
-    std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
-    NodeId free_node = mesh::kInvalidId;
-    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-      if (body.inv_mass_per_kg[n] != 0.0) free_node = n;
-    });
-    ASSERT_NE(free_node, mesh::kInvalidId);
-    f[free_node] = Vec3(std::numeric_limits<double>::infinity(), 0, 0);
-    const std::vector<Vec3> before = body.x_m;
-    const StepOutcome out = integrator.step(body, f, 1e-3);
-    EXPECT_FALSE(out.ok);
-    EXPECT_NE(out.error.find("non-finite"), std::string::npos) << out.error;
-    EXPECT_EQ(body.x_m, before);
-    EXPECT_TRUE(integrator.offset_layout());
-  }
+  for (const auto precision : {scene::ExplicitPrecision::kDouble, scene::ExplicitPrecision::kFloat})
+    for (const double bad_N :
+         {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN(), 1e150}) {
+      Body body = uniform_beam(2);
+      scene::IntegratorSpec spec = body.scene().integrator;
+      spec.explicit_precision = precision;
+      ExplicitIntegrator integrator(spec, body.scene().material);
+      integrator.set_layout(Layout::kOffset);
+      std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
+      NodeId free_node = mesh::kInvalidId;
+      body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+        if (body.inv_mass_per_kg[n] != 0.0) free_node = n;
+      });
+      ASSERT_NE(free_node, mesh::kInvalidId);
+      f[free_node] = Vec3(0, bad_N, 0);
+      const std::vector<Vec3> before = body.x_m;
+      const StepOutcome out = integrator.step(body, f, 1e-3);
+      EXPECT_FALSE(out.ok);
+      EXPECT_NE(out.error.find("non-finite"), std::string::npos) << out.error;
+      EXPECT_EQ(body.x_m, before);
+      EXPECT_TRUE(integrator.offset_layout());
+    }
 }
 
 }  // namespace
