@@ -41,7 +41,9 @@ nlohmann::json solver_json(const physics::SimCounters& c) {
   return {{"substeps", {{"mean", c.substeps_per_step()}, {"max", c.max_substeps}}},
           {"iterations", {{"mean", c.solver_iterations_per_step()}, {"max", c.max_solver_iterations}}},
           {"unconverged_steps", c.unconverged_steps},
-          {"offset_layout_steps", c.offset_layout_steps}};
+          {"offset_layout_steps", c.offset_layout_steps},
+          {"verified_substep_steps", c.verified_substep_steps},
+          {"rerun_steps", c.rerun_steps}};
 }
 
 struct Tally {

@@ -32,6 +32,10 @@ struct StepOutcome {
   // Explicit: the sub-steps ran on the offset layout (a mesh of one depth;
   // integrator_explicit_offset.cpp) rather than the gathered stream.
   bool offset_layout = false;
+  // Explicit: the step took fewer sub-steps than the margin allows, proved
+  // stable by the measured deformation; rerun: it was run again with more.
+  bool verified_substeps = false;
+  bool rerun = false;
 };
 
 class Integrator {
@@ -65,6 +69,35 @@ struct ExplicitStableStep {
 // it is lower (the explicit rung's Lanczos bound, frequency_estimate.hpp);
 // it tightens the damping bound too (γ ≤ max(c/k) λmax).
 ExplicitStableStep explicit_stable_step(const Body& body, double frequency2_bound_per_s2 = INFINITY);
+
+// The body's bounds the stable step is made of, computed once per mesh.
+struct ExplicitBounds {
+  double rest_per_s2 = 0.0;              // λmax(M⁻¹K) at rest: min(element, graph)
+  double graph_per_s2 = 0.0;             // max_i 2 Σk / m_i (Gershgorin of M⁻¹ L_k)
+  double damping_rate_per_s = 0.0;       // γ ≤ max_i 2 Σc / m_i
+  double damping_per_stiffness_s = 0.0;  // max c / k over the springs
+};
+ExplicitBounds explicit_bounds(const Body& body);
+// The stable step for a bound ω² ≤ frequency2_per_s2 (capped at the graph
+// bound) and its damping rate γ ≤ min(damping_rate, max(c/k) · that).
+ExplicitStableStep explicit_stable_step(const ExplicitBounds& bounds, double frequency2_per_s2);
+
+// An upper bound on λmax(M⁻¹K(x)) of the deformed body, K(x) the springs'
+// stiffness at the current state, from its rest bound and the largest
+// relative displacement of a spring's ends, r = max |Δu| / L (Δu = u_b − u_a,
+// u = x − X). A spring of length l along d̂ has stiffness
+// k (d̂d̂ᵀ + (1 − L/l)(I − d̂d̂ᵀ)); it differs from its rest part k d̂₀d̂₀ᵀ by at
+// most k (sin θ + |1 − L/l|) in norm, θ the angle it turned, and sin θ ≤ r,
+// |1 − L/l| ≤ r / (1 − r). Summed over springs (each difference is at most
+// that times k I on its two ends) and by Weyl's inequality:
+//   λmax(M⁻¹K(x)) ≤ rest + ε · graph,   ε = r + r / (1 − r).
+// And while no spring is shorter than half its rest length (r ≤ ½), every
+// spring's stiffness lies between −k I and k I, so graph (a bound on
+// M⁻¹ L_k ⊗ I) caps it. Beyond r = ½ a spring may collapse and no finite
+// bound holds: the cap is kept there, unverified (the non-finite guard
+// remains). The rest part counts rigid rotations as deformation (rotations do
+// not change the spectrum), so the bound is loose where a body turns far.
+double deformed_frequency2_bound_per_s2(double rest_per_s2, double graph_per_s2, double end_displacement_ratio);
 
 // An upper bound on the body's highest ω² = λmax(M⁻¹K) at rest [1/s²]: the
 // largest λmax(K_t, M_t) of any tet, K_t its eq. (3) stiffness shares and M_t

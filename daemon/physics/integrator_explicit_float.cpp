@@ -275,6 +275,19 @@ bool ExplicitFloatState::finite(const Body& body) const {
   return ok;  // NaN fails every comparison
 }
 
+double ExplicitFloatState::end_displacement_ratio() const {
+  const float* u = u_[0].v;
+  float worst = 0.0f;  // (|Δu| / L)²
+  for (const ExplicitSpringBatchF& s : batches_)
+    for (int j = 0; j < 8; ++j) {
+      if (!(s.k_N_per_m[j] > 0.0f)) continue;  // filler
+      const std::uint32_t a4 = s.a4[j], b4 = s.b4[j];
+      const float du[3] = {u[b4] - u[a4], u[b4 + 1] - u[a4 + 1], u[b4 + 2] - u[a4 + 2]};
+      worst = std::max(worst, (du[0] * du[0] + du[1] * du[1] + du[2] * du[2]) / (s.rest_m[j] * s.rest_m[j]));
+    }
+  return std::sqrt(static_cast<double>(worst));
+}
+
 void ExplicitFloatState::store(Body& body) const {
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
     const float u[3] = {u_[n].v[0], u_[n].v[1], u_[n].v[2]}, v[3] = {v_[n].v[0], v_[n].v[1], v_[n].v[2]};

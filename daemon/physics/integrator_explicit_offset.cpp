@@ -226,6 +226,7 @@ struct AvxDouble {
   TISSUE_AVX2 static V div(V a, V b) { return _mm256_div_pd(a, b); }
   TISSUE_AVX2 static V not_zero(V a) { return _mm256_cmp_pd(a, zero(), _CMP_NEQ_UQ); }
   TISSUE_AVX2 static V select(V mask, V yes, V no) { return _mm256_blendv_pd(no, yes, mask); }
+  TISSUE_AVX2 static V max(V a, V b) { return _mm256_max_pd(a, b); }
 
   // The batch's forces on its lower ends; false when a spring is collapsed
   // (the caller then takes the scalar lanes).
@@ -275,6 +276,7 @@ struct AvxFloat {
   TISSUE_AVX2 static V div(V a, V b) { return _mm256_div_ps(a, b); }
   TISSUE_AVX2 static V not_zero(V a) { return _mm256_cmp_ps(a, zero(), _CMP_NEQ_UQ); }
   TISSUE_AVX2 static V select(V mask, V yes, V no) { return _mm256_blendv_ps(no, yes, mask); }
+  TISSUE_AVX2 static V max(V a, V b) { return _mm256_max_ps(a, b); }
 
   template <bool kDamped>
   TISSUE_AVX2 static bool force(const OffsetBatchF& s, std::size_t stride, const float* u, const float* v,
@@ -395,6 +397,56 @@ TISSUE_AVX2 void forces_avx2(const OffsetBatch<typename K::Real>* batches, const
     expect = a0 + W;
   }
   for (int i = 0; i < 3; ++i) f[i * stride + expect] -= K::first(carry[i]);
+}
+#endif
+
+// (|Δu| / L)² over the springs, largest (integrator.hpp,
+// deformed_frequency2_bound_per_s2): Δu from displacements x (float) or
+// positions x minus rest positions (double, rest non-null); empty lanes 0.
+template <typename Real>
+Real end_ratio2_scalar(const OffsetBatch<Real>* batches, std::size_t count, std::size_t stride, const Real* x,
+                       const Real* rest) {
+  constexpr int W = OffsetBatch<Real>::kLanes;
+  Real worst = 0;
+  for (std::size_t q = 0; q < count; ++q) {
+    const OffsetBatch<Real>& s = batches[q];
+    for (int j = 0; j < W; ++j) {
+      Real dd = 0;
+      for (int i = 0; i < 3; ++i) {
+        const std::size_t a = i * stride + s.a0 + j, b = i * stride + s.b0 + j;
+        Real du = x[b] - x[a];
+        if (rest) du = du - (rest[b] - rest[a]);
+        dd = dd + du * du;
+      }
+      const Real ratio2 = s.k_N_per_m[j] != Real(0) ? dd / (s.rest_m[j] * s.rest_m[j]) : Real(0);
+      worst = std::max(worst, ratio2);
+    }
+  }
+  return worst;
+}
+
+#if defined(__x86_64__)
+template <class K>
+TISSUE_AVX2 typename K::Real end_ratio2_avx2(const OffsetBatch<typename K::Real>* batches, std::size_t count,
+                                             std::size_t stride, const typename K::Real* x,
+                                             const typename K::Real* rest) {
+  using V = typename K::V;
+  V worst = K::zero();
+  for (std::size_t q = 0; q < count; ++q) {
+    const OffsetBatch<typename K::Real>& s = batches[q];
+    V dd = K::zero();
+    for (int i = 0; i < 3; ++i) {
+      V du = K::sub(K::load(x + i * stride + s.b0), K::load(x + i * stride + s.a0));
+      if (rest) du = K::sub(du, K::sub(K::load(rest + i * stride + s.b0), K::load(rest + i * stride + s.a0)));
+      dd = K::add(dd, K::mul(du, du));
+    }
+    const V r = K::load(s.rest_m);
+    const V ratio2 = K::select(K::not_zero(K::load(s.k_N_per_m)), K::div(dd, K::mul(r, r)), K::zero());
+    worst = K::max(worst, ratio2);
+  }
+  alignas(32) typename K::Real lanes[K::W];
+  K::store(lanes, worst);
+  return *std::max_element(lanes, lanes + K::W);
 }
 #endif
 
@@ -613,6 +665,10 @@ bool ExplicitOffsetState<Real>::build(const Body& body, bool force) {
   if constexpr (std::is_same_v<Real, float>) {
     x0_.assign(3 * stride_, 0.0f);
     v0_.assign(3 * stride_, 0.0f);
+  } else {
+    rest_.assign(3 * stride_, 0.0);
+    for (std::size_t p = 0; p < node_at_.size(); ++p)
+      for (int i = 0; i < 3; ++i) rest_[i * stride_ + p] = body.rest_m[node_at_[p]][i];
   }
   inv_mass_.assign(stride_, Real(0));
   for (std::size_t p = 0; p < node_at_.size(); ++p) inv_mass_[p] = static_cast<Real>(body.inv_mass_per_kg[node_at_[p]]);
@@ -669,6 +725,20 @@ bool ExplicitOffsetState<Real>::finite() const {
       for (const Real value : *a) bad = std::abs(value) < limit ? bad : Real(1);
     return bad == Real(0);
   }
+}
+
+template <typename Real>
+double ExplicitOffsetState<Real>::end_displacement_ratio(Simd simd) const {
+  const Real* rest = std::is_same_v<Real, double> ? rest_.data() : nullptr;
+  Real worst;
+#if defined(__x86_64__)
+  using K = std::conditional_t<std::is_same_v<Real, float>, AvxFloat, AvxDouble>;
+  if (simd == Simd::kAvx2)
+    worst = end_ratio2_avx2<K>(batches_.data(), batches_.size(), stride_, x_.data(), rest);
+  else
+#endif
+    worst = end_ratio2_scalar<Real>(batches_.data(), batches_.size(), stride_, x_.data(), rest);
+  return std::sqrt(static_cast<double>(worst));
 }
 
 template <typename Real>

@@ -107,6 +107,9 @@ class ExplicitFloatState {
   void substeps(Simd simd, double h_s, double alpha_per_s, int count);
   // Every live node's displacement and velocity finite and below 1e30.
   bool finite(const Body& body) const;
+  // max |u_b − u_a| / L over the springs, at the state now (integrator.hpp,
+  // deformed_frequency2_bound_per_s2).
+  double end_displacement_ratio() const;
   // Adds the free nodes' increments (u and v now minus as loaded) to the
   // body's double state; kinematic nodes move in double by the last
   // substeps() call's h and count. Call before the body changes.
@@ -202,6 +205,9 @@ class ExplicitOffsetState {
   void substeps(Simd simd, double h_s, double alpha_per_s, int count);
   bool finite() const;
   void store(Body& body) const;
+  // As ExplicitFloatState::end_displacement_ratio (scalar and AVX2 give the
+  // same value: lane by lane the same operations, then a maximum).
+  double end_displacement_ratio(Simd simd) const;
   // The share of lanes holding a spring in the last plan (0 without one).
   double fill() const { return fill_; }
   const std::vector<Batch>& batches() const { return batches_; }
@@ -220,6 +226,7 @@ class ExplicitOffsetState {
   std::vector<Vec3> rest_by_position_;   // for the collapsed-spring direction
   std::vector<Real> x_, v_, f_, f_ext_;  // 3 × stride
   std::vector<Real> x0_, v0_;            // float: as loaded (store() adds the increments); double: unused
+  std::vector<Real> rest_;               // double: rest positions, 3 × stride (float keeps displacements)
   std::vector<Real> inv_mass_;           // stride
   double h_s_ = 0.0;                     // the last substeps() call's, for store()
   int count_ = 0;
@@ -264,6 +271,29 @@ class ExplicitIntegrator final : public Integrator {
   bool tightened() const { return tightened_; }
   const FrequencyEstimate& estimate() const { return estimate_; }
 
+  // A step takes fewer sub-steps than the margin above allows when the
+  // deformation, measured, proves them stable (integrator.hpp,
+  // deformed_frequency2_bound_per_s2): the largest relative displacement r
+  // of a spring's ends, measured on the last state, gives a bound on the
+  // deformed stiffness; if substep_safety × kVerifiedSafetyPerSafety (0.95 by
+  // default) of the stable step under that bound needs fewer sub-steps, the
+  // step runs with them and r is measured again on the state reached; the
+  // step is accepted if the bound there allows them too, else run again from
+  // the body (untouched until a step is accepted) with the usual count or
+  // more. So a shortened step is verified at both of its ends (not in
+  // between: the margin is for that). The measuring pass costs 0.4-0.8 of a
+  // sub-step, so it runs every step only while it pays; otherwise every
+  // kRemeasureSteps steps to see whether it would.
+  static constexpr double kVerifiedSafetyPerSafety = 19.0 / 16.0;  // 0.8 -> 0.95
+  static constexpr int kRemeasureSteps = 64;
+  // r of the last state measured; steps taken with fewer sub-steps, and
+  // steps run again. For tests and the benchmark.
+  double end_displacement_ratio() const { return end_displacement_ratio_; }
+  std::int64_t verified_steps() const { return verified_steps_; }
+  std::int64_t rerun_steps() const { return rerun_steps_; }
+  // The stable step at relative end displacement r on the current mesh.
+  ExplicitStableStep stable_step_at(double end_displacement_ratio) const;
+
   // The sub-step starts from the guaranteed bounds (explicit_stable_step).
   // Once the current mesh has run kLanczosWaitCostMultiple times the Lanczos
   // estimate's cost in sub-steps, the estimate starts, spread over the
@@ -284,8 +314,15 @@ class ExplicitIntegrator final : public Integrator {
  private:
   // Spring stream, stable bound and padded state sized for the topology.
   void build_layout(const Body& body);
-  // Copies the body's state in and runs `count` sub-steps on the padded copy.
-  void advance(const Body& body, const std::vector<Vec3>& f_ext_N, double h_s, int count);
+  // Copies the body's state in; runs `count` sub-steps on the padded copy.
+  void load(const Body& body, const std::vector<Vec3>& f_ext_N);
+  void advance(double h_s, int count);
+  // r of the padded copy (float and offset states: their own; the double
+  // stream: positions minus the body's rest positions).
+  double measure_end_displacement_ratio(const Body& body) const;
+  // Sub-steps for dt_s at relative end displacement r with the verified
+  // margin (max_substeps + 1 when more than that).
+  int verified_substeps(double dt_s, double end_displacement_ratio) const;
   // state_is_finite for the padded copy, over the body's live nodes.
   bool advanced_state_is_finite(const Body& body) const;
   // Copies the padded state back to the body.
@@ -298,7 +335,14 @@ class ExplicitIntegrator final : public Integrator {
   double alpha_per_s_;
   Simd simd_;
   std::uint64_t layout_version_ = 0;  // body.parameters_version() the layout was built for
-  ExplicitStableStep stable_;
+  ExplicitBounds bounds_;
+  double rest_bound_per_s2_ = 0.0;        // min(bounds_.rest_per_s2, the Lanczos bound once done)
+  ExplicitStableStep stable_;             // stable_step_at(0)
+  double end_displacement_ratio_ = -1.0;  // of the last state measured; < 0: not measured on this layout
+  int steps_since_measured_ = 0;
+  std::int64_t verified_steps_ = 0;
+  const Vec3* rest_m_ = nullptr;  // the body's rest positions, for the double stream's collapsed springs
+  std::int64_t rerun_steps_ = 0;
   bool tightened_ = false;
   std::int64_t layout_substeps_ = 0, lanczos_wait_substeps_ = 0;  // sub-steps run on this layout
   std::optional<RestFrequencyLanczos> lanczos_;                   // under way

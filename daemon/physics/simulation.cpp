@@ -65,6 +65,8 @@ StepResult Simulation::step() {
   counters_.max_solver_iterations = std::max(counters_.max_solver_iterations, out.solver_iterations);
   if (!out.solver_converged) ++counters_.unconverged_steps;
   if (out.offset_layout) ++counters_.offset_layout_steps;
+  if (out.verified_substeps) ++counters_.verified_substep_steps;
+  if (out.rerun) ++counters_.rerun_steps;
 
   time_s_ = t_next;
   ++counters_.steps;

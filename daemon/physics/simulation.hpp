@@ -47,7 +47,9 @@ struct SimCounters {
   std::int64_t substeps = 0, solver_iterations = 0;
   int max_substeps = 0, max_solver_iterations = 0;
   std::int64_t unconverged_steps = 0;
-  std::int64_t offset_layout_steps = 0;  // explicit steps run on the offset layout
+  std::int64_t offset_layout_steps = 0;     // explicit steps run on the offset layout
+  std::int64_t verified_substep_steps = 0;  // explicit steps shortened by the measured deformation
+  std::int64_t rerun_steps = 0;             // explicit steps run again with more sub-steps
   // Means over the steps taken (0 before the first).
   double substeps_per_step() const { return steps > 0 ? static_cast<double>(substeps) / steps : 0.0; }
   double solver_iterations_per_step() const { return steps > 0 ? static_cast<double>(solver_iterations) / steps : 0.0; }

@@ -261,6 +261,36 @@ TEST(OffsetLayout, StepsFollowTheGatheredTrajectory) {
   }
 }
 
+// The largest relative displacement of a spring's ends (the deformed
+// stiffness bound's r) is the same from the scalar and AVX2 passes, in both
+// precisions, and matches the body's own springs.
+TEST(OffsetLayout, EndDisplacementRatioIsTheBodysAndTheSameOnEitherInstructionSet) {
+  Body body = uniform_beam(3);
+  jiggle(body, 5);
+  double expected = 0.0;
+  for (std::size_t e = 0; e < body.edge_a.size(); ++e)
+    if (body.stiffness_N_per_m[e] > 0.0 &&
+        (body.inv_mass_per_kg[body.edge_a[e]] > 0.0 || body.inv_mass_per_kg[body.edge_b[e]] > 0.0))
+      expected = std::max(expected, ((body.x_m[body.edge_b[e]] - body.rest_m[body.edge_b[e]]) -
+                                     (body.x_m[body.edge_a[e]] - body.rest_m[body.edge_a[e]]))
+                                            .norm() /
+                                        body.rest_length_m[e]);
+  ASSERT_GT(expected, 0.01);
+  const std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
+  ExplicitOffsetState<double> d;
+  ASSERT_TRUE(d.build(body, true));
+  d.load(body, f);
+  ExplicitOffsetState<float> s;
+  ASSERT_TRUE(s.build(body, true));
+  s.load(body, f);
+  EXPECT_NEAR(d.end_displacement_ratio(Simd::kScalar), expected, 1e-12 * expected);
+  EXPECT_NEAR(s.end_displacement_ratio(Simd::kScalar), expected, 1e-5 * expected);
+  if (detected_simd() == Simd::kAvx2) {
+    EXPECT_EQ(d.end_displacement_ratio(Simd::kAvx2), d.end_displacement_ratio(Simd::kScalar));
+    EXPECT_EQ(s.end_displacement_ratio(Simd::kAvx2), s.end_displacement_ratio(Simd::kScalar));
+  }
+}
+
 // A state gone non-finite (or past the finiteness limit: 1e150 N is finite
 // in double) on the layout is rejected and the body kept.
 TEST(OffsetLayout, NonFiniteStepIsRejectedAndTheStateKept) {
