@@ -420,15 +420,20 @@ void ExplicitIntegrator::load(const Body& body, const std::vector<Vec3>& f_ext_N
   }
 }
 
-void ExplicitIntegrator::advance(double h_s, int count) {
+void ExplicitIntegrator::advance(double h_s, int count, double* end_displacement_ratio, const Body* body) {
   if (offset_) {
     if (single_precision())
-      offset_float_.substeps(simd_, h_s, alpha_per_s_, count);
+      offset_float_.substeps(simd_, h_s, alpha_per_s_, count, end_displacement_ratio);
     else
-      offset_double_.substeps(simd_, h_s, alpha_per_s_, count);
+      offset_double_.substeps(simd_, h_s, alpha_per_s_, count, end_displacement_ratio);
     return;
   }
-  if (single_precision()) return float_.substeps(simd_, h_s, alpha_per_s_, count);
+  // The gathered streams measure in a pass of their own, on the state reached.
+  if (single_precision()) {
+    float_.substeps(simd_, h_s, alpha_per_s_, count);
+    if (end_displacement_ratio) *end_displacement_ratio = float_.end_displacement_ratio();
+    return;
+  }
   // Symplectic Euler (kick, then drift). Spring dampers are explicit so
   // every mode gets its exact Rayleigh ratio; the stable bound accounts for
   // them. Mass-proportional damping is taken implicitly (free of any bound).
@@ -439,6 +444,7 @@ void ExplicitIntegrator::advance(double h_s, int count) {
                            f_.data());
     update(simd_, h_s, divisor, inv_mass_.data(), f_ext_.data(), x_.data(), v_.data(), f_.data(), nodes);
   }
+  if (end_displacement_ratio) *end_displacement_ratio = measure_end_displacement_ratio(*body);
 }
 
 double ExplicitIntegrator::measure_end_displacement_ratio(const Body& body) const {
@@ -556,13 +562,13 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   ++steps_since_measured_;
   const int fewer = verified_substeps(dt_s, end_displacement_ratio_);
   if (fewer < count) {
-    advance(dt_s / fewer, fewer);
+    double reached = 0.0;
+    advance(dt_s / fewer, fewer, &reached, &body);
     if (!advanced_state_is_finite(body)) {
       out.ok = false;
       out.error = "explicit integrator: state became non-finite; step rejected, previous state kept";
       return out;
     }
-    const double reached = measure_end_displacement_ratio(body);
     steps_since_measured_ = 0;
     if (verified_substeps(dt_s, reached) <= fewer) {
       end_displacement_ratio_ = reached;

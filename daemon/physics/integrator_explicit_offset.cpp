@@ -135,14 +135,41 @@ void lane_force(const OffsetBatchF& s, int j, std::size_t stride, const float* u
   for (int i = 0; i < 3; ++i) force[i] = magnitude * dir[i];
 }
 
+// (|Δu| / L)² over the springs, largest (integrator.hpp,
+// deformed_frequency2_bound_per_s2): Δu from displacements x (float) or
+// positions x minus rest positions (double, rest non-null); empty lanes 0.
+template <typename Real>
+Real end_ratio2_scalar(const OffsetBatch<Real>* batches, std::size_t count, std::size_t stride, const Real* x,
+                       const Real* rest) {
+  constexpr int W = OffsetBatch<Real>::kLanes;
+  Real worst = 0;
+  for (std::size_t q = 0; q < count; ++q) {
+    const OffsetBatch<Real>& s = batches[q];
+    for (int j = 0; j < W; ++j) {
+      Real dd = 0;
+      for (int i = 0; i < 3; ++i) {
+        const std::size_t a = i * stride + s.a0 + j, b = i * stride + s.b0 + j;
+        Real du = x[b] - x[a];
+        if (rest) du = du - (rest[b] - rest[a]);
+        dd = dd + du * du;
+      }
+      const Real ratio2 = s.k_N_per_m[j] != Real(0) ? dd / (s.rest_m[j] * s.rest_m[j]) : Real(0);
+      worst = std::max(worst, ratio2);
+    }
+  }
+  return worst;
+}
+
 // The group loop, scalar. Per group: the a-side sum starts at zero and takes
 // each batch's forces; δ = 1 batches go to `next` rotated one lane (lane
 // j + 1 gets lane j, lane 0 the last), the others are subtracted at b0 in
 // memory; then lane 0 of the sum takes off the previous group's carried
 // lane, lanes 1.. the rotated ones, and the sum is added at a0.
-template <typename Real, bool kDamped>
+// kMeasure: also the largest (|Δu| / L)² into *worst (end_ratio2_scalar).
+template <typename Real, bool kDamped, bool kMeasure>
 void forces_scalar(const OffsetBatch<Real>* batches, const OffsetGroup* groups, std::size_t group_count,
-                   std::size_t stride, const Real* x, const Real* v, const Vec3* rest_by_position, Real* f) {
+                   std::size_t stride, const Real* x, const Real* v, const Vec3* rest_by_position, Real* f,
+                   const Real* rest, Real* worst) {
   constexpr int W = OffsetBatch<Real>::kLanes;
   Real carry[3][W] = {};
   std::uint32_t expect = 0;
@@ -159,6 +186,7 @@ void forces_scalar(const OffsetBatch<Real>* batches, const OffsetGroup* groups, 
       const OffsetBatch<Real>& s = batches[q];
       Real force[W][3];
       for (int j = 0; j < W; ++j) lane_force<kDamped>(s, j, stride, x, v, rest_by_position, force[j]);
+      if constexpr (kMeasure) *worst = std::max(*worst, end_ratio2_scalar<Real>(&s, 1, stride, x, rest));
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < W; ++j) sum[i][j] = sum[i][j] + force[j][i];
       if (s.b0 == a0 + 1) {
@@ -230,12 +258,15 @@ struct AvxDouble {
 
   // The batch's forces on its lower ends; false when a spring is collapsed
   // (the caller then takes the scalar lanes).
-  template <bool kDamped>
+  // kMeasure: d gets the position differences (for the deformation measure).
+  template <bool kDamped, bool kMeasure>
   TISSUE_AVX2 static bool force(const OffsetBatchD& s, std::size_t stride, const double* x, const double* v,
-                                const V (&xa)[3], const V (&va)[3], V (&F)[3]) {
+                                const V (&xa)[3], const V (&va)[3], V (&F)[3], V (&d)[3]) {
     const std::uint32_t b = s.b0;
     V dx[3];
     for (int i = 0; i < 3; ++i) dx[i] = sub(load(x + i * stride + b), xa[i]);
+    if constexpr (kMeasure)
+      for (int i = 0; i < 3; ++i) d[i] = dx[i];
     const V k = load(s.k_N_per_m), rest = load(s.rest_m);
     const V lane = _mm256_cmp_pd(k, zero(), _CMP_GT_OQ);
     const V l2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx[0], dx[0]), _mm256_mul_pd(dx[1], dx[1])),
@@ -278,12 +309,15 @@ struct AvxFloat {
   TISSUE_AVX2 static V select(V mask, V yes, V no) { return _mm256_blendv_ps(no, yes, mask); }
   TISSUE_AVX2 static V max(V a, V b) { return _mm256_max_ps(a, b); }
 
-  template <bool kDamped>
+  // kMeasure: d gets the displacement differences (the deformation measure's Δu).
+  template <bool kDamped, bool kMeasure>
   TISSUE_AVX2 static bool force(const OffsetBatchF& s, std::size_t stride, const float* u, const float* v,
-                                const V (&ua)[3], const V (&va)[3], V (&F)[3]) {
+                                const V (&ua)[3], const V (&va)[3], V (&F)[3], V (&d)[3]) {
     const std::uint32_t b = s.b0;
     V du[3];
     for (int i = 0; i < 3; ++i) du[i] = sub(load(u + i * stride + b), ua[i]);
+    if constexpr (kMeasure)
+      for (int i = 0; i < 3; ++i) d[i] = du[i];
     const V ex = load(s.ex), ey = load(s.ey), ez = load(s.ez), rest = load(s.rest_m), k = load(s.k_N_per_m);
     const V lane = _mm256_cmp_ps(k, zero(), _CMP_GT_OQ);
     const V ed =
@@ -342,13 +376,15 @@ TISSUE_AVX2 void update_avx2(typename K::Real h, typename K::Real divisor, const
   }
 }
 
-template <class K, bool kDamped>
+template <class K, bool kDamped, bool kMeasure>
 TISSUE_AVX2 void forces_avx2(const OffsetBatch<typename K::Real>* batches, const OffsetGroup* groups,
                              std::size_t group_count, std::size_t stride, const typename K::Real* x,
-                             const typename K::Real* v, const Vec3* rest_by_position, typename K::Real* f) {
+                             const typename K::Real* v, const Vec3* rest_by_position, typename K::Real* f,
+                             const typename K::Real* rest, typename K::Real* worst_out) {
   using Real = typename K::Real;
   using V = typename K::V;
   constexpr int W = K::W;
+  V worst = K::zero();
   V carry[3] = {K::zero(), K::zero(), K::zero()};
   std::uint32_t expect = 0;
   for (std::size_t g = 0; g < group_count; ++g) {
@@ -361,15 +397,28 @@ TISSUE_AVX2 void forces_avx2(const OffsetBatch<typename K::Real>* batches, const
     }
     V sum[3] = {K::zero(), K::zero(), K::zero()}, next[3] = {K::zero(), K::zero(), K::zero()};
     // The a-side state, loaded once per group.
-    V xa[3], va[3];
+    V xa[3], va[3], ra[3];
     for (int i = 0; i < 3; ++i) {
       xa[i] = K::load(x + i * stride + a0);
       va[i] = kDamped ? K::load(v + i * stride + a0) : K::zero();
+      if constexpr (kMeasure) ra[i] = rest ? K::load(rest + i * stride + a0) : K::zero();
     }
     for (std::uint32_t q = groups[g].first; q < groups[g].end; ++q) {
       const OffsetBatch<Real>& s = batches[q];
-      V F[3];
-      if (!K::template force<kDamped>(s, stride, x, v, xa, va, F)) {
+      V F[3], d[3];
+      const bool vector_lanes = K::template force<kDamped, kMeasure>(s, stride, x, v, xa, va, F, d);
+      if constexpr (kMeasure) {
+        // end_ratio2_scalar's operations, lane by lane: Δu = d (float), or
+        // d minus the rest positions' difference (double).
+        V dd = K::zero();
+        for (int i = 0; i < 3; ++i) {
+          const V du = rest ? K::sub(d[i], K::sub(K::load(rest + i * stride + s.b0), ra[i])) : d[i];
+          dd = K::add(dd, K::mul(du, du));
+        }
+        const V r = K::load(s.rest_m);
+        worst = K::max(worst, K::select(K::not_zero(K::load(s.k_N_per_m)), K::div(dd, K::mul(r, r)), K::zero()));
+      }
+      if (!vector_lanes) {
         alignas(32) Real lanes[3][W];
         for (int j = 0; j < W; ++j) {
           Real one[3];
@@ -397,33 +446,13 @@ TISSUE_AVX2 void forces_avx2(const OffsetBatch<typename K::Real>* batches, const
     expect = a0 + W;
   }
   for (int i = 0; i < 3; ++i) f[i * stride + expect] -= K::first(carry[i]);
+  if constexpr (kMeasure) {
+    alignas(32) Real lanes[W];
+    K::store(lanes, worst);
+    for (int j = 0; j < W; ++j) *worst_out = std::max(*worst_out, lanes[j]);
+  }
 }
 #endif
-
-// (|Δu| / L)² over the springs, largest (integrator.hpp,
-// deformed_frequency2_bound_per_s2): Δu from displacements x (float) or
-// positions x minus rest positions (double, rest non-null); empty lanes 0.
-template <typename Real>
-Real end_ratio2_scalar(const OffsetBatch<Real>* batches, std::size_t count, std::size_t stride, const Real* x,
-                       const Real* rest) {
-  constexpr int W = OffsetBatch<Real>::kLanes;
-  Real worst = 0;
-  for (std::size_t q = 0; q < count; ++q) {
-    const OffsetBatch<Real>& s = batches[q];
-    for (int j = 0; j < W; ++j) {
-      Real dd = 0;
-      for (int i = 0; i < 3; ++i) {
-        const std::size_t a = i * stride + s.a0 + j, b = i * stride + s.b0 + j;
-        Real du = x[b] - x[a];
-        if (rest) du = du - (rest[b] - rest[a]);
-        dd = dd + du * du;
-      }
-      const Real ratio2 = s.k_N_per_m[j] != Real(0) ? dd / (s.rest_m[j] * s.rest_m[j]) : Real(0);
-      worst = std::max(worst, ratio2);
-    }
-  }
-  return worst;
-}
 
 #if defined(__x86_64__)
 template <class K>
@@ -581,17 +610,35 @@ OffsetPlan plan_offset_layout(const Body& body, int lanes) {
 template <typename Real>
 void offset_spring_forces(Simd simd, const OffsetBatch<Real>* batches, const OffsetGroup* groups,
                           std::size_t group_count, std::size_t stride, const Real* x, const Real* v,
-                          const Vec3* rest_by_position, Real* f) {
+                          const Vec3* rest_by_position, Real* f, const Real* rest, Real* worst_ratio2) {
+  const bool measure = worst_ratio2 != nullptr;
 #if defined(__x86_64__)
   using K = std::conditional_t<std::is_same_v<Real, float>, AvxFloat, AvxDouble>;
-  if (simd == Simd::kAvx2)
-    return v ? forces_avx2<K, true>(batches, groups, group_count, stride, x, v, rest_by_position, f)
-             : forces_avx2<K, false>(batches, groups, group_count, stride, x, v, rest_by_position, f);
+  if (simd == Simd::kAvx2) {
+    if (measure)
+      return v ? forces_avx2<K, true, true>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest,
+                                            worst_ratio2)
+               : forces_avx2<K, false, true>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest,
+                                             worst_ratio2);
+    return v ? forces_avx2<K, true, false>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest,
+                                           nullptr)
+             : forces_avx2<K, false, false>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest,
+                                            nullptr);
+  }
 #endif
+  if (measure) {
+    if (v)
+      forces_scalar<Real, true, true>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest,
+                                      worst_ratio2);
+    else
+      forces_scalar<Real, false, true>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest,
+                                       worst_ratio2);
+    return;
+  }
   if (v)
-    forces_scalar<Real, true>(batches, groups, group_count, stride, x, v, rest_by_position, f);
+    forces_scalar<Real, true, false>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest, nullptr);
   else
-    forces_scalar<Real, false>(batches, groups, group_count, stride, x, v, rest_by_position, f);
+    forces_scalar<Real, false, false>(batches, groups, group_count, stride, x, v, rest_by_position, f, rest, nullptr);
 }
 
 template <typename Real>
@@ -605,9 +652,9 @@ void offset_update(Simd simd, Real h, Real divisor, const Real* inv_mass, std::s
 }
 
 template void offset_spring_forces<double>(Simd, const OffsetBatchD*, const OffsetGroup*, std::size_t, std::size_t,
-                                           const double*, const double*, const Vec3*, double*);
+                                           const double*, const double*, const Vec3*, double*, const double*, double*);
 template void offset_spring_forces<float>(Simd, const OffsetBatchF*, const OffsetGroup*, std::size_t, std::size_t,
-                                          const float*, const float*, const Vec3*, float*);
+                                          const float*, const float*, const Vec3*, float*, const float*, float*);
 
 template <typename Real>
 bool ExplicitOffsetState<Real>::build(const Body& body, bool force) {
@@ -694,16 +741,22 @@ void ExplicitOffsetState<Real>::load(const Body& body, const std::vector<Vec3>& 
 }
 
 template <typename Real>
-void ExplicitOffsetState<Real>::substeps(Simd simd, double h_s, double alpha_per_s, int count) {
+void ExplicitOffsetState<Real>::substeps(Simd simd, double h_s, double alpha_per_s, int count,
+                                         double* end_displacement_ratio) {
   h_s_ = h_s;
   count_ = count;
   const auto h = static_cast<Real>(h_s);
   const auto divisor = static_cast<Real>(1.0 + h_s * alpha_per_s);
+  const Real* rest = std::is_same_v<Real, double> ? rest_.data() : nullptr;
+  Real worst = 0;
   for (int s = 0; s < count; ++s) {
+    const bool measure = end_displacement_ratio != nullptr && s + 1 == count;
     offset_spring_forces<Real>(simd, batches_.data(), groups_.data(), groups_.size(), stride_, x_.data(),
-                               damped_ ? v_.data() : nullptr, rest_by_position_.data(), f_.data());
+                               damped_ ? v_.data() : nullptr, rest_by_position_.data(), f_.data(), rest,
+                               measure ? &worst : nullptr);
     offset_update<Real>(simd, h, divisor, inv_mass_.data(), stride_, f_ext_.data(), x_.data(), v_.data(), f_.data());
   }
+  if (end_displacement_ratio) *end_displacement_ratio = std::sqrt(static_cast<double>(worst));
 }
 
 template <typename Real>

@@ -171,10 +171,15 @@ bool mesh_has_one_depth(const Body& body);
 // v = nullptr: no dampers).
 // Both instruction sets give bit-identical results.
 template <typename Real>
+// worst_ratio2 non-null: also the largest (|Δu| / L)² over the springs
+// (deformed_frequency2_bound_per_s2's r², Δu from x, less rest: the rest
+// positions, 3 × stride, for double positions; null for float displacements)
+// into it, the same on either instruction set.
 void offset_spring_forces(Simd simd,
                           const std::conditional_t<std::is_same_v<Real, float>, OffsetBatchF, OffsetBatchD>* batches,
                           const OffsetGroup* groups, std::size_t group_count, std::size_t stride, const Real* x,
-                          const Real* v, const Vec3* rest_by_position, Real* f);
+                          const Real* v, const Vec3* rest_by_position, Real* f, const Real* rest = nullptr,
+                          Real* worst_ratio2 = nullptr);
 
 // v += h w f (then / divisor) where w ≠ 0, x += h v, f = f_ext over the
 // structure-of-arrays state (stride a multiple of the lanes). Both
@@ -202,7 +207,9 @@ class ExplicitOffsetState {
   // otherwise clears it.
   bool build(const Body& body, bool force = false);
   void load(const Body& body, const std::vector<Vec3>& f_ext_N);
-  void substeps(Simd simd, double h_s, double alpha_per_s, int count);
+  // end_displacement_ratio non-null: r at the last sub-step's forces (the
+  // state after count − 1 updates), measured in that force pass.
+  void substeps(Simd simd, double h_s, double alpha_per_s, int count, double* end_displacement_ratio = nullptr);
   bool finite() const;
   void store(Body& body) const;
   // As ExplicitFloatState::end_displacement_ratio (scalar and AVX2 give the
@@ -277,13 +284,16 @@ class ExplicitIntegrator final : public Integrator {
   // of a spring's ends, measured on the last state, gives a bound on the
   // deformed stiffness; if substep_safety × kVerifiedSafetyPerSafety (0.95 by
   // default) of the stable step under that bound needs fewer sub-steps, the
-  // step runs with them and r is measured again on the state reached; the
-  // step is accepted if the bound there allows them too, else run again from
-  // the body (untouched until a step is accepted) with the usual count or
-  // more. So a shortened step is verified at both of its ends (not in
-  // between: the margin is for that). The measuring pass costs 0.4-0.8 of a
-  // sub-step, so it runs every step only while it pays; otherwise every
-  // kRemeasureSteps steps to see whether it would.
+  // step runs with them and r is measured again near its end (on the offset
+  // layout at the last sub-step's forces, inside that force pass; on the
+  // gathered streams on the state reached, in a pass of its own); the step
+  // is accepted if the bound there allows them too, else run again from the
+  // body (untouched until a step is accepted) with the usual count or more.
+  // So a shortened step is verified at its start and near its end (not at
+  // every sub-step: the margin is for that). A pass of its own costs
+  // 0.4-0.8 of a sub-step, so the count is shortened only where that saves
+  // one; without shortening, r is measured every kRemeasureSteps steps to
+  // see whether it would.
   static constexpr double kVerifiedSafetyPerSafety = 19.0 / 16.0;  // 0.8 -> 0.95
   static constexpr int kRemeasureSteps = 64;
   // r of the last state measured; steps taken with fewer sub-steps, and
@@ -314,9 +324,13 @@ class ExplicitIntegrator final : public Integrator {
  private:
   // Spring stream, stable bound and padded state sized for the topology.
   void build_layout(const Body& body);
-  // Copies the body's state in; runs `count` sub-steps on the padded copy.
+  // Copies the body's state in; runs `count` sub-steps on the padded copy
+  // (end_displacement_ratio non-null: and measures r, on the offset layout
+  // in the last sub-step's force pass, on the gathered streams in a pass of
+  // their own over the state reached; body: the double stream's rest
+  // positions).
   void load(const Body& body, const std::vector<Vec3>& f_ext_N);
-  void advance(double h_s, int count);
+  void advance(double h_s, int count, double* end_displacement_ratio = nullptr, const Body* body = nullptr);
   // r of the padded copy (float and offset states: their own; the double
   // stream: positions minus the body's rest positions).
   double measure_end_displacement_ratio(const Body& body) const;

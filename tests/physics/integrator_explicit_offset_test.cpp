@@ -289,6 +289,30 @@ TEST(OffsetLayout, EndDisplacementRatioIsTheBodysAndTheSameOnEitherInstructionSe
     EXPECT_EQ(d.end_displacement_ratio(Simd::kAvx2), d.end_displacement_ratio(Simd::kScalar));
     EXPECT_EQ(s.end_displacement_ratio(Simd::kAvx2), s.end_displacement_ratio(Simd::kScalar));
   }
+  // Measured inside a sub-step's force pass (one sub-step: the loaded
+  // state's forces), damped and undamped kernels, either instruction set:
+  // the same value as the pass of its own.
+  for (const bool damped : {true, false}) {
+    Body b = uniform_beam(3, damped);
+    jiggle(b, 5);
+    for (const Simd simd : {Simd::kScalar, detected_simd()}) {
+      ExplicitOffsetState<double> dd;
+      ASSERT_TRUE(dd.build(b, true));
+      dd.load(b, f);
+      const double alone_d = dd.end_displacement_ratio(simd);
+      double in_pass_d = -1.0;
+      dd.substeps(simd, 1e-6, 0.0, 1, &in_pass_d);
+      EXPECT_EQ(in_pass_d, alone_d) << "damped " << damped;
+      ExplicitOffsetState<float> ss;
+      ASSERT_TRUE(ss.build(b, true));
+      ss.load(b, f);
+      const double alone_s = ss.end_displacement_ratio(simd);
+      double in_pass_s = -1.0;
+      ss.substeps(simd, 1e-6, 0.0, 1, &in_pass_s);
+      EXPECT_EQ(in_pass_s, alone_s) << "damped " << damped;
+      EXPECT_NEAR(in_pass_d, expected, 1e-12 * expected);
+    }
+  }
 }
 
 // A state gone non-finite (or past the finiteness limit: 1e150 N is finite
