@@ -6,6 +6,7 @@
 #include <limits>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "physics/forces.hpp"
@@ -292,25 +293,23 @@ TEST(OffsetLayout, EndDisplacementRatioIsTheBodysAndTheSameOnEitherInstructionSe
   // Measured inside a sub-step's force pass (one sub-step: the loaded
   // state's forces), damped and undamped kernels, either instruction set:
   // the same value as the pass of its own.
+  const auto in_pass_and_alone = [&](auto state, const Body& b, Simd simd) {
+    EXPECT_TRUE(state.build(b, true));
+    state.load(b, f);
+    const double alone = state.end_displacement_ratio(simd);
+    double in_pass = -1.0;
+    state.substeps(simd, 1e-6, 0.0, 1, &in_pass);
+    return std::make_pair(in_pass, alone);
+  };
   for (const bool damped : {true, false}) {
     Body b = uniform_beam(3, damped);
     jiggle(b, 5);
     for (const Simd simd : {Simd::kScalar, detected_simd()}) {
-      ExplicitOffsetState<double> dd;
-      ASSERT_TRUE(dd.build(b, true));
-      dd.load(b, f);
-      const double alone_d = dd.end_displacement_ratio(simd);
-      double in_pass_d = -1.0;
-      dd.substeps(simd, 1e-6, 0.0, 1, &in_pass_d);
+      const auto [in_pass_d, alone_d] = in_pass_and_alone(ExplicitOffsetState<double>{}, b, simd);
       EXPECT_EQ(in_pass_d, alone_d) << "damped " << damped;
-      ExplicitOffsetState<float> ss;
-      ASSERT_TRUE(ss.build(b, true));
-      ss.load(b, f);
-      const double alone_s = ss.end_displacement_ratio(simd);
-      double in_pass_s = -1.0;
-      ss.substeps(simd, 1e-6, 0.0, 1, &in_pass_s);
-      EXPECT_EQ(in_pass_s, alone_s) << "damped " << damped;
       EXPECT_NEAR(in_pass_d, expected, 1e-12 * expected);
+      const auto [in_pass_s, alone_s] = in_pass_and_alone(ExplicitOffsetState<float>{}, b, simd);
+      EXPECT_EQ(in_pass_s, alone_s) << "damped " << damped;
     }
   }
 }
