@@ -557,10 +557,13 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   // measuring pass costs 0.4-0.8 of a sub-step.
   if (end_displacement_ratio_ < 0.0 || steps_since_measured_ >= kRemeasureSteps) {
     end_displacement_ratio_ = measure_end_displacement_ratio(body);
+    growth_per_step_ = 0.0;
     steps_since_measured_ = 0;
   }
   ++steps_since_measured_;
-  const int fewer = verified_substeps(dt_s, end_displacement_ratio_);
+  // Chosen for r grown by as much again as over the last step, so a load's
+  // onset (r rising step after step) does not run steps twice.
+  const int fewer = verified_substeps(dt_s, end_displacement_ratio_ + growth_per_step_);
   if (fewer < count) {
     double reached = 0.0;
     advance(dt_s / fewer, fewer, &reached, &body);
@@ -571,6 +574,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     }
     steps_since_measured_ = 0;
     if (verified_substeps(dt_s, reached) <= fewer) {
+      growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
       end_displacement_ratio_ = reached;
       ++verified_steps_;
       out.substeps = fewer;
@@ -581,6 +585,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     }
     // The state reached needs more: run the step again from the body, with
     // the margin as before or what the bound asks there, whichever is more.
+    growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
     end_displacement_ratio_ = reached;
     ++rerun_steps_;
     out.rerun = true;
