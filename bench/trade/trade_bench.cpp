@@ -8,6 +8,10 @@
 //                  uniform reference at the same max depth and integrator
 //                  settings; uniform levels 0..max depth are the baseline curve.
 //                  --csv FILE, --svg FILE (log-log, one panel per setting).
+//                  --scene-file FILE [--set key.path=value ...]: the sweep
+//                  on a scene file of your own (its loads, boundary
+//                  conditions, material and probes; the sweep sets the mesh,
+//                  the integrator and dt of each run).
 //   --beam-theory  model error: static tip of the PERFORMANCE.md beam against
 //                  Euler-Bernoulli and Timoshenko, uniform depths, both laws.
 //   --quick        shrinks everything (short runs, fewer points).
@@ -43,16 +47,19 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "physics/boundary.hpp"
+#include "physics/field_error.hpp"
 #include "physics/forces.hpp"
 #include "physics/probes.hpp"
 #include "physics/simulation.hpp"
 #include "scene/scene.hpp"
+#include "scene/scene_yaml.hpp"
 
 namespace {
 
@@ -82,18 +89,20 @@ bool g_cost_uses_cpu = false;
 struct Options {
   bool table1 = false, sweep = false, beam_theory = false, quick = false;
   std::string csv_path, svg_path;
-  std::string sweep_scene = "cantilever";     // or "beam", "beam-r"
-  std::string preconditioner = "jacobi";      // implicit CG: jacobi | two_level | auto (the scene default)
-  std::string explicit_precision = "double";  // explicit rung: double | float
-  std::string metric = "rms";                 // plotted error: rms | max | tip
-  std::vector<double> th_Pa;                  // empty: the scene's default list
-  std::vector<int> max_depths;                // empty: {3, 6} (quick: {3})
-  std::vector<std::string> integrators;       // empty: all three
-  std::vector<double> dts_s;                  // empty: {1 ms, 5 ms}
-  double sweep_duration_s = 0.0;              // 0: the scene's default
-  double run_wall_cap_s = 0.0;                // 0: default (quick 3 s, full 30 s)
-  int beam_max_depth = -1;                    // -1: 6 (quick: 4)
-  bool cpu_clock = false;                     // --clock cpu: verdicts and plot use thread CPU time
+  std::string sweep_scene = "cantilever";    // or "beam", "beam-r"
+  std::string scene_file;                    // --scene-file: a user's scene instead
+  std::vector<std::string> scene_overrides;  // --set key.path=value, applied to the scene file
+  std::string preconditioner;      // implicit CG: jacobi | two_level | auto; empty: jacobi (a scene file: its own)
+  std::string explicit_precision;  // explicit rung: double | float; empty: double (a scene file: its own)
+  std::string metric = "rms";      // plotted error: rms | max | tip
+  std::vector<double> th_Pa;       // empty: the scene's default list
+  std::vector<int> max_depths;     // empty: {3, 6} (quick: {3})
+  std::vector<std::string> integrators;  // empty: all three
+  std::vector<double> dts_s;             // empty: {1 ms, 5 ms}
+  double sweep_duration_s = 0.0;         // 0: the scene's default
+  double run_wall_cap_s = 0.0;           // 0: default (quick 3 s, full 30 s)
+  int beam_max_depth = -1;               // -1: 6 (quick: 4)
+  bool cpu_clock = false;                // --clock cpu: verdicts and plot use thread CPU time
 };
 
 std::vector<std::string> split_list(const std::string& s) {
@@ -108,12 +117,16 @@ void usage() {
   std::puts(
       "usage: trade_bench [--table1] [--sweep] [--beam-theory] [--quick]\n"
       "  sweep: [--csv FILE] [--svg FILE] [--scene cantilever|beam|beam-r] [--th 2,20,...]\n"
+      "         [--scene-file FILE [--set key.path=value ...]]   (a scene of your own; defaults from it:\n"
+      "          Th x 1/4, 1, 4, its max depth, its dt; uniform levels from its min depth)\n"
       "         [--depths 3,6] [--integrators implicit,explicit,projective] [--dts 0.001,0.005]\n"
       "         [--duration S] [--metric rms|max|tip] [--run-cap S] [--clock wall|cpu]\n"
-      "         [--preconditioner jacobi|two_level|auto]   (default jacobi, as the README's tables)\n"
-      "         [--explicit-precision double|float]   (the explicit rung's arithmetic, default double)\n"
+      "         [--preconditioner jacobi|two_level|auto]   (default jacobi, as the README's tables;\n"
+      "          a scene file: its own)\n"
+      "         [--explicit-precision double|float]   (the explicit rung's arithmetic, default double;\n"
+      "          a scene file: its own)\n"
       "  beam-theory: [--beam-depth D]\n"
-      "no mode flag: all three modes");
+      "no mode flag: all three modes (with --scene-file: the sweep)");
 }
 
 Options parse(int argc, char** argv) {
@@ -138,6 +151,10 @@ Options parse(int argc, char** argv) {
       o.svg_path = value(i);
     else if (a == "--scene")
       o.sweep_scene = value(i);
+    else if (a == "--scene-file")
+      o.scene_file = value(i);
+    else if (a == "--set")
+      o.scene_overrides.push_back(value(i));
     else if (a == "--metric")
       o.metric = value(i);
     else if (a == "--th") {
@@ -173,9 +190,16 @@ Options parse(int argc, char** argv) {
       throw std::invalid_argument("unknown argument " + a);
     }
   }
-  if (!o.table1 && !o.sweep && !o.beam_theory) o.table1 = o.sweep = o.beam_theory = true;
+  if (!o.table1 && !o.sweep && !o.beam_theory) {
+    if (o.scene_file.empty())
+      o.table1 = o.sweep = o.beam_theory = true;
+    else
+      o.sweep = true;  // a scene file is for the sweep
+  }
   if (o.sweep_scene != "cantilever" && o.sweep_scene != "beam" && o.sweep_scene != "beam-r")
     throw std::invalid_argument("--scene must be cantilever, beam or beam-r");
+  if (!o.scene_overrides.empty() && o.scene_file.empty())
+    throw std::invalid_argument("--set applies to --scene-file; the built-in scenes take none");
   if (o.metric != "rms" && o.metric != "max" && o.metric != "tip")
     throw std::invalid_argument("--metric must be rms, max or tip");
   return o;
@@ -278,97 +302,6 @@ sc::Scene beam(const MeshChoice& m, sc::IntegratorKind kind, double dt_s, double
 }
 
 // ---------------------------------------------------------------------------
-// Displacement fields and their comparison
-
-struct Field {
-  std::vector<Vec3> rest, u;
-  std::vector<std::uint8_t> free;
-  std::vector<std::array<int, 4>> tets;  // compact node indices
-};
-
-Field capture(const ph::Body& body) {
-  Field f;
-  std::vector<int> compact(body.x_m.size(), -1);
-  body.mesh().for_each_node([&](ph::NodeId n, const tissue::mesh::Node&) {
-    compact[n] = static_cast<int>(f.rest.size());
-    f.rest.push_back(body.rest_m[n]);
-    f.u.push_back(body.x_m[n] - body.rest_m[n]);
-    f.free.push_back(body.kind[n] == ph::NodeKind::kFree ? 1 : 0);
-  });
-  body.mesh().for_each_tet([&](ph::TetId, const tissue::mesh::Tet& t) {
-    f.tets.push_back({compact[t.v[0]], compact[t.v[1]], compact[t.v[2]], compact[t.v[3]]});
-  });
-  return f;
-}
-
-struct FieldError {
-  double rms_rel = NAN, max_rel = NAN;
-  double ref_max_m = 0.0;
-  std::size_t compared = 0, unlocated = 0;
-};
-
-// Interpolates `test` at every node of `ref` (bins over the reference nodes,
-// each test tet visits the bins its rest bounding box covers).
-FieldError compare_fields(const Field& ref, const Field& test) {
-  FieldError e;
-  const std::size_t n = ref.rest.size();
-  Vec3 lo = ref.rest[0], hi = ref.rest[0];
-  for (const auto& p : ref.rest) {
-    lo = lo.cwiseMin(p);
-    hi = hi.cwiseMax(p);
-  }
-  const Vec3 extent = hi - lo;
-  const double cell = std::cbrt(std::max(extent.prod(), 1e-30) / static_cast<double>(n));
-  std::array<int, 3> dims{};
-  for (int a = 0; a < 3; ++a) dims[a] = static_cast<int>(extent[a] / cell) + 1;
-  auto bin_of = [&](int a, double x) { return std::clamp(static_cast<int>((x - lo[a]) / cell), 0, dims[a] - 1); };
-  std::vector<std::vector<int>> bins(static_cast<std::size_t>(dims[0]) * dims[1] * dims[2]);
-  auto bin_index = [&](int i, int j, int k) { return (static_cast<std::size_t>(k) * dims[1] + j) * dims[0] + i; };
-  for (std::size_t i = 0; i < n; ++i)
-    bins[bin_index(bin_of(0, ref.rest[i][0]), bin_of(1, ref.rest[i][1]), bin_of(2, ref.rest[i][2]))].push_back(
-        static_cast<int>(i));
-
-  std::vector<Vec3> interpolated(n, Vec3::Zero());
-  std::vector<std::uint8_t> located(n, 0);
-  const double tol = 1e-9 * extent.maxCoeff();
-  for (const auto& t : test.tets) {
-    const Vec3 &a = test.rest[t[0]], &b = test.rest[t[1]], &c = test.rest[t[2]], &d = test.rest[t[3]];
-    const Vec3 tlo = a.cwiseMin(b).cwiseMin(c).cwiseMin(d).array() - tol;
-    const Vec3 thi = a.cwiseMax(b).cwiseMax(c).cwiseMax(d).array() + tol;
-    for (int k = bin_of(2, tlo[2]); k <= bin_of(2, thi[2]); ++k)
-      for (int j = bin_of(1, tlo[1]); j <= bin_of(1, thi[1]); ++j)
-        for (int i = bin_of(0, tlo[0]); i <= bin_of(0, thi[0]); ++i)
-          for (int r : bins[bin_index(i, j, k)]) {
-            if (located[r]) continue;
-            const Vec3& p = ref.rest[r];
-            if ((p.array() < tlo.array()).any() || (p.array() > thi.array()).any()) continue;
-            const auto l = ph::barycentric(p, a, b, c, d);
-            if (std::min({l[0], l[1], l[2], l[3]}) < -1e-9) continue;
-            located[r] = 1;
-            interpolated[r] = l[0] * test.u[t[0]] + l[1] * test.u[t[1]] + l[2] * test.u[t[2]] + l[3] * test.u[t[3]];
-          }
-  }
-  for (std::size_t i = 0; i < n; ++i) e.ref_max_m = std::max(e.ref_max_m, ref.u[i].norm());
-  double sum2 = 0.0, worst = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!ref.free[i]) continue;
-    if (!located[i]) {
-      ++e.unlocated;
-      continue;
-    }
-    const double err = (interpolated[i] - ref.u[i]).norm();
-    sum2 += err * err;
-    worst = std::max(worst, err);
-    ++e.compared;
-  }
-  if (e.compared > 0 && e.ref_max_m > 0.0) {
-    e.rms_rel = std::sqrt(sum2 / static_cast<double>(e.compared)) / e.ref_max_m;
-    e.max_rel = worst / e.ref_max_m;
-  }
-  return e;
-}
-
-// ---------------------------------------------------------------------------
 // Running
 
 struct RunStats {
@@ -451,7 +384,7 @@ void run_table1(const Options& o) {
     std::size_t nodes_t2 = 0, tets_t2 = 0, springs_t2 = 0, nodes_end = 0, tets_end = 0;
     std::size_t peak_nodes = 0, peak_tets = 0;
     Vec3 tip_bottom = Vec3::Zero(), tip_centre = Vec3::Zero();
-    Field field;
+    ph::DisplacementField field;
     double energy_t2_J = 0.0, work_t2_J = 0.0, energy_end_J = 0.0, max_rise_J = 0.0, max_rise_t = 0.0;
     long splits = 0, merges = 0, merges_after = 0;
     double wall_cost_total = NAN, cpu_cost_total = NAN;
@@ -476,7 +409,7 @@ void run_table1(const Options& o) {
     row.springs_t2 = sim.body().mesh().edge_count();
     row.tip_bottom = sim.probe_displacement_m(0);
     row.tip_centre = sim.probe_displacement_m(1);
-    row.field = capture(sim.body());
+    row.field = ph::capture_displacement_field(sim.body());
     row.last_adapt_t2_s = row.st.last_adapt_s;
     row.energy_t2_J = sim.kinetic_energy_J() + sim.elastic_energy_J();
     row.work_t2_J = sim.counters().external_work_J;
@@ -527,7 +460,7 @@ void run_table1(const Options& o) {
     const bool is_high = &row == &high;
     const double e_bottom = (row.tip_bottom - high.tip_bottom).norm() / high.tip_bottom.norm();
     const double e_centre = (row.tip_centre - high.tip_centre).norm() / high.tip_centre.norm();
-    const FieldError fe = is_high ? FieldError{} : compare_fields(high.field, row.field);
+    const ph::FieldError fe = is_high ? ph::FieldError{} : ph::compare_displacement_fields(high.field, row.field);
     std::printf(
         "| %s | %zu | %zu | %zu | %zu | %zu | %.3f | %s | %.3f | %s | %s | %s | %.3f (%.3f) | %.3f (%.3f) | %zu / "
         "%zu |\n",
@@ -698,7 +631,7 @@ struct Point {
   int deepest = 0;                  // deepest leaf tet at the end
   std::size_t tets_at_deepest = 0;  // and how many leaves sit there
   Vec3 tip = Vec3::Zero();
-  Field field;  // dropped once errors are filled
+  ph::DisplacementField field;  // dropped once errors are filled
   bool captured = false;
   // Errors vs the reference (filled when both ran)
   double tip_err = NAN, rms_err = NAN, max_err = NAN;
@@ -714,9 +647,11 @@ struct Point {
 };
 
 struct SweepSetup {
-  std::string scene;
-  sc::CgPreconditioner preconditioner = sc::CgPreconditioner::kJacobi;
-  sc::ExplicitPrecision explicit_precision = sc::ExplicitPrecision::kDouble;
+  std::string scene;                                        // its name (CSV, plot)
+  std::optional<sc::Scene> from_file;                       // --scene-file: the user's scene
+  int base_depth = 0;                                       // uniform levels and adaptive runs start here
+  std::optional<sc::CgPreconditioner> preconditioner;       // unset: the scene's own
+  std::optional<sc::ExplicitPrecision> explicit_precision;  // unset: the scene's own
   double duration_s;
   std::vector<double> th_Pa;
   std::vector<int> max_depths;
@@ -727,7 +662,14 @@ struct SweepSetup {
 
 sc::Scene sweep_scene(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kind, double dt) {
   sc::Scene out;
-  if (s.scene == "beam" || s.scene == "beam-r") {
+  if (s.from_file) {
+    // The user's scene as it is, but for what each run of the sweep sets.
+    out = *s.from_file;
+    apply_mesh(out, m);
+    if (m.adaptive) out.adaptivity.min_depth = s.base_depth;
+    out.integrator.kind = kind;
+    out.integrator.dt_s = dt;
+  } else if (s.scene == "beam" || s.scene == "beam-r") {
     // Static-ish: ramp the load over a quarter of the run and damp the first
     // bending mode (2.3 Hz) about critically with mass-proportional damping.
     out = beam(m, kind, dt, 0.25 * s.duration_s, s.scene == "beam-r");
@@ -735,8 +677,8 @@ sc::Scene sweep_scene(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKi
   } else {
     out = paper_cantilever(m, kind, dt, std::numeric_limits<double>::infinity());
   }
-  out.integrator.cg_preconditioner = s.preconditioner;
-  out.integrator.explicit_precision = s.explicit_precision;
+  if (s.preconditioner) out.integrator.cg_preconditioner = *s.preconditioner;
+  if (s.explicit_precision) out.integrator.explicit_precision = *s.explicit_precision;
   return out;
 }
 
@@ -763,8 +705,9 @@ Point run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kin
     if (t.depth == p.deepest) ++p.tets_at_deepest;
   });
   if (p.st.ok && !p.st.capped) {
-    p.tip = sim.probe_displacement_m(0);
-    p.field = capture(sim.body());
+    // The first probe is the tip (a scene file without probes has no tip error).
+    p.tip = sim.probe_count() > 0 ? sim.probe_displacement_m(0) : Vec3::Constant(NAN);
+    p.field = ph::capture_displacement_field(sim.body());
     p.captured = true;
   }
   return p;
@@ -773,7 +716,7 @@ Point run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kin
 void fill_errors(Point& p, const Point& ref) {
   if (!p.captured || !ref.captured) return;
   p.tip_err = (p.tip - ref.tip).norm() / ref.tip.norm();
-  const FieldError fe = compare_fields(ref.field, p.field);
+  const ph::FieldError fe = ph::compare_displacement_fields(ref.field, p.field);
   p.rms_err = fe.rms_rel;
   p.max_err = fe.max_rel;
   p.unlocated = fe.unlocated;
@@ -972,32 +915,65 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
 void run_sweep(const Options& o) {
   SweepSetup s;
   s.scene = o.sweep_scene;
-  s.preconditioner = o.preconditioner == "two_level" ? sc::CgPreconditioner::kTwoLevel
-                     : o.preconditioner == "auto"    ? sc::CgPreconditioner::kAuto
+  if (!o.scene_file.empty()) {
+    s.from_file = sc::load_scene_file_with_overrides(o.scene_file, o.scene_overrides);
+    s.scene = s.from_file->name;
+    s.base_depth = s.from_file->adaptivity.min_depth;
+  }
+  const std::string preconditioner = !o.preconditioner.empty() ? o.preconditioner : s.from_file ? "" : "jacobi";
+  if (!preconditioner.empty())
+    s.preconditioner = preconditioner == "two_level" ? sc::CgPreconditioner::kTwoLevel
+                       : preconditioner == "auto"    ? sc::CgPreconditioner::kAuto
                                                      : sc::CgPreconditioner::kJacobi;
-  s.explicit_precision =
-      o.explicit_precision == "float" ? sc::ExplicitPrecision::kFloat : sc::ExplicitPrecision::kDouble;
-  const bool is_beam = s.scene == "beam" || s.scene == "beam-r";
+  const std::string precision = !o.explicit_precision.empty() ? o.explicit_precision : s.from_file ? "" : "double";
+  if (!precision.empty())
+    s.explicit_precision = precision == "float" ? sc::ExplicitPrecision::kFloat : sc::ExplicitPrecision::kDouble;
+  const bool is_beam = !s.from_file && (s.scene == "beam" || s.scene == "beam-r");
   s.duration_s = o.sweep_duration_s > 0 ? o.sweep_duration_s : is_beam ? (o.quick ? 0.5 : 1.0) : (o.quick ? 0.2 : 0.5);
   if (!o.th_Pa.empty())
     s.th_Pa = o.th_Pa;
-  else if (is_beam)
+  else if (s.from_file) {  // around the scene's own threshold
+    const double th = s.from_file->adaptivity.refine_threshold_Pa;
+    s.th_Pa = o.quick ? std::vector<double>{th, 4 * th} : std::vector<double>{0.25 * th, th, 4 * th};
+  } else if (is_beam)
     s.th_Pa = o.quick ? std::vector<double>{0.01, 0.1} : std::vector<double>{0.003, 0.01, 0.03, 0.1, 0.3};
   else
     s.th_Pa = o.quick ? std::vector<double>{5, 20, 80} : std::vector<double>{5, 20, 40, 80, 300};
-  s.max_depths = !o.max_depths.empty() ? o.max_depths : (o.quick ? std::vector<int>{3} : std::vector<int>{3, 6});
+  if (!o.max_depths.empty())
+    s.max_depths = o.max_depths;
+  else if (s.from_file)
+    s.max_depths = {s.from_file->adaptivity.max_depth};
+  else
+    s.max_depths = o.quick ? std::vector<int>{3} : std::vector<int>{3, 6};
+  for (const int md : s.max_depths)
+    if (md <= s.base_depth)
+      throw std::invalid_argument("max depth " + std::to_string(md) + " leaves nothing to refine above the scene's " +
+                                  "adaptivity.min_depth " + std::to_string(s.base_depth) +
+                                  " (give --depths above it, or raise the scene's adaptivity.max_depth)");
   if (o.integrators.empty())
     s.kinds = {sc::IntegratorKind::kImplicit, sc::IntegratorKind::kExplicit, sc::IntegratorKind::kProjective};
   else
     for (const auto& k : o.integrators) s.kinds.push_back(kind_of(k));
-  s.dts_s = !o.dts_s.empty() ? o.dts_s : std::vector<double>{1e-3, 5e-3};
+  if (!o.dts_s.empty())
+    s.dts_s = o.dts_s;
+  else if (s.from_file)
+    s.dts_s = {s.from_file->integrator.dt_s};
+  else
+    s.dts_s = {1e-3, 5e-3};
   s.wall_cap_s = o.run_wall_cap_s > 0 ? o.run_wall_cap_s : (o.quick ? 3.0 : 30.0);
   const int deepest = *std::max_element(s.max_depths.begin(), s.max_depths.end());
+  // Uniform level L is uniform[L - base_depth].
+  const auto uniform_at = [&](std::vector<Point>& uniform, int level) -> Point& {
+    return uniform[static_cast<std::size_t>(level - s.base_depth)];
+  };
 
-  std::printf("\n## Sweep: %s (%s), state at t = %.2f s%s\n\n", s.scene.c_str(),
-              is_beam ? "0.05 N ramped over the first quarter, Rayleigh alpha 30/s: static-ish"
-                      : "seed §4.1, constant 5 N: static from ~0.3 s on",
-              s.duration_s, o.quick ? " (--quick)" : "");
+  const std::string about = s.from_file ? "scene file " + o.scene_file + ", its loads and boundary conditions"
+                            : is_beam   ? "0.05 N ramped over the first quarter, Rayleigh alpha 30/s: static-ish"
+                                        : "seed §4.1, constant 5 N: static from ~0.3 s on";
+  std::printf("\n## Sweep: %s (%s), state at t = %.2f s%s\n\n", s.scene.c_str(), about.c_str(), s.duration_s,
+              o.quick ? " (--quick)" : "");
+  if (s.from_file && s.from_file->probes.empty())
+    std::printf("The scene has no probes: no tip error (the first probe is the tip).\n");
   std::printf("Th (Pa):");
   for (double t : s.th_Pa) std::printf(" %g", t);
   std::printf("; max depths:");
@@ -1008,10 +984,10 @@ void run_sweep(const Options& o) {
   const auto sweep0 = Clock::now();
   for (auto kind : s.kinds) {
     for (double dt : s.dts_s) {
-      // Uniform levels 0..deepest, run once, compared against each max depth's reference.
+      // Uniform levels base..deepest, run once, compared against each max depth's reference.
       std::vector<Point> uniform;
       std::string stop_reason;  // set once a level failed or hit the cap: finer ones would too
-      for (int level = 0; level <= deepest; ++level) {
+      for (int level = s.base_depth; level <= deepest; ++level) {
         if (!stop_reason.empty()) {
           Point p;
           p.integrator = kind_name(kind);
@@ -1032,9 +1008,9 @@ void run_sweep(const Options& o) {
                      p.status().c_str(), seconds_between(t0, Clock::now()));
       }
       for (int md : s.max_depths) {
-        const Point& ref = uniform[static_cast<std::size_t>(md)];
-        for (int level = 0; level <= md; ++level) {
-          Point p = uniform[static_cast<std::size_t>(level)];
+        const Point& ref = uniform_at(uniform, md);
+        for (int level = s.base_depth; level <= md; ++level) {
+          Point p = uniform_at(uniform, level);
           p.max_depth = md;
           fill_errors(p, ref);
           points.push_back(std::move(p));
@@ -1062,7 +1038,7 @@ void run_sweep(const Options& o) {
         }
       }
       for (auto& p : points) {  // fields are large; keep only what the table and files need
-        if (p.integrator == kind_name(kind) && p.dt_s == dt) p.field = Field{};
+        if (p.integrator == kind_name(kind) && p.dt_s == dt) p.field = ph::DisplacementField{};
       }
     }
   }

@@ -1,0 +1,88 @@
+#include "physics/field_error.hpp"
+
+#include <algorithm>
+
+#include "physics/probes.hpp"
+
+namespace tissue::physics {
+
+DisplacementField capture_displacement_field(const Body& body) {
+  DisplacementField f;
+  std::vector<int> compact(body.x_m.size(), -1);
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    compact[n] = static_cast<int>(f.rest_m.size());
+    f.rest_m.push_back(body.rest_m[n]);
+    f.u_m.push_back(body.x_m[n] - body.rest_m[n]);
+    f.free.push_back(body.kind[n] == NodeKind::kFree ? 1 : 0);
+  });
+  body.mesh().for_each_tet([&](TetId, const mesh::Tet& t) {
+    f.tets.push_back({compact[t.v[0]], compact[t.v[1]], compact[t.v[2]], compact[t.v[3]]});
+  });
+  return f;
+}
+
+FieldError compare_displacement_fields(const DisplacementField& ref, const DisplacementField& test) {
+  FieldError e;
+  const std::size_t n = ref.rest_m.size();
+  if (n == 0) return e;
+  Vec3 lo = ref.rest_m[0], hi = ref.rest_m[0];
+  for (const auto& p : ref.rest_m) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  // Bins of about one reference node each.
+  const Vec3 extent = hi - lo;
+  const double cell = std::max(std::cbrt(std::max(extent.prod(), 1e-30) / static_cast<double>(n)), 1e-12);
+  std::array<int, 3> dims{};
+  for (int a = 0; a < 3; ++a) dims[a] = static_cast<int>(extent[a] / cell) + 1;
+  const auto bin_of = [&](int a, double x) { return std::clamp(static_cast<int>((x - lo[a]) / cell), 0, dims[a] - 1); };
+  const auto bin_index = [&](int i, int j, int k) { return (static_cast<std::size_t>(k) * dims[1] + j) * dims[0] + i; };
+  std::vector<std::vector<int>> bins(static_cast<std::size_t>(dims[0]) * dims[1] * dims[2]);
+  for (std::size_t i = 0; i < n; ++i)
+    bins[bin_index(bin_of(0, ref.rest_m[i][0]), bin_of(1, ref.rest_m[i][1]), bin_of(2, ref.rest_m[i][2]))].push_back(
+        static_cast<int>(i));
+
+  std::vector<Vec3> interpolated(n, Vec3::Zero());
+  std::vector<std::uint8_t> located(n, 0);
+  // Nodes on a tet's face or edge belong to it too (rounding of the rest
+  // positions must not leave them out).
+  const double tol = 1e-9 * std::max(extent.maxCoeff(), 1e-12);
+  for (const auto& t : test.tets) {
+    const Vec3 &a = test.rest_m[t[0]], &b = test.rest_m[t[1]], &c = test.rest_m[t[2]], &d = test.rest_m[t[3]];
+    const Vec3 tlo = a.cwiseMin(b).cwiseMin(c).cwiseMin(d).array() - tol;
+    const Vec3 thi = a.cwiseMax(b).cwiseMax(c).cwiseMax(d).array() + tol;
+    for (int k = bin_of(2, tlo[2]); k <= bin_of(2, thi[2]); ++k)
+      for (int j = bin_of(1, tlo[1]); j <= bin_of(1, thi[1]); ++j)
+        for (int i = bin_of(0, tlo[0]); i <= bin_of(0, thi[0]); ++i)
+          for (const int r : bins[bin_index(i, j, k)]) {
+            if (located[r]) continue;
+            const Vec3& p = ref.rest_m[r];
+            if ((p.array() < tlo.array()).any() || (p.array() > thi.array()).any()) continue;
+            const auto l = barycentric(p, a, b, c, d);
+            if (std::min({l[0], l[1], l[2], l[3]}) < -1e-9) continue;
+            located[r] = 1;
+            interpolated[r] =
+                l[0] * test.u_m[t[0]] + l[1] * test.u_m[t[1]] + l[2] * test.u_m[t[2]] + l[3] * test.u_m[t[3]];
+          }
+  }
+  for (std::size_t i = 0; i < n; ++i) e.reference_max_m = std::max(e.reference_max_m, ref.u_m[i].norm());
+  double sum2 = 0.0, worst = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!ref.free[i]) continue;
+    if (!located[i]) {
+      ++e.unlocated;
+      continue;
+    }
+    const double err = (interpolated[i] - ref.u_m[i]).norm();
+    sum2 += err * err;
+    worst = std::max(worst, err);
+    ++e.compared;
+  }
+  if (e.compared > 0 && e.reference_max_m > 0.0) {
+    e.rms_rel = std::sqrt(sum2 / static_cast<double>(e.compared)) / e.reference_max_m;
+    e.max_rel = worst / e.reference_max_m;
+  }
+  return e;
+}
+
+}  // namespace tissue::physics

@@ -1,0 +1,164 @@
+// trade_bench's sweep on a user's scene file (--scene-file, --set): it runs
+// the scene's own loads and probes on uniform levels and adaptive meshes and
+// measures each against the uniform reference at the maximum depth.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "support/process_support.hpp"
+
+namespace {
+
+using tissue::testing::quote;
+using tissue::testing::run;
+using tissue::testing::RunResult;
+using tissue::testing::slurp;
+using tissue::testing::TempDir;
+using tissue::testing::write_text;
+
+const std::string kCantilever = std::string(TISSUE_SOURCE_DIR) + "/config/scenes/cantilever.yaml";
+
+// One CSV record (quoted fields may hold commas and doubled quotes).
+std::vector<std::string> split_csv(const std::string& line) {
+  std::vector<std::string> fields(1);
+  bool quoted = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted && c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
+      fields.back() += '"';
+      ++i;
+    } else if (c == '"') {
+      quoted = !quoted;
+    } else if (c == ',' && !quoted) {
+      fields.emplace_back();
+    } else {
+      fields.back() += c;
+    }
+  }
+  return fields;
+}
+
+// The CSV's rows as column name -> value.
+std::vector<std::map<std::string, std::string>> read_csv(const std::string& path) {
+  std::istringstream in(slurp(path));
+  std::string line;
+  std::vector<std::map<std::string, std::string>> rows;
+  if (!std::getline(in, line)) return rows;
+  const std::vector<std::string> header = split_csv(line);
+  while (std::getline(in, line)) {
+    const std::vector<std::string> fields = split_csv(line);
+    std::map<std::string, std::string> row;
+    for (std::size_t i = 0; i < header.size() && i < fields.size(); ++i) row[header[i]] = fields[i];
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+double number(const std::map<std::string, std::string>& row, const std::string& column) {
+  const auto it = row.find(column);
+  return it == row.end() || it->second.empty() ? NAN : std::stod(it->second);
+}
+
+// A short implicit sweep of `scene` to max depth 2; extra arguments appended.
+RunResult sweep(const TempDir& dir, const std::string& scene, const std::string& csv, const std::string& extra = "") {
+  return run(quote(TRADE_BENCH_BINARY) + " --scene-file " + quote(scene) +
+                 " --quick --integrators implicit --depths 2 --duration 0.05 --csv " + quote(csv) + " " + extra,
+             dir);
+}
+
+TEST(TradeBench, SweepsASceneFileAgainstItsUniformReference) {
+  TempDir dir;
+  const RunResult r = sweep(dir, kCantilever, dir / "sweep.csv");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.find("Table 1"), std::string::npos) << "a scene file runs the sweep only";
+  const auto rows = read_csv(dir / "sweep.csv");
+  std::map<std::string, std::map<std::string, std::string>> by_mesh;  // "L0".."L2", "Th20", "Th80"
+  for (const auto& row : rows) {
+    EXPECT_EQ(row.at("scene"), "cantilever");
+    EXPECT_EQ(row.at("status"), "ok") << row.at("message");
+    const std::string key = row.at("mode") == "uniform" ? "L" + row.at("level") : "Th" + row.at("th_Pa");
+    by_mesh[key] = row;
+  }
+  // Uniform levels from the scene's min depth (0) to 2; Th around the
+  // scene's own 20 Pa (--quick: 1x and 4x).
+  ASSERT_EQ(by_mesh.size(), 5u) << r.out;
+  for (const std::string key : {"L0", "L1", "L2", "Th20", "Th80"}) ASSERT_EQ(by_mesh.count(key), 1u) << key;
+  // The reference against itself: no error; the coarsest level: some.
+  EXPECT_EQ(number(by_mesh["L2"], "rms_err_rel"), 0.0);
+  EXPECT_EQ(number(by_mesh["L2"], "tip_err_rel"), 0.0);
+  EXPECT_GT(number(by_mesh["L0"], "rms_err_rel"), 1e-3);
+  EXPECT_GT(number(by_mesh["L0"], "tip_err_rel"), 1e-3);
+  // The adaptive runs refined (their leaves reach depth 2) and have an error.
+  for (const std::string key : {"Th20", "Th80"}) {
+    EXPECT_EQ(number(by_mesh[key], "deepest_level"), 2.0) << key;
+    EXPECT_TRUE(std::isfinite(number(by_mesh[key], "rms_err_rel"))) << key;
+  }
+  // The tip is the scene's first probe: it bends down under the 5 N load.
+  EXPECT_LT(number(by_mesh["L2"], "tip_uz_m"), -1e-4);
+}
+
+// --set reaches the scene: half the load, half the (small) deflection.
+TEST(TradeBench, OverridesApplyToTheSceneFile) {
+  TempDir dir;
+  ASSERT_EQ(sweep(dir, kCantilever, dir / "full.csv").exit_code, 0);
+  const RunResult half = sweep(dir, kCantilever, dir / "half.csv", "--set 'loads[0].total_force_N[2]=-2.5'");
+  ASSERT_EQ(half.exit_code, 0) << half.err;
+  const auto reference_tip = [&](const std::string& csv) -> double {
+    for (const auto& row : read_csv(csv))
+      if (row.at("mode") == "uniform" && row.at("level") == "2") return number(row, "tip_uz_m");
+    return NAN;
+  };
+  const double ratio = reference_tip(dir / "half.csv") / reference_tip(dir / "full.csv");
+  EXPECT_NEAR(ratio, 0.5, 0.02);
+}
+
+TEST(TradeBench, ASceneWithoutProbesHasNoTipErrorButANodeError) {
+  TempDir dir;
+  write_text(dir / "block.yaml",
+             "name: block\n"
+             "object: {cubes: [3, 2, 2], cube_size_m: 0.02}\n"
+             "fixed: [{region: {box: {min_m: [0, 0, 0], max_m: [0, 0.04, 0.04]}}}]\n"
+             "loads: [{name: push, region: {box: {min_m: [0.06, 0, 0], max_m: [0.06, 0.04, 0.04]}},\n"
+             "         total_force_N: [0, 0, -1]}]\n"
+             "adaptivity: {enabled: true, refine_threshold_Pa: 10, max_depth: 2}\n");
+  const RunResult r = sweep(dir, dir / "block.yaml", dir / "block.csv");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("no probes"), std::string::npos) << r.out;
+  const auto rows = read_csv(dir / "block.csv");
+  ASSERT_FALSE(rows.empty());
+  for (const auto& row : rows) {
+    EXPECT_EQ(row.at("tip_err_rel"), "") << "no probe, no tip";
+    if (row.at("mode") == "uniform" && row.at("level") == "0") {
+      EXPECT_GT(number(row, "rms_err_rel"), 0.0);
+    }
+  }
+}
+
+TEST(TradeBench, ABadSceneFileIsAnErrorNamingTheFileAndKey) {
+  TempDir dir;
+  write_text(dir / "bad.yaml", "object: {cubes: [2, 2, 2], cube_size_m: 0.02}\nmaterial: {density_kg_per_m3: -1}\n");
+  const RunResult r = sweep(dir, dir / "bad.yaml", dir / "bad.csv");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find(dir / "bad.yaml"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("material.density_kg_per_m3"), std::string::npos) << r.err;
+  // And a bad override names itself.
+  const RunResult o = sweep(dir, kCantilever, dir / "o.csv", "--set 'integrator.dt_s=-1'");
+  EXPECT_EQ(o.exit_code, 2);
+  EXPECT_NE(o.err.find("integrator.dt_s"), std::string::npos) << o.err;
+  EXPECT_NE(o.err.find("--set"), std::string::npos) << o.err;
+}
+
+TEST(TradeBench, AMaxDepthAtTheScenesMinDepthIsRefused) {
+  TempDir dir;
+  const RunResult r = run(quote(TRADE_BENCH_BINARY) + " --scene-file " + quote(kCantilever) +
+                              " --set adaptivity.min_depth=1 --depths 1 --quick --integrators implicit",
+                          dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("adaptivity.min_depth 1"), std::string::npos) << r.err;
+}
+
+}  // namespace
