@@ -37,6 +37,18 @@
 // summation order into the nodes differs, so the two layouts agree to
 // rounding, not bit for bit. Scalar and AVX2 kernels of this layout do the
 // same operations in the same order: bit-identical.
+//
+// How much of the float sub-step is its arithmetic (2026-11-25, a timing
+// probe, not kept: AvxFloat::force with its square root and divisions
+// replaced by multiplications; BM_ExplicitSubstep/{0,3}/0/{0,1}/1/0, three
+// rounds alternating with the shipped kernel, the other core busy): 10-17 %
+// faster (10^3 springs damped 2.25-2.29 -> 1.93-1.95 ns per spring, 7x10^3
+// undamped 1.64-1.73 -> 1.37-1.41), still 2.97-3.08x the bandwidth bound
+// measured beside it (three more runs of the probe, 11 of 12 readings). So no cheaper square root or division (an approximate
+// reciprocal square root included, which would also give different bits on
+// different CPUs) brings this layout within 2x of the bound at
+// cache-resident sizes: the loads, stores and lane shuffles of the group
+// loop are most of it.
 #include <algorithm>
 #include <array>
 #include <cmath>

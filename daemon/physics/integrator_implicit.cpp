@@ -54,6 +54,18 @@
 //    at cache-resident sizes, ahead only where this one waits on memory), and
 //    the transposes eat the rest. It would need the CG vectors, the setup
 //    pass and the coarse correction in the layout's order throughout.
+//  - Tried and dropped (2026-11-25, later; BM_ImplicitMatvec, three rounds
+//    alternating with the shipped build, the other core busy compiling):
+//    records in single precision (e and iso as floats widened by one
+//    vcvtps2pd, products in double; 24 instead of 40 B per spring, the
+//    operator still symmetric positive definite): R2 66-67 vs 66-67, R3
+//    72-79 vs 71-73 ns per spring per cg20 step, so the matvec does not wait
+//    on its record stream; a non-temporal prefetch of the records 24 ahead
+//    (to keep p and ap in L2): 1-4 % slower. A perf profile of a cg20 step
+//    at 5x10^4 springs: matvec 62 %, setup pass 14 %, node passes (update,
+//    prepare, dot) 18 %, the rest 6 %. With the matvec at about one
+//    explicit sub-step per product, 21 products alone are ~21 sub-steps:
+//    the 25x target needs a matvec well below a sub-step, not less around it.
 // Everything is sequential in a fixed order: bit-identical reruns.
 #include <algorithm>
 #include <cmath>
