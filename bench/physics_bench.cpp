@@ -574,7 +574,7 @@ void BM_ImplicitPreconditioner(benchmark::State& state) {
 // nodes), dt = 1 or 10 ms; both preconditioners run alternately three times
 // (200 timed steps each), medians of thread CPU time per step. The figures
 // behind ImplicitIntegrator::kAutoTwoLevelUnknowns, the size from which the
-// default (cg_preconditioner: auto) takes two-level (README "Integrators").
+// default (cg_preconditioner: auto) takes two-level (docs/performance.md).
 // Args: depth, dt in ms, shape (0 beam, 1 cube).
 void BM_PreconditionerCrossover(benchmark::State& state) {
   scene::Scene s = beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kImplicit);
@@ -909,7 +909,7 @@ BENCHMARK_CAPTURE(BM_Step, explicit, scene::IntegratorKind::kExplicit, 0)
 #define CG_STEP_ARGS ArgsProduct({{0, 3, 6, 9, 11}})->Iterations(5)->Unit(benchmark::kMillisecond)
 BENCHMARK_CAPTURE(BM_Step, implicit_cg20, scene::IntegratorKind::kImplicit, 20)->CG_STEP_ARGS;
 // The two-level preconditioner at 5 iterations (more accurate than Jacobi at
-// 20 on these beams: README), coarse factorisation included in every step.
+// 20 on these beams: docs/performance.md), coarse factorisation included in every step.
 BENCHMARK_CAPTURE(BM_Step, implicit_two_level_cg5, scene::IntegratorKind::kImplicit, 5,
                   scene::CgPreconditioner::kTwoLevel)
     ->CG_STEP_ARGS;

@@ -128,7 +128,7 @@ enum class IntegratorKind { kExplicit, kImplicit, kProjective };
 // Implicit CG preconditioner: kJacobi (diagonal) or kTwoLevel (Jacobi plus a
 // coarse correction over ~27-node aggregates: dearer per iteration, but 5
 // iterations beat 20 Jacobi ones, its iteration count stays flat as the mesh
-// grows, and stiff large steps converge; README "Integrators"). kAuto, the
+// grows, and stiff large steps converge; docs/performance.md). kAuto, the
 // default, takes two-level from ImplicitIntegrator::kAutoTwoLevelUnknowns
 // free nodes on, re-deciding whenever the mesh changes.
 enum class CgPreconditioner { kAuto, kJacobi, kTwoLevel };
