@@ -631,11 +631,15 @@ struct Point {
   int deepest = 0;                  // deepest leaf tet at the end
   std::size_t tets_at_deepest = 0;  // and how many leaves sit there
   Vec3 tip = Vec3::Zero();
+  std::vector<double> tip_t_s;  // the tip after every step (a scene with probes)
+  std::vector<Vec3> tip_path_m;
   ph::DisplacementField field;  // dropped once errors are filled
   bool captured = false;
   // Errors vs the reference (filled when both ran)
   double tip_err = NAN, rms_err = NAN, max_err = NAN;
   std::size_t unlocated = 0;
+  // The tip's path against the truth of its max depth (set_path_errors).
+  double path_err = NAN;
   bool has_error = false;
   bool skipped = false;  // not run (reason in st.error)
   std::string status() const {
@@ -692,7 +696,12 @@ Point run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kin
   p.th_Pa = m.adaptive ? m.th_Pa : NAN;
   ph::Simulation sim(sweep_scene(s, m, kind, dt));
   const long steps = std::lround(s.duration_s / dt);
-  advance(sim, steps, p.st, s.wall_cap_s);
+  const bool has_tip = sim.probe_count() > 0;
+  advance(sim, steps, p.st, s.wall_cap_s, [&](const ph::Simulation&) {
+    if (!has_tip) return;
+    p.tip_t_s.push_back(sim.time_s());
+    p.tip_path_m.push_back(sim.probe_displacement_m(0));
+  });
   p.nodes = sim.body().mesh().node_count();
   p.tets = sim.body().mesh().tet_count();
   p.springs = sim.body().mesh().edge_count();
@@ -723,6 +732,33 @@ void fill_errors(Point& p, const Point& ref) {
   p.has_error = true;
 }
 
+// The dynamics' truth at each max depth: the uniform run at that depth with
+// the smallest time error, explicit (symplectic, sub-stepped far below dt)
+// at the smallest dt if the sweep ran it, else implicit, else projective.
+// Every run's tip path is measured against it: the same-integrator
+// reference above measures the mesh; this measures integrator and dt too
+// (implicit Euler's damping at large dt ends in the same static state).
+// Returns, per max depth, what the truth was ("" where none finished).
+std::map<int, std::string> set_path_errors(std::vector<Point>& points) {
+  std::map<int, const Point*> truth;
+  const auto rank = [](const Point& p) { return p.integrator == "explicit" ? 0 : p.integrator == "implicit" ? 1 : 2; };
+  for (const Point& p : points) {
+    if (p.adaptive || p.level != p.max_depth || !p.st.ok || p.st.capped || p.tip_path_m.empty()) continue;
+    const Point*& best = truth[p.max_depth];
+    if (!best || rank(p) < rank(*best) || (rank(p) == rank(*best) && p.dt_s < best->dt_s)) best = &p;
+  }
+  std::map<int, std::string> described;
+  for (const auto& [md, t] : truth)
+    described[md] = t ? t->integrator + " at dt " + fmt("%g", t->dt_s * 1e3) + " ms, uniform L" + std::to_string(md)
+                      : std::string();
+  for (Point& p : points) {
+    const auto it = truth.find(p.max_depth);
+    if (it == truth.end() || !it->second || !p.st.ok || p.st.capped || p.tip_path_m.empty()) continue;
+    p.path_err = ph::compare_trajectories(it->second->tip_t_s, it->second->tip_path_m, p.tip_t_s, p.tip_path_m).rms_rel;
+  }
+  return described;
+}
+
 double metric_of(const Point& p, const std::string& metric) {
   if (metric == "tip") return p.tip_err;
   if (metric == "max") return p.max_err;
@@ -737,14 +773,15 @@ std::string csv_quote(const std::string& s) {
   return out + "\"";
 }
 
-void write_csv(const std::string& path, const std::string& scene, const std::vector<Point>& points) {
+void write_csv(const std::string& path, const std::string& scene, const std::vector<Point>& points,
+               const std::map<int, std::string>& truth) {
   std::ofstream f(path);
   if (!f) throw std::runtime_error("cannot write " + path);
   f << "scene,integrator,dt_s,max_depth,mode,level,th_Pa,status,message,steps,sim_s,wall_s,cpu_s,"
        "cost_wall_per_sim,cost_cpu_per_sim,"
        "nodes_end,tets_end,springs_end,peak_nodes,peak_tets,splits,merges,tip_uz_m,tip_err_rel,rms_err_rel,"
        "max_err_rel,unlocated,mean_solver_iterations,max_substeps,last_mesh_change_s,deepest_level,tets_at_deepest,"
-       "unconverged_steps\n";
+       "unconverged_steps,tip_path_err_rel,path_truth\n";
   for (const auto& p : points) {
     f << scene << ',' << p.integrator << ',' << p.dt_s << ',' << p.max_depth << ','
       << (p.adaptive ? "adaptive" : "uniform") << ',' << (p.adaptive ? std::string() : std::to_string(p.level)) << ','
@@ -756,7 +793,8 @@ void write_csv(const std::string& path, const std::string& scene, const std::vec
       << (p.captured ? csv_num(p.tip[2]) : "") << ',' << csv_num(p.tip_err) << ',' << csv_num(p.rms_err) << ','
       << csv_num(p.max_err) << ',' << p.unlocated << ',' << csv_num(p.st.mean_iterations()) << ',' << p.st.max_substeps
       << ',' << csv_num(p.st.last_adapt_s) << ',' << p.deepest << ',' << p.tets_at_deepest << ','
-      << p.st.unconverged_steps << '\n';
+      << p.st.unconverged_steps << ',' << csv_num(p.path_err) << ','
+      << csv_quote(truth.count(p.max_depth) ? truth.at(p.max_depth) : "") << '\n';
   }
 }
 
@@ -1043,19 +1081,26 @@ void run_sweep(const Options& o) {
     }
   }
   const double sweep_wall = seconds_between(sweep0, Clock::now());
+  const std::map<int, std::string> truth = set_path_errors(points);
+  for (const auto& [md, what] : truth)
+    std::printf(
+        "Tip path error at max depth %d: RMS over the run of |u_tip(t) - u_truth(t)| / max |u_truth|, "
+        "truth = %s.\n",
+        md, what.c_str());
+  std::printf("\n");
 
   std::printf(
       "| integrator | dt (ms) | max depth | mesh | status | tets (end) | peak tets | deepest leaf (tets there) | "
-      "cost wall (cpu) s/s | tip err | node RMS err | node max err | mean iters | max substeps | last mesh change (s) "
-      "|\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "cost wall (cpu) s/s | tip err | node RMS err | node max err | tip path err | mean iters | max substeps | "
+      "last mesh change (s) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& p : points) {
     const std::string mesh = p.adaptive ? "adaptive Th " + fmt("%g", p.th_Pa) : "uniform L" + std::to_string(p.level);
     std::string status = p.status();
     if (!p.st.ok && !p.skipped) status += " at t=" + fmt("%.3g", p.st.error_time_s) + " s";
     if (p.st.unconverged_steps > 0)  // cheaper, but short of the tolerance: say so beside the cost
       status += ", " + std::to_string(p.st.unconverged_steps) + " steps CG-capped";
-    std::printf("| %s | %g | %d | %s | %s | %zu | %zu | %d (%zu) | %s | %s | %s | %s | %.1f | %d | %s |\n",
+    std::printf("| %s | %g | %d | %s | %s | %zu | %zu | %d (%zu) | %s | %s | %s | %s | %s | %.1f | %d | %s |\n",
                 p.integrator.c_str(), p.dt_s * 1e3, p.max_depth, mesh.c_str(), status.c_str(), p.tets, p.peak_tets,
                 p.deepest, p.tets_at_deepest,
                 std::isfinite(p.st.wall_cost())
@@ -1063,8 +1108,8 @@ void run_sweep(const Options& o) {
                     : "n/a",
                 p.adaptive || p.level != p.max_depth ? pct(p.tip_err).c_str() : "ref",
                 p.adaptive || p.level != p.max_depth ? pct(p.rms_err).c_str() : "ref",
-                p.adaptive || p.level != p.max_depth ? pct(p.max_err).c_str() : "ref", p.st.mean_iterations(),
-                p.st.max_substeps,
+                p.adaptive || p.level != p.max_depth ? pct(p.max_err).c_str() : "ref", pct(p.path_err).c_str(),
+                p.st.mean_iterations(), p.st.max_substeps,
                 p.adaptive && std::isfinite(p.st.last_adapt_s) ? fmt("%.3f", p.st.last_adapt_s).c_str() : "");
   }
 
@@ -1144,7 +1189,7 @@ void run_sweep(const Options& o) {
   std::printf("\nsweep wall time %.1f s\n", sweep_wall);
 
   if (!o.csv_path.empty()) {
-    write_csv(o.csv_path, s.scene, points);
+    write_csv(o.csv_path, s.scene, points, truth);
     std::printf("wrote %s\n", o.csv_path.c_str());
   }
   if (!o.svg_path.empty()) {

@@ -85,4 +85,34 @@ FieldError compare_displacement_fields(const DisplacementField& ref, const Displ
   return e;
 }
 
+TrajectoryError compare_trajectories(const std::vector<double>& ref_t, const std::vector<Vec3>& ref_u,
+                                     const std::vector<double>& t, const std::vector<Vec3>& u) {
+  TrajectoryError e;
+  const std::size_t n_ref = std::min(ref_t.size(), ref_u.size());
+  for (std::size_t k = 0; k < n_ref; ++k) e.reference_max_m = std::max(e.reference_max_m, ref_u[k].norm());
+  if (n_ref == 0) return e;
+  // Rounding of accumulated step times (k dt summed) must not drop the ends.
+  const double slack = 1e-9 * std::max({std::abs(ref_t.front()), std::abs(ref_t[n_ref - 1]), 1e-9});
+  double sum2 = 0.0, worst = 0.0;
+  std::size_t j = 0;  // reference interval [j, j + 1] holding the sample (times increase)
+  for (std::size_t k = 0; k < std::min(t.size(), u.size()); ++k) {
+    if (t[k] < ref_t.front() - slack || t[k] > ref_t[n_ref - 1] + slack) continue;
+    while (j + 1 < n_ref && ref_t[j + 1] < t[k]) ++j;
+    Vec3 reference = ref_u[j];
+    if (j + 1 < n_ref && ref_t[j + 1] > ref_t[j]) {
+      const double w = std::clamp((t[k] - ref_t[j]) / (ref_t[j + 1] - ref_t[j]), 0.0, 1.0);
+      reference = (1.0 - w) * ref_u[j] + w * ref_u[j + 1];
+    }
+    const double err = (u[k] - reference).norm();
+    sum2 += err * err;
+    worst = std::max(worst, err);
+    ++e.compared;
+  }
+  if (e.compared > 0 && e.reference_max_m > 0.0) {
+    e.rms_rel = std::sqrt(sum2 / static_cast<double>(e.compared)) / e.reference_max_m;
+    e.max_rel = worst / e.reference_max_m;
+  }
+  return e;
+}
+
 }  // namespace tissue::physics

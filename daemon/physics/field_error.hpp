@@ -46,4 +46,20 @@ struct FieldError {
 // covers: O(nodes + tets) for meshes of one object.
 FieldError compare_displacement_fields(const DisplacementField& reference, const DisplacementField& test);
 
+// A point's displacement over time (a probe, sampled once per step) against
+// a reference run's (NUMERICS.md §4, "for dynamics"): where the end states
+// agree, an integrator that damps or shifts the motion on the way does not.
+// The reference is interpolated linearly to each sample time inside its
+// span; samples outside it are not compared. Both runs' times must increase.
+//   rms_rel = √(mean |u(t_k) − u_ref(t_k)|²) / max_k |u_ref|,
+//   max_rel = max |u(t_k) − u_ref(t_k)| / max_k |u_ref|.
+struct TrajectoryError {
+  double rms_rel = NAN, max_rel = NAN;  // NaN when nothing compared or the reference did not move
+  double reference_max_m = 0.0;         // largest |u_ref| over the reference's samples
+  std::size_t compared = 0;             // samples inside the reference's time span
+};
+
+TrajectoryError compare_trajectories(const std::vector<double>& reference_t_s, const std::vector<Vec3>& reference_u_m,
+                                     const std::vector<double>& t_s, const std::vector<Vec3>& u_m);
+
 }  // namespace tissue::physics

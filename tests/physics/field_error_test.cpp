@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <functional>
 
 #include "physics/body.hpp"
@@ -149,6 +150,100 @@ TEST(FieldError, NothingToCompareGivesNaNNotZero) {
   const FieldError empty = compare_displacement_fields(DisplacementField{}, still);
   EXPECT_EQ(empty.compared, 0u);
   EXPECT_TRUE(std::isnan(empty.rms_rel));
+}
+
+// Trajectories: u(t) sampled at two rates.
+struct Samples {
+  std::vector<double> t_s;
+  std::vector<Vec3> u_m;
+};
+
+Samples sample(double dt_s, double end_s, const std::function<Vec3(double)>& u) {
+  Samples s;
+  for (int k = 1; k * dt_s <= end_s + 1e-12; ++k) {
+    s.t_s.push_back(k * dt_s);  // as a run records: after each step
+    s.u_m.push_back(u(k * dt_s));
+  }
+  return s;
+}
+
+Vec3 oscillation(double t) { return Vec3(0.0, 0.0, -0.01 * (1.0 - std::exp(-20.0 * t) * std::cos(60.0 * t))); }
+
+TEST(TrajectoryError, ARunAgainstItselfHasNoError) {
+  const Samples a = sample(1e-3, 0.5, oscillation);
+  const TrajectoryError e = compare_trajectories(a.t_s, a.u_m, a.t_s, a.u_m);
+  EXPECT_EQ(e.compared, a.t_s.size());
+  EXPECT_EQ(e.rms_rel, 0.0);
+  EXPECT_EQ(e.max_rel, 0.0);
+}
+
+// A linear motion is interpolated exactly between reference samples, so a
+// coarser run of the same motion (samples between the reference's) is exact.
+TEST(TrajectoryError, ALinearMotionSampledCoarserHasNoError) {
+  const auto line = [](double t) { return Vec3(0.002 * t, -0.03 * t, 0.001); };
+  const Samples reference = sample(1e-3, 0.5, line);
+  const Samples coarse = sample(2.5e-3, 0.5, line);  // 2.5 ms: most samples fall between the reference's
+  const TrajectoryError e = compare_trajectories(reference.t_s, reference.u_m, coarse.t_s, coarse.u_m);
+  EXPECT_EQ(e.compared, coarse.t_s.size());
+  EXPECT_LT(e.rms_rel, 1e-12);
+  EXPECT_LT(e.max_rel, 1e-12);
+}
+
+// A run that damps the motion (an implicit integrator at a large step) ends
+// where the reference does but departs from it on the way.
+TEST(TrajectoryError, ADampedRunIsFarOffOnTheWayThoughItEndsTheSame) {
+  const Samples reference = sample(1e-3, 0.5, oscillation);
+  const Samples damped =
+      sample(5e-3, 0.5, [](double t) { return Vec3(0.0, 0.0, -0.01 * (1.0 - std::exp(-40.0 * t))); });
+  const TrajectoryError e = compare_trajectories(reference.t_s, reference.u_m, damped.t_s, damped.u_m);
+  EXPECT_LT((damped.u_m.back() - reference.u_m.back()).norm(), 1e-6);  // the same end state
+  EXPECT_GT(e.rms_rel, 0.1);
+  EXPECT_GE(e.max_rel, e.rms_rel);
+  // While the same motion at 5 ms is within the interpolation error of 1 ms samples.
+  const Samples same = sample(5e-3, 0.5, oscillation);
+  EXPECT_LT(compare_trajectories(reference.t_s, reference.u_m, same.t_s, same.u_m).rms_rel, 0.01);
+}
+
+TEST(TrajectoryError, AnOffsetIsMeasuredRelativeToTheLargestReferenceDisplacement) {
+  const Samples reference = sample(1e-3, 0.2, oscillation);
+  Samples shifted = reference;
+  for (auto& u : shifted.u_m) u += Vec3(3e-4, 0.0, 4e-4);  // |δ| = 5e-4 m
+  double largest = 0.0;
+  for (const auto& u : reference.u_m) largest = std::max(largest, u.norm());
+  const TrajectoryError e = compare_trajectories(reference.t_s, reference.u_m, shifted.t_s, shifted.u_m);
+  EXPECT_DOUBLE_EQ(e.reference_max_m, largest);
+  EXPECT_NEAR(e.rms_rel, 5e-4 / largest, 1e-12);
+  EXPECT_NEAR(e.max_rel, 5e-4 / largest, 1e-12);
+}
+
+// A run longer than the reference (or starting before it) is compared where
+// both exist; the ends of the span count despite rounded step times.
+TEST(TrajectoryError, SamplesOutsideTheReferenceSpanAreNotCompared) {
+  const Samples reference = sample(1e-3, 0.1, oscillation);
+  Samples longer = sample(1e-3, 0.3, oscillation);
+  longer.t_s.insert(longer.t_s.begin(), 0.0);
+  longer.u_m.insert(longer.u_m.begin(), Vec3(1.0, 1.0, 1.0));  // before the reference: never compared
+  const TrajectoryError e = compare_trajectories(reference.t_s, reference.u_m, longer.t_s, longer.u_m);
+  EXPECT_EQ(e.compared, reference.t_s.size());
+  EXPECT_LT(e.rms_rel, 1e-12);
+  // Step times accumulated by summing dt are within rounding of k dt.
+  Samples summed;
+  double t = 0.0;
+  for (int k = 0; k < 100; ++k) {
+    t += 1e-3;
+    summed.t_s.push_back(t);
+    summed.u_m.push_back(oscillation(t));
+  }
+  EXPECT_EQ(compare_trajectories(reference.t_s, reference.u_m, summed.t_s, summed.u_m).compared, 100u);
+}
+
+TEST(TrajectoryError, NothingToCompareGivesNaNNotZero) {
+  const Samples still = sample(1e-3, 0.1, [](double) { return Vec3::Zero(); });
+  EXPECT_TRUE(std::isnan(compare_trajectories(still.t_s, still.u_m, still.t_s, still.u_m).rms_rel));
+  const Samples moving = sample(1e-3, 0.1, oscillation);
+  const TrajectoryError none = compare_trajectories({}, {}, moving.t_s, moving.u_m);
+  EXPECT_EQ(none.compared, 0u);
+  EXPECT_TRUE(std::isnan(none.rms_rel));
 }
 
 }  // namespace

@@ -99,6 +99,30 @@ TEST(TradeBench, SweepsASceneFileAgainstItsUniformReference) {
   }
   // The tip is the scene's first probe: it bends down under the 5 N load.
   EXPECT_LT(number(by_mesh["L2"], "tip_uz_m"), -1e-4);
+  // Its path: the only uniform L2 run is the truth, so it has no path error.
+  EXPECT_EQ(by_mesh["L2"].at("path_truth"), "implicit at dt 1 ms, uniform L2");
+  EXPECT_EQ(number(by_mesh["L2"], "tip_path_err_rel"), 0.0);
+  EXPECT_GT(number(by_mesh["L0"], "tip_path_err_rel"), 1e-3);
+}
+
+// The path error sees what the end state hides: at a 5 ms step implicit
+// Euler damps the first swing, so its tip path departs from the 1 ms run's,
+// though each dt's reference is error-free against itself.
+TEST(TradeBench, TheTipPathIsMeasuredAgainstTheSmallestStep) {
+  TempDir dir;
+  const RunResult r = sweep(dir, kCantilever, dir / "dts.csv", "--dts 0.001,0.005");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("truth = implicit at dt 1 ms, uniform L2"), std::string::npos) << r.out;
+  std::map<double, std::map<std::string, std::string>> reference_by_dt;
+  for (const auto& row : read_csv(dir / "dts.csv"))
+    if (row.at("mode") == "uniform" && row.at("level") == "2") reference_by_dt[number(row, "dt_s")] = row;
+  ASSERT_EQ(reference_by_dt.size(), 2u);
+  const auto& fine = reference_by_dt.at(0.001);
+  const auto& coarse = reference_by_dt.at(0.005);
+  EXPECT_EQ(number(fine, "rms_err_rel"), 0.0);
+  EXPECT_EQ(number(coarse, "rms_err_rel"), 0.0);  // each dt against its own reference
+  EXPECT_EQ(number(fine, "tip_path_err_rel"), 0.0);
+  EXPECT_GT(number(coarse, "tip_path_err_rel"), 0.01);  // but not against the truth
 }
 
 // --set reaches the scene: half the load, half the (small) deflection.
