@@ -6,6 +6,29 @@
 
 namespace tissue::physics {
 
+namespace {
+
+// The distances |u − u_ref| at the compared points, as RMS and maximum
+// relative to a scale (NaN when nothing was compared or the scale is 0).
+struct DistanceSum {
+  double sum2 = 0.0, worst = 0.0;
+  std::size_t count = 0;
+  void add(double distance) {
+    sum2 += distance * distance;
+    worst = std::max(worst, distance);
+    ++count;
+  }
+  template <class Error>
+  void finish(double scale, Error& e) const {
+    e.compared = count;
+    if (count == 0 || !(scale > 0.0)) return;
+    e.rms_rel = std::sqrt(sum2 / static_cast<double>(count)) / scale;
+    e.max_rel = worst / scale;
+  }
+};
+
+}  // namespace
+
 DisplacementField capture_displacement_field(const Body& body) {
   DisplacementField f;
   std::vector<int> compact(body.x_m.size(), -1);
@@ -66,22 +89,15 @@ FieldError compare_displacement_fields(const DisplacementField& ref, const Displ
           }
   }
   for (std::size_t i = 0; i < n; ++i) e.reference_max_m = std::max(e.reference_max_m, ref.u_m[i].norm());
-  double sum2 = 0.0, worst = 0.0;
+  DistanceSum distances;
   for (std::size_t i = 0; i < n; ++i) {
     if (!ref.free[i]) continue;
-    if (!located[i]) {
+    if (located[i])
+      distances.add((interpolated[i] - ref.u_m[i]).norm());
+    else
       ++e.unlocated;
-      continue;
-    }
-    const double err = (interpolated[i] - ref.u_m[i]).norm();
-    sum2 += err * err;
-    worst = std::max(worst, err);
-    ++e.compared;
   }
-  if (e.compared > 0 && e.reference_max_m > 0.0) {
-    e.rms_rel = std::sqrt(sum2 / static_cast<double>(e.compared)) / e.reference_max_m;
-    e.max_rel = worst / e.reference_max_m;
-  }
+  distances.finish(e.reference_max_m, e);
   return e;
 }
 
@@ -93,7 +109,7 @@ TrajectoryError compare_trajectories(const std::vector<double>& ref_t, const std
   if (n_ref == 0) return e;
   // Rounding of accumulated step times (k dt summed) must not drop the ends.
   const double slack = 1e-9 * std::max({std::abs(ref_t.front()), std::abs(ref_t[n_ref - 1]), 1e-9});
-  double sum2 = 0.0, worst = 0.0;
+  DistanceSum distances;
   std::size_t j = 0;  // reference interval [j, j + 1] holding the sample (times increase)
   for (std::size_t k = 0; k < std::min(t.size(), u.size()); ++k) {
     if (t[k] < ref_t.front() - slack || t[k] > ref_t[n_ref - 1] + slack) continue;
@@ -103,15 +119,9 @@ TrajectoryError compare_trajectories(const std::vector<double>& ref_t, const std
       const double w = std::clamp((t[k] - ref_t[j]) / (ref_t[j + 1] - ref_t[j]), 0.0, 1.0);
       reference = (1.0 - w) * ref_u[j] + w * ref_u[j + 1];
     }
-    const double err = (u[k] - reference).norm();
-    sum2 += err * err;
-    worst = std::max(worst, err);
-    ++e.compared;
+    distances.add((u[k] - reference).norm());
   }
-  if (e.compared > 0 && e.reference_max_m > 0.0) {
-    e.rms_rel = std::sqrt(sum2 / static_cast<double>(e.compared)) / e.reference_max_m;
-    e.max_rel = worst / e.reference_max_m;
-  }
+  distances.finish(e.reference_max_m, e);
   return e;
 }
 
