@@ -11,7 +11,8 @@
 //                  --scene-file FILE [--set key.path=value ...]: the sweep
 //                  on a scene file of your own (its loads, boundary
 //                  conditions, material and probes; the sweep sets the mesh,
-//                  the integrator and dt of each run).
+//                  the integrator and dt of each run, and refines by
+//                  strain-energy density whatever criterion the scene names).
 //   --beam-theory  model error: static tip of the PERFORMANCE.md beam against
 //                  Euler-Bernoulli and Timoshenko, uniform depths, both laws.
 //   --quick        shrinks everything (short runs, fewer points).
