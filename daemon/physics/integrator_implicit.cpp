@@ -89,10 +89,11 @@ void matvec_scalar(const ImplicitSpring* springs, std::size_t count, const Pad3*
     const ImplicitSpring& s = springs[i];
     const std::uint32_t a4 = s.a4, b4 = s.b4;
     const double dp[3] = {p[a4] - p[b4], p[a4 + 1] - p[b4 + 1], p[a4 + 2] - p[b4 + 2]};
-    const double dot = (s.e[0] * dp[0] + s.e[1] * dp[1]) + (s.e[2] * dp[2] + 0.0);
+    const double e[3] = {s.e[0], s.e[1], s.e[2]};
+    const double dot = (e[0] * dp[0] + e[1] * dp[1]) + (e[2] * dp[2] + 0.0);
     const double iso = s.iso;
     for (int k = 0; k < 3; ++k) {
-      const double q = dot * s.e[k] + iso * dp[k];
+      const double q = dot * e[k] + iso * dp[k];
       ap[a4 + k] += q;
       ap[b4 + k] -= q;
     }
@@ -115,14 +116,15 @@ double dot_scalar(const Pad3* a, const Pad3* b, std::size_t n) {
   return ((acc[0] + acc[1]) + acc[2]) + acc[3];
 }
 
-// dv += step p, r −= step ap, z = D⁻¹ r; returns rᵀz and rᵀr.
-void update_scalar(double step, const Pad3* p, const Pad3* ap, const Pad3* diag_inv, Pad3* dv, Pad3* r, Pad3* z,
-                   std::size_t n, double* rz, double* rr) {
+// dv += step p, r −= step_ap ap (ap in the records' scale: step_ap is
+// step times it), z = D⁻¹ r; returns rᵀz and rᵀr.
+void update_scalar(double step, double step_ap, const Pad3* p, const Pad3* ap, const Pad3* diag_inv, Pad3* dv, Pad3* r,
+                   Pad3* z, std::size_t n, double* rz, double* rr) {
   double acc_rz[4] = {0.0, 0.0, 0.0, 0.0}, acc_rr[4] = {0.0, 0.0, 0.0, 0.0};
   for (std::size_t i = 0; i < n; ++i)
     for (int k = 0; k < 4; ++k) {
       dv[i].v[k] += step * p[i].v[k];
-      r[i].v[k] -= step * ap[i].v[k];
+      r[i].v[k] -= step_ap * ap[i].v[k];
       z[i].v[k] = diag_inv[i].v[k] * r[i].v[k];
       acc_rz[k] += r[i].v[k] * z[i].v[k];
       acc_rr[k] += r[i].v[k] * r[i].v[k];
@@ -140,11 +142,12 @@ TISSUE_AVX2 void matvec_avx2(const ImplicitSpring* springs, std::size_t count, c
     const ImplicitSpring& s = springs[i];
     const std::uint32_t a4 = s.a4, b4 = s.b4;  // read before the stores: no reload
     const __m256d dp = _mm256_sub_pd(_mm256_load_pd(p + a4), _mm256_load_pd(p + b4));
-    const __m256d e = _mm256_and_pd(_mm256_loadu_pd(s.e), xyz);  // drops iso from lane 3
+    const __m256d e_iso = _mm256_cvtps_pd(_mm_loadu_ps(s.e));
+    const __m256d e = _mm256_and_pd(e_iso, xyz);  // drops iso from lane 3
     const __m256d prod = _mm256_mul_pd(e, dp);
     const __m256d pairs = _mm256_add_pd(prod, _mm256_permute_pd(prod, 0b0101));         // x+y, y+x, z+w, w+z
     const __m256d dot = _mm256_add_pd(pairs, _mm256_permute2f128_pd(pairs, pairs, 1));  // (x+y)+(z+w) in all
-    const __m256d q = _mm256_add_pd(_mm256_mul_pd(dot, e), _mm256_mul_pd(_mm256_broadcast_sd(&s.iso), dp));
+    const __m256d q = _mm256_add_pd(_mm256_mul_pd(dot, e), _mm256_mul_pd(_mm256_permute4x64_pd(e_iso, 0xFF), dp));
     _mm256_store_pd(ap + a4, _mm256_add_pd(_mm256_load_pd(ap + a4), q));
     _mm256_store_pd(ap + b4, _mm256_sub_pd(_mm256_load_pd(ap + b4), q));
   }
@@ -170,13 +173,13 @@ TISSUE_AVX2 double dot_avx2(const Pad3* a, const Pad3* b, std::size_t n) {
   return sum_lanes_avx2(acc);
 }
 
-TISSUE_AVX2 void update_avx2(double step, const Pad3* p, const Pad3* ap, const Pad3* diag_inv, Pad3* dv, Pad3* r,
-                             Pad3* z, std::size_t n, double* rz, double* rr) {
-  const __m256d a = _mm256_set1_pd(step);
+TISSUE_AVX2 void update_avx2(double step, double step_ap, const Pad3* p, const Pad3* ap, const Pad3* diag_inv, Pad3* dv,
+                             Pad3* r, Pad3* z, std::size_t n, double* rz, double* rr) {
+  const __m256d a = _mm256_set1_pd(step), a_ap = _mm256_set1_pd(step_ap);
   __m256d acc_rz = _mm256_setzero_pd(), acc_rr = _mm256_setzero_pd();
   for (std::size_t i = 0; i < n; ++i) {
     _mm256_store_pd(dv[i].v, _mm256_add_pd(_mm256_load_pd(dv[i].v), _mm256_mul_pd(a, _mm256_load_pd(p[i].v))));
-    const __m256d ri = _mm256_sub_pd(_mm256_load_pd(r[i].v), _mm256_mul_pd(a, _mm256_load_pd(ap[i].v)));
+    const __m256d ri = _mm256_sub_pd(_mm256_load_pd(r[i].v), _mm256_mul_pd(a_ap, _mm256_load_pd(ap[i].v)));
     const __m256d zi = _mm256_mul_pd(_mm256_load_pd(diag_inv[i].v), ri);
     _mm256_store_pd(r[i].v, ri);
     _mm256_store_pd(z[i].v, zi);
@@ -204,6 +207,9 @@ struct SetupInput {
   const Vec3* rest_position;
   const std::uint32_t* unknown_of_node;
   double h;
+  // The records' power-of-two scale (ImplicitIntegrator::step): e times
+  // record_scale, iso times its square.
+  double record_scale, record_scale2;
 };
 
 // The scalars of one spring after its direction and relative velocity.
@@ -251,9 +257,10 @@ void setup_spring_scalar(const SetupInput& in, EdgeId e, Pad3* rhs, Pad3* diag, 
     const double block_diag = s.along * (dir[i] * dir[i]) + s.iso;
     diag[a].v[i] += block_diag;
     diag[b].v[i] += block_diag;
-    record->e[i] = s.root_along * dir[i];
   }
-  record->iso = s.iso;
+  const double root_along_scaled = s.root_along * in.record_scale;
+  for (int i = 0; i < 3; ++i) record->e[i] = static_cast<float>(root_along_scaled * dir[i]);
+  record->iso = static_cast<float>(s.iso * in.record_scale2);
   record->a4 = 4 * a;
   record->b4 = 4 * b;
 }
@@ -314,13 +321,15 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
     const __m256d k_along = _mm256_mul_pd(k, _mm256_sub_pd(one, transverse));
     const __m256d k_iso = _mm256_mul_pd(k, transverse);
     const __m256d along = _mm256_add_pd(_mm256_mul_pd(hv, c), _mm256_mul_pd(hh, k_along));
-    alignas(32) double f_mag[4], kad[4], k_iso_s[4], along_s[4], iso[4], root_along[4];
+    alignas(32) double f_mag[4], kad[4], k_iso_s[4], along_s[4], iso[4], root_along_scaled[4], iso_scaled[4];
     _mm256_store_pd(f_mag, _mm256_sub_pd(_mm256_mul_pd(k, _mm256_sub_pd(length, rest)), _mm256_mul_pd(c, dvd)));
     _mm256_store_pd(kad, _mm256_mul_pd(k_along, dvd));
     _mm256_store_pd(k_iso_s, k_iso);
     _mm256_store_pd(along_s, along);
-    _mm256_store_pd(iso, _mm256_mul_pd(hh, k_iso));
-    _mm256_store_pd(root_along, _mm256_sqrt_pd(along));
+    const __m256d iso_v = _mm256_mul_pd(hh, k_iso);
+    _mm256_store_pd(iso, iso_v);
+    _mm256_store_pd(root_along_scaled, _mm256_mul_pd(_mm256_sqrt_pd(along), _mm256_set1_pd(in.record_scale)));
+    _mm256_store_pd(iso_scaled, _mm256_mul_pd(iso_v, _mm256_set1_pd(in.record_scale2)));
     for (int j = 0; j < 4; ++j) {
       const __m256d q = _mm256_add_pd(_mm256_mul_pd(_mm256_broadcast_sd(kad + j), dir[j]),
                                       _mm256_mul_pd(_mm256_broadcast_sd(k_iso_s + j), dv[j]));
@@ -335,10 +344,12 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
       _mm256_store_pd(rhs + b4, _mm256_sub_pd(_mm256_load_pd(rhs + b4), contribution));
       _mm256_store_pd(diag + a4, _mm256_add_pd(_mm256_load_pd(diag + a4), block_diag));
       _mm256_store_pd(diag + b4, _mm256_add_pd(_mm256_load_pd(diag + b4), block_diag));
-      // e = √along d̂ in lanes 0-2 and iso in lane 3: the record's first 32 B.
+      // e = √along d̂ in lanes 0-2 and iso in lane 3, scaled and rounded to
+      // floats: the record's first 16 B.
       ImplicitSpring& record = records[i + j];
-      _mm256_storeu_pd(record.e, _mm256_blend_pd(_mm256_mul_pd(_mm256_broadcast_sd(root_along + j), dir[j]),
-                                                 _mm256_broadcast_sd(iso + j), 0b1000));
+      _mm_storeu_ps(record.e,
+                    _mm256_cvtpd_ps(_mm256_blend_pd(_mm256_mul_pd(_mm256_broadcast_sd(root_along_scaled + j), dir[j]),
+                                                    _mm256_broadcast_sd(iso_scaled + j), 0b1000)));
       record.a4 = a4;
       record.b4 = b4;
     }
@@ -370,12 +381,12 @@ double dot(Simd simd, const Pad3* a, const Pad3* b, std::size_t n) {
   return dot_scalar(a, b, n);
 }
 
-void update(Simd simd, double step, const Pad3* p, const Pad3* ap, const Pad3* diag_inv, Pad3* dv, Pad3* r, Pad3* z,
-            std::size_t n, double* rz, double* rr) {
+void update(Simd simd, double step, double step_ap, const Pad3* p, const Pad3* ap, const Pad3* diag_inv, Pad3* dv,
+            Pad3* r, Pad3* z, std::size_t n, double* rz, double* rr) {
 #if defined(__x86_64__)
-  if (simd == Simd::kAvx2) return update_avx2(step, p, ap, diag_inv, dv, r, z, n, rz, rr);
+  if (simd == Simd::kAvx2) return update_avx2(step, step_ap, p, ap, diag_inv, dv, r, z, n, rz, rr);
 #endif
-  update_scalar(step, p, ap, diag_inv, dv, r, z, n, rz, rr);
+  update_scalar(step, step_ap, p, ap, diag_inv, dv, r, z, n, rz, rr);
 }
 
 Vec3 to_vec3(const Pad3& p) { return Vec3(p.v[0], p.v[1], p.v[2]); }
@@ -426,12 +437,12 @@ double ImplicitIntegrator::apply(bool update_p, double beta) {
     if (update_p)
       for (std::uint32_t i = 0; i < unknowns_; ++i)
         for (int k = 0; k < 4; ++k) p_[i].v[k] = z_[i].v[k] + beta * p_[i].v[k];
-    return apply_assembled();
+    return record_scale2_ * apply_assembled();
   }
   prepare(simd_, update_p, beta, mass_.data(), z_.data(), p_.data(), ap_.data(), unknowns_);
   ap_[unknowns_] = Pad3{};  // the sink collects kinematic ends' shares; never read
   implicit_spring_matvec(simd_, springs_.data(), springs_.size(), p_.data(), ap_.data());
-  return dot(simd_, p_.data(), ap_.data(), unknowns_);
+  return record_scale2_ * dot(simd_, p_.data(), ap_.data(), unknowns_);
 }
 
 void ImplicitIntegrator::assemble() {
@@ -454,7 +465,7 @@ void ImplicitIntegrator::assemble() {
   for (const ImplicitSpring& s : springs_) {
     const std::uint32_t a = s.a4 / 4, b = s.b4 / 4;
     const Vec3 e(s.e[0], s.e[1], s.e[2]);
-    const Eigen::Matrix3d block = e * e.transpose() + s.iso * Eigen::Matrix3d::Identity();
+    const Eigen::Matrix3d block = e * e.transpose() + double(s.iso) * Eigen::Matrix3d::Identity();
     diag_block_[a] += block;
     diag_block_[b] += block;
     if (a != sink && b != sink) {
@@ -472,7 +483,7 @@ void ImplicitIntegrator::system_product(const std::vector<Vec3>& p_by_node, std:
   for (std::uint32_t i = 0; i < unknowns_; ++i) p_[i] = to_pad3(p_by_node[node_of_unknown_[i]]);
   p_[unknowns_] = Pad3{};
   apply(false, 0.0);
-  for (std::uint32_t i = 0; i < unknowns_; ++i) y_by_node[node_of_unknown_[i]] = to_vec3(ap_[i]);
+  for (std::uint32_t i = 0; i < unknowns_; ++i) y_by_node[node_of_unknown_[i]] = record_scale2_ * to_vec3(ap_[i]);
 }
 
 void ImplicitIntegrator::build_layout(const Body& body) {
@@ -499,10 +510,13 @@ void ImplicitIntegrator::build_layout(const Body& body) {
   // unknowns along a Morton curve of their lattice position (springs still
   // in edge order) did not help either (4x10^5 springs 61 vs 50-58 ms).
   live_edges_.clear();
+  stiffness_max_ = damping_max_ = 0.0;
   for (EdgeId e = 0; e < edges; ++e) {
     if (body.stiffness_N_per_m[e] == 0.0) continue;  // dead edge slot
     if (unknown_of_node_[body.edge_a[e]] == sink && unknown_of_node_[body.edge_b[e]] == sink) continue;  // no unknown
     live_edges_.push_back(e);
+    stiffness_max_ = std::max(stiffness_max_, body.stiffness_N_per_m[e]);
+    damping_max_ = std::max(damping_max_, body.damping_N_s_per_m[e]);
   }
   springs_.resize(live_edges_.size());
   two_level_ = preconditioner_ == Preconditioner::kTwoLevel ||
@@ -542,12 +556,26 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   mass_.resize(slots);
   dv_by_node_.resize(nodes, Vec3::Zero());  // warm start, by node id across mesh changes
 
+  // The records hold each block B = S B̃ as B̃ in single precision, S = 2^2e
+  // chosen from the stiffest and most damped spring so that no entry of B̃
+  // exceeds 1 (h c + h² k bounds every block's along and iso): the records
+  // neither overflow nor lose their range whatever the units. ap holds
+  // (M'/S + Σ B̃) p; the CG takes S in its scalars (pᵀAp, the residual
+  // update). Powers of two scale exactly: only the rounding of B̃ to floats
+  // (~6e-8 relative) differs from double records.
+  int exponent = 0;
+  const double bound = h * damping_max_ + h * h * stiffness_max_;
+  if (bound > 0.0 && std::isfinite(bound)) std::frexp(std::sqrt(bound), &exponent);  // √bound < 2^exponent
+  exponent = std::clamp(exponent, -500, 500);
+  record_scale2_ = std::ldexp(1.0, 2 * exponent);
+  const double inv_record_scale2 = std::ldexp(1.0, -2 * exponent);
   const double mass_scale = 1.0 + h * alpha_per_s_;
   for (std::uint32_t i = 0; i < unknowns_; ++i) {
     const NodeId n = node_of_unknown_[i];
-    mass_[i] = body.mass_kg[n] * mass_scale;
+    const double mass = body.mass_kg[n] * mass_scale;
+    mass_[i] = mass * inv_record_scale2;
     rhs_[i] = to_pad3(h * (f_ext_N[n] - alpha_per_s_ * body.mass_kg[n] * body.v_m_per_s[n]));
-    diag_inv_[i] = Pad3{{mass_[i], mass_[i], mass_[i], 0.0}};  // the diagonal, inverted below
+    diag_inv_[i] = Pad3{{mass, mass, mass, 0.0}};  // the diagonal, inverted below
   }
   rhs_[sink] = diag_inv_[sink] = Pad3{};
   // One pass over the edges: rhs = h (f − h K v) with the spring and damper
@@ -562,7 +590,9 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
                          body.v_m_per_s.data(),
                          body.rest_m.data(),
                          unknown_of_node_.data(),
-                         h};
+                         h,
+                         std::ldexp(1.0, -exponent),
+                         inv_record_scale2};
   setup_springs(simd_, input, live_edges_.data(), live_edges_.size(), rhs_.data(), diag_inv_.data(), springs_.data());
   for (std::uint32_t i = 0; i < unknowns_; ++i) {
     for (int k = 0; k < 3; ++k) diag_inv_[i].v[k] = 1.0 / diag_inv_[i].v[k];
@@ -591,7 +621,7 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   double rz = 0.0, rr = 0.0;
   for (std::uint32_t i = 0; i < unknowns_; ++i)
     for (int k = 0; k < 3; ++k) {
-      r_[i].v[k] = rhs_[i].v[k] - ap_[i].v[k];
+      r_[i].v[k] = rhs_[i].v[k] - record_scale2_ * ap_[i].v[k];
       z_[i].v[k] = diag_inv_[i].v[k] * r_[i].v[k];
       rz += r_[i].v[k] * z_[i].v[k];
       rr += r_[i].v[k] * r_[i].v[k];
@@ -606,8 +636,8 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     if (!(pap > 0.0)) break;                 // cannot happen for an SPD system; guards NaN
     const double step = rz / pap;
     double rz_next = 0.0;
-    update(simd_, step, p_.data(), ap_.data(), diag_inv_.data(), dv_.data(), r_.data(), z_.data(), unknowns_, &rz_next,
-           &rr);
+    update(simd_, step, step * record_scale2_, p_.data(), ap_.data(), diag_inv_.data(), dv_.data(), r_.data(),
+           z_.data(), unknowns_, &rz_next, &rr);
     if (coarse_ok_) rz_next = coarse_correct();
     ++it;
     residual = std::sqrt(rr) / rhs_norm;

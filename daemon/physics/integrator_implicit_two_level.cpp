@@ -153,7 +153,7 @@ bool ImplicitIntegrator::factor_coarse() {
   std::fill(coarse_factor_.begin(), coarse_factor_.end(), 0.0);
   for (std::uint32_t u = 0; u < unknowns_; ++u) {
     const std::uint32_t base = 3 * aggregate_of_unknown_[u];
-    for (int k = 0; k < 3; ++k) at(base + k, base + k) += mass_[u];
+    for (int k = 0; k < 3; ++k) at(base + k, base + k) += mass_[u] * record_scale2_;  // true units
   }
   // Pᵀ B P per spring: B on both diagonal blocks, −B on the coupling block;
   // springs inside one aggregate cancel. Summed per aggregate pair first
@@ -163,18 +163,20 @@ bool ImplicitIntegrator::factor_coarse() {
   std::fill(pair_blocks_.begin(), pair_blocks_.end(), 0.0);
   for (const CoarseSpring& coarse : coarse_springs_) {
     const ImplicitSpring& s = springs_[coarse.spring];
+    const double e[3] = {s.e[0], s.e[1], s.e[2]}, iso = s.iso;  // in the records' scale
     double* const sum = pair_blocks_.data() + 6 * coarse.pair;
-    sum[0] += s.e[0] * s.e[0] + s.iso;  // xx
-    sum[1] += s.e[1] * s.e[0];          // yx
-    sum[2] += s.e[1] * s.e[1] + s.iso;  // yy
-    sum[3] += s.e[2] * s.e[0];          // zx
-    sum[4] += s.e[2] * s.e[1];          // zy
-    sum[5] += s.e[2] * s.e[2] + s.iso;  // zz
+    sum[0] += e[0] * e[0] + iso;  // xx
+    sum[1] += e[1] * e[0];        // yx
+    sum[2] += e[1] * e[1] + iso;  // yy
+    sum[3] += e[2] * e[0];        // zx
+    sum[4] += e[2] * e[1];        // zy
+    sum[5] += e[2] * e[2] + iso;  // zz
   }
   constexpr int kRow[6] = {0, 1, 1, 2, 2, 2}, kCol[6] = {0, 0, 1, 0, 1, 2};
   for (std::size_t p = 0; p < coarse_pairs_.size(); ++p) {
     const std::uint32_t hi = coarse_pairs_[p].hi, lo = coarse_pairs_[p].lo;
-    const double* const sum = pair_blocks_.data() + 6 * p;
+    double sum[6];  // true units (S times the records')
+    for (int t = 0; t < 6; ++t) sum[t] = pair_blocks_[6 * p + t] * record_scale2_;
     for (const std::uint32_t end : {hi, lo}) {
       if (end == kNoAggregate) continue;  // a kinematic end
       for (int t = 0; t < 6; ++t) at(3 * end + kRow[t], 3 * end + kCol[t]) += sum[t];
