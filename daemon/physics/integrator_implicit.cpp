@@ -54,18 +54,22 @@
 //    at cache-resident sizes, ahead only where this one waits on memory), and
 //    the transposes eat the rest. It would need the CG vectors, the setup
 //    pass and the coarse correction in the layout's order throughout.
-//  - Tried and dropped (2026-11-25, later; BM_ImplicitMatvec, three rounds
-//    alternating with the shipped build, the other core busy compiling):
-//    records in single precision (e and iso as floats widened by one
-//    vcvtps2pd, products in double; 24 instead of 40 B per spring, the
-//    operator still symmetric positive definite): R2 66-67 vs 66-67, R3
-//    72-79 vs 71-73 ns per spring per cg20 step, so the matvec does not wait
-//    on its record stream; a non-temporal prefetch of the records 24 ahead
-//    (to keep p and ap in L2): 1-4 % slower. A perf profile of a cg20 step
-//    at 5x10^4 springs: matvec 62 %, setup pass 14 %, node passes (update,
-//    prepare, dot) 18 %, the rest 6 %. With the matvec at about one
-//    explicit sub-step per product, 21 products alone are ~21 sub-steps:
-//    the 25x target needs a matvec well below a sub-step, not less around it.
+//  - Records in single precision (2026-11-25, later): e and iso as floats
+//    scaled by a power of two per step (ImplicitIntegrator::step), widened
+//    by one vcvtps2pd, products in double; 24 instead of 40 B per spring.
+//    Where the data fits in cache it changes nothing (BM_ImplicitMatvec, R2
+//    66-67 vs 66-67, R3 72-79 vs 71-73 ns per spring per cg20 step, the
+//    other core busy): the matvec does not wait on its record stream there.
+//    At 4x10^5 springs, where records and CG vectors outgrew L3, a cg20 step
+//    took 99-110 instead of 138-147 ns per spring, at 1.6x10^6 149-163
+//    instead of 167-179 (BM_Step/implicit_cg20, three rounds alternating).
+//    Tried and dropped the same day: a non-temporal prefetch of the records
+//    24 ahead (to keep p and ap in L2), 1-4 % slower. A perf profile of a
+//    cg20 step at 4x10^5 springs after the change: matvec 63 %, setup pass
+//    13 %, node passes (update, prepare, dot) 20 %, the rest 4 %; at 5x10^4
+//    before it 62 / 14 / 18 / 6 %. With a product costing about one explicit
+//    sub-step, 21 products are ~21 sub-steps: the 25x target leaves little
+//    around them.
 // Everything is sequential in a fixed order: bit-identical reruns.
 #include <algorithm>
 #include <cmath>
