@@ -44,11 +44,11 @@
 // rounds alternating with the shipped kernel, the other core busy): 10-17 %
 // faster (10^3 springs damped 2.25-2.29 -> 1.93-1.95 ns per spring, 7x10^3
 // undamped 1.64-1.73 -> 1.37-1.41), still 2.97-3.08x the bandwidth bound
-// measured beside it (three more runs of the probe, 11 of 12 readings). So no cheaper square root or division (an approximate
-// reciprocal square root included, which would also give different bits on
-// different CPUs) brings this layout within 2x of the bound at
-// cache-resident sizes: the loads, stores and lane shuffles of the group
-// loop are most of it.
+// measured beside it (three more runs of the probe, 11 of 12 readings).
+// So no cheaper square root or division (an approximate reciprocal square
+// root included, which would also give different bits on different CPUs)
+// brings this layout within 2x of the bound at cache-resident sizes: the
+// loads, stores and lane shuffles of the group loop are most of it.
 #include <algorithm>
 #include <array>
 #include <cmath>
