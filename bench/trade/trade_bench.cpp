@@ -95,7 +95,7 @@ struct Options {
   std::vector<std::string> scene_overrides;  // --set key.path=value, applied to the scene file
   std::string preconditioner;      // implicit CG: jacobi | two_level | auto; empty: jacobi (a scene file: its own)
   std::string explicit_precision;  // explicit rung: double | float; empty: double (a scene file: its own)
-  std::string metric = "rms";      // plotted error: rms | max | tip
+  std::string metric = "rms";      // plotted error: rms | max | tip | path
   std::vector<double> th_Pa;       // empty: the scene's default list
   std::vector<int> max_depths;     // empty: {3, 6} (quick: {3})
   std::vector<std::string> integrators;  // empty: all three
@@ -121,7 +121,7 @@ void usage() {
       "         [--scene-file FILE [--set key.path=value ...]]   (a scene of your own; defaults from it:\n"
       "          Th x 1/4, 1, 4, its max depth, its dt; uniform levels from its min depth)\n"
       "         [--depths 3,6] [--integrators implicit,explicit,projective] [--dts 0.001,0.005]\n"
-      "         [--duration S] [--metric rms|max|tip] [--run-cap S] [--clock wall|cpu]\n"
+      "         [--duration S] [--metric rms|max|tip|path] [--run-cap S] [--clock wall|cpu]\n"
       "         [--preconditioner jacobi|two_level|auto]   (default jacobi, as the README's tables;\n"
       "          a scene file: its own)\n"
       "         [--explicit-precision double|float]   (the explicit rung's arithmetic, default double;\n"
@@ -201,8 +201,8 @@ Options parse(int argc, char** argv) {
     throw std::invalid_argument("--scene must be cantilever, beam or beam-r");
   if (!o.scene_overrides.empty() && o.scene_file.empty())
     throw std::invalid_argument("--set applies to --scene-file; the built-in scenes take none");
-  if (o.metric != "rms" && o.metric != "max" && o.metric != "tip")
-    throw std::invalid_argument("--metric must be rms, max or tip");
+  if (o.metric != "rms" && o.metric != "max" && o.metric != "tip" && o.metric != "path")
+    throw std::invalid_argument("--metric must be rms, max, tip or path");
   return o;
 }
 
@@ -762,6 +762,7 @@ std::map<int, std::string> set_path_errors(std::vector<Point>& points) {
 
 double metric_of(const Point& p, const std::string& metric) {
   if (metric == "tip") return p.tip_err;
+  if (metric == "path") return p.path_err;
   if (metric == "max") return p.max_err;
   return p.rms_err;
 }
@@ -837,9 +838,10 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
   std::ostringstream o;
   o << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << width << "\" height=\"" << height
     << "\" font-family=\"sans-serif\" font-size=\"11\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-  const std::string metric_label = metric == "tip"   ? "tip displacement error"
-                                   : metric == "max" ? "max node error / max |u_ref|"
-                                                     : "RMS node error / max |u_ref|";
+  const std::string metric_label = metric == "tip"    ? "tip displacement error"
+                                   : metric == "max"  ? "max node error / max |u_ref|"
+                                   : metric == "path" ? "tip path error vs the truth run / max |u_tip,truth|"
+                                                      : "RMS node error / max |u_ref|";
   o << "<text x=\"10\" y=\"22\" font-size=\"15\" font-weight=\"bold\">Cost vs error, " << s.scene
     << " at t = " << s.duration_s << " s: adaptive points below the uniform curve = adaptivity pays</text>\n";
   // Legend
@@ -889,7 +891,10 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
       o << "<text x=\"" << x0 + pw / 2 << "\" y=\"" << y0 + ph_ + 30 << "\" text-anchor=\"middle\">cost ["
         << (g_cost_uses_cpu ? "CPU" : "wall") << " s / simulated s]</text>\n";
       o << "<text transform=\"translate(" << x0 - 48 << "," << y0 + ph_ / 2 << ") rotate(-90)\" text-anchor=\"middle\">"
-        << (metric == "tip" ? "tip error [-]" : "node error [-]") << "</text>\n";
+        << (metric == "tip"    ? "tip error [-]"
+            : metric == "path" ? "tip path error [-]"
+                               : "node error [-]")
+        << "</text>\n";
 
       std::vector<const Point*> uni, ada;
       const Point* ref = nullptr;
@@ -1145,11 +1150,15 @@ void run_sweep(const Options& o) {
     if (!p.adaptive) continue;
     const double e = metric_of(p, o.metric), c = p.st.cost();
     if (!(std::isfinite(e) && std::isfinite(c))) continue;
-    std::vector<std::pair<double, double>> curve;  // (log cost, log err) of uniform levels < md, ref as err ~ 0
+    // (log cost, log err) of the uniform levels below md (the reference has
+    // no error against itself); the path error is against the truth run, so
+    // there the reference level is a point of the curve too.
+    std::vector<std::pair<double, double>> curve;
+    const bool against_truth = o.metric == "path";
     for (const auto& q : points)
       if (!q.adaptive && q.integrator == p.integrator && q.dt_s == p.dt_s && q.max_depth == p.max_depth &&
-          q.level < q.max_depth && std::isfinite(metric_of(q, o.metric)) && metric_of(q, o.metric) > 0 &&
-          std::isfinite(q.st.cost()))
+          (q.level < q.max_depth || against_truth) && std::isfinite(metric_of(q, o.metric)) &&
+          metric_of(q, o.metric) > 0 && std::isfinite(q.st.cost()))
         curve.emplace_back(std::log10(q.st.cost()), std::log10(metric_of(q, o.metric)));
     std::sort(curve.begin(), curve.end());
     double ref_cost = NAN;

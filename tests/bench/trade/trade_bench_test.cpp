@@ -110,9 +110,13 @@ TEST(TradeBench, SweepsASceneFileAgainstItsUniformReference) {
 // though each dt's reference is error-free against itself.
 TEST(TradeBench, TheTipPathIsMeasuredAgainstTheSmallestStep) {
   TempDir dir;
-  const RunResult r = sweep(dir, kCantilever, dir / "dts.csv", "--dts 0.001,0.005");
+  const RunResult r =
+      sweep(dir, kCantilever, dir / "dts.csv", "--dts 0.001,0.005 --metric path --svg " + quote(dir / "dts.svg"));
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("truth = implicit at dt 1 ms, uniform L2"), std::string::npos) << r.out;
+  // --metric path: the verdicts and the plot use the path error.
+  EXPECT_NE(r.out.find("Adaptive vs uniform curve (path metric"), std::string::npos) << r.out;
+  EXPECT_NE(slurp(dir / "dts.svg").find("tip path error"), std::string::npos);
   std::map<double, std::map<std::string, std::string>> reference_by_dt;
   for (const auto& row : read_csv(dir / "dts.csv"))
     if (row.at("mode") == "uniform" && row.at("level") == "2") reference_by_dt[number(row, "dt_s")] = row;
