@@ -187,10 +187,16 @@ TEST(RecordProcess, SwmrReaderSeesTheHapticRowsGrow) {
   Helper helper({"record", dir.path(), "live.h5", "2.0"});
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
   // The file exists before SWMR writing starts; retry until a SWMR open works.
+  // Not before it has a superblock: between the writer's exclusive create and
+  // its file lock the file is empty, and a reader's open holding a shared
+  // lock there fails the writer's H5Fcreate ("it already exists"; seen in the
+  // TSan tree, where the helper runs slowly).
   hid_t file = H5I_INVALID_HID;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
   while (file < 0 && std::chrono::steady_clock::now() < deadline) {
-    file = H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT);
+    std::error_code ec;
+    if (std::filesystem::file_size(path, ec) > 0 && !ec)
+      file = H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT);
     if (file < 0) std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   ASSERT_GE(file, 0) << "no SWMR open of " << path;
