@@ -61,6 +61,7 @@
 #include "physics/simulation.hpp"
 #include "scene/scene.hpp"
 #include "scene/scene_yaml.hpp"
+#include "util/xml.hpp"
 
 namespace {
 
@@ -785,7 +786,7 @@ void write_csv(const std::string& path, const std::string& scene, const std::vec
        "max_err_rel,unlocated,mean_solver_iterations,max_substeps,last_mesh_change_s,deepest_level,tets_at_deepest,"
        "unconverged_steps,tip_path_err_rel,path_truth\n";
   for (const auto& p : points) {
-    f << scene << ',' << p.integrator << ',' << p.dt_s << ',' << p.max_depth << ','
+    f << csv_quote(scene) << ',' << p.integrator << ',' << p.dt_s << ',' << p.max_depth << ','
       << (p.adaptive ? "adaptive" : "uniform") << ',' << (p.adaptive ? std::string() : std::to_string(p.level)) << ','
       << csv_num(p.th_Pa) << ',' << p.status() << ','
       << csv_quote(p.st.ok ? (p.st.capped ? "stopped by the per-run wall cap" : "") : p.st.error) << ',' << p.st.steps
@@ -842,8 +843,9 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
                                    : metric == "max"  ? "max node error / max |u_ref|"
                                    : metric == "path" ? "tip path error vs the truth run / max |u_tip,truth|"
                                                       : "RMS node error / max |u_ref|";
-  o << "<text x=\"10\" y=\"22\" font-size=\"15\" font-weight=\"bold\">Cost vs error, " << s.scene
-    << " at t = " << s.duration_s << " s: adaptive points below the uniform curve = adaptivity pays</text>\n";
+  o << "<text x=\"10\" y=\"22\" font-size=\"15\" font-weight=\"bold\">Cost vs error, "
+    << tissue::util::escape_xml(s.scene) << " at t = " << s.duration_s
+    << " s: adaptive points below the uniform curve = adaptivity pays</text>\n";
   // Legend
   double lx = 10, ly = title_h + 10;
   o << "<rect x=\"" << lx << "\" y=\"" << ly - 6 << "\" width=\"10\" height=\"10\" fill=\"black\"/><text x=\""

@@ -147,18 +147,20 @@ TEST(TradeBench, OverridesApplyToTheSceneFile) {
 TEST(TradeBench, ASceneWithoutProbesHasNoTipErrorButANodeError) {
   TempDir dir;
   write_text(dir / "block.yaml",
-             "name: block\n"
+             "name: 'block, \"soft\" <A&B>'\n"  // a user's name: CSV-quoted, XML-escaped
              "object: {cubes: [3, 2, 2], cube_size_m: 0.02}\n"
              "fixed: [{region: {box: {min_m: [0, 0, 0], max_m: [0, 0.04, 0.04]}}}]\n"
              "loads: [{name: push, region: {box: {min_m: [0.06, 0, 0], max_m: [0.06, 0.04, 0.04]}},\n"
              "         total_force_N: [0, 0, -1]}]\n"
              "adaptivity: {enabled: true, refine_threshold_Pa: 10, max_depth: 2}\n");
-  const RunResult r = sweep(dir, dir / "block.yaml", dir / "block.csv");
+  const RunResult r = sweep(dir, dir / "block.yaml", dir / "block.csv", "--svg " + quote(dir / "block.svg"));
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(slurp(dir / "block.svg").find("block, &quot;soft&quot; &lt;A&amp;B&gt;"), std::string::npos);
   EXPECT_NE(r.out.find("no probes"), std::string::npos) << r.out;
   const auto rows = read_csv(dir / "block.csv");
   ASSERT_FALSE(rows.empty());
   for (const auto& row : rows) {
+    EXPECT_EQ(row.at("scene"), "block, \"soft\" <A&B>");  // one field, whatever it holds
     EXPECT_EQ(row.at("tip_err_rel"), "") << "no probe, no tip";
     if (row.at("mode") == "uniform" && row.at("level") == "0") {
       EXPECT_GT(number(row, "rms_err_rel"), 0.0);
