@@ -1,5 +1,6 @@
 #include "record/h5_util.hpp"
 
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
@@ -119,11 +120,13 @@ Handle string_type(std::size_t bytes) {
 
 }  // namespace
 
-void write_string_attribute(hid_t object, const char* name, const std::string& value) {
+void write_string_attribute(hid_t object, const char* name, const std::string& value, std::size_t stored_bytes) {
   // Fixed-length, NUL-terminated: every reader (C, h5py, h5dump) handles it
-  // without variable-length memory to reclaim.
-  Handle type = string_type(value.size() + 1);
-  write_attribute(object, name, type.get(), type.get(), value.c_str());
+  // without variable-length memory to reclaim. An existing attribute keeps
+  // its stored size (HDF5 converts between string sizes on write).
+  Handle file_type = string_type(std::max(value.size() + 1, stored_bytes));
+  Handle mem_type = string_type(value.size() + 1);
+  write_attribute(object, name, file_type.get(), mem_type.get(), value.c_str());
 }
 
 void write_u8_attribute(hid_t object, const char* name, std::uint8_t value) {

@@ -4,6 +4,7 @@
 
 #include <hdf5.h>
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <utility>
@@ -65,8 +66,10 @@ std::string last_error();
 // "<what>: <last_error()>" — every failure names the HDF5 reason.
 std::string describe(const std::string& what);
 
-// Attributes (created before SWMR mode; read by the tools).
-void write_string_attribute(hid_t object, const char* name, const std::string& value);
+// Attributes. In SWMR mode only existing ones may be rewritten, in place:
+// strings then need their room reserved up front (`stored_bytes`, counting
+// the terminating NUL; the value's own size when larger).
+void write_string_attribute(hid_t object, const char* name, const std::string& value, std::size_t stored_bytes = 0);
 void write_u8_attribute(hid_t object, const char* name, std::uint8_t value);
 void write_i64_attribute(hid_t object, const char* name, std::int64_t value);
 void write_f64_attribute(hid_t object, const char* name, double value);

@@ -118,12 +118,19 @@ inline constexpr const char* kAttrConfigText = "config_text";
 inline constexpr const char* kAttrSoftwareVersion = "software_version";
 inline constexpr const char* kAttrStartTime = "start_time_utc";
 inline constexpr const char* kAttrHostName = "host_name";
-// 0 from creation; set to 1 after the SWMR file is closed, by reopening it in
-// ordinary mode (attributes cannot be added in SWMR mode, and a crash must
-// leave 0 behind). end_time_utc / duration_s are added at the same moment.
+// All three are created with the file (closed_cleanly 0, end_time_utc empty,
+// duration_s NaN) and rewritten in place at the clean close, after every row
+// is flushed and while still in SWMR mode: SWMR forbids creating attributes,
+// and a clean close must not depend on no reader having the file open. A
+// session counts as closed cleanly only when closed_cleanly is 1 and the
+// superblock's open-for-write flags are clear, so a crash anywhere before
+// the close completes reads as not clean. (Files written before 2026-11-25
+// get end_time_utc and duration_s only at the clean close.)
 inline constexpr const char* kAttrClosedCleanly = "closed_cleanly";
 inline constexpr const char* kAttrEndTime = "end_time_utc";
 inline constexpr const char* kAttrDurationS = "duration_s";
+// Room for "YYYY-MM-DDTHH:MM:SS.mmmZ" and its NUL, reserved at creation.
+inline constexpr std::size_t kEndTimeBytes = 32;
 // Added by `tissue session repair`.
 inline constexpr const char* kAttrRepairedTime = "repaired_utc";
 

@@ -1,9 +1,11 @@
 #include "record/session_writer.hpp"
 
 #include <fcntl.h>
+#include <stdio.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -102,6 +104,37 @@ void validate_session_name(const std::string& name) {
   if (name == ".") bad("it is '.'");
 }
 
+namespace {
+
+// ".NAME.creating-PID-N" beside the session: hidden from listings and from
+// the *.h5 globs users point tools at. Left behind only by a crash inside
+// create(), which takes milliseconds.
+std::string hidden_path_for(const std::string& path) {
+  static std::atomic<unsigned> counter{0};
+  const std::filesystem::path p(path);
+  // Appended piecewise: GCC 12 warns falsely (-Wrestrict) on "." + string.
+  std::string name(".");
+  name.append(p.filename().string())
+      .append(".creating-")
+      .append(std::to_string(::getpid()))
+      .append("-")
+      .append(std::to_string(counter.fetch_add(1)));
+  return (p.parent_path() / name).string();
+}
+
+// Renames `from` to `to` unless `to` exists (atomically: no check-then-act
+// window). Returns 0 or the errno. Filesystems without RENAME_NOREPLACE get a
+// hard link, which is just as exclusive, and the unlink of the old name.
+int publish_without_replacing(const std::string& from, const std::string& to) {
+  if (::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE) == 0) return 0;
+  if (errno != EINVAL && errno != ENOSYS) return errno;
+  if (::link(from.c_str(), to.c_str()) != 0) return errno;
+  ::unlink(from.c_str());
+  return 0;
+}
+
+}  // namespace
+
 std::string utc_now_iso8601() {
   const auto now = std::chrono::system_clock::now();
   const std::time_t secs = std::chrono::system_clock::to_time_t(now);
@@ -138,27 +171,44 @@ std::unique_ptr<SessionWriter> SessionWriter::create(const std::string& path, co
     throw RecordError("cannot create session file '" + path + "': directory '" + parent.string() +
                       "' is not writable: " + std::strerror(errno));
 
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec))
+    throw RecordError("cannot create session file '" + path + "': it already exists");
+
+  // The file is built under a hidden name and appears under its own name only
+  // once it is a complete SWMR file. A reader polling for the name (`tissue
+  // session info`, h5py, a live viewer) can then never open it half-made: its
+  // open would hold HDF5's shared file lock, and the writer's exclusive lock
+  // (taken right after the create, and again by H5Fstart_swmr_write) fails
+  // on it. That failed the create as "already exists" or "Resource
+  // temporarily unavailable" in most of the sessions a polling reader
+  // watched (tests/record/process_test.cpp).
+  const std::string hidden = hidden_path_for(path);
   h5::Handle fapl(H5Pcreate(H5P_FILE_ACCESS));
   // SWMR needs the latest file format (v3 superblock, v4 object headers).
   if (!fapl || H5Pset_libver_bounds(fapl.get(), H5F_LIBVER_LATEST, H5F_LIBVER_LATEST) < 0)
     throw fail("cannot set the file format");
-  h5::Handle file(H5Fcreate(path.c_str(), H5F_ACC_EXCL, H5P_DEFAULT, fapl.get()));
-  if (!file) {
-    std::error_code ec;
-    if (std::filesystem::exists(path, ec))
-      throw RecordError("cannot create session file '" + path + "': it already exists");
-    throw fail("H5Fcreate failed");
-  }
+  h5::Handle file(H5Fcreate(hidden.c_str(), H5F_ACC_EXCL, H5P_DEFAULT, fapl.get()));
+  if (!file) throw fail("H5Fcreate of '" + hidden + "' failed");
 
   // A file that could not be set up completely is not a session: remove it
   // so the state directory holds only real sessions.
+  std::unique_ptr<SessionWriter> writer;
   try {
-    return finish_create(path, metadata, std::move(file));
+    writer = finish_create(path, metadata, std::move(file));
   } catch (const RecordError& e) {
-    std::error_code ec;
-    std::filesystem::remove(path, ec);
+    std::filesystem::remove(hidden, ec);
     throw RecordError("cannot create session file '" + path + "': " + e.what());
   }
+  const int moved = publish_without_replacing(hidden, path);
+  if (moved != 0) {
+    writer.reset();
+    std::filesystem::remove(hidden, ec);
+    if (moved == EEXIST) throw RecordError("cannot create session file '" + path + "': it already exists");
+    throw RecordError("cannot create session file '" + path + "': renaming '" + hidden +
+                      "' to it failed: " + std::strerror(moved));
+  }
+  return writer;
 }
 
 std::unique_ptr<SessionWriter> SessionWriter::finish_create(const std::string& path, const SessionMetadata& metadata,
@@ -174,6 +224,8 @@ std::unique_ptr<SessionWriter> SessionWriter::finish_create(const std::string& p
                              metadata.start_time_utc.empty() ? utc_now_iso8601() : metadata.start_time_utc);
   h5::write_string_attribute(file.get(), kAttrHostName, metadata.host_name.empty() ? host_name() : metadata.host_name);
   h5::write_u8_attribute(file.get(), kAttrClosedCleanly, 0);
+  h5::write_string_attribute(file.get(), kAttrEndTime, "", kEndTimeBytes);
+  h5::write_f64_attribute(file.get(), kAttrDurationS, std::numeric_limits<double>::quiet_NaN());
 
   for (const char* group : kGroupPaths) {
     h5::Handle g(H5Gcreate2(file.get(), group, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT));
@@ -432,40 +484,29 @@ void SessionWriter::close() {
     try {
       for (std::size_t i = 0; i < kDatasetCount; ++i)
         if (dirty_[i] && H5Dflush(datasets_[i].get()) < 0) fail(std::string("cannot flush ") + kDatasets[i].path);
+      // Every row on disk first; only then the mark that says so.
+      if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0) fail("cannot flush the file");
+      const double duration_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - opened_at_).count();
+      try {
+        h5::write_string_attribute(file_.get(), kAttrEndTime, utc_now_iso8601());
+        h5::write_f64_attribute(file_.get(), kAttrDurationS, duration_s);
+        h5::write_u8_attribute(file_.get(), kAttrClosedCleanly, 1);
+      } catch (const RecordError& e) {
+        fail(std::string("cannot write the clean-close mark: ") + e.what());
+      }
     } catch (const RecordError&) {
       ok = false;
     }
   }
   for (h5::Handle& ds : datasets_) ok = ds.reset() && ok;
+  // The close writes the mark and then clears the superblock's open-for-write
+  // flags; a session reads as closed cleanly only with both.
   if (!file_.reset() && ok) {
     ok = false;
     error_ = "session file '" + path_ + "': " + h5::describe("closing the file failed");
   }
   if (!ok) {
     if (error_.empty()) error_ = "session file '" + path_ + "': " + h5::describe("closing the file failed");
-    throw RecordError(error_);
-  }
-
-  // The SWMR file is closed and consistent; only now say so. A crash before
-  // this point leaves closed_cleanly = 0.
-  h5::Handle fapl(H5Pcreate(H5P_FILE_ACCESS));
-  H5Pset_libver_bounds(fapl.get(), H5F_LIBVER_LATEST, H5F_LIBVER_LATEST);
-  h5::Handle file(H5Fopen(path_.c_str(), H5F_ACC_RDWR, fapl.get()));
-  if (!file) {
-    error_ = "session file '" + path_ + "': " + h5::describe("reopening to mark the clean close failed");
-    throw RecordError(error_);
-  }
-  const double duration_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - opened_at_).count();
-  try {
-    h5::write_string_attribute(file.get(), kAttrEndTime, utc_now_iso8601());
-    h5::write_f64_attribute(file.get(), kAttrDurationS, duration_s);
-    h5::write_u8_attribute(file.get(), kAttrClosedCleanly, 1);
-  } catch (const RecordError& e) {
-    error_ = "session file '" + path_ + "': " + e.what();
-    throw RecordError(error_);
-  }
-  if (!file.reset()) {
-    error_ = "session file '" + path_ + "': " + h5::describe("closing after the clean-close mark failed");
     throw RecordError(error_);
   }
 }

@@ -35,7 +35,9 @@ std::string utc_now_iso8601();
 class SessionWriter {
  public:
   // Creates `state_dir/name` (never overwrites: an existing file is an
-  // error). The directory must exist. Throws RecordError.
+  // error). The directory must exist. The file is built under a hidden name
+  // and renamed into place once in SWMR mode, so no reader ever finds it
+  // half-made (or blocks its creation). Throws RecordError.
   static std::unique_ptr<SessionWriter> open_in(const std::string& state_dir, const std::string& name,
                                                 const SessionMetadata& metadata);
   // Same, for a full path (tests, tools). Prefer open_in in the daemon.
@@ -61,9 +63,10 @@ class SessionWriter {
   // before the columns readers count by).
   void flush();
 
-  // Flushes, closes the SWMR file, then reopens it in ordinary mode to set
-  // closed_cleanly = 1, end_time_utc and duration_s. Throws RecordError (the
-  // file then stays marked as not closed cleanly). Idempotent.
+  // Flushes every row, rewrites closed_cleanly = 1, end_time_utc and
+  // duration_s in place (still in SWMR mode, so readers may keep the file
+  // open), then closes the file. Throws RecordError (the file then does not
+  // read as closed cleanly). Idempotent.
   void close();
 
   const std::string& path() const { return path_; }

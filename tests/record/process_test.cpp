@@ -11,11 +11,13 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <sstream>
 #include <thread>
 
 #include "record/session_tools.hpp"
+#include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 
 extern char** environ;
@@ -148,6 +150,7 @@ TEST(RecordProcess, KillNineThenRepairRecoversEverythingFlushed) {
   EXPECT_FALSE(info.open_for_write_flag);
   EXPECT_FALSE(info.closed_cleanly);
   EXPECT_FALSE(info.repaired_utc.empty());
+  EXPECT_TRUE(info.end_time_utc.empty()) << info.end_time_utc;  // reserved, written only at a clean close
   // At most about one second lost: everything reported flushed is there,
   // and little more than a flush interval behind what was pushed.
   EXPECT_GE(info.rows.haptic_rows, last.written);
@@ -186,17 +189,11 @@ TEST(RecordProcess, SwmrReaderSeesTheHapticRowsGrow) {
   const std::string path = dir / "live.h5";
   Helper helper({"record", dir.path(), "live.h5", "2.0"});
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
-  // The file exists before SWMR writing starts; retry until a SWMR open works.
-  // Not before it has a superblock: between the writer's exclusive create and
-  // its file lock the file is empty, and a reader's open holding a shared
-  // lock there fails the writer's H5Fcreate ("it already exists"; seen in the
-  // TSan tree, where the helper runs slowly).
+  // The file appears under its name already in SWMR mode; poll until it does.
   hid_t file = H5I_INVALID_HID;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
   while (file < 0 && std::chrono::steady_clock::now() < deadline) {
-    std::error_code ec;
-    if (std::filesystem::file_size(path, ec) > 0 && !ec)
-      file = H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT);
+    file = H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT);
     if (file < 0) std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   ASSERT_GE(file, 0) << "no SWMR open of " << path;
@@ -236,6 +233,57 @@ TEST(RecordProcess, SwmrReaderSeesTheHapticRowsGrow) {
   const SessionInfo info = read_session_info(path);
   EXPECT_TRUE(info.closed_cleanly);
   EXPECT_GE(info.rows.haptic_rows, seen.back());
+}
+
+// A viewer polling for a session file (another process opening it SWMR
+// without pause) and holding it open may neither fail the recording's start
+// nor its clean close, and must never find a half-made file. Before the
+// hidden-name create and the in-place clean-close mark, most sessions here
+// failed one or the other: the poller's shared HDF5 file lock failed the
+// writer's exclusive one ("it already exists", "H5Fstart_swmr_write failed"),
+// or the reopen that set closed_cleanly.
+TEST(RecordProcess, APollingReaderNeitherBlocksNorSeesAHalfMadeSession) {
+  TempDir dir;
+  SessionMetadata meta;
+  meta.scene_name = "watched";
+  unsigned seen = 0;
+  for (int i = 0; i < 4; ++i) {
+    const std::string name = "w" + std::to_string(i) + ".h5";
+    Helper watcher({"watch", dir.path(), name, "0.6"});
+    std::string line;
+    ASSERT_TRUE(watcher.read_line(&line, 20.0) && line == "ready") << line;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // polling now
+    try {
+      auto w = SessionWriter::open_in(dir.path(), name, meta);
+      std::vector<HapticRow> rows;
+      for (std::uint64_t t = 0; t < 100; ++t) rows.push_back(testing::haptic_row(t));
+      w->append_haptic(rows);
+      w->flush();
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the watcher holds the file open
+      w->close();
+    } catch (const RecordError& e) {
+      ADD_FAILURE() << name << ": " << e.what();
+    }
+    const std::string out = watcher.read_all(20.0);
+    const int status = watcher.finish(false);
+    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+    unsigned opens = 0, incomplete = 0;
+    ASSERT_EQ(std::sscanf(out.c_str(), "watched %u %u", &opens, &incomplete), 2) << out;
+    EXPECT_EQ(incomplete, 0u) << name;
+    seen += opens > 0;
+    const SessionInfo info = read_session_info(dir / name);
+    EXPECT_TRUE(info.closed_cleanly) << name;
+    EXPECT_EQ(info.rows.haptic_rows, 100u) << name;
+  }
+  // The watcher had the file open in most rounds (else this proves nothing).
+  EXPECT_GE(seen, 3u);
+  // No hidden leftovers: the directory holds the sessions only.
+  std::size_t entries = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir.path())) {
+    ++entries;
+    EXPECT_EQ(e.path().extension(), ".h5") << e.path();
+  }
+  EXPECT_EQ(entries, 4u);
 }
 
 TEST(RecordProcess, FileSizeLimitStopsRecordingWithAClearErrorAndNoCrash) {

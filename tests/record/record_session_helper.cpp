@@ -5,10 +5,15 @@
 //   record_session_helper record   DIR NAME SECONDS       1 kHz haptic, 50 Hz sim, 10 Hz mesh, 2 Hz events
 //   record_session_helper fsize    DIR NAME LIMIT_BYTES   same, under RLIMIT_FSIZE, until the recorder fails
 //   record_session_helper readonly DIR NAME               start a recording in DIR as an unprivileged user
+//   record_session_helper watch    DIR NAME SECONDS       a reader polling for DIR/NAME without pause
 //
 // Rows follow record_test_support's generators, so the test checks every
 // row. Progress lines on stdout: "progress PUSHED_HAPTIC WRITTEN_HAPTIC
 // WRITTEN_FRAMES" after each recorder flush (written = flushed to the file).
+// `watch` prints "ready", then tries SWMR opens of the path back to back (as
+// a viewer polling for a session would); each open that works checks that
+// the file is a whole session and holds it open 200 ms. At the end:
+// "watched OPENS INCOMPLETE".
 #include <signal.h>
 #include <sys/resource.h>
 #include <unistd.h>
@@ -20,6 +25,7 @@
 #include <thread>
 
 #include "record/recorder.hpp"
+#include "record/session_layout.hpp"
 #include "record_test_support.hpp"
 
 using namespace tissue::record;
@@ -76,7 +82,7 @@ RecorderOptions options() {
 
 int main(int argc, char** argv) {
   if (argc < 4) {
-    std::fprintf(stderr, "usage: %s record|fsize|readonly DIR NAME [ARG]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s record|fsize|readonly|watch DIR NAME [ARG]\n", argv[0]);
     return 2;
   }
   const std::string mode = argv[1], dir = argv[2], name = argv[3];
@@ -123,6 +129,28 @@ int main(int argc, char** argv) {
                 static_cast<int>(state), r->error().c_str(), callback_message.c_str(),
                 static_cast<unsigned long long>(after), static_cast<unsigned long long>(s.haptic_drops));
     return state == RecorderState::kFailed ? 0 : 3;
+  }
+
+  if (mode == "watch") {
+    if (argc < 5) return 2;
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    const std::string path = dir + "/" + name;
+    const auto end = Clock::now() + std::chrono::duration<double>(std::strtod(argv[4], nullptr));
+    std::printf("ready\n");
+    std::fflush(stdout);
+    unsigned opens = 0, incomplete = 0;
+    while (Clock::now() < end) {
+      const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT);
+      if (file < 0) continue;
+      ++opens;
+      const hid_t ds = H5Dopen2(file, kDatasets[kHapticTime].path, H5P_DEFAULT);
+      if (H5Aexists(file, kAttrFormatVersion) <= 0 || H5Aexists(file, kAttrClosedCleanly) <= 0 || ds < 0) ++incomplete;
+      if (ds >= 0) H5Dclose(ds);
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      H5Fclose(file);
+    }
+    std::printf("watched %u %u\n", opens, incomplete);
+    return 0;
   }
 
   if (mode == "record") {

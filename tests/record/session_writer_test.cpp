@@ -86,7 +86,9 @@ TEST(SessionWriter, InfoReportsACleanCloseWithMetadataAndCounts) {
   EXPECT_FALSE(info.host_name.empty());
   EXPECT_EQ(info.start_time_utc.size(), std::string("2024-01-01T00:00:00.000Z").size()) << info.start_time_utc;
   EXPECT_EQ(info.start_time_utc.back(), 'Z');
-  EXPECT_FALSE(info.end_time_utc.empty());
+  EXPECT_EQ(info.end_time_utc.size(), info.start_time_utc.size()) << info.end_time_utc;
+  EXPECT_GE(info.end_time_utc, info.start_time_utc);
+  EXPECT_GT(info.duration_s, 0.0);
   EXPECT_EQ(info.rows.haptic_rows, 1000u);
   EXPECT_EQ(info.rows.sim_rows, 50u);
   EXPECT_EQ(info.rows.mesh_frames, 3u);
