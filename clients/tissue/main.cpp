@@ -7,9 +7,10 @@
 #include <vector>
 
 #include "tissue/ctl_command.hpp"
+#include "tissue/render_command.hpp"
 #include "tissue/session_command.hpp"
 #include "tissue/subcommand.hpp"
-#include "tissue/render_command.hpp"
+#include "tissue/trade_command.hpp"
 #include "tissue/x3d_command.hpp"
 
 int main(int argc, char** argv) {
@@ -21,6 +22,7 @@ int main(int argc, char** argv) {
   subcommands.push_back(add_session_command(app));
   subcommands.push_back(add_x3d_command(app));
   subcommands.push_back(add_render_command(app));
+  subcommands.push_back(add_trade_command(app));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

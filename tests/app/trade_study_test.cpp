@@ -1,6 +1,8 @@
-// trade_bench's sweep on a user's scene file (--scene-file, --set): it runs
-// the scene's own loads and probes on uniform levels and adaptive meshes and
-// measures each against the uniform reference at the maximum depth.
+// The trade study as labs run it, `tissue trade` (app/trade_study.cpp; the
+// build tree's trade_bench is the same function): the sweep on a user's scene
+// file (--scene-file, --set) runs the scene's own loads and probes on uniform
+// levels and adaptive meshes and measures each against the uniform reference
+// at the maximum depth; bad options and scenes are errors naming themselves.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -20,6 +22,7 @@ using tissue::testing::slurp;
 using tissue::testing::TempDir;
 using tissue::testing::write_text;
 
+const std::string kTrade = quote(TISSUE_CLI_BINARY) + " trade";
 const std::string kCantilever = std::string(TISSUE_SOURCE_DIR) + "/config/scenes/cantilever.yaml";
 
 // One CSV record (quoted fields may hold commas and doubled quotes).
@@ -65,12 +68,12 @@ double number(const std::map<std::string, std::string>& row, const std::string& 
 
 // A short implicit sweep of `scene` to max depth 2; extra arguments appended.
 RunResult sweep(const TempDir& dir, const std::string& scene, const std::string& csv, const std::string& extra = "") {
-  return run(quote(TRADE_BENCH_BINARY) + " --scene-file " + quote(scene) +
+  return run(kTrade + " --scene-file " + quote(scene) +
                  " --quick --integrators implicit --depths 2 --duration 0.05 --csv " + quote(csv) + " " + extra,
              dir);
 }
 
-TEST(TradeBench, SweepsASceneFileAgainstItsUniformReference) {
+TEST(TradeStudy, SweepsASceneFileAgainstItsUniformReference) {
   TempDir dir;
   const RunResult r = sweep(dir, kCantilever, dir / "sweep.csv");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -108,7 +111,7 @@ TEST(TradeBench, SweepsASceneFileAgainstItsUniformReference) {
 // The path error sees what the end state hides: at a 5 ms step implicit
 // Euler damps the first swing, so its tip path departs from the 1 ms run's,
 // though each dt's reference is error-free against itself.
-TEST(TradeBench, TheTipPathIsMeasuredAgainstTheSmallestStep) {
+TEST(TradeStudy, TheTipPathIsMeasuredAgainstTheSmallestStep) {
   TempDir dir;
   const RunResult r =
       sweep(dir, kCantilever, dir / "dts.csv", "--dts 0.001,0.005 --metric path --svg " + quote(dir / "dts.svg"));
@@ -130,7 +133,7 @@ TEST(TradeBench, TheTipPathIsMeasuredAgainstTheSmallestStep) {
 }
 
 // --set reaches the scene: half the load, half the (small) deflection.
-TEST(TradeBench, OverridesApplyToTheSceneFile) {
+TEST(TradeStudy, OverridesApplyToTheSceneFile) {
   TempDir dir;
   ASSERT_EQ(sweep(dir, kCantilever, dir / "full.csv").exit_code, 0);
   const RunResult half = sweep(dir, kCantilever, dir / "half.csv", "--set 'loads[0].total_force_N[2]=-2.5'");
@@ -144,7 +147,7 @@ TEST(TradeBench, OverridesApplyToTheSceneFile) {
   EXPECT_NEAR(ratio, 0.5, 0.02);
 }
 
-TEST(TradeBench, ASceneWithoutProbesHasNoTipErrorButANodeError) {
+TEST(TradeStudy, ASceneWithoutProbesHasNoTipErrorButANodeError) {
   TempDir dir;
   write_text(dir / "block.yaml",
              "name: 'block, \"soft\" <A&B>'\n"  // a user's name: CSV-quoted, XML-escaped
@@ -168,7 +171,7 @@ TEST(TradeBench, ASceneWithoutProbesHasNoTipErrorButANodeError) {
   }
 }
 
-TEST(TradeBench, ABadSceneFileIsAnErrorNamingTheFileAndKey) {
+TEST(TradeStudy, ABadSceneFileIsAnErrorNamingTheFileAndKey) {
   TempDir dir;
   write_text(dir / "bad.yaml", "object: {cubes: [2, 2, 2], cube_size_m: 0.02}\nmaterial: {density_kg_per_m3: -1}\n");
   const RunResult r = sweep(dir, dir / "bad.yaml", dir / "bad.csv");
@@ -182,13 +185,26 @@ TEST(TradeBench, ABadSceneFileIsAnErrorNamingTheFileAndKey) {
   EXPECT_NE(o.err.find("--set"), std::string::npos) << o.err;
 }
 
-TEST(TradeBench, AMaxDepthAtTheScenesMinDepthIsRefused) {
+TEST(TradeStudy, AMaxDepthAtTheScenesMinDepthIsRefused) {
   TempDir dir;
-  const RunResult r = run(quote(TRADE_BENCH_BINARY) + " --scene-file " + quote(kCantilever) +
+  const RunResult r = run(kTrade + " --scene-file " + quote(kCantilever) +
                               " --set adaptivity.min_depth=1 --depths 1 --quick --integrators implicit",
                           dir);
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("adaptivity.min_depth 1"), std::string::npos) << r.err;
+}
+
+TEST(TradeStudy, HelpListsTheOptionsAndABadOptionIsAUsageError) {
+  TempDir dir;
+  const RunResult help = run(kTrade + " --help", dir);
+  EXPECT_EQ(help.exit_code, 0) << help.err;
+  EXPECT_NE(help.out.find("usage: tissue trade"), std::string::npos) << help.out;
+  EXPECT_NE(help.out.find("--scene-file"), std::string::npos) << help.out;
+  EXPECT_EQ(help.out.find("Table 1"), std::string::npos) << "--help runs nothing";
+  const RunResult bad = run(kTrade + " --sweep --depths 2 --frobnicate", dir);
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("tissue trade: unknown argument --frobnicate"), std::string::npos) << bad.err;
+  EXPECT_EQ(bad.out.find("Sweep"), std::string::npos) << "nothing ran: " << bad.out;
 }
 
 }  // namespace

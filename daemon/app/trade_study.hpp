@@ -1,0 +1,20 @@
+// The speed/accuracy trade study (NUMERICS.md §4): the seed paper's Table 1
+// for this implementation, a cost-vs-error sweep against the uniform
+// reference (CSV + SVG) on the shipped scenes or a user's scene file, and the
+// beam's model error against beam theory. `tissue trade` and the build tree's
+// `trade_bench` are this one function; the option list is its usage text
+// (`--help`) and the README's "The speed/accuracy trade".
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace tissue::app {
+
+// Runs the study `args` ask for (argv without the program name), printing
+// its tables to stdout. `program` names it in the usage and error lines.
+// Returns 0, or 2 after printing the reason and the usage to stderr (a bad
+// option, a scene file that does not load, a run that cannot start).
+int run_trade_study(const std::string& program, const std::vector<std::string>& args);
+
+}  // namespace tissue::app
