@@ -21,7 +21,12 @@
 //    pass after the spring loop: accumulating dpᵀB dp inside the spring loop
 //    was 10% slower (6.3 vs 7.2 ms at R3); with AVX2 (a 4-lane accumulator,
 //    pᵀM'p in the node pass) it measured R2 +2 %, R3 ±1 %, 4x10^5 springs
-//    −4 % (load 4.5): not kept.
+//    −4 % (load 4.5): not kept. Again on single-precision records with two
+//    accumulators (even and odd springs; 2026-11-25, idle machine, three
+//    rounds alternating, BM_Step/implicit_cg20 ns per spring): 7x10^3
+//    71.4-72.9 vs 69.6-71.7, 5x10^4 74.6-75.3 vs 72.8-75.6, 4x10^5 88-93 vs
+//    89-110, 1.6x10^6 138-152 vs 133-139; ImplicitVsExplicitSubstep/9
+//    24.0-24.9 vs 23.5-25.4: within noise, not kept.
 //  - The spring loop is instruction-bound (~50 scalar SSE2 instructions, ~4 ns
 //    per spring per matvec, IPC ~3.5); hand-written scalar code ran the same
 //    as Eigen's.
@@ -517,7 +522,15 @@ void ImplicitIntegrator::build_layout(const Body& body) {
   // (2026-11-25, float records; BM_Step/implicit_cg20, two rounds
   // alternating): 5x10^4 springs 82-83 vs 73-74, 4x10^5 112-115 vs 91-97,
   // 1.6x10^6 179-216 vs 139-141 ns per spring per step: sorted, consecutive
-  // springs share an end and chain their read-modify-writes of ap.
+  // springs share an end and chain their read-modify-writes of ap. Two more
+  // orders, same benchmark, two rounds alternating on an idle machine
+  // (2026-11-25): Morton unknowns with the sorted springs dealt round-robin
+  // from 8 chunks (no chain) 5x10^4 85-100 vs 75-77, 4x10^5 125-137 vs
+  // 104-109, 1.6x10^6 284-286 vs 143-146 (4 chunks: 78, 113-119, 230-253);
+  // unknowns numbered as the edge stream first touches them (springs in
+  // edge order) 75-76 vs 74-88, 94-98 vs 94-102, 193-201 vs 138-147. Both
+  // lose the streams this order keeps: the setup pass reads the body's edge
+  // arrays, and the node passes its node arrays, in the order given here.
   live_edges_.clear();
   stiffness_max_ = damping_max_ = 0.0;
   for (EdgeId e = 0; e < edges; ++e) {
