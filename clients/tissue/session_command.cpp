@@ -35,8 +35,10 @@ struct ReplayCommandOptions {
 
 struct SessionOptions {
   std::string file;
+  std::string dir = config::DaemonConfig{}.state_dir;  // `list`
   std::string xdmf_out;
   ReplayCommandOptions replay;
+  CLI::App* list = nullptr;
   CLI::App* info = nullptr;
   CLI::App* repair = nullptr;
   CLI::App* xdmf = nullptr;
@@ -137,6 +139,10 @@ void print_counts(const char* label, const record::GroupCounts& c) {
 
 int run_session(const SessionOptions& o) {
   try {
+    if (o.list->parsed()) {
+      std::cout << record::format_session_listing(record::list_sessions(o.dir));
+      return kExitOk;
+    }
     if (o.info->parsed()) {
       std::cout << record::format_session_info(record::read_session_info(o.file));
       return kExitOk;
@@ -211,6 +217,13 @@ Subcommand add_session_command(CLI::App& parent) {
   CLI::App* session =
       parent.add_subcommand("session", "Inspect, repair, export and replay recorded session files (HDF5)");
   session->require_subcommand(1);
+  options->list = session->add_subcommand(
+      "list", "The sessions in a state directory: state (clean, crashed, repaired), start, duration, rows, scene");
+  options->list->add_option("dir", options->dir, "Directory (default: tissued's default state_dir)")
+      ->capture_default_str();
+  options->list->footer(
+      "Unreadable session files and unfinished creations are listed after the sessions, with the reason.\n"
+      "Exit codes: 0 listed, 1 the directory cannot be read, 2 bad arguments.");
   options->info = session->add_subcommand("info", "Duration, row counts, scene, host, version, clean close or crash");
   options->info->add_option("file", options->file, "Session file (.h5)")->required();
   options->repair = session->add_subcommand(

@@ -131,6 +131,9 @@ inline constexpr const char* kAttrEndTime = "end_time_utc";
 inline constexpr const char* kAttrDurationS = "duration_s";
 // Room for "YYYY-MM-DDTHH:MM:SS.mmmZ" and its NUL, reserved at creation.
 inline constexpr std::size_t kEndTimeBytes = 32;
+// A session is built under ".NAME" + kCreatingInfix + "PID-N" beside its
+// final name and renamed into place once complete (SessionWriter::create).
+inline constexpr const char* kCreatingInfix = ".creating-";
 // Added by `tissue session repair`.
 inline constexpr const char* kAttrRepairedTime = "repaired_utc";
 

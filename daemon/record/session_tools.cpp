@@ -6,6 +6,7 @@
 #include <array>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -381,15 +382,21 @@ std::string format_session_info(const SessionInfo& info) {
   std::ostringstream o;
   o << "file:             " << info.path << "\n";
   o << "state:            ";
-  if (info.closed_cleanly)
-    o << "closed cleanly\n";
-  else if (info.open_for_write_flag)
-    o << "NOT closed cleanly: left by a crash (or still being recorded); run `tissue session repair` once no recorder "
-         "has it open\n";
-  else if (!info.repaired_utc.empty())
-    o << "NOT closed cleanly: left by a crash, repaired " << info.repaired_utc << "\n";
-  else
-    o << "NOT closed cleanly (the clean-close mark is missing)\n";
+  switch (session_state(info)) {
+    case SessionState::kClosedCleanly:
+      o << "closed cleanly\n";
+      break;
+    case SessionState::kOpenForWrite:
+      o << "NOT closed cleanly: left by a crash (or still being recorded); run `tissue session repair` once no "
+           "recorder has it open\n";
+      break;
+    case SessionState::kRepaired:
+      o << "NOT closed cleanly: left by a crash, repaired " << info.repaired_utc << "\n";
+      break;
+    case SessionState::kNotClosed:
+      o << "NOT closed cleanly (the clean-close mark is missing)\n";
+      break;
+  }
   o << "scene:            " << (info.scene_name.empty() ? "(none)" : info.scene_name) << "\n";
   o << "start time (UTC): " << info.start_time_utc << "\n";
   if (!info.end_time_utc.empty()) o << "end time (UTC):   " << info.end_time_utc << "\n";
@@ -406,6 +413,84 @@ std::string format_session_info(const SessionInfo& info) {
     << info.rows.mesh_triangles << " triangles"
     << (info.has_strain ? ", strain energy density per triangle" : ", no strain (format version 1)") << ")\n";
   o << "  /events         " << info.rows.events << " events\n";
+  return o.str();
+}
+
+SessionState session_state(const SessionInfo& info) {
+  if (info.closed_cleanly) return SessionState::kClosedCleanly;
+  if (info.open_for_write_flag) return SessionState::kOpenForWrite;
+  if (!info.repaired_utc.empty()) return SessionState::kRepaired;
+  return SessionState::kNotClosed;
+}
+
+SessionListing list_sessions(const std::string& dir) {
+  namespace fs = std::filesystem;
+  SessionListing listing;
+  listing.dir = dir;
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw RecordError("cannot list sessions in '" + dir + "': not a directory");
+  std::vector<fs::path> candidates;
+  fs::directory_iterator it(dir, ec), end;
+  if (ec) throw RecordError("cannot list sessions in '" + dir + "': " + ec.message());
+  for (; it != end; it.increment(ec)) {
+    if (ec) throw RecordError("cannot list sessions in '" + dir + "': " + ec.message());
+    const fs::path& p = it->path();
+    const std::string name = p.filename().string();
+    if (!it->is_regular_file(ec)) continue;
+    if (name.size() > 1 && name[0] == '.') {
+      if (name.find(kCreatingInfix) != std::string::npos) listing.unfinished.push_back(p.string());
+      continue;
+    }
+    bool hdf5 = p.extension() == ".h5";
+    if (!hdf5) {
+      // HDF5's signature at offset 0 (where this writer puts the superblock).
+      static constexpr char kSignature[8] = {'\x89', 'H', 'D', 'F', '\r', '\n', '\x1a', '\n'};
+      char head[8] = {};
+      std::ifstream in(p, std::ios::binary);
+      hdf5 = in.read(head, sizeof head) && std::equal(head, head + 8, kSignature);
+    }
+    if (hdf5) candidates.push_back(p);
+  }
+  std::sort(candidates.begin(), candidates.end());
+  std::sort(listing.unfinished.begin(), listing.unfinished.end());
+  for (const fs::path& p : candidates) {
+    try {
+      listing.sessions.push_back(read_session_info(p.string()));
+    } catch (const RecordError& e) {
+      listing.unreadable.push_back({p.string(), e.what()});
+    }
+  }
+  return listing;
+}
+
+std::string format_session_listing(const SessionListing& listing) {
+  static constexpr const char* kStateLabels[] = {"closed cleanly", "OPEN (recording or crashed)", "repaired",
+                                                 "NOT closed cleanly"};
+  std::ostringstream o;
+  o << listing.sessions.size() << " session" << (listing.sessions.size() == 1 ? "" : "s") << " in " << listing.dir
+    << "\n";
+  if (!listing.sessions.empty()) {
+    char line[512];
+    std::snprintf(line, sizeof line, "%-28s %-28s %-24s %10s %10s %7s  %s\n", "file", "state", "start (UTC)",
+                  "duration s", "haptic", "frames", "scene");
+    o << line;
+    for (const SessionInfo& s : listing.sessions) {
+      const std::string name = std::filesystem::path(s.path).filename().string();
+      std::snprintf(line, sizeof line, "%-28s %-28s %-24s %10.3f %10llu %7llu  %s\n", name.c_str(),
+                    kStateLabels[static_cast<int>(session_state(s))], s.start_time_utc.c_str(), s.duration_s,
+                    static_cast<unsigned long long>(s.rows.haptic_rows),
+                    static_cast<unsigned long long>(s.rows.mesh_frames), s.scene_name.c_str());
+      o << line;
+    }
+  }
+  for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << u.reason << "\n";
+  for (const std::string& f : listing.unfinished)
+    o << "unfinished: " << f
+      << ": a session being created right now, or left by a recorder that stopped while creating it (not a "
+         "session; safe to delete once no recorder is starting)\n";
+  if (std::any_of(listing.sessions.begin(), listing.sessions.end(),
+                  [](const SessionInfo& s) { return session_state(s) == SessionState::kOpenForWrite; }))
+    o << "OPEN: still being recorded, or left by a crash: `tissue session repair FILE` once no recorder has it open\n";
   return o.str();
 }
 

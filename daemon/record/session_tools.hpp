@@ -48,6 +48,36 @@ SessionInfo read_session_info(const std::string& path);
 // Human-readable multi-line summary (what `tissue session info` prints).
 std::string format_session_info(const SessionInfo& info);
 
+// How a session file ended, from its clean-close mark, superblock flags and
+// repair mark.
+enum class SessionState : std::uint8_t {
+  kClosedCleanly,
+  kOpenForWrite,  // being recorded, or left by a crash and not yet repaired
+  kRepaired,      // left by a crash, repaired
+  kNotClosed,     // no clean-close mark, flags clear (e.g. a failed close)
+};
+SessionState session_state(const SessionInfo& info);
+
+// What a state directory holds (`tissue session list`). Every regular file
+// whose name ends in ".h5" or that starts with HDF5's signature is read as a
+// session; other files (exports, sidecars) and subdirectories are skipped.
+struct SessionListing {
+  std::string dir;
+  std::vector<SessionInfo> sessions;  // sorted by file name
+  struct Unreadable {
+    std::string path, reason;  // reason: RecordError's message
+  };
+  std::vector<Unreadable> unreadable;  // session-like files that are not readable sessions
+  // Hidden ".NAME.creating-PID-N" files: a session being created right now,
+  // or one whose recorder stopped while creating it (not a session).
+  std::vector<std::string> unfinished;
+};
+// Throws RecordError naming `dir` when it cannot be listed.
+SessionListing list_sessions(const std::string& dir);
+// One line per session (name, state, start, duration, haptic ticks, mesh
+// frames, scene), then the unreadable and unfinished files with reasons.
+std::string format_session_listing(const SessionListing& listing);
+
 // ---------------------------------------------------------------- readers
 // The one reader of a session's rows (replay, the replay haptic device, the
 // frame source): the same file checks as read_session_info (foreign, empty,

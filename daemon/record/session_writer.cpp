@@ -115,7 +115,7 @@ std::string hidden_path_for(const std::string& path) {
   // Appended piecewise: GCC 12 warns falsely (-Wrestrict) on "." + string.
   std::string name(".");
   name.append(p.filename().string())
-      .append(".creating-")
+      .append(kCreatingInfix)
       .append(std::to_string(::getpid()))
       .append("-")
       .append(std::to_string(counter.fetch_add(1)));

@@ -1,4 +1,4 @@
-// Session tools (info / repair / xdmf) and the session readers (SessionFile,
+// Session tools (list / info / repair / xdmf) and the session readers (SessionFile,
 // read_session_rows, read_haptic_track), as library calls and through the
 // `tissue session` CLI: good files, bad arguments, and files that are not
 // sessions at all. No input may crash them (the ASan tree runs this too).
@@ -14,6 +14,7 @@
 
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
+#include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 
 namespace tissue::record {
@@ -107,10 +108,68 @@ TEST(SessionTools, CliInfoAndRepairOnACleanSession) {
   EXPECT_TRUE(read_session_info(dir / "s.h5").closed_cleanly);
 }
 
+// A state directory as a lab finds it: a clean session, one still open for
+// writing (a copy taken while its writer runs reads as a crash), a repaired
+// one, a session file without the .h5 name, an empty .h5, an unfinished
+// creation, and files that are not sessions (skipped).
+TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
+  TempDir dir;
+  const std::string d = dir / "state";
+  std::filesystem::create_directories(d + "/sub");
+  write_small_session(d + "/a.h5");
+  {
+    SessionMetadata meta;
+    meta.scene_name = "live";
+    auto w = SessionWriter::create(dir / "live.h5", meta);
+    w->append_haptic(std::vector<HapticRow>{testing::haptic_row(0), testing::haptic_row(1)});
+    w->flush();
+    std::filesystem::copy_file(dir / "live.h5", d + "/b.h5");
+    std::filesystem::copy_file(dir / "live.h5", d + "/c.h5");
+    w->close();
+  }
+  repair_session(d + "/c.h5");
+  std::filesystem::copy_file(d + "/a.h5", d + "/no_extension");
+  std::ofstream(d + "/empty.h5").flush();
+  std::ofstream(d + "/notes.txt") << "not a session\n";
+  std::ofstream(d + "/a.x3d") << "<X3D/>\n";
+  std::ofstream(d + "/.d.h5" + kCreatingInfix + "1-0").flush();
+
+  const SessionListing l = list_sessions(d);
+  ASSERT_EQ(l.sessions.size(), 4u);
+  const auto name = [](const SessionInfo& s) { return std::filesystem::path(s.path).filename().string(); };
+  EXPECT_EQ(name(l.sessions[0]), "a.h5");
+  EXPECT_EQ(session_state(l.sessions[0]), SessionState::kClosedCleanly);
+  EXPECT_EQ(l.sessions[0].rows.haptic_rows, testing::TestSession{}.haptic);
+  EXPECT_EQ(name(l.sessions[1]), "b.h5");
+  EXPECT_EQ(session_state(l.sessions[1]), SessionState::kOpenForWrite);
+  EXPECT_EQ(l.sessions[1].rows.haptic_rows, 2u);
+  EXPECT_EQ(name(l.sessions[2]), "c.h5");
+  EXPECT_EQ(session_state(l.sessions[2]), SessionState::kRepaired);
+  EXPECT_EQ(name(l.sessions[3]), "no_extension");
+  ASSERT_EQ(l.unreadable.size(), 1u);
+  EXPECT_EQ(l.unreadable[0].path, d + "/empty.h5");
+  EXPECT_NE(l.unreadable[0].reason.find("empty"), std::string::npos) << l.unreadable[0].reason;
+  ASSERT_EQ(l.unfinished.size(), 1u);
+  EXPECT_NE(l.unfinished[0].find(".d.h5.creating-1-0"), std::string::npos);
+
+  const auto r = run(tissue() + " session list " + quote(d), dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("4 sessions in " + d), std::string::npos) << r.out;
+  for (const char* expected : {"a.h5", "closed cleanly", "b.h5", "OPEN", "c.h5", "repaired", "no_extension",
+                               "unreadable: '" /* the path follows */, "unfinished: ", "tissue session repair"})
+    EXPECT_NE(r.out.find(expected), std::string::npos) << expected << "\n" << r.out;
+  for (const char* skipped : {"notes.txt", "a.x3d", "sub"})
+    EXPECT_EQ(r.out.find(skipped), std::string::npos) << skipped;
+
+  const auto missing = run(tissue() + " session list " + quote(dir / "missing"), dir);
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.err.find(dir / "missing"), std::string::npos) << missing.err;
+}
+
 TEST(SessionTools, CliBadArgumentsExitTwo) {
   TempDir dir;
   for (const char* args : {"session", "session info", "session repair", "session xdmf", "session frobnicate x.h5",
-                           "session info a.h5 b.h5", "session xdmf a.h5 -o"}) {
+                           "session info a.h5 b.h5", "session xdmf a.h5 -o", "session list a b"}) {
     const auto r = run(tissue() + " " + args, dir);
     EXPECT_EQ(r.exit_code, 2) << args << "\n" << r.err;
   }
