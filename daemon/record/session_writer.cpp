@@ -124,13 +124,20 @@ std::string hidden_path_for(const std::string& path) {
 
 // Renames `from` to `to` unless `to` exists (atomically: no check-then-act
 // window). Returns 0 or the errno. Filesystems without RENAME_NOREPLACE get a
-// hard link, which is just as exclusive, and the unlink of the old name.
+// hard link, which is just as exclusive, and the unlink of the old name;
+// those without hard links either (FAT and exFAT sticks) a check, then a
+// plain rename: two recorders starting the same name in the same instant
+// there could replace one another's file.
 int publish_without_replacing(const std::string& from, const std::string& to) {
   if (::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE) == 0) return 0;
   if (errno != EINVAL && errno != ENOSYS) return errno;
-  if (::link(from.c_str(), to.c_str()) != 0) return errno;
-  ::unlink(from.c_str());
-  return 0;
+  if (::link(from.c_str(), to.c_str()) == 0) {
+    ::unlink(from.c_str());
+    return 0;
+  }
+  if (errno != EPERM && errno != EOPNOTSUPP) return errno;
+  if (::access(to.c_str(), F_OK) == 0) return EEXIST;
+  return ::rename(from.c_str(), to.c_str()) == 0 ? 0 : errno;
 }
 
 }  // namespace
