@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <sstream>
 #include <type_traits>
 
@@ -463,29 +464,56 @@ SessionListing list_sessions(const std::string& dir) {
   return listing;
 }
 
+namespace {
+
+const char* state_label(SessionState state) {
+  switch (state) {
+    case SessionState::kClosedCleanly:
+      return "closed cleanly";
+    case SessionState::kOpenForWrite:
+      return "OPEN (recording or crashed)";
+    case SessionState::kRepaired:
+      return "repaired";
+    case SessionState::kNotClosed:
+      break;
+  }
+  return "NOT closed cleanly";
+}
+
+// One table cell: a name from a file or a scene may hold anything, and a
+// line break in it would start a false row.
+std::string one_line(std::string text) {
+  for (char& c : text)
+    if (c == '\n' || c == '\r' || c == '\t') c = ' ';
+  return text;
+}
+
+}  // namespace
+
 std::string format_session_listing(const SessionListing& listing) {
-  static constexpr const char* kStateLabels[] = {"closed cleanly", "OPEN (recording or crashed)", "repaired",
-                                                 "NOT closed cleanly"};
   std::ostringstream o;
   o << listing.sessions.size() << " session" << (listing.sessions.size() == 1 ? "" : "s") << " in " << listing.dir
     << "\n";
-  if (!listing.sessions.empty()) {
-    char line[512];
-    std::snprintf(line, sizeof line, "%-28s %-28s %-24s %10s %10s %7s  %s\n", "file", "state", "start (UTC)",
-                  "duration s", "haptic", "frames", "scene");
-    o << line;
-    for (const SessionInfo& s : listing.sessions) {
-      const std::string name = std::filesystem::path(s.path).filename().string();
-      std::snprintf(line, sizeof line, "%-28s %-28s %-24s %10.3f %10llu %7llu  %s\n", name.c_str(),
-                    kStateLabels[static_cast<int>(session_state(s))], s.start_time_utc.c_str(), s.duration_s,
-                    static_cast<unsigned long long>(s.rows.haptic_rows),
-                    static_cast<unsigned long long>(s.rows.mesh_frames), s.scene_name.c_str());
-      o << line;
-    }
+  // Left-aligned text columns, right-aligned numbers; a long name widens its
+  // row rather than being cut.
+  const auto row = [&o](const std::string& file, const std::string& state, const std::string& start,
+                        const std::string& duration, const std::string& haptic, const std::string& frames,
+                        const std::string& scene) {
+    o << std::left << std::setw(28) << file << ' ' << std::setw(28) << state << ' ' << std::setw(24) << start << ' '
+      << std::right << std::setw(10) << duration << ' ' << std::setw(10) << haptic << ' ' << std::setw(7) << frames
+      << "  " << scene << "\n";
+  };
+  if (!listing.sessions.empty()) row("file", "state", "start (UTC)", "duration s", "haptic", "frames", "scene");
+  for (const SessionInfo& s : listing.sessions) {
+    char duration[32];
+    std::snprintf(duration, sizeof duration, "%.3f", s.duration_s);
+    row(one_line(std::filesystem::path(s.path).filename().string()), state_label(session_state(s)),
+        one_line(s.start_time_utc), duration, std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames),
+        one_line(s.scene_name));
   }
-  for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << u.reason << "\n";
+  for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << one_line(u.reason) << "\n";
   for (const std::string& f : listing.unfinished)
-    o << "unfinished: " << f
+    o << "unfinished: " << one_line(f)
       << ": a session being created right now, or left by a recorder that stopped while creating it (not a "
          "session; safe to delete once no recorder is starting)\n";
   if (std::any_of(listing.sessions.begin(), listing.sessions.end(),

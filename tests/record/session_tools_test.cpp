@@ -128,6 +128,9 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
     w->close();
   }
   repair_session(d + "/c.h5");
+  testing::TestSession odd;  // a scene name no table column is made for
+  odd.scene_name = std::string(600, 'x') + "\nrow";
+  testing::write_test_session(d + "/e.h5", odd);
   std::filesystem::copy_file(d + "/a.h5", d + "/no_extension");
   std::ofstream(d + "/empty.h5").flush();
   std::ofstream(d + "/notes.txt") << "not a session\n";
@@ -135,7 +138,7 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
   std::ofstream(d + "/.d.h5" + kCreatingInfix + "1-0").flush();
 
   const SessionListing l = list_sessions(d);
-  ASSERT_EQ(l.sessions.size(), 4u);
+  ASSERT_EQ(l.sessions.size(), 5u);
   const auto name = [](const SessionInfo& s) { return std::filesystem::path(s.path).filename().string(); };
   EXPECT_EQ(name(l.sessions[0]), "a.h5");
   EXPECT_EQ(session_state(l.sessions[0]), SessionState::kClosedCleanly);
@@ -145,7 +148,8 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
   EXPECT_EQ(l.sessions[1].rows.haptic_rows, 2u);
   EXPECT_EQ(name(l.sessions[2]), "c.h5");
   EXPECT_EQ(session_state(l.sessions[2]), SessionState::kRepaired);
-  EXPECT_EQ(name(l.sessions[3]), "no_extension");
+  EXPECT_EQ(name(l.sessions[3]), "e.h5");
+  EXPECT_EQ(name(l.sessions[4]), "no_extension");
   ASSERT_EQ(l.unreadable.size(), 1u);
   EXPECT_EQ(l.unreadable[0].path, d + "/empty.h5");
   EXPECT_NE(l.unreadable[0].reason.find("empty"), std::string::npos) << l.unreadable[0].reason;
@@ -154,7 +158,13 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
 
   const auto r = run(tissue() + " session list " + quote(d), dir);
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.out.find("4 sessions in " + d), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("5 sessions in " + d), std::string::npos) << r.out;
+  // The long, two-line scene name stays whole, on its session's row.
+  EXPECT_NE(r.out.find("e.h5 "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(std::string(600, 'x') + " row\n"), std::string::npos) << r.out;
+  EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1 + 1 + 5 + 1 + 1 + 1)
+      << "title, header, 5 sessions, 1 unreadable, 1 unfinished, the OPEN hint\n"
+      << r.out;
   for (const char* expected : {"a.h5", "closed cleanly", "b.h5", "OPEN", "c.h5", "repaired", "no_extension",
                                "unreadable: '" /* the path follows */, "unfinished: ", "tissue session repair"})
     EXPECT_NE(r.out.find(expected), std::string::npos) << expected << "\n" << r.out;
