@@ -499,7 +499,11 @@ void SessionWriter::close() {
         h5::write_f64_attribute(file_.get(), kAttrDurationS, duration_s);
         h5::write_u8_attribute(file_.get(), kAttrClosedCleanly, 1);
       } catch (const RecordError& e) {
-        fail(std::string("cannot write the clean-close mark: ") + e.what());
+        // e names the attribute and HDF5's reason already (fail() would add
+        // the reason twice); the rest is fail()'s: detach, then report.
+        error_ = "session file '" + path_ + "': cannot write the clean-close mark: " + e.what();
+        detach_from_disk();
+        throw RecordError(error_);
       }
     } catch (const RecordError&) {
       ok = false;
