@@ -87,9 +87,6 @@ double thread_cpu_s() {
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
-// Which clock `cost` uses in verdicts and plots (set from --clock).
-bool g_cost_uses_cpu = false;
-
 // ---------------------------------------------------------------------------
 // Options
 
@@ -326,7 +323,10 @@ struct RunStats {
   long unconverged_steps = 0;  // solver stopped at cg_max_iterations short of cg_tolerance
   double wall_cost() const { return sim_s > 0.0 ? wall_s / sim_s : NAN; }
   double cpu_cost() const { return sim_s > 0.0 ? cpu_s / sim_s : NAN; }
-  double cost() const { return g_cost_uses_cpu ? cpu_cost() : wall_cost(); }
+  // What cost() and the run cap measure: wall time, or thread CPU time with
+  // --clock cpu (set where the run is set up, from the options).
+  bool cost_uses_cpu = false;
+  double cost() const { return cost_uses_cpu ? cpu_cost() : wall_cost(); }
   double mean_iterations() const { return steps > 0 ? static_cast<double>(solver_iterations) / steps : 0.0; }
   double last_adapt_s = NAN;  // time of the last step whose adaptation split or merged
 };
@@ -356,7 +356,7 @@ bool advance(ph::Simulation& sim, long n, RunStats& st, double cap_s = 0.0,
     st.unconverged_steps += r.solver_converged ? 0 : 1;
     if (r.adapted.splits + r.adapted.merges > 0) st.last_adapt_s = sim.time_s();
     if (after) after(sim);
-    if (cap_s > 0.0 && (g_cost_uses_cpu ? st.cpu_s : st.wall_s) > cap_s && i + 1 < n) {
+    if (cap_s > 0.0 && (st.cost_uses_cpu ? st.cpu_s : st.wall_s) > cap_s && i + 1 < n) {
       st.capped = true;
       return false;
     }
@@ -672,6 +672,7 @@ struct SweepSetup {
   std::vector<sc::IntegratorKind> kinds;
   std::vector<double> dts_s;
   double wall_cap_s;
+  bool cost_uses_cpu = false;  // --clock cpu: costs, the cap and the plot's axis in thread CPU time
 };
 
 sc::Scene sweep_scene(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kind, double dt) {
@@ -698,6 +699,7 @@ sc::Scene sweep_scene(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKi
 
 Point run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kind, double dt) {
   Point p;
+  p.st.cost_uses_cpu = s.cost_uses_cpu;
   p.integrator = kind_name(kind);
   p.dt_s = dt;
   p.adaptive = m.adaptive;
@@ -866,7 +868,7 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
     o << "<circle cx=\"" << x - 8 << "\" cy=\"" << y - 4 << "\" r=\"4.5\" fill=\"" << colours[i % colours.size()]
       << "\"/><text x=\"" << x << "\" y=\"" << y << "\">adaptive Th = " << s.th_Pa[i] << " Pa</text>\n";
   }
-  o << "<text x=\"" << lx << "\" y=\"" << ly + 54 << "\">x: cost = " << (g_cost_uses_cpu ? "thread CPU" : "wall")
+  o << "<text x=\"" << lx << "\" y=\"" << ly + 54 << "\">x: cost = " << (s.cost_uses_cpu ? "thread CPU" : "wall")
     << " s per simulated s (step incl. adaptation); y: " << metric_label
     << " vs the uniform reference at the same max depth (log-log)</text>\n";
 
@@ -899,7 +901,7 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
           << "</text>\n";
       }
       o << "<text x=\"" << x0 + pw / 2 << "\" y=\"" << y0 + ph_ + 30 << "\" text-anchor=\"middle\">cost ["
-        << (g_cost_uses_cpu ? "CPU" : "wall") << " s / simulated s]</text>\n";
+        << (s.cost_uses_cpu ? "CPU" : "wall") << " s / simulated s]</text>\n";
       o << "<text transform=\"translate(" << x0 - 48 << "," << y0 + ph_ / 2 << ") rotate(-90)\" text-anchor=\"middle\">"
         << (metric == "tip"    ? "tip error [-]"
             : metric == "path" ? "tip path error [-]"
@@ -969,6 +971,7 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
 void run_sweep(const Options& o) {
   SweepSetup s;
   s.scene = o.sweep_scene;
+  s.cost_uses_cpu = o.cpu_clock;
   if (!o.scene_file.empty()) {
     s.from_file = sc::load_scene_file_with_overrides(o.scene_file, o.scene_overrides);
     s.scene = s.from_file->name;
@@ -1227,7 +1230,6 @@ int run_trade_study(const std::string& program, const std::vector<std::string>& 
       usage(program, stdout);
       return 0;
     }
-    g_cost_uses_cpu = o.cpu_clock;
     const auto t0 = Clock::now();
     if (o.table1) {
       const auto t = Clock::now();

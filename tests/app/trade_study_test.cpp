@@ -132,6 +132,27 @@ TEST(TradeStudy, TheTipPathIsMeasuredAgainstTheSmallestStep) {
   EXPECT_GT(number(coarse, "tip_path_err_rel"), 0.01);  // but not against the truth
 }
 
+// --clock picks the cost the plot and the verdicts use; it is each study's
+// own setting, not left over from an earlier study in the same process.
+TEST(TradeStudy, TheCostClockIsTheOneAskedFor) {
+  TempDir dir;
+  const RunResult cpu = sweep(dir, kCantilever, dir / "cpu.csv", "--clock cpu --svg " + quote(dir / "cpu.svg"));
+  ASSERT_EQ(cpu.exit_code, 0) << cpu.err;
+  const RunResult wall = sweep(dir, kCantilever, dir / "wall.csv", "--svg " + quote(dir / "wall.svg"));
+  ASSERT_EQ(wall.exit_code, 0) << wall.err;
+  const std::string cpu_svg = slurp(dir / "cpu.svg"), wall_svg = slurp(dir / "wall.svg");
+  EXPECT_NE(cpu_svg.find("x: cost = thread CPU"), std::string::npos);
+  EXPECT_NE(cpu_svg.find("[CPU s / simulated s]"), std::string::npos);
+  EXPECT_NE(wall_svg.find("x: cost = wall"), std::string::npos);
+  EXPECT_NE(wall_svg.find("[wall s / simulated s]"), std::string::npos);
+  // Both costs are in the CSV whichever clock is plotted.
+  for (const auto& row : read_csv(dir / "cpu.csv"))
+    if (row.at("status") == "ok") {
+      EXPECT_GT(number(row, "cost_cpu_per_sim"), 0.0);
+      EXPECT_GT(number(row, "cost_wall_per_sim"), 0.0);
+    }
+}
+
 // --set reaches the scene: half the load, half the (small) deflection.
 TEST(TradeStudy, OverridesApplyToTheSceneFile) {
   TempDir dir;
