@@ -361,27 +361,15 @@ std::string resolve(const std::string& path, const std::string& source) {
 }
 
 DaemonConfig build(const std::string& text, const std::string& source, const std::vector<std::string>& overrides) {
-  try {
-    const yaml_util::Document doc = yaml_util::load_with_overrides(text, source, overrides, kConfigDocument);
-    try {
-      DaemonConfig c = Converter(source).config(doc.root);
-      c.scene_path = resolve(c.scene_path, source);
-      c.state_dir = resolve(c.state_dir, source);
-      if (!c.device.replay.session.empty()) c.device.replay.session = resolve(c.device.replay.session, source);
-      validate_daemon_config(c);
-      return c;
-    } catch (const ConfigError& e) {
-      throw ConfigError(e.source(), e.key_path(), yaml_util::blame_override(doc.overrides, e.key_path(), e.reason()));
-    } catch (const yaml_util::PathError& e) {
-      throw ConfigError(e.source(), e.key_path(), yaml_util::blame_override(doc.overrides, e.key_path(), e.reason()));
-    }
-  } catch (const yaml_util::PathError& e) {
-    throw ConfigError(e.source(), e.key_path(), e.reason());
-  } catch (const YAML::Exception& e) {
-    // Not expected (the converter only reads nodes it has checked), but a
-    // yaml-cpp exception must never escape as anything but a ConfigError.
-    throw ConfigError(source, "", std::string("YAML error: ") + e.what());
-  }
+  return yaml_util::convert_document<ConfigError>(
+      text, source, overrides, kConfigDocument, [&](const YAML::Node& root) {
+        DaemonConfig c = Converter(source).config(root);
+        c.scene_path = resolve(c.scene_path, source);
+        c.state_dir = resolve(c.state_dir, source);
+        if (!c.device.replay.session.empty()) c.device.replay.session = resolve(c.device.replay.session, source);
+        validate_daemon_config(c);
+        return c;
+      });
 }
 
 }  // namespace
@@ -394,13 +382,8 @@ DaemonConfig parse_daemon_config(const std::string& yaml_text, const std::string
 }
 
 DaemonConfig load_daemon_config(const std::string& path, const std::vector<std::string>& overrides) {
-  std::string text;
-  try {
-    text = yaml_util::read_text_file(path, kMaxConfigFileBytes, "daemon config file");
-  } catch (const yaml_util::PathError& e) {
-    throw ConfigError(e.source(), e.key_path(), e.reason());
-  }
-  return build(text, path, overrides);
+  return build(yaml_util::read_text_file_as<ConfigError>(path, kMaxConfigFileBytes, "daemon config file"), path,
+               overrides);
 }
 
 bool is_daemon_config_key(std::string_view key_path) {

@@ -422,32 +422,16 @@ class Validator : private yaml_util::ValueChecks<Validator> {
 const yaml_util::DocumentKind kSceneDocument{"scene", "a scene needs at least an 'object' section"};
 
 Scene build(const std::string& yaml_text, const std::string& source, const std::vector<std::string>& overrides) {
-  try {
-    const yaml_util::Document doc = yaml_util::load_with_overrides(yaml_text, source, overrides, kSceneDocument);
-    try {
-      Scene s = Converter(source).scene(doc.root);
-      validate_scene(s);
-      return s;
-    } catch (const SceneError& e) {
-      throw SceneError(e.source(), e.key_path(), yaml_util::blame_override(doc.overrides, e.key_path(), e.reason()));
-    } catch (const yaml_util::PathError& e) {
-      throw SceneError(e.source(), e.key_path(), yaml_util::blame_override(doc.overrides, e.key_path(), e.reason()));
-    }
-  } catch (const yaml_util::PathError& e) {
-    throw SceneError(e.source(), e.key_path(), e.reason());
-  } catch (const YAML::Exception& e) {
-    // Not expected (the converter only reads nodes it has checked), but a
-    // yaml-cpp exception must never escape as anything but a SceneError.
-    throw SceneError(source, "", std::string("YAML error: ") + e.what());
-  }
+  return yaml_util::convert_document<SceneError>(yaml_text, source, overrides, kSceneDocument,
+                                                 [&](const YAML::Node& root) {
+                                                   Scene s = Converter(source).scene(root);
+                                                   validate_scene(s);
+                                                   return s;
+                                                 });
 }
 
 std::string read_file(const std::string& path) {
-  try {
-    return yaml_util::read_text_file(path, kMaxSceneFileBytes, "scene file");
-  } catch (const yaml_util::PathError& e) {
-    throw SceneError(e.source(), e.key_path(), e.reason());
-  }
+  return yaml_util::read_text_file_as<SceneError>(path, kMaxSceneFileBytes, "scene file");
 }
 
 }  // namespace

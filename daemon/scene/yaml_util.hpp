@@ -229,6 +229,40 @@ class DocumentError : public KeyPathError {
       : KeyPathError(source, key_path, reason, unnamed) {}
 };
 
+// The loaders' boundary: `convert(root)` over the document in `text` with
+// `overrides` applied. Whatever goes wrong leaves as an Error (the loader's
+// public DocumentError type) naming the file and key path, with the --set
+// that probably caused it; a yaml-cpp exception never escapes as anything else.
+template <class Error, class Convert>
+auto convert_document(const std::string& text, const std::string& source, const std::vector<std::string>& overrides,
+                      const DocumentKind& kind, Convert&& convert) -> decltype(convert(YAML::Node())) {
+  try {
+    const Document doc = load_with_overrides(text, source, overrides, kind);
+    try {
+      return convert(doc.root);
+    } catch (const Error& e) {
+      throw Error(e.source(), e.key_path(), blame_override(doc.overrides, e.key_path(), e.reason()));
+    } catch (const PathError& e) {
+      throw Error(e.source(), e.key_path(), blame_override(doc.overrides, e.key_path(), e.reason()));
+    }
+  } catch (const PathError& e) {
+    throw Error(e.source(), e.key_path(), e.reason());
+  } catch (const YAML::Exception& e) {
+    // Not expected (the converters only read nodes they have checked).
+    throw Error(source, "", std::string("YAML error: ") + e.what());
+  }
+}
+
+// read_text_file with its PathError as the loader's Error.
+template <class Error>
+std::string read_text_file_as(const std::string& path, std::uintmax_t max_bytes, const std::string& what) {
+  try {
+    return read_text_file(path, max_bytes, what);
+  } catch (const PathError& e) {
+    throw Error(e.source(), e.key_path(), e.reason());
+  }
+}
+
 // Value checks shared by the scene and daemon-config validators (CRTP): each
 // reports through the derived class's fail(path, reason), which throws that
 // document's error type naming the file.
