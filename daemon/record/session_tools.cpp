@@ -515,7 +515,7 @@ std::string format_session_listing(const SessionListing& listing) {
   for (const std::string& f : listing.unfinished)
     o << "unfinished: " << one_line(f)
       << ": a session being created right now, or left by a recorder that stopped while creating it (not a "
-         "session; safe to delete once no recorder is starting)\n";
+         "session, no data in it; tissued removes it at its next start once that process is gone)\n";
   if (std::any_of(listing.sessions.begin(), listing.sessions.end(),
                   [](const SessionInfo& s) { return session_state(s) == SessionState::kOpenForWrite; }))
     o << "OPEN: still being recorded, or left by a crash: `tissue session repair FILE` once no recorder has it open\n";

@@ -1,6 +1,7 @@
 #include "record/session_writer.hpp"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <stdio.h>
 #include <unistd.h>
 
@@ -108,7 +109,8 @@ namespace {
 
 // ".NAME.creating-PID-N" beside the session: hidden from listings and from
 // the *.h5 globs users point tools at. Left behind only by a crash inside
-// create(), which takes milliseconds.
+// create(), which takes milliseconds; tissued removes such leftovers at its
+// next start (remove_abandoned_creations, keyed on the PID in the name).
 std::string hidden_path_for(const std::string& path) {
   static std::atomic<unsigned> counter{0};
   const std::filesystem::path p(path);
@@ -141,6 +143,33 @@ int publish_without_replacing(const std::string& from, const std::string& to) {
 }
 
 }  // namespace
+
+std::vector<std::string> remove_abandoned_creations(const std::string& dir) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> removed;
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec), end;
+  if (ec) return removed;
+  const std::string infix = kCreatingInfix;
+  for (; it != end; it.increment(ec)) {
+    if (ec) break;
+    const std::string name = it->path().filename().string();
+    const std::size_t at = name.rfind(infix);
+    if (name.size() < 2 || name[0] != '.' || at == std::string::npos || !it->is_regular_file(ec)) continue;
+    // "PID-N": the pid the name was made with (hidden_path_for).
+    const std::string tail = name.substr(at + infix.size());
+    const std::size_t dash = tail.find('-');
+    if (dash == 0 || dash == std::string::npos || dash > 9 ||
+        !std::all_of(tail.begin(), tail.begin() + static_cast<std::ptrdiff_t>(dash),
+                     [](char c) { return c >= '0' && c <= '9'; }))
+      continue;
+    const pid_t pid = static_cast<pid_t>(std::stol(tail.substr(0, dash)));
+    if (pid <= 0 || pid == ::getpid()) continue;
+    if (::kill(pid, 0) == 0 || errno != ESRCH) continue;  // alive, or not ours to judge (EPERM)
+    if (fs::remove(it->path(), ec)) removed.push_back(it->path().string());
+  }
+  return removed;
+}
 
 std::string utc_now_iso8601() {
   const auto now = std::chrono::system_clock::now();

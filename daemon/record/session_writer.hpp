@@ -29,6 +29,13 @@ namespace tissue::record {
 // no "..", no NUL. Sessions only ever land inside the state directory.
 void validate_session_name(const std::string& name);
 
+// Removes the hidden ".NAME.creating-PID-N" files in `dir` whose process is
+// gone: a recorder killed inside SessionWriter::create, before the file was
+// published, so no recorded row is in it. Files of a live process (this one
+// included) stay, and so does anything that is not such a file. Returns the
+// removed paths; a directory that cannot be read removes nothing.
+std::vector<std::string> remove_abandoned_creations(const std::string& dir);
+
 // Current UTC time as ISO-8601 with milliseconds, e.g. 2024-05-01T12:00:00.123Z.
 std::string utc_now_iso8601();
 

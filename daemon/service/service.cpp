@@ -15,6 +15,7 @@
 #include "control/systemd_notify.hpp"
 #include "export/x3d.hpp"
 #include "record/recorder.hpp"
+#include "record/session_writer.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/haptic_side.hpp"
 #include "transport/dds_publisher.hpp"
@@ -353,6 +354,12 @@ int Service::run() {
   } catch (const std::exception&) {
     // The server names the path when it cannot bind; nothing more to say here.
   }
+  // A recorder killed while creating a session leaves a hidden, never
+  // published file with no recorded row in it: remove it, named, rather than
+  // let such files pile up in the state directory.
+  for (const std::string& f : record::remove_abandoned_creations(config_.state_dir))
+    std::fprintf(options_.out, "tissued: removed %s: a session creation whose process is gone (no data in it)\n",
+                 f.c_str());
   try {
     systemd_ = std::make_unique<control::SystemdNotifier>();
     if (!systemd_->setup_error().empty())

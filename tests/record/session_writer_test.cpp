@@ -3,9 +3,12 @@
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 
 #include "record/session_layout.hpp"
@@ -133,6 +136,33 @@ TEST(SessionWriter, NeverOverwritesAndNamesMissingStateDirectories) {
   } catch (const RecordError& e) {
     EXPECT_NE(std::string(e.what()).find(dir / "missing"), std::string::npos) << e.what();
   }
+}
+
+// A recorder killed while creating a session leaves its hidden file behind;
+// it goes once its process is gone, never while the process lives, and
+// nothing else in the directory is touched.
+TEST(SessionWriter, AbandonedCreationsOfGoneProcessesAreRemoved) {
+  TempDir dir;
+  const pid_t gone = ::fork();
+  ASSERT_GE(gone, 0);
+  if (gone == 0) ::_exit(0);
+  ASSERT_EQ(::waitpid(gone, nullptr, 0), gone);
+  write_session(dir.path(), "kept.h5", 10, 1, 1, 1);
+  const auto touch = [&](const std::string& name) {
+    std::ofstream(dir / name) << "half-made";
+    return dir / name;
+  };
+  const std::string abandoned = touch(".a.h5" + std::string(kCreatingInfix) + std::to_string(gone) + "-0");
+  const std::vector<std::string> kept = {
+      touch(".b.h5" + std::string(kCreatingInfix) + std::to_string(::getpid()) + "-3"),             // this process
+      touch(".c.h5" + std::string(kCreatingInfix) + std::to_string(::getppid()) + "-0"),            // a live one
+      touch(".d.h5" + std::string(kCreatingInfix) + "x1-0"),                                        // no pid
+      touch(".notes"), touch("e.h5" + std::string(kCreatingInfix) + std::to_string(gone) + "-0")};  // not hidden
+  EXPECT_EQ(remove_abandoned_creations(dir.path()), std::vector<std::string>{abandoned});
+  EXPECT_FALSE(std::filesystem::exists(abandoned));
+  for (const std::string& f : kept) EXPECT_TRUE(std::filesystem::exists(f)) << f;
+  EXPECT_EQ(read_session_info(dir / "kept.h5").rows.haptic_rows, 10u);
+  EXPECT_TRUE(remove_abandoned_creations(dir / "missing").empty());
 }
 
 TEST(SessionWriter, InvalidMeshFramesAreRefusedWithoutTouchingTheFile) {

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -18,6 +19,7 @@
 #include "control/control_client.hpp"
 #include "control/fake_systemd.hpp"
 #include "control/temp_dir.hpp"
+#include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
 
 namespace tissue::service {
@@ -260,6 +262,26 @@ TEST(Service, RecordsASessionOnRequest) {
   EXPECT_GT(info.rows.sim_rows, 100u);     // one per sim step: fewer when the sim runs slow (sanitizers)
   EXPECT_GT(info.rows.mesh_frames, 5u);    // 30 Hz
   EXPECT_GE(info.rows.events, 2u);         // recording started, scene loaded
+}
+
+// A session creation left by a killed recorder goes when the daemon starts,
+// and the daemon says so; a live process's creation stays.
+TEST(Service, StartRemovesAbandonedSessionCreations) {
+  TempDir dir;
+  const pid_t gone = ::fork();
+  ASSERT_GE(gone, 0);
+  if (gone == 0) ::_exit(0);
+  ASSERT_EQ(::waitpid(gone, nullptr, 0), gone);
+  const std::string abandoned = dir / (".s.h5" + std::string(record::kCreatingInfix) + std::to_string(gone) + "-0");
+  const std::string live = dir / (".t.h5" + std::string(record::kCreatingInfix) + std::to_string(::getppid()) + "-0");
+  std::ofstream(abandoned) << "half-made";
+  std::ofstream(live) << "being made";
+  Running run(write_config(dir, scene_file("beam.yaml")), 0.2);
+  EXPECT_EQ(run.wait(), kServiceOk);
+  EXPECT_FALSE(std::filesystem::exists(abandoned));
+  EXPECT_TRUE(std::filesystem::exists(live));
+  const std::string out = file_text(run.out);
+  EXPECT_NE(out.find("removed " + abandoned), std::string::npos) << out;
 }
 
 TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
