@@ -305,6 +305,108 @@ void BM_ExplicitAccessFloor(benchmark::State& state) {
   state.counters["kernel_x_bound"] = kernel / static_cast<double>(body.mesh().edge_count()) / bound;
   state.counters["floor_vs_kernel"] = floor / kernel;
 }
+
+// The divider floor of the explicit sub-step: the square roots and divisions
+// the shipped offset kernels issue per spring, with nothing else — no loads,
+// no stores, no other arithmetic. Double: one square root and one division
+// per 4 springs (1/l, then multiplications); float: one square root and two
+// divisions per 8 springs, three with dampers (integrator_explicit_offset.cpp).
+// Eight independent chains, so the divider's throughput is timed, not its
+// latency. A kernel that computes each spring's length and force exactly
+// (IEEE square root and division, as the bit-identity across instruction
+// sets needs) cannot run faster than this. Args: depth (for the spring count
+// and the bound beside it), precision (0 double, 1 float), dampers (0, 1).
+// Timed alternately with the shipped sub-step on the same mesh (damped and
+// precision as asked): divider_x_bound, kernel_x_bound, divider_vs_kernel.
+TISSUE_AVX2 double divider_floor_double(std::size_t springs, double seed) {
+  __m256d l2[8], acc[8];
+  for (int c = 0; c < 8; ++c) {
+    l2[c] = _mm256_set_pd(seed + c, seed + 0.1 + c, seed + 0.2 + c, seed + 0.3 + c);
+    acc[c] = _mm256_setzero_pd();
+  }
+  const __m256d one = _mm256_set1_pd(1.0), tiny = _mm256_set1_pd(1e-12);
+  for (std::size_t i = 0; i < springs; i += 32) {
+    for (int c = 0; c < 8; ++c) {
+      const __m256d inv = _mm256_div_pd(one, _mm256_sqrt_pd(l2[c]));
+      acc[c] = _mm256_add_pd(acc[c], inv);
+      l2[c] = _mm256_add_pd(l2[c], tiny);  // new operands each round
+    }
+  }
+  double sum = 0.0;
+  for (int c = 0; c < 8; ++c) sum += _mm256_cvtsd_f64(acc[c]);
+  return sum;
+}
+
+TISSUE_AVX2 double divider_floor_float(std::size_t springs, bool damped, double seed) {
+  __m256 l2[8], acc[8];
+  for (int c = 0; c < 8; ++c) {
+    l2[c] = _mm256_set1_ps(static_cast<float>(seed) + 0.1f * static_cast<float>(c));
+    acc[c] = _mm256_setzero_ps();
+  }
+  const __m256 rest = _mm256_set1_ps(0.9f), tiny = _mm256_set1_ps(1e-6f);
+  for (std::size_t i = 0; i < springs; i += 64) {
+    for (int c = 0; c < 8; ++c) {
+      const __m256 l = _mm256_sqrt_ps(l2[c]);
+      __m256 along = _mm256_div_ps(l2[c], _mm256_add_ps(l, rest));
+      if (damped) along = _mm256_add_ps(along, _mm256_div_ps(rest, l));
+      acc[c] = _mm256_add_ps(acc[c], _mm256_div_ps(along, l));
+      l2[c] = _mm256_add_ps(l2[c], tiny);
+    }
+  }
+  double sum = 0.0;
+  for (int c = 0; c < 8; ++c) sum += _mm256_cvtss_f32(acc[c]);
+  return sum;
+}
+
+void BM_ExplicitDividerFloor(benchmark::State& state) {
+  if (physics::detected_simd() != physics::Simd::kAvx2) {
+    state.SkipWithError("needs AVX2");
+    return;
+  }
+  constexpr int kSubsteps = 10;
+  const bool single = state.range(1) == 1, damped = state.range(2) == 1;
+  scene::Scene scene = beam(static_cast<int>(state.range(0)), scene::IntegratorKind::kExplicit);
+  if (!damped) scene.material.rayleigh_beta_s = 0.0;
+  if (single) scene.integrator.explicit_precision = scene::ExplicitPrecision::kFloat;
+  physics::Simulation sim(scene);
+  physics::Body& body = sim.mutable_body();
+  const std::size_t springs = body.mesh().edge_count();
+  const double h = 0.5 * physics::explicit_stable_dt_s(body);
+  physics::ExplicitIntegrator integrator(sim.scene().integrator, sim.scene().material);
+  const std::vector<physics::Vec3> no_force(body.x_m.size(), physics::Vec3::Zero());
+  integrator.run_substeps(body, no_force, h, 1);
+  // The bound as BM_ExplicitSubstep takes it, on the bytes of the stream that runs.
+  const double spring_bytes = integrator.offset_layout() ? integrator.offset_stream_bytes_per_spring()
+                                                         : (single ? (damped ? 32.0 : 28.0) : (damped ? 32.0 : 24.0));
+  const double bound = bound_ns_per_spring(body, spring_bytes, single ? 76.0 : 152.0);
+  std::vector<double> floor_ns, kernel_ns;
+  double sink = 0.0;
+  long rounds = 0;
+  for (auto _ : state) {
+    auto t0 = std::chrono::steady_clock::now();
+    for (int s = 0; s < kSubsteps; ++s) {
+      // A new seed per call: the floors are pure functions, and calls with
+      // equal arguments would be folded into one (measured: 10x too fast).
+      const double seed = 1.2345678901234567 + 1e-3 * static_cast<double>(rounds++);
+      sink += single ? divider_floor_float(springs, damped, seed) : divider_floor_double(springs, seed);
+      benchmark::DoNotOptimize(sink);
+    }
+    floor_ns.push_back(std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                       kSubsteps);
+    t0 = std::chrono::steady_clock::now();
+    integrator.run_substeps(body, no_force, h, kSubsteps);
+    kernel_ns.push_back(std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                        kSubsteps);
+    benchmark::DoNotOptimize(body.x_m.data());
+  }
+  benchmark::DoNotOptimize(sink);
+  if (!physics::state_is_finite(body)) state.SkipWithError("state became non-finite: the timing is not valid");
+  const double floor = bench::median(floor_ns), kernel = bench::median(kernel_ns);
+  report(state, body, floor, bound);
+  state.counters["offset"] = integrator.offset_layout() ? 1.0 : 0.0;
+  state.counters["kernel_x_bound"] = kernel / static_cast<double>(springs) / bound;
+  state.counters["divider_vs_kernel"] = floor / kernel;
+}
 #endif
 
 // Whole steps of each rung at dt = 1 ms (explicit includes its sub-steps).
@@ -894,6 +996,11 @@ BENCHMARK(BM_ExplicitSubstep)
     ->Unit(benchmark::kMillisecond);
 #if defined(__x86_64__)
 BENCHMARK(BM_ExplicitAccessFloor)->DenseRange(0, 9, 3)->Arg(10)->Arg(11)->Iterations(21)->Unit(benchmark::kMillisecond);
+// Args: depth, precision (1 float), dampers.
+BENCHMARK(BM_ExplicitDividerFloor)
+    ->ArgsProduct({{0, 3, 6, 9, 10, 11}, {0, 1}, {0, 1}})
+    ->Iterations(21)
+    ->Unit(benchmark::kMillisecond);
 #endif
 // The beam keeps the scene default Rayleigh beta = 0.01 s, which the explicit
 // rung pays for in sub-steps (measured: 28 per 1 ms step at depth 0, 1,749 at
