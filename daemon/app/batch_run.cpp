@@ -7,9 +7,13 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <fstream>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 
+#include "app/batch_record.hpp"
+#include "record/record_types.hpp"
 #include "scene/scene_yaml.hpp"
 
 namespace tissue::app {
@@ -124,9 +128,28 @@ class ReportFile {
   std::FILE* file_ = nullptr;
 };
 
+// The scene file's text, stored in the session beside the scene it made.
+std::string file_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// How the run was made, for the session's config_text.
+std::string command_text(const BatchOptions& options) {
+  std::string text = "tissued --batch --scene " + options.scene_path;
+  char duration[48];
+  std::snprintf(duration, sizeof duration, " --duration %.17g", options.duration_s);
+  text += duration;
+  for (const std::string& o : options.overrides) text.append(" --set '").append(o).append("'");
+  return text;
+}
+
 }  // namespace
 
-nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress) {
+nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress,
+                         const std::function<void(const physics::Simulation&, double step_ms)>& after_step) {
   const scene::Scene& scene = sim.scene();
   const double dt = scene.integrator.dt_s;
   if (!(dt > 0.0) || !std::isfinite(dt)) throw std::invalid_argument("integrator.dt_s must be a positive number");
@@ -167,6 +190,7 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
       break;
     }
     track_probes();
+    if (after_step) after_step(sim, step_ms.back());
     if (every_s > 0.0 && sim.time_s() >= static_cast<double>(next_line) * every_s - slack_s) {
       print_progress(progress, sim, seconds_between(start, Clock::now()));
       next_line = static_cast<long long>(std::floor((sim.time_s() + slack_s) / every_s)) + 1;
@@ -255,12 +279,31 @@ int batch_command(const BatchOptions& options) {
       if (!why.empty()) return fail(kExitReport, why);
     }
 
+    // The session file, like the report, is created before the run: a path
+    // that cannot be written fails now, not after minutes of simulation.
+    std::unique_ptr<BatchRecorder> recorder;
+    if (!options.record_path.empty()) {
+      try {
+        recorder = std::make_unique<BatchRecorder>(options.record_path, *sim, file_text(options.scene_path),
+                                                   command_text(options));
+      } catch (const record::RecordError& e) {
+        return fail(kExitRecord, e.what());
+      }
+    }
+
     const bool talk = options.progress_every_s > 0.0;
-    const nlohmann::json report = run_batch(*sim, options, talk ? stdout : nullptr);
+    const nlohmann::json report =
+        recorder ? run_batch(*sim, options, talk ? stdout : nullptr,
+                             [&](const physics::Simulation& s, double step_ms) { recorder->after_step(s, step_ms); })
+                 : run_batch(*sim, options, talk ? stdout : nullptr);
     const nlohmann::json& result = report["result"];
 
     std::string write_error;
     if (!options.report_path.empty()) write_error = file.write(report_text(report));
+    const std::string record_error =
+        recorder
+            ? recorder->finish(*sim, result["error"].is_null() ? std::string() : result["error"].get<std::string>())
+            : std::string();
 
     if (!result["error"].is_null()) {
       char where[96];
@@ -268,9 +311,14 @@ int batch_command(const BatchOptions& options) {
                     static_cast<long long>(sim->counters().steps));
       const int code = fail(kExitSimFailed, where + result["error"].get<std::string>());
       if (!write_error.empty()) fail(kExitReport, write_error);
+      if (!record_error.empty()) fail(kExitRecord, record_error);
       return code;
     }
-    if (!write_error.empty()) return fail(kExitReport, write_error);
+    if (!write_error.empty()) {
+      if (!record_error.empty()) fail(kExitRecord, record_error);
+      return fail(kExitReport, write_error);
+    }
+    if (!record_error.empty()) return fail(kExitRecord, record_error);
     if (const physics::SimCounters& c = sim->counters(); c.unconverged_steps > 0) {
       // The run succeeded, but part of it is less accurate than the scene asked.
       std::fflush(stdout);
@@ -290,6 +338,9 @@ int batch_command(const BatchOptions& options) {
           std::printf(" (%.2fx real time)", timing["real_time_factor"].get<double>());
       }
       if (!options.report_path.empty()) std::printf("; report %s", options.report_path.c_str());
+      if (recorder)
+        std::printf("; session %s (%llu mesh frames)", recorder->path().c_str(),
+                    static_cast<unsigned long long>(recorder->mesh_frames()));
       std::printf("\n");
       std::fflush(stdout);
     }

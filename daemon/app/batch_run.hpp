@@ -3,7 +3,7 @@
 // report.
 //
 //   tissued --batch --scene FILE --duration SECONDS [--set key.path=value ...]
-//           [--report out.json] [--no-timing] [--progress SECONDS]
+//           [--report out.json] [--no-timing] [--progress SECONDS] [--record session.h5]
 //
 // The report (keys sorted, doubles printed so they round-trip):
 //   scene   {source, name, integrator, dt_s, adaptivity}
@@ -18,12 +18,17 @@
 // it is bit-identical from run to run; with timing off (--no-timing) the
 // whole file is.
 //
+// --record writes the run as an HDF5 session (batch_record.hpp) for the
+// session tools (info, x3d, render, replay); the report is the same with or
+// without it.
+//
 // A step that fails (the integrator refused it, or the state went
 // non-finite; the simulation keeps its previous state) ends the run: the
 // report is still written, with result.error set.
 #pragma once
 
 #include <cstdio>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -40,6 +45,7 @@ struct BatchOptions {
   std::string report_path;             // empty: no report file
   bool timing = true;                  // include the wall-clock `timing` object
   double progress_every_s = 0.1;       // simulated seconds between live lines; 0 = quiet
+  std::string record_path;             // empty: no session file (batch_record.hpp)
 };
 
 // Process exit codes of `tissued --batch`.
@@ -49,6 +55,7 @@ enum ExitCode : int {
   kExitUsage = 2,      // bad command line or bad scene
   kExitSimFailed = 3,  // a step failed; the report says why
   kExitReport = 4,     // the report file cannot be written
+  kExitRecord = 5,     // the session file (--record) cannot be created or written
 };
 
 // Steps `sim` until its time reaches options.duration_s (to within a
@@ -57,7 +64,10 @@ enum ExitCode : int {
 // seconds (nothing when it is null or the interval is 0). A failed step ends
 // the run early; the report's result.error then holds the reason. Only
 // options.duration_s, .timing and .progress_every_s are read.
-nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress);
+// `after_step`, when given, sees the simulation after every successful step
+// with that step's wall time in ms (the session recorder).
+nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress,
+                         const std::function<void(const physics::Simulation&, double step_ms)>& after_step = {});
 
 // The same on a fresh Simulation of `scene`. Throws std::invalid_argument when
 // the simulation cannot be built from it (mesh limits, a probe outside the

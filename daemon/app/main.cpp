@@ -1,9 +1,10 @@
 // tissued — the daemon's entry point: parses the command line and dispatches
 // to a mode. Modes live in their own files (batch_run.cpp); this file stays
 // thin. Exit codes: 0 success, 1 internal error, 2 bad command line or scene,
-// 3 simulation failure, 4 report not writable.
+// 3 simulation failure, 4 report not writable, 5 session file not writable.
 #include <CLI/CLI.hpp>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <exception>
 #include <string>
@@ -27,11 +28,15 @@ const CLI::Validator kSeconds(
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Under a file-size limit (ulimit -f, systemd's LimitFSIZE=) a write past
+  // it must fail with EFBIG, which the session writers report and survive,
+  // not kill the daemon (SIGXFSZ's default action) and lose the session.
+  std::signal(SIGXFSZ, SIG_IGN);
   try {
     CLI::App app{"tissued: real-time haptic server for adaptive soft-tissue simulation"};
     app.footer(
         "Exit codes: 0 success, 1 internal error, 2 bad command line or scene, 3 simulation failure, "
-        "4 report not writable.");
+        "4 report not writable, 5 session file (--batch --record) not writable.");
     bool batch = false;
     tissue::app::BatchOptions batch_options;
     std::string config_path;
@@ -49,8 +54,8 @@ int main(int argc, char** argv) {
     app.add_option("--report", batch_options.report_path, "write the JSON report to this file");
     std::string record_name;
     app.add_option("--record", record_name,
-                   "--config: record the session from the start to this file name in the config's state_dir "
-                   "(HDF5, see docs/session-format.md)");
+                   "--config: record the session from the start to this file name in the config's state_dir; "
+                   "--batch: record the run to this file (path); never overwrites (HDF5, see docs/session-format.md)");
     bool no_timing = false;
     app.add_flag("--no-timing", no_timing, "leave wall-clock timing out of the report (bit-identical reruns)");
     app.add_option("--progress", batch_options.progress_every_s,
@@ -91,6 +96,7 @@ int main(int argc, char** argv) {
       return tissue::app::kExitUsage;
     }
     batch_options.timing = !no_timing;
+    batch_options.record_path = record_name;
     return tissue::app::batch_command(batch_options);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tissued: internal error: %s\n", e.what());

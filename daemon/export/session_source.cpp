@@ -140,11 +140,15 @@ class SessionFrameSource final : public FrameSource {
 }  // namespace
 
 std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s) {
-  // Frames are in time order: binary search for the last time <= t.
+  // Frames are in time order: binary search for the last time <= t. A
+  // nanosecond of slack: times summed from steps land a hair off the grid
+  // (500 steps of 1 ms end at 0.5000000000000003 s), and --time 0.5 means
+  // that frame, not the one before it.
+  constexpr double kSlack_s = 1e-9;
   std::size_t lo = 0, hi = source.frame_count();
   while (lo < hi) {
     const std::size_t mid = lo + (hi - lo) / 2;
-    if (source.frame_time_s(mid) <= t_s)
+    if (source.frame_time_s(mid) <= t_s + kSlack_s)
       lo = mid + 1;
     else
       hi = mid;

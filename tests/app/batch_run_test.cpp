@@ -3,6 +3,7 @@
 #include "app/batch_run.hpp"
 
 #include <gtest/gtest.h>
+#include <hdf5.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -16,6 +17,9 @@
 #include <string>
 #include <vector>
 
+#include "export/frame_source.hpp"
+#include "record/session_layout.hpp"
+#include "record/session_tools.hpp"
 #include "scene/scene_yaml.hpp"
 
 namespace tissue::app {
@@ -416,6 +420,144 @@ TEST_F(TissuedProcess, CappedSolverWarnsNamingTheKeys) {
   EXPECT_EQ(r["result"]["solver"]["unconverged_steps"].get<long long>(), 50);
   EXPECT_EQ(r["result"]["solver"]["iterations"]["max"].get<long long>(), 1);
   EXPECT_TRUE(r["result"]["error"].is_null());
+}
+
+// /events/message of a closed session, through the plain HDF5 C API.
+std::vector<std::string> event_messages(const std::string& path) {
+  std::vector<std::string> out;
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (file < 0) return out;
+  const hid_t set = H5Dopen2(file, "/events/message", H5P_DEFAULT);
+  const hid_t type = H5Dget_type(set), space = H5Dget_space(set);
+  const std::size_t width = H5Tget_size(type);
+  const auto rows = static_cast<std::size_t>(H5Sget_simple_extent_npoints(space));
+  std::vector<char> text(rows * width + 1, '\0');
+  if (rows > 0 && H5Dread(set, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, text.data()) >= 0)
+    for (std::size_t i = 0; i < rows; ++i)
+      out.emplace_back(text.data() + i * width, strnlen(text.data() + i * width, width));
+  H5Sclose(space);
+  H5Tclose(type);
+  H5Dclose(set);
+  H5Fclose(file);
+  return out;
+}
+
+// --record: the run as a session file the session tools read (one sim row per
+// step, a surface frame every 1/30 s of simulated time from the first state to
+// the last, how the run started and ended), and the report unchanged by it.
+TEST_F(TissuedProcess, RecordWritesTheRunAsASessionAndLeavesTheReportAsItWas) {
+  const fs::path plain = dir_ / "plain.json", recorded = dir_ / "recorded.json", session = dir_ / "run.h5";
+  const std::vector<std::string> args = {"--batch",    "--scene", scene_path("cantilever"),          "--duration",
+                                         "0.3",        "--set",   "loads[0].profile.release_s=0.15", "--no-timing",
+                                         "--progress", "0"};
+  std::vector<std::string> with_report = args;
+  with_report.insert(with_report.end(), {"--report", plain.string()});
+  ASSERT_EQ(run(with_report).exit_code, 0);
+  std::vector<std::string> with_record = args;
+  with_record.insert(with_record.end(), {"--report", recorded.string(), "--record", session.string()});
+  const Process p = run(with_record);
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  EXPECT_EQ(read_file(plain), read_file(recorded));
+  const json r = json::parse(read_file(recorded));
+
+  const record::SessionInfo info = record::read_session_info(session.string());
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.scene_name, "cantilever");
+  EXPECT_EQ(info.rows.haptic_rows, 0u);
+  EXPECT_EQ(info.rows.sim_rows, r["result"]["steps"].get<std::uint64_t>());
+  EXPECT_EQ(info.rows.mesh_frames, 10u);  // t = 0, 1/30, ..., 9/30 = 0.3 s
+  EXPECT_EQ(info.rows.events, 2u);
+  const std::vector<std::string> events = event_messages(session.string());
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_TRUE(contains(events[0], "--set 'loads[0].profile.release_s=0.15'")) << events[0];
+  EXPECT_TRUE(contains(events[1], "completed at t = 0.3 s after 300 steps")) << events[1];
+
+  // The last sim row is the report's end state; the frames span the run.
+  const record::SessionRows rows = record::read_session_rows(session.string());
+  ASSERT_FALSE(rows.sim.empty());
+  EXPECT_EQ(rows.sim.back().sim_time_s, r["result"]["sim_time_s"].get<double>());
+  EXPECT_EQ(static_cast<std::int64_t>(rows.sim.back().refines), r["result"]["refines"].get<std::int64_t>());
+  EXPECT_EQ(static_cast<std::int64_t>(rows.sim.back().merges), r["result"]["merges"].get<std::int64_t>());
+  EXPECT_EQ(rows.sim.back().elastic_J, r["result"]["energy_J"]["elastic"].get<double>());
+  const auto frames = x3d::open_session_source(session.string());
+  ASSERT_EQ(frames->frame_count(), 10u);
+  EXPECT_EQ(frames->frame_time_s(0), 0.0);
+  EXPECT_EQ(frames->frame_time_s(9), r["result"]["sim_time_s"].get<double>());
+  EXPECT_TRUE(frames->has_strain());
+  // While loaded the mesh refines: its surface has more vertices than at rest.
+  EXPECT_GT(frames->read_frame(4).vertices_m.size(), frames->read_frame(0).vertices_m.size());
+
+  // And the session tools take it as they take the service's sessions.
+  const std::string x3d_out = (dir_ / "run.x3d").string();
+  const int x3d_status =
+      std::system((shell_quote(TISSUE_CLI_BINARY) + " x3d --session " + shell_quote(session.string()) +
+                   " --time 0.3 -o " + shell_quote(x3d_out) + " >/dev/null 2>&1")
+                      .c_str());
+  EXPECT_EQ(x3d_status, 0);
+  EXPECT_TRUE(fs::exists(x3d_out));
+}
+
+// A run that ends between frame times still records its last state.
+TEST_F(TissuedProcess, RecordEndsWithTheLastState) {
+  const fs::path session = dir_ / "short.h5", report = dir_ / "r.json";
+  const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.05", "--progress", "0", "--record",
+                         session.string(), "--report", report.string()});
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  const auto frames = x3d::open_session_source(session.string());
+  ASSERT_EQ(frames->frame_count(), 3u);  // t = 0, 1/30 s and the end
+  EXPECT_EQ(frames->frame_time_s(2), json::parse(read_file(report))["result"]["sim_time_s"].get<double>());
+  EXPECT_GT(frames->frame_time_s(1), frames->frame_time_s(0));
+}
+
+TEST_F(TissuedProcess, RecordNeverOverwritesAndAnUnwritablePathExits5BeforeTheRun) {
+  const fs::path session = dir_ / "taken.h5", report = dir_ / "r.json";
+  std::ofstream(session) << "someone else's file";
+  const Process taken = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.05", "--record",
+                             session.string(), "--report", report.string()});
+  EXPECT_EQ(taken.exit_code, 5);
+  EXPECT_TRUE(contains(taken.err, session.string())) << taken.err;
+  EXPECT_TRUE(contains(taken.err, "already exists")) << taken.err;
+  EXPECT_EQ(read_file(session), "someone else's file");
+  EXPECT_FALSE(fs::exists(report));  // nothing ran
+  const std::string nowhere = (dir_ / "missing" / "s.h5").string();
+  const Process missing = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.05", "--record", nowhere});
+  EXPECT_EQ(missing.exit_code, 5);
+  EXPECT_TRUE(contains(missing.err, nowhere)) << missing.err;
+}
+
+// Under a file-size limit the session write fails (EFBIG) instead of
+// killing tissued (SIGXFSZ): the run goes on, the report is written, the
+// recording error is named and the exit code says the session is incomplete.
+TEST_F(TissuedProcess, AFileSizeLimitStopsTheRecordingNotTheRun) {
+  const fs::path session = dir_ / "limited.h5", report = dir_ / "r.json";
+  const std::string command = "ulimit -f 150; exec " + shell_quote(TISSUED_BINARY) + " --batch --scene " +
+                              shell_quote(scene_path("cantilever")) + " --duration 0.2 --progress 0 --record " +
+                              shell_quote(session.string()) + " --report " + shell_quote(report.string()) + " 2>" +
+                              shell_quote((dir_ / "err.txt").string());
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status)) << "killed by a signal: " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+  EXPECT_EQ(WEXITSTATUS(status), 5);
+  const std::string err = read_file(dir_ / "err.txt");
+  EXPECT_TRUE(contains(err, "recording to " + session.string() + " stopped")) << err;
+  EXPECT_TRUE(contains(err, "File too large")) << err;
+  EXPECT_EQ(json::parse(read_file(report))["result"]["steps"].get<long long>(), 200);  // the run went on
+}
+
+// A failed run still leaves a whole session, ending with the reason.
+TEST_F(TissuedProcess, RecordOfAFailedRunEndsWithTheReason) {
+  const fs::path session = dir_ / "failed.h5";
+  const Process p =
+      run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set", "integrator.kind=explicit",
+           "--set", "integrator.max_substeps=1", "--set", "integrator.dt_s=0.01", "--record", session.string()});
+  EXPECT_EQ(p.exit_code, 3);
+  const record::SessionInfo info = record::read_session_info(session.string());
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.rows.sim_rows, 0u);
+  EXPECT_EQ(info.rows.mesh_frames, 1u);  // the initial state
+  const std::vector<std::string> events = event_messages(session.string());
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_TRUE(contains(events[1], "batch run failed at t = 0 s after 0 steps")) << events[1];
+  EXPECT_TRUE(contains(events[1], "max_substeps")) << events[1];
 }
 
 }  // namespace

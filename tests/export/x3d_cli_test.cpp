@@ -72,6 +72,10 @@ TEST_F(X3dCli, SessionSourceReadsFramesBack) {
   EXPECT_EQ(frame_at_time(*source, 0.25), 0u);
   EXPECT_EQ(frame_at_time(*source, 0.7), 1u);
   EXPECT_EQ(frame_at_time(*source, 99.0), 4u);
+  // A time a rounding hair before a frame's (summed steps: 0.5000000000000003
+  // for 0.5) picks that frame; a microsecond before does not.
+  EXPECT_EQ(frame_at_time(*source, expected[1].time_s - 1e-12), 1u);
+  EXPECT_EQ(frame_at_time(*source, expected[1].time_s - 1e-6), 0u);
   EXPECT_EQ(frames_in_window(*source, 0.5, 1.0), (std::vector<std::size_t>{1, 2, 3}));
 }
 
