@@ -322,6 +322,26 @@ class TissuedProcess : public ::testing::Test {
   fs::path dir_;
 };
 
+// /events/message of a closed session, through the plain HDF5 C API.
+std::vector<std::string> event_messages(const std::string& path) {
+  std::vector<std::string> out;
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (file < 0) return out;
+  const hid_t set = H5Dopen2(file, "/events/message", H5P_DEFAULT);
+  const hid_t type = H5Dget_type(set), space = H5Dget_space(set);
+  const std::size_t width = H5Tget_size(type);
+  const auto rows = static_cast<std::size_t>(H5Sget_simple_extent_npoints(space));
+  std::vector<char> text(rows * width + 1, '\0');
+  if (rows > 0 && H5Dread(set, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, text.data()) >= 0)
+    for (std::size_t i = 0; i < rows; ++i)
+      out.emplace_back(text.data() + i * width, strnlen(text.data() + i * width, width));
+  H5Sclose(space);
+  H5Tclose(type);
+  H5Dclose(set);
+  H5Fclose(file);
+  return out;
+}
+
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 TEST_F(TissuedProcess, NoTimingReportsAreByteIdentical) {
@@ -386,11 +406,12 @@ TEST_F(TissuedProcess, UnwritableReportExits4NamingThePath) {
   EXPECT_TRUE(contains(p.err, "No such file or directory")) << p.err;  // the errno reason
 }
 
+// The report and the session (--record) of a failed run both end with the reason.
 TEST_F(TissuedProcess, RefusedExplicitStepExits3WithTheReasonInTheReport) {
-  const fs::path report = dir_ / "r.json";
-  const Process p =
-      run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set", "integrator.kind=explicit",
-           "--set", "integrator.max_substeps=1", "--set", "integrator.dt_s=0.01", "--report", report.string()});
+  const fs::path report = dir_ / "r.json", session = dir_ / "failed.h5";
+  const Process p = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set",
+                         "integrator.kind=explicit", "--set", "integrator.max_substeps=1", "--set",
+                         "integrator.dt_s=0.01", "--report", report.string(), "--record", session.string()});
   EXPECT_EQ(p.exit_code, 3);
   EXPECT_TRUE(contains(p.err, "max_substeps")) << p.err;
   EXPECT_EQ(std::count(p.err.begin(), p.err.end(), '\n'), 1) << p.err;  // one line
@@ -402,6 +423,14 @@ TEST_F(TissuedProcess, RefusedExplicitStepExits3WithTheReasonInTheReport) {
   EXPECT_EQ(r["result"]["rejected_steps"].get<long long>(), 1);
   EXPECT_EQ(r["result"]["nonfinite_events"].get<long long>(), 0);
   EXPECT_EQ(r["scene"]["integrator"], "explicit");
+  const record::SessionInfo info = record::read_session_info(session.string());
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.rows.sim_rows, 0u);
+  EXPECT_EQ(info.rows.mesh_frames, 1u);  // the initial state
+  const std::vector<std::string> events = event_messages(session.string());
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_TRUE(contains(events[1], "batch run failed at t = 0 s after 0 steps")) << events[1];
+  EXPECT_TRUE(contains(events[1], "max_substeps")) << events[1];
 }
 
 // A run whose solver stops at cg_max_iterations still succeeds (exit 0), but
@@ -420,26 +449,6 @@ TEST_F(TissuedProcess, CappedSolverWarnsNamingTheKeys) {
   EXPECT_EQ(r["result"]["solver"]["unconverged_steps"].get<long long>(), 50);
   EXPECT_EQ(r["result"]["solver"]["iterations"]["max"].get<long long>(), 1);
   EXPECT_TRUE(r["result"]["error"].is_null());
-}
-
-// /events/message of a closed session, through the plain HDF5 C API.
-std::vector<std::string> event_messages(const std::string& path) {
-  std::vector<std::string> out;
-  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-  if (file < 0) return out;
-  const hid_t set = H5Dopen2(file, "/events/message", H5P_DEFAULT);
-  const hid_t type = H5Dget_type(set), space = H5Dget_space(set);
-  const std::size_t width = H5Tget_size(type);
-  const auto rows = static_cast<std::size_t>(H5Sget_simple_extent_npoints(space));
-  std::vector<char> text(rows * width + 1, '\0');
-  if (rows > 0 && H5Dread(set, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, text.data()) >= 0)
-    for (std::size_t i = 0; i < rows; ++i)
-      out.emplace_back(text.data() + i * width, strnlen(text.data() + i * width, width));
-  H5Sclose(space);
-  H5Tclose(type);
-  H5Dclose(set);
-  H5Fclose(file);
-  return out;
 }
 
 // --record: the run as a session file the session tools read (one sim row per
@@ -541,23 +550,6 @@ TEST_F(TissuedProcess, AFileSizeLimitStopsTheRecordingNotTheRun) {
   EXPECT_TRUE(contains(err, "recording to " + session.string() + " stopped")) << err;
   EXPECT_TRUE(contains(err, "File too large")) << err;
   EXPECT_EQ(json::parse(read_file(report))["result"]["steps"].get<long long>(), 200);  // the run went on
-}
-
-// A failed run still leaves a whole session, ending with the reason.
-TEST_F(TissuedProcess, RecordOfAFailedRunEndsWithTheReason) {
-  const fs::path session = dir_ / "failed.h5";
-  const Process p =
-      run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set", "integrator.kind=explicit",
-           "--set", "integrator.max_substeps=1", "--set", "integrator.dt_s=0.01", "--record", session.string()});
-  EXPECT_EQ(p.exit_code, 3);
-  const record::SessionInfo info = record::read_session_info(session.string());
-  EXPECT_TRUE(info.closed_cleanly);
-  EXPECT_EQ(info.rows.sim_rows, 0u);
-  EXPECT_EQ(info.rows.mesh_frames, 1u);  // the initial state
-  const std::vector<std::string> events = event_messages(session.string());
-  ASSERT_EQ(events.size(), 2u);
-  EXPECT_TRUE(contains(events[1], "batch run failed at t = 0 s after 0 steps")) << events[1];
-  EXPECT_TRUE(contains(events[1], "max_substeps")) << events[1];
 }
 
 }  // namespace
