@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <exception>
 #include <limits>
+#include <stdexcept>
 
 namespace tissue::app {
 
@@ -24,6 +25,8 @@ std::string seconds_text(double s) {
 BatchRecorder::BatchRecorder(const std::string& path, const physics::Simulation& sim, const std::string& scene_text,
                              const std::string& command, double frame_interval_s)
     : path_(path), frame_interval_s_(frame_interval_s) {
+  if (!(frame_interval_s > 0.0) || !std::isfinite(frame_interval_s))
+    throw std::invalid_argument("batch recording: the frame interval must be a finite number of seconds > 0");
   record::SessionMetadata meta;
   meta.scene_name = sim.scene().name;
   meta.scene_text = scene_text;

@@ -27,7 +27,8 @@ class BatchRecorder {
   // Creates `path` (never over an existing file; record::RecordError
   // otherwise, naming it) and records the initial state of `sim`.
   // `command` says how the run was made (the scene file, the duration, the
-  // overrides); it is stored as the session's config_text.
+  // overrides); it is stored as the session's config_text. A frame interval
+  // that is not a finite number > 0 is std::invalid_argument.
   BatchRecorder(const std::string& path, const physics::Simulation& sim, const std::string& scene_text,
                 const std::string& command, double frame_interval_s = 1.0 / 30.0);
 

@@ -60,7 +60,7 @@ TEST(BatchRecorder, AFrameEveryIntervalOfSimulatedTimeAndTheLastState) {
   EXPECT_EQ(rows.sim.back().elastic_J, sim.elastic_energy_J());
 }
 
-TEST(BatchRecorder, NeverOverwritesAFile) {
+TEST(BatchRecorder, NeverOverwritesAFileAndRefusesANonsenseFrameInterval) {
   TempDir dir;
   const std::string path = dir / "taken.h5";
   std::ofstream(path) << "not ours";
@@ -75,6 +75,9 @@ TEST(BatchRecorder, NeverOverwritesAFile) {
   std::string text;
   std::getline(in, text);
   EXPECT_EQ(text, "not ours");
+  for (const double bad : {0.0, -1.0, std::nan("")})
+    EXPECT_THROW(BatchRecorder(dir / "new.h5", sim, "", "", bad), std::invalid_argument) << bad;
+  EXPECT_FALSE(std::filesystem::exists(dir / "new.h5"));
 }
 
 // More rows than one write holds (1,000): every one reaches the file, in order.
