@@ -285,25 +285,34 @@ int batch_command(const BatchOptions& options) {
     if (!options.record_path.empty()) {
       try {
         recorder = std::make_unique<BatchRecorder>(options.record_path, *sim, file_text(options.scene_path),
-                                                   command_text(options));
+                                                   command_text(options), options.record_frame_interval_s);
       } catch (const record::RecordError& e) {
         return fail(kExitRecord, e.what());
       }
     }
 
     const bool talk = options.progress_every_s > 0.0;
-    const nlohmann::json report =
-        recorder ? run_batch(*sim, options, talk ? stdout : nullptr,
-                             [&](const physics::Simulation& s, double step_ms) { recorder->after_step(s, step_ms); })
-                 : run_batch(*sim, options, talk ? stdout : nullptr);
+    // A recording that stops mid-run (disk full, a file-size limit) is said
+    // at once: the run goes on, and a long run should not hide it to the end.
+    bool told = false;
+    const auto record_step = [&](const physics::Simulation& s, double step_ms) {
+      recorder->after_step(s, step_ms);
+      if (told || recorder->error().empty()) return;
+      told = true;
+      std::fflush(stdout);
+      std::fprintf(stderr, "tissued: %s (the run goes on)\n", recorder->error().c_str());
+    };
+    const nlohmann::json report = recorder ? run_batch(*sim, options, talk ? stdout : nullptr, record_step)
+                                           : run_batch(*sim, options, talk ? stdout : nullptr);
     const nlohmann::json& result = report["result"];
 
     std::string write_error;
     if (!options.report_path.empty()) write_error = file.write(report_text(report));
-    const std::string record_error =
+    std::string record_error =
         recorder
             ? recorder->finish(*sim, result["error"].is_null() ? std::string() : result["error"].get<std::string>())
             : std::string();
+    if (told) record_error = "session " + options.record_path + " is incomplete: its recording stopped (above)";
 
     if (!result["error"].is_null()) {
       char where[96];

@@ -40,12 +40,13 @@ namespace tissue::app {
 
 struct BatchOptions {
   std::string scene_path;
-  std::vector<std::string> overrides;  // "key.path=value", applied in order
-  double duration_s = 0.0;             // simulated seconds
-  std::string report_path;             // empty: no report file
-  bool timing = true;                  // include the wall-clock `timing` object
-  double progress_every_s = 0.1;       // simulated seconds between live lines; 0 = quiet
-  std::string record_path;             // empty: no session file (batch_record.hpp)
+  std::vector<std::string> overrides;           // "key.path=value", applied in order
+  double duration_s = 0.0;                      // simulated seconds
+  std::string report_path;                      // empty: no report file
+  bool timing = true;                           // include the wall-clock `timing` object
+  double progress_every_s = 0.1;                // simulated seconds between live lines; 0 = quiet
+  std::string record_path;                      // empty: no session file (batch_record.hpp)
+  double record_frame_interval_s = 1.0 / 30.0;  // simulated seconds between recorded surface frames
 };
 
 // Process exit codes of `tissued --batch`.

@@ -56,6 +56,10 @@ int main(int argc, char** argv) {
     app.add_option("--record", record_name,
                    "--config: record the session from the start to this file name in the config's state_dir; "
                    "--batch: record the run to this file (path); never overwrites (HDF5, see docs/session-format.md)");
+    CLI::Option* record_interval =
+        app.add_option("--record-interval", batch_options.record_frame_interval_s,
+                       "--batch --record: simulated seconds between recorded surface frames (default 1/30)")
+            ->check(kSeconds);
     bool no_timing = false;
     app.add_flag("--no-timing", no_timing, "leave wall-clock timing out of the report (bit-identical reruns)");
     app.add_option("--progress", batch_options.progress_every_s,
@@ -76,6 +80,11 @@ int main(int argc, char** argv) {
       return tissue::app::kExitUsage;
     }
     if (!config_path.empty()) {
+      if (record_interval->count() > 0) {
+        // The service records its frames at the recorder's own rate (30 Hz of wall time).
+        std::fprintf(stderr, "tissued: --record-interval is for --batch --record (see --help)\n");
+        return tissue::app::kExitUsage;
+      }
       tissue::service::ServiceOptions options;
       options.config_path = config_path;
       options.overrides = batch_options.overrides;
@@ -97,6 +106,10 @@ int main(int argc, char** argv) {
     }
     batch_options.timing = !no_timing;
     batch_options.record_path = record_name;
+    if (record_interval->count() > 0 && (record_name.empty() || !(batch_options.record_frame_interval_s > 0.0))) {
+      std::fprintf(stderr, "tissued: --record-interval needs --record FILE and a number of seconds > 0 (see --help)\n");
+      return tissue::app::kExitUsage;
+    }
     return tissue::app::batch_command(batch_options);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tissued: internal error: %s\n", e.what());

@@ -518,6 +518,27 @@ TEST_F(TissuedProcess, RecordEndsWithTheLastState) {
   EXPECT_GT(frames->frame_time_s(1), frames->frame_time_s(0));
 }
 
+// --record-interval sets the frames' spacing in simulated time; without
+// --record, with --config, or at 0 it is a usage error.
+TEST_F(TissuedProcess, RecordIntervalSpacesTheFrames) {
+  const fs::path session = dir_ / "sparse.h5";
+  const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.05", "--progress", "0", "--record",
+                         session.string(), "--record-interval", "0.02"});
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  EXPECT_EQ(x3d::open_session_source(session.string())->frame_count(), 4u);  // 0, 0.02, 0.04 and 0.05 s
+  for (const std::vector<std::string>& bad :
+       {std::vector<std::string>{"--batch", "--scene", scene_path("beam"), "--duration", "0.05", "--record-interval",
+                                 "0.02"},
+        std::vector<std::string>{"--batch", "--scene", scene_path("beam"), "--duration", "0.05", "--record",
+                                 (dir_ / "zero.h5").string(), "--record-interval", "0"},
+        std::vector<std::string>{"--config", "whatever.yaml", "--record-interval", "0.02"}}) {
+    const Process q = run(bad);
+    EXPECT_EQ(q.exit_code, 2) << q.err;
+    EXPECT_TRUE(contains(q.err, "--record-interval")) << q.err;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "zero.h5"));
+}
+
 TEST_F(TissuedProcess, RecordNeverOverwritesAndAnUnwritablePathExits5BeforeTheRun) {
   const fs::path session = dir_ / "taken.h5", report = dir_ / "r.json";
   std::ofstream(session) << "someone else's file";
@@ -547,8 +568,12 @@ TEST_F(TissuedProcess, AFileSizeLimitStopsTheRecordingNotTheRun) {
   ASSERT_TRUE(WIFEXITED(status)) << "killed by a signal: " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
   EXPECT_EQ(WEXITSTATUS(status), 5);
   const std::string err = read_file(dir_ / "err.txt");
+  // Said once, at once, then the exit line names the incomplete session.
   EXPECT_TRUE(contains(err, "recording to " + session.string() + " stopped")) << err;
   EXPECT_TRUE(contains(err, "File too large")) << err;
+  EXPECT_TRUE(contains(err, "(the run goes on)")) << err;
+  EXPECT_TRUE(contains(err, "session " + session.string() + " is incomplete")) << err;
+  EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 2) << err;
   EXPECT_EQ(json::parse(read_file(report))["result"]["steps"].get<long long>(), 200);  // the run went on
 }
 
