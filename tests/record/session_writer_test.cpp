@@ -3,7 +3,6 @@
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -143,10 +142,7 @@ TEST(SessionWriter, NeverOverwritesAndNamesMissingStateDirectories) {
 // nothing else in the directory is touched.
 TEST(SessionWriter, AbandonedCreationsOfGoneProcessesAreRemoved) {
   TempDir dir;
-  const pid_t gone = ::fork();
-  ASSERT_GE(gone, 0);
-  if (gone == 0) ::_exit(0);
-  ASSERT_EQ(::waitpid(gone, nullptr, 0), gone);
+  const int gone = tissue::testing::gone_pid();
   write_session(dir.path(), "kept.h5", 10, 1, 1, 1);
   const auto touch = [&](const std::string& name) {
     std::ofstream(dir / name) << "half-made";

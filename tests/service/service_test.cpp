@@ -6,7 +6,6 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -21,6 +20,7 @@
 #include "control/temp_dir.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
+#include "support/process_support.hpp"
 
 namespace tissue::service {
 namespace {
@@ -268,10 +268,7 @@ TEST(Service, RecordsASessionOnRequest) {
 // and the daemon says so; a live process's creation stays.
 TEST(Service, StartRemovesAbandonedSessionCreations) {
   TempDir dir;
-  const pid_t gone = ::fork();
-  ASSERT_GE(gone, 0);
-  if (gone == 0) ::_exit(0);
-  ASSERT_EQ(::waitpid(gone, nullptr, 0), gone);
+  const int gone = tissue::testing::gone_pid();
   const std::string abandoned = dir / (".s.h5" + std::string(record::kCreatingInfix) + std::to_string(gone) + "-0");
   const std::string live = dir / (".t.h5" + std::string(record::kCreatingInfix) + std::to_string(::getppid()) + "-0");
   std::ofstream(abandoned) << "half-made";

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <stdlib.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -56,6 +57,14 @@ RunResult run(const std::string& command, const TempDir& scratch) {
   r.out = slurp(out);
   r.err = slurp(err);
   return r;
+}
+
+int gone_pid() {
+  const pid_t child = ::fork();
+  if (child < 0) throw std::runtime_error("fork failed");
+  if (child == 0) ::_exit(0);
+  if (::waitpid(child, nullptr, 0) != child) throw std::runtime_error("waitpid failed");
+  return child;
 }
 
 }  // namespace tissue::testing

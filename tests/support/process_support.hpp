@@ -39,4 +39,8 @@ std::string slurp(const std::string& path);
 // Writes `text` to `path` (a failed write fails the test).
 void write_text(const std::string& path, const std::string& text);
 
+// The pid of a process that has exited and been reaped: a pid nothing runs
+// under (until the kernel reuses it), for tests of stale-pid handling.
+int gone_pid();
+
 }  // namespace tissue::testing
