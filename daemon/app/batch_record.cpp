@@ -33,6 +33,7 @@ BatchRecorder::BatchRecorder(const std::string& path, const physics::Simulation&
   meta.config_text = command;
   meta.software_version = TISSUE_VERSION;
   writer_ = record::SessionWriter::create(path, meta);
+  start_s_ = sim.time_s();
   rows_.reserve(kRowsPerWrite);
   try {
     event(sim.time_s(), record::EventKind::kSceneLoaded,
@@ -81,7 +82,8 @@ std::string BatchRecorder::finish(const physics::Simulation& sim, const std::str
     else
       event(sim.time_s(), record::EventKind::kError, "batch run failed " + when + ": " + run_error);
     flush_rows();
-    writer_->close();
+    // Session time is simulated time here, so is the session's duration.
+    writer_->close(sim.time_s() - start_s_);
   } catch (const std::exception& e) {
     stop(e);
   }

@@ -58,6 +58,7 @@ class BatchRecorder {
   std::string path_;
   std::unique_ptr<record::SessionWriter> writer_;
   double frame_interval_s_;
+  double start_s_ = 0.0;  // simulated time of the first state
   double next_frame_s_ = 0.0;
   double last_frame_s_ = -1.0;
   std::vector<record::SimRow> rows_;  // written in batches of kRowsPerWrite

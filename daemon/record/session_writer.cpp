@@ -511,7 +511,7 @@ std::array<std::uint64_t, 4> SessionWriter::group_rows() const {
   return {rows_[kHapticTime], rows_[kSimTime], rows_[kMeshFrameTime], rows_[kEventTime]};
 }
 
-void SessionWriter::close() {
+void SessionWriter::close(std::optional<double> duration_s) {
   if (closed_) return;
   h5::QuietErrors quiet;
   closed_ = true;
@@ -522,10 +522,13 @@ void SessionWriter::close() {
         if (dirty_[i] && H5Dflush(datasets_[i].get()) < 0) fail(std::string("cannot flush ") + kDatasets[i].path);
       // Every row on disk first; only then the mark that says so.
       if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0) fail("cannot flush the file");
-      const double duration_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - opened_at_).count();
+      const double duration =
+          duration_s && std::isfinite(*duration_s) && *duration_s >= 0.0
+              ? *duration_s
+              : std::chrono::duration<double>(std::chrono::steady_clock::now() - opened_at_).count();
       try {
         h5::write_string_attribute(file_.get(), kAttrEndTime, utc_now_iso8601());
-        h5::write_f64_attribute(file_.get(), kAttrDurationS, duration_s);
+        h5::write_f64_attribute(file_.get(), kAttrDurationS, duration);
         h5::write_u8_attribute(file_.get(), kAttrClosedCleanly, 1);
       } catch (const RecordError& e) {
         // e names the attribute and HDF5's reason already (fail() would add

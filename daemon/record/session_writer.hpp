@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -73,8 +74,10 @@ class SessionWriter {
   // Flushes every row, rewrites closed_cleanly = 1, end_time_utc and
   // duration_s in place (still in SWMR mode, so readers may keep the file
   // open), then closes the file. Throws RecordError (the file then does not
-  // read as closed cleanly). Idempotent.
-  void close();
+  // read as closed cleanly). Idempotent. duration_s: the session's length in
+  // its own time when that is not the wall time since opening (a batch run's
+  // simulated seconds); unset, negative or not finite: the wall time.
+  void close(std::optional<double> duration_s = std::nullopt);
 
   const std::string& path() const { return path_; }
   bool failed() const { return !error_.empty(); }

@@ -43,6 +43,7 @@ TEST(BatchRecorder, AFrameEveryIntervalOfSimulatedTimeAndTheLastState) {
 
   const record::SessionInfo info = record::read_session_info(path);
   EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.duration_s, sim.time_s());  // in session time: simulated seconds
   EXPECT_EQ(info.rows.sim_rows, static_cast<std::uint64_t>(steps));
   EXPECT_EQ(info.rows.events, 2u);
   const auto frames = x3d::open_session_source(path);
