@@ -7,9 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
-#include <fstream>
 #include <memory>
-#include <sstream>
 #include <stdexcept>
 
 #include "app/batch_record.hpp"
@@ -127,14 +125,6 @@ class ReportFile {
   std::string path_;
   std::FILE* file_ = nullptr;
 };
-
-// The scene file's text, stored in the session beside the scene it made.
-std::string file_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
 
 // How the run was made, for the session's config_text.
 std::string command_text(const BatchOptions& options) {
@@ -284,8 +274,9 @@ int batch_command(const BatchOptions& options) {
     std::unique_ptr<BatchRecorder> recorder;
     if (!options.record_path.empty()) {
       try {
-        recorder = std::make_unique<BatchRecorder>(options.record_path, *sim, file_text(options.scene_path),
-                                                   command_text(options), options.record_frame_interval_s);
+        recorder =
+            std::make_unique<BatchRecorder>(options.record_path, *sim, record::metadata_file_text(options.scene_path),
+                                            command_text(options), options.record_frame_interval_s);
       } catch (const record::RecordError& e) {
         return fail(kExitRecord, e.what());
       }

@@ -12,7 +12,9 @@
 #include <cstring>
 #include <ctime>
 #include <filesystem>
+#include <fstream>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 #include <system_error>
 
@@ -169,6 +171,13 @@ std::vector<std::string> remove_abandoned_creations(const std::string& dir) {
     if (fs::remove(it->path(), ec)) removed.push_back(it->path().string());
   }
   return removed;
+}
+
+std::string metadata_file_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
 }
 
 std::string utc_now_iso8601() {

@@ -7,7 +7,6 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <stdexcept>
 
 #include "config/daemon_config_yaml.hpp"
@@ -33,13 +32,6 @@ SimThreadOptions sim_options(const config::DaemonConfig& c) {
   // Energies are only read by sim_stats and `status`: sum them at the stats rate.
   o.energy_every_s = 1.0 / std::max(c.publish.stats_rate_hz, 1.0);
   return o;
-}
-
-std::string file_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
 }
 
 // PREFIX-20261123-101500.EXT (UTC): the file name when a command gives none.
@@ -136,8 +128,8 @@ void Service::stop_threads() {
 void Service::start_recording(const std::string& name) {
   record::SessionMetadata meta;
   meta.scene_name = scene_.name;
-  meta.scene_text = file_text(scene_path_);
-  meta.config_text = file_text(options_.config_path);
+  meta.scene_text = record::metadata_file_text(scene_path_);
+  meta.config_text = record::metadata_file_text(options_.config_path);
   meta.software_version = TISSUE_VERSION;
   record::RecorderOptions options;
   options.on_error = [this](const std::string& message) {
