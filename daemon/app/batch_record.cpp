@@ -33,13 +33,12 @@ BatchRecorder::BatchRecorder(const std::string& path, const physics::Simulation&
   meta.config_text = command;
   meta.software_version = TISSUE_VERSION;
   writer_ = record::SessionWriter::create(path, meta);
-  start_s_ = sim.time_s();
+  start_s_ = last_s_ = sim.time_s();
   rows_.reserve(kRowsPerWrite);
   try {
     event(sim.time_s(), record::EventKind::kSceneLoaded,
           "batch run of scene '" + sim.scene().name + "' (" + sim.integrator().name() + " integrator): " + command);
     frame(sim);
-    writer_->flush();
   } catch (const std::exception& e) {
     stop(e);
   }
@@ -47,6 +46,7 @@ BatchRecorder::BatchRecorder(const std::string& path, const physics::Simulation&
 
 void BatchRecorder::after_step(const physics::Simulation& sim, double step_ms) {
   if (!error_.empty()) return;
+  last_s_ = sim.time_s();
   try {
     record::SimRow row;
     row.time_s = row.sim_time_s = sim.time_s();
@@ -62,28 +62,33 @@ void BatchRecorder::after_step(const physics::Simulation& sim, double step_ms) {
     row.kinetic_J = sim.kinetic_energy_J();
     row.elastic_J = sim.elastic_energy_J();
     rows_.push_back(row);
-    if (rows_.size() >= kRowsPerWrite) flush_rows();
     // Frames on the grid k·interval of simulated time; a millionth of a step
     // of slack, as the run's own end (2000 steps of 1 ms end a hair below 2 s).
-    if (sim.time_s() >= next_frame_s_ - 1e-6 * sim.scene().integrator.dt_s) frame(sim);
+    if (sim.time_s() >= next_frame_s_ - 1e-6 * sim.scene().integrator.dt_s) {
+      frame(sim);
+    } else if (rows_.size() >= kRowsPerWrite) {
+      append_rows();
+      writer_->flush();
+    }
   } catch (const std::exception& e) {
     stop(e);
   }
 }
 
-std::string BatchRecorder::finish(const physics::Simulation& sim, const std::string& run_error) {
+std::string BatchRecorder::finish(const physics::Simulation& sim, const std::string& run_error,
+                                  const std::string& interrupted_by) {
   if (!error_.empty() || !writer_) return error_;
+  last_s_ = sim.time_s();
   try {
     if (sim.time_s() != last_frame_s_) frame(sim);
     const std::string when =
         "at t = " + seconds_text(sim.time_s()) + " after " + std::to_string(sim.counters().steps) + " steps";
-    if (run_error.empty())
-      event(sim.time_s(), record::EventKind::kInfo, "batch run completed " + when);
+    if (!run_error.empty())
+      end(sim.time_s(), record::EventKind::kError, "batch run failed " + when + ": " + run_error);
+    else if (!interrupted_by.empty())
+      end(sim.time_s(), record::EventKind::kInfo, "batch run interrupted by " + interrupted_by + " " + when);
     else
-      event(sim.time_s(), record::EventKind::kError, "batch run failed " + when + ": " + run_error);
-    flush_rows();
-    // Session time is simulated time here, so is the session's duration.
-    writer_->close(sim.time_s() - start_s_);
+      end(sim.time_s(), record::EventKind::kInfo, "batch run completed " + when);
   } catch (const std::exception& e) {
     stop(e);
   }
@@ -91,7 +96,7 @@ std::string BatchRecorder::finish(const physics::Simulation& sim, const std::str
 }
 
 void BatchRecorder::frame(const physics::Simulation& sim) {
-  flush_rows();
+  append_rows();
   service::build_mesh_snapshot(sim, &scratch_, &snapshot_);
   record::MeshFrameView view;
   view.time_s = sim.time_s();
@@ -111,26 +116,32 @@ void BatchRecorder::event(double time_s, record::EventKind kind, const std::stri
   writer_->append_events({&e, 1});
 }
 
-void BatchRecorder::flush_rows() {
+// Pending sim rows to the file; readers see them at the next flush.
+void BatchRecorder::append_rows() {
   if (rows_.empty()) return;
   writer_->append_sim(rows_);
   rows_.clear();
-  writer_->flush();
+}
+
+void BatchRecorder::end(double time_s, record::EventKind kind, const std::string& text) {
+  event(time_s, kind, text);
+  append_rows();
+  // Session time is simulated time here, so is the session's duration.
+  writer_->close(time_s - start_s_);
 }
 
 void BatchRecorder::stop(const std::exception& e) {
   error_ = "recording to " + path_ + " stopped: " + e.what();
-  rows_.clear();
   // What was flushed stays; the file reads as not closed cleanly unless the
-  // writer can still close it (an invalid frame leaves the file usable).
+  // writer can still close it (an invalid frame leaves the file usable, and
+  // then the rows not yet written go in too). A failed writer takes nothing
+  // more: the rows since the last write (at most a frame interval's) are lost.
   try {
-    if (writer_ && !writer_->failed()) {
-      event(last_frame_s_ < 0.0 ? 0.0 : last_frame_s_, record::EventKind::kRecordingError, error_);
-      writer_->close();
-    }
+    if (writer_ && !writer_->failed()) end(last_s_, record::EventKind::kRecordingError, error_);
   } catch (const std::exception&) {
     // The destructor closes what is left, swallowing errors.
   }
+  rows_.clear();
 }
 
 }  // namespace tissue::app

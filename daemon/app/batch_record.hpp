@@ -38,10 +38,12 @@ class BatchRecorder {
   void after_step(const physics::Simulation& sim, double step_ms);
 
   // The last state as a frame (unless it was just written), an event saying
-  // how the run ended (`run_error` empty: it completed), every row flushed,
-  // the file closed cleanly. Returns error(): empty when the whole session
-  // was written.
-  std::string finish(const physics::Simulation& sim, const std::string& run_error);
+  // how the run ended (`run_error` empty and `interrupted_by` empty: it
+  // completed; `interrupted_by`: the signal that stopped it), every row
+  // flushed, the file closed cleanly. Returns error(): empty when the whole
+  // session was written.
+  std::string finish(const physics::Simulation& sim, const std::string& run_error,
+                     const std::string& interrupted_by = {});
 
   const std::string& path() const { return path_; }
   const std::string& error() const { return error_; }
@@ -52,13 +54,17 @@ class BatchRecorder {
  private:
   void frame(const physics::Simulation& sim);
   void event(double time_s, record::EventKind kind, const std::string& text);
-  void flush_rows();
+  void append_rows();
+  // The closing event at simulated time `time_s`, then the file closed with
+  // the simulated seconds recorded as its duration.
+  void end(double time_s, record::EventKind kind, const std::string& text);
   void stop(const std::exception& e);
 
   std::string path_;
   std::unique_ptr<record::SessionWriter> writer_;
   double frame_interval_s_;
   double start_s_ = 0.0;  // simulated time of the first state
+  double last_s_ = 0.0;   // simulated time of the last state seen
   double next_frame_s_ = 0.0;
   double last_frame_s_ = -1.0;
   std::vector<record::SimRow> rows_;  // written in batches of kRowsPerWrite

@@ -1,5 +1,7 @@
 #include "app/batch_run.hpp"
 
+#include <signal.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
@@ -7,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <functional>
 #include <memory>
 #include <stdexcept>
 
@@ -136,10 +139,59 @@ std::string command_text(const BatchOptions& options) {
   return text;
 }
 
+// The signal that asked the running batch to stop (0: none): written only by
+// on_stop_signal, read by run_batch before each step.
+volatile std::sig_atomic_t g_stop_signal = 0;
+
+void on_stop_signal(int signo) { g_stop_signal = signo; }
+
+// SIGINT and SIGTERM end the run after the step in progress, for as long as
+// this lives; the dispositions before it are restored after. One-shot
+// (SA_RESETHAND): a second signal takes its default action and kills, for a
+// user whose run does not stop soon enough. SA_RESTART: a session or report
+// write the signal lands in is resumed, not failed with EINTR. A SIGINT
+// ignored from the start (nohup, `&` in a script) stays ignored, as the
+// shell meant.
+class StopOnSignals {
+ public:
+  StopOnSignals() {
+    g_stop_signal = 0;
+    install(SIGINT, &before_int_, /*keep_if_ignored=*/true);
+    install(SIGTERM, &before_term_, /*keep_if_ignored=*/false);
+  }
+  ~StopOnSignals() {
+    sigaction(SIGINT, &before_int_, nullptr);
+    sigaction(SIGTERM, &before_term_, nullptr);
+  }
+  StopOnSignals(const StopOnSignals&) = delete;
+  StopOnSignals& operator=(const StopOnSignals&) = delete;
+  const volatile std::sig_atomic_t* flag() const { return &g_stop_signal; }
+
+ private:
+  static void install(int signo, struct sigaction* before, bool keep_if_ignored) {
+    sigaction(signo, nullptr, before);
+    if (keep_if_ignored && before->sa_handler == SIG_IGN) return;
+    struct sigaction action {};
+    action.sa_handler = on_stop_signal;
+    sigemptyset(&action.sa_mask);
+    action.sa_flags = SA_RESETHAND | SA_RESTART;
+    sigaction(signo, &action, nullptr);
+  }
+  struct sigaction before_int_ {};
+  struct sigaction before_term_ {};
+};
+
 }  // namespace
 
+std::string signal_name(int signo) {
+  if (signo == SIGINT) return "SIGINT";
+  if (signo == SIGTERM) return "SIGTERM";
+  return "signal " + std::to_string(signo);
+}
+
 nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress,
-                         const std::function<void(const physics::Simulation&, double step_ms)>& after_step) {
+                         const std::function<void(const physics::Simulation&, double step_ms)>& after_step,
+                         const volatile std::sig_atomic_t* stop_signal) {
   const scene::Scene& scene = sim.scene();
   const double dt = scene.integrator.dt_s;
   if (!(dt > 0.0) || !std::isfinite(dt)) throw std::invalid_argument("integrator.dt_s must be a positive number");
@@ -163,9 +215,14 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
 
   if (every_s > 0.0) print_header(progress, sim, options.duration_s);
   std::string error;
+  int interrupted_by = 0;   // the signal that ended the run early, 0 if none
   long long next_line = 1;  // index of the next progress line: printed at next_line * every_s
   const Clock::time_point start = Clock::now();
   while (sim.time_s() < end_s) {
+    if (stop_signal && *stop_signal != 0) {
+      interrupted_by = *stop_signal;
+      break;
+    }
     const double before_s = sim.time_s();
     const Clock::time_point t0 = Clock::now();
     const physics::StepResult r = sim.step();
@@ -216,6 +273,7 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
       {"rejected_steps", c.rejected_steps},
       {"solver", solver_json(c)},
       {"error", error.empty() ? nlohmann::json(nullptr) : nlohmann::json(error)},
+      {"interrupted_by", interrupted_by == 0 ? nlohmann::json(nullptr) : nlohmann::json(signal_name(interrupted_by))},
       {"probes", std::move(probes)},
   };
   if (options.timing) {
@@ -293,17 +351,41 @@ int batch_command(const BatchOptions& options) {
       std::fflush(stdout);
       std::fprintf(stderr, "tissued: %s (the run goes on)\n", recorder->error().c_str());
     };
-    const nlohmann::json report = recorder ? run_batch(*sim, options, talk ? stdout : nullptr, record_step)
-                                           : run_batch(*sim, options, talk ? stdout : nullptr);
+    nlohmann::json report;
+    {
+      const StopOnSignals stop;
+      report =
+          run_batch(*sim, options, talk ? stdout : nullptr,
+                    recorder ? record_step : std::function<void(const physics::Simulation&, double)>(), stop.flag());
+    }
     const nlohmann::json& result = report["result"];
+    const std::string interrupted_by =
+        result["interrupted_by"].is_null() ? std::string() : result["interrupted_by"].get<std::string>();
 
     std::string write_error;
     if (!options.report_path.empty()) write_error = file.write(report_text(report));
     std::string record_error =
         recorder
-            ? recorder->finish(*sim, result["error"].is_null() ? std::string() : result["error"].get<std::string>())
+            ? recorder->finish(*sim, result["error"].is_null() ? std::string() : result["error"].get<std::string>(),
+                               interrupted_by)
             : std::string();
     if (told) record_error = "session " + options.record_path + " is incomplete: its recording stopped (above)";
+
+    if (!interrupted_by.empty()) {
+      // Not a failure of the run: what it reached is written, and the exit
+      // code says which signal stopped it.
+      char where[160];
+      std::snprintf(where, sizeof where, "interrupted by %s at t = %.6g s after %lld steps", interrupted_by.c_str(),
+                    sim->time_s(), static_cast<long long>(sim->counters().steps));
+      std::string message = where;
+      if (!options.report_path.empty() && write_error.empty()) message += "; report " + options.report_path;
+      if (recorder && record_error.empty()) message += "; session " + options.record_path;
+      if (!options.report_path.empty() || recorder) message += " (the run so far)";
+      const int code = fail(kExitSignalBase + (interrupted_by == "SIGTERM" ? SIGTERM : SIGINT), message);
+      if (!write_error.empty()) fail(kExitReport, write_error);
+      if (!record_error.empty()) fail(kExitRecord, record_error);
+      return code;
+    }
 
     if (!result["error"].is_null()) {
       char where[96];

@@ -10,6 +10,7 @@
 //   result  {sim_time_s, steps, nodes/tets/springs {final, peak}, refines,
 //            merges, energy_J {kinetic, elastic}, external_work_J,
 //            nonfinite_events, rejected_steps, error (null | message),
+//            interrupted_by (null | "SIGINT" | "SIGTERM"),
 //            solver {substeps {mean, max}, iterations {mean, max},
 //                    unconverged_steps},
 //            probes {NAME: {final_displacement_m [x,y,z], peak_magnitude_m}}}
@@ -25,8 +26,16 @@
 // A step that fails (the integrator refused it, or the state went
 // non-finite; the simulation keeps its previous state) ends the run: the
 // report is still written, with result.error set.
+//
+// SIGINT (Ctrl-C) or SIGTERM ends the run after the step in progress: the
+// report and the session cover the run so far (result.interrupted_by names
+// the signal) and the exit code is 128 + the signal's number, as a shell
+// reports a process the signal killed. A second one kills at once. A SIGINT
+// the process was started ignoring (`nohup`, a background job of a script)
+// stays ignored.
 #pragma once
 
+#include <csignal>
 #include <cstdio>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -57,7 +66,12 @@ enum ExitCode : int {
   kExitSimFailed = 3,  // a step failed; the report says why
   kExitReport = 4,     // the report file cannot be written
   kExitRecord = 5,     // the session file (--record) cannot be created or written
+  // 128 + N: stopped by signal N (SIGINT 130, SIGTERM 143); report and session written.
+  kExitSignalBase = 128,
 };
+
+// "SIGINT", "SIGTERM", or "signal N".
+std::string signal_name(int signo);
 
 // Steps `sim` until its time reaches options.duration_s (to within a
 // millionth of a step, so 2 s at 1 ms is 2000 steps) and returns the report.
@@ -67,8 +81,12 @@ enum ExitCode : int {
 // options.duration_s, .timing and .progress_every_s are read.
 // `after_step`, when given, sees the simulation after every successful step
 // with that step's wall time in ms (the session recorder).
+// `stop_signal`, when given, is read before every step: once it holds a
+// signal number (SIGINT or SIGTERM; set by a handler) the run ends there and
+// result.interrupted_by names it.
 nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress,
-                         const std::function<void(const physics::Simulation&, double step_ms)>& after_step = {});
+                         const std::function<void(const physics::Simulation&, double step_ms)>& after_step = {},
+                         const volatile std::sig_atomic_t* stop_signal = nullptr);
 
 // The same on a fresh Simulation of `scene`. Throws std::invalid_argument when
 // the simulation cannot be built from it (mesh limits, a probe outside the

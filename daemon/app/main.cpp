@@ -1,7 +1,8 @@
 // tissued — the daemon's entry point: parses the command line and dispatches
 // to a mode. Modes live in their own files (batch_run.cpp); this file stays
 // thin. Exit codes: 0 success, 1 internal error, 2 bad command line or scene,
-// 3 simulation failure, 4 report not writable, 5 session file not writable.
+// 3 simulation failure, 4 report not writable, 5 session file not writable,
+// 128 + N a batch run stopped by signal N (batch_run.hpp).
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <csignal>
@@ -36,7 +37,8 @@ int main(int argc, char** argv) {
     CLI::App app{"tissued: real-time haptic server for adaptive soft-tissue simulation"};
     app.footer(
         "Exit codes: 0 success, 1 internal error, 2 bad command line or scene, 3 simulation failure, "
-        "4 report not writable, 5 session file (--batch --record) not writable.");
+        "4 report not writable, 5 session file (--batch --record) not writable, 128 + N --batch stopped by signal N "
+        "(SIGINT, SIGTERM; the report and session cover the run so far).");
     bool batch = false;
     tissue::app::BatchOptions batch_options;
     std::string config_path;

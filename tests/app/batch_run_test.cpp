@@ -8,13 +8,17 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "export/frame_source.hpp"
@@ -147,6 +151,30 @@ TEST(BatchReport, StepsUntilTheDurationDespiteRoundedTimeSums) {
   EXPECT_EQ(run_batch(scene, options, nullptr)["result"]["steps"].get<long long>(), 0);
 }
 
+// A stop signal ends the run before the next step: the report covers the
+// steps taken and names the signal; the run is not a failure.
+TEST(BatchReport, AStopSignalEndsTheRunBeforeTheNextStep) {
+  physics::Simulation sim(scene::load_scene_file(scene_path("beam")));
+  BatchOptions options;
+  options.duration_s = 1.0;
+  volatile std::sig_atomic_t stop = 0;
+  long long seen = 0;
+  const json report = run_batch(
+      sim, options, nullptr,
+      [&](const physics::Simulation&, double) {
+        if (++seen == 25) stop = SIGTERM;
+      },
+      &stop);
+  const json& res = report["result"];
+  EXPECT_EQ(res["steps"].get<long long>(), 25);
+  EXPECT_EQ(seen, 25);
+  EXPECT_NEAR(res["sim_time_s"].get<double>(), 0.025, 1e-12);
+  EXPECT_EQ(res["interrupted_by"], "SIGTERM");
+  EXPECT_TRUE(res["error"].is_null());
+  EXPECT_EQ(signal_name(SIGINT), "SIGINT");
+  EXPECT_EQ(signal_name(SIGHUP), "signal " + std::to_string(SIGHUP));
+}
+
 TEST(BatchReport, TimingPresentOnlyWhenAsked) {
   const scene::Scene scene = scene::load_scene_file(scene_path("beam"));
   BatchOptions options;
@@ -205,6 +233,7 @@ TEST(BatchReport, FieldsHaveTheRightTypes) {
   EXPECT_TRUE(res["rejected_steps"].is_number_integer());
   EXPECT_EQ(res["rejected_steps"].get<long long>(), 0);
   EXPECT_TRUE(res["error"].is_null());
+  EXPECT_TRUE(res["interrupted_by"].is_null());
 
   // What the integrator spent: implicit CG iterations, one "sub-step" per step.
   const json& solver = res["solver"];
@@ -575,6 +604,124 @@ TEST_F(TissuedProcess, AFileSizeLimitStopsTheRecordingNotTheRun) {
   EXPECT_TRUE(contains(err, "session " + session.string() + " is incomplete")) << err;
   EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 2) << err;
   EXPECT_EQ(json::parse(read_file(report))["result"]["steps"].get<long long>(), 200);  // the run went on
+}
+
+// A batch run of the cantilever for 1000 simulated seconds (far longer than
+// any test waits) in a child process, with its session, report, progress
+// lines and stderr under `dir`, named after `name`: for the signal tests.
+class LongBatchRun {
+ public:
+  LongBatchRun(const fs::path& dir, const std::string& name, bool ignore_sigint)
+      : session(dir / (name + ".h5")),
+        report(dir / (name + ".json")),
+        out_(dir / (name + ".out")),
+        err_(dir / (name + ".err")) {
+    pid_ = ::fork();
+    if (pid_ != 0) return;
+    // The child. A SIGINT ignored here is what `nohup` or `cmd &` in a
+    // script hands on.
+    if (ignore_sigint) std::signal(SIGINT, SIG_IGN);
+    if (!std::freopen(out_.c_str(), "w", stdout) || !std::freopen(err_.c_str(), "w", stderr)) ::_exit(120);
+    ::execl(TISSUED_BINARY, TISSUED_BINARY, "--batch", "--scene", scene_path("cantilever").c_str(), "--duration",
+            "1000", "--progress", "0.01", "--report", report.c_str(), "--record", session.c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(121);
+  }
+  ~LongBatchRun() {
+    if (pid_ > 0 && !exited_) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
+  LongBatchRun(const LongBatchRun&) = delete;
+  LongBatchRun& operator=(const LongBatchRun&) = delete;
+
+  bool started() const { return pid_ > 0; }
+  // A progress line seen: the run is under way, its handlers installed.
+  // Up to 60 s (sanitizer builds start slowly).
+  bool wait_until_stepping() const {
+    for (int i = 0; i < 1200; ++i) {
+      if (read_file(out_).find("\nt ") != std::string::npos) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return false;
+  }
+  bool signal(int signo) const { return ::kill(pid_, signo) == 0; }
+  // Waits up to `seconds` for the process to end; its wait status, or
+  // nullopt while it still runs.
+  std::optional<int> wait_for_exit(double seconds) {
+    for (int i = 0; i <= static_cast<int>(seconds * 20.0); ++i) {
+      int status = 0;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        exited_ = true;
+        return status;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return std::nullopt;
+  }
+  std::string err() const { return read_file(err_); }
+
+  const fs::path session, report;
+
+ private:
+  fs::path out_, err_;
+  pid_t pid_ = -1;
+  bool exited_ = false;
+};
+
+// Ctrl-C (SIGINT) or SIGTERM on a long batch run: it stops after the step in
+// progress, the report and the session are written for the run so far (the
+// session closed cleanly, its last frame the last state, an event naming the
+// signal), and the exit code is 128 + the signal's number.
+TEST_F(TissuedProcess, ASignalStopsTheRunAndKeepsTheReportAndTheSession) {
+  for (const int signo : {SIGINT, SIGTERM}) {
+    SCOPED_TRACE(signal_name(signo));
+    LongBatchRun run(dir_, signal_name(signo), /*ignore_sigint=*/false);
+    ASSERT_TRUE(run.started());
+    EXPECT_TRUE(run.wait_until_stepping()) << run.err();
+    ASSERT_TRUE(run.signal(signo));
+    const std::optional<int> status = run.wait_for_exit(60.0);
+    ASSERT_TRUE(status.has_value()) << "tissued did not stop within 60 s of " << signal_name(signo);
+    const std::string err = run.err();
+    ASSERT_TRUE(WIFEXITED(*status)) << "killed by signal " << (WIFSIGNALED(*status) ? WTERMSIG(*status) : 0) << err;
+    EXPECT_EQ(WEXITSTATUS(*status), 128 + signo) << err;
+    EXPECT_TRUE(contains(err, "interrupted by " + signal_name(signo))) << err;
+    EXPECT_TRUE(contains(err, "report " + run.report.string())) << err;
+    EXPECT_TRUE(contains(err, "session " + run.session.string())) << err;
+
+    const json r = json::parse(read_file(run.report));
+    EXPECT_EQ(r["result"]["interrupted_by"], signal_name(signo));
+    EXPECT_TRUE(r["result"]["error"].is_null());
+    const double reached_s = r["result"]["sim_time_s"].get<double>();
+    EXPECT_GE(reached_s, 0.01);
+    EXPECT_LT(reached_s, 1000.0);
+
+    const record::SessionInfo info = record::read_session_info(run.session.string());
+    EXPECT_TRUE(info.closed_cleanly);
+    EXPECT_EQ(info.rows.sim_rows, r["result"]["steps"].get<std::uint64_t>());
+    EXPECT_NEAR(info.duration_s, reached_s, 1e-12);  // simulated seconds
+    const std::vector<std::string> events = event_messages(run.session.string());
+    ASSERT_EQ(events.size(), 2u);
+    EXPECT_TRUE(contains(events[1], "interrupted by " + signal_name(signo))) << events[1];
+    const auto frames = x3d::open_session_source(run.session.string());
+    ASSERT_GT(frames->frame_count(), 0u);
+    EXPECT_EQ(frames->frame_time_s(frames->frame_count() - 1), reached_s);
+  }
+}
+
+// A SIGINT the process was started ignoring (nohup, `cmd &` in a script)
+// stays ignored: the run goes on; SIGTERM still stops it.
+TEST_F(TissuedProcess, AnIgnoredSigintStaysIgnored) {
+  LongBatchRun run(dir_, "nohup", /*ignore_sigint=*/true);
+  ASSERT_TRUE(run.started());
+  EXPECT_TRUE(run.wait_until_stepping()) << run.err();
+  ASSERT_TRUE(run.signal(SIGINT));
+  EXPECT_FALSE(run.wait_for_exit(0.5).has_value()) << run.err();
+  ASSERT_TRUE(run.signal(SIGTERM));
+  const std::optional<int> status = run.wait_for_exit(60.0);
+  ASSERT_TRUE(status.has_value());
+  EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 128 + SIGTERM) << run.err();
 }
 
 }  // namespace
