@@ -1,19 +1,17 @@
 #include "app/batch_run.hpp"
 
-#include <signal.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <exception>
 #include <functional>
 #include <memory>
 #include <stdexcept>
 
 #include "app/batch_record.hpp"
+#include "app/output_file.hpp"
+#include "app/stop_signals.hpp"
 #include "record/record_types.hpp"
 #include "scene/scene_yaml.hpp"
 
@@ -90,45 +88,6 @@ void print_progress(std::FILE* out, physics::Simulation& sim, double wall_s) {
   std::fflush(out);
 }
 
-// A report file opened before the run (so an unwritable path fails before
-// minutes of simulation, not after) and written once at the end.
-class ReportFile {
- public:
-  // Returns an empty string on success, else "cannot write report PATH: reason".
-  std::string open(const std::string& path) {
-    path_ = path;
-    errno = 0;
-    file_ = std::fopen(path.c_str(), "w");
-    return file_ ? std::string() : failure(errno);
-  }
-  std::string write(const std::string& text) {
-    errno = 0;
-    const bool wrote = std::fwrite(text.data(), 1, text.size(), file_) == text.size() && std::fflush(file_) == 0;
-    const int write_errno = errno;
-    const bool closed = std::fclose(file_) == 0;
-    const int close_errno = errno;
-    file_ = nullptr;
-    if (!wrote) return failure(write_errno);
-    if (!closed) return failure(close_errno);
-    return {};
-  }
-  // Closes and deletes a file the run could not complete.
-  void discard() {
-    if (!file_) return;
-    std::fclose(file_);
-    file_ = nullptr;
-    std::remove(path_.c_str());
-  }
-  ~ReportFile() { discard(); }
-
- private:
-  std::string failure(int err) const {
-    return "cannot write report " + path_ + ": " + (err != 0 ? std::strerror(err) : "unknown error");
-  }
-  std::string path_;
-  std::FILE* file_ = nullptr;
-};
-
 // How the run was made, for the session's config_text.
 std::string command_text(const BatchOptions& options) {
   std::string text = "tissued --batch --scene " + options.scene_path;
@@ -139,55 +98,7 @@ std::string command_text(const BatchOptions& options) {
   return text;
 }
 
-// The signal that asked the running batch to stop (0: none): written only by
-// on_stop_signal, read by run_batch before each step.
-volatile std::sig_atomic_t g_stop_signal = 0;
-
-void on_stop_signal(int signo) { g_stop_signal = signo; }
-
-// SIGINT and SIGTERM end the run after the step in progress, for as long as
-// this lives; the dispositions before it are restored after. One-shot
-// (SA_RESETHAND): a second signal takes its default action and kills, for a
-// user whose run does not stop soon enough. SA_RESTART: a session or report
-// write the signal lands in is resumed, not failed with EINTR. A SIGINT
-// ignored from the start (nohup, `&` in a script) stays ignored, as the
-// shell meant.
-class StopOnSignals {
- public:
-  StopOnSignals() {
-    g_stop_signal = 0;
-    install(SIGINT, &before_int_, /*keep_if_ignored=*/true);
-    install(SIGTERM, &before_term_, /*keep_if_ignored=*/false);
-  }
-  ~StopOnSignals() {
-    sigaction(SIGINT, &before_int_, nullptr);
-    sigaction(SIGTERM, &before_term_, nullptr);
-  }
-  StopOnSignals(const StopOnSignals&) = delete;
-  StopOnSignals& operator=(const StopOnSignals&) = delete;
-  const volatile std::sig_atomic_t* flag() const { return &g_stop_signal; }
-
- private:
-  static void install(int signo, struct sigaction* before, bool keep_if_ignored) {
-    sigaction(signo, nullptr, before);
-    if (keep_if_ignored && before->sa_handler == SIG_IGN) return;
-    struct sigaction action {};
-    action.sa_handler = on_stop_signal;
-    sigemptyset(&action.sa_mask);
-    action.sa_flags = SA_RESETHAND | SA_RESTART;
-    sigaction(signo, &action, nullptr);
-  }
-  struct sigaction before_int_ {};
-  struct sigaction before_term_ {};
-};
-
 }  // namespace
-
-std::string signal_name(int signo) {
-  if (signo == SIGINT) return "SIGINT";
-  if (signo == SIGTERM) return "SIGTERM";
-  return "signal " + std::to_string(signo);
-}
 
 nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress,
                          const std::function<void(const physics::Simulation&, double step_ms)>& after_step,
@@ -321,7 +232,7 @@ int batch_command(const BatchOptions& options) {
       return fail(kExitUsage, scene.source + ": " + e.what());
     }
 
-    ReportFile file;
+    OutputFile file;
     if (!options.report_path.empty()) {
       const std::string why = file.open(options.report_path);
       if (!why.empty()) return fail(kExitReport, why);
@@ -381,7 +292,7 @@ int batch_command(const BatchOptions& options) {
       if (!options.report_path.empty() && write_error.empty()) message += "; report " + options.report_path;
       if (recorder && record_error.empty()) message += "; session " + options.record_path;
       if (!options.report_path.empty() || recorder) message += " (the run so far)";
-      const int code = fail(kExitSignalBase + (interrupted_by == "SIGTERM" ? SIGTERM : SIGINT), message);
+      const int code = fail(exit_code_for_signal(interrupted_by == signal_name(SIGTERM) ? SIGTERM : SIGINT), message);
       if (!write_error.empty()) fail(kExitReport, write_error);
       if (!record_error.empty()) fail(kExitRecord, record_error);
       return code;

@@ -42,6 +42,7 @@
 #include <string>
 #include <vector>
 
+#include "app/stop_signals.hpp"
 #include "physics/simulation.hpp"
 #include "scene/scene.hpp"
 
@@ -66,12 +67,9 @@ enum ExitCode : int {
   kExitSimFailed = 3,  // a step failed; the report says why
   kExitReport = 4,     // the report file cannot be written
   kExitRecord = 5,     // the session file (--record) cannot be created or written
-  // 128 + N: stopped by signal N (SIGINT 130, SIGTERM 143); report and session written.
-  kExitSignalBase = 128,
+  // 128 + N: stopped by signal N (SIGINT 130, SIGTERM 143; stop_signals.hpp);
+  // the report and the session are written.
 };
-
-// "SIGINT", "SIGTERM", or "signal N".
-std::string signal_name(int signo);
 
 // Steps `sim` until its time reaches options.duration_s (to within a
 // millionth of a step, so 2 s at 1 ms is 2000 steps) and returns the report.

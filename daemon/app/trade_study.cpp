@@ -41,6 +41,8 @@
 // - a refused or failed step ends a run; the refusal is recorded, not hidden.
 #include "app/trade_study.hpp"
 
+#include <signal.h>
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -48,7 +50,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
-#include <fstream>
 #include <functional>
 #include <limits>
 #include <map>
@@ -58,6 +59,8 @@
 #include <string>
 #include <vector>
 
+#include "app/output_file.hpp"
+#include "app/stop_signals.hpp"
 #include "physics/boundary.hpp"
 #include "physics/field_error.hpp"
 #include "physics/forces.hpp"
@@ -132,7 +135,10 @@ void usage(const std::string& program, std::FILE* to) {
       "         [--explicit-precision double|float]   (the explicit rung's arithmetic, default double;\n"
       "          a scene file: its own)\n"
       "  beam-theory: [--beam-depth D]\n"
-      "no mode flag: all three modes (with --scene-file: the sweep)\n",
+      "no mode flag: all three modes (with --scene-file: the sweep)\n"
+      "--csv / --svg are created before any run. Ctrl-C (or SIGTERM) during the sweep stops it after the\n"
+      "step in progress and still prints its tables and writes its files for the runs done; a second Ctrl-C kills.\n"
+      "exit codes: 0 done, 2 bad option or scene, 4 --csv/--svg not writable, 128+N sweep stopped by signal N\n",
       to);
 }
 
@@ -207,6 +213,8 @@ Options parse(const std::vector<std::string>& args) {
     throw std::invalid_argument("--scene must be cantilever, beam or beam-r");
   if (!o.scene_overrides.empty() && o.scene_file.empty())
     throw std::invalid_argument("--set applies to --scene-file; the built-in scenes take none");
+  if (!o.sweep && (!o.csv_path.empty() || !o.svg_path.empty()))
+    throw std::invalid_argument("--csv and --svg are the sweep's files: add --sweep");
   if (o.metric != "rms" && o.metric != "max" && o.metric != "tip" && o.metric != "path")
     throw std::invalid_argument("--metric must be rms, max, tip or path");
   return o;
@@ -313,7 +321,8 @@ sc::Scene beam(const MeshChoice& m, sc::IntegratorKind kind, double dt_s, double
 
 struct RunStats {
   bool ok = true;
-  bool capped = false;  // stopped by the wall-time cap (cost still valid)
+  bool capped = false;     // stopped by the wall-time cap (cost still valid)
+  int interrupted_by = 0;  // stopped by this signal (SIGINT, SIGTERM): failed, the error says so
   std::string error;
   double error_time_s = 0.0;
   long steps = 0;
@@ -332,12 +341,20 @@ struct RunStats {
 };
 
 // Steps `n` times (timing only step()); `after` runs untimed after each
-// successful step. Returns false when a step fails or the cap (on the cost
-// clock: wall, or CPU with --clock cpu) is hit.
+// successful step. Returns false when a step fails, the cap (on the cost
+// clock: wall, or CPU with --clock cpu) is hit or `stop` holds a signal.
 bool advance(ph::Simulation& sim, long n, RunStats& st, double cap_s = 0.0,
-             const std::function<void(const ph::Simulation&)>& after = {}) {
+             const std::function<void(const ph::Simulation&)>& after = {},
+             const volatile std::sig_atomic_t* stop = nullptr) {
   const double dt = sim.scene().integrator.dt_s;
   for (long i = 0; i < n; ++i) {
+    if (stop && *stop != 0) {
+      st.ok = false;
+      st.interrupted_by = *stop;
+      st.error = "interrupted by " + signal_name(st.interrupted_by);
+      st.error_time_s = sim.time_s();
+      return false;
+    }
     const auto t0 = Clock::now();
     const double c0 = thread_cpu_s();
     const ph::StepResult r = sim.step();
@@ -654,6 +671,7 @@ struct Point {
   bool skipped = false;  // not run (reason in st.error)
   std::string status() const {
     if (skipped) return "skipped";
+    if (st.interrupted_by != 0) return "interrupted";
     if (!st.ok) return "failed";
     if (st.capped) return "capped";
     return "ok";
@@ -673,6 +691,10 @@ struct SweepSetup {
   std::vector<double> dts_s;
   double wall_cap_s;
   bool cost_uses_cpu = false;  // --clock cpu: costs, the cap and the plot's axis in thread CPU time
+  // Read before every step: a signal number there ends the sweep (the run in
+  // progress is marked interrupted, the rest are not run).
+  const volatile std::sig_atomic_t* stop = nullptr;
+  bool stopped() const { return stop && *stop != 0; }
 };
 
 sc::Scene sweep_scene(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kind, double dt) {
@@ -709,11 +731,14 @@ Point run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kin
   ph::Simulation sim(sweep_scene(s, m, kind, dt));
   const long steps = std::lround(s.duration_s / dt);
   const bool has_tip = sim.probe_count() > 0;
-  advance(sim, steps, p.st, s.wall_cap_s, [&](const ph::Simulation&) {
-    if (!has_tip) return;
-    p.tip_t_s.push_back(sim.time_s());
-    p.tip_path_m.push_back(sim.probe_displacement_m(0));
-  });
+  advance(
+      sim, steps, p.st, s.wall_cap_s,
+      [&](const ph::Simulation&) {
+        if (!has_tip) return;
+        p.tip_t_s.push_back(sim.time_s());
+        p.tip_path_m.push_back(sim.probe_displacement_m(0));
+      },
+      s.stop);
   p.nodes = sim.body().mesh().node_count();
   p.tets = sim.body().mesh().tet_count();
   p.springs = sim.body().mesh().edge_count();
@@ -786,10 +811,9 @@ std::string csv_quote(const std::string& s) {
   return out + "\"";
 }
 
-void write_csv(const std::string& path, const std::string& scene, const std::vector<Point>& points,
-               const std::map<int, std::string>& truth) {
-  std::ofstream f(path);
-  if (!f) throw std::runtime_error("cannot write " + path);
+std::string csv_text(const std::string& scene, const std::vector<Point>& points,
+                     const std::map<int, std::string>& truth) {
+  std::ostringstream f;
   f << "scene,integrator,dt_s,max_depth,mode,level,th_Pa,status,message,steps,sim_s,wall_s,cpu_s,"
        "cost_wall_per_sim,cost_cpu_per_sim,"
        "nodes_end,tets_end,springs_end,peak_nodes,peak_tets,splits,merges,tip_uz_m,tip_err_rel,rms_err_rel,"
@@ -809,14 +833,14 @@ void write_csv(const std::string& path, const std::string& scene, const std::vec
       << p.st.unconverged_steps << ',' << csv_num(p.path_err) << ','
       << csv_quote(truth.count(p.max_depth) ? truth.at(p.max_depth) : "") << '\n';
   }
+  return f.str();
 }
 
 // Hand-written SVG: one log-log panel per (integrator, dt) row and max-depth
 // column, shared axes. Uniform levels: squares joined by a line; the
 // reference (error 0 by definition) as a dashed vertical line at its cost;
 // adaptive points: circles coloured by Th.
-void write_svg(const std::string& path, const SweepSetup& s, const std::vector<Point>& points,
-               const std::string& metric) {
+std::string svg_text(const SweepSetup& s, const std::vector<Point>& points, const std::string& metric) {
   const std::vector<std::string> colours = {"#d62728", "#ff7f0e", "#2ca02c", "#1f77b4",
                                             "#9467bd", "#8c564b", "#e377c2", "#17becf"};
   double cmin = INFINITY, cmax = 0, emin = INFINITY, emax = 0;
@@ -963,15 +987,22 @@ void write_svg(const std::string& path, const SweepSetup& s, const std::vector<P
     }
   }
   o << "</svg>\n";
-  std::ofstream f(path);
-  if (!f) throw std::runtime_error("cannot write " + path);
-  f << o.str();
+  return o.str();
 }
 
-void run_sweep(const Options& o) {
+// A --csv or --svg file that could not be written (the message names it).
+struct OutputError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Runs the sweep, prints its tables and writes `csv` / `svg` (those opened).
+// Returns the signal that interrupted it (the tables and files then hold the
+// runs done), or 0.
+int run_sweep(const Options& o, OutputFile& csv, OutputFile& svg, const volatile std::sig_atomic_t* stop) {
   SweepSetup s;
   s.scene = o.sweep_scene;
   s.cost_uses_cpu = o.cpu_clock;
+  s.stop = stop;
   if (!o.scene_file.empty()) {
     s.from_file = sc::load_scene_file_with_overrides(o.scene_file, o.scene_overrides);
     s.scene = s.from_file->name;
@@ -1045,6 +1076,7 @@ void run_sweep(const Options& o) {
       std::vector<Point> uniform;
       std::string stop_reason;  // set once a level failed or hit the cap: finer ones would too
       for (int level = s.base_depth; level <= deepest; ++level) {
+        if (s.stopped()) stop_reason = "not run: interrupted by " + signal_name(*s.stop);
         if (!stop_reason.empty()) {
           Point p;
           p.integrator = kind_name(kind);
@@ -1060,6 +1092,7 @@ void run_sweep(const Options& o) {
         uniform.push_back(run_point(s, {false, level, 0.0, level}, kind, dt));
         const Point& p = uniform.back();
         if (!p.st.ok) stop_reason = "not run: uniform L" + std::to_string(level) + " failed or refused";
+        if (p.st.interrupted_by != 0) stop_reason = "not run: interrupted by " + signal_name(p.st.interrupted_by);
         if (p.st.capped) stop_reason = "not run: uniform L" + std::to_string(level) + " already hit the wall cap";
         std::fprintf(stderr, "  sweep: %s dt %g uniform L%d: %s, %.1f s wall\n", kind_name(kind), dt, level,
                      p.status().c_str(), seconds_between(t0, Clock::now()));
@@ -1073,7 +1106,7 @@ void run_sweep(const Options& o) {
           points.push_back(std::move(p));
         }
         for (double th : s.th_Pa) {
-          if (!ref.captured) {  // no reference, no error: the point would only cost time
+          if (!ref.captured || s.stopped()) {  // no reference, no error: the point would only cost time
             Point p;
             p.integrator = kind_name(kind);
             p.dt_s = dt;
@@ -1082,7 +1115,9 @@ void run_sweep(const Options& o) {
             p.th_Pa = th;
             p.skipped = true;
             p.st.ok = false;
-            p.st.error = "not run: no reference (uniform L" + std::to_string(md) + " " + ref.status() + ")";
+            p.st.error = s.stopped()
+                             ? "not run: interrupted by " + signal_name(*s.stop)
+                             : "not run: no reference (uniform L" + std::to_string(md) + " " + ref.status() + ")";
             points.push_back(std::move(p));
             continue;
           }
@@ -1211,25 +1246,45 @@ void run_sweep(const Options& o) {
   }
   std::printf("\nsweep wall time %.1f s\n", sweep_wall);
 
-  if (!o.csv_path.empty()) {
-    write_csv(o.csv_path, s.scene, points, truth);
+  if (csv.is_open()) {
+    if (const std::string why = csv.write(csv_text(s.scene, points, truth)); !why.empty()) throw OutputError(why);
     std::printf("wrote %s\n", o.csv_path.c_str());
   }
-  if (!o.svg_path.empty()) {
-    write_svg(o.svg_path, s, points, o.metric);
+  if (svg.is_open()) {
+    if (const std::string why = svg.write(svg_text(s, points, o.metric)); !why.empty()) throw OutputError(why);
     std::printf("wrote %s\n", o.svg_path.c_str());
   }
+  return s.stopped() ? *s.stop : 0;
 }
 
 }  // namespace
 
 int run_trade_study(const std::string& program, const std::vector<std::string>& args) {
+  const auto fail = [&](int code, const std::string& why) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "%s: %s\n", program.c_str(), why.c_str());
+    return code;
+  };
+  Options o;
   try {
-    const Options o = parse(args);
-    if (o.help) {
-      usage(program, stdout);
-      return 0;
-    }
+    o = parse(args);
+  } catch (const std::exception& e) {
+    const int code = fail(kTradeExitUsage, e.what());
+    usage(program, stderr);
+    return code;
+  }
+  if (o.help) {
+    usage(program, stdout);
+    return kTradeExitOk;
+  }
+  try {
+    // The sweep's files are opened before anything runs: a path that cannot
+    // be written fails now, not after an hour of runs.
+    OutputFile csv, svg;
+    for (const auto& [file, path] :
+         {std::pair<OutputFile*, const std::string*>{&csv, &o.csv_path}, {&svg, &o.svg_path}})
+      if (!path->empty())
+        if (const std::string why = file->open(*path); !why.empty()) return fail(kTradeExitOutput, why);
     const auto t0 = Clock::now();
     if (o.table1) {
       const auto t = Clock::now();
@@ -1241,15 +1296,26 @@ int run_trade_study(const std::string& program, const std::vector<std::string>& 
       run_beam_theory(o);
       std::printf("\n(beam-theory wall time %.1f s)\n", seconds_between(t, Clock::now()));
     }
-    if (o.sweep) run_sweep(o);
+    if (o.sweep) {
+      // Ctrl-C (or SIGTERM) during the sweep, which can take hours, ends it
+      // after the step in progress and keeps what it measured.
+      const StopOnSignals stop;
+      if (const int signo = run_sweep(o, csv, svg, stop.flag()); signo != 0) {
+        std::string files;
+        for (const std::string* path : {&o.csv_path, &o.svg_path})
+          if (!path->empty()) files += (files.empty() ? "; " : ", ") + *path;
+        return fail(exit_code_for_signal(signo), "interrupted by " + signal_name(signo) + ": the tables" +
+                                                     (files.empty() ? "" : " and files") +
+                                                     " hold the runs done (the rest say \"not run\")" + files);
+      }
+    }
     std::printf("\ntotal wall time %.1f s\n", seconds_between(t0, Clock::now()));
+  } catch (const OutputError& e) {
+    return fail(kTradeExitOutput, e.what());
   } catch (const std::exception& e) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "%s: %s\n", program.c_str(), e.what());
-    usage(program, stderr);
-    return 2;
+    return fail(kTradeExitUsage, e.what());
   }
-  return 0;
+  return kTradeExitOk;
 }
 
 }  // namespace tissue::app

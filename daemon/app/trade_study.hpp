@@ -11,10 +11,19 @@
 
 namespace tissue::app {
 
+// Exit codes of run_trade_study.
+enum TradeExitCode : int {
+  kTradeExitOk = 0,
+  kTradeExitUsage = 2,   // a bad option, a scene file that does not load, a run that cannot start
+  kTradeExitOutput = 4,  // --csv or --svg cannot be written (checked before any run)
+  // 128 + N: the sweep was stopped by signal N (SIGINT 130, SIGTERM 143;
+  // stop_signals.hpp); its tables and files hold the runs done.
+};
+
 // Runs the study `args` ask for (argv without the program name), printing
 // its tables to stdout. `program` names it in the usage and error lines.
-// Returns 0, or 2 after printing the reason and the usage to stderr (a bad
-// option, a scene file that does not load, a run that cannot start).
+// Returns one of the codes above after printing the reason to stderr (with
+// the usage, for a bad option).
 int run_trade_study(const std::string& program, const std::vector<std::string>& args);
 
 }  // namespace tissue::app

@@ -8,7 +8,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -18,13 +17,13 @@
 #include <optional>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "export/frame_source.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
 #include "scene/scene_yaml.hpp"
+#include "support/process_support.hpp"
 
 namespace tissue::app {
 namespace {
@@ -171,8 +170,6 @@ TEST(BatchReport, AStopSignalEndsTheRunBeforeTheNextStep) {
   EXPECT_NEAR(res["sim_time_s"].get<double>(), 0.025, 1e-12);
   EXPECT_EQ(res["interrupted_by"], "SIGTERM");
   EXPECT_TRUE(res["error"].is_null());
-  EXPECT_EQ(signal_name(SIGINT), "SIGINT");
-  EXPECT_EQ(signal_name(SIGHUP), "signal " + std::to_string(SIGHUP));
 }
 
 TEST(BatchReport, TimingPresentOnlyWhenAsked) {
@@ -607,67 +604,21 @@ TEST_F(TissuedProcess, AFileSizeLimitStopsTheRecordingNotTheRun) {
 }
 
 // A batch run of the cantilever for 1000 simulated seconds (far longer than
-// any test waits) in a child process, with its session, report, progress
+// any test waits) in the background, with its session, report, progress
 // lines and stderr under `dir`, named after `name`: for the signal tests.
-class LongBatchRun {
- public:
+struct LongBatchRun {
   LongBatchRun(const fs::path& dir, const std::string& name, bool ignore_sigint)
       : session(dir / (name + ".h5")),
         report(dir / (name + ".json")),
-        out_(dir / (name + ".out")),
-        err_(dir / (name + ".err")) {
-    pid_ = ::fork();
-    if (pid_ != 0) return;
-    // The child. A SIGINT ignored here is what `nohup` or `cmd &` in a
-    // script hands on.
-    if (ignore_sigint) std::signal(SIGINT, SIG_IGN);
-    if (!std::freopen(out_.c_str(), "w", stdout) || !std::freopen(err_.c_str(), "w", stderr)) ::_exit(120);
-    ::execl(TISSUED_BINARY, TISSUED_BINARY, "--batch", "--scene", scene_path("cantilever").c_str(), "--duration",
-            "1000", "--progress", "0.01", "--report", report.c_str(), "--record", session.c_str(),
-            static_cast<char*>(nullptr));
-    ::_exit(121);
-  }
-  ~LongBatchRun() {
-    if (pid_ > 0 && !exited_) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  LongBatchRun(const LongBatchRun&) = delete;
-  LongBatchRun& operator=(const LongBatchRun&) = delete;
-
-  bool started() const { return pid_ > 0; }
+        process({TISSUED_BINARY, "--batch", "--scene", scene_path("cantilever"), "--duration", "1000", "--progress",
+                 "0.01", "--report", report.string(), "--record", session.string()},
+                dir / (name + ".out"), dir / (name + ".err"), ignore_sigint) {}
   // A progress line seen: the run is under way, its handlers installed.
   // Up to 60 s (sanitizer builds start slowly).
-  bool wait_until_stepping() const {
-    for (int i = 0; i < 1200; ++i) {
-      if (read_file(out_).find("\nt ") != std::string::npos) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    return false;
-  }
-  bool signal(int signo) const { return ::kill(pid_, signo) == 0; }
-  // Waits up to `seconds` for the process to end; its wait status, or
-  // nullopt while it still runs.
-  std::optional<int> wait_for_exit(double seconds) {
-    for (int i = 0; i <= static_cast<int>(seconds * 20.0); ++i) {
-      int status = 0;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-        exited_ = true;
-        return status;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    return std::nullopt;
-  }
-  std::string err() const { return read_file(err_); }
+  bool wait_until_stepping() const { return process.wait_for_output("\nt ", 60.0); }
 
   const fs::path session, report;
-
- private:
-  fs::path out_, err_;
-  pid_t pid_ = -1;
-  bool exited_ = false;
+  testing::BackgroundProcess process;
 };
 
 // Ctrl-C (SIGINT) or SIGTERM on a long batch run: it stops after the step in
@@ -678,12 +629,13 @@ TEST_F(TissuedProcess, ASignalStopsTheRunAndKeepsTheReportAndTheSession) {
   for (const int signo : {SIGINT, SIGTERM}) {
     SCOPED_TRACE(signal_name(signo));
     LongBatchRun run(dir_, signal_name(signo), /*ignore_sigint=*/false);
-    ASSERT_TRUE(run.started());
-    EXPECT_TRUE(run.wait_until_stepping()) << run.err();
-    ASSERT_TRUE(run.signal(signo));
-    const std::optional<int> status = run.wait_for_exit(60.0);
+    ASSERT_TRUE(run.process.started());
+    EXPECT_TRUE(run.wait_until_stepping()) << run.process.err();
+    ASSERT_TRUE(run.process.signal(signo));
+    // It stops after the step in progress: a minute means it did not.
+    const std::optional<int> status = run.process.wait_for_exit(60.0);
     ASSERT_TRUE(status.has_value()) << "tissued did not stop within 60 s of " << signal_name(signo);
-    const std::string err = run.err();
+    const std::string err = run.process.err();
     ASSERT_TRUE(WIFEXITED(*status)) << "killed by signal " << (WIFSIGNALED(*status) ? WTERMSIG(*status) : 0) << err;
     EXPECT_EQ(WEXITSTATUS(*status), 128 + signo) << err;
     EXPECT_TRUE(contains(err, "interrupted by " + signal_name(signo))) << err;
@@ -714,14 +666,14 @@ TEST_F(TissuedProcess, ASignalStopsTheRunAndKeepsTheReportAndTheSession) {
 // stays ignored: the run goes on; SIGTERM still stops it.
 TEST_F(TissuedProcess, AnIgnoredSigintStaysIgnored) {
   LongBatchRun run(dir_, "nohup", /*ignore_sigint=*/true);
-  ASSERT_TRUE(run.started());
-  EXPECT_TRUE(run.wait_until_stepping()) << run.err();
-  ASSERT_TRUE(run.signal(SIGINT));
-  EXPECT_FALSE(run.wait_for_exit(0.5).has_value()) << run.err();
-  ASSERT_TRUE(run.signal(SIGTERM));
-  const std::optional<int> status = run.wait_for_exit(60.0);
+  ASSERT_TRUE(run.process.started());
+  EXPECT_TRUE(run.wait_until_stepping()) << run.process.err();
+  ASSERT_TRUE(run.process.signal(SIGINT));
+  EXPECT_FALSE(run.process.wait_for_exit(0.5).has_value()) << run.process.err();
+  ASSERT_TRUE(run.process.signal(SIGTERM));
+  const std::optional<int> status = run.process.wait_for_exit(60.0);
   ASSERT_TRUE(status.has_value());
-  EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 128 + SIGTERM) << run.err();
+  EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 128 + SIGTERM) << run.process.err();
 }
 
 }  // namespace

@@ -4,9 +4,12 @@
 // levels and adaptive meshes and measures each against the uniform reference
 // at the maximum depth; bad options and scenes are errors naming themselves.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
 #include <cmath>
+#include <csignal>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -226,6 +229,64 @@ TEST(TradeStudy, HelpListsTheOptionsAndABadOptionIsAUsageError) {
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("tissue trade: unknown argument --frobnicate"), std::string::npos) << bad.err;
   EXPECT_EQ(bad.out.find("Sweep"), std::string::npos) << "nothing ran: " << bad.out;
+}
+
+// The sweep's files are created before any run: a path that cannot be
+// written is exit 4 naming it, with nothing run; and they belong to the sweep.
+TEST(TradeStudy, AnUnwritableOutputFailsBeforeAnyRun) {
+  TempDir dir;
+  const std::string nowhere = dir / "missing/plot.svg";
+  const RunResult r = sweep(dir, kCantilever, dir / "ok.csv", "--svg " + quote(nowhere));
+  EXPECT_EQ(r.exit_code, 4) << r.err;
+  EXPECT_NE(r.err.find("cannot write " + nowhere), std::string::npos) << r.err;
+  EXPECT_EQ(r.out.find("Sweep"), std::string::npos) << "nothing ran: " << r.out;
+  const RunResult t = run(kTrade + " --table1 --quick --csv " + quote(dir / "t.csv"), dir);
+  EXPECT_EQ(t.exit_code, 2) << t.err;
+  EXPECT_NE(t.err.find("--csv and --svg are the sweep's files"), std::string::npos) << t.err;
+}
+
+// Ctrl-C during a sweep stops it after the step in progress: the run it
+// stopped is "interrupted", the rest "skipped" (not run), and the tables,
+// CSV and SVG still come out for what ran; exit 130.
+TEST(TradeStudy, CtrlCStopsTheSweepAndKeepsWhatItMeasured) {
+  TempDir dir;
+  const std::string csv = dir / "s.csv", svg = dir / "s.svg";
+  // Uniform L0..L3 and one adaptive run for 20 simulated seconds each: L0
+  // takes ~1 s (release build), the others longer, so the signal lands in
+  // L1 or later.
+  tissue::testing::BackgroundProcess trade(
+      {TISSUE_CLI_BINARY, "trade", "--scene-file", kCantilever, "--integrators", "implicit", "--depths", "3", "--th",
+       "20", "--duration", "20", "--run-cap", "600", "--csv", csv, "--svg", svg},
+      dir / "trade.out", dir / "trade.err");
+  ASSERT_TRUE(trade.started());
+  ASSERT_TRUE(trade.wait_for_output("uniform L0: ok", 120.0, /*in_stderr=*/true)) << trade.err();
+  ASSERT_TRUE(trade.signal(SIGINT));
+  const std::optional<int> status = trade.wait_for_exit(60.0);
+  ASSERT_TRUE(status.has_value()) << "did not stop within 60 s of SIGINT: " << trade.err();
+  ASSERT_TRUE(WIFEXITED(*status)) << trade.err();
+  EXPECT_EQ(WEXITSTATUS(*status), 130) << trade.err();
+  EXPECT_NE(trade.err().find("interrupted by SIGINT"), std::string::npos) << trade.err();
+  EXPECT_NE(trade.out().find("| implicit |"), std::string::npos) << "the table is printed: " << trade.out();
+
+  const auto rows = read_csv(csv);
+  ASSERT_EQ(rows.size(), 5u);  // L0..L3 and the adaptive run
+  EXPECT_EQ(rows[0].at("status"), "ok");
+  EXPECT_EQ(number(rows[0], "steps"), 20000);
+  int interrupted = 0, not_run = 0;
+  for (const auto& row : rows) {
+    if (row.at("status") == "interrupted") {
+      ++interrupted;
+      EXPECT_EQ(row.at("message"), "interrupted by SIGINT");
+      EXPECT_LT(number(row, "steps"), 20000);
+    } else if (row.at("status") == "skipped") {
+      ++not_run;
+      EXPECT_EQ(row.at("message"), "not run: interrupted by SIGINT");
+    }
+  }
+  EXPECT_EQ(interrupted, 1);
+  EXPECT_EQ(rows.back().at("status"), "skipped");  // the adaptive run comes after every uniform level
+  EXPECT_EQ(interrupted + not_run + 1 + (rows[1].at("status") == "ok") + (rows[2].at("status") == "ok"), 5);
+  EXPECT_NE(slurp(svg).find("</svg>"), std::string::npos);
 }
 
 }  // namespace

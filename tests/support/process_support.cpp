@@ -5,12 +5,16 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <system_error>
+#include <thread>
 
 namespace tissue::testing {
 
@@ -66,5 +70,54 @@ int gone_pid() {
   if (::waitpid(child, nullptr, 0) != child) throw std::runtime_error("waitpid failed");
   return child;
 }
+
+BackgroundProcess::BackgroundProcess(const std::vector<std::string>& argv, const std::string& out_path,
+                                     const std::string& err_path, bool ignore_sigint)
+    : out_path_(out_path), err_path_(err_path) {
+  std::vector<char*> args;
+  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  std::fflush(nullptr);  // nothing buffered is written twice
+  pid_ = ::fork();
+  if (pid_ != 0) return;
+  if (ignore_sigint) std::signal(SIGINT, SIG_IGN);
+  if (!std::freopen(out_path_.c_str(), "w", stdout) || !std::freopen(err_path_.c_str(), "w", stderr)) ::_exit(120);
+  ::execv(args[0], args.data());
+  ::_exit(121);
+}
+
+BackgroundProcess::~BackgroundProcess() {
+  if (pid_ > 0 && !exited_) {
+    ::kill(pid_, SIGKILL);
+    ::waitpid(pid_, nullptr, 0);
+  }
+}
+
+bool BackgroundProcess::wait_for_output(const std::string& text, double seconds, bool in_stderr) const {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  do {
+    if ((in_stderr ? err() : out()).find(text) != std::string::npos) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  } while (std::chrono::steady_clock::now() < end);
+  return false;
+}
+
+bool BackgroundProcess::signal(int signo) const { return pid_ > 0 && !exited_ && ::kill(pid_, signo) == 0; }
+
+std::optional<int> BackgroundProcess::wait_for_exit(double seconds) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  do {
+    int status = 0;
+    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+      exited_ = true;
+      return status;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  } while (std::chrono::steady_clock::now() < end);
+  return std::nullopt;
+}
+
+std::string BackgroundProcess::out() const { return slurp(out_path_); }
+std::string BackgroundProcess::err() const { return slurp(err_path_); }
 
 }  // namespace tissue::testing

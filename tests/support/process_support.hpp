@@ -3,7 +3,9 @@
 // with its output captured.
 #pragma once
 
+#include <optional>
 #include <string>
+#include <vector>
 
 namespace tissue::testing {
 
@@ -38,6 +40,36 @@ std::string quote(const std::string& s);
 std::string slurp(const std::string& path);
 // Writes `text` to `path` (a failed write fails the test).
 void write_text(const std::string& path, const std::string& text);
+
+// A program running in the background (fork + exec, no shell), its stdout
+// and stderr in files, for tests that signal a long run mid-way. Killed and
+// reaped at the end if it still runs.
+class BackgroundProcess {
+ public:
+  // `argv[0]` is the program's path. `ignore_sigint`: the child starts with
+  // SIGINT ignored, as `nohup` or `cmd &` in a script would start it.
+  BackgroundProcess(const std::vector<std::string>& argv, const std::string& out_path, const std::string& err_path,
+                    bool ignore_sigint = false);
+  ~BackgroundProcess();
+  BackgroundProcess(const BackgroundProcess&) = delete;
+  BackgroundProcess& operator=(const BackgroundProcess&) = delete;
+
+  bool started() const { return pid_ > 0; }
+  // Waits up to `seconds` for `text` to appear in its stdout (`in_stderr`:
+  // stderr); false if it did not.
+  bool wait_for_output(const std::string& text, double seconds, bool in_stderr = false) const;
+  bool signal(int signo) const;
+  // Waits up to `seconds` for it to end: its wait status, or nullopt while it
+  // still runs.
+  std::optional<int> wait_for_exit(double seconds);
+  std::string out() const;
+  std::string err() const;
+
+ private:
+  std::string out_path_, err_path_;
+  int pid_ = -1;
+  bool exited_ = false;
+};
 
 // The pid of a process that has exited and been reaped: a pid nothing runs
 // under (until the kernel reuses it), for tests of stale-pid handling.
