@@ -234,7 +234,7 @@ int batch_command(const BatchOptions& options) {
 
     OutputFile file;
     if (!options.report_path.empty()) {
-      const std::string why = file.open(options.report_path);
+      const std::string why = file.open(options.report_path, "report");
       if (!why.empty()) return fail(kExitReport, why);
     }
 
@@ -262,13 +262,12 @@ int batch_command(const BatchOptions& options) {
       std::fflush(stdout);
       std::fprintf(stderr, "tissued: %s (the run goes on)\n", recorder->error().c_str());
     };
-    nlohmann::json report;
-    {
-      const StopOnSignals stop;
-      report =
-          run_batch(*sim, options, talk ? stdout : nullptr,
-                    recorder ? record_step : std::function<void(const physics::Simulation&, double)>(), stop.flag());
-    }
+    // Until the report and the session are written: a signal during the
+    // run ends it there; one after it (while writing) changes nothing.
+    const StopOnSignals stop;
+    const nlohmann::json report =
+        run_batch(*sim, options, talk ? stdout : nullptr,
+                  recorder ? record_step : std::function<void(const physics::Simulation&, double)>(), stop.flag());
     const nlohmann::json& result = report["result"];
     const std::string interrupted_by =
         result["interrupted_by"].is_null() ? std::string() : result["interrupted_by"].get<std::string>();

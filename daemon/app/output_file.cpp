@@ -5,16 +5,17 @@
 
 namespace tissue::app {
 
-std::string OutputFile::open(const std::string& path) {
+std::string OutputFile::open(const std::string& path, const std::string& what) {
   discard();
   path_ = path;
+  what_ = what;
   errno = 0;
   file_ = std::fopen(path.c_str(), "w");
   return file_ ? std::string() : failure(errno);
 }
 
 std::string OutputFile::write(const std::string& text) {
-  if (!file_) return "cannot write " + path_ + ": not open";
+  if (!file_) return "cannot write " + name() + ": not open";
   errno = 0;
   const bool wrote = std::fwrite(text.data(), 1, text.size(), file_) == text.size() && std::fflush(file_) == 0;
   const int write_errno = errno;
@@ -33,8 +34,10 @@ void OutputFile::discard() {
   std::remove(path_.c_str());
 }
 
+std::string OutputFile::name() const { return what_.empty() ? path_ : what_ + " " + path_; }
+
 std::string OutputFile::failure(int err) const {
-  return "cannot write " + path_ + ": " + (err != 0 ? std::strerror(err) : "unknown error");
+  return "cannot write " + name() + ": " + (err != 0 ? std::strerror(err) : "unknown error");
 }
 
 }  // namespace tissue::app

@@ -17,8 +17,8 @@ class OutputFile {
   ~OutputFile() { discard(); }
 
   // Creates (or truncates) `path`. Empty on success, else
-  // "cannot write PATH: reason".
-  std::string open(const std::string& path);
+  // "cannot write WHAT PATH: reason" (`what` says which file it is: "report").
+  std::string open(const std::string& path, const std::string& what = {});
   // Writes `text` and closes the file; the same kind of message on failure
   // (a full disk shows up here, at the flush or the close).
   std::string write(const std::string& text);
@@ -28,8 +28,9 @@ class OutputFile {
   bool is_open() const { return file_ != nullptr; }
 
  private:
+  std::string name() const;
   std::string failure(int err) const;
-  std::string path_;
+  std::string path_, what_;
   std::FILE* file_ = nullptr;
 };
 

@@ -1281,10 +1281,10 @@ int run_trade_study(const std::string& program, const std::vector<std::string>& 
     // The sweep's files are opened before anything runs: a path that cannot
     // be written fails now, not after an hour of runs.
     OutputFile csv, svg;
-    for (const auto& [file, path] :
-         {std::pair<OutputFile*, const std::string*>{&csv, &o.csv_path}, {&svg, &o.svg_path}})
-      if (!path->empty())
-        if (const std::string why = file->open(*path); !why.empty()) return fail(kTradeExitOutput, why);
+    if (!o.csv_path.empty())
+      if (const std::string why = csv.open(o.csv_path, "--csv"); !why.empty()) return fail(kTradeExitOutput, why);
+    if (!o.svg_path.empty())
+      if (const std::string why = svg.open(o.svg_path, "--svg"); !why.empty()) return fail(kTradeExitOutput, why);
     const auto t0 = Clock::now();
     if (o.table1) {
       const auto t = Clock::now();

@@ -29,8 +29,8 @@ TEST(OutputFile, AMissingDirectoryIsRefusedAtOpenNamingThePath) {
   TempDir dir;
   OutputFile file;
   const std::string path = dir / "missing/out.txt";
-  const std::string why = file.open(path);
-  EXPECT_NE(why.find("cannot write " + path), std::string::npos) << why;
+  const std::string why = file.open(path, "report");
+  EXPECT_NE(why.find("cannot write report " + path), std::string::npos) << why;
   EXPECT_NE(why.find("No such file or directory"), std::string::npos) << why;
 }
 

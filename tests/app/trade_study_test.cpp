@@ -238,7 +238,7 @@ TEST(TradeStudy, AnUnwritableOutputFailsBeforeAnyRun) {
   const std::string nowhere = dir / "missing/plot.svg";
   const RunResult r = sweep(dir, kCantilever, dir / "ok.csv", "--svg " + quote(nowhere));
   EXPECT_EQ(r.exit_code, 4) << r.err;
-  EXPECT_NE(r.err.find("cannot write " + nowhere), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("cannot write --svg " + nowhere), std::string::npos) << r.err;
   EXPECT_EQ(r.out.find("Sweep"), std::string::npos) << "nothing ran: " << r.out;
   const RunResult t = run(kTrade + " --table1 --quick --csv " + quote(dir / "t.csv"), dir);
   EXPECT_EQ(t.exit_code, 2) << t.err;
