@@ -30,9 +30,9 @@
 // SIGINT (Ctrl-C) or SIGTERM ends the run after the step in progress: the
 // report and the session cover the run so far (result.interrupted_by names
 // the signal) and the exit code is 128 + the signal's number, as a shell
-// reports a process the signal killed. A second one kills at once. A SIGINT
-// the process was started ignoring (`nohup`, a background job of a script)
-// stays ignored.
+// reports a process the signal killed. Asked again a second later, it kills;
+// a SIGINT the process was started ignoring (`nohup`, a background job of a
+// script) stays ignored (stop_signals.hpp).
 #pragma once
 
 #include <csignal>

@@ -137,7 +137,7 @@ void usage(const std::string& program, std::FILE* to) {
       "  beam-theory: [--beam-depth D]\n"
       "no mode flag: all three modes (with --scene-file: the sweep)\n"
       "--csv / --svg are created before any run. Ctrl-C (or SIGTERM) during the sweep stops it after the\n"
-      "step in progress and still prints its tables and writes its files for the runs done; a second Ctrl-C kills.\n"
+      "step in progress and still prints its tables and writes its files for the runs done; Ctrl-C again kills.\n"
       "exit codes: 0 done, 2 bad option or scene, 4 --csv/--svg not writable, 128+N sweep stopped by signal N\n",
       to);
 }
