@@ -49,6 +49,13 @@
 // root included, which would also give different bits on different CPUs)
 // brings this layout within 2x of the bound at cache-resident sizes: the
 // loads, stores and lane shuffles of the group loop are most of it.
+//
+// Nodes numbered in blocks of 32 or 64 distinct x values (2026-11-26, Intel
+// host with 2 MB L2; tried for 1.6x10^6 springs, where the signature order's
+// offsets reach 11,761 positions and the sub-step costs ~2x per spring what
+// it costs at 4x10^5): no faster there (double damped 6.5-6.8 vs 6.2-6.6 ns
+// per spring), 0-13 % slower below, as the cross-block springs fill one lane
+// each (fill 0.92-0.98 -> 0.80-0.93). Not kept; docs/performance.md.
 #include <algorithm>
 #include <array>
 #include <cmath>
