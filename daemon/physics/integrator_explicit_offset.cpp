@@ -54,7 +54,7 @@
 // host with 2 MB L2; tried for 1.6x10^6 springs, where the signature order's
 // offsets reach 11,761 positions and the sub-step costs ~2x per spring what
 // it costs at 4x10^5): no faster there (double damped 6.5-6.8 vs 6.2-6.6 ns
-// per spring), 0-13 % slower below, as the cross-block springs fill one lane
+// per spring), up to 18 % slower below, as the cross-block springs fill one lane
 // each (fill 0.92-0.98 -> 0.80-0.93). Not kept; docs/performance.md.
 #include <algorithm>
 #include <array>
