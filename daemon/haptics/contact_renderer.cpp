@@ -15,6 +15,11 @@ constexpr double kBehindTolerance_m = 1e-7;
 // device crossing exactly through a shared edge or vertex is not missed.
 constexpr double kBarycentricTolerance = 1e-9;
 constexpr double kDegenerateArea2_m4 = 1e-30;
+// A surface met between two ticks or two models (a sim step: 1 ms) has moved
+// at most this far past the tool: 5 m/s for a millisecond. A tool deeper
+// behind the surface did not meet it; it is left free, as one that starts
+// inside.
+constexpr double kCaptureDepth_m = 0.005;
 
 struct TriangleClosest {
   Vec3 point;
@@ -91,6 +96,7 @@ void ContactRenderer::set_model(const LocalModel* model) noexcept {
 void ContactRenderer::carry_state_from(const ContactRenderer& other) noexcept {
   initialised_ = other.initialised_;
   touching_ = other.touching_;
+  outside_ = other.outside_;
   proxy_m_ = other.proxy_m_;
   surface_point_m_ = other.surface_point_m_;
   contact_triangle_ = -1;
@@ -99,6 +105,7 @@ void ContactRenderer::carry_state_from(const ContactRenderer& other) noexcept {
 void ContactRenderer::reset() noexcept {
   initialised_ = false;
   touching_ = false;
+  outside_ = false;
   contact_triangle_ = -1;
 }
 
@@ -223,12 +230,32 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     // free, so a device that starts inside the object feels no sudden force.
     initialised_ = true;
     touching_ = false;
+    outside_ = false;
     proxy_m_ = device_m;
   }
 
   Vec3 reference_m = Vec3::Zero();
   if (!touching_) {
     touching_ = find_entry(proxy_m_, device_m, &reference_m);
+    if (!touching_ && outside_) {
+      // A tool in front of the surface at the last tick and just behind it
+      // now has met it, though the segment test above saw no crossing. That
+      // happens (a) on the first tick of a new model: the service publishes
+      // one per sim step, so a surface moving into a still tool mostly passes
+      // it between two models, where the segment has no previous patch to
+      // move with; (b) at a patch vertex or edge, where the segment's face
+      // plane and the pseudo-normal below disagree by a fraction of a
+      // micrometre (the shipped demo's hand lands on a lattice node). Both
+      // lost the whole press: the tool went on inside with no force.
+      const Closest s = closest_facing(device_m, device_m, false);
+      if (s.triangle >= 0) {
+        const double depth_m = -pseudo_normal(s).dot(device_m - s.point);
+        if (depth_m > 0.0 && depth_m <= kCaptureDepth_m) {
+          touching_ = true;
+          reference_m = s.point;
+        }
+      }
+    }
   } else if (contact_triangle_ >= 0) {
     const auto& tri = model_->triangle[contact_triangle_];
     reference_m = contact_weight_[0] * vertex_m_[tri[0]] + contact_weight_[1] * vertex_m_[tri[1]] +
@@ -257,8 +284,11 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     contact_triangle_ = -1;
     proxy_m_ = device_m;
     out.proxy_m = device_m;
+    const Closest s = closest_facing(device_m, device_m, false);
+    outside_ = s.triangle >= 0 && pseudo_normal(s).dot(device_m - s.point) > 0.0;
     return out;
   }
+  outside_ = false;
 
   contact_triangle_ = c.triangle;
   contact_weight_ = c.weight;

@@ -126,6 +126,9 @@ class ContactRenderer {
   // Proxy state.
   bool initialised_ = false;
   bool touching_ = false;
+  // Free, with the device in front of the patch at the last tick: a surface
+  // that has it just behind at this tick met it (render).
+  bool outside_ = false;
   Vec3 proxy_m_ = Vec3::Zero();
   Vec3 surface_point_m_ = Vec3::Zero();  // last geometric contact point c
   int contact_triangle_ = -1;            // in the bound model; -1 after a model switch
