@@ -283,6 +283,23 @@ TEST(ContactRenderer, ASurfaceThatMovesPastAStillToolBetweenModelsIsMet) {
   EXPECT_TRUE(touched);
 }
 
+// The patch is a window on a larger surface. A tool that comes in from beside
+// it crosses the surface's plane just outside the window, where the segment
+// test finds no triangle, and ends just behind the patch: it was in front of
+// the surface at the last tick and is behind it now, so it has met it, on
+// one and the same model.
+TEST(ContactRenderer, AToolThatIsBehindTheSurfaceNowAndWasInFrontIsMetWithinAModel) {
+  const LocalModel patch = test::make_flat_patch(0.05);  // z = 0 for |x|, |y| <= 50 mm
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  EXPECT_FALSE(r.render(0, Vec3(0.060, 0.0, 0.001), Vec3::Zero()).contact);  // beside, 1 mm above the plane
+  // In one tick to 0.5 mm below, crossing z = 0 at x = 52 mm (outside the patch).
+  const RenderOutput out = r.render(kMs, Vec3(0.048, 0.0, -0.0005), Vec3::Zero());
+  EXPECT_TRUE(out.contact);
+  EXPECT_NEAR(out.surface_point_m.z(), 0.0, 1e-12);
+  EXPECT_GT(out.force_on_device_N.z(), 0.0);
+}
+
 // A tool that starts inside the object, or that the surface passed by more
 // than a few millimetres in one model, is not pulled out by a model switch.
 TEST(ContactRenderer, AModelSwitchDoesNotCaptureAToolThatWasNotOutside) {
