@@ -291,7 +291,8 @@ int batch_command(const BatchOptions& options) {
       if (!options.report_path.empty() && write_error.empty()) message += "; report " + options.report_path;
       if (recorder && record_error.empty()) message += "; session " + options.record_path;
       if (!options.report_path.empty() || recorder) message += " (the run so far)";
-      const int code = fail(exit_code_for_signal(interrupted_by == signal_name(SIGTERM) ? SIGTERM : SIGINT), message);
+      // The flag keeps the first signal, the one that ended the run.
+      const int code = fail(exit_code_for_signal(*stop.flag()), message);
       if (!write_error.empty()) fail(kExitReport, write_error);
       if (!record_error.empty()) fail(kExitRecord, record_error);
       return code;

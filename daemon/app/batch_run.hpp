@@ -42,7 +42,6 @@
 #include <string>
 #include <vector>
 
-#include "app/stop_signals.hpp"
 #include "physics/simulation.hpp"
 #include "scene/scene.hpp"
 

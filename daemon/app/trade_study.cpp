@@ -41,8 +41,6 @@
 // - a refused or failed step ends a run; the refusal is recorded, not hidden.
 #include "app/trade_study.hpp"
 
-#include <signal.h>
-
 #include <algorithm>
 #include <array>
 #include <chrono>

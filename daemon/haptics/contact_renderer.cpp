@@ -234,6 +234,20 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     proxy_m_ = device_m;
   }
 
+  // The device's signed height above the patch (along the pseudo-normal at
+  // its closest point; NaN without a triangle), found at most once a tick.
+  Closest nearest;
+  double height_m = std::numeric_limits<double>::quiet_NaN();
+  bool have_height = false;
+  const auto device_height_m = [&]() noexcept {
+    if (!have_height) {
+      nearest = closest_facing(device_m, device_m, false);
+      if (nearest.triangle >= 0) height_m = pseudo_normal(nearest).dot(device_m - nearest.point);
+      have_height = true;
+    }
+    return height_m;
+  };
+
   Vec3 reference_m = Vec3::Zero();
   if (!touching_) {
     touching_ = find_entry(proxy_m_, device_m, &reference_m);
@@ -247,13 +261,10 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
       // plane and the pseudo-normal below disagree by a fraction of a
       // micrometre (the shipped demo's hand lands on a lattice node). Both
       // lost the whole press: the tool went on inside with no force.
-      const Closest s = closest_facing(device_m, device_m, false);
-      if (s.triangle >= 0) {
-        const double depth_m = -pseudo_normal(s).dot(device_m - s.point);
-        if (depth_m > 0.0 && depth_m <= kCaptureDepth_m) {
-          touching_ = true;
-          reference_m = s.point;
-        }
+      const double h_m = device_height_m();
+      if (h_m < 0.0 && h_m >= -kCaptureDepth_m) {
+        touching_ = true;
+        reference_m = nearest.point;
       }
     }
   } else if (contact_triangle_ >= 0) {
@@ -284,8 +295,7 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     contact_triangle_ = -1;
     proxy_m_ = device_m;
     out.proxy_m = device_m;
-    const Closest s = closest_facing(device_m, device_m, false);
-    outside_ = s.triangle >= 0 && pseudo_normal(s).dot(device_m - s.point) > 0.0;
+    outside_ = device_height_m() > 0.0;  // NaN (no triangle): not known to be outside
     return out;
   }
   outside_ = false;

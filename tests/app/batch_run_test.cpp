@@ -1,6 +1,7 @@
 // Batch mode: the report (in-process, through run_batch) and the process
 // contract of `tissued --batch` (exit codes, messages, bit-identical files).
 #include "app/batch_run.hpp"
+#include "app/stop_signals.hpp"
 
 #include <gtest/gtest.h>
 #include <hdf5.h>
