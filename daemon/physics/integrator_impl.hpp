@@ -523,7 +523,8 @@ class ProjectiveIntegrator final : public Integrator {
   double alpha_per_s_;
   bool factor_valid_ = false;
   double factored_dt_s_ = 0.0;
-  std::vector<int> dof_of_node_;  // free nodes → row, else -1
+  std::uint64_t factored_version_ = 0;  // body.parameters_version() the factor was built for
+  std::vector<int> dof_of_node_;        // free nodes → row, else -1
   std::vector<NodeId> node_of_dof_;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver_;
   Eigen::MatrixXd rhs_, solution_;

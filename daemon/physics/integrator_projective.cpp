@@ -41,11 +41,15 @@ void ProjectiveIntegrator::factor(const Body& body, double dt_s) {
   solver_.compute(system);
   factor_valid_ = solver_.info() == Eigen::Success;
   factored_dt_s_ = dt_s;
+  factored_version_ = body.parameters_version();
 }
 
 StepOutcome ProjectiveIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) {
   StepOutcome out;
-  if (!factor_valid_ || factored_dt_s_ != dt_s) factor(body, dt_s);
+  // The body's version changes with every split, merge and parameter
+  // rebuild, so a caller that adapts it without mesh_changed() still gets a
+  // system of the right size (a stale one would index past its numbering).
+  if (!factor_valid_ || factored_dt_s_ != dt_s || factored_version_ != body.parameters_version()) factor(body, dt_s);
   if (!factor_valid_) {
     out.ok = false;
     out.error = "projective integrator: factorisation of the global system failed";

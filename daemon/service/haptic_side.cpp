@@ -2,6 +2,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "haptics/device.hpp"
 #include "haptics/haptic_loop.hpp"
@@ -10,6 +11,32 @@
 #include "record/session_tools.hpp"
 
 namespace tissue::service {
+
+void format_haptic_summary(const haptics::HapticStats& stats, const char* device_name, char* buffer, std::size_t size) {
+  if (size == 0) return;
+  std::size_t used = 0;
+  // Appends while there is room; snprintf truncates the last piece.
+  const auto append = [&](const char* format, auto... args) {
+    if (used >= size) return;
+    const int n = std::snprintf(buffer + used, size - used, format, args...);
+    if (n > 0) used += static_cast<std::size_t>(n);
+  };
+  append(" | haptic %s F %.2f N%s", device_name, stats.force_N, stats.contact ? " contact" : "");
+  if (stats.safety_trips == 0) return;
+  // The loop counts rising edges per kind; "other" is a stop request, the
+  // watchdog or a non-finite force (the JSON status counts the last).
+  const std::uint64_t named = stats.stale_model_trips + stats.device_lost_trips;
+  const std::uint64_t other = stats.safety_trips > named ? stats.safety_trips - named : 0;
+  const char* separator = " (safety trips: ";
+  for (const auto& [count, what] : {std::pair<std::uint64_t, const char*>{stats.stale_model_trips, "stale model"},
+                                    {stats.device_lost_trips, "device lost"},
+                                    {other, "other"}}) {
+    if (count == 0) continue;
+    append("%s%llu %s", separator, static_cast<unsigned long long>(count), what);
+    separator = ", ";
+  }
+  append(")");
+}
 
 namespace {
 
@@ -52,9 +79,7 @@ class HapticSideImpl final : public HapticSide {
   std::uint64_t heartbeat() const override { return loop_->heartbeat().load(std::memory_order_relaxed); }
 
   void summary(char* buffer, std::size_t size) const override {
-    const haptics::HapticStats s = loop_->stats();
-    std::snprintf(buffer, size, " | haptic %s F %.2f N%s%s", device_->name(), s.force_N, s.contact ? " contact" : "",
-                  s.safety_trips ? " (safety trips)" : "");
+    format_haptic_summary(loop_->stats(), device_->name(), buffer, size);
   }
 
   nlohmann::json status_json() const override {

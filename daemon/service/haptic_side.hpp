@@ -10,9 +10,17 @@
 #include <nlohmann/json.hpp>
 
 #include "config/daemon_config.hpp"
+#include "haptics/haptic_loop.hpp"
 #include "service/sim_thread.hpp"
 
 namespace tissue::service {
+
+// The haptic part of the status line, e.g. " | haptic sim F 0.42 N contact",
+// and after a safety fault " (safety trips: 1 stale model, 2 other)": which
+// fault ramped the force out is what an operator needs to act on (a stale
+// model points at the sim thread, a lost device at the device or its link).
+// Never allocates; truncates to size.
+void format_haptic_summary(const haptics::HapticStats& stats, const char* device_name, char* buffer, std::size_t size);
 
 class HapticSide {
  public:
@@ -26,7 +34,7 @@ class HapticSide {
   virtual void stop() = 0;
   // Advances every tick: the watchdog is fed only while it moves.
   virtual std::uint64_t heartbeat() const = 0;
-  // " | haptic 1000 Hz F 0.42 N contact" for the status line.
+  // format_haptic_summary() of the loop's current stats.
   virtual void summary(char* buffer, std::size_t size) const = 0;
   virtual nlohmann::json status_json() const = 0;
   // Device, scheduling and memory locking actually obtained.

@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace tissue::physics::testing {
@@ -103,6 +104,16 @@ scene::Scene free_cube_scene(int cubes, int depth) {
   s.object.cube_size_m = 0.05;
   s.adaptivity.min_depth = depth;
   return s;
+}
+
+std::vector<Vec3> random_free_vector(const Body& state, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<Vec3> p(state.x_m.size());
+  for (auto& v : p) v = Vec3(u(rng), u(rng), u(rng));
+  for (std::size_t n = 0; n < p.size(); ++n)
+    if (state.inv_mass_per_kg[n] == 0.0) p[n].setZero();
+  return p;
 }
 
 double total_energy_J(const Simulation& sim) { return sim.kinetic_energy_J() + sim.elastic_energy_J(); }

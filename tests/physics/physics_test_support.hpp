@@ -3,6 +3,8 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
+#include <vector>
 
 #include "physics/simulation.hpp"
 #include "scene/scene.hpp"
@@ -41,6 +43,10 @@ void jiggle_free_nodes(Body& body, std::uint32_t seed, double amplitude_m, doubl
 // beam_scene with adaptivity on up to max_depth, and 40 randomly chosen
 // diamonds split (mixed depths 0..max_depth).
 Body randomly_refined_beam(std::uint32_t seed, int max_depth = 5);
+
+// Random p over the free nodes of `state` (zero on kinematic ones), each
+// component uniform in [-1, 1] (seeded: the same every run).
+std::vector<Vec3> random_free_vector(const Body& state, std::uint32_t seed);
 
 // Kinetic + elastic energy [J].
 double total_energy_J(const Simulation& sim);

@@ -164,7 +164,7 @@ TEST(Simulation, WorkOfAConstantLoadIsTheLoadTimesTheDisplacement) {
 
 // The scene chooses the CG preconditioner (integrator.cg_preconditioner):
 // at dt = 10 ms, 20 iterations carry the beam's bending with the two-level
-// one and not with Jacobi (Integrator.TwoLevelKeepsTwentyIterations... holds
+// one and not with Jacobi (TwoLevelPreconditioner.KeepsTwentyIterations... holds
 // the integrator-level figures); here the choice must reach the integrator.
 TEST(Simulation, TheSceneChoosesTheCgPreconditioner) {
   const auto tip_mm = [](scene::CgPreconditioner preconditioner, double tolerance, int iterations) {

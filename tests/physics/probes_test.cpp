@@ -1,0 +1,165 @@
+#include "physics/probes.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <array>
+#include <random>
+#include <stdexcept>
+#include <string>
+
+#include "physics/body.hpp"
+#include "physics/physics_test_support.hpp"
+
+namespace tissue::physics {
+namespace {
+
+// A skewed tet, positively oriented, nowhere near the origin.
+const Vec3 kA(0.1, 0.2, -0.3), kB(0.5, 0.1, -0.2), kC(0.2, 0.7, -0.1), kD(0.15, 0.3, 0.4);
+
+std::array<double, 4> weights_of(const Vec3& p) { return barycentric(p, kA, kB, kC, kD); }
+
+TEST(Probes, BarycentricOfEachVertexIsItsUnitWeight) {
+  const std::array<Vec3, 4> corners = {kA, kB, kC, kD};
+  for (int i = 0; i < 4; ++i) {
+    const auto l = weights_of(corners[i]);
+    for (int j = 0; j < 4; ++j) EXPECT_NEAR(l[j], i == j ? 1.0 : 0.0, 1e-14) << "vertex " << i << " weight " << j;
+  }
+}
+
+TEST(Probes, BarycentricOfTheCentroidIsAQuarterEach) {
+  const auto l = weights_of(0.25 * (kA + kB + kC + kD));
+  for (int j = 0; j < 4; ++j) EXPECT_NEAR(l[j], 0.25, 1e-14) << "weight " << j;
+}
+
+// For any point, inside or out: the weights sum to one and mix the corners
+// back into the point (linear precision).
+TEST(Probes, BarycentricWeightsSumToOneAndReproduceThePoint) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int i = 0; i < 100; ++i) {
+    const Vec3 p(u(rng), u(rng), u(rng));
+    const auto l = weights_of(p);
+    EXPECT_NEAR(l[0] + l[1] + l[2] + l[3], 1.0, 1e-13) << p.transpose();
+    const Vec3 back = l[0] * kA + l[1] * kB + l[2] * kC + l[3] * kD;
+    EXPECT_NEAR((back - p).norm(), 0.0, 1e-13) << p.transpose();
+  }
+}
+
+// Beyond the face opposite a vertex, that vertex's weight is negative (by
+// how far past the face, in units of the vertex's height) and the others
+// stay positive; a point inside has all four positive.
+TEST(Probes, APointOutsideHasANegativeWeight) {
+  const std::array<Vec3, 4> corners = {kA, kB, kC, kD};
+  for (int i = 0; i < 4; ++i) {
+    Vec3 face = Vec3::Zero();
+    for (int j = 0; j < 4; ++j)
+      if (j != i) face += corners[j] / 3.0;
+    const Vec3 beyond = face + 0.25 * (face - corners[i]);  // a quarter height past the face
+    const auto l = weights_of(beyond);
+    EXPECT_NEAR(l[i], -0.25, 1e-13) << "vertex " << i;
+    for (int j = 0; j < 4; ++j) {
+      if (j == i) continue;
+      EXPECT_GT(l[j], 0.0) << "vertex " << i << " weight " << j;
+    }
+  }
+  const auto inside = weights_of(0.4 * kA + 0.3 * kB + 0.2 * kC + 0.1 * kD);
+  EXPECT_NEAR(inside[0], 0.4, 1e-14);
+  EXPECT_NEAR(inside[1], 0.3, 1e-14);
+  EXPECT_NEAR(inside[2], 0.2, 1e-14);
+  EXPECT_NEAR(inside[3], 0.1, 1e-14);
+}
+
+// A linear displacement field is read exactly anywhere in a mesh of mixed
+// depths, wherever the containing tet is; name and rest point are kept.
+TEST(Probes, ProbeReadsALinearFieldExactly) {
+  Body body = testing::randomly_refined_beam(5);
+  Eigen::Matrix3d g;
+  g << 0.01, -0.02, 0.005, 0.03, 0.0, -0.01, -0.02, 0.015, 0.01;
+  const Vec3 shift(1e-3, -2e-3, 5e-4);
+  body.mesh().for_each_node(
+      [&](NodeId n, const mesh::Node&) { body.x_m[n] = body.rest_m[n] + g * body.rest_m[n] + shift; });
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> along(0.0, 0.4), across(0.0, 0.1);
+  for (int i = 0; i < 50; ++i) {
+    const Vec3 p(along(rng), across(rng), across(rng));
+    std::string name = "p";
+    name += std::to_string(i);
+    Probe probe(name, p);
+    EXPECT_EQ(probe.name(), name);
+    EXPECT_EQ(probe.rest_m(), p);
+    EXPECT_NEAR((probe.displacement_m(body) - (g * p + shift)).norm(), 0.0, 1e-15) << p.transpose();
+  }
+}
+
+// Only one node moved by δ: a probe on that node reads δ, one at the
+// midpoint of one of its edges δ/2 (whichever tet around the edge holds it),
+// and one on another node reads nothing.
+TEST(Probes, ProbeMixesTheDisplacementsOfItsTetsNodes) {
+  Body body(testing::free_cube_scene(2, 1));
+  const Vec3 centre(0.05, 0.05, 0.05), delta(1e-3, -2e-3, 3e-3);
+  NodeId moved = mesh::kInvalidId, corner = mesh::kInvalidId;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if ((body.rest_m[n] - centre).norm() < 1e-12) moved = n;
+    if (body.rest_m[n].norm() < 1e-12) corner = n;
+  });
+  ASSERT_NE(moved, mesh::kInvalidId);
+  ASSERT_NE(corner, mesh::kInvalidId);
+  body.x_m[moved] += delta;
+  int edges = 0;
+  body.mesh().for_each_edge([&](EdgeId, const mesh::Edge& edge) {
+    if (edge.a != moved && edge.b != moved) return;
+    Probe probe("mid", 0.5 * (body.rest_m[edge.a] + body.rest_m[edge.b]));
+    EXPECT_NEAR((probe.displacement_m(body) - 0.5 * delta).norm(), 0.0, 1e-15) << "edge " << edge.a << "-" << edge.b;
+    ++edges;
+  });
+  EXPECT_GT(edges, 6);
+  Probe on_node("node", centre);
+  EXPECT_NEAR((on_node.displacement_m(body) - delta).norm(), 0.0, 1e-15);
+  Probe far("far", Vec3::Zero());
+  EXPECT_EQ(far.displacement_m(body), Vec3::Zero());
+}
+
+// The probe at the cube's centre sits on the cube diagonal, shared by all
+// six tets. Once read, the mesh is split there: the tet it had is gone (or
+// its id reused with other nodes), the new centre node moves, and the probe
+// follows it rather than the stale corners.
+TEST(Probes, ProbeRelocatesAfterTheMeshChanges) {
+  scene::Scene s = testing::free_cube_scene(1, 0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 2;
+  Body body(s);
+  const Vec3 centre(0.025, 0.025, 0.025);
+  Probe probe("centre", centre);
+  EXPECT_EQ(probe.displacement_m(body), Vec3::Zero());
+
+  const mesh::Key diagonal = body.mesh().diamond_of(0);
+  ASSERT_GT(body.split(diagonal), 0);
+  const NodeId z = body.mesh().find_node(diagonal);
+  ASSERT_NE(z, mesh::kInvalidId);
+  ASSERT_NEAR((body.rest_m[z] - centre).norm(), 0.0, 1e-15);
+  const Vec3 delta(2e-3, 1e-3, -1e-3);
+  body.x_m[z] += delta;
+  EXPECT_NEAR((probe.displacement_m(body) - delta).norm(), 0.0, 1e-15);
+}
+
+// A probe on the object's surface (a corner, a face) is inside; one a
+// tenth of a millimetre outside is refused, naming the probe.
+TEST(Probes, ProbesOnTheSurfaceAreInsideAndJustOutsideAreRefused) {
+  Body body(testing::free_cube_scene(1, 1));
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n] = 1.5 * body.rest_m[n]; });
+  for (const Vec3& p : {Vec3(0.05, 0.05, 0.05), Vec3(0.0, 0.03, 0.01), Vec3(0.02, 0.05, 0.04)}) {
+    Probe probe("surface", p);
+    EXPECT_NEAR((probe.displacement_m(body) - 0.5 * p).norm(), 0.0, 1e-15) << p.transpose();
+  }
+  Probe outside("just outside", Vec3(0.0501, 0.02, 0.02));
+  try {
+    outside.displacement_m(body);
+    FAIL() << "a probe outside the object must be refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("just outside"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace tissue::physics
