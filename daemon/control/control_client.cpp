@@ -96,7 +96,9 @@ void ControlClient::send_raw(std::string_view bytes) {
 
 std::string ControlClient::read_line() {
   Impl& s = *impl_;
-  auto buffer = asio::dynamic_buffer(s.inbox, kMaxResponseBytes);
+  // Room for the longest line and its '\n' (the server's limit counts the
+  // same way: a line of exactly the limit is accepted).
+  auto buffer = asio::dynamic_buffer(s.inbox, kMaxResponseBytes + 1);
   const auto ec = s.run([&](auto handler) { asio::async_read_until(s.socket, buffer, '\n', handler); }, "response");
   if (ec == asio::error::eof)
     throw ControlClientError(Kind::kTransport, s.peer + ": the daemon closed the connection without answering");

@@ -33,7 +33,8 @@ class ControlClient {
  public:
   using Timeout = std::chrono::milliseconds;
   static constexpr Timeout kDefaultTimeout{10000};
-  // Longest response line accepted (a status with many fields is still tiny).
+  // Longest response line accepted, without its '\n' (a status with many
+  // fields is still tiny).
   static constexpr std::size_t kMaxResponseBytes = 64u << 20;
 
   // Throw ControlClientError(kConnect) naming the socket / port.

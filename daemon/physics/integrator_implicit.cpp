@@ -75,6 +75,13 @@
 //    before it 62 / 14 / 18 / 6 %. With a product costing about one explicit
 //    sub-step, 21 products are ~21 sub-steps: the 25x target leaves little
 //    around them.
+//  - Tried and dropped (2026-11-26, Intel Xeon with AVX-512): two springs
+//    per 512-bit register (the same operations per spring, no FMA, the
+//    scatters still one 256-bit read-modify-write per end). Env-switched,
+//    two rounds alternating, BM_ImplicitVsExplicitSubstep, Jacobi cg20 over
+//    the offset sub-step: 10^3 springs 22.9-23.1 vs 19.5-20.5 without, 7x10^3
+//    26.1-27.8 vs 25.5-25.7, 5x10^4 28.6-29.2 vs 29.2, 4x10^5 27.0-27.1 vs
+//    26.0-27.9, 1.6x10^6 26.7-26.9 vs 26.2-30.5: no gain.
 // Everything is sequential in a fixed order: bit-identical reruns.
 #include <algorithm>
 #include <cmath>

@@ -5,25 +5,76 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <memory>
+#include <string>
+#include <system_error>
 
 namespace tissue::render {
 
+namespace {
+
+// libpng's largest default width and height (png_set_user_limits).
+constexpr int kMaxSide_px = 1000000;
+
+// Where libpng's error callback leaves its message and errno for the
+// setjmp branch (libpng otherwise prints to stderr and says nothing useful).
+struct PngFailure {
+  char message[200] = "libpng failed";
+  int saved_errno = 0;
+};
+
+void on_png_error(png_structp png, png_const_charp message) {
+  auto* failure = static_cast<PngFailure*>(png_get_error_ptr(png));
+  failure->saved_errno = errno;
+  std::snprintf(failure->message, sizeof failure->message, "%s", message);
+  png_longjmp(png, 1);
+}
+
+void on_png_warning(png_structp, png_const_charp) {}  // warnings do not fail a write
+
+}  // namespace
+
 void write_png(const Image& image, const std::string& path) {
+  if (image.width < 1 || image.height < 1 || image.width > kMaxSide_px || image.height > kMaxSide_px)
+    throw RenderError("cannot write " + path + ": the image is " + std::to_string(image.width) + " x " +
+                      std::to_string(image.height) + " pixels (each side must be 1 to " + std::to_string(kMaxSide_px) +
+                      ")");
+  const std::size_t expected_bytes = 4 * static_cast<std::size_t>(image.width) * image.height;
+  if (image.rgba.size() != expected_bytes)
+    throw RenderError("cannot write " + path + ": the image has " + std::to_string(image.rgba.size()) +
+                      " bytes of pixels, " + std::to_string(image.width) + " x " + std::to_string(image.height) +
+                      " RGBA needs " + std::to_string(expected_bytes));
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
   if (!file) throw RenderError("cannot write " + path + ": " + std::strerror(errno));
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  // Whatever fails from here on leaves no truncated picture behind (only a
+  // regular file is removed: the path may be a device such as /dev/full).
+  const auto fail = [&](const std::string& reason) {
+    file.reset();
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(path, ec)) std::filesystem::remove(path, ec);
+    return RenderError("cannot write " + path + ": " + reason);
+  };
+  // Static storage: written by the error callback between setjmp and
+  // longjmp, so it must not be a local (whose value would be indeterminate).
+  static thread_local PngFailure failure;
+  failure = PngFailure{};
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &failure, &on_png_error, &on_png_warning);
   png_infop info = png ? png_create_info_struct(png) : nullptr;
   if (!png || !info) {
     png_destroy_write_struct(&png, &info);
-    throw RenderError("cannot write " + path + ": libpng could not start");
+    throw fail("libpng could not start");
   }
-  // libpng reports errors by longjmp: nothing with a destructor lives
+  // libpng reports errors by longjmp: nothing with a destructor is created
   // between here and the end of the writing.
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
-    throw RenderError("cannot write " + path + ": libpng failed (disk full?)");
+    // A failed write (a full disk) leaves errno; libpng's message alone
+    // would say only "Write Error".
+    throw fail(failure.saved_errno != 0 ? std::string(failure.message) + " (" + std::strerror(failure.saved_errno) + ")"
+                                        : std::string(failure.message));
   }
+  errno = 0;
   png_init_io(png, file.get());
   png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,
                PNG_COLOR_TYPE_RGBA, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
@@ -32,7 +83,8 @@ void write_png(const Image& image, const std::string& path) {
     png_write_row(png, const_cast<png_bytep>(&image.rgba[4 * static_cast<std::size_t>(y) * image.width]));
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
-  if (std::fflush(file.get()) != 0) throw RenderError("cannot write " + path + ": " + std::strerror(errno));
+  if (std::fflush(file.get()) != 0) throw fail(std::strerror(errno));
+  if (std::fclose(file.release()) != 0) throw fail(std::strerror(errno));
 }
 
 Image read_png(const std::string& path) {

@@ -6,7 +6,10 @@
 
 namespace tissue::render {
 
-// Writes `image` as an 8-bit RGBA PNG. Throws RenderError naming the file.
+// Writes `image` as an 8-bit RGBA PNG. Throws RenderError naming the file and
+// the reason: an image whose size and pixel count disagree (checked before
+// the file is touched), the system's error, or libpng's own message. A file
+// that failed part-way is removed rather than left as a truncated picture.
 void write_png(const Image& image, const std::string& path);
 
 // Reads any PNG as 8-bit RGBA (row 0 at the top), for checking pictures made
