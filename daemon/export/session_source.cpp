@@ -77,15 +77,27 @@ class SessionFrameSource final : public FrameSource {
     const auto xyz = read<float>(record::kMeshVertices, vertex_offset_[k], nv);
     f.vertices_m.resize(nv);
     for (std::size_t i = 0; i < nv; ++i)
-      for (int a = 0; a < 3; ++a) f.vertices_m[i][a] = static_cast<double>(xyz[3 * i + a]);
+      for (int a = 0; a < 3; ++a) {
+        const float coordinate = xyz[3 * i + a];
+        if (!std::isfinite(coordinate))
+          fail(std::string(record::kDatasets[record::kMeshVertices].path) + " row " +
+               std::to_string(vertex_offset_[k] + i) + " (frame " + std::to_string(k) + ") holds the coordinate " +
+               std::to_string(coordinate) + ": not a position");
+        f.vertices_m[i][a] = static_cast<double>(coordinate);
+      }
     const auto idx = read<std::int32_t>(record::kMeshTriangles, triangle_offset_[k], nt);
     f.triangles.resize(nt);
     for (std::size_t t = 0; t < nt; ++t)
       for (int c = 0; c < 3; ++c) {
         const std::int32_t v = idx[3 * t + c];
+        // Every consumer (x3d, render, replay) indexes the frame's vertices
+        // with these: checked here, with or without strain.
         if (v < 0)
           fail("/mesh/triangles row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
                ") holds the negative index " + std::to_string(v));
+        if (static_cast<std::uint64_t>(v) >= nv)
+          fail("/mesh/triangles row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
+               ") holds the index " + std::to_string(v) + ", past the frame's " + std::to_string(nv) + " vertices");
         f.triangles[t][c] = static_cast<std::uint32_t>(v);
       }
     f.vertex_level = read<std::uint8_t>(record::kMeshVertexLevel, vertex_offset_[k], nv);

@@ -26,6 +26,7 @@
 #include <utility>
 #include <vector>
 
+#include "control/line_socket.hpp"
 #include "control/server_harness.hpp"
 
 namespace tissue::control {
@@ -37,56 +38,8 @@ using testing::TempDir;
 using Kind = ControlClientError::Kind;
 using std::chrono::milliseconds;
 
-// The accepted end of a scripted peer's connection (blocking, bounded waits).
-class PeerConnection {
- public:
-  explicit PeerConnection(int fd) : fd_(fd) {}
-  // One line without its '\n'; nullopt on EOF or after `limit`.
-  std::optional<std::string> read_line(milliseconds limit = std::chrono::seconds(10)) {
-    const auto until = std::chrono::steady_clock::now() + limit;
-    for (;;) {
-      if (const auto nl = buffer_.find('\n'); nl != std::string::npos) {
-        std::string line = buffer_.substr(0, nl);
-        buffer_.erase(0, nl + 1);
-        return line;
-      }
-      if (!fill(until)) return std::nullopt;
-    }
-  }
-  // Everything the client sends until it closes (bounded by `limit`).
-  std::string read_to_eof(milliseconds limit = std::chrono::seconds(10)) {
-    const auto until = std::chrono::steady_clock::now() + limit;
-    while (fill(until)) {
-    }
-    return std::exchange(buffer_, {});
-  }
-  // False once the client is gone.
-  bool send(std::string_view bytes) {
-    while (!bytes.empty()) {
-      const ssize_t n = ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) return false;
-      bytes.remove_prefix(static_cast<std::size_t>(n));
-    }
-    return true;
-  }
-
- private:
-  bool fill(std::chrono::steady_clock::time_point until) {
-    const auto left = std::chrono::duration_cast<milliseconds>(until - std::chrono::steady_clock::now());
-    if (left.count() <= 0) return false;
-    pollfd p{fd_, POLLIN, 0};
-    if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return false;
-    char buf[65536];
-    const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
-    if (n <= 0) return false;
-    buffer_.append(buf, static_cast<std::size_t>(n));
-    return true;
-  }
-
-  int fd_;
-  std::string buffer_;
-};
+// The accepted end of a scripted peer's connection.
+using PeerConnection = testing::LineSocket;
 
 // A Unix socket in a temp dir whose single connection is served by `script`
 // on a thread. Declare it before the client, so the client is gone (and the
@@ -106,9 +59,8 @@ class ScriptedPeer {
       if (::poll(&p, 1, 10000) <= 0) return;  // no client came
       const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
       if (fd < 0) return;
-      PeerConnection connection(fd);
+      PeerConnection connection(fd);  // closes it
       script(connection);
-      ::close(fd);
     });
   }
   ~ScriptedPeer() {
@@ -156,7 +108,7 @@ TEST(ControlClient, RequestSendsOneLineWithAnIdAddedWhenAbsent) {
       received.push_back(*line);
       const json request = json::parse(*line, nullptr, false);
       const json id = request.is_object() ? request.value("id", json()) : json();
-      c.send(json({{"id", id}, {"ok", true}}).dump() + "\n");
+      c.send_all(json({{"id", id}, {"ok", true}}).dump() + "\n");
     }
   });
   ASSERT_TRUE(peer.listening());
@@ -177,8 +129,8 @@ TEST(ControlClient, CallPutsTheCommandAmongTheArguments) {
   ScriptedPeer peer([&](PeerConnection& c) {
     while (auto line = c.read_line()) {
       received.push_back(*line);
-      c.send(R"({"ok":false,"error":"x"})"
-             "\n");
+      c.send_all(R"({"ok":false,"error":"x"})"
+                 "\n");
     }
   });
   ASSERT_TRUE(peer.listening());
@@ -241,11 +193,11 @@ TEST(ControlClient, ResponsesThatAreNotProtocolResponsesAreProtocolErrors) {
   ScriptedPeer peer([&](PeerConnection& c) {
     for (const std::string& reply : replies) {
       if (!c.read_line()) return;
-      c.send(reply + "\n");
+      c.send_all(reply + "\n");
     }
     if (c.read_line())
-      c.send(R"({"id":9,"ok":true,"result":"fine"})"
-             "\n");
+      c.send_all(R"({"id":9,"ok":true,"result":"fine"})"
+                 "\n");
   });
   ASSERT_TRUE(peer.listening());
   ControlClient client = ControlClient::connect_unix(peer.path());
@@ -267,8 +219,8 @@ TEST(ControlClient, ResponsesThatAreNotProtocolResponsesAreProtocolErrors) {
 
 TEST(ControlClient, ReadLineSplitsLinesAndKeepsBytesPastTheLast) {
   ScriptedPeer peer([](PeerConnection& c) {
-    c.send("first\nsecond\nthi");
-    if (c.read_line()) c.send("rd\n\n{\"id\":1,\"ok\":true}\nlast\n");
+    c.send_all("first\nsecond\nthi");
+    if (c.read_line()) c.send_all("rd\n\n{\"id\":1,\"ok\":true}\nlast\n");
     c.read_to_eof();
   });
   ASSERT_TRUE(peer.listening());
@@ -288,8 +240,8 @@ TEST(ControlClient, ReadLineSplitsLinesAndKeepsBytesPastTheLast) {
 TEST(ControlClient, OversizedResponseLineIsAProtocolError) {
   constexpr std::size_t kMax = ControlClient::kMaxResponseBytes;
   ScriptedPeer peer([](PeerConnection& c) {
-    if (!c.send(std::string(kMax, 'a') + "\n")) return;
-    c.send(std::string(kMax + 2, 'b'));  // no newline at all; ends when the client leaves
+    if (!c.send_all(std::string(kMax, 'a') + "\n")) return;
+    c.send_all(std::string(kMax + 2, 'b'));  // no newline at all; ends when the client leaves
   });
   ASSERT_TRUE(peer.listening());
   ControlClient client = ControlClient::connect_unix(peer.path());
@@ -320,7 +272,7 @@ TEST(ControlClient, PeerClosingBeforeAnsweringIsATransportError) {
 
 TEST(ControlClient, PeerClosingMidLineIsATransportError) {
   ScriptedPeer peer([](PeerConnection& c) {
-    if (c.read_line()) c.send(R"({"id":1,"ok":tr)");  // half a response, then gone
+    if (c.read_line()) c.send_all(R"({"id":1,"ok":tr)");  // half a response, then gone
   });
   ASSERT_TRUE(peer.listening());
   ControlClient client = ControlClient::connect_unix(peer.path());

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "control/control_client.hpp"
+#include "control/line_socket.hpp"
 #include "control/server_harness.hpp"
 
 namespace tissue::control {
@@ -44,65 +45,7 @@ void expect_healthy(ServerHarness& h) {
   EXPECT_EQ(r.at("result").at("state"), "running") << r;
 }
 
-// A raw, blocking Unix stream socket, for misbehaving clients.
-class RawClient {
- public:
-  explicit RawClient(const std::string& path) {
-    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    std::memcpy(addr.sun_path, path.data(), path.size());
-    connected_ = ::connect(fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0;
-  }
-  ~RawClient() { close(); }
-  bool connected() const { return connected_; }
-  int fd() const { return fd_; }
-  // Sends everything; false when the peer is gone (no SIGPIPE).
-  bool send_all(std::string_view bytes) {
-    while (!bytes.empty()) {
-      const ssize_t n = ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) return false;
-      bytes.remove_prefix(static_cast<std::size_t>(n));
-    }
-    return true;
-  }
-  // One line (without '\n'); empty optional on EOF or after `timeout`.
-  std::optional<std::string> read_line(std::chrono::milliseconds timeout = std::chrono::seconds(5)) {
-    const auto until = std::chrono::steady_clock::now() + timeout;
-    for (;;) {
-      if (const auto nl = buffer_.find('\n'); nl != std::string::npos) {
-        std::string line = buffer_.substr(0, nl);
-        buffer_.erase(0, nl + 1);
-        return line;
-      }
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - std::chrono::steady_clock::now());
-      if (left.count() <= 0) return std::nullopt;
-      pollfd p{fd_, POLLIN, 0};
-      if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return std::nullopt;
-      char buf[4096];
-      const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
-      if (n <= 0) return std::nullopt;
-      buffer_.append(buf, static_cast<std::size_t>(n));
-    }
-  }
-  // True when the server closed the connection (EOF) within `timeout`.
-  bool sees_eof(std::chrono::milliseconds timeout = std::chrono::seconds(5)) {
-    pollfd p{fd_, POLLIN, 0};
-    if (::poll(&p, 1, static_cast<int>(timeout.count())) <= 0) return false;
-    char c;
-    return ::recv(fd_, &c, 1, MSG_DONTWAIT) == 0;
-  }
-  void close() {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = -1;
-  }
-
- private:
-  int fd_ = -1;
-  bool connected_ = false;
-  std::string buffer_;
-};
+using testing::RawClient;
 
 TEST(ControlServer, StatusRoundTripOverTheUnixSocket) {
   ServerHarness h(unix_settings());

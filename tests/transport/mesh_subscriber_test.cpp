@@ -12,6 +12,7 @@
 
 #include "transport/lcm_messages.hpp"
 #include "transport/lcm_subscriber.hpp"
+#include "transport/transport_test_support.hpp"
 
 namespace tissue::transport {
 namespace {
@@ -102,17 +103,10 @@ std::vector<std::uint8_t> encoded_mesh(int quads) {
     s.triangles.push_back({2 * i, 2 * i + 2, 2 * i + 3});
     s.triangles.push_back({2 * i, 2 * i + 3, 2 * i + 1});
   }
-  tissue_lcm::tissue::surface_mesh m;
-  to_message(s, 1, &m);
-  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(m.getEncodedSize()));
-  EXPECT_EQ(m.encode(bytes.data(), 0, static_cast<int>(bytes.size())), static_cast<int>(bytes.size()));
-  return bytes;
+  return testing::lcm_encoded(s);
 }
 
-void put_be32(std::vector<std::uint8_t>& b, std::size_t at, std::int32_t v) {
-  const auto u = static_cast<std::uint32_t>(v);
-  for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(u >> (24 - 8 * i));
-}
+using testing::put_be32;
 
 TEST(LcmMeshSubscriber, DecodesGoodMessagesAndCountsEveryMalformedOne) {
   LcmMeshSubscriber sub("memq://");                        // in-process provider: nothing on the network
