@@ -37,11 +37,17 @@ class FrameSource {
   virtual bool has_strain() const = 0;
 };
 
-// The frame on screen at time t: the last one with time_s <= t. Empty when
-// t is before the first frame (or there are no frames).
+// The frame on screen at time t: the last one with time_s <= t + 1 ns (see
+// below). Empty when t is before the first frame (or there are no frames).
 std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s);
 
-// Frames with t0 <= time_s <= t1, in order.
+// Whether a recorded time lies in a user's window t0 <= t <= t1 (an end
+// not given is open), each end with the nanosecond of slack frame_at_time
+// allows: a frame recorded at 0.5000000000000003 s is in a window that ends
+// at 0.5 s, as --time 0.5 picks it. NaN is in no window.
+bool time_in_window(double t_s, std::optional<double> t0_s, std::optional<double> t1_s);
+
+// The frames whose times are in the window [t0, t1] (time_in_window), in order.
 std::vector<std::size_t> frames_in_window(const FrameSource& source, double t0_s, double t1_s);
 
 // Opens a session file (docs/session-format.md), including one still being

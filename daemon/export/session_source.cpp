@@ -151,12 +151,15 @@ class SessionFrameSource final : public FrameSource {
 
 }  // namespace
 
+namespace {
+// A nanosecond of slack when a user's time meets a stored one: times summed
+// from steps land a hair off the grid (500 steps of 1 ms end at
+// 0.5000000000000003 s), and --time 0.5 or --to 0.5 means that frame.
+constexpr double kSlack_s = 1e-9;
+}  // namespace
+
 std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s) {
-  // Frames are in time order: binary search for the last time <= t. A
-  // nanosecond of slack: times summed from steps land a hair off the grid
-  // (500 steps of 1 ms end at 0.5000000000000003 s), and --time 0.5 means
-  // that frame, not the one before it.
-  constexpr double kSlack_s = 1e-9;
+  // Frames are in time order: binary search for the last time <= t.
   std::size_t lo = 0, hi = source.frame_count();
   while (lo < hi) {
     const std::size_t mid = lo + (hi - lo) / 2;
@@ -169,12 +172,15 @@ std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s) 
   return lo - 1;
 }
 
+bool time_in_window(double t_s, std::optional<double> t0_s, std::optional<double> t1_s) {
+  if (std::isnan(t_s)) return false;
+  return (!t0_s || t_s >= *t0_s - kSlack_s) && (!t1_s || t_s <= *t1_s + kSlack_s);
+}
+
 std::vector<std::size_t> frames_in_window(const FrameSource& source, double t0_s, double t1_s) {
   std::vector<std::size_t> out;
-  for (std::size_t k = 0; k < source.frame_count(); ++k) {
-    const double t = source.frame_time_s(k);
-    if (t >= t0_s && t <= t1_s) out.push_back(k);
-  }
+  for (std::size_t k = 0; k < source.frame_count(); ++k)
+    if (time_in_window(source.frame_time_s(k), t0_s, t1_s)) out.push_back(k);
   return out;
 }
 

@@ -81,7 +81,7 @@ std::vector<TimelineItem> build_timeline(const std::vector<double>& frame_times_
   if (o.from_s && o.to_s && !(*o.from_s <= *o.to_s))
     throw ReplayError("window --from " + std::to_string(*o.from_s) + " --to " + std::to_string(*o.to_s) +
                       ": the start is after the end");
-  const auto inside = [&](double t) { return (!o.from_s || t >= *o.from_s) && (!o.to_s || t <= *o.to_s); };
+  const auto inside = [&](double t) { return x3d::time_in_window(t, o.from_s, o.to_s); };
   std::vector<TimelineItem> items;
   items.reserve(frame_times_s.size() + sim_times_s.size() + haptic_times_s.size());
   for (std::size_t k = 0; k < frame_times_s.size(); ++k)

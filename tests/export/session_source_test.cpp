@@ -11,6 +11,7 @@
 
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -420,6 +421,29 @@ TEST(SessionSource, FramesInWindowAreTheFramesInsideItBothEndsIncluded) {
   EXPECT_TRUE(frames_in_window(source, 0.6, 0.9).empty());
   EXPECT_TRUE(frames_in_window(source, std::numeric_limits<double>::quiet_NaN(), 9.0).empty());
   EXPECT_TRUE(frames_in_window(TimesSource({}), 0.0, 1.0).empty());
+  // Times summed from steps, a hair off the grid: inside the window their
+  // frame_at_time would pick them for, and no further.
+  const TimesSource summed({0.25, 0.5000000000000003, 0.7499999999999998, 1.0});
+  EXPECT_EQ(frames_in_window(summed, 0.0, 0.5), (std::vector<std::size_t>{0, 1}));
+  EXPECT_EQ(frame_at_time(summed, 0.5), 1u);
+  EXPECT_EQ(frames_in_window(summed, 0.75, 2.0), (std::vector<std::size_t>{2, 3}));
+  EXPECT_EQ(frames_in_window(summed, 0.5 + 2e-9, 0.75 - 2e-9), (std::vector<std::size_t>{}));
+}
+
+// The window test itself, which session replay applies to every stream: an
+// end not given is open, and NaN is in no window.
+TEST(SessionSource, TimeInWindowHasOpenEndsAndTheSameSlack) {
+  const std::optional<double> none;
+  EXPECT_TRUE(time_in_window(-1e300, none, none));
+  EXPECT_TRUE(time_in_window(5.0, 1.0, none));
+  EXPECT_FALSE(time_in_window(0.5, 1.0, none));
+  EXPECT_TRUE(time_in_window(0.5, none, 1.0));
+  EXPECT_FALSE(time_in_window(1.5, none, 1.0));
+  EXPECT_TRUE(time_in_window(1.0 + 5e-10, 0.0, 1.0));
+  EXPECT_TRUE(time_in_window(-5e-10, 0.0, 1.0));
+  EXPECT_FALSE(time_in_window(1.0 + 2e-9, 0.0, 1.0));
+  EXPECT_FALSE(time_in_window(-2e-9, 0.0, 1.0));
+  EXPECT_FALSE(time_in_window(std::numeric_limits<double>::quiet_NaN(), none, none));
 }
 
 }  // namespace
