@@ -15,6 +15,11 @@ namespace tissue::x3d {
 
 namespace {
 
+// A nanosecond of slack when a user's time meets a stored one: times summed
+// from steps land a hair off the grid (500 steps of 1 ms end at
+// 0.5000000000000003 s), and --time 0.5 or --to 0.5 means that frame.
+constexpr double kSlack_s = 1e-9;
+
 // Opens the file; its RecordError ("'FILE': what") becomes a SourceError
 // with the same message.
 record::SessionFile open_file(const std::string& path) {
@@ -149,13 +154,6 @@ class SessionFrameSource final : public FrameSource {
   std::vector<std::uint64_t> vertex_offset_, vertex_count_, triangle_offset_, triangle_count_;
 };
 
-}  // namespace
-
-namespace {
-// A nanosecond of slack when a user's time meets a stored one: times summed
-// from steps land a hair off the grid (500 steps of 1 ms end at
-// 0.5000000000000003 s), and --time 0.5 or --to 0.5 means that frame.
-constexpr double kSlack_s = 1e-9;
 }  // namespace
 
 std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s) {
