@@ -113,7 +113,10 @@ std::string ControlClient::read_line() {
 }
 
 nlohmann::json ControlClient::request(nlohmann::json request) {
-  if (!request.is_object()) throw ControlClientError(Kind::kProtocol, "a request must be a JSON object");
+  if (!request.is_object())
+    throw ControlClientError(Kind::kProtocol, impl_->peer + ": a request must be a JSON object, not " +
+                                                  std::string(request.type_name()) + " " +
+                                                  to_line(request).substr(0, 80));
   if (!request.contains("id")) request["id"] = impl_->next_id++;
   send_raw(to_line(request) + "\n");
   const std::string line = read_line();

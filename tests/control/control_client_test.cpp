@@ -151,9 +151,11 @@ TEST(ControlClient, CallPutsTheCommandAmongTheArguments) {
 TEST(ControlClient, NonObjectRequestIsRefusedBeforeAnythingIsSent) {
   ServerHarness h;
   ControlClient client = ControlClient::connect_unix(h.socket_path());
+  // The error names the socket, as every other client error does.
   expect_client_error([&] { client.request(json::array({"status"})); }, Kind::kProtocol,
-                      {"a request must be a JSON object"});
-  expect_client_error([&] { client.request("status"); }, Kind::kProtocol, {"a request must be a JSON object"});
+                      {client.peer_name() + ": a request must be a JSON object, not array [\"status\"]"});
+  expect_client_error([&] { client.request("status"); }, Kind::kProtocol,
+                      {client.peer_name() + ": a request must be a JSON object, not string \"status\""});
   EXPECT_EQ(h.handler().call_count(), 0u);
   // Nothing is left half-sent: the next request is answered, with id 1.
   const json r = client.call("status");
