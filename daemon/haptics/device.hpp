@@ -29,8 +29,10 @@ class Device {
   virtual bool start(std::string* error) = 0;
   virtual void stop() noexcept = 0;
 
-  // The newest pose at now_ns (steady_clock). False when no sample is
-  // available (the loop counts it and holds the last good one).
+  // The newest pose at now_ns (steady_clock). False when no new sample has
+  // come since the last read (the loop counts it and holds the last good
+  // one): a held pose handed back as new would defeat the loop's speed check
+  // and its device_timeout_s.
   virtual bool read(std::int64_t now_ns, DeviceSample* out) noexcept = 0;
   // The force to render until the next write (device frame, already safe).
   virtual void write(std::int64_t now_ns, const Vec3& force_N) noexcept = 0;

@@ -38,10 +38,15 @@ Vec3 ForceSafety::apply(const Vec3& desired_N, double dt_s, unsigned faults) noe
   else
     scale_ = limits_.ramp_in_s > 0.0 ? std::min(1.0, scale_ + dt_s / limits_.ramp_in_s) : 1.0;
 
-  Vec3 target_N = scale_ * held_desired_N_;
+  // Clamp first, then scale: scaling first would let a desired force far
+  // above the limit (a device that comes back deep inside the object asks
+  // for hundreds of newtons) reach max_force_N at a scale of a few percent,
+  // and the ramp-in would be no ramp at all.
+  Vec3 target_N = held_desired_N_;
   const double max_force_N = std::max(0.0, limits_.max_force_N);
   const double magnitude_N = target_N.norm();
   if (magnitude_N > max_force_N) target_N *= max_force_N / magnitude_N;
+  target_N *= scale_;
 
   Vec3 step_N = target_N - output_N_;
   const double max_step_N = std::max(0.0, limits_.max_force_rate_N_per_s) * dt_s;

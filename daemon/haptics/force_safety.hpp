@@ -6,7 +6,8 @@
 //      (ramp-in after start or after a fault clears), falls at 1/ramp_out_s
 //      while any fault is present (stale model, lost device, stop, watchdog,
 //      non-finite force). Faults never step the force to zero; they ramp it.
-//   3. |s * F| is clamped to max_force_N.
+//   3. The output aims at s * F', F' = F clamped to max_force_N: the clamp
+//      comes before the scale, so a ramp is a ramp whatever F asks for.
 //   4. The change per tick is clamped to max_force_rate_N_per_s * dt (vector
 //      norm), so no cause whatsoever produces a step above the rate limit.
 // The output is always finite and within max_force_N (the rate-limited point

@@ -5,7 +5,9 @@
 // The track is given in memory (the service reads it from the session file
 // with record::read_haptic_track before the loop starts), so read() and
 // write() only interpolate and never allocate, lock or block. Positions are
-// in the scene frame as recorded: configure the device with offset 0, scale 1.
+// in the device frame: a session records them in the scene frame, and the
+// service maps them back with the config's device.offset_m and scale
+// (HapticSideImpl), so the hand retraces the recorded path whatever those are.
 #pragma once
 
 #include <vector>

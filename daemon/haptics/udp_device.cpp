@@ -95,10 +95,14 @@ bool UdpDevice::start(std::string* error) {
   last_sender_time_ns_ = 0;
   pose_ = DeviceSample{};
   force_sequence_number_ = 0;
+  last_sent_zero_ = false;
+  behind_count_ = 0;
+  behind_last_sequence_number_ = 0;
   peer_ = ip::udp::endpoint();
   buttons_.store(0, std::memory_order_relaxed);
   for (auto& r : rejected_) r.store(0, std::memory_order_relaxed);
-  for (auto* c : {&received_, &accepted_, &out_of_order_, &receive_errors_, &sent_, &send_failures_, &sessions_})
+  for (auto* c :
+       {&received_, &accepted_, &out_of_order_, &resyncs_, &receive_errors_, &sent_, &send_failures_, &sessions_})
     c->store(0, std::memory_order_relaxed);
   return true;
 }
@@ -130,9 +134,21 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
   const bool live = sender_live(now_ns);
   if (live && from_ != peer_) return reject(Reject::kOtherSender);
   if (live && packet.sequence_number <= last_sequence_number_) {
-    bump(out_of_order_);
-    return Verdict::kOutOfOrder;
+    // kResyncPackets in a row below the last accepted number, each above the
+    // one before: the sender's counter restarted (or one packet leapt ahead
+    // and took the sequence with it), not a reordering. Follow the sender.
+    if (behind_count_ > 0 && packet.sequence_number > behind_last_sequence_number_)
+      ++behind_count_;
+    else
+      behind_count_ = 1;
+    behind_last_sequence_number_ = packet.sequence_number;
+    if (behind_count_ < kResyncPackets) {
+      bump(out_of_order_);
+      return Verdict::kOutOfOrder;
+    }
+    bump(resyncs_);
   }
+  behind_count_ = 0;
 
   if (!live) bump(sessions_);
   peer_ = from_;
@@ -149,6 +165,7 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
 
 bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   if (!socket_.is_open()) return false;
+  bool fresh = false;
   for (int i = 0; i < kMaxDatagramsPerRead; ++i) {
     boost::system::error_code ec;
     const std::size_t bytes = socket_.receive_from(boost::asio::buffer(receive_buffer_), from_, 0, ec);
@@ -160,17 +177,25 @@ bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
       break;
     }
     bump(received_);
-    consider(bytes, now_ns);
+    if (consider(bytes, now_ns) == Verdict::kAccepted) fresh = true;
   }
-  if (!sender_live(now_ns)) return false;
+  // Only a pose that arrived during this read is a sample: handing the held
+  // pose back every tick would make a 250 Hz device look like one that jumps
+  // 4 ms of motion in 1 ms (the loop's speed check) and would hide a device
+  // that went silent until timeout_s instead of limits.device_timeout_s.
+  if (!fresh) return false;
   if (out) *out = pose_;
   return true;
 }
 
 void UdpDevice::write(std::int64_t now_ns, const Vec3& force_N) noexcept {
   // No pose yet: nobody to answer. A lost sender still gets the (ramped-out)
-  // force, so a device that comes back starts from what tissued renders.
+  // force, so a device that comes back starts from what tissued renders, until
+  // one zero force has gone: then nothing more goes to an address that may
+  // no longer be a device (its next pose makes it live again).
   if (!socket_.is_open() || peer_.port() == 0) return;
+  const bool zero = force_N.allFinite() && force_N.isZero(0.0);
+  if (zero && last_sent_zero_ && !sender_live(now_ns)) return;
 
   Packet packet{};
   packet.version = kProtocolVersion;
@@ -192,6 +217,7 @@ void UdpDevice::write(std::int64_t now_ns, const Vec3& force_N) noexcept {
   boost::system::error_code ec;
   socket_.send_to(boost::asio::buffer(send_buffer_.data(), static_cast<std::size_t>(bytes)), peer_, 0, ec);
   bump(ec ? send_failures_ : sent_);  // would_block: dropped, the next tick sends a newer force
+  last_sent_zero_ = !ec && zero;
 }
 
 UdpDevice::Stats UdpDevice::stats() const noexcept {
@@ -201,6 +227,7 @@ UdpDevice::Stats UdpDevice::stats() const noexcept {
   for (int i = 0; i < static_cast<int>(Reject::kCount); ++i)
     s.rejected[i] = rejected_[i].load(std::memory_order_relaxed);
   s.out_of_order = out_of_order_.load(std::memory_order_relaxed);
+  s.resyncs = resyncs_.load(std::memory_order_relaxed);
   s.receive_errors = receive_errors_.load(std::memory_order_relaxed);
   s.sent = sent_.load(std::memory_order_relaxed);
   s.send_failures = send_failures_.load(std::memory_order_relaxed);

@@ -7,7 +7,9 @@
 //
 // Real-time: read() and write() run in the 1 kHz tick. The socket is
 // non-blocking; read() drains at most kMaxDatagramsPerRead waiting datagrams
-// into a preallocated buffer and keeps the newest valid pose, write() sends one
+// into a preallocated buffer and keeps the newest valid pose, returning true
+// only when one arrived during that read (a device slower than the loop
+// gives a sample on some ticks; the loop holds it between), write() sends one
 // datagram and drops it when the socket would block. Packets are decoded into
 // stack objects of a fixed-size generated type, so nothing allocates, locks or
 // waits. start()/stop() are the only calls that allocate or may fail.
@@ -22,10 +24,13 @@
 //   other_sender  while a sender is live, datagrams from any other address
 // and then the ordering rule: sequence_number must exceed the last accepted
 // one (duplicates and reordered packets are dropped and counted as
-// out_of_order). When no valid pose has arrived for timeout_s the sender is
-// lost: read() returns false (the haptic loop ramps the force out), and the
+// out_of_order), except that kResyncPackets valid poses in a row below it,
+// each above the one before, are followed (counted as resyncs): one packet
+// whose number leapt ahead cannot lock the real stream out until timeout_s.
+// When no valid pose has arrived for timeout_s the sender is lost and the
 // next valid pose from any address starts a new session with any sequence
-// number (a restarted device may count from 0 again).
+// number (a restarted device may count from 0 again). The haptic loop ramps
+// the force out sooner, after limits.device_timeout_s without a sample.
 //
 // Threads: start()/stop()/read()/write() from one thread at a time (the
 // haptic thread while it runs); stats() and buttons() from any thread.
@@ -53,6 +58,10 @@ class UdpDevice final : public Device {
   // Larger than any valid packet, so an oversized datagram is seen (and
   // rejected by size) instead of being silently truncated to a valid length.
   static constexpr std::size_t kReceiveBufferBytes = 2048;
+  // Poses in a row below the last accepted sequence number (and rising) after
+  // which the sender is followed: more than a reordering produces, few
+  // enough that a bad leap costs the loop ~2 ms of samples at 1 kHz.
+  static constexpr int kResyncPackets = 3;
 
   enum class Reject : int { kSize, kFingerprint, kVersion, kKind, kNonFinite, kOtherSender, kCount };
   static const char* reject_name(Reject reason) noexcept;
@@ -62,7 +71,8 @@ class UdpDevice final : public Device {
     std::uint64_t received = 0;  // datagrams taken off the socket
     std::uint64_t accepted = 0;  // valid poses (not necessarily the newest of their read())
     std::array<std::uint64_t, static_cast<int>(Reject::kCount)> rejected{};
-    std::uint64_t out_of_order = 0;  // valid but sequence_number <= the last accepted one
+    std::uint64_t out_of_order = 0;  // valid but sequence_number <= the last accepted one, dropped
+    std::uint64_t resyncs = 0;       // times the sequence was followed below the last accepted one
     std::uint64_t receive_errors = 0;
     std::uint64_t sent = 0;
     std::uint64_t send_failures = 0;  // would block (dropped) or an OS error
@@ -90,6 +100,10 @@ class UdpDevice final : public Device {
   // The encoded size of device_packet, bytes (every valid datagram has it).
   int packet_bytes() const noexcept { return packet_bytes_; }
   Stats stats() const noexcept;
+  // A sender is live from its accepted pose until timeout_s without another:
+  // meanwhile other addresses are refused and sequence numbers must rise.
+  // Haptic thread only (it reads the pose state).
+  bool sender_live(std::int64_t now_ns) const noexcept;
   // Buttons of the newest accepted pose (bit i = button i).
   std::int32_t buttons() const noexcept { return buttons_.load(std::memory_order_relaxed); }
 
@@ -97,7 +111,6 @@ class UdpDevice final : public Device {
   // Outcome of one datagram: accepted, rejected for a reason, or out of order.
   enum class Verdict { kAccepted, kRejected, kOutOfOrder };
   Verdict consider(std::size_t bytes, std::int64_t now_ns) noexcept;
-  bool sender_live(std::int64_t now_ns) const noexcept;
   static void bump(std::atomic<std::uint64_t>& counter) noexcept {
     counter.store(counter.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // one writer
   }
@@ -121,12 +134,16 @@ class UdpDevice final : public Device {
   std::int64_t last_sender_time_ns_ = 0;
   DeviceSample pose_;
   std::int64_t force_sequence_number_ = 0;
+  bool last_sent_zero_ = false;  // the newest force packet that went out was zero
+  int behind_count_ = 0;         // poses in a row below last_sequence_number_, rising
+  std::int64_t behind_last_sequence_number_ = 0;
 
   std::atomic<std::int32_t> buttons_{0};
   std::atomic<std::uint64_t> received_{0};
   std::atomic<std::uint64_t> accepted_{0};
   std::array<std::atomic<std::uint64_t>, static_cast<int>(Reject::kCount)> rejected_{};
   std::atomic<std::uint64_t> out_of_order_{0};
+  std::atomic<std::uint64_t> resyncs_{0};
   std::atomic<std::uint64_t> receive_errors_{0};
   std::atomic<std::uint64_t> sent_{0};
   std::atomic<std::uint64_t> send_failures_{0};

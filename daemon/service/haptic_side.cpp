@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "haptics/device.hpp"
+#include "haptics/frame_transform.hpp"
 #include "haptics/haptic_loop.hpp"
 #include "haptics/haptic_thread.hpp"
 #include "haptics/replay_device.hpp"
@@ -12,7 +13,8 @@
 
 namespace tissue::service {
 
-void format_haptic_summary(const haptics::HapticStats& stats, const char* device_name, char* buffer, std::size_t size) {
+void format_haptic_summary(const haptics::HapticStats& stats, const char* device_name,
+                           const haptics::UdpDevice::Stats* link, char* buffer, std::size_t size) {
   if (size == 0) return;
   std::size_t used = 0;
   // Appends while there is room; snprintf truncates the last piece.
@@ -22,20 +24,50 @@ void format_haptic_summary(const haptics::HapticStats& stats, const char* device
     if (n > 0) used += static_cast<std::size_t>(n);
   };
   append(" | haptic %s F %.2f N%s", device_name, stats.force_N, stats.contact ? " contact" : "");
-  if (stats.safety_trips == 0) return;
+  using Count = std::pair<std::uint64_t, const char*>;
+  // " (title: 1 a, 2 b)" over the non-zero counts; nothing when all are zero.
+  const auto counts = [&](const char* title, std::initializer_list<Count> items) {
+    const char* separator = title;
+    for (const auto& [count, what] : items) {
+      if (count == 0) continue;
+      append("%s%llu %s", separator, static_cast<unsigned long long>(count), what);
+      separator = ", ";
+    }
+    if (separator != title) append(")");
+  };
   // The loop counts rising edges per kind; "other" is a stop request, the
   // watchdog or a non-finite force (the JSON status counts the last).
   const std::uint64_t named = stats.stale_model_trips + stats.device_lost_trips;
   const std::uint64_t other = stats.safety_trips > named ? stats.safety_trips - named : 0;
-  const char* separator = " (safety trips: ";
-  for (const auto& [count, what] : {std::pair<std::uint64_t, const char*>{stats.stale_model_trips, "stale model"},
-                                    {stats.device_lost_trips, "device lost"},
-                                    {other, "other"}}) {
-    if (count == 0) continue;
-    append("%s%llu %s", separator, static_cast<unsigned long long>(count), what);
-    separator = ", ";
+  counts(" (safety trips: ", {Count{stats.stale_model_trips, "stale model"},
+                              Count{stats.device_lost_trips, "device lost"}, Count{other, "other"}});
+  counts(" (inputs rejected: ",
+         {Count{stats.rejected_speed, "too fast"}, Count{stats.rejected_workspace, "outside the workspace"},
+          Count{stats.rejected_nonfinite, "non-finite"}});
+  if (link) {
+    using R = haptics::UdpDevice::Reject;
+    const auto& r = link->rejected;
+    const auto n = [&](R reason) {
+      return Count{r[static_cast<int>(reason)], haptics::UdpDevice::reject_name(reason)};
+    };
+    counts(" (udp dropped: ", {n(R::kSize), n(R::kFingerprint), n(R::kVersion), n(R::kKind), n(R::kNonFinite),
+                               n(R::kOtherSender), Count{link->out_of_order, "out of order"}});
   }
-  append(")");
+}
+
+nlohmann::json udp_link_json(const haptics::UdpDevice::Stats& link) {
+  nlohmann::json rejected = nlohmann::json::object();
+  for (int i = 0; i < static_cast<int>(haptics::UdpDevice::Reject::kCount); ++i)
+    rejected[haptics::UdpDevice::reject_name(static_cast<haptics::UdpDevice::Reject>(i))] = link.rejected[i];
+  return {{"received", link.received},
+          {"accepted", link.accepted},
+          {"rejected", rejected},
+          {"out_of_order", link.out_of_order},
+          {"resyncs", link.resyncs},
+          {"sessions", link.sessions},
+          {"receive_errors", link.receive_errors},
+          {"sent", link.sent},
+          {"send_failures", link.send_failures}};
 }
 
 namespace {
@@ -48,13 +80,19 @@ class HapticSideImpl final : public HapticSide {
       const record::HapticTrack track = record::read_haptic_track(config.device.replay.session);  // names the file
       std::vector<haptics::Vec3> positions;
       positions.reserve(track.device_position_m.size());
-      for (const auto& p : track.device_position_m) positions.emplace_back(p[0], p[1], p[2]);
+      // Recorded in the scene frame; the loop maps device -> scene with this
+      // config's offset and scale, so the hand retraces the recorded path
+      // whatever they are.
+      const haptics::FrameTransform frame = haptics::FrameTransform::from(config.device.offset_m, config.device.scale);
+      for (const auto& p : track.device_position_m)
+        positions.push_back(frame.position_to_device(haptics::Vec3(p[0], p[1], p[2])));
       device_ = std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
                                                         config.device.replay.loop);
     } else {
       device_ = haptics::make_device(config.device, &error);
     }
     if (!device_) throw std::runtime_error("haptic device: " + (error.empty() ? "none configured" : error));
+    udp_ = dynamic_cast<const haptics::UdpDevice*>(device_.get());
     if (!device_->start(&error))
       throw std::runtime_error(std::string("haptic device ") + device_->name() + ": " + error);
     memory_ = haptics::lock_memory(config.realtime.lock_memory);
@@ -79,13 +117,15 @@ class HapticSideImpl final : public HapticSide {
   std::uint64_t heartbeat() const override { return loop_->heartbeat().load(std::memory_order_relaxed); }
 
   void summary(char* buffer, std::size_t size) const override {
-    format_haptic_summary(loop_->stats(), device_->name(), buffer, size);
+    haptics::UdpDevice::Stats link;
+    if (udp_) link = udp_->stats();
+    format_haptic_summary(loop_->stats(), device_->name(), udp_ ? &link : nullptr, buffer, size);
   }
 
   nlohmann::json status_json() const override {
     const haptics::HapticStats s = loop_->stats();
     const haptics::TimingSummary t = thread_->timing();
-    return {
+    nlohmann::json j = {
         {"device", device_->name()},
         {"rate_hz", rate_hz_},
         {"ticks", s.ticks},
@@ -95,6 +135,10 @@ class HapticSideImpl final : public HapticSide {
         {"model_version", s.model_version},
         {"passivity_energy_J", s.passivity_energy_J},
         {"rejected_inputs", s.rejected_inputs},
+        {"rejected_inputs_by_reason",
+         {{"too_fast", s.rejected_speed},
+          {"outside_workspace", s.rejected_workspace},
+          {"non_finite", s.rejected_nonfinite}}},
         {"missing_samples", s.missing_samples},
         {"safety_trips", s.safety_trips},
         {"stale_model_trips", s.stale_model_trips},
@@ -107,6 +151,8 @@ class HapticSideImpl final : public HapticSide {
          {{"p50", 1e-3 * t.compute_p50_ns}, {"p99", 1e-3 * t.compute_p99_ns}, {"p999", 1e-3 * t.compute_p999_ns}}},
         {"scheduling", thread_->scheduling().summary()},
         {"memory_lock", memory_.message}};
+    if (udp_) j["link"] = udp_link_json(udp_->stats());
+    return j;
   }
 
   void print_startup(std::FILE* out) const override {
@@ -116,6 +162,7 @@ class HapticSideImpl final : public HapticSide {
 
  private:
   std::unique_ptr<haptics::Device> device_;
+  const haptics::UdpDevice* udp_ = nullptr;  // device_ when it is the UDP bridge: its counters go in the status
   std::unique_ptr<haptics::HapticLoop> loop_;
   std::unique_ptr<haptics::HapticThread> thread_;
   haptics::MemoryLockReport memory_;

@@ -11,6 +11,7 @@
 
 #include "config/daemon_config.hpp"
 #include "haptics/haptic_loop.hpp"
+#include "haptics/udp_device.hpp"
 #include "service/sim_thread.hpp"
 
 namespace tissue::service {
@@ -19,8 +20,14 @@ namespace tissue::service {
 // and after a safety fault " (safety trips: 1 stale model, 2 other)": which
 // fault ramped the force out is what an operator needs to act on (a stale
 // model points at the sim thread, a lost device at the device or its link).
-// Never allocates; truncates to size.
-void format_haptic_summary(const haptics::HapticStats& stats, const char* device_name, char* buffer, std::size_t size);
+// Device samples the loop refused follow, by reason (" (inputs rejected: 3
+// too fast)"), and for the UDP bridge (link non-null) the datagrams it
+// dropped (" (udp dropped: 5 size, 2 out of order)"): the once-a-second line
+// is their rate limit. Never allocates; truncates to size.
+void format_haptic_summary(const haptics::HapticStats& stats, const char* device_name,
+                           const haptics::UdpDevice::Stats* link, char* buffer, std::size_t size);
+// The UDP bridge's counters for `tissue ctl status` (haptic.link).
+nlohmann::json udp_link_json(const haptics::UdpDevice::Stats& link);
 
 class HapticSide {
  public:

@@ -217,7 +217,7 @@ void Service::reload() {
 
 void Service::print_status() {
   const SimStatus s = sim_->status();
-  char haptic[160] = "";
+  char haptic[320] = "";
   if (haptics_) haptics_->summary(haptic, sizeof haptic);
   // Steps whose CG stopped at cg_max_iterations: faster, less accurate than
   // the scene asked; shown only when there are any.

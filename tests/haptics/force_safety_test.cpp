@@ -50,6 +50,21 @@ TEST(ForceSafety, RampsInAfterStart) {
   EXPECT_NEAR(previous_N, 2.0, 1e-9);
 }
 
+// A device that comes back deep inside the object asks for hundreds of
+// newtons: the ramp-in still takes ramp_in_s to reach max_force_N (the clamp
+// comes before the scale), instead of reaching it within a few ticks at the
+// rate limit.
+TEST(ForceSafety, RampsInAForceFarAboveTheLimitOverTheWholeRamp) {
+  ForceSafety s(limits());
+  const Vec3 desired(0.0, 0.0, -400.0);
+  for (int i = 1; i <= 500; ++i) {
+    const Vec3 out = s.apply(desired, kDt_s, kFaultNone);
+    EXPECT_NEAR(out.z(), -3.0 * i * kDt_s / 0.5, 1e-9) << "tick " << i;
+    EXPECT_NEAR(out.x(), 0.0, 0.0);
+  }
+  EXPECT_NEAR(s.output_N().norm(), 3.0, 1e-9);
+}
+
 TEST(ForceSafety, FaultRampsToZeroWithinRampOutWithoutSteps) {
   ForceSafety s(limits());
   ramp_in(s);

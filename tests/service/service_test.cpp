@@ -305,6 +305,9 @@ TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
+// Peak and mean force of the two tracks agree (25 % / 30 %); the original pressed.
+void expect_same_force_profile(const record::HapticTrack& original, const record::HapticTrack& replayed);
+
 // Replay (issue 6): a session recorded with the simulated hand, played back
 // through the replay device, renders the same forces within a tolerance
 // (the two runs share no clock, so compare the force profile, not ticks).
@@ -322,18 +325,29 @@ TEST(Service, ReplayDeviceReproducesTheRecordedForces) {
     Running run(write_config(dir, scene_file("cantilever.yaml")), 1.5, unloaded, "original.h5");
     ASSERT_EQ(run.wait(), kServiceOk);
   }
-  const std::string config = dir / "replay.yaml";
-  std::ofstream(config) << "scene: " << scene_file("cantilever.yaml") << "\n"
-                        << "state_dir: " << dir.path() << "\n"
-                        << "device: {kind: replay, replay: {session: " << (dir / "original.h5") << "}}\n"
-                        << "realtime: {sched_fifo: false, lock_memory: false}\n"
-                        << "control: {unix_socket_path: " << (dir / "ctl2.sock") << "}\n";
-  {
-    Running run(config, 1.5, unloaded, "replayed.h5");
-    ASSERT_EQ(run.wait(), kServiceOk);
+  // Replayed twice: as recorded, and by a config whose device frame is
+  // shifted 5 cm up (the session holds scene-frame positions; the replay maps
+  // them through the config's frame, so the hand retraces the same path).
+  for (const char* offset : {"[0, 0, 0]", "[0, 0, 0.05]"}) {
+    SCOPED_TRACE(std::string("device.offset_m ") + offset);
+    const std::string config = dir / "replay.yaml";
+    std::ofstream(config) << "scene: " << scene_file("cantilever.yaml") << "\n"
+                          << "state_dir: " << dir.path() << "\n"
+                          << "device: {kind: replay, offset_m: " << offset
+                          << ", replay: {session: " << (dir / "original.h5") << "}}\n"
+                          << "realtime: {sched_fifo: false, lock_memory: false}\n"
+                          << "control: {unix_socket_path: " << (dir / "ctl2.sock") << "}\n";
+    std::filesystem::remove(dir / "replayed.h5");
+    {
+      Running run(config, 1.5, unloaded, "replayed.h5");
+      ASSERT_EQ(run.wait(), kServiceOk);
+    }
+    expect_same_force_profile(record::read_haptic_track(dir / "original.h5"),
+                              record::read_haptic_track(dir / "replayed.h5"));
   }
-  const record::HapticTrack original = record::read_haptic_track(dir / "original.h5");
-  const record::HapticTrack replayed = record::read_haptic_track(dir / "replayed.h5");
+}
+
+void expect_same_force_profile(const record::HapticTrack& original, const record::HapticTrack& replayed) {
   auto profile = [](const record::HapticTrack& t) {
     double peak = 0.0, sum = 0.0;
     for (const auto& f : t.force_N) {
