@@ -81,6 +81,10 @@ ExplicitBounds explicit_bounds(const Body& body);
 // The stable step for a bound ω² ≤ frequency2_per_s2 (capped at the graph
 // bound) and its damping rate γ ≤ min(damping_rate, max(c/k) · that).
 ExplicitStableStep explicit_stable_step(const ExplicitBounds& bounds, double frequency2_per_s2);
+// The stable step with every spring's stiffness within ±collapse_factor times
+// its axial part (collapse_factor below): ω² ≤ collapse_factor · graph, the
+// dampers' rate as at the graph cap (they act along their springs only).
+ExplicitStableStep collapsed_stable_step(const ExplicitBounds& bounds, double collapse_factor);
 
 // An upper bound on λmax(M⁻¹K(x)) of the deformed body, K(x) the springs'
 // stiffness at the current state, from its rest bound and the largest
@@ -93,11 +97,26 @@ ExplicitStableStep explicit_stable_step(const ExplicitBounds& bounds, double fre
 //   λmax(M⁻¹K(x)) ≤ rest + ε · graph,   ε = r + r / (1 − r).
 // And while no spring is shorter than half its rest length (r ≤ ½), every
 // spring's stiffness lies between −k I and k I, so graph (a bound on
-// M⁻¹ L_k ⊗ I) caps it. Beyond r = ½ a spring may collapse and no finite
-// bound holds: the cap is kept there, unverified (the non-finite guard
-// remains). The rest part counts rigid rotations as deformation (rotations do
+// M⁻¹ L_k ⊗ I) caps it. Beyond r = ½ a spring may collapse and no bound in r
+// alone holds: the cap is returned there, and the explicit rung measures the
+// shortest spring every step and takes collapsed_stable_step (below) instead,
+// or refuses the step. The rest part counts rigid rotations as deformation (rotations do
 // not change the spectrum), so the bound is loose where a body turns far.
 double deformed_frequency2_bound_per_s2(double rest_per_s2, double graph_per_s2, double end_displacement_ratio);
+
+// Beyond r = ½, where the bound above is only capped: a spring of length l
+// has stiffness between −s k I and s k I with s = max(1, L/l − 1) (its
+// transverse part k (1 − L/l) grows without bound as it collapses), so the
+// graph bound times the largest s bounds λmax(M⁻¹K(x)) in magnitude. The
+// shortest spring relative to its rest length, over springs with a free end
+// (a spring between two kinematic nodes moves nothing), gives that s.
+struct ShortestSpring {
+  double length_ratio = INFINITY;  // l / L; 0 for a spring collapsed to a point
+  NodeId a = 0, b = 0;             // its ends (when length_ratio is finite)
+};
+ShortestSpring shortest_spring(const Body& body);
+// s = max(1, 1/ρ − 1) for a length ratio ρ = l/L; infinite at ρ = 0.
+double collapse_factor(double length_ratio);
 
 // An upper bound on the body's highest ω² = λmax(M⁻¹K) at rest [1/s²]: the
 // largest λmax(K_t, M_t) of any tet, K_t its eq. (3) stiffness shares and M_t

@@ -157,14 +157,31 @@ ExplicitBounds explicit_bounds(const Body& body) {
   return bounds;
 }
 
-ExplicitStableStep explicit_stable_step(const ExplicitBounds& bounds, double frequency2_per_s2) {
-  // Both are upper bounds: keep the smaller.
-  const double omega2 = std::min(bounds.graph_per_s2, frequency2_per_s2);
-  const double gamma = std::min(bounds.damping_rate_per_s, bounds.damping_per_stiffness_s * frequency2_per_s2);
+namespace {
+
+// Symplectic Euler's stable step for modes ω² ≤ omega2 with damping rates
+// γ ≤ gamma.
+ExplicitStableStep stable_step_for(double omega2, double gamma) {
   if (omega2 <= 0.0) return {gamma > 0.0 ? 2.0 / gamma : INFINITY, INFINITY};
   const double omega = std::sqrt(omega2);
   const double zeta = gamma / (2.0 * omega);
   return {2.0 / omega * (std::sqrt(1.0 + zeta * zeta) - zeta), 2.0 / omega};
+}
+
+}  // namespace
+
+ExplicitStableStep explicit_stable_step(const ExplicitBounds& bounds, double frequency2_per_s2) {
+  // Both are upper bounds: keep the smaller.
+  const double omega2 = std::min(bounds.graph_per_s2, frequency2_per_s2);
+  const double gamma = std::min(bounds.damping_rate_per_s, bounds.damping_per_stiffness_s * frequency2_per_s2);
+  return stable_step_for(omega2, gamma);
+}
+
+ExplicitStableStep collapsed_stable_step(const ExplicitBounds& bounds, double collapse_factor) {
+  // The dampers act along their springs only, so a collapsing spring does
+  // not raise their bound: γ as at the graph cap.
+  const double gamma = std::min(bounds.damping_rate_per_s, bounds.damping_per_stiffness_s * bounds.graph_per_s2);
+  return stable_step_for(collapse_factor * bounds.graph_per_s2, gamma);
 }
 
 ExplicitStableStep explicit_stable_step(const Body& body, double frequency2_bound_per_s2) {
@@ -177,6 +194,23 @@ double deformed_frequency2_bound_per_s2(double rest_per_s2, double graph_per_s2,
   if (!(r < 0.5)) return std::max(rest_per_s2, graph_per_s2);  // the cap; NaN lands here too
   const double epsilon = r + r / (1.0 - r);
   return std::min(rest_per_s2 + epsilon * graph_per_s2, std::max(rest_per_s2, graph_per_s2));
+}
+
+ShortestSpring shortest_spring(const Body& body) {
+  ShortestSpring out;
+  for (std::size_t e = 0; e < body.edge_a.size(); ++e) {
+    const NodeId a = body.edge_a[e], b = body.edge_b[e];
+    if (!(body.stiffness_N_per_m[e] > 0.0) || !(body.rest_length_m[e] > 0.0)) continue;  // dead
+    if (body.inv_mass_per_kg[a] == 0.0 && body.inv_mass_per_kg[b] == 0.0) continue;      // moves nothing
+    const double ratio = (body.x_m[b] - body.x_m[a]).norm() / body.rest_length_m[e];
+    if (!(ratio >= out.length_ratio)) out = {ratio, a, b};  // NaN wins: the caller refuses it
+  }
+  return out;
+}
+
+double collapse_factor(double length_ratio) {
+  if (!(length_ratio > 0.0)) return INFINITY;  // collapsed, or NaN
+  return std::max(1.0, 1.0 / length_ratio - 1.0);
 }
 
 bool state_is_finite(const Body& body) {
@@ -555,12 +589,45 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   // Fewer sub-steps where the deformation, measured, allows them (see
   // integrator_impl.hpp): taken only when it saves at least one, as the
   // measuring pass costs 0.4-0.8 of a sub-step.
-  if (end_displacement_ratio_ < 0.0 || steps_since_measured_ >= kRemeasureSteps) {
+  // Beyond r = ½ the deformed bound is only a cap (a spring may collapse), so
+  // r is measured every step there and the shortest spring sets the count.
+  if (end_displacement_ratio_ < 0.0 || end_displacement_ratio_ >= 0.5 || steps_since_measured_ >= kRemeasureSteps) {
     end_displacement_ratio_ = measure_end_displacement_ratio(body);
     growth_per_step_ = 0.0;
     steps_since_measured_ = 0;
   }
   ++steps_since_measured_;
+  if (end_displacement_ratio_ >= 0.5) {
+    // Within its bound or refused: the graph bound times the collapse factor
+    // bounds every spring's stiffness, positive or negative. A spring
+    // shrinking fast within one step is seen at the next.
+    const ShortestSpring shortest = shortest_spring(body);
+    const double factor = collapse_factor(shortest.length_ratio);
+    const double collapse_limit = spec_.substep_safety * collapsed_stable_step(bounds_, factor).dt_s;
+    const double collapse_needed = std::ceil(dt_s / collapse_limit);
+    if (!(collapse_needed <= spec_.max_substeps)) {
+      std::ostringstream os;
+      os << "explicit integrator: the spring between nodes " << shortest.a << " and " << shortest.b
+         << " is compressed to " << std::setprecision(3) << 100.0 * shortest.length_ratio
+         << " % of its rest length, where no stable sub-step holds within integrator.max_substeps = "
+         << spec_.max_substeps << " (dt_s = " << dt_s << " needs " << collapse_needed
+         << "); step refused, previous state kept: the mesh is collapsing under its "
+         << "loads; lower the loads or dt_s, or use the implicit integrator";
+      out.ok = false;
+      out.error = os.str();
+      return out;
+    }
+    out.substeps = std::max(count, static_cast<int>(collapse_needed));
+    advance(dt_s / out.substeps, out.substeps);
+    if (!advanced_state_is_finite(body)) {
+      out.ok = false;
+      out.error = "explicit integrator: state became non-finite; step rejected, previous state kept";
+      return out;
+    }
+    store(body);
+    spend_on_estimate(body, out.substeps);
+    return out;
+  }
   // Chosen for r grown by as much again as over the last step, so a load's
   // onset (r rising step after step) does not run steps twice.
   const int fewer = verified_substeps(dt_s, end_displacement_ratio_ + growth_per_step_);
