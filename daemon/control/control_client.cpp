@@ -1,5 +1,7 @@
 #include "control/control_client.hpp"
 
+#include <optional>
+
 #include <boost/asio/connect.hpp>
 #include <boost/asio/generic/stream_protocol.hpp>
 #include <boost/asio/io_context.hpp>
@@ -118,8 +120,21 @@ nlohmann::json ControlClient::request(nlohmann::json request) {
                                                   std::string(request.type_name()) + " " +
                                                   to_line(request).substr(0, 80));
   if (!request.contains("id")) request["id"] = impl_->next_id++;
-  send_raw(to_line(request) + "\n");
-  const std::string line = read_line();
+  std::optional<std::string> answered;
+  try {
+    send_raw(to_line(request) + "\n");
+  } catch (const ControlClientError& e) {
+    // A daemon that refuses a connection (too many connections) answers and
+    // closes before reading: the send then fails (broken pipe), but its
+    // answer is waiting, and it says why.
+    if (e.kind() != Kind::kTransport) throw;
+    try {
+      answered = read_line();
+    } catch (const ControlClientError&) {
+      throw e;
+    }
+  }
+  const std::string line = answered ? *answered : read_line();
   nlohmann::json response = nlohmann::json::parse(line, nullptr, false);
   if (response.is_discarded() || !response.is_object() || !response.contains("ok") || !response["ok"].is_boolean())
     throw ControlClientError(Kind::kProtocol,

@@ -138,8 +138,8 @@ json dispatch(const Command& c, const json& request, ControlHandler& handler) {
   throw BadRequest{"command '" + cmd + "' has no dispatcher"};
 }
 
-// nlohmann's parse_error::what() starts with "[json.exception.parse_error.101] ".
-std::string parse_reason(const json::parse_error& e) {
+// nlohmann's exceptions' what() starts with "[json.exception.parse_error.101] ".
+std::string parse_reason(const json::exception& e) {
   std::string_view w = e.what();
   if (const auto close = w.find("] "); !w.empty() && w.front() == '[' && close != std::string_view::npos)
     w.remove_prefix(close + 2);
@@ -159,6 +159,8 @@ std::string handle_request_line(std::string_view line, ControlHandler& handler) 
     try {
       request = json::parse(line.begin(), line.end());
     } catch (const json::parse_error& e) {
+      return error_line(id, "malformed JSON: " + parse_reason(e));
+    } catch (const json::out_of_range& e) {  // a number beyond double, e.g. 1e999
       return error_line(id, "malformed JSON: " + parse_reason(e));
     }
     if (!request.is_object())

@@ -105,6 +105,17 @@ void validate_session_name(const std::string& name) {
   if (name.find("..") != std::string::npos) bad("it contains '..'");
   if (name.find('\0') != std::string::npos) bad("it contains a NUL byte");
   if (name == ".") bad("it is '.'");
+  // Hidden names are the daemon's own: ".NAME.creating-PID-N" leftovers are
+  // removed at start (remove_abandoned_creations), so a user's file named
+  // like one would be deleted with them.
+  if (name.front() == '.') bad("it starts with '.' (hidden names are the daemon's temporary files)");
+  for (const char c : name)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) bad("it contains a control character");
+  if (name.find_first_not_of(' ') == std::string::npos) bad("it is only spaces");
+  // Room for the temporary ".NAME.creating-PID-N" within the 255 bytes a
+  // file name may have.
+  if (name.size() > kMaxSessionNameBytes)
+    bad(("it is longer than " + std::to_string(kMaxSessionNameBytes) + " bytes").c_str());
 }
 
 namespace {

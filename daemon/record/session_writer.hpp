@@ -27,7 +27,10 @@
 namespace tissue::record {
 
 // Throws RecordError unless `name` is a plain file name: not empty, no '/',
-// no "..", no NUL. Sessions only ever land inside the state directory.
+// no "..", no NUL or other control character, not hidden (no leading '.'),
+// not only spaces, at most kMaxSessionNameBytes. Sessions (and the daemon's
+// X3D exports, by the same rule) only ever land inside the state directory.
+inline constexpr std::size_t kMaxSessionNameBytes = 200;
 void validate_session_name(const std::string& name);
 
 // Removes the hidden ".NAME.creating-PID-N" files in `dir` whose process is

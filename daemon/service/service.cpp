@@ -103,6 +103,7 @@ scene::Scene Service::load_scene_file(const std::string& path) const {
 void Service::load_config() {
   config_ = config::load_daemon_config(options_.config_path, config_overrides());
   scene_path_ = config_.scene_path;
+  base_scene_overrides_ = scene_overrides();
   scene_ = load_scene_file(scene_path_);
 }
 
@@ -165,12 +166,16 @@ void Service::record_event(int kind, const std::string& text) {
                                                                            static_cast<record::EventKind>(kind), text));
 }
 
-void Service::apply_scene(scene::Scene scene) {
+void Service::apply_scene(scene::Scene scene, bool restart_haptics) {
   auto runner = std::make_unique<SimRunner>(scene);  // throws std::invalid_argument: nothing changes
   const bool had_tool = scene_.tool.has_value();
   scene_ = std::move(scene);
   sim_->replace_runner(std::move(runner));
   const bool want_haptics = scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone;
+  if (restart_haptics && haptics_) {  // ramps the force out first
+    haptics_->stop();
+    haptics_.reset();
+  }
   if (had_tool && !want_haptics && haptics_) {
     haptics_->stop();
     haptics_.reset();
@@ -202,11 +207,25 @@ void Service::reload() {
   try {
     config::DaemonConfig config = config::load_daemon_config(options_.config_path, config_overrides());
     scene::Scene scene = scene::load_scene_file_with_overrides(config.scene_path, scene_overrides());
-    // Device and socket changes need a restart; the rest applies now.
+    // Device and socket changes need a restart; the rest applies now. Nothing
+    // changes unless the new scene is running: a failed reload keeps it all.
+    const config::HapticSpec old_haptics = config_.haptics;
+    const config::HapticSpec& h = config.haptics;
+    const bool haptics_changed = h.rate_hz != old_haptics.rate_hz ||
+                                 h.coupling_stiffness_N_per_m != old_haptics.coupling_stiffness_N_per_m ||
+                                 h.coupling_damping_N_s_per_m != old_haptics.coupling_damping_N_s_per_m ||
+                                 h.crossfade_s != old_haptics.crossfade_s;
     config_.haptics = config.haptics;
+    try {
+      apply_scene(std::move(scene), haptics_changed);
+    } catch (...) {
+      config_.haptics = old_haptics;
+      throw;
+    }
     config_.status_interval_s = config.status_interval_s;
     scene_path_ = config.scene_path;
-    apply_scene(std::move(scene));
+    base_scene_overrides_ = scene_overrides();
+    scene_sets_.clear();
     std::fprintf(options_.out, "tissued: reloaded %s and %s\n", options_.config_path.c_str(), scene_path_.c_str());
   } catch (const std::exception& e) {
     std::fprintf(options_.err, "tissued: reload failed, keeping the running scene: %s\n", e.what());
@@ -458,33 +477,36 @@ nlohmann::json Service::reset() {
 nlohmann::json Service::load_scene(const std::string& path) {
   scene::Scene scene;
   try {
-    scene = load_scene_file(path);
+    // The file as written: earlier `set`s and the command line's --set were
+    // for the scene that was running.
+    scene = scene::load_scene_file_with_overrides(path, {});
     apply_scene(scene);
   } catch (const std::exception& e) {
     throw control::ControlError(e.what());  // names the file, the key and the reason
   }
   scene_path_ = path;
+  base_scene_overrides_.clear();
+  scene_sets_.clear();
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), "scene " + scene_.name + " loaded from " + path);
   return {{"scene", scene_.name}, {"source", path}};
 }
 
 nlohmann::json Service::set(const std::string& key, const nlohmann::json& value) {
   const std::string override = control::set_override_text(key, value);
-  if (config::is_daemon_config_key(key)) {
-    // Validated like the file; applied at the next reload (device, socket and
-    // thread settings cannot change under a running loop).
-    try {
-      std::vector<std::string> overrides = config_overrides();
-      overrides.push_back(override);
-      config::load_daemon_config(options_.config_path, overrides);
-    } catch (const std::exception& e) {
-      throw control::ControlError(e.what());
-    }
-    options_.overrides.push_back(override);
-    return {{"key", key}, {"applied", "at the next reload (SIGHUP) or restart"}};
-  }
-  std::vector<std::string> overrides = scene_overrides();
-  overrides.push_back(override);
+  if (config::is_daemon_config_key(key))
+    // Device, socket and thread settings cannot change under a running loop,
+    // and a value kept only in memory would be lost at the next restart: the
+    // file is where daemon settings live.
+    throw control::ControlError("'" + key + "' is a daemon setting: edit " + options_.config_path +
+                                " and reload (SIGHUP: scene, haptics.*, status_interval_s) or restart; set "
+                                "changes scene keys only");
+  // One entry per key: a new value replaces the old one.
+  std::vector<std::string> sets;
+  for (const std::string& o : scene_sets_)
+    if (o.compare(0, o.find('='), key) != 0) sets.push_back(o);
+  sets.push_back(override);
+  std::vector<std::string> overrides = base_scene_overrides_;
+  overrides.insert(overrides.end(), sets.begin(), sets.end());
   scene::Scene scene;
   try {
     scene = scene::load_scene_file_with_overrides(scene_path_, overrides);
@@ -492,7 +514,7 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
   } catch (const std::exception& e) {
     throw control::ControlError(e.what());
   }
-  options_.overrides.push_back(override);
+  scene_sets_ = std::move(sets);
   record_event(static_cast<int>(record::EventKind::kParameterChanged), override + " (scene restarted)");
   return {{"key", key}, {"applied", "scene restarted with the new value"}};
 }
@@ -521,9 +543,12 @@ nlohmann::json Service::record_stop() {
 nlohmann::json Service::export_x3d(const std::string& name) {
   const std::string file_name = name.empty() ? timestamped_name("surface", ".x3d") : name;
   // Same rule as recordings: a plain file name inside the state directory.
-  if (file_name.find('/') != std::string::npos || file_name == "." || file_name == "..")
-    throw control::ControlError("export_x3d: '" + file_name + "' is not a plain file name (files go to state_dir " +
-                                config_.state_dir + ")");
+  try {
+    record::validate_session_name(file_name);
+  } catch (const std::exception& e) {
+    throw control::ControlError("export_x3d: " + std::string(e.what()) + "; files go to state_dir " +
+                                config_.state_dir);
+  }
   const MeshSnapshot& snap = sim_->snapshot();
   if (snap.sequence == 0) throw control::ControlError("export_x3d: no surface yet; try again in a moment");
   x3d::SurfaceFrame frame;

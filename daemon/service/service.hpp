@@ -83,8 +83,11 @@ class Service : public control::ControlHandler {
   scene::Scene load_scene_file(const std::string& path) const;
   void start_threads();
   void stop_threads();
-  void apply_scene(scene::Scene scene);  // new runner on the sim thread, haptics started/stopped to match
-  void reload();                         // SIGHUP: config and scene again
+  // New runner on the sim thread, haptics started/stopped to match (and
+  // restarted when restart_haptics: its settings changed). Throws before
+  // changing anything when the scene cannot be built.
+  void apply_scene(scene::Scene scene, bool restart_haptics = false);
+  void reload();  // SIGHUP: config and scene again
   void request_stop(const std::string& why);
   void arm_signals();
   void start_publishing();
@@ -106,6 +109,12 @@ class Service : public control::ControlHandler {
   config::DaemonConfig config_;
   scene::Scene scene_;
   std::string scene_path_;  // the scene the running simulation came from
+  // Overrides the running scene was loaded with: the command line's scene
+  // keys for the configured scene (start, SIGHUP), none for a load_scene.
+  std::vector<std::string> base_scene_overrides_;
+  // `set` over the socket since: one per key (a new value replaces the old),
+  // dropped when another scene is loaded or on SIGHUP (files as written).
+  std::vector<std::string> scene_sets_;
 
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;

@@ -179,6 +179,20 @@ TEST(ControlClient, NullIdResponseFromTheServerIsReturned) {
   EXPECT_EQ(client.call("status").at("ok"), true);  // the connection lives on
 }
 
+// A daemon over its connection limit answers and closes before reading: the
+// request's send fails (broken pipe), and the client returns the answer
+// waiting for it instead of "cannot send: Broken pipe".
+TEST(ControlClient, AnAnswerSentBeforeTheDaemonClosedIsReturnedWhenTheSendFails) {
+  const std::string refusal = R"j({"id":null,"ok":false,"error":"too many connections (the limit is 16)"})j";
+  ScriptedPeer peer([&](PeerConnection& c) { c.send_all(refusal + "\n"); });
+  ASSERT_TRUE(peer.listening());
+  ControlClient client = ControlClient::connect_unix(peer.path());
+  peer.join();  // answered and closed
+  const json r = client.call("status");
+  EXPECT_EQ(r.at("ok"), false);
+  EXPECT_EQ(r.at("error"), "too many connections (the limit is 16)");
+}
+
 // ------------------------------------------------------- bad responses
 
 TEST(ControlClient, ResponsesThatAreNotProtocolResponsesAreProtocolErrors) {

@@ -74,6 +74,10 @@ TEST(ControlProtocol, MalformedRequestsAreAnsweredNotThrown) {
   expect_error(handle("{\"id\":1,\"cmd\":", h), nullptr, "malformed JSON");
   expect_error(handle("not json at all", h), nullptr, "malformed JSON");
   expect_error(handle("{\"cmd\":\"status\"} trailing", h), nullptr, "malformed JSON");
+  // A number beyond double is the request's fault, not an internal error.
+  expect_error(handle("{\"id\":1,\"cmd\":\"set\",\"key\":\"a\",\"value\":1e999}", h), nullptr,
+               "malformed JSON: number overflow parsing '1e999'");
+  expect_error(handle("{\"id\":1e999,\"cmd\":\"status\"}", h), nullptr, "malformed JSON: number overflow");
   expect_error(handle("[1,2,3]", h), nullptr, "must be a JSON object");
   expect_error(handle("\"status\"", h), nullptr, "must be a JSON object");
   expect_error(handle(R"({"id":3})", h), 3, "missing 'cmd'");

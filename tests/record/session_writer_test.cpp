@@ -107,7 +107,14 @@ TEST(SessionWriter, InfoReportsACleanCloseWithMetadataAndCounts) {
 
 TEST(SessionWriter, OpenInRejectsNamesThatLeaveTheStateDirectory) {
   TempDir dir;
-  for (const std::string bad : {"", "a/b.h5", "../x.h5", "..", "x..h5", "/etc/passwd"}) {
+  // Also names the daemon would take for its own temporary files (removed at
+  // the next start), control characters, blanks and names with no room left
+  // for the temporary suffix.
+  for (const std::string& bad :
+       {std::string(""), std::string("a/b.h5"), std::string("../x.h5"), std::string(".."), std::string("x..h5"),
+        std::string("/etc/passwd"), std::string(".evil.creating-999999-0"), std::string(".hidden.h5"),
+        std::string("a\nb.h5"), std::string("tab\t.h5"), std::string("   "),
+        std::string(kMaxSessionNameBytes - 2, 'x') + ".h5"}) {
     try {
       SessionWriter::open_in(dir.path(), bad, test_metadata());
       ADD_FAILURE() << "accepted '" << bad << "'";
@@ -116,6 +123,10 @@ TEST(SessionWriter, OpenInRejectsNamesThatLeaveTheStateDirectory) {
     }
   }
   EXPECT_TRUE(std::filesystem::is_empty(dir.path()));
+  // The longest name allowed is recorded.
+  const std::string longest = std::string(kMaxSessionNameBytes - 3, 'x') + ".h5";
+  SessionWriter::open_in(dir.path(), longest, test_metadata())->close();
+  EXPECT_TRUE(std::filesystem::exists(dir / longest));
 }
 
 TEST(SessionWriter, NeverOverwritesAndNamesMissingStateDirectories) {

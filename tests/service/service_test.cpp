@@ -57,6 +57,7 @@ struct Running {
   std::thread thread;
   int exit_code = -1;
   std::FILE* out = std::tmpfile();
+  std::FILE* err = std::tmpfile();
 
   explicit Running(const std::string& config_path, double duration_s = 0.0, std::vector<std::string> overrides = {},
                    std::string record_name = "") {
@@ -65,12 +66,14 @@ struct Running {
     options.overrides = std::move(overrides);
     options.record_name = std::move(record_name);
     options.out = out;
+    options.err = err;
     service = std::make_unique<Service>(options);
     thread = std::thread([this] { exit_code = service->run(); });
   }
   ~Running() {
     if (thread.joinable()) thread.join();
     std::fclose(out);
+    std::fclose(err);
   }
   int wait() {
     thread.join();
@@ -197,6 +200,77 @@ TEST(Service, SceneChangesUnderLoadKeepServing) {
   EXPECT_GT(ticks(), before + 50);  // 200 ms at 1 kHz, generous for a loaded machine
   EXPECT_TRUE(client.call("pause")["result"]["paused"].get<bool>());
   EXPECT_FALSE(client.call("resume")["result"]["paused"].get<bool>());
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// `set` changes the running scene's keys only, one value per key; a
+// load_scene takes the file as written (earlier sets were for the scene that
+// ran); daemon settings are refused with where they live.
+TEST(Service, SetChangesTheRunningSceneAndLoadSceneTakesTheFileAsWritten) {
+  TempDir dir;
+  Running run(write_config(dir, scene_file("cantilever.yaml")));
+  ControlClient client = connect(dir / "ctl.sock");
+  EXPECT_TRUE(client.call("set", {{"key", "name"}, {"value", "renamed"}})["ok"].get<bool>());
+  EXPECT_TRUE(client.call("set", {{"key", "probes[1].name"}, {"value", "centre2"}})["ok"].get<bool>());
+  EXPECT_TRUE(client.call("set", {{"key", "name"}, {"value", "renamed again"}})["ok"].get<bool>());
+  EXPECT_EQ(client.call("status")["result"]["scene"]["name"], "renamed again");
+
+  // beam.yaml has one probe and no tool: the cantilever's sets do not follow.
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("beam.yaml")}});
+  EXPECT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
+  const nlohmann::json scene = client.call("status")["result"]["scene"];
+  EXPECT_EQ(scene["name"], "beam");
+  EXPECT_EQ(scene["tool"], false);
+  EXPECT_TRUE(client.call("load_scene", {{"path", scene_file("beam.yaml")}})["ok"].get<bool>()) << "and again";
+
+  const nlohmann::json daemon_key = client.call("set", {{"key", "haptics.rate_hz"}, {"value", 500}});
+  EXPECT_FALSE(daemon_key["ok"].get<bool>());
+  EXPECT_NE(daemon_key["error"].get<std::string>().find("'haptics.rate_hz' is a daemon setting: edit " +
+                                                        (dir / "tissued.yaml")),
+            std::string::npos)
+      << daemon_key.dump();
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// A reload whose scene loads but cannot be built (a probe a hair outside the
+// object passes the file's checks and fails when located) changes nothing:
+// the running scene's file stays the one `set` reloads.
+TEST(Service, AFailedReloadChangesNothing) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"));
+  Running run(config);
+  ControlClient client = connect(dir / "ctl.sock");
+  const std::string source = client.call("status")["result"]["scene"]["source"];
+  const auto read = [](const std::string& path) {
+    std::ifstream in(path);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  // The config now names a copy of the cantilever whose centre probe sits
+  // 0.09 nm outside the object.
+  const std::string bad_scene = dir / "bad_probe.yaml";
+  std::string scene_text = read(scene_file("cantilever.yaml"));
+  const std::string probe = "rest_m: [0.1, 0.05, 0.05]";
+  const std::size_t at = scene_text.find(probe);
+  ASSERT_NE(at, std::string::npos);
+  scene_text.replace(at, probe.size(), "rest_m: [0.10000000009, 0.05, 0.05]");
+  std::ofstream(bad_scene) << scene_text;
+  std::string config_text = read(config);
+  config_text.replace(config_text.find(scene_file("cantilever.yaml")), scene_file("cantilever.yaml").size(), bad_scene);
+  std::ofstream(config) << config_text;
+  ASSERT_EQ(::raise(SIGHUP), 0);
+  bool failed = false;
+  for (int i = 0; i < 500 && !failed; ++i) {
+    std::fflush(run.err);
+    failed = file_text(run.err).find("reload failed") != std::string::npos;
+    if (!failed) std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_TRUE(failed) << "the reload did not fail: " << file_text(run.err);
+  EXPECT_NE(file_text(run.err).find("lies outside the object"), std::string::npos) << file_text(run.err);
+  EXPECT_EQ(client.call("status")["result"]["scene"]["source"], source);
+  const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 6e4}});
+  EXPECT_TRUE(set["ok"].get<bool>()) << set.dump();
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
 }
