@@ -14,6 +14,7 @@
 #include "render/png_writer.hpp"
 #include "render/render.hpp"
 #include "tissue/live_source_options.hpp"
+#include "util/output_file.hpp"
 
 namespace tissue::cli {
 
@@ -94,6 +95,12 @@ int run_render(RenderCommandOptions o) {
     for (std::size_t i = 0; i < frames.size(); ++i) {
       const x3d::SurfaceFrame frame = source->read_frame(frames[i]);
       const std::string path = o.sequence ? numbered(o.out, i) : o.out;
+      // write_png truncates PATH: were it the session, the recording would be gone.
+      if (!o.live.live() && util::same_file(path, o.session)) {
+        std::cerr << "tissue render: -o " << path << " is the input session " << o.session
+                  << ": writing it would destroy the recording; choose another output file\n";
+        return kExitBadInput;
+      }
       render::write_png(renderer.render(frame, o.image), path);
       std::cout << "wrote " << path << ": frame " << frames[i] << " at t=" << frame.time_s << " s, "
                 << frame.triangles.size() << " triangles";
@@ -131,7 +138,14 @@ Subcommand add_render_command(CLI::App& parent) {
       parent.add_subcommand("render", "Draw the tissue surface of a recorded session or live data to PNG (OSMesa)");
   CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
   CLI::Option* time = cmd->add_option("--time", o->time_s, "The frame shown at session time T (s)");
-  CLI::Option* frame = cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)");
+  CLI::Option* frame =
+      cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)")
+          // Unsigned parsing would wrap "-1" to 18446744073709551615.
+          ->check(CLI::Validator(
+              [](std::string& v) {
+                return !v.empty() && v.front() == '-' ? v + " is negative: frames are numbered from 0" : std::string();
+              },
+              "K >= 0"));
   time->excludes(frame);
   CLI::Option* seq = cmd->add_flag("--sequence", o->sequence, "Every frame in --from..--to, numbered files");
   seq->excludes(time)->excludes(frame);

@@ -85,6 +85,13 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
     std::cerr << "tissue session replay: " << e.what() << "\n";
     return kExitBadFile;
   }
+  // An empty session is a property of the file, not of the options: exit 1
+  // as for any other unusable file (an empty --from/--to window stays exit 2).
+  if (frames->frame_count() == 0 && rows.haptic.empty() && rows.sim.empty()) {
+    std::cerr << "tissue session replay: '" << file
+              << "': nothing to replay: the session holds no mesh frame, haptic row or sim row\n";
+    return kExitBadFile;
+  }
   std::unique_ptr<transport::LcmPublisher> lcm;
   std::unique_ptr<transport::DdsPublisher> dds;
   try {

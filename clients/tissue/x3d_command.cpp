@@ -2,11 +2,8 @@
 
 #include <CLI/CLI.hpp>
 
-#include <cerrno>
 #include <charconv>
 #include <cstdio>
-#include <cstring>
-#include <fstream>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -18,6 +15,7 @@
 #include "export/live_source.hpp"
 #include "export/x3d.hpp"
 #include "tissue/live_source_options.hpp"
+#include "util/output_file.hpp"
 
 namespace tissue::cli {
 
@@ -49,26 +47,11 @@ std::string fmt(double v) {
   return std::string(buf, r.ptr);
 }
 
-// Writes next to the target and renames, so a failed export never leaves a
-// truncated OUT behind (and never clobbers a good one).
+// Regular files via a temporary and a rename (a failed export never leaves a
+// truncated OUT behind); devices and FIFOs in place (util::write_output_file).
 void write_file(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw x3d::SourceError("cannot write '" + tmp + "': " + std::strerror(errno));
-    f.write(text.data(), static_cast<std::streamsize>(text.size()));
-    f.close();
-    if (!f) {
-      const int err = errno;
-      std::remove(tmp.c_str());
-      throw x3d::SourceError("cannot write '" + tmp + "': " + std::strerror(err));
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int err = errno;
-    std::remove(tmp.c_str());
-    throw x3d::SourceError("cannot write '" + path + "': " + std::strerror(err));
-  }
+  const std::string reason = util::write_output_file(path, text);
+  if (!reason.empty()) throw x3d::SourceError("cannot write '" + path + "': " + reason);
 }
 
 std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o, const x3d::X3dOptions& xo,
@@ -150,6 +133,10 @@ int run_x3d(const X3dCommandOptions& o) {
   try {
     if (o.session.empty() && !o.live.live())
       throw BadArguments("--session is required (or a live source: --lcm [URL] or --dds)");
+    // The rename would put the export where the recording was.
+    if (!o.live.live() && util::same_file(o.out, o.session))
+      throw x3d::SourceError("-o " + o.out + " is the input session " + o.session +
+                             ": writing it would destroy the recording; choose another output file");
     std::unique_ptr<x3d::FrameSource> source =
         o.live.live() ? open_live_source(o.live, o.animate) : x3d::open_session_source(o.session);
     if (xo.colour == x3d::ColourMode::kStrain && !source->has_strain())
@@ -186,7 +173,14 @@ Subcommand add_x3d_command(CLI::App& parent) {
       parent.add_subcommand("x3d", "Export the tissue surface of a recorded session or live data as X3D (XML)");
   CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
   CLI::Option* time = cmd->add_option("--time", o->time_s, "Snapshot of the frame shown at session time T (s)");
-  CLI::Option* frame = cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)");
+  CLI::Option* frame =
+      cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)")
+          // Unsigned parsing would wrap "-1" to 18446744073709551615.
+          ->check(CLI::Validator(
+              [](std::string& v) {
+                return !v.empty() && v.front() == '-' ? v + " is negative: frames are numbered from 0" : std::string();
+              },
+              "K >= 0"));
   time->excludes(frame);
   CLI::Option* animate = cmd->add_flag("--animate", o->animate, "Animation over --from..--to (default: all frames)");
   animate->excludes(time)->excludes(frame);

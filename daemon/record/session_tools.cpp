@@ -17,6 +17,7 @@
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
+#include "util/output_file.hpp"
 #include "util/xml.hpp"
 
 namespace tissue::record {
@@ -63,6 +64,20 @@ Preamble read_preamble(const std::string& path) {
   return p;
 }
 
+// How often a SWMR reader reads a metadata entry whose checksum fails before
+// it gives up. HDF5 (1.10.8, H5C_load_entry; the same in 1.12) retries such
+// a read, sleeping 1 ns after the first failure and twice as long after each
+// next one, so N attempts sleep 2^N - 1 ns in all. Its default for SWMR
+// reads is 100 attempts (H5F_SWMR_METADATA_READ_ATTEMPTS): 2^100 ns, so a
+// crashed session with one bad metadata byte hung every reader for good.
+// A live writer's torn read (the entry read while the writer's pwrite of it,
+// a few KB, is under way) mends as soon as that write completes: 28 attempts
+// keep retrying for 2^28 ns = 0.27 s (the last wait alone 0.13 s, plus the
+// kernel's timer slack per sleep), hundreds of times longer than such a
+// write even on a loaded machine, yet a damaged entry fails within that
+// bound, well under a second.
+constexpr unsigned kSwmrMetadataReadAttempts = 28;
+
 // Opens for reading: SWMR read when the superblock says a writer has (or
 // had) it open, since an ordinary open refuses such a file.
 Handle open_for_reading(const std::string& path, const Preamble& pre) {
@@ -72,6 +87,8 @@ Handle open_for_reading(const std::string& path, const Preamble& pre) {
     if (pre.superblock_version < 3)
       bad_file(path, "is marked open for writing but is not in the SWMR file format: cannot be read");
     flags |= H5F_ACC_SWMR_READ;
+    if (!fapl || H5Pset_metadata_read_attempts(fapl.get(), kSwmrMetadataReadAttempts) < 0)
+      bad_file(path, h5::describe("cannot bound the metadata read attempts"));
   }
   Handle file(H5Fopen(path.c_str(), flags, fapl.get()));
   if (!file) bad_file(path, h5::describe("cannot be opened as HDF5 (corrupt or truncated?)"));
@@ -91,11 +108,67 @@ Handle open_dataset(hid_t file, const std::string& path, const char* dataset) {
   return d;
 }
 
+H5T_class_t stored_class(ElementType type) {
+  switch (type) {
+    case ElementType::kF64:
+    case ElementType::kF32:
+      return H5T_FLOAT;
+    case ElementType::kString:
+      return H5T_STRING;
+    case ElementType::kU8:
+    case ElementType::kI32:
+    case ElementType::kU64:
+    case ElementType::kI64:
+      break;
+  }
+  return H5T_INTEGER;
+}
+
+const char* class_name(H5T_class_t c) {
+  switch (c) {
+    case H5T_INTEGER:
+      return "integer";
+    case H5T_FLOAT:
+      return "floating-point";
+    case H5T_STRING:
+      return "string";
+    default:
+      return "other (not integer, floating-point or string)";
+  }
+}
+
+// Rows of dataset `d` (kDatasets[id]) after checking what every reader
+// relies on: rank 1 for a column, N x columns otherwise, and the type class
+// of the layout. HDF5 converts within a class on read (int32 to uint64,
+// float64 to float32), but a string column read as numbers, or a V x 2
+// vertex table read 3 values a row, would be garbage.
+std::uint64_t checked_rows(hid_t d, const std::string& path, DatasetId id) {
+  const DatasetSpec& spec = kDatasets[id];
+  Handle space(H5Dget_space(d));
+  const int rank = space ? H5Sget_simple_extent_ndims(space.get()) : -1;
+  if (rank < 0) bad_file(path, h5::describe(std::string("cannot read the shape of ") + spec.path));
+  hsize_t dims[H5S_MAX_RANK] = {};
+  if (rank > 0 && H5Sget_simple_extent_dims(space.get(), dims, nullptr) < 0)
+    bad_file(path, h5::describe(std::string("cannot read the shape of ") + spec.path));
+  const int want_rank = spec.columns == 1 ? 1 : 2;
+  if (rank != want_rank || (rank == 2 && dims[1] != static_cast<hsize_t>(spec.columns))) {
+    std::string shape;
+    for (int i = 0; i < rank; ++i) shape += (i ? " x " : "") + std::to_string(dims[i]);
+    bad_file(path, std::string("dataset ") + spec.path + " has shape (" + shape + "), rank " + std::to_string(rank) +
+                       ", expected " + (spec.columns == 1 ? "rank 1 (one value per row)" : "N x 3") +
+                       ": corrupt session file");
+  }
+  Handle type(H5Dget_type(d));
+  const H5T_class_t cls = type ? H5Tget_class(type.get()) : H5T_NO_CLASS;
+  if (cls != stored_class(spec.type))
+    bad_file(path, std::string("dataset ") + spec.path + " stores " + class_name(cls) + " values, expected " +
+                       class_name(stored_class(spec.type)) + ": corrupt session file");
+  return dims[0];
+}
+
 std::uint64_t dataset_rows(hid_t file, const std::string& path, DatasetId id) {
   Handle d = open_dataset(file, path, kDatasets[id].path);
-  const std::int64_t n = h5::rows(d.get());
-  if (n < 0) bad_file(path, h5::describe(std::string("cannot read the shape of ") + kDatasets[id].path));
-  return static_cast<std::uint64_t>(n);
+  return checked_rows(d.get(), path, id);
 }
 
 // The HDF5 memory type of T (H5T_NATIVE_* are run-time values, so this is a
@@ -126,9 +199,29 @@ std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, st
                            std::uint64_t count) {
   const DatasetSpec& spec = kDatasets[id];
   const hsize_t columns = static_cast<hsize_t>(spec.columns);
-  std::vector<T> out(count * columns);
-  if (count == 0) return out;
+  if (count == 0) return {};
   Handle d = open_dataset(file, path, spec.path);
+  checked_rows(d.get(), path, id);
+  // A damaged extent (1e8 rows in a 1 MB file: chunks never written read as
+  // fill values) must not become a gigabyte allocation or a bare bad_alloc.
+  // Session datasets are stored unfiltered, so every row that was written
+  // takes its bytes in the file: rows to read whose bytes exceed the whole
+  // file were never written. The bound holds for crashed files too: their
+  // readers read only rows every column of the group has (or a frame the
+  // index places inside the data), and an extent set just before a crash is
+  // at most one flush ahead of the data, far smaller than the file's other
+  // columns and metadata.
+  hsize_t file_bytes = 0;
+  if (H5Fget_filesize(file, &file_bytes) < 0) bad_file(path, h5::describe("cannot read the file size"));
+  Handle stored(H5Dget_type(d.get()));
+  const std::size_t element_bytes = stored ? H5Tget_size(stored.get()) : 0;
+  const long double want_bytes = static_cast<long double>(count) * columns * std::max<std::size_t>(element_bytes, 1);
+  if (want_bytes > static_cast<long double>(file_bytes))
+    bad_file(path, std::string("dataset ") + spec.path + ": rows " + std::to_string(first) + " to " +
+                       std::to_string(first + count) + " would take " + std::to_string(count) + " x " +
+                       std::to_string(columns * element_bytes) + " bytes, more than the whole file (" +
+                       std::to_string(file_bytes) + " bytes): its extent is corrupt");
+  std::vector<T> out(count * columns);
   Handle space(H5Dget_space(d.get()));
   const int rank = columns == 1 ? 1 : 2;
   const hsize_t start[2] = {first, 0}, n[2] = {count, columns};
@@ -148,18 +241,6 @@ struct Counts {
   std::array<std::uint64_t, kDatasetCount> extents{};  // 0 for datasets the file's version does not have
   double last_time_s = 0.0;
 };
-
-// The per-triangle strain dataset must be a plain column (one value per
-// /mesh/triangles row); anything else is a damaged or foreign file.
-void check_strain_shape(hid_t file, const std::string& path) {
-  const char* name = kDatasets[kMeshTriangleStrain].path;
-  Handle d = open_dataset(file, path, name);
-  Handle space(H5Dget_space(d.get()));
-  const int rank = space ? H5Sget_simple_extent_ndims(space.get()) : -1;
-  if (rank != 1)
-    bad_file(path, std::string("dataset ") + name + " has rank " + std::to_string(rank) +
-                       ", expected 1 (one strain value per triangle): corrupt session file");
-}
 
 // Complete rows per group: the shortest column of the group (columns are
 // flushed one after another), and for the mesh the frames whose index and
@@ -193,7 +274,6 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
   const std::uint64_t vertex_rows = std::min(c.extents[kMeshVertices], c.extents[kMeshVertexLevel]);
   std::uint64_t triangle_rows = c.extents[kMeshTriangles];
   if (dataset_in_version(kDatasets[kMeshTriangleStrain], version)) {
-    check_strain_shape(file, path);
     const std::uint64_t strain_rows = c.extents[kMeshTriangleStrain];
     if (strain_rows != triangle_rows && !partial_ok)
       bad_file(path, std::string("dataset ") + kDatasets[kMeshTriangleStrain].path + " has " +
@@ -203,12 +283,39 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
     triangle_rows = std::min(triangle_rows, strain_rows);
   }
   std::uint64_t v_end = 0, t_end = 0, frames = 0;
+  // Frames are appended back to back. After a crash (partial_ok) the last
+  // frames may have index rows ahead of their data: the frames before the
+  // first such row are complete, and the file counts up to there. In a
+  // closed or repaired file every index row was written with its data, so
+  // any break is damage and an error naming the row: trimming would hide
+  // the frames after it from every reader.
+  const auto damaged = [&](std::uint64_t f, DatasetId id, const std::string& why) {
+    if (!partial_ok)
+      bad_file(path, std::string(kDatasets[id].path) + "[" + std::to_string(f) + "] " + why + " (frame " +
+                         std::to_string(f) + " of " + std::to_string(indexed) + "): corrupt frame index");
+  };
   for (; frames < indexed; ++frames) {
     const std::uint64_t f = frames;
-    // Frames are appended back to back; anything else is damage, and the
-    // frames before it are still good.
-    if (voff[f] != v_end || toff[f] != t_end) break;
-    if (vcnt[f] > vertex_rows - v_end || tcnt[f] > triangle_rows - t_end) break;
+    if (voff[f] != v_end) {
+      damaged(f, kMeshVertexOffset, "is " + std::to_string(voff[f]) + ", expected " + std::to_string(v_end));
+      break;
+    }
+    if (toff[f] != t_end) {
+      damaged(f, kMeshTriangleOffset, "is " + std::to_string(toff[f]) + ", expected " + std::to_string(t_end));
+      break;
+    }
+    if (vcnt[f] > vertex_rows - v_end) {
+      damaged(f, kMeshVertexCount,
+              "is " + std::to_string(vcnt[f]) + ": past the end of the " + std::to_string(vertex_rows) +
+                  " vertex rows (/mesh/vertices_m, /mesh/vertex_level)");
+      break;
+    }
+    if (tcnt[f] > triangle_rows - t_end) {
+      damaged(f, kMeshTriangleCount,
+              "is " + std::to_string(tcnt[f]) + ": past the end of the " + std::to_string(triangle_rows) +
+                  " triangle rows");
+      break;
+    }
     v_end += vcnt[f];
     t_end += tcnt[f];
   }
@@ -235,6 +342,10 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   SessionInfo info;
   info.path = path;
   info.open_for_write_flag = pre.consistency_flags != 0;
+  // A root group whose metadata cannot be read (a bad checksum) is damage,
+  // not a foreign file without the attribute.
+  if (H5Aexists(file, kAttrFormatVersion) < 0)
+    bad_file(path, h5::describe("cannot read the root group's attributes (corrupt metadata)"));
   if (!h5::read_i64_attribute(file, kAttrFormatVersion, &info.format_version))
     bad_file(path, "HDF5 file without a format_version attribute: not a tissue session file");
   if (info.format_version < kOldestReadableFormatVersion || info.format_version > kSessionFormatVersion)
@@ -619,10 +730,22 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   const auto vcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshVertexCount, 0, frames);
   const auto toff = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleOffset, 0, frames);
   const auto tcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleCount, 0, frames);
+  // The same rule as every other reader of frames (the frame source, replay):
+  // ParaView steps through the grids by these times.
+  for (std::uint64_t f = 0; f < frames; ++f) {
+    if (!std::isfinite(times[f]))
+      bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + "[" + std::to_string(f) + "] is not finite");
+    if (f > 0 && times[f] < times[f - 1])
+      bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + " goes backwards at frame " + std::to_string(f) +
+                            " (frames must be in time order)");
+  }
 
   namespace fs = std::filesystem;
   XdmfReport report;
   report.out_path = out_path_in.empty() ? fs::path(h5_path).replace_extension(".xdmf").string() : out_path_in;
+  if (util::same_file(report.out_path, h5_path))
+    bad_file(h5_path, "is also the XDMF output '" + report.out_path +
+                          "': writing it would destroy the recording; choose another output file");
   std::error_code ec;
   const fs::path out_dir = fs::absolute(report.out_path, ec).parent_path();
   fs::path h5_ref = fs::relative(fs::absolute(h5_path, ec), out_dir, ec);
@@ -638,7 +761,9 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
 
   std::ostringstream x;
   x << "<?xml version=\"1.0\" ?>\n";
-  x << "<!-- Written by `tissue session xdmf` from " << util::escape_xml(h5_path) << ": one grid per mesh frame. -->\n";
+  // No path in the comment: "--" (run--2.h5) may not appear inside an XML
+  // comment, and the DataItems below name the file anyway.
+  x << "<!-- Written by `tissue session xdmf`: one grid per mesh frame of the session the DataItems read. -->\n";
   x << "<Xdmf Version=\"3.0\">\n <Domain>\n";
   x << "  <Grid Name=\"session\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
   for (std::uint64_t f = 0; f < frames; ++f) {
@@ -681,25 +806,10 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   }
   x << "  </Grid>\n </Domain>\n</Xdmf>\n";
 
-  // Write to a temporary and rename, so a failed write never leaves half a
-  // sidecar behind.
-  const std::string tmp = report.out_path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw RecordError("cannot write XDMF sidecar '" + report.out_path + "': " + std::strerror(errno));
-    const std::string text = x.str();
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    out.close();
-    if (!out) {
-      fs::remove(tmp, ec);
-      throw RecordError("cannot write XDMF sidecar '" + report.out_path + "': write failed");
-    }
-  }
-  fs::rename(tmp, report.out_path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw RecordError("cannot write XDMF sidecar '" + report.out_path + "': " + ec.message());
-  }
+  // A regular file through a temporary and a rename (a failed write never
+  // leaves half a sidecar behind); a device or FIFO in place.
+  const std::string reason = util::write_output_file(report.out_path, x.str());
+  if (!reason.empty()) throw RecordError("cannot write XDMF sidecar '" + report.out_path + "': " + reason);
   return report;
 }
 

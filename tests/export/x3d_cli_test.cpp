@@ -2,6 +2,8 @@
 // SessionWriter, and the session FrameSource it reads through.
 #include <gtest/gtest.h>
 #include <hdf5.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -207,6 +209,7 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   };
   expect_2(s + " --frame 5", "--frame 5: '" + session_ + "' has 5 frames (0 to 4)");
   expect_2(s + " --time 0.1", "--time 0.1: '" + session_ + "' has no frame that early");
+  expect_2(s + " --frame -1", "--frame: -1 is negative: frames are numbered from 0");
   expect_2(s + " --frame 1 --time 0.5", "excludes");
   expect_2(s + " --animate --frame 1", "excludes");
   expect_2(s + " --from 0.5", "requires --animate");
@@ -217,6 +220,44 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2("-o " + quote(dir_ / "o.x3d"), "--session is required");
   expect_2("--session " + quote(session_), "--output is required");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
+}
+
+// -o naming the session would rename the export over the recording.
+TEST_F(X3dCli, RefusesToOverwriteTheInputSession) {
+  std::filesystem::create_symlink(session_, dir_ / "link.x3d");
+  const std::string before = testing::slurp(session_);
+  for (const std::string& out : {session_, dir_ / "./s.h5", dir_ / "link.x3d"}) {
+    const RunResult r = x3d("--session " + quote(session_) + " -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 1) << out;
+    EXPECT_NE(r.err.find("is the input session"), std::string::npos) << r.err;
+    EXPECT_EQ(testing::slurp(session_), before) << "the session was changed via " << out;
+  }
+}
+
+// An existing FIFO (or device: /dev/full, /dev/null) is written in place;
+// the temporary + rename used for regular files replaced such a node with a
+// regular file. (A FIFO, not a real device: a broken build must not be able
+// to replace a system node.)
+TEST_F(X3dCli, WritesIntoAFifoAndKeepsIt) {
+  const std::string fifo = dir_ / "out.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  // Both ends bounded: a writer that never opens the FIFO leaves the reader
+  // to give up after 30 s, and the other way round.
+  const RunResult r =
+      testing::run("(timeout 30 cat " + quote(fifo) + " > " + quote(dir_ / "got.x3d") + " &) ; timeout 60 " + tissue() +
+                       " x3d --session " + quote(session_) + " -o " + quote(fifo),
+                   dir_);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  struct stat st {};
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode)) << "the FIFO was replaced by a regular file";
+  EXPECT_FALSE(std::filesystem::exists(fifo + ".tmp"));
+  std::string got;
+  for (int i = 0; i < 100 && got.find("</X3D>") == std::string::npos; ++i) {
+    got = testing::slurp(dir_ / "got.x3d");
+    if (got.find("</X3D>") == std::string::npos) ::usleep(50000);
+  }
+  EXPECT_NE(got.find("</X3D>"), std::string::npos) << got;
 }
 
 }  // namespace

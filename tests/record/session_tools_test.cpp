@@ -12,6 +12,13 @@
 #include <fstream>
 #include <limits>
 
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
@@ -442,6 +449,284 @@ TEST(SessionReader, RowsOutsideADatasetAreAClearErrorNotAReadPastItsEnd) {
     EXPECT_NE(what.find("/haptic/time_s"), std::string::npos) << what;
     EXPECT_NE(what.find("rows 1490 to 1510"), std::string::npos) << what;
   }
+}
+
+// ---------------------------------------------------------------- damaged files
+
+// Overwrites row `row` of a 1-D uint64 dataset of a closed session.
+void overwrite_u64(const std::string& path, const char* dataset, std::uint64_t row, std::uint64_t value) {
+  const hid_t file = testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << dataset;
+  const hid_t space = H5Dget_space(ds);
+  const hsize_t start[1] = {row}, one[1] = {1};
+  H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, one, nullptr);
+  const hid_t mem = H5Screate_simple(1, one, nullptr);
+  EXPECT_GE(H5Dwrite(ds, H5T_NATIVE_UINT64, mem, space, H5P_DEFAULT, &value), 0);
+  H5Sclose(mem);
+  H5Sclose(space);
+  H5Dclose(ds);
+  H5Fclose(file);
+}
+
+// Replaces `dataset` by an empty-valued one of the given type and shape.
+void recreate(const std::string& path, const char* dataset, hid_t type, std::vector<hsize_t> dims) {
+  const hid_t file = testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  ASSERT_GE(H5Ldelete(file, dataset, H5P_DEFAULT), 0);
+  const hid_t space = H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr);
+  const hid_t ds = H5Dcreate2(file, dataset, type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << dataset;
+  H5Dclose(ds);
+  H5Sclose(space);
+  H5Fclose(file);
+}
+
+// A session whose writer died after a flush (the superblock still says
+// "open for SWMR writing"), written by a child process.
+void write_crashed_session(const std::string& path) {
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    try {
+      SessionMetadata meta;
+      meta.scene_name = "crash";
+      auto w = SessionWriter::create(path, meta);
+      std::vector<HapticRow> rows;
+      for (std::uint64_t i = 0; i < 300; ++i) rows.push_back(testing::haptic_row(i));
+      w->append_haptic(rows);
+      for (std::uint64_t f = 0; f < 3; ++f) w->append_mesh_frame(testing::test_frame(f).view());
+      w->flush();
+      ::_exit(0);  // never closed, as after a crash
+    } catch (...) {
+    }
+    ::_exit(1);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "the writer process failed";
+}
+
+// A SWMR reader retries a metadata read whose checksum fails, doubling its
+// sleep each time; with HDF5's default number of attempts one bad byte in a
+// crashed session hung every reader for good. Now it is an error naming the
+// file, well within a generous deadline (the reader runs under `timeout`, so
+// a hang fails the test instead of stalling it).
+TEST(SessionTools, CorruptMetadataInACrashedSessionIsAnErrorNotAHang) {
+  TempDir dir;
+  const std::string crashed = dir / "crashed.h5";
+  write_crashed_session(crashed);
+  ASSERT_TRUE(read_session_info(crashed).open_for_write_flag);
+  std::string bytes = testing::slurp(crashed);
+  // Version-2 object headers ("OHDR") end in a checksum over the whole block;
+  // 40 bytes in is past the longest prefix (34 bytes), inside the messages.
+  std::vector<std::size_t> headers;
+  for (std::size_t at = bytes.find("OHDR"); at != std::string::npos; at = bytes.find("OHDR", at + 4))
+    headers.push_back(at);
+  ASSERT_GE(headers.size(), 10u);
+  // The root group's header (read by the open) and a dataset's (read by info).
+  for (const std::size_t header : {headers[0], headers[9]}) {
+    const std::string path = dir / ("bad_" + std::to_string(header) + ".h5");
+    std::string damaged = bytes;
+    damaged[header + 40] = static_cast<char>(damaged[header + 40] ^ 0x5a);
+    testing::write_bytes(path, damaged);
+    for (const std::string& cmd : {std::string("session info"), "x3d -o " + quote(dir / "o.x3d") + " --session"}) {
+      SCOPED_TRACE(cmd + " " + path);
+      const auto start = std::chrono::steady_clock::now();
+      const auto r = run("timeout -s KILL 60 " + tissue() + " " + cmd + " " + quote(path), dir);
+      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      EXPECT_EQ(r.exit_code, 1) << "took " << seconds << " s (killed after 60 s: a hang)\n" << r.err;
+      EXPECT_LT(seconds, 50.0);
+      EXPECT_NE(r.err.find("'" + path + "'"), std::string::npos) << r.err;
+      EXPECT_NE(r.err.find("checksum"), std::string::npos) << r.err;
+    }
+  }
+}
+
+// In a closed file every frame's index row was written with its data: a
+// broken one is damage every tool reports (naming the dataset and row),
+// not a shorter session (10 of 46 frames, exit 0).
+TEST(SessionTools, ABrokenFrameIndexInAClosedFileIsAnErrorNamingTheRow) {
+  TempDir dir;
+  struct Damage {
+    DatasetId id;
+    std::uint64_t row, value;
+    const char* says;
+  };
+  for (const Damage d :
+       {Damage{kMeshVertexOffset, 2, std::uint64_t{1} << 40, "/mesh/vertex_offset[2] is 1099511627776"},
+        Damage{kMeshTriangleOffset, 3, 1, "/mesh/triangle_offset[3] is 1, expected"},
+        Damage{kMeshVertexCount, 4, 1000000, "/mesh/vertex_count[4] is 1000000: past the end"},
+        Damage{kMeshTriangleCount, 1, 1000000, "/mesh/triangle_count[1] is 1000000: past the end"}}) {
+    const std::string path = dir / ("index" + std::to_string(d.id) + ".h5");
+    write_small_session(path, 5);
+    overwrite_u64(path, kDatasets[d.id].path, d.row, d.value);
+    expect_every_tool_refuses(path, dir, d.says);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.out;
+    EXPECT_NE(cli.err.find(d.says), std::string::npos) << cli.err;
+  }
+}
+
+// Extents of 2^36 rows (chunks never written, so the file stays small) must
+// be refused before a read allocates for them (a bare std::bad_alloc, or
+// gigabytes and a minute for 1e8 rows).
+TEST(SessionTools, AnIndexExtentTheFileCannotHoldIsAnErrorNotAnAllocation) {
+  TempDir dir;
+  const std::string path = dir / "huge.h5";
+  write_small_session(path, 5);
+  {
+    const hid_t file = testing::open_for_edit(path);
+    ASSERT_GE(file, 0);
+    for (const DatasetId id :
+         {kMeshVertexOffset, kMeshVertexCount, kMeshTriangleOffset, kMeshTriangleCount, kMeshFrameTime}) {
+      const hid_t ds = H5Dopen2(file, kDatasets[id].path, H5P_DEFAULT);
+      const hsize_t dims[1] = {hsize_t{1} << 36};
+      EXPECT_GE(H5Dset_extent(ds, dims), 0);
+      H5Dclose(ds);
+    }
+    H5Fclose(file);
+  }
+  ASSERT_LT(std::filesystem::file_size(path), 10u << 20);
+  expect_every_tool_refuses(path, dir, "more than the whole file");
+  const auto cli = run(tissue() + " session info " + quote(path), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_NE(cli.err.find("'" + path + "': dataset /mesh/vertex_offset"), std::string::npos) << cli.err;
+}
+
+// Every reader checks the shape and type class of the columns it reads, not
+// only the rank: a V x 2 vertex table read 3 values a row is garbage.
+TEST(SessionTools, ColumnsOfTheWrongShapeOrTypeAreRefusedNamingTheDataset) {
+  TempDir dir;
+  struct Damage {
+    DatasetId id;
+    hid_t type;
+    std::vector<hsize_t> dims;
+    const char* says;
+  };
+  const hid_t text = H5Tcopy(H5T_C_S1);
+  H5Tset_size(text, 16);
+  const std::uint64_t v = 4, t = 6;
+  int n = 0;
+  for (const Damage& d : {Damage{kMeshVertices, H5T_IEEE_F32LE, {v, 2}, "has shape (4 x 2)"},
+                          Damage{kMeshVertices, H5T_IEEE_F32LE, {v, 4}, "has shape (4 x 4)"},
+                          Damage{kMeshVertices, H5T_IEEE_F32LE, {v}, "has shape (4), rank 1, expected N x 3"},
+                          Damage{kMeshTriangles, text, {t, 3}, "stores string values, expected integer"},
+                          Damage{kMeshVertexLevel, H5T_STD_U8LE, {v, 3}, "has shape (4 x 3), rank 2, expected rank 1"},
+                          Damage{kMeshVertexOffset, H5T_IEEE_F64LE, {5}, "stores floating-point values"},
+                          Damage{kMeshFrameTime, text, {5}, "stores string values, expected floating-point"},
+                          Damage{kHapticForce, H5T_IEEE_F64LE, {1500, 2}, "has shape (1500 x 2)"}}) {
+    const std::string path = dir / ("shape" + std::to_string(++n) + ".h5");
+    write_small_session(path, 5);
+    recreate(path, kDatasets[d.id].path, d.type, d.dims);
+    expect_every_tool_refuses(path, dir, std::string("dataset ") + kDatasets[d.id].path + " " + d.says);
+  }
+  H5Tclose(text);
+}
+
+// `session xdmf` checks frame times as every other frame reader does:
+// ParaView would get <Time Value="nan"/> or grids out of order.
+TEST(SessionTools, XdmfRefusesFrameTimesThatAreNotFiniteOrGoBack) {
+  TempDir dir;
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), -1.0}) {
+    const std::string path = dir / (std::isnan(bad) ? "nan.h5" : "back.h5");
+    write_small_session(path, 5);
+    testing::overwrite_f64(path, kDatasets[kMeshFrameTime].path, 3, bad);
+    try {
+      write_xdmf(path, "");
+      ADD_FAILURE() << "wrote a sidecar with frame time " << bad;
+    } catch (const RecordError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("'" + path + "'"), std::string::npos) << what;
+      EXPECT_NE(what.find(std::isnan(bad) ? "/mesh/frame_time_s[3] is not finite"
+                                          : "/mesh/frame_time_s goes backwards at frame 3"),
+                std::string::npos)
+          << what;
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / (std::isnan(bad) ? "nan.xdmf" : "back.xdmf")));
+  }
+}
+
+// "--" may not appear inside an XML comment: the sidecar of run--2.h5 must
+// still be well-formed.
+TEST(SessionTools, XdmfOfASessionNamedWithDoubleHyphensIsWellFormed) {
+  TempDir dir;
+  const std::string path = dir / "run--2.h5";
+  write_small_session(path, 3);
+  write_xdmf(path, "");
+  const std::string xml = testing::slurp(dir / "run--2.xdmf");
+  ASSERT_FALSE(xml.empty());
+  std::size_t comments = 0;
+  for (std::size_t at = xml.find("<!--"); at != std::string::npos; at = xml.find("<!--", at + 4)) {
+    const std::size_t end = xml.find("-->", at + 4);
+    ASSERT_NE(end, std::string::npos) << xml;
+    const std::string body = xml.substr(at + 4, end - at - 4);
+    EXPECT_EQ(body.find("--"), std::string::npos) << body;
+    EXPECT_FALSE(!body.empty() && body.back() == '-') << body;
+    ++comments;
+  }
+  EXPECT_GT(comments, 0u);
+  EXPECT_NE(xml.find("run--2.h5:/mesh/vertices_m"), std::string::npos) << "the DataItems still name the file";
+}
+
+// -o naming the session itself would replace the recording with its sidecar.
+TEST(SessionTools, XdmfRefusesToOverwriteItsInput) {
+  TempDir dir;
+  const std::string path = dir / "same.h5";
+  write_small_session(path, 3);
+  const std::string before = testing::slurp(path);
+  for (const std::string& out : {path, dir / "./same.h5"}) {
+    const auto cli = run(tissue() + " session xdmf " + quote(path) + " -o " + quote(out), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.out;
+    EXPECT_NE(cli.err.find("writing it would destroy the recording"), std::string::npos) << cli.err;
+    EXPECT_EQ(testing::slurp(path), before) << "the session was changed";
+  }
+  // A session named like its default sidecar.
+  const std::string xdmf_named = dir / "s.xdmf";
+  std::filesystem::copy_file(path, xdmf_named);
+  const auto cli = run(tissue() + " session xdmf " + quote(xdmf_named), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_EQ(testing::slurp(xdmf_named), before);
+}
+
+// An existing FIFO or device is written in place, never replaced by a
+// regular file (the old temporary + rename turned /dev/full into a file).
+TEST(SessionTools, XdmfToAFifoWritesIntoItAndKeepsIt) {
+  TempDir dir;
+  const std::string path = dir / "s.h5";
+  write_small_session(path, 3);
+  const std::string fifo = dir / "sidecar.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  // The reader gives up after 30 s, so a writer that never opens the FIFO
+  // cannot stall the test; the writer is bounded the same way.
+  const auto cli = run("(timeout 30 cat " + quote(fifo) + " > " + quote(dir / "got.xdmf") + " &) ; timeout 60 " +
+                           tissue() + " session xdmf " + quote(path) + " -o " + quote(fifo),
+                       dir);
+  EXPECT_EQ(cli.exit_code, 0) << cli.err;
+  struct stat st {};
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode)) << "the FIFO was replaced";
+  EXPECT_FALSE(std::filesystem::exists(fifo + ".tmp"));
+  std::string got;
+  for (int i = 0; i < 100 && got.find("</Xdmf>") == std::string::npos; ++i) {
+    got = testing::slurp(dir / "got.xdmf");
+    if (got.find("</Xdmf>") == std::string::npos) ::usleep(50000);
+  }
+  EXPECT_NE(got.find("</Xdmf>"), std::string::npos) << got;
+}
+
+// The reason a sidecar cannot be written, not "Success".
+TEST(SessionTools, XdmfIntoADirectorySaysWhy) {
+  TempDir dir;
+  const std::string path = dir / "s.h5";
+  write_small_session(path, 3);
+  std::filesystem::create_directory(dir / "out");
+  const auto cli = run(tissue() + " session xdmf " + quote(path) + " -o " + quote(dir / "out"), dir);
+  EXPECT_EQ(cli.exit_code, 1);
+  EXPECT_NE(cli.err.find("cannot write XDMF sidecar '" + (dir / "out") + "': is a directory"), std::string::npos)
+      << cli.err;
+  EXPECT_EQ(cli.err.find("Success"), std::string::npos) << cli.err;
 }
 
 }  // namespace

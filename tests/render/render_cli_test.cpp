@@ -49,9 +49,27 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   EXPECT_EQ(render(dir, "--session " + quote(dir / "missing.h5") + " -o x.png").exit_code, 1);
   EXPECT_EQ(render(dir, "--session " + quote(session) + " --frame 9 -o x.png").exit_code, 2);
   EXPECT_EQ(render(dir, "--session " + quote(session) + " --width 3 -o x.png").exit_code, 2);
+  const RunResult negative = render(dir, "--session " + quote(session) + " --frame -1 -o x.png");
+  EXPECT_EQ(negative.exit_code, 2);
+  EXPECT_NE(negative.err.find("--frame: -1 is negative"), std::string::npos) << negative.err;
   const RunResult unwritable = render(dir, "--session " + quote(session) + " -o /nonexistent-dir/x.png");
   EXPECT_EQ(unwritable.exit_code, 1);
   EXPECT_NE(unwritable.err.find("/nonexistent-dir/x.png"), std::string::npos) << unwritable.err;
+}
+
+// -o naming the session (another spelling, a symbolic link) would truncate
+// the recording: refused, the session left as it was.
+TEST(RenderCli, RefusesToOverwriteTheInputSession) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  std::filesystem::create_symlink(session, dir / "link.png");
+  const std::string before = x3d::testing::slurp(session);
+  for (const std::string& out : {session, dir / "./s.h5", dir / "link.png"}) {
+    const RunResult r = render(dir, "--session " + quote(session) + " --width 64 --height 48 -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 1) << out;
+    EXPECT_NE(r.err.find("is the input session"), std::string::npos) << r.err;
+    EXPECT_EQ(x3d::testing::slurp(session), before) << "the session was changed via " << out;
+  }
 }
 
 }  // namespace

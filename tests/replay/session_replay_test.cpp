@@ -341,6 +341,18 @@ TEST(ReplayCli, BadFilesExitOneWithOneLineNamingTheFile) {
   }
 }
 
+// A session with nothing in it is a data problem (exit 1, naming the file),
+// not a bad window (exit 2): no option could make it replay.
+TEST(ReplayCli, AnEmptySessionExitsOneNamingTheFile) {
+  TempDir dir;
+  record::testing::TestSession empty;
+  empty.haptic = empty.sim = empty.frames = empty.events = 0;
+  const std::string path = record::testing::write_test_session(dir / "empty.h5", empty);
+  const RunResult r = record::testing::run(tissue() + " session replay " + quote(path) + " --lcm memq://", dir);
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("'" + path + "': nothing to replay"), std::string::npos) << r.err;
+}
+
 TEST(ReplayCli, BadArgumentsExitTwoAndBadTransportsExitThree) {
   TempDir dir;
   const std::string path = testing::write_session(dir / "s.h5", 5);
