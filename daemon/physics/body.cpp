@@ -2,6 +2,9 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
 
 #include "mesh/refine_ops.hpp"
 #include "physics/spring_law.hpp"
@@ -43,7 +46,36 @@ Body::Body(const scene::Scene& scene) : scene_(scene), mesh_(box_of(scene)) {
     v_m_per_s[n].setZero();
     classify_node(n);
   });
+  require_every_region_selects_a_node();
   rebuild_parameters();
+}
+
+void Body::require_every_region_selects_a_node() const {
+  // The scene's checks see only the object's box; whether a region holds a
+  // node shows on the mesh. A region between nodes would fix, move or load
+  // nothing and the run would go on as if it did (a load "applied" with no
+  // work, a beam "clamped" floating free). Refinement adds nodes only where
+  // the body deforms, so an empty region stays empty: refuse it here.
+  const double tol = 1e-6 * mesh_.lattice_unit_m();
+  const auto check = [&](const scene::Region& region, const std::string& key) {
+    bool any = false;
+    mesh_.for_each_node([&](NodeId n, const mesh::Node&) {
+      any = any || region.contains({rest_m[n][0], rest_m[n][1], rest_m[n][2]}, tol);
+    });
+    if (!any) {
+      const double spacing_mm = 1e3 * scene_.object.cube_size_m / std::exp2(scene_.adaptivity.min_depth / 3.0);
+      char spacing[32];
+      std::snprintf(spacing, sizeof spacing, "%.3g", spacing_mm);
+      throw std::invalid_argument(key + " selects no node of the mesh (its nodes are about " + spacing +
+                                  " mm apart: a region between them holds none); enlarge it or move it onto nodes");
+    }
+  };
+  for (std::size_t i = 0; i < scene_.fixed.size(); ++i)
+    check(scene_.fixed[i].region, "fixed[" + std::to_string(i) + "].region");
+  for (std::size_t i = 0; i < scene_.prescribed.size(); ++i)
+    check(scene_.prescribed[i].region, "prescribed[" + std::to_string(i) + "].region");
+  for (std::size_t i = 0; i < scene_.loads.size(); ++i)
+    check(scene_.loads[i].region, "loads[" + std::to_string(i) + "].region");
 }
 
 void Body::resize_to_mesh() {

@@ -82,6 +82,9 @@ class Body {
  private:
   void apply_log(const mesh::MeshChangeLog& log);
   void resize_to_mesh();
+  // Throws std::invalid_argument naming the key path of a fixed, prescribed
+  // or load region that holds no node of the starting mesh.
+  void require_every_region_selects_a_node() const;
   void classify_node(NodeId n);
   void refresh_edge(EdgeId e);
 

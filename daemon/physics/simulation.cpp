@@ -15,9 +15,14 @@ Simulation::Simulation(const scene::Scene& scene)
     tool_->spec = *scene.tool;
   }
   loads_.rebuild(body_);
-  for (const auto& p : scene.probes) {
+  for (std::size_t i = 0; i < scene.probes.size(); ++i) {
+    const scene::ProbeSpec& p = scene.probes[i];
     probes_.emplace_back(p.name, Vec3(p.rest_m[0], p.rest_m[1], p.rest_m[2]));
-    probes_.back().displacement_m(body_);  // locates it now: a bad probe fails at load time
+    try {
+      probes_.back().displacement_m(body_);  // locates it now: a bad probe fails at load time
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument("probes[" + std::to_string(i) + "].rest_m: " + e.what());
+    }
   }
   counters_.peak_nodes = body_.mesh().node_count();
   counters_.peak_tets = body_.mesh().tet_count();

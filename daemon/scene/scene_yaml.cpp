@@ -237,6 +237,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
       if (total > kMaxTotalCubes)
         fail("object.cubes", "too many cubes (more than " + std::to_string(kMaxTotalCubes) + " in total)");
     }
+    total_cubes_ = total;
     positive(o.cube_size_m, "object.cube_size_m");
     for (int a = 0; a < 3; ++a) {
       extent_[a] = o.cubes[a] * o.cube_size_m;
@@ -280,6 +281,17 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (!(a.stretch_ratio > 1.0))
       fail("adaptivity.stretch_ratio", "must be > 1 (got " + fmt_num(a.stretch_ratio) + ")");
     at_least(a.min_depth, 0, "adaptivity.min_depth");
+    // The mesh starts refined to min_depth everywhere: 6 · 2^min_depth tets
+    // per cube, bounded as the cubes are (min_depth 30 asked for 6e9 tets per
+    // cube and ran out of memory instead of being refused).
+    if (a.min_depth <= kMaxDepthLimit) {
+      const double tets = 6.0 * static_cast<double>(total_cubes_) * std::exp2(a.min_depth);
+      if (tets > 6.0 * static_cast<double>(kMaxTotalCubes))
+        fail("adaptivity.min_depth", "the starting mesh would have " + fmt_num(tets) + " tetrahedra (" +
+                                         std::to_string(total_cubes_) + " cubes x 6 x 2^" +
+                                         std::to_string(a.min_depth) + "), more than " +
+                                         std::to_string(6 * kMaxTotalCubes));
+    }
     if (a.max_depth > kMaxDepthLimit)
       fail("adaptivity.max_depth",
            "must be <= " + std::to_string(kMaxDepthLimit) + " (got " + std::to_string(a.max_depth) + ")");
@@ -415,6 +427,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
   const Scene& s_;
   std::array<double, 3> extent_{};
   double tolerance_ = 0.0;
+  long long total_cubes_ = 1;
 };
 
 // ---------------------------------------------------------------- documents

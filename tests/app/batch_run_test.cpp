@@ -476,6 +476,14 @@ TEST_F(TissuedProcess, CappedSolverWarnsNamingTheKeys) {
   EXPECT_EQ(r["result"]["solver"]["unconverged_steps"].get<long long>(), 50);
   EXPECT_EQ(r["result"]["solver"]["iterations"]["max"].get<long long>(), 1);
   EXPECT_TRUE(r["result"]["error"].is_null());
+  EXPECT_TRUE(contains(p.err, "try cg_preconditioner: two_level")) << p.err;
+  // Already two-level: the hint is not repeated.
+  const Process q = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.05", "--set",
+                         "integrator.cg_max_iterations=1", "--set", "integrator.cg_tolerance=1e-12", "--set",
+                         "integrator.cg_preconditioner=two_level", "--progress", "0"});
+  ASSERT_EQ(q.exit_code, 0) << q.err;
+  EXPECT_TRUE(contains(q.err, "raise cg_max_iterations or lower dt_s")) << q.err;
+  EXPECT_FALSE(contains(q.err, "two_level")) << q.err;
 }
 
 // --record: the run as a session file the session tools read (one sim row per

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <random>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "physics/forces.hpp"
@@ -56,6 +58,37 @@ void randomise_state(Body& body, std::mt19937& rng) {
 // free_node_count and moving_springs against the mesh itself, on a beam
 // with a fixed face after split/merge churn (dead node and edge slots):
 // every live spring with a free end, in id order, and nothing else.
+// A fixed, prescribed or load region that holds no node would clamp, move or
+// load nothing, and the run would go on as if it did: refused, naming the key.
+TEST(Body, ARegionThatSelectsNoNodeIsRefusedNamingItsKey) {
+  const auto between = scene::Region::sphere({0.05, 0.0125, 0.0125}, 0.001);  // face x = 0.05, between corners
+  const auto on_node = scene::Region::sphere({0.05, 0.05, 0.05}, 0.001);
+  const auto refused = [](const scene::Scene& s, const std::string& key) {
+    try {
+      Body body(s);
+      ADD_FAILURE() << key << ": accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(key + " selects no node of the mesh"), std::string::npos) << e.what();
+    }
+  };
+  scene::Scene s = testing::free_cube_scene(1, 0);
+  s.fixed.push_back({on_node});
+  s.fixed.push_back({between});
+  refused(s, "fixed[1].region");
+  s.fixed.pop_back();
+  s.prescribed.push_back({"poke", between, {0, 0, -0.001}, {}});
+  refused(s, "prescribed[0].region");
+  s.prescribed.back().region = on_node;
+  s.loads.push_back({"pull", between, {0, 0, -1}, {}});
+  refused(s, "loads[0].region");
+  s.loads.back().region = on_node;
+  EXPECT_NO_THROW(Body body(s));
+  // One level down the face centre holds a node (a region may rely on min_depth).
+  s = testing::free_cube_scene(1, 2);
+  s.loads.push_back({"pull", scene::Region::sphere({0.05, 0.025, 0.025}, 0.001), {0, 0, -1}, {}});
+  EXPECT_NO_THROW(Body body(s));
+}
+
 TEST(Body, MovingSpringsAreTheLiveOnesWithAFreeEnd) {
   scene::Scene s = testing::beam_scene();
   s.adaptivity.enabled = true;

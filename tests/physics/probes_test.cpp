@@ -10,6 +10,7 @@
 
 #include "physics/body.hpp"
 #include "physics/physics_test_support.hpp"
+#include "physics/simulation.hpp"
 
 namespace tissue::physics {
 namespace {
@@ -158,6 +159,24 @@ TEST(Probes, ProbesOnTheSurfaceAreInsideAndJustOutsideAreRefused) {
     FAIL() << "a probe outside the object must be refused";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("just outside"), std::string::npos) << e.what();
+  }
+}
+
+// The scene's checks let a probe lie outside the box by up to 1e-9 of its
+// size; such a probe is located (on the nearest tet), not refused later by a
+// tighter test of its own. One clearly outside is refused naming its key.
+TEST(Probes, AProbeTheScenesChecksAcceptIsLocatedAndABadOneNamesItsKey) {
+  // 4 x 4 x 4 cubes of 50 mm: the checks allow 0.2 nm, -4e-9 of a 50 mm tet.
+  scene::Scene s = testing::free_cube_scene(4, 0);
+  s.probes = {{"hair outside", {0.2 + 1.8e-10, 0.02, 0.02}}};
+  EXPECT_NO_THROW(Simulation sim(s));
+  s.probes = {{"fine", {0.01, 0.01, 0.01}}, {"far", {0.2001, 0.02, 0.02}}};
+  try {
+    Simulation sim(s);
+    FAIL() << "a probe outside the object must be refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("probes[1].rest_m: probe 'far' lies outside the object"), std::string::npos)
+        << e.what();
   }
 }
 

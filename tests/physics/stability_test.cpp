@@ -91,10 +91,18 @@ TEST(Stability, ThousandNewtonPointLoadOnSoftTissue) {
   for (const Rung& rung : kAll) {
     scene::Scene s = small_bar(rung, 5e4, 1e-3, 1);
     s.gravity_m_per_s2 = {0, 0, 0};
-    s.loads.push_back({"yank", sphere({0.1, 0.025, 0.025}, 1e-4), {0, 0, -1000.0}, {}});
+    // On the free end's corner node: the face centre, where this load sat
+    // before, holds no node at depth 1, so it loaded nothing (now refused).
+    s.loads.push_back({"yank", sphere({0.1, 0.05, 0.05}, 1e-4), {0, 0, -1000.0}, {}});
     s.integrator.max_substeps = 100000;
     Simulation sim(s);
-    run_checked(sim, 100, rung.is_explicit() ? 0.05 : 1e-6);
+    const std::string refused = run_checked(sim, 100, rung.is_explicit() ? 0.05 : 1e-6);
+    // The load acts: the corner it pulls moves down (unless the rung refused).
+    sim.body().mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if ((sim.body().rest_m[n] - Vec3(0.1, 0.05, 0.05)).norm() < 1e-9 && refused.empty())
+        EXPECT_LT(sim.body().x_m[n].z() - sim.body().rest_m[n].z(), -1e-3) << rung.name;
+    });
+    RecordProperty("refused_" + std::string(rung.name), refused);
     // Springs do not resist inversion; the count is reported, never hidden.
     RecordProperty("inverted_" + std::string(rung.name), static_cast<int>(inverted_tet_count(sim.body())));
   }

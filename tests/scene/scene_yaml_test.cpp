@@ -368,6 +368,10 @@ TEST(SceneYamlErrors, PhysicallyMeaninglessValues) {
   expect_error(base_with("{release_s: 1.0}", "{start_s: 2, release_s: 1.0}"), "loads[0].profile.release_s",
                "must be > start_s");
   expect_error(base_with("min_depth: 0", "min_depth: 4"), "adaptivity.min_depth", "must be <= max_depth");
+  // The starting mesh is refined to min_depth everywhere: bounded like the cubes.
+  expect_error(base_with("min_depth: 0\n  max_depth: 3", "min_depth: 30\n  max_depth: 30"), "adaptivity.min_depth",
+               "the starting mesh would have 412316860416 tetrahedra (64 cubes x 6 x 2^30), more than 60000000");
+  EXPECT_NO_THROW(parse_scene(base_with("min_depth: 0\n  max_depth: 3", "min_depth: 12\n  max_depth: 12"), "ok.yaml"));
   expect_error(base_with("max_depth: 3", "max_depth: 31"), "adaptivity.max_depth", "<= 30");
   expect_error(base_with("simplify_factor: 0.25", "simplify_factor: 1"), "adaptivity.simplify_factor", "(0, 1)");
   expect_error(base_with("stretch_ratio: 1.05", "stretch_ratio: 1"), "adaptivity.stretch_ratio", "> 1");

@@ -234,9 +234,9 @@ TEST(Service, SetChangesTheRunningSceneAndLoadSceneTakesTheFileAsWritten) {
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
-// A reload whose scene loads but cannot be built (a probe a hair outside the
-// object passes the file's checks and fails when located) changes nothing:
-// the running scene's file stays the one `set` reloads.
+// A reload whose scene loads but cannot be built (a fixed region that lies
+// between the nodes passes the file's checks and fails on the mesh) changes
+// nothing: the running scene's file stays the one `set` reloads.
 TEST(Service, AFailedReloadChangesNothing) {
   TempDir dir;
   const std::string config = write_config(dir, scene_file("cantilever.yaml"));
@@ -247,14 +247,14 @@ TEST(Service, AFailedReloadChangesNothing) {
     std::ifstream in(path);
     return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   };
-  // The config now names a copy of the cantilever whose centre probe sits
-  // 0.09 nm outside the object.
-  const std::string bad_scene = dir / "bad_probe.yaml";
+  // The config now names a copy of the cantilever clamped by a 1 mm sphere
+  // between the nodes of its face x = 0.
+  const std::string bad_scene = dir / "bad_fixed.yaml";
   std::string scene_text = read(scene_file("cantilever.yaml"));
-  const std::string probe = "rest_m: [0.1, 0.05, 0.05]";
-  const std::size_t at = scene_text.find(probe);
+  const std::string fixed = "{box: {min_m: [0, 0, 0], max_m: [0, 0.1, 0.1]}}";
+  const std::size_t at = scene_text.find(fixed);
   ASSERT_NE(at, std::string::npos);
-  scene_text.replace(at, probe.size(), "rest_m: [0.10000000009, 0.05, 0.05]");
+  scene_text.replace(at, fixed.size(), "{sphere: {centre_m: [0, 0.0125, 0.0125], radius_m: 0.001}}");
   std::ofstream(bad_scene) << scene_text;
   std::string config_text = read(config);
   config_text.replace(config_text.find(scene_file("cantilever.yaml")), scene_file("cantilever.yaml").size(), bad_scene);
@@ -267,7 +267,7 @@ TEST(Service, AFailedReloadChangesNothing) {
     if (!failed) std::this_thread::sleep_for(10ms);
   }
   ASSERT_TRUE(failed) << "the reload did not fail: " << file_text(run.err);
-  EXPECT_NE(file_text(run.err).find("lies outside the object"), std::string::npos) << file_text(run.err);
+  EXPECT_NE(file_text(run.err).find("fixed[0].region selects no node"), std::string::npos) << file_text(run.err);
   EXPECT_EQ(client.call("status")["result"]["scene"]["source"], source);
   const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 6e4}});
   EXPECT_TRUE(set["ok"].get<bool>()) << set.dump();
