@@ -136,6 +136,11 @@ struct DaemonConfig {
   ControlSpec control;
   PublishSpec publish;
   double status_interval_s = 1.0;  // live status line on stdout and STATUS= to systemd
+  // Largest starting mesh the service builds (scene::starting_tet_count). A
+  // scene is built on the control thread, ~1.3 us per tet: 6e6 tets blocked
+  // every client for 7.6 s, past systemd's 5 s watchdog, and could never run
+  // in real time anyway.
+  int max_scene_tets = 1'000'000;
 };
 
 }  // namespace tissue::config

@@ -39,8 +39,8 @@ constexpr int kMaxRtPriority = 99;
 // CPU_SETSIZE: sched_setaffinity cannot name a CPU beyond it.
 constexpr int kMaxCpuIndex = 1023;
 
-const std::array<std::string_view, 8> kTopLevelKeys{"scene",   "state_dir", "status_interval_s", "device",
-                                                    "haptics", "realtime",  "control",           "publish"};
+const std::array<std::string_view, 9> kTopLevelKeys{
+    "scene", "state_dir", "status_interval_s", "max_scene_tets", "device", "haptics", "realtime", "control", "publish"};
 
 const yaml_util::DocumentKind kConfigDocument{
     "daemon config", "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
@@ -68,6 +68,7 @@ class Converter : public yaml_util::Reader {
     read(require(f, "scene", ""), "scene", c.scene_path);
     opt(f, "state_dir", "", c.state_dir);
     opt(f, "status_interval_s", "", c.status_interval_s);
+    opt(f, "max_scene_tets", "", c.max_scene_tets);
     if (const auto it = f.find("device"); it != f.end()) device(it->second, "device", c.device);
     if (const auto it = f.find("haptics"); it != f.end()) haptics(it->second, "haptics", c.haptics);
     if (const auto it = f.find("realtime"); it != f.end()) realtime(it->second, "realtime", c.realtime);
@@ -210,6 +211,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (c_.scene_path.empty()) fail("scene", "must not be empty (the scene file to load)");
     if (c_.state_dir.empty()) fail("state_dir", "must not be empty (recordings and exports go there)");
     positive(c_.status_interval_s, "status_interval_s");
+    if (c_.max_scene_tets < 1) fail("max_scene_tets", "must be >= 1 (got " + std::to_string(c_.max_scene_tets) + ")");
 
     const DeviceSpec& d = c_.device;
     const int kind = static_cast<int>(d.kind);

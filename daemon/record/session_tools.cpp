@@ -155,7 +155,9 @@ std::uint64_t checked_rows(hid_t d, const std::string& path, DatasetId id) {
     std::string shape;
     for (int i = 0; i < rank; ++i) shape += (i ? " x " : "") + std::to_string(dims[i]);
     bad_file(path, std::string("dataset ") + spec.path + " has shape (" + shape + "), rank " + std::to_string(rank) +
-                       ", expected " + (spec.columns == 1 ? "rank 1 (one value per row)" : "N x 3") +
+                       ", expected " +
+                       (spec.columns == 1 ? std::string("rank 1 (one value per row)")
+                                          : "N x " + std::to_string(spec.columns)) +
                        ": corrupt session file");
   }
   Handle type(H5Dget_type(d));

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <limits>
 #include <optional>
 #include <string>
@@ -178,5 +179,13 @@ struct Scene {
   std::vector<ProbeSpec> probes;
   std::optional<ToolSpec> tool;
 };
+
+// Tetrahedra of the starting mesh: 6 per cube, refined to min_depth
+// everywhere (each bisection doubles them). A double: it is compared with
+// limits before anything that large is built.
+inline double starting_tet_count(const Scene& s) {
+  return 6.0 * static_cast<double>(s.object.cubes[0]) * static_cast<double>(s.object.cubes[1]) *
+         static_cast<double>(s.object.cubes[2]) * std::exp2(static_cast<double>(s.adaptivity.min_depth));
+}
 
 }  // namespace tissue::scene

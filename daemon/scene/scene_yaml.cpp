@@ -285,7 +285,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     // per cube, bounded as the cubes are (min_depth 30 asked for 6e9 tets per
     // cube and ran out of memory instead of being refused).
     if (a.min_depth <= kMaxDepthLimit) {
-      const double tets = 6.0 * static_cast<double>(total_cubes_) * std::exp2(a.min_depth);
+      const double tets = starting_tet_count(s_);
       if (tets > 6.0 * static_cast<double>(kMaxTotalCubes))
         fail("adaptivity.min_depth", "the starting mesh would have " + fmt_num(tets) + " tetrahedra (" +
                                          std::to_string(total_cubes_) + " cubes x 6 x 2^" +

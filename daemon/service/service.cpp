@@ -105,6 +105,20 @@ void Service::load_config() {
   scene_path_ = config_.scene_path;
   base_scene_overrides_ = scene_overrides();
   scene_ = load_scene_file(scene_path_);
+  require_servable(scene_);
+}
+
+void Service::require_servable(const scene::Scene& scene) const {
+  const double tets = scene::starting_tet_count(scene);
+  if (tets > config_.max_scene_tets) {
+    char count[32];
+    std::snprintf(count, sizeof count, "%.0f", tets);
+    throw std::invalid_argument("scene '" + scene.name + "': its starting mesh has " + count +
+                                " tetrahedra, more than max_scene_tets = " + std::to_string(config_.max_scene_tets) +
+                                " in " + options_.config_path +
+                                " (it would block the daemon while it is built and cannot run in real time); "
+                                "raise max_scene_tets to serve it anyway");
+  }
 }
 
 void Service::start_threads() {
@@ -167,7 +181,8 @@ void Service::record_event(int kind, const std::string& text) {
 }
 
 void Service::apply_scene(scene::Scene scene, bool restart_haptics) {
-  auto runner = std::make_unique<SimRunner>(scene);  // throws std::invalid_argument: nothing changes
+  require_servable(scene);                           // throws std::invalid_argument: nothing changes
+  auto runner = std::make_unique<SimRunner>(scene);  // ditto
   const bool had_tool = scene_.tool.has_value();
   scene_ = std::move(scene);
   sim_->replace_runner(std::move(runner));

@@ -87,6 +87,9 @@ class Service : public control::ControlHandler {
   // restarted when restart_haptics: its settings changed). Throws before
   // changing anything when the scene cannot be built.
   void apply_scene(scene::Scene scene, bool restart_haptics = false);
+  // Throws std::invalid_argument when the scene's starting mesh is over
+  // config max_scene_tets (see DaemonConfig).
+  void require_servable(const scene::Scene& scene) const;
   void reload();  // SIGHUP: config and scene again
   void request_stop(const std::string& why);
   void arm_signals();

@@ -132,6 +132,8 @@ TEST(DaemonConfigYaml, MinimalConfigTakesTheDocumentedDefaults) {
   EXPECT_EQ(c.control.unix_socket_path, d.control.unix_socket_path);
   EXPECT_EQ(c.control.tcp_port, 0);
   EXPECT_DOUBLE_EQ(c.status_interval_s, d.status_interval_s);
+  EXPECT_EQ(c.max_scene_tets, 1'000'000);
+  EXPECT_EQ(parse_daemon_config(text + "max_scene_tets: 5000\n", "x.yaml").max_scene_tets, 5000);
 }
 
 TEST(DaemonConfigYaml, ShippedConfigLoadsAndPressesTheCantileverTopFace) {
@@ -207,6 +209,8 @@ TEST(DaemonConfigYaml, WrongTypesNameTheKey) {
 
 TEST(DaemonConfigYaml, OutOfRangeValuesNameTheKey) {
   expect_error(edit("rate_hz: 1000", "rate_hz: 0"), "haptics.rate_hz", "must be > 0 (got 0)");
+  expect_error(edit("state_dir: /var/lib/tissued", "state_dir: /var/lib/tissued\nmax_scene_tets: 0"), "max_scene_tets",
+               "must be >= 1 (got 0)");
   expect_error(edit("rate_hz: 1000", "rate_hz: -5"), "haptics.rate_hz", "must be > 0 (got -5)");
   expect_error(edit("rate_hz: 1000", "rate_hz: .nan"), "haptics.rate_hz", "finite");
   expect_error(edit("rate_hz: 1000", "rate_hz: 50000"), "haptics.rate_hz", "must be <= 10000");

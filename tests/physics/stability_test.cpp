@@ -99,8 +99,9 @@ TEST(Stability, ThousandNewtonPointLoadOnSoftTissue) {
     const std::string refused = run_checked(sim, 100, rung.is_explicit() ? 0.05 : 1e-6);
     // The load acts: the corner it pulls moves down (unless the rung refused).
     sim.body().mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-      if ((sim.body().rest_m[n] - Vec3(0.1, 0.05, 0.05)).norm() < 1e-9 && refused.empty())
+      if ((sim.body().rest_m[n] - Vec3(0.1, 0.05, 0.05)).norm() < 1e-9 && refused.empty()) {
         EXPECT_LT(sim.body().x_m[n].z() - sim.body().rest_m[n].z(), -1e-3) << rung.name;
+      }
     });
     RecordProperty("refused_" + std::string(rung.name), refused);
     // Springs do not resist inversion; the count is reported, never hidden.

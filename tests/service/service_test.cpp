@@ -234,6 +234,41 @@ TEST(Service, SetChangesTheRunningSceneAndLoadSceneTakesTheFileAsWritten) {
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
+// A scene past max_scene_tets is refused before it is built (6e6 tets took
+// 7.6 s on the control thread, past systemd's 5 s watchdog), at start and
+// over the socket; the running scene goes on.
+TEST(Service, AScenePastMaxSceneTetsIsRefusedBeforeItIsBuilt) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"));
+  std::ofstream(config, std::ios::app) << "max_scene_tets: 3072\n";  // the cantilever has 384 at depth 0
+  {
+    Running run(config);
+    ControlClient client = connect(dir / "ctl.sock");
+    const nlohmann::json big = client.call("set", {{"key", "object.cubes"}, {"value", {100, 100, 100}}});
+    EXPECT_FALSE(big["ok"].get<bool>());
+    EXPECT_NE(big["error"].get<std::string>().find("starting mesh has 6000000 tetrahedra, more than max_scene_tets = "
+                                                   "3072 in " +
+                                                   config),
+              std::string::npos)
+        << big.dump();
+    EXPECT_TRUE(client.call("set", {{"key", "adaptivity.min_depth"}, {"value", 3}})["ok"].get<bool>()) << "3072: fits";
+    EXPECT_FALSE(client.call("set", {{"key", "object.cubes"}, {"value", {5, 4, 4}}})["ok"].get<bool>()) << "3840";
+    EXPECT_EQ(client.call("status")["result"]["scene"]["name"], "cantilever");
+    client.call("shutdown");
+    EXPECT_EQ(run.wait(), kServiceOk);
+  }
+  ServiceOptions options;
+  options.config_path = config;
+  options.overrides = {"adaptivity.max_depth=4", "adaptivity.min_depth=4"};  // 6144 at the start
+  options.err = std::tmpfile();
+  options.out = std::tmpfile();
+  EXPECT_EQ(Service(options).run(), kServiceBadConfig);
+  EXPECT_NE(file_text(options.err).find("more than max_scene_tets = 3072"), std::string::npos)
+      << file_text(options.err);
+  std::fclose(options.err);
+  std::fclose(options.out);
+}
+
 // A reload whose scene loads but cannot be built (a fixed region that lies
 // between the nodes passes the file's checks and fails on the mesh) changes
 // nothing: the running scene's file stays the one `set` reloads.
