@@ -242,6 +242,8 @@ void Service::reload() {
     base_scene_overrides_ = scene_overrides();
     scene_sets_.clear();
     std::fprintf(options_.out, "tissued: reloaded %s and %s\n", options_.config_path.c_str(), scene_path_.c_str());
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded),
+                 "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_);
   } catch (const std::exception& e) {
     std::fprintf(options_.err, "tissued: reload failed, keeping the running scene: %s\n", e.what());
   }
@@ -470,13 +472,17 @@ nlohmann::json Service::status() {
   return j;
 }
 
+// Operator actions go in the recording's events too: a session reviewed
+// later shows when the clock stopped or the object was put back at rest.
 nlohmann::json Service::pause() {
   sim_->pause();
+  record_event(static_cast<int>(record::EventKind::kInfo), "simulation paused (control)");
   return {{"paused", true}};
 }
 
 nlohmann::json Service::resume() {
   sim_->resume();
+  record_event(static_cast<int>(record::EventKind::kInfo), "simulation resumed (control)");
   return {{"paused", false}};
 }
 
@@ -486,6 +492,7 @@ nlohmann::json Service::reset() {
   } catch (const std::exception& e) {
     throw control::ControlError(std::string("reset failed: ") + e.what());
   }
+  record_event(static_cast<int>(record::EventKind::kInfo), "scene " + scene_.name + " reset to rest (control)");
   return {{"scene", scene_.name}, {"reset", true}};
 }
 

@@ -358,6 +358,9 @@ TEST(Service, RecordsASessionOnRequest) {
   const nlohmann::json status = client.call("status")["result"]["recording"];
   EXPECT_EQ(status["state"], "recording") << status.dump();
   ASSERT_TRUE(client.call("load_scene", {{"path", scene_file("cantilever.yaml")}})["ok"].get<bool>());
+  ASSERT_TRUE(client.call("pause")["ok"].get<bool>());
+  ASSERT_TRUE(client.call("resume")["ok"].get<bool>());
+  ASSERT_TRUE(client.call("reset")["ok"].get<bool>());
   const nlohmann::json stopped = client.call("record_stop");
   ASSERT_TRUE(stopped["ok"].get<bool>()) << stopped.dump();
   EXPECT_TRUE(client.call("status")["result"]["recording"].is_null());
@@ -370,7 +373,7 @@ TEST(Service, RecordsASessionOnRequest) {
   EXPECT_GT(info.rows.haptic_rows, 300u);  // ~600 ticks at 1 kHz; generous for sanitizers
   EXPECT_GT(info.rows.sim_rows, 100u);     // one per sim step: fewer when the sim runs slow (sanitizers)
   EXPECT_GT(info.rows.mesh_frames, 5u);    // 30 Hz
-  EXPECT_GE(info.rows.events, 2u);         // recording started, scene loaded
+  EXPECT_EQ(info.rows.events, 5u);         // recording started, scene loaded, paused, resumed, reset
 }
 
 // A session creation left by a killed recorder goes when the daemon starts,
