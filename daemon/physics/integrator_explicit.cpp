@@ -544,6 +544,9 @@ void ExplicitIntegrator::spend_on_estimate(const Body& body, int substeps) {
 
 namespace {
 
+constexpr const char* kNonFiniteRejected =
+    "explicit integrator: state became non-finite; step rejected, previous state kept";
+
 // The refusal when a step needs more than max_substeps.
 std::string too_many_substeps(double dt_s, double needed, double limit_s, const ExplicitStableStep& stable,
                               int max_substeps) {
@@ -617,16 +620,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
       out.error = os.str();
       return out;
     }
-    out.substeps = std::max(count, static_cast<int>(collapse_needed));
-    advance(dt_s / out.substeps, out.substeps);
-    if (!advanced_state_is_finite(body)) {
-      out.ok = false;
-      out.error = "explicit integrator: state became non-finite; step rejected, previous state kept";
-      return out;
-    }
-    store(body);
-    spend_on_estimate(body, out.substeps);
-    return out;
+    return run_and_accept(body, dt_s, std::max(count, static_cast<int>(collapse_needed)), out);
   }
   // Chosen for r grown by as much again as over the last step, so a load's
   // onset (r rising step after step) does not run steps twice.
@@ -636,7 +630,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     advance(dt_s / fewer, fewer, &reached, &body);
     if (!advanced_state_is_finite(body)) {
       out.ok = false;
-      out.error = "explicit integrator: state became non-finite; step rejected, previous state kept";
+      out.error = kNonFiniteRejected;
       return out;
     }
     steps_since_measured_ = 0;
@@ -659,11 +653,15 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     count = std::max(count, std::min(verified_substeps(dt_s, reached), spec_.max_substeps));
     load(body, f_ext_N);
   }
+  return run_and_accept(body, dt_s, count, out);
+}
+
+StepOutcome ExplicitIntegrator::run_and_accept(Body& body, double dt_s, int count, StepOutcome out) {
   out.substeps = count;
   advance(dt_s / count, count);
   if (!advanced_state_is_finite(body)) {
     out.ok = false;
-    out.error = "explicit integrator: state became non-finite; step rejected, previous state kept";
+    out.error = kNonFiniteRejected;
     return out;
   }
   store(body);

@@ -340,6 +340,9 @@ class ExplicitIntegrator final : public Integrator {
   // Sub-steps for dt_s at relative end displacement r with the verified
   // margin (max_substeps + 1 when more than that).
   int verified_substeps(double dt_s, double end_displacement_ratio) const;
+  // Runs `count` sub-steps from the loaded state and stores the result in the
+  // body, or rejects a non-finite one (the body untouched).
+  StepOutcome run_and_accept(Body& body, double dt_s, int count, StepOutcome out);
   // state_is_finite for the padded copy, over the body's live nodes.
   bool advanced_state_is_finite(const Body& body) const;
   // Copies the padded state back to the body.

@@ -323,23 +323,7 @@ TEST(SessionSource, StrainIsNaNForAWholeFrameOrNotAtAll) {
 TEST(SessionSource, ASessionLeftByACrashReadsAsFarAsItWasFlushed) {
   TempDir dir;
   const std::string path = dir / "crashed.h5";
-  const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    try {
-      record::SessionMetadata meta;
-      meta.scene_name = "crash";
-      auto w = record::SessionWriter::create(path, meta);
-      for (std::uint64_t f = 0; f < 3; ++f) w->append_mesh_frame(rt::test_frame(f).view());
-      w->flush();
-      ::_exit(0);  // never closed, as after a crash
-    } catch (...) {
-    }
-    ::_exit(1);
-  }
-  int status = 0;
-  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "the writer process failed";
+  rt::write_crashed_session(path, 0, 3);
 
   auto source = open_session_source(path);
   ASSERT_EQ(source->frame_count(), 3u);

@@ -87,6 +87,29 @@ bool same_row(const SimRow& a, const SimRow& b) {
          a.refines == b.refines && a.merges == b.merges && a.kinetic_J == b.kinetic_J && a.elastic_J == b.elastic_J;
 }
 
+void write_crashed_session(const std::string& path, std::uint64_t haptic_rows, std::uint64_t frames) {
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    try {
+      SessionMetadata meta;
+      meta.scene_name = "crash";
+      auto w = SessionWriter::create(path, meta);
+      std::vector<HapticRow> rows;
+      for (std::uint64_t i = 0; i < haptic_rows; ++i) rows.push_back(haptic_row(i));
+      if (!rows.empty()) w->append_haptic(rows);
+      for (std::uint64_t f = 0; f < frames; ++f) w->append_mesh_frame(test_frame(f).view());
+      w->flush();
+      ::_exit(0);  // never closed, as after a crash
+    } catch (...) {
+    }
+    ::_exit(1);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "the writer process failed";
+}
+
 std::string write_test_session(const std::string& path, const TestSession& c) {
   SessionMetadata m;
   m.scene_name = c.scene_name;

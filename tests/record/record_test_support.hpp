@@ -55,6 +55,11 @@ std::string write_test_session(const std::string& path, const TestSession& conte
 
 void write_bytes(const std::string& path, const std::string& bytes);
 
+// A session whose writer died after a flush (the superblock still says "open
+// for SWMR writing"): haptic_row(0..haptic_rows) and test_frame(0..frames),
+// scene "crash", written by a child process that exits without closing.
+void write_crashed_session(const std::string& path, std::uint64_t haptic_rows, std::uint64_t frames);
+
 // Files every session reader and tool must refuse with a clear error naming
 // the file: empty, text, random bytes, an HDF5 signature then noise, a good
 // session truncated at several points (inside the signature, the superblock,

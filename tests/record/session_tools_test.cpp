@@ -483,31 +483,6 @@ void recreate(const std::string& path, const char* dataset, hid_t type, std::vec
   H5Fclose(file);
 }
 
-// A session whose writer died after a flush (the superblock still says
-// "open for SWMR writing"), written by a child process.
-void write_crashed_session(const std::string& path) {
-  const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    try {
-      SessionMetadata meta;
-      meta.scene_name = "crash";
-      auto w = SessionWriter::create(path, meta);
-      std::vector<HapticRow> rows;
-      for (std::uint64_t i = 0; i < 300; ++i) rows.push_back(testing::haptic_row(i));
-      w->append_haptic(rows);
-      for (std::uint64_t f = 0; f < 3; ++f) w->append_mesh_frame(testing::test_frame(f).view());
-      w->flush();
-      ::_exit(0);  // never closed, as after a crash
-    } catch (...) {
-    }
-    ::_exit(1);
-  }
-  int status = 0;
-  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "the writer process failed";
-}
-
 // A SWMR reader retries a metadata read whose checksum fails, doubling its
 // sleep each time; with HDF5's default number of attempts one bad byte in a
 // crashed session hung every reader for good. Now it is an error naming the
@@ -516,7 +491,7 @@ void write_crashed_session(const std::string& path) {
 TEST(SessionTools, CorruptMetadataInACrashedSessionIsAnErrorNotAHang) {
   TempDir dir;
   const std::string crashed = dir / "crashed.h5";
-  write_crashed_session(crashed);
+  testing::write_crashed_session(crashed, 300, 3);
   ASSERT_TRUE(read_session_info(crashed).open_for_write_flag);
   std::string bytes = testing::slurp(crashed);
   // Version-2 object headers ("OHDR") end in a checksum over the whole block;
