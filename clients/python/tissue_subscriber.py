@@ -12,10 +12,14 @@ Needs the PyPI `lcm` package (pip install lcm==1.5.3) and the Python types
 lcm-gen writes at build time (build/release/proto/generated/python; --types
 points elsewhere). The daemon publishes when its config says
 `publish: {lcm: {enabled: true}}`.
+A message that does not decode (another publisher on the channel, a damaged
+datagram) is counted and dropped; non-finite statistics are printed but left
+out of the plot.
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
 2 bad arguments or missing modules.
 """
 import argparse
+import math
 import os
 import select
 import sys
@@ -39,6 +43,9 @@ def find_types(explicit):
 def write_svg(path, samples):
     """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib."""
     width, height, pad = 640, 400, 50
+    samples = [s for s in samples if all(math.isfinite(v) for v in s)]  # a NaN would break the polyline
+    if not samples:
+        return False
     t = [s[0] for s in samples]
     series = [("tets", [s[1] for s in samples], "#1f77b4"), ("real-time factor", [s[2] for s in samples], "#d62728")]
     t0, t1 = min(t), max(t)
@@ -59,6 +66,7 @@ def write_svg(path, samples):
     out.append("</svg>")
     with open(path, "w") as f:
         f.write("\n".join(out) + "\n")
+    return True
 
 
 def main():
@@ -89,9 +97,23 @@ def main():
         print(f"tissue_subscriber: cannot listen at {args.url}: {e}", file=sys.stderr)
         return 2
     samples, counts = [], {"mesh": 0, "haptic": 0}
+    undecodable = {}
+
+    def decoded(kind, channel, data):
+        """The message, or None (counted; the first one per channel said) when it does not decode."""
+        try:
+            return kind.decode(data)
+        except Exception as e:  # LCM's decoders raise ValueError, struct.error, ...
+            undecodable[channel] = undecodable.get(channel, 0) + 1
+            if undecodable[channel] == 1:
+                print(f"tissue_subscriber: dropped a {len(data)}-byte message on {channel} that is not a "
+                      f"{kind.__name__}: {e}", file=sys.stderr)
+            return None
 
     def on_stats(channel, data):
-        m = sim_stats.decode(data)
+        m = decoded(sim_stats, channel, data)
+        if m is None:
+            return
         samples.append((m.time_s, m.tet_count, m.real_time_factor))
         print(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
               f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
@@ -99,12 +121,12 @@ def main():
               f"(meshes {counts['mesh']}, haptic states {counts['haptic']})", flush=True)
 
     def on_mesh(channel, data):
-        surface_mesh.decode(data)  # decoding proves the message is whole
-        counts["mesh"] += 1
+        if decoded(surface_mesh, channel, data) is not None:  # decoding proves the message is whole
+            counts["mesh"] += 1
 
     def on_haptic(channel, data):
-        haptic_state.decode(data)
-        counts["haptic"] += 1
+        if decoded(haptic_state, channel, data) is not None:
+            counts["haptic"] += 1
 
     lc.subscribe("TISSUE_SIM_STATS", on_stats)
     lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
@@ -114,9 +136,13 @@ def main():
         ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))
         if ready:
             lc.handle()
+    for channel, n in sorted(undecodable.items()):
+        print(f"tissue_subscriber: {n} undecodable message(s) dropped on {channel}", file=sys.stderr)
     if args.plot and samples:
-        write_svg(args.plot, samples)
-        print(f"wrote {args.plot}")
+        if write_svg(args.plot, samples):
+            print(f"wrote {args.plot}")
+        else:
+            print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
     if not samples:
         print(f"tissue_subscriber: no sim_stats at {args.url} in {args.seconds:g} s (is publish.lcm.enabled on?)",
               file=sys.stderr)

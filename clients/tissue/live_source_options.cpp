@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include "export/live_source.hpp"
+#include "tissue/cli_checks.hpp"
 #include "transport/dds_subscriber.hpp"
 #include "transport/lcm_subscriber.hpp"
 
@@ -16,11 +17,11 @@ void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* s
   o.dds_option = add_dds_options(cmd, o.dds, "Live frames from Fast DDS (topic <prefix>surface_mesh)");
   CLI::Option* seconds =
       cmd->add_option("--seconds", o.seconds, "Live: collect frames for S seconds (wall) after the first one")
-          ->check(CLI::PositiveNumber)
+          ->check(finite_positive())
           ->capture_default_str();
   if (many) seconds->needs(many);
   CLI::Option* timeout = cmd->add_option("--timeout", o.timeout_s, "Live: wait at most S seconds for the first frame")
-                             ->check(CLI::PositiveNumber)
+                             ->check(finite_positive())
                              ->capture_default_str();
   session->excludes(o.lcm_option)->excludes(o.dds_option);
   o.lcm_option->excludes(o.dds_option);

@@ -15,6 +15,7 @@
 #include "config/daemon_config.hpp"
 #include "record/session_tools.hpp"
 #include "replay/session_replay.hpp"
+#include "tissue/cli_checks.hpp"
 #include "tissue/dds_cli.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
@@ -197,7 +198,7 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
       ->capture_default_str()
       ->needs(dds);
   cmd->add_option("--speed", r.replay.speed, "Session seconds per wall second (2: twice as fast)")
-      ->check(CLI::PositiveNumber)
+      ->check(finite_positive())
       ->capture_default_str();
   cmd->add_option("--from", r.replay.timeline.from_s, "Start at this session time (s)");
   cmd->add_option("--to", r.replay.timeline.to_s, "End at this session time (s)");

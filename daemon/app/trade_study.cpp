@@ -66,6 +66,7 @@
 #include "physics/simulation.hpp"
 #include "scene/scene.hpp"
 #include "scene/scene_yaml.hpp"
+#include "util/output_file.hpp"
 #include "util/xml.hpp"
 
 namespace tissue::app {
@@ -140,6 +141,40 @@ void usage(const std::string& program, std::FILE* to) {
       to);
 }
 
+namespace {
+
+// The whole of `text` as a finite number > 0 (or an integer in [0, 30] for
+// depths); anything else is the option's error, naming the value. std::stod
+// alone took "20abc" as 20, "nan" as NaN and said only "stod" for ",".
+double positive_number(const std::string& option, const std::string& text) {
+  std::size_t used = 0;
+  double v = 0.0;
+  try {
+    v = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size()) throw std::invalid_argument(option + ": '" + text + "' is not a number");
+  if (!(std::isfinite(v) && v > 0.0))
+    throw std::invalid_argument(option + ": " + text + " must be a finite number > 0");
+  return v;
+}
+
+int depth(const std::string& option, const std::string& text) {
+  std::size_t used = 0;
+  long v = -1;
+  try {
+    v = std::stol(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size()) throw std::invalid_argument(option + ": '" + text + "' is not an integer");
+  if (v < 0 || v > 30) throw std::invalid_argument(option + ": " + text + " must be a depth in [0, 30]");
+  return static_cast<int>(v);
+}
+
+}  // namespace
+
 Options parse(const std::vector<std::string>& args) {
   Options o;
   auto value = [&](std::size_t& i) -> std::string {
@@ -169,17 +204,17 @@ Options parse(const std::vector<std::string>& args) {
     else if (a == "--metric")
       o.metric = value(i);
     else if (a == "--th") {
-      for (const auto& t : split_list(value(i))) o.th_Pa.push_back(std::stod(t));
+      for (const auto& t : split_list(value(i))) o.th_Pa.push_back(positive_number("--th", t));
     } else if (a == "--depths") {
-      for (const auto& t : split_list(value(i))) o.max_depths.push_back(std::stoi(t));
+      for (const auto& t : split_list(value(i))) o.max_depths.push_back(depth("--depths", t));
     } else if (a == "--integrators") {
       o.integrators = split_list(value(i));
     } else if (a == "--dts") {
-      for (const auto& t : split_list(value(i))) o.dts_s.push_back(std::stod(t));
+      for (const auto& t : split_list(value(i))) o.dts_s.push_back(positive_number("--dts", t));
     } else if (a == "--duration") {
-      o.sweep_duration_s = std::stod(value(i));
+      o.sweep_duration_s = positive_number("--duration", value(i));
     } else if (a == "--run-cap") {
-      o.run_wall_cap_s = std::stod(value(i));
+      o.run_wall_cap_s = positive_number("--run-cap", value(i));
     } else if (a == "--clock") {
       const std::string c = value(i);
       if (c != "wall" && c != "cpu") throw std::invalid_argument("--clock must be wall or cpu");
@@ -193,7 +228,7 @@ Options parse(const std::vector<std::string>& args) {
       if (o.explicit_precision != "double" && o.explicit_precision != "float")
         throw std::invalid_argument("--explicit-precision must be double or float");
     } else if (a == "--beam-depth") {
-      o.beam_max_depth = std::stoi(value(i));
+      o.beam_max_depth = depth("--beam-depth", value(i));
     } else if (a == "-h" || a == "--help") {
       o.help = true;
       return o;
@@ -213,6 +248,10 @@ Options parse(const std::vector<std::string>& args) {
     throw std::invalid_argument("--set applies to --scene-file; the built-in scenes take none");
   if (!o.sweep && (!o.csv_path.empty() || !o.svg_path.empty()))
     throw std::invalid_argument("--csv and --svg are the sweep's files: add --sweep");
+  if (!o.csv_path.empty() && !o.svg_path.empty() &&
+      (o.csv_path == o.svg_path || util::same_file(o.csv_path, o.svg_path)))
+    throw std::invalid_argument("--csv and --svg name the same file '" + o.csv_path +
+                                "': the plot would replace the table");
   if (o.metric != "rms" && o.metric != "max" && o.metric != "tip" && o.metric != "path")
     throw std::invalid_argument("--metric must be rms, max, tip or path");
   return o;

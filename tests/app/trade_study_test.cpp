@@ -231,6 +231,34 @@ TEST(TradeStudy, HelpListsTheOptionsAndABadOptionIsAUsageError) {
   EXPECT_EQ(bad.out.find("Sweep"), std::string::npos) << "nothing ran: " << bad.out;
 }
 
+// Every number is taken whole and in range, or the option says why (exit 2,
+// nothing run): NaN or zero steps ran 0-step "ok" rows, "20abc" was 20, a
+// negative duration silently became the default, "," said only "stod".
+TEST(TradeStudy, BadNumbersAreUsageErrorsNamingTheOption) {
+  TempDir dir;
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--dts nan", "--dts: nan must be a finite number > 0"},
+      {"--dts 0", "--dts: 0 must be a finite number > 0"},
+      {"--dts 0.001,-0.005", "--dts: -0.005 must be a finite number > 0"},
+      {"--th nan", "--th: nan must be a finite number > 0"},
+      {"--th -5", "--th: -5 must be a finite number > 0"},
+      {"--th 20abc", "--th: '20abc' is not a number"},
+      {"--th ,", "--th: '' is not a number"},
+      {"--duration -1", "--duration: -1 must be a finite number > 0"},
+      {"--duration 1e400", "--duration: '1e400' is not a number"},
+      {"--run-cap nan", "--run-cap: nan must be a finite number > 0"},
+      {"--depths 3.9", "--depths: '3.9' is not an integer"},
+      {"--beam-depth -3", "--beam-depth: -3 must be a depth in [0, 30]"},
+      {"--csv " + quote(dir / "same.out") + " --svg " + quote(dir / "same.out"), "name the same file"},
+  };
+  for (const auto& [args, expected] : cases) {
+    const RunResult r = run(kTrade + " --sweep --quick " + args, dir);
+    EXPECT_EQ(r.exit_code, 2) << args << ": " << r.err;
+    EXPECT_NE(r.err.find(expected), std::string::npos) << args << ": " << r.err;
+    EXPECT_EQ(r.out.find("Sweep"), std::string::npos) << args << ": nothing runs";
+  }
+}
+
 // The sweep's files are created before any run: a path that cannot be
 // written is exit 4 naming it, with nothing run; and they belong to the sweep.
 TEST(TradeStudy, AnUnwritableOutputFailsBeforeAnyRun) {

@@ -217,6 +217,14 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2(s + " --animate --from 1 --to 0.5", "the window is empty");
   expect_2(s + " --colour purple", "purple");
   expect_2(s + " --colour strain", "stores no strain energy (session format version 1, or recorded without it)");
+  // Live waits: NaN passed CLI11's PositiveNumber and waited forever (no
+  // publisher is needed to see the refusal: arguments are checked first).
+  const std::string live = "--lcm memq:// -o " + quote(dir_ / "o.x3d");
+  expect_2(live + " --timeout nan", "--timeout: nan must be a finite number > 0");
+  expect_2(live + " --timeout inf", "--timeout: inf must be a finite number > 0");
+  expect_2(live + " --timeout 0", "--timeout: 0 must be a finite number > 0");
+  expect_2(live + " --animate --seconds nan", "--seconds: nan must be a finite number > 0");
+  expect_2(live + " --timeout 5s", "--timeout: '5s' is not a number");
   expect_2("-o " + quote(dir_ / "o.x3d"), "--session is required");
   expect_2("--session " + quote(session_), "--output is required");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));

@@ -1,0 +1,25 @@
+// Option checks the `tissue` subcommands share.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+namespace tissue::cli {
+
+// A finite number > 0. CLI::PositiveNumber lets NaN through (every
+// comparison with it is false): `--timeout nan` then waited forever.
+inline CLI::Validator finite_positive() {
+  return CLI::Validator(
+      [](std::string& v) -> std::string {
+        char* end = nullptr;
+        const double x = std::strtod(v.c_str(), &end);
+        if (v.empty() || end != v.c_str() + v.size()) return "'" + v + "' is not a number";
+        if (!(std::isfinite(x) && x > 0.0)) return v + " must be a finite number > 0";
+        return {};
+      },
+      "S > 0");
+}
+
+}  // namespace tissue::cli
