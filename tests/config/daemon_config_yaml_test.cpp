@@ -115,6 +115,27 @@ TEST(DaemonConfigYaml, BaseParsesWithEveryField) {
   EXPECT_EQ(c.control.max_connections, 16);
 }
 
+// udpm:// URLs are checked here: LCM itself took port 99999 or ttl=-3 and
+// failed only when the daemon opened it, which then served without LCM.
+TEST(DaemonConfigYaml, LcmUrlsAreCheckedBeforeTheDaemonOpensThem) {
+  const auto with_url = [](const std::string& url) {
+    return "scene: /abs/scene.yaml\ndevice: {kind: none}\npublish: {lcm: {enabled: true, url: \"" + url + "\"}}\n";
+  };
+  for (const std::string ok :
+       {"udpm://239.255.76.67:7667?ttl=0", "udpm://239.255.76.67:7667?ttl=1&recv_buf_size=8388608",
+        "udpm://239.255.76.67", "udpm://224.0.0.1:1?ttl=255", "memq://", "file:///tmp/x.log"})
+    EXPECT_NO_THROW(parse_daemon_config(with_url(ok), "x.yaml")) << ok;
+  expect_error(with_url("udpm://239.255.76.67:99999"), "publish.lcm.url", "the port must be in [1, 65535]");
+  expect_error(with_url("udpm://239.255.76.67:0"), "publish.lcm.url", "the port must be in [1, 65535]");
+  expect_error(with_url("udpm://239.255.76.67:abc?ttl=0"), "publish.lcm.url", "the port must be in [1, 65535]");
+  expect_error(with_url("udpm://239.255.76.67:7667?ttl=-3"), "publish.lcm.url", "ttl must be in [0, 255]");
+  expect_error(with_url("udpm://239.255.76.67:7667?recv_buf_size=1&ttl=256"), "publish.lcm.url",
+               "ttl must be in [0, 255]");
+  expect_error(with_url("udpm://10.0.0.1:7667"), "publish.lcm.url", "IPv4 multicast address");
+  expect_error(with_url("udpm://lab-host:7667"), "publish.lcm.url", "IPv4 multicast address");
+  expect_error(with_url("bogus://x"), "publish.lcm.url", "must be an LCM provider URL");
+}
+
 TEST(DaemonConfigYaml, MinimalConfigTakesTheDocumentedDefaults) {
   const std::string text =
       "scene: /abs/scene.yaml\n"
