@@ -22,4 +22,13 @@ inline CLI::Validator finite_positive() {
       "S > 0");
 }
 
+// A frame index: unsigned parsing would wrap "-1" to 18446744073709551615.
+inline CLI::Validator frame_index() {
+  return CLI::Validator(
+      [](std::string& v) {
+        return !v.empty() && v.front() == '-' ? v + " is negative: frames are numbered from 0" : std::string();
+      },
+      "K >= 0");
+}
+
 }  // namespace tissue::cli

@@ -13,6 +13,7 @@
 #include "export/live_source.hpp"
 #include "render/png_writer.hpp"
 #include "render/render.hpp"
+#include "tissue/cli_checks.hpp"
 #include "tissue/live_source_options.hpp"
 #include "util/output_file.hpp"
 
@@ -139,13 +140,7 @@ Subcommand add_render_command(CLI::App& parent) {
   CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
   CLI::Option* time = cmd->add_option("--time", o->time_s, "The frame shown at session time T (s)");
   CLI::Option* frame =
-      cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)")
-          // Unsigned parsing would wrap "-1" to 18446744073709551615.
-          ->check(CLI::Validator(
-              [](std::string& v) {
-                return !v.empty() && v.front() == '-' ? v + " is negative: frames are numbered from 0" : std::string();
-              },
-              "K >= 0"));
+      cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)")->check(frame_index());
   time->excludes(frame);
   CLI::Option* seq = cmd->add_flag("--sequence", o->sequence, "Every frame in --from..--to, numbered files");
   seq->excludes(time)->excludes(frame);

@@ -14,6 +14,7 @@
 #include "export/frame_source.hpp"
 #include "export/live_source.hpp"
 #include "export/x3d.hpp"
+#include "tissue/cli_checks.hpp"
 #include "tissue/live_source_options.hpp"
 #include "util/output_file.hpp"
 
@@ -174,13 +175,7 @@ Subcommand add_x3d_command(CLI::App& parent) {
   CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
   CLI::Option* time = cmd->add_option("--time", o->time_s, "Snapshot of the frame shown at session time T (s)");
   CLI::Option* frame =
-      cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)")
-          // Unsigned parsing would wrap "-1" to 18446744073709551615.
-          ->check(CLI::Validator(
-              [](std::string& v) {
-                return !v.empty() && v.front() == '-' ? v + " is negative: frames are numbered from 0" : std::string();
-              },
-              "K >= 0"));
+      cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)")->check(frame_index());
   time->excludes(frame);
   CLI::Option* animate = cmd->add_flag("--animate", o->animate, "Animation over --from..--to (default: all frames)");
   animate->excludes(time)->excludes(frame);
