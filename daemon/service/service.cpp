@@ -230,11 +230,14 @@ void Service::reload() {
                                  h.coupling_stiffness_N_per_m != old_haptics.coupling_stiffness_N_per_m ||
                                  h.coupling_damping_N_s_per_m != old_haptics.coupling_damping_N_s_per_m ||
                                  h.crossfade_s != old_haptics.crossfade_s;
+    const int old_max_scene_tets = config_.max_scene_tets;
     config_.haptics = config.haptics;
+    config_.max_scene_tets = config.max_scene_tets;
     try {
       apply_scene(std::move(scene), haptics_changed);
     } catch (...) {
       config_.haptics = old_haptics;
+      config_.max_scene_tets = old_max_scene_tets;
       throw;
     }
     config_.status_interval_s = config.status_interval_s;
@@ -519,9 +522,10 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
     // Device, socket and thread settings cannot change under a running loop,
     // and a value kept only in memory would be lost at the next restart: the
     // file is where daemon settings live.
-    throw control::ControlError("'" + key + "' is a daemon setting: edit " + options_.config_path +
-                                " and reload (SIGHUP: scene, haptics.*, status_interval_s) or restart; set "
-                                "changes scene keys only");
+    throw control::ControlError(
+        "'" + key + "' is a daemon setting: edit " + options_.config_path +
+        " and reload (SIGHUP: scene, haptics.*, status_interval_s, max_scene_tets) or restart; set "
+        "changes scene keys only");
   // One entry per key: a new value replaces the old one.
   std::vector<std::string> sets;
   for (const std::string& o : scene_sets_)

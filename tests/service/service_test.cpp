@@ -254,6 +254,27 @@ TEST(Service, AScenePastMaxSceneTetsIsRefusedBeforeItIsBuilt) {
     EXPECT_TRUE(client.call("set", {{"key", "adaptivity.min_depth"}, {"value", 3}})["ok"].get<bool>()) << "3072: fits";
     EXPECT_FALSE(client.call("set", {{"key", "object.cubes"}, {"value", {5, 4, 4}}})["ok"].get<bool>()) << "3840";
     EXPECT_EQ(client.call("status")["result"]["scene"]["name"], "cantilever");
+    // A reload reads the limit afresh.
+    std::ofstream(config, std::ios::app) << "max_scene_tets: 4000\n";
+    std::string config_text;
+    {
+      std::ifstream in(config);
+      config_text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    config_text.replace(config_text.find("max_scene_tets: 3072\n"), 21, "");
+    std::ofstream(config) << config_text;
+    ASSERT_EQ(::raise(SIGHUP), 0);
+    bool reloaded = false;
+    for (int i = 0; i < 500 && !reloaded; ++i) {
+      std::fflush(run.out);
+      reloaded = file_text(run.out).find("tissued: reloaded") != std::string::npos;
+      if (!reloaded) std::this_thread::sleep_for(10ms);
+    }
+    EXPECT_TRUE(reloaded) << file_text(run.err);
+    // (The reload took the file as written: min_depth is 0 again.)
+    EXPECT_TRUE(client.call("set", {{"key", "adaptivity.min_depth"}, {"value", 3}})["ok"].get<bool>());
+    const nlohmann::json bigger = client.call("set", {{"key", "object.cubes"}, {"value", {5, 4, 4}}});
+    EXPECT_TRUE(bigger["ok"].get<bool>()) << "3840 <= 4000 after the reload: " << bigger.dump();
     client.call("shutdown");
     EXPECT_EQ(run.wait(), kServiceOk);
   }
@@ -263,7 +284,7 @@ TEST(Service, AScenePastMaxSceneTetsIsRefusedBeforeItIsBuilt) {
   options.err = std::tmpfile();
   options.out = std::tmpfile();
   EXPECT_EQ(Service(options).run(), kServiceBadConfig);
-  EXPECT_NE(file_text(options.err).find("more than max_scene_tets = 3072"), std::string::npos)
+  EXPECT_NE(file_text(options.err).find("more than max_scene_tets = 4000"), std::string::npos)
       << file_text(options.err);
   std::fclose(options.err);
   std::fclose(options.out);
