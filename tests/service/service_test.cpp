@@ -141,6 +141,22 @@ std::string file_text(std::FILE* f) {
   return text;
 }
 
+// The whole file at `path`.
+std::string file_text(const std::string& path) {
+  std::ifstream in(path);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// Whether the service wrote `text` to `f` within 5 s (it reloads on its own thread).
+bool written_within_5_s(std::FILE* f, const std::string& text) {
+  for (int i = 0; i < 500; ++i) {
+    std::fflush(f);
+    if (file_text(f).find(text) != std::string::npos) return true;
+    std::this_thread::sleep_for(10ms);
+  }
+  return false;
+}
+
 // The status line says when CG stops at its cap (a scene asking for 1e-12
 // in one iteration), and says nothing of it otherwise.
 TEST(Service, StatusLineShowsCappedSolverSteps) {
@@ -256,21 +272,11 @@ TEST(Service, AScenePastMaxSceneTetsIsRefusedBeforeItIsBuilt) {
     EXPECT_EQ(client.call("status")["result"]["scene"]["name"], "cantilever");
     // A reload reads the limit afresh.
     std::ofstream(config, std::ios::app) << "max_scene_tets: 4000\n";
-    std::string config_text;
-    {
-      std::ifstream in(config);
-      config_text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-    }
+    std::string config_text = file_text(config);
     config_text.replace(config_text.find("max_scene_tets: 3072\n"), 21, "");
     std::ofstream(config) << config_text;
     ASSERT_EQ(::raise(SIGHUP), 0);
-    bool reloaded = false;
-    for (int i = 0; i < 500 && !reloaded; ++i) {
-      std::fflush(run.out);
-      reloaded = file_text(run.out).find("tissued: reloaded") != std::string::npos;
-      if (!reloaded) std::this_thread::sleep_for(10ms);
-    }
-    EXPECT_TRUE(reloaded) << file_text(run.err);
+    EXPECT_TRUE(written_within_5_s(run.out, "tissued: reloaded")) << file_text(run.err);
     // (The reload took the file as written: min_depth is 0 again.)
     EXPECT_TRUE(client.call("set", {{"key", "adaptivity.min_depth"}, {"value", 3}})["ok"].get<bool>());
     const nlohmann::json bigger = client.call("set", {{"key", "object.cubes"}, {"value", {5, 4, 4}}});
@@ -299,30 +305,20 @@ TEST(Service, AFailedReloadChangesNothing) {
   Running run(config);
   ControlClient client = connect(dir / "ctl.sock");
   const std::string source = client.call("status")["result"]["scene"]["source"];
-  const auto read = [](const std::string& path) {
-    std::ifstream in(path);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  };
   // The config now names a copy of the cantilever clamped by a 1 mm sphere
   // between the nodes of its face x = 0.
   const std::string bad_scene = dir / "bad_fixed.yaml";
-  std::string scene_text = read(scene_file("cantilever.yaml"));
+  std::string scene_text = file_text(scene_file("cantilever.yaml"));
   const std::string fixed = "{box: {min_m: [0, 0, 0], max_m: [0, 0.1, 0.1]}}";
   const std::size_t at = scene_text.find(fixed);
   ASSERT_NE(at, std::string::npos);
   scene_text.replace(at, fixed.size(), "{sphere: {centre_m: [0, 0.0125, 0.0125], radius_m: 0.001}}");
   std::ofstream(bad_scene) << scene_text;
-  std::string config_text = read(config);
+  std::string config_text = file_text(config);
   config_text.replace(config_text.find(scene_file("cantilever.yaml")), scene_file("cantilever.yaml").size(), bad_scene);
   std::ofstream(config) << config_text;
   ASSERT_EQ(::raise(SIGHUP), 0);
-  bool failed = false;
-  for (int i = 0; i < 500 && !failed; ++i) {
-    std::fflush(run.err);
-    failed = file_text(run.err).find("reload failed") != std::string::npos;
-    if (!failed) std::this_thread::sleep_for(10ms);
-  }
-  ASSERT_TRUE(failed) << "the reload did not fail: " << file_text(run.err);
+  ASSERT_TRUE(written_within_5_s(run.err, "reload failed")) << "the reload did not fail: " << file_text(run.err);
   EXPECT_NE(file_text(run.err).find("fixed[0].region selects no node"), std::string::npos) << file_text(run.err);
   EXPECT_EQ(client.call("status")["result"]["scene"]["source"], source);
   const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 6e4}});
