@@ -9,6 +9,8 @@
 //   scene   {source, name, integrator, dt_s, adaptivity}
 //   result  {sim_time_s, steps, nodes/tets/springs {final, peak}, refines,
 //            merges, energy_J {kinetic, elastic}, external_work_J,
+//            adaptation_energy_J {net, added} (what splits and merges
+//            changed the kinetic + elastic energy by; see SimCounters),
 //            nonfinite_events, rejected_steps, error (null | message),
 //            interrupted_by (null | "SIGINT" | "SIGTERM"),
 //            solver {substeps {mean, max}, iterations {mean, max},

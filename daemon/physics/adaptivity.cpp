@@ -34,9 +34,14 @@ AdaptStats Adaptivity::adapt(Body& body) {
   const double merge_below = simplify_threshold();
   youngs_modulus_Pa_ = body.scene().material.youngs_modulus_Pa;
   edge_strain_.resize(body.rest_length_m.size());
-  mesh.for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
-    edge_strain_[e] = (body.x_m[edge.b] - body.x_m[edge.a]).norm() / body.rest_length_m[e] - 1.0;
+  double energy_J = 0.0;
+  mesh.for_each_edge([&](EdgeId e, const mesh::Edge&) {
+    const double length_m = (body.x_m[body.edge_b[e]] - body.x_m[body.edge_a[e]]).norm();
+    edge_strain_[e] = length_m / body.rest_length_m[e] - 1.0;
+    const double stretch_m = length_m - body.rest_length_m[e];
+    energy_J += 0.5 * body.stiffness_N_per_m[e] * stretch_m * stretch_m;
   });
+  stats.elastic_energy_before_J = energy_J;
   node_max_.assign(body.x_m.size(), 0.0);
   refine_.clear();
   mesh.for_each_tet([&](TetId t, const mesh::Tet& tet) {

@@ -19,6 +19,10 @@ namespace tissue::physics {
 struct AdaptStats {
   int splits = 0;  // diamonds split, closure included
   int merges = 0;
+  // Σ ½ k (l − L)² before the pass changed anything, bit-identical to
+  // elastic_energy_J (same sum in the same order), from the lengths the
+  // pass measures anyway: the energy booking needs it for free.
+  double elastic_energy_before_J = 0.0;
 };
 
 class Adaptivity {

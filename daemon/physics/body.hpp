@@ -35,8 +35,10 @@ class Body {
 
   // Splits / merges one diamond (closure included for split) and carries the
   // state across: a new node takes its edge's mean position and velocity (a
-  // split adds no momentum or energy); a merged node gives half its momentum
-  // to each end of its edge. Returns diamonds split / 1 for merge.
+  // split adds no momentum or kinetic energy); a merged node gives half its
+  // momentum to each end of its edge (kinetic energy can only drop). The
+  // elastic energy does change with the springs (SimCounters::
+  // adaptation_energy_J). Returns diamonds split / 1 for merge.
   int split(mesh::Key diamond);
   void merge(mesh::Key diamond);
 

@@ -29,6 +29,12 @@ Simulation::Simulation(const scene::Scene& scene)
   counters_.peak_springs = body_.mesh().edge_count();
 }
 
+void Simulation::book_mesh_change(double energy_before_J) {
+  const double change_J = kinetic_energy_J() + elastic_energy_J() - energy_before_J;
+  counters_.adaptation_energy_J += change_J;
+  if (change_J > 0.0) counters_.adaptation_energy_added_J += change_J;
+}
+
 StepResult Simulation::step() {
   StepResult result;
   const double dt = scene().integrator.dt_s;
@@ -78,10 +84,16 @@ StepResult Simulation::step() {
   body_.step_index = counters_.steps;
 
   if (adaptivity_ && !adaptation_paused_ && counters_.steps % scene().adaptivity.every_steps == 0) {
+    // The pass measures the elastic energy before it changes anything; the
+    // energy after is summed only when it did change something.
+    const double kinetic_before_J = kinetic_energy_J();
     result.adapted = adaptivity_->adapt(body_);
     counters_.splits += result.adapted.splits;
     counters_.merges += result.adapted.merges;
-    if (result.adapted.splits + result.adapted.merges > 0) mesh_changed();
+    if (result.adapted.splits + result.adapted.merges > 0) {
+      book_mesh_change(kinetic_before_J + result.adapted.elastic_energy_before_J);
+      mesh_changed();
+    }
   }
   return result;
 }
@@ -99,14 +111,18 @@ void Simulation::mesh_changed() {
 }
 
 int Simulation::split_diamond(mesh::Key diamond) {
+  const double before_J = kinetic_energy_J() + elastic_energy_J();
   const int n = body_.split(diamond);
+  if (n > 0) book_mesh_change(before_J);
   counters_.splits += n;
   if (n > 0) mesh_changed();
   return n;
 }
 
 void Simulation::merge_diamond(mesh::Key diamond) {
+  const double before_J = kinetic_energy_J() + elastic_energy_J();
   body_.merge(diamond);
+  book_mesh_change(before_J);
   ++counters_.merges;
   mesh_changed();
 }

@@ -40,6 +40,17 @@ struct SimCounters {
   std::int64_t rejected_steps = 0;  // non-finite or refused
   std::size_t peak_nodes = 0, peak_tets = 0, peak_springs = 0;
   double external_work_J = 0.0;  // work of loads and gravity on free nodes
+  // Σ over mesh changes (adaptation passes, split_diamond, merge_diamond) of
+  // the change in kinetic + elastic energy they made. Springs on a changing
+  // mesh are not energy-consistent: the per-type weights make each uniform
+  // level isotropic, but a single face- or axis-diagonal diamond split changes
+  // the energy of an affine deformation by up to ±75% of the diamond's share
+  // (cube-diagonal splits by 0), and no choice of per-type weights removes
+  // that (README, "Energy across mesh changes"). So the energy the model
+  // change made is kept apart from what the integrator did: a step never
+  // adds energy beyond external_work_J; a mesh change adds this.
+  double adaptation_energy_J = 0.0;
+  double adaptation_energy_added_J = 0.0;  // the positive changes alone
   // What the integrator spent on the steps taken (the speed side of the
   // speed/accuracy knobs): explicit sub-steps, implicit CG or projective
   // local/global iterations, and the steps whose solver stopped at
@@ -122,6 +133,10 @@ class Simulation {
   std::unique_ptr<Adaptivity> adaptivity_;  // null when the scene has no adaptivity
   LoadDistribution loads_;
   void mesh_changed();
+
+  // Books the energy a mesh change made (adaptation_energy_J), given the
+  // kinetic + elastic energy before it.
+  void book_mesh_change(double energy_before_J);
 
   std::vector<Probe> probes_;
   std::vector<Vec3> f_ext_N_;

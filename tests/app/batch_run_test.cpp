@@ -226,6 +226,12 @@ TEST(BatchReport, FieldsHaveTheRightTypes) {
   EXPECT_TRUE(res["energy_J"]["elastic"].is_number_float());
   EXPECT_TRUE(res["external_work_J"].is_number_float());
   EXPECT_GT(res["external_work_J"].get<double>(), 0.0);  // the tip load did work while it bent the beam
+  // The cantilever refines while it bends: its splits change the energy.
+  ASSERT_TRUE(res["adaptation_energy_J"]["net"].is_number_float());
+  ASSERT_TRUE(res["adaptation_energy_J"]["added"].is_number_float());
+  EXPECT_NE(res["adaptation_energy_J"]["net"].get<double>(), 0.0);
+  EXPECT_GT(res["adaptation_energy_J"]["added"].get<double>(), 0.0);
+  EXPECT_GE(res["adaptation_energy_J"]["added"].get<double>(), res["adaptation_energy_J"]["net"].get<double>());
   EXPECT_TRUE(res["nonfinite_events"].is_number_integer());
   EXPECT_EQ(res["nonfinite_events"].get<long long>(), 0);
   EXPECT_TRUE(res["rejected_steps"].is_number_integer());

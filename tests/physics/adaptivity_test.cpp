@@ -81,12 +81,15 @@ TEST(Adaptivity, AdaptationNeverAddsKineticEnergy) {
   // Copy the deformed state onto an adaptive body with the same coarse mesh.
   body.x_m = sim.body().x_m;
   body.v_m_per_s = sim.body().v_m_per_s;
-  const double ke0 = kinetic_energy_J(body);
+  const double ke0 = kinetic_energy_J(body), elastic0_J = elastic_energy_J(body);
   ASSERT_GT(ke0, 0.0);
   Adaptivity adaptivity(adaptive.adaptivity);
   const AdaptStats stats = adaptivity.adapt(body);
   EXPECT_GT(stats.splits, 0);
   EXPECT_LE(kinetic_energy_J(body), ke0 * (1 + 1e-12));
+  // The energy booking takes the elastic energy before the pass from the
+  // pass itself: it must be the very sum elastic_energy_J makes.
+  EXPECT_EQ(stats.elastic_energy_before_J, elastic0_J);
 }
 
 // The pass's fast per-edge evaluation equals the per-tet definition (eq. (1)

@@ -162,6 +162,64 @@ TEST(Simulation, WorkOfAConstantLoadIsTheLoadTimesTheDisplacement) {
   }
 }
 
+// Every mesh change books exactly the energy it made: a split or merge from
+// outside (split_diamond, merge_diamond) and the adaptation pass of a step
+// (against a twin whose pass is paused: same step, no pass).
+TEST(Simulation, MeshChangesBookTheEnergyTheyMake) {
+  scene::Scene s = cantilever_scene();
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.adaptivity.every_steps = 1;
+  Simulation sim(s);
+  sim.set_adaptation_paused(true);  // bent on the coarse mesh: every diamond free to split
+  ASSERT_TRUE(run_until(sim, 0.02));
+  const auto energy_J = [](const Simulation& x) { return x.kinetic_energy_J() + x.elastic_energy_J(); };
+  const double scale_J = energy_J(sim);
+  ASSERT_GT(scale_J, 0.0);
+
+  // Outside changes: split a few diamonds of the bent body, then merge one.
+  int changes = 0;
+  double largest_change_J = 0.0;
+  for (TetId t = 0; t < sim.body().mesh().tet_capacity() && changes < 6; t += 37) {
+    if (!sim.body().mesh().tet_alive(t)) continue;
+    const mesh::Key d = sim.body().mesh().diamond_of(t);
+    if (!sim.body().mesh().can_split(d)) continue;
+    const double before_J = energy_J(sim), booked_before_J = sim.counters().adaptation_energy_J;
+    ASSERT_GT(sim.split_diamond(d), 0);
+    const double change_J = energy_J(sim) - before_J;
+    EXPECT_NEAR(sim.counters().adaptation_energy_J - booked_before_J, change_J, 1e-12 * scale_J);
+    largest_change_J = std::max(largest_change_J, std::abs(change_J));
+    ++changes;
+    if (changes == 3) {  // and merge it back
+      const double merge_before_J = energy_J(sim), booked_J = sim.counters().adaptation_energy_J;
+      ASSERT_TRUE(sim.body().mesh().can_merge(d));
+      sim.merge_diamond(d);
+      EXPECT_NEAR(sim.counters().adaptation_energy_J - booked_J, energy_J(sim) - merge_before_J, 1e-12 * scale_J);
+    }
+  }
+  EXPECT_GE(changes, 6);
+  EXPECT_GT(largest_change_J, 1e-6 * scale_J);  // the changes did change the energy
+  EXPECT_GE(sim.counters().adaptation_energy_added_J, std::max(0.0, sim.counters().adaptation_energy_J));
+
+  // The pass inside a step. The twin, identical so far, takes the same steps
+  // with its pass paused; they part at the first pass that changes the mesh.
+  Simulation adapting(s), twin(s);
+  twin.set_adaptation_paused(true);
+  for (int i = 0; i < 200; ++i) {
+    const double booked_J = adapting.counters().adaptation_energy_J;
+    const StepResult r = adapting.step();
+    ASSERT_TRUE(r.ok && twin.step().ok);
+    if (r.adapted.splits + r.adapted.merges == 0) {
+      ASSERT_EQ(adapting.counters().adaptation_energy_J, booked_J);  // no change, nothing booked
+      continue;
+    }
+    EXPECT_NEAR(adapting.counters().adaptation_energy_J - booked_J, energy_J(adapting) - energy_J(twin),
+                1e-12 * scale_J);
+    EXPECT_NE(energy_J(adapting), energy_J(twin));
+    return;
+  }
+  ADD_FAILURE() << "no adaptation pass changed the mesh in 200 steps";
+}
+
 // The scene chooses the CG preconditioner (integrator.cg_preconditioner):
 // at dt = 10 ms, 20 iterations carry the beam's bending with the two-level
 // one and not with Jacobi (TwoLevelPreconditioner.KeepsTwentyIterations... holds
