@@ -8,7 +8,8 @@
 // The report (keys sorted, doubles printed so they round-trip):
 //   scene   {source, name, integrator, dt_s, adaptivity}
 //   result  {sim_time_s, steps, nodes/tets/springs {final, peak}, refines,
-//            merges, energy_J {kinetic, elastic}, external_work_J,
+//            merges, energy_J {kinetic, elastic}, external_work_J (loads,
+//            gravity), prescribed_work_J (drivers of prescribed nodes),
 //            adaptation_energy_J {net, added} (what splits and merges
 //            changed the kinetic + elastic energy by; see SimCounters),
 //            nonfinite_events, rejected_steps, error (null | message),

@@ -1,8 +1,9 @@
 // Numerical health of a run: the check behind "stable at the extremes"
 // (NUMERICS.md §3). Pass = no non-finite state, and the body never holds more
-// energy than it started with plus the work done on it plus the energy its
-// mesh changes made (within `slack`, relative); the explicit rung may instead
-// refuse a step it cannot take.
+// energy than it started with plus the work done on it (loads, gravity,
+// prescribed nodes' drivers) plus the energy its mesh changes made (within
+// `slack`, relative); the explicit rung may instead refuse a step it cannot
+// take.
 #pragma once
 
 #include <cstddef>

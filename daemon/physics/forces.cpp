@@ -16,18 +16,22 @@ SpringFrame spring_frame(const Body& body, EdgeId e) {
   return {rest > 0.0 ? Vec3(d / rest) : Vec3::Zero(), l};
 }
 
+Vec3 spring_force_on_a_N(const Body& body, EdgeId e, bool with_damper) {
+  const NodeId a = body.edge_a[e], b = body.edge_b[e];
+  const SpringFrame s = spring_frame(body, e);
+  const double closing_speed = with_damper ? (body.v_m_per_s[b] - body.v_m_per_s[a]).dot(s.direction) : 0.0;
+  return (body.stiffness_N_per_m[e] * (s.length_m - body.rest_length_m[e]) +
+          body.damping_N_s_per_m[e] * closing_speed) *
+         s.direction;
+}
+
 void add_spring_forces(const Body& body, std::vector<Vec3>& f, bool with_dampers) {
   const std::size_t edges = body.stiffness_N_per_m.size();
   for (EdgeId e = 0; e < edges; ++e) {
-    const double k = body.stiffness_N_per_m[e];
-    if (k == 0.0) continue;  // dead edge slot
-    const NodeId a = body.edge_a[e], b = body.edge_b[e];
-    const SpringFrame s = spring_frame(body, e);
-    const double closing_speed = with_dampers ? (body.v_m_per_s[b] - body.v_m_per_s[a]).dot(s.direction) : 0.0;
-    const Vec3 force_on_a =
-        (k * (s.length_m - body.rest_length_m[e]) + body.damping_N_s_per_m[e] * closing_speed) * s.direction;
-    f[a] += force_on_a;
-    f[b] -= force_on_a;
+    if (body.stiffness_N_per_m[e] == 0.0) continue;  // dead edge slot
+    const Vec3 force_on_a = spring_force_on_a_N(body, e, with_dampers);
+    f[body.edge_a[e]] += force_on_a;
+    f[body.edge_b[e]] -= force_on_a;
   }
 }
 

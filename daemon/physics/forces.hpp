@@ -18,6 +18,10 @@ struct SpringFrame {
 };
 SpringFrame spring_frame(const Body& body, EdgeId e);
 
+// Force [N] spring e (and, with_damper, its damper at the current
+// velocities) exerts on its end a; its end b gets the opposite.
+Vec3 spring_force_on_a_N(const Body& body, EdgeId e, bool with_damper = true);
+
 // Adds spring forces [N] of every live edge into `f` (indexed by node; must
 // already hold body.x_m.size() entries); with `with_dampers` also the
 // dampers' forces at the current velocities.

@@ -40,6 +40,11 @@ struct SimCounters {
   std::int64_t rejected_steps = 0;  // non-finite or refused
   std::size_t peak_nodes = 0, peak_tets = 0, peak_springs = 0;
   double external_work_J = 0.0;  // work of loads and gravity on free nodes
+  // Work the drivers of prescribed nodes did on the body: against the
+  // springs and dampers at those nodes, at the end of each step (the force
+  // backward Euler balances), times the step's prescribed displacement; and
+  // the kinetic energy they gave their (massive) nodes.
+  double prescribed_work_J = 0.0;
   // Σ over mesh changes (adaptation passes, split_diamond, merge_diamond) of
   // the change in kinetic + elastic energy they made. Springs on a changing
   // mesh are not energy-consistent: the per-type weights make each uniform
@@ -137,11 +142,14 @@ class Simulation {
   // Books the energy a mesh change made (adaptation_energy_J), given the
   // kinetic + elastic energy before it.
   void book_mesh_change(double energy_before_J);
+  double prescribed_kinetic_energy_J() const;  // of the prescribed nodes
 
   std::vector<Probe> probes_;
   std::vector<Vec3> f_ext_N_;
   std::vector<std::pair<NodeId, Vec3>> loaded_before_;  // free nodes with an external force, x before the step
   std::vector<NodeId> kinematic_;                       // fixed and prescribed nodes
+  std::vector<EdgeId> driven_springs_;                  // springs with a prescribed end
+  std::vector<Vec3> x_before_m_;                        // per node; kept for prescribed nodes only
   std::uint64_t kinematic_version_ = 0;                 // body parameters_version the list is for
   SimCounters counters_;
   double time_s_ = 0.0;

@@ -47,6 +47,31 @@ TEST(Simulation, PrescribedDisplacementIsFollowedExactly) {
   EXPECT_NEAR(sim.probe_displacement_m(0).x(), 0.0, 1e-12);
 }
 
+// The drivers' work: pushing the free face's centre 1 cm in slowly (0.5 s
+// ramp, held to 1 s) stores what they did, less what the dampers took.
+// Undamped and explicit, nothing is lost; damped and implicit, a little is.
+TEST(Simulation, PrescribedWorkIsTheEnergyASlowPushStores) {
+  for (const bool damped : {false, true}) {
+    SCOPED_TRACE(damped ? "damped, implicit" : "undamped, explicit");
+    scene::Scene s = cantilever_scene();
+    s.loads.clear();
+    s.adaptivity.enabled = false;
+    scene::PrescribedSpec poke{"poke", sphere({0.1, 0.05, 0.05}, 1e-4), {0, 0, -0.01}, {}};
+    poke.profile.ramp_s = 0.5;
+    s.prescribed.push_back(poke);
+    s.material.rayleigh_beta_s = damped ? 0.003 : 0.0;
+    s.integrator.kind = damped ? scene::IntegratorKind::kImplicit : scene::IntegratorKind::kExplicit;
+    Simulation sim(s);
+    ASSERT_TRUE(run_until(sim, 1.0));
+    const double stored_J = sim.kinetic_energy_J() + sim.elastic_energy_J(), work_J = sim.counters().prescribed_work_J;
+    EXPECT_EQ(sim.counters().external_work_J, 0.0);  // no load, no gravity: all of it is the drivers'
+    ASSERT_GT(stored_J, 0.01);                       // measured 31 mJ
+    // Measured: undamped 0.2 %, damped 1.4 % more work than energy.
+    EXPECT_GE(work_J, stored_J);
+    EXPECT_LE(work_J, stored_J * (damped ? 1.03 : 1.005));
+  }
+}
+
 // The step sets kinematic velocities from a list of the fixed and
 // prescribed nodes: nodes a split adds on a prescribed face must join it.
 // Split mid-ramp, they carry the ramp's velocity; if the list were not
