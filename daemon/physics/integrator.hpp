@@ -25,6 +25,8 @@ struct StepOutcome {
   std::string error;          // set when !ok
   int substeps = 1;           // explicit
   int solver_iterations = 0;  // implicit CG / projective local-global
+  // Implicit: CG's relative residual; projective: the estimated error of
+  // the positions [m] (integrator_projective.cpp's stopping rule).
   double solver_residual = 0.0;
   // False when the solver stopped at integrator.cg_max_iterations before
   // reaching integrator.cg_tolerance: the step ran, less accurately.

@@ -125,7 +125,9 @@ TEST(Stability, PrescribedPokeAtBothEndsOfStiffnessIsAuditedAgainstTheDriversWor
       s.integrator.max_substeps = 100000;
       Simulation sim(s);
       const std::string refused = run_checked(sim, 60, rung.is_explicit() ? 0.05 : 1e-6);
-      if (refused.empty()) EXPECT_GT(sim.counters().prescribed_work_J, 0.0);
+      if (refused.empty()) {
+        EXPECT_GT(sim.counters().prescribed_work_J, 0.0);
+      }
     }
 }
 
