@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "scene/yaml_util.hpp"
+#include "util/lcm_url.hpp"
 
 namespace tissue::config {
 
@@ -288,42 +289,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
         pub.lcm.url.rfind("file://", 0) != 0)
       fail("publish.lcm.url",
            "must be an LCM provider URL: udpm://GROUP:PORT?ttl=N, memq:// or file://PATH (got '" + pub.lcm.url + "')");
-    if (const std::string why = udpm_url_problem(pub.lcm.url); !why.empty())
+    if (const std::string why = util::udpm_url_problem(pub.lcm.url); !why.empty())
       fail("publish.lcm.url", why + " (got '" + pub.lcm.url + "')");
-  }
-
-  // What is wrong with a udpm:// URL ("" when nothing, or not udpm): LCM
-  // takes port 99999 or ttl=-3 and fails only when the daemon opens it, then
-  // serving without LCM; said here, it names the key.
-  static std::string udpm_url_problem(const std::string& url) {
-    if (url.rfind("udpm://", 0) != 0) return {};
-    const std::string rest = url.substr(7);
-    const std::string address = rest.substr(0, rest.find('?'));
-    const std::size_t colon = address.rfind(':');
-    const std::string group = address.substr(0, colon);
-    int octets[4] = {-1, -1, -1, -1};
-    char tail = 0;
-    if (std::sscanf(group.c_str(), "%d.%d.%d.%d%c", &octets[0], &octets[1], &octets[2], &octets[3], &tail) != 4 ||
-        octets[0] < 224 || octets[0] > 239 || octets[1] < 0 || octets[1] > 255 || octets[2] < 0 || octets[2] > 255 ||
-        octets[3] < 0 || octets[3] > 255)
-      return "the group must be an IPv4 multicast address (224.0.0.0 to 239.255.255.255)";
-    if (colon == std::string::npos) return {};  // LCM's default port
-    const std::string port = address.substr(colon + 1);
-    if (port.empty() || port.size() > 5 || port.find_first_not_of("0123456789") != std::string::npos ||
-        std::stoi(port) < 1 || std::stoi(port) > 65535)
-      return "the port must be in [1, 65535]";
-    if (const std::size_t q = rest.find('?'); q != std::string::npos) {
-      std::string options = rest.substr(q + 1) + "&";
-      for (std::size_t at = 0, amp; (amp = options.find('&', at)) != std::string::npos; at = amp + 1) {
-        const std::string option = options.substr(at, amp - at);
-        if (option.rfind("ttl=", 0) != 0) continue;
-        const std::string ttl = option.substr(4);
-        if (ttl.empty() || ttl.size() > 3 || ttl.find_first_not_of("0123456789") != std::string::npos ||
-            std::stoi(ttl) > 255)
-          return "ttl must be in [0, 255] (0: this host only)";
-      }
-    }
-    return {};
   }
 
  private:

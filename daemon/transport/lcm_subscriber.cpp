@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "transport/lcm_messages.hpp"
+#include "util/lcm_url.hpp"
 
 namespace tissue::transport {
 
@@ -58,9 +59,9 @@ std::string lcm_mesh_layout_error(const void* data, std::size_t size) {
 }
 
 LcmMeshSubscriber::LcmMeshSubscriber(const std::string& url) : url_(url), lcm_(std::make_unique<lcm::LCM>(url)) {
-  if (!lcm_->good())
-    throw std::runtime_error("LCM: cannot start LCM at '" + url +
-                             "' (udpm needs a multicast route, e.g. `ip route add 224.0.0.0/4 dev lo`)");
+  // A tcpq:// provider that could not connect still reports good() but has
+  // no socket: waiting on it aborted the process (FD_SET of -1).
+  if (!lcm_->good() || lcm_->getFileno() < 0) throw std::runtime_error("LCM: " + util::lcm_start_failure(url));
   lcm_->subscribeFunction(kSurfaceMeshChannel, &handle, this);
 }
 

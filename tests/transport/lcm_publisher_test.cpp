@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "transport/lcm_messages.hpp"
+#include "transport/transport_test_support.hpp"
 
 namespace tissue::transport {
 namespace {
@@ -111,6 +112,21 @@ TEST(LcmPublisher, AnUnusableUrlIsAClearError) {
     FAIL() << "expected an error";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("bogus://nowhere"), std::string::npos) << e.what();
+  }
+}
+
+// LCM's TCP provider reports good() even when it could not connect, and
+// has no socket then: the publisher refuses it, pointing at LCM's message.
+TEST(LcmPublisher, AProviderThatCouldNotConnectIsAStartError) {
+  const std::string url = testing::refused_tcpq_url();
+  try {
+    LcmPublisher p(url);
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(url), std::string::npos) << what;
+    EXPECT_NE(what.find("LCM's own message"), std::string::npos) << what;
+    EXPECT_EQ(what.find("multicast"), std::string::npos) << what;
   }
 }
 

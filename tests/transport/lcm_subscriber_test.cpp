@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <limits>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,19 @@ constexpr std::size_t kCoordinateCountAt = kVertexCountAt + 4;
 std::size_t triangle_count_at(std::size_t vertices) { return kCoordinateCountAt + 4 + 12 * vertices + vertices; }
 
 std::string layout_error(const std::vector<std::uint8_t>& b) { return lcm_mesh_layout_error(b.data(), b.size()); }
+
+// Waiting on an LCM whose TCP provider could not connect aborted the client
+// (FD_SET of descriptor -1 inside lcm_handle_timeout): refused at the start
+// instead, with exit 3 in the clients.
+TEST(LcmSubscriber, AProviderThatCouldNotConnectIsAStartError) {
+  const std::string url = testing::refused_tcpq_url();
+  try {
+    LcmMeshSubscriber subscriber(url);
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(url), std::string::npos) << e.what();
+  }
+}
 
 TEST(LcmSubscriber, LayoutErrorsNameTheFieldAndTheReason) {
   const std::vector<std::uint8_t> good = lcm_encoded(strip());

@@ -1,6 +1,12 @@
 #include "transport/transport_test_support.hpp"
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <string>
 
 #include "transport/lcm_messages.hpp"
 
@@ -43,6 +49,21 @@ void expect_frame_is_snapshot(const x3d::SurfaceFrame& f, const service::MeshSna
 void put_be32(std::vector<std::uint8_t>& b, std::size_t at, std::int32_t v) {
   const auto u = static_cast<std::uint32_t>(v);
   for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(u >> (24 - 8 * i));
+}
+
+std::string refused_tcpq_url() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof address;
+  if (fd < 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0 ||
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) != 0) {
+    if (fd >= 0) ::close(fd);
+    return "tcpq://127.0.0.1:1";
+  }
+  ::close(fd);  // bound, never listening, now closed: connecting is refused
+  return "tcpq://127.0.0.1:" + std::to_string(ntohs(address.sin_port));
 }
 
 }  // namespace tissue::transport::testing

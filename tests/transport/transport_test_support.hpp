@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "export/x3d.hpp"
@@ -25,5 +26,10 @@ void expect_frame_is_snapshot(const x3d::SurfaceFrame& f, const service::MeshSna
 
 // Writes v big-endian at b[at .. at + 4) (LCM's byte order).
 void put_be32(std::vector<std::uint8_t>& b, std::size_t at, std::int32_t v);
+
+// A tcpq:// URL on 127.0.0.1 at a port nothing listens on (one the kernel
+// just handed out and that was closed again): LCM's TCP provider cannot
+// connect there, and nothing leaves the machine.
+std::string refused_tcpq_url();
 
 }  // namespace tissue::transport::testing
