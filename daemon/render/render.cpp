@@ -127,8 +127,18 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   V3 hi{-lo[0], -lo[1], -lo[2]};
   for (const auto& v : frame.vertices_m)
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], v[a]), hi[a] = std::max(hi[a], v[a]);
-  const V3 centre{(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2};
-  const double radius = std::max(1e-9, 0.5 * std::sqrt(dot(sub(hi, lo), sub(hi, lo))));
+  // The picture is drawn in units of the bounding radius about the centre:
+  // GL's float pipeline then sees coordinates of order 1 whatever the
+  // object's size and place (a surface at ±3e38 m overflowed the projection
+  // to a blank picture; one a nanometre across was a dot). Halves first, so
+  // no sum or difference overflows.
+  const V3 centre{lo[0] / 2 + hi[0] / 2, lo[1] / 2 + hi[1] / 2, lo[2] / 2 + hi[2] / 2};
+  const V3 half_span{hi[0] / 2 - lo[0] / 2, hi[1] / 2 - lo[1] / 2, hi[2] / 2 - lo[2] / 2};
+  const double largest = std::max({half_span[0], half_span[1], half_span[2]});
+  const V3 unit_span{half_span[0] / largest, half_span[1] / largest, half_span[2] / largest};
+  // All vertices at one point: any scale draws it.
+  const double radius_m = largest > 0.0 ? largest * std::sqrt(dot(unit_span, unit_span)) : 1.0;
+  const double radius = 1.0;  // of the drawing
   const double az = o.azimuth_deg * M_PI / 180.0, el = o.elevation_deg * M_PI / 180.0;
   const V3 eye_dir{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};  // towards the camera
   const V3 up_hint = std::abs(eye_dir[2]) > 0.99 ? V3{0, 1, 0} : V3{0, 0, 1};
@@ -145,9 +155,8 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   const double half_h = 1.05 * radius * std::max(1.0, 1.0 / aspect), half_w = half_h * aspect;
   glOrtho(-half_w, half_w, -half_h, half_h, 0.0, 4.0 * radius);
   glMatrixMode(GL_MODELVIEW);
-  // View matrix: rows right/up/eye_dir, eye at centre + 2 r eye_dir.
-  const V3 eye{centre[0] + 2 * radius * eye_dir[0], centre[1] + 2 * radius * eye_dir[1],
-               centre[2] + 2 * radius * eye_dir[2]};
+  // View matrix: rows right/up/eye_dir, eye at 2 r eye_dir from the centre.
+  const V3 eye{2 * radius * eye_dir[0], 2 * radius * eye_dir[1], 2 * radius * eye_dir[2]};
   const GLdouble view[16] = {right[0], up[0], eye_dir[0], 0, right[1],         up[1],         eye_dir[1],         0,
                              right[2], up[2], eye_dir[2], 0, -dot(right, eye), -dot(up, eye), -dot(eye_dir, eye), 1};
   glLoadMatrixd(view);
@@ -175,16 +184,16 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
       base = x3d::strain_colour(span > 0.0 ? (mean - range[0]) / span : 0.0);
     }
     // A head light: faces turned to the camera are bright, grazing ones dim.
-    const double facing = std::abs(dot(normalized(cross(sub(b, a), sub(c, a))), eye_dir));
+    const auto in_radii = [&](const V3& v) { return V3{v[0] / radius_m, v[1] / radius_m, v[2] / radius_m}; };
+    const double facing = std::abs(dot(normalized(cross(in_radii(sub(b, a)), in_radii(sub(c, a)))), eye_dir));
     const auto colour = to_bytes(base, 0.35 + 0.65 * facing);
     for (const V3* p : {&a, &b, &c}) {
-      // Relative to the centre: floats keep sub-micrometre detail of a
-      // metre-sized object wherever it sits.
-      for (int k = 0; k < 3; ++k) positions.push_back(static_cast<float>((*p)[k] - centre[k]));
+      // Relative to the centre, in bounding radii: floats keep the detail of
+      // an object of any size wherever it sits.
+      for (int k = 0; k < 3; ++k) positions.push_back(static_cast<float>(((*p)[k] - centre[k]) / radius_m));
       colours.insert(colours.end(), colour.begin(), colour.end());
     }
   }
-  glTranslated(centre[0], centre[1], centre[2]);
   glEnableClientState(GL_VERTEX_ARRAY);
   glEnableClientState(GL_COLOR_ARRAY);
   glVertexPointer(3, GL_FLOAT, 0, positions.data());

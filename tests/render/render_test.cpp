@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <utility>
 
 #include "mesh/kuhn_mesh.hpp"
 #include "mesh/refine_ops.hpp"
@@ -63,6 +64,35 @@ TEST(Render, ObjectCoversItsProjectedBounds) {
   // And it is centred.
   EXPECT_FALSE(is_background(img, img.width / 2, img.height / 2));
   EXPECT_TRUE(is_background(img, 2, 2));
+}
+
+// The picture does not depend on the object's size or place: the box scaled
+// to ±3e38 m (finite; a blank picture before) or to a nanometre (a dot
+// before), or moved a kilometre, draws as the box itself. Within a few
+// pixels: the float rasteriser rounds differently at each scale.
+TEST(Render, APictureDoesNotDependOnTheObjectsScaleOrPlace) {
+  const RenderOptions o = top_view(true);
+  const x3d::SurfaceFrame box = box_surface(true);
+  const Image reference = render_frame(box, o);
+  const auto transformed = [&](double scale, double shift_m) {
+    x3d::SurfaceFrame f = box;
+    for (auto& v : f.vertices_m)
+      for (int a = 0; a < 3; ++a) v[a] = (v[a] - 0.2) * scale + shift_m;
+    return f;
+  };
+  for (const auto& [scale, shift_m] :
+       {std::pair{1.5e39, 0.0}, std::pair{5e-9, 0.0}, std::pair{1.0, 1000.0}, std::pair{1e300, 0.0}}) {
+    SCOPED_TRACE(::testing::Message() << "scale " << scale << " shift " << shift_m);
+    const Image img = render_frame(transformed(scale, shift_m), o);
+    int differing = 0, covered = 0;
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        differing += img.pixel(x, y) != reference.pixel(x, y) ? 1 : 0;
+        covered += is_background(img, x, y) ? 0 : 1;
+      }
+    EXPECT_GT(covered, img.width * img.height / 20);  // not blank
+    EXPECT_LT(differing, img.width * img.height / 200) << differing << " pixels differ";
+  }
 }
 
 // Refinement shows: the refined corner is drawn in another palette colour
