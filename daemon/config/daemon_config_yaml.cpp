@@ -63,7 +63,7 @@ class Converter : public yaml_util::Reader {
   explicit Converter(const std::string& source) : Reader(source) {}
 
   DaemonConfig config(const YAML::Node& root) {
-    if (!root.IsMap()) fail("", "a daemon config must be a map of sections, got " + yaml_util::describe(root));
+    if (!root.IsMap()) fail("", "a daemon config must be a map of sections, got " + yaml_util::describe_kind(root));
     const FieldMap f = fields(root, "", kTopLevelKeys);
     DaemonConfig c;
     c.source = source_;

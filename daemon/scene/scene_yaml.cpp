@@ -19,6 +19,7 @@ namespace {
 using yaml_util::Choices;
 using yaml_util::count_of;
 using yaml_util::describe;
+using yaml_util::describe_kind;
 using yaml_util::FieldMap;
 using yaml_util::fmt_num;
 using yaml_util::is_digit;
@@ -60,7 +61,7 @@ class Converter : public yaml_util::Reader {
   explicit Converter(const std::string& source) : Reader(source) {}
 
   Scene scene(const YAML::Node& root) {
-    if (!root.IsMap()) fail("", "a scene document must be a map of sections, got " + describe(root));
+    if (!root.IsMap()) fail("", "a scene document must be a map of sections, got " + describe_kind(root));
     const FieldMap f = fields(root, "",
                               {"name", "object", "material", "gravity_m_per_s2", "fixed", "prescribed", "loads",
                                "adaptivity", "integrator", "probes", "tool"});

@@ -151,6 +151,11 @@ std::string describe(const YAML::Node& n) {
   return "nothing";
 }
 
+std::string describe_kind(const YAML::Node& n) {
+  if (n.IsScalar()) return "a line of text, not a map (contents not shown)";
+  return describe(n);
+}
+
 NumberParse parse_float(std::string_view s, double* out) {
   std::string_view t = s;
   bool neg = false;

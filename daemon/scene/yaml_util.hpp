@@ -78,6 +78,11 @@ bool is_digit(char c);
 bool is_quoted(const YAML::Node& n);
 // A node as a message shows it: "null", "a list", "a map", 'text'.
 std::string describe(const YAML::Node& n);
+// The kind of node without its text: for a whole document that is not a
+// map. The control socket's load_scene reads files as the daemon's user, so
+// quoting the start of a file that is not a scene (say /etc/passwd) would
+// show a client what it may not read itself.
+std::string describe_kind(const YAML::Node& n);
 
 enum class NumberParse { kOk, kNotANumber, kOutOfRange };
 // YAML 1.2 core-schema decimal numbers plus the .inf/.nan spellings.

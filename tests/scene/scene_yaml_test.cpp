@@ -463,6 +463,16 @@ TEST(SceneYamlErrors, EmptyDocumentAndMultipleDocuments) {
   expect_error("object: " + std::string(100000, '['), "", "nesting too deep");
 }
 
+// A file that is not a scene at all is said to be so without quoting it:
+// through the control socket the daemon reads it with its own rights.
+TEST(SceneYamlErrors, ADocumentThatIsNotAMapIsNotQuoted) {
+  const std::string what = expect_error("root:x:0:0:root:/root:/bin/bash\nsecret hunter2\n", "", "map of sections");
+  EXPECT_EQ(what.find("root"), std::string::npos) << what;
+  EXPECT_EQ(what.find("hunter2"), std::string::npos) << what;
+  EXPECT_NE(what.find("line of text"), std::string::npos) << what;
+  expect_error("- a\n- b\n", "", "got a list");
+}
+
 TEST(SceneYamlErrors, ValidateSceneWorksOnProgrammaticScenes) {
   Scene s;
   s.source = "built-in";
