@@ -52,6 +52,13 @@ class SessionBase {
  public:
   virtual ~SessionBase() = default;
   virtual void close() = 0;
+  // Waiting for a request with nothing of one received and no response
+  // being written: closing it loses nothing.
+  virtual bool idle() const = 0;
+  // Closes an idle connection after a best-effort error line (a short write
+  // to an idle socket fits its buffer).
+  virtual void evict(const std::string& line) = 0;
+  std::chrono::steady_clock::time_point last_active = std::chrono::steady_clock::now();
 };
 
 struct ControlServer::State : std::enable_shared_from_this<ControlServer::State> {
@@ -110,10 +117,22 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
     socket_.close(ignored);
   }
 
+  bool idle() const override { return awaiting_request_ && !closed_; }
+
+  void evict(const std::string& line) override {
+    boost::system::error_code ignored;
+    socket_.non_blocking(true, ignored);
+    socket_.write_some(asio::buffer(line), ignored);
+    close();
+  }
+
  private:
   void read_more() {
     auto self = this->shared_from_this();
+    awaiting_request_ = line_.empty() && !discarding_ && out_.empty();
     socket_.async_read_some(asio::buffer(chunk_), [self](const boost::system::error_code& ec, std::size_t n) {
+      self->awaiting_request_ = false;
+      self->last_active = std::chrono::steady_clock::now();
       if (ec || self->state_->stopped) {
         self->finish();  // EOF (maybe mid-line: nothing to answer), reset, or stop()
         return;
@@ -195,12 +214,30 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
   std::string out_;      // the response being written
   bool discarding_ = false;
   bool closed_ = false;
+  bool awaiting_request_ = false;
 };
 
 }  // namespace
 
 template <class Socket>
 void ControlServer::State::admit(Socket socket) {
+  if (sessions.size() >= static_cast<std::size_t>(settings.max_connections)) {
+    // Full: the connection idle the longest (nothing asked since its last
+    // answer) makes way, so forgotten connections (a script that never
+    // closed its socket) cannot lock every client out. Only when every
+    // connection is in the middle of a request is the newcomer refused.
+    SessionBase* longest_idle = nullptr;
+    for (const auto& [session, owner] : sessions)
+      if (session->idle() && (!longest_idle || session->last_active < longest_idle->last_active))
+        longest_idle = session;
+    if (longest_idle) {
+      longest_idle->evict(error_response("closed: this connection was the longest idle of " +
+                                         std::to_string(settings.max_connections) +
+                                         " open ones and a new client needed its place") +
+                          "\n");
+      sessions.erase(longest_idle);
+    }
+  }
   if (sessions.size() >= static_cast<std::size_t>(settings.max_connections)) {
     // One line, best effort: the socket is fresh, so a short write fits its
     // buffer; a client that cannot take it is closed all the same.
@@ -361,5 +398,11 @@ std::optional<tcp::endpoint> ControlServer::tcp_endpoint() const { return state_
 const std::string& ControlServer::unix_socket_path() const { return state_->settings.unix_socket_path; }
 
 std::size_t ControlServer::connection_count() const { return state_->sessions.size(); }
+
+std::size_t ControlServer::idle_connection_count() const {
+  std::size_t idle = 0;
+  for (const auto& entry : state_->sessions) idle += entry.first->idle() ? 1 : 0;
+  return idle;
+}
 
 }  // namespace tissue::control

@@ -71,6 +71,9 @@ class ControlServer {
   const std::string& unix_socket_path() const;
   // Open, accepted (not refused) connections; read it on the io thread.
   std::size_t connection_count() const;
+  // Of those, the ones waiting for a request with nothing of one received
+  // (a full server closes the longest idle of them for a newcomer); io thread.
+  std::size_t idle_connection_count() const;
 
   struct State;
 

@@ -172,39 +172,85 @@ TEST(ControlServer, OversizedLineIsRefusedAndTheStreamResynchronises) {
   expect_healthy(h);
 }
 
-TEST(ControlServer, ConnectionsBeyondTheLimitAreRefusedWithAMessage) {
-  constexpr int kLimit = 16;
-  constexpr int kClients = 100;
+// When every slot is taken, the connection idle the longest (nothing asked
+// since its last answer, or since it connected) is closed with one error
+// line, and the newcomer is served: 16 forgotten connections used to lock
+// every client out until they closed.
+TEST(ControlServer, WhenFullTheLongestIdleConnectionMakesWayForANewClient) {
+  constexpr int kLimit = 4;
   ServerHarness h(unix_settings(65536, kLimit));
   std::vector<std::unique_ptr<RawClient>> clients;
-  for (int i = 0; i < kClients; ++i) {
+  for (int i = 0; i < kLimit; ++i) {
     clients.push_back(std::make_unique<RawClient>(h.socket_path()));
     ASSERT_TRUE(clients.back()->connected()) << i;
+    ASSERT_TRUE(h.wait_for_connections(static_cast<std::size_t>(i + 1)));
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // distinct idle times
   }
-  // Refused clients get one error line and EOF; accepted ones hear nothing
-  // until they ask. Connections are accepted in order.
-  int refused = 0;
-  for (int i = kLimit; i < kClients; ++i) {
-    const auto line = clients[i]->read_line();
-    ASSERT_TRUE(line.has_value()) << "client " << i << " got no refusal";
+  // The first one asks something: now the second is the longest idle.
+  ASSERT_TRUE(clients[0]->send_all("{\"id\":0,\"cmd\":\"status\"}\n"));
+  ASSERT_TRUE(clients[0]->read_line().has_value());
+
+  for (int round = 0; round < 2; ++round) {  // the second and then the third make way
+    const int victim = 1 + round;
+    clients.push_back(std::make_unique<RawClient>(h.socket_path()));
+    ASSERT_TRUE(clients.back()->connected());
+    const auto line = clients[victim]->read_line();
+    ASSERT_TRUE(line.has_value()) << "client " << victim << " was not told";
     const json r = json::parse(*line);
     EXPECT_EQ(r.at("ok"), false);
-    EXPECT_EQ(r.at("error"), "too many connections (the limit is 16); try again later");
-    EXPECT_TRUE(clients[i]->sees_eof());
-    ++refused;
+    EXPECT_NE(r.at("error").get<std::string>().find("longest idle"), std::string::npos) << r;
+    EXPECT_TRUE(clients[victim]->sees_eof());
+    ASSERT_TRUE(clients.back()->send_all("{\"id\":7,\"cmd\":\"status\"}\n"));
+    const auto answer = clients.back()->read_line();
+    ASSERT_TRUE(answer.has_value());
+    EXPECT_EQ(json::parse(*answer).at("ok"), true);
   }
-  EXPECT_EQ(refused, kClients - kLimit);
-  for (int i = 0; i < kLimit; ++i) {
+  // The others were left alone and still answer.
+  for (int i : {0, 3}) {
     ASSERT_TRUE(clients[i]->send_all("{\"id\":" + std::to_string(i) + ",\"cmd\":\"status\"}\n"));
     const auto line = clients[i]->read_line();
-    ASSERT_TRUE(line.has_value()) << "accepted client " << i;
+    ASSERT_TRUE(line.has_value()) << "client " << i;
     EXPECT_EQ(json::parse(*line).at("id"), i);
-    EXPECT_EQ(json::parse(*line).at("ok"), true);
   }
   EXPECT_EQ(h.connections(), static_cast<std::size_t>(kLimit));
   clients.clear();
   ASSERT_TRUE(h.wait_for_connections(0));
   expect_healthy(h);
+}
+
+// A connection in the middle of a request is never closed for a newcomer:
+// when every one is, the newcomer is refused with one error line, and the
+// requests in progress complete.
+TEST(ControlServer, WhenEveryConnectionIsMidRequestANewcomerIsRefused) {
+  constexpr int kLimit = 3;
+  ServerHarness h(unix_settings(65536, kLimit));
+  std::vector<std::unique_ptr<RawClient>> busy;
+  for (int i = 0; i < kLimit; ++i) {
+    busy.push_back(std::make_unique<RawClient>(h.socket_path()));
+    ASSERT_TRUE(busy.back()->connected());
+    ASSERT_TRUE(h.wait_for_connections(static_cast<std::size_t>(i + 1)));
+    ASSERT_TRUE(busy.back()->send_all("{\"id\":" + std::to_string(i) + ",\"cmd\":"));
+  }
+  // Until the server has read the partial lines (bounded).
+  for (int i = 0; i < 1000 && h.idle_connections() > 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_EQ(h.idle_connections(), 0u);
+  for (int attempt = 0; attempt < 5; ++attempt) {
+    RawClient newcomer(h.socket_path());
+    ASSERT_TRUE(newcomer.connected());
+    const auto line = newcomer.read_line();
+    ASSERT_TRUE(line.has_value()) << "no refusal";
+    const json r = json::parse(*line);
+    EXPECT_EQ(r.at("ok"), false);
+    EXPECT_EQ(r.at("error"), "too many connections (the limit is 3); try again later");
+    EXPECT_TRUE(newcomer.sees_eof());
+  }
+  for (int i = 0; i < kLimit; ++i) {
+    ASSERT_TRUE(busy[i]->send_all("\"status\"}\n"));
+    const auto line = busy[i]->read_line();
+    ASSERT_TRUE(line.has_value()) << "busy client " << i;
+    EXPECT_EQ(json::parse(*line).at("id"), i);
+    EXPECT_EQ(json::parse(*line).at("ok"), true);
+  }
 }
 
 TEST(ControlServer, ManySimultaneousClientsAreAllServedWithinTheLimit) {

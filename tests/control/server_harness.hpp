@@ -53,6 +53,9 @@ class ServerHarness {
   std::size_t connections() {
     return on_io([this] { return server_->connection_count(); });
   }
+  std::size_t idle_connections() {
+    return on_io([this] { return server_->idle_connection_count(); });
+  }
   // Waits (bounded) until the server has seen `n` connections close.
   bool wait_for_connections(std::size_t n, std::chrono::milliseconds limit = std::chrono::seconds(5)) {
     const auto until = std::chrono::steady_clock::now() + limit;
