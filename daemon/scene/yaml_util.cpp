@@ -4,6 +4,7 @@
 #include <yaml-cpp/eventhandler.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <climits>
@@ -71,6 +72,13 @@ std::string printable_bare(std::string_view s) {
 }
 
 std::string printable(std::string_view s) { return "'" + printable_bare(s) + "'"; }
+
+bool plain_name(std::string_view s) {
+  if (s.empty() || s.size() > 64) return false;
+  for (const char c : s)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-')) return false;
+  return true;
+}
 
 std::string join_list(KeyList items) {
   std::string out;
@@ -152,7 +160,7 @@ std::string describe(const YAML::Node& n) {
 }
 
 std::string describe_kind(const YAML::Node& n) {
-  if (n.IsScalar()) return "a line of text, not a map (contents not shown)";
+  if (n.IsScalar()) return "a line of text (contents not shown)";
   return describe(n);
 }
 
@@ -224,6 +232,13 @@ FieldMap Reader::fields(const YAML::Node& n, const std::string& path, KeyList al
     const YAML::Node key = it->first;
     if (!key.IsScalar()) fail(path, "map keys must be plain names, got " + describe(key));
     const std::string& name = key.Scalar();
+    // A key that is no plain name is not echoed: a file that is not a scene
+    // (an /etc/shadow line reads as a YAML key) must not come back through
+    // the control socket, which reads files with the daemon's rights.
+    if (!plain_name(name))
+      fail(join_key(path, "<key not shown>"),
+           "unknown key that is not a plain name (letters, digits, '_', '-'; up to 64), not shown; allowed keys: " +
+               join_list(allowed));
     const std::string kp = join_key(path, printable_bare(name));
     if (std::find(allowed.begin(), allowed.end(), std::string_view(name)) == allowed.end()) {
       std::string reason = "unknown key " + printable(name);
@@ -370,7 +385,7 @@ YAML::Node set_path(const YAML::Node& node, bool present, const Override& ov, st
   const std::string here = join_key(done, part.key);
   if (present && !node.IsNull() && !node.IsMap())
     throw PathError(source, done.empty() ? here : done,
-                    shown + ": cannot set key '" + part.key + "' inside " + describe(node) + ", it is not a map");
+                    shown + ": cannot set key '" + part.key + "' inside " + describe_kind(node) + ", it is not a map");
   YAML::Node out(YAML::NodeType::Map);
   bool replaced = false;
   if (present && node.IsMap()) {

@@ -83,6 +83,8 @@ std::string describe(const YAML::Node& n);
 // quoting the start of a file that is not a scene (say /etc/passwd) would
 // show a client what it may not read itself.
 std::string describe_kind(const YAML::Node& n);
+// A key worth echoing: 1..64 letters, digits, '_' or '-'.
+bool plain_name(std::string_view s);
 
 enum class NumberParse { kOk, kNotANumber, kOutOfRange };
 // YAML 1.2 core-schema decimal numbers plus the .inf/.nan spellings.

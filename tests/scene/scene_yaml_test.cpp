@@ -471,6 +471,22 @@ TEST(SceneYamlErrors, ADocumentThatIsNotAMapIsNotQuoted) {
   EXPECT_EQ(what.find("hunter2"), std::string::npos) << what;
   EXPECT_NE(what.find("line of text"), std::string::npos) << what;
   expect_error("- a\n- b\n", "", "got a list");
+  // Lines that YAML reads as keys (/etc/shadow's end in ':') are not echoed.
+  const std::string shadow =
+      expect_error("alice:$6$SALTsalt$HASHhashHASH:20228:0:99999:7:::\nbob:*:20228:0:99999:7:::\n", "<key not shown>",
+                   "not a plain name");
+  EXPECT_EQ(shadow.find("alice"), std::string::npos) << shadow;
+  EXPECT_EQ(shadow.find("SALT"), std::string::npos) << shadow;
+  // Nor is a file that is not a map when an override reaches into it.
+  try {
+    parse_scene_with_overrides("root:x:0:0:root:/root:/bin/bash secret\n", "t.yaml", {"integrator.kind=explicit"});
+    ADD_FAILURE() << "expected an error";
+  } catch (const SceneError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(what.find("root"), std::string::npos) << what;
+    EXPECT_EQ(what.find("secret"), std::string::npos) << what;
+    EXPECT_NE(what.find("not shown"), std::string::npos) << what;
+  }
 }
 
 TEST(SceneYamlErrors, ValidateSceneWorksOnProgrammaticScenes) {
