@@ -2,6 +2,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
+#include <array>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -91,6 +93,21 @@ int run_render(RenderCommandOptions o) {
       frames = {*at};
     } else {
       frames = {n - 1};
+    }
+    if (o.sequence) {
+      // One camera for the whole sequence (as x3d --animate): the union of
+      // the frames' bounds, read in a first pass, so motion shows.
+      std::array<std::array<double, 3>, 2> box{};
+      for (std::size_t i = 0; i < frames.size(); ++i) {
+        const x3d::SurfaceFrame frame = source->read_frame(frames[i]);
+        x3d::validate_frame(frame, false, "frame");
+        const auto one = render::union_box_m({&frame});
+        for (int a = 0; a < 3; ++a) {
+          box[0][a] = i == 0 ? one[0][a] : std::min(box[0][a], one[0][a]);
+          box[1][a] = i == 0 ? one[1][a] : std::max(box[1][a], one[1][a]);
+        }
+      }
+      o.image.frame_box_m = box;
     }
     render::Renderer renderer;  // one context for the whole sequence
     for (std::size_t i = 0; i < frames.size(); ++i) {

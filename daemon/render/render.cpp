@@ -93,6 +93,19 @@ Renderer::~Renderer() = default;
 Renderer::Renderer(Renderer&&) noexcept = default;
 Renderer& Renderer::operator=(Renderer&&) noexcept = default;
 
+std::array<std::array<double, 3>, 2> union_box_m(const std::vector<const x3d::SurfaceFrame*>& frames) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  std::array<std::array<double, 3>, 2> box{{{kInf, kInf, kInf}, {-kInf, -kInf, -kInf}}};
+  bool any = false;
+  for (const x3d::SurfaceFrame* f : frames)
+    for (const auto& v : f->vertices_m) {
+      any = true;
+      for (int a = 0; a < 3; ++a) box[0][a] = std::min(box[0][a], v[a]), box[1][a] = std::max(box[1][a], v[a]);
+    }
+  if (!any) throw x3d::X3dInputError("no vertex in any frame");
+  return box;
+}
+
 Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& options) {
   Renderer renderer;
   return renderer.render(frame, options);
@@ -125,8 +138,17 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   V3 lo{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
         std::numeric_limits<double>::infinity()};
   V3 hi{-lo[0], -lo[1], -lo[2]};
-  for (const auto& v : frame.vertices_m)
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], v[a]), hi[a] = std::max(hi[a], v[a]);
+  if (o.frame_box_m) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = (*o.frame_box_m)[0][a];
+      hi[a] = (*o.frame_box_m)[1][a];
+      if (!std::isfinite(lo[a]) || !std::isfinite(hi[a]) || lo[a] > hi[a])
+        throw RenderError("render: the camera's box must be finite with lo <= hi on every axis");
+    }
+  } else {
+    for (const auto& v : frame.vertices_m)
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], v[a]), hi[a] = std::max(hi[a], v[a]);
+  }
   // The picture is drawn in units of the bounding radius about the centre:
   // GL's float pipeline then sees coordinates of order 1 whatever the
   // object's size and place (a surface at ±3e38 m overflowed the projection
@@ -141,8 +163,10 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   const double radius = 1.0;  // of the drawing
   const double az = o.azimuth_deg * M_PI / 180.0, el = o.elevation_deg * M_PI / 180.0;
   const V3 eye_dir{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};  // towards the camera
-  const V3 up_hint = std::abs(eye_dir[2]) > 0.99 ? V3{0, 1, 0} : V3{0, 0, 1};
-  const V3 right = normalized(cross(up_hint, eye_dir));
+  // Right is horizontal and follows the azimuth at every elevation, up to
+  // straight down or up: an up hint switched near the poles turned the
+  // picture by ~60° between 81° and 82° and froze the azimuth above.
+  const V3 right{-std::sin(az), std::cos(az), 0.0};
   const V3 up = cross(eye_dir, right);
 
   glViewport(0, 0, img.width, img.height);

@@ -42,7 +42,16 @@ struct RenderOptions {
   x3d::ColourMode colour = x3d::ColourMode::kLevel;
   // Strain ramp ends (Pa); unset: the frame's own min..max.
   std::optional<std::array<double, 2>> strain_range_Pa;
+  // Box the camera frames (lo, hi corners, m); unset: the frame's own
+  // bounds. A sequence passes the union over its frames, so one camera
+  // shows the motion instead of re-centring on every frame.
+  std::optional<std::array<std::array<double, 3>, 2>> frame_box_m;
 };
+
+// Axis-aligned bounds (lo, hi) of the frames' vertices together, for
+// RenderOptions::frame_box_m; throws x3d::X3dInputError when no frame has a
+// vertex.
+std::array<std::array<double, 3>, 2> union_box_m(const std::vector<const x3d::SurfaceFrame*>& frames);
 
 // The strain range render_frame uses for `frame` with `options` (for
 // captions): options.strain_range_Pa or the frame's min..max. Throws

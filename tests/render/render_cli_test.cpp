@@ -5,6 +5,7 @@
 
 #include "export/export_test_support.hpp"
 #include "record/session_writer.hpp"
+#include "render/png_writer.hpp"
 
 namespace tissue::render {
 namespace {
@@ -41,6 +42,30 @@ TEST(RenderCli, OneFrameAndANumberedSequence) {
   r = render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(dir / "f.png"));
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const char* name : {"f-0000.png", "f-0001.png", "f-0002.png"}) EXPECT_TRUE(std::filesystem::exists(dir / name));
+}
+
+// A sequence keeps one camera (the union of its frames' bounds): a box that
+// slides along x shows up in different places. Framed frame by frame, every
+// picture of a rigidly moving body was the same.
+TEST(RenderCli, ASequenceKeepsOneCameraSoMotionShows) {
+  TempDir dir;
+  record::SessionMetadata meta;
+  meta.scene_name = "slide";
+  const std::string session = dir / "slide.h5";
+  auto writer = record::SessionWriter::create(session, meta);
+  for (int k = 0; k < 3; ++k) {
+    const x3d::SurfaceFrame f = x3d::testing::box_frame(0.1 * k, {0.1 * k, 0, 0}, {0.1 * k + 0.1, 0.05, 0.02});
+    writer->append_mesh_frame(record::MeshFrameView{f.time_s, f.vertices_m, f.triangles, f.vertex_level, {}});
+  }
+  writer->close();
+  const RunResult r = render(dir, "--session " + quote(session) +
+                                      " --sequence --width 120 --height 90 --no-legend -o " + quote(dir / "f.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Image first = read_png(dir / "f-0000.png"), last = read_png(dir / "f-0002.png");
+  ASSERT_EQ(first.rgba.size(), last.rgba.size());
+  std::size_t differing = 0;
+  for (std::size_t i = 0; i < first.rgba.size(); i += 4) differing += first.rgba[i] != last.rgba[i] ? 1 : 0;
+  EXPECT_GT(differing, first.rgba.size() / 4 / 20) << "the box did not move in the pictures";
 }
 
 TEST(RenderCli, ErrorsHaveExitCodes) {

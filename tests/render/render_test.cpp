@@ -95,6 +95,38 @@ TEST(Render, APictureDoesNotDependOnTheObjectsScaleOrPlace) {
   }
 }
 
+// The camera turns smoothly over the poles: one degree of elevation moves
+// few pixels (81° to 82° turned the picture by ~60°), and the azimuth still
+// turns the view from straight above (it froze from 82° on).
+TEST(Render, TheViewChangesSmoothlyWithElevationAndAzimuthTurnsItFromAbove) {
+  RenderOptions o = top_view(false);
+  const x3d::SurfaceFrame box = box_surface(false);
+  // Pixels covered in one picture and background in the other (the shade
+  // of every face changes a little with any turn; the silhouette moves only
+  // as far as the turn).
+  const auto differing = [](const Image& a, const Image& b) {
+    int n = 0;
+    for (int y = 0; y < a.height; ++y)
+      for (int x = 0; x < a.width; ++x) n += is_background(a, x, y) != is_background(b, x, y) ? 1 : 0;
+    return n;
+  };
+  o.azimuth_deg = -60.0;
+  for (double elevation = 75.0; elevation < 90.0; elevation += 1.0) {
+    SCOPED_TRACE(::testing::Message() << "elevation " << elevation);
+    o.elevation_deg = elevation;
+    const Image lower = render_frame(box, o);
+    o.elevation_deg = elevation + 1.0;
+    const Image higher = render_frame(box, o);
+    EXPECT_LT(differing(lower, higher), lower.width * lower.height / 10);
+  }
+  o.elevation_deg = 90.0;
+  o.azimuth_deg = -90.0;
+  const Image along_x = render_frame(box, o);
+  o.azimuth_deg = 0.0;
+  const Image along_y = render_frame(box, o);
+  EXPECT_GT(differing(along_x, along_y), along_x.width * along_x.height / 10);
+}
+
 // Refinement shows: the refined corner is drawn in another palette colour
 // than the coarse rest, and the legend lists both levels.
 TEST(Render, RefinedRegionChangesColour) {
