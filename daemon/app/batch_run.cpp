@@ -317,14 +317,16 @@ int batch_command(const BatchOptions& options) {
     if (const physics::SimCounters& c = sim->counters(); c.unconverged_steps > 0) {
       // The run succeeded, but part of it is less accurate than the scene asked.
       std::fflush(stdout);
-      // The two-level hint only where it is not what ran already.
-      const bool two_level = scene.integrator.cg_preconditioner == scene::CgPreconditioner::kTwoLevel;
+      // The two-level hint only for the implicit rung (the preconditioner is
+      // its CG's; projective has none) and where it is not what ran already.
+      const bool hint_two_level = scene.integrator.kind == scene::IntegratorKind::kImplicit &&
+                                  scene.integrator.cg_preconditioner != scene::CgPreconditioner::kTwoLevel;
       std::fprintf(stderr,
                    "tissued: warning: %lld of %lld steps stopped at integrator.cg_max_iterations = %d short of "
                    "integrator.cg_tolerance = %g; raise cg_max_iterations%s lower dt_s%s\n",
                    static_cast<long long>(c.unconverged_steps), static_cast<long long>(c.steps),
-                   scene.integrator.cg_max_iterations, scene.integrator.cg_tolerance, two_level ? " or" : ",",
-                   two_level ? "" : ", or (slender or heavily damped objects) try cg_preconditioner: two_level");
+                   scene.integrator.cg_max_iterations, scene.integrator.cg_tolerance, hint_two_level ? "," : " or",
+                   hint_two_level ? ", or (slender or heavily damped objects) try cg_preconditioner: two_level" : "");
     }
     if (talk) {
       std::printf("done: %.6g s simulated in %lld steps", sim->time_s(), static_cast<long long>(sim->counters().steps));

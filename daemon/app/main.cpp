@@ -87,6 +87,13 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "tissued: --record-interval is for --batch --record (see --help)\n");
         return tissue::app::kExitUsage;
       }
+      if (duration->count() > 0 && !(batch_options.duration_s > 0.0)) {
+        // 0 would mean "no limit" to the service: a user who typed it meant "stop at once" or a typo.
+        std::fprintf(stderr,
+                     "tissued: --duration with --config must be > 0 wall seconds (omit it to serve until "
+                     "stopped)\n");
+        return tissue::app::kExitUsage;
+      }
       tissue::service::ServiceOptions options;
       options.config_path = config_path;
       options.overrides = batch_options.overrides;

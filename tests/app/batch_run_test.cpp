@@ -490,6 +490,12 @@ TEST_F(TissuedProcess, CappedSolverWarnsNamingTheKeys) {
   ASSERT_EQ(q.exit_code, 0) << q.err;
   EXPECT_TRUE(contains(q.err, "raise cg_max_iterations or lower dt_s")) << q.err;
   EXPECT_FALSE(contains(q.err, "two_level")) << q.err;
+  // Projective has no preconditioner: no hint that changes nothing.
+  const Process pd = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.05", "--set",
+                          "integrator.kind=projective", "--set", "integrator.cg_max_iterations=1", "--progress", "0"});
+  ASSERT_EQ(pd.exit_code, 0) << pd.err;
+  EXPECT_TRUE(contains(pd.err, "raise cg_max_iterations or lower dt_s")) << pd.err;
+  EXPECT_FALSE(contains(pd.err, "two_level")) << pd.err;
 }
 
 // --record: the run as a session file the session tools read (one sim row per
@@ -578,6 +584,14 @@ TEST_F(TissuedProcess, RecordIntervalSpacesTheFrames) {
     EXPECT_TRUE(contains(q.err, "--record-interval")) << q.err;
   }
   EXPECT_FALSE(fs::exists(dir_ / "zero.h5"));
+}
+
+// --duration 0 with --config meant "no limit" to the service and it never
+// stopped: a usage error now, before anything starts.
+TEST_F(TissuedProcess, AZeroDurationForTheServiceIsAUsageError) {
+  const Process p = run({"--config", "whatever.yaml", "--duration", "0"});
+  EXPECT_EQ(p.exit_code, 2) << p.err;
+  EXPECT_TRUE(contains(p.err, "--duration with --config must be > 0")) << p.err;
 }
 
 TEST_F(TissuedProcess, RecordNeverOverwritesAndAnUnwritablePathExits5BeforeTheRun) {
