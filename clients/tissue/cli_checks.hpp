@@ -6,6 +6,8 @@
 #include <cstdlib>
 #include <string>
 
+#include "util/lcm_url.hpp"
+
 namespace tissue::cli {
 
 // A finite number > 0. CLI::PositiveNumber lets NaN through (every
@@ -20,6 +22,31 @@ inline CLI::Validator finite_positive() {
         return {};
       },
       "S > 0");
+}
+
+// Any finite number (a session time): `--time nan` found "no frame that
+// early" instead of saying what was wrong.
+inline CLI::Validator finite_number() {
+  return CLI::Validator(
+      [](std::string& v) -> std::string {
+        char* end = nullptr;
+        const double x = std::strtod(v.c_str(), &end);
+        if (v.empty() || end != v.c_str() + v.size()) return "'" + v + "' is not a number";
+        if (!std::isfinite(x)) return v + " is not a finite number";
+        return {};
+      },
+      "T");
+}
+
+// An LCM provider URL as the daemon's config checks it (util/lcm_url.hpp):
+// a udpm:// one needs a multicast group, a port and a ttl in range.
+inline CLI::Validator lcm_url() {
+  return CLI::Validator(
+      [](std::string& v) -> std::string {
+        if (const std::string why = util::udpm_url_problem(v); !why.empty()) return "'" + v + "': " + why;
+        return {};
+      },
+      "URL");
 }
 
 // A frame index: unsigned parsing would wrap "-1" to 18446744073709551615.

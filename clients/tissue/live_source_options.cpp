@@ -13,7 +13,8 @@ void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* s
   o.lcm_option = cmd->add_option("--lcm", o.lcm_url,
                                  "Live frames from LCM (channel TISSUE_SURFACE_MESH) at URL instead of a session")
                      ->expected(0, 1)
-                     ->default_str(transport::kLcmSubscribeUrl);
+                     ->default_str(transport::kLcmSubscribeUrl)
+                     ->check(lcm_url());
   o.dds_option = add_dds_options(cmd, o.dds, "Live frames from Fast DDS (topic <prefix>surface_mesh)");
   CLI::Option* seconds =
       cmd->add_option("--seconds", o.seconds, "Live: collect frames for S seconds (wall) after the first one")
@@ -34,7 +35,10 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
   std::unique_ptr<transport::MeshSubscriber> sub;
   try {
     if (o.lcm_url) {
-      sub = std::make_unique<transport::LcmMeshSubscriber>(*o.lcm_url);
+      // `--lcm ''` reaches here unchecked (CLI11 validates no empty value):
+      // it means the default, said by name in every message.
+      sub = std::make_unique<transport::LcmMeshSubscriber>(o.lcm_url->empty() ? std::string(transport::kLcmSubscribeUrl)
+                                                                              : *o.lcm_url);
     } else {
       sub = std::make_unique<transport::DdsMeshSubscriber>(o.dds.options());
     }

@@ -155,14 +155,15 @@ Subcommand add_render_command(CLI::App& parent) {
   CLI::App* cmd =
       parent.add_subcommand("render", "Draw the tissue surface of a recorded session or live data to PNG (OSMesa)");
   CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
-  CLI::Option* time = cmd->add_option("--time", o->time_s, "The frame shown at session time T (s)");
+  CLI::Option* time =
+      cmd->add_option("--time", o->time_s, "The frame shown at session time T (s)")->check(finite_number());
   CLI::Option* frame =
       cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)")->check(frame_index());
   time->excludes(frame);
   CLI::Option* seq = cmd->add_flag("--sequence", o->sequence, "Every frame in --from..--to, numbered files");
   seq->excludes(time)->excludes(frame);
-  cmd->add_option("--from", o->from_s, "Sequence start, session time (s)")->needs(seq);
-  cmd->add_option("--to", o->to_s, "Sequence end, session time (s)")->needs(seq);
+  cmd->add_option("--from", o->from_s, "Sequence start, session time (s)")->check(finite_number())->needs(seq);
+  cmd->add_option("--to", o->to_s, "Sequence end, session time (s)")->check(finite_number())->needs(seq);
   cmd->add_option("--width", o->image.width_px, "Image width (pixels)")->check(CLI::Range(16, 8192));
   cmd->add_option("--height", o->image.height_px, "Image height (pixels)")->check(CLI::Range(16, 8192));
   cmd->add_option("--azimuth", o->image.azimuth_deg, "Camera azimuth about +z from +x (degrees)")

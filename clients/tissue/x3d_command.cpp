@@ -173,14 +173,17 @@ Subcommand add_x3d_command(CLI::App& parent) {
   CLI::App* cmd =
       parent.add_subcommand("x3d", "Export the tissue surface of a recorded session or live data as X3D (XML)");
   CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
-  CLI::Option* time = cmd->add_option("--time", o->time_s, "Snapshot of the frame shown at session time T (s)");
+  CLI::Option* time =
+      cmd->add_option("--time", o->time_s, "Snapshot of the frame shown at session time T (s)")->check(finite_number());
   CLI::Option* frame =
       cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)")->check(frame_index());
   time->excludes(frame);
   CLI::Option* animate = cmd->add_flag("--animate", o->animate, "Animation over --from..--to (default: all frames)");
   animate->excludes(time)->excludes(frame);
-  cmd->add_option("--from", o->from_s, "Animation window start, session time (s)")->needs(animate);
-  cmd->add_option("--to", o->to_s, "Animation window end, session time (s)")->needs(animate);
+  cmd->add_option("--from", o->from_s, "Animation window start, session time (s)")
+      ->check(finite_number())
+      ->needs(animate);
+  cmd->add_option("--to", o->to_s, "Animation window end, session time (s)")->check(finite_number())->needs(animate);
   cmd->add_option("--colour", o->colour, "Vertex colours: level (bisection depth) or strain (energy density)")
       ->check(CLI::IsMember({"level", "strain"}));
   cmd->add_option("-o,--output", o->out, "Output file (.x3d)")->required();

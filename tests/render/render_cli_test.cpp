@@ -74,6 +74,9 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   EXPECT_EQ(render(dir, "--session " + quote(dir / "missing.h5") + " -o x.png").exit_code, 1);
   EXPECT_EQ(render(dir, "--session " + quote(session) + " --frame 9 -o x.png").exit_code, 2);
   EXPECT_EQ(render(dir, "--session " + quote(session) + " --width 3 -o x.png").exit_code, 2);
+  const RunResult nan_time = render(dir, "--session " + quote(session) + " --time nan -o x.png");
+  EXPECT_EQ(nan_time.exit_code, 2);
+  EXPECT_NE(nan_time.err.find("not a finite number"), std::string::npos) << nan_time.err;
   const RunResult negative = render(dir, "--session " + quote(session) + " --frame -1 -o x.png");
   EXPECT_EQ(negative.exit_code, 2);
   EXPECT_NE(negative.err.find("--frame: -1 is negative"), std::string::npos) << negative.err;
