@@ -132,7 +132,6 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
     awaiting_request_ = line_.empty() && !discarding_ && out_.empty();
     socket_.async_read_some(asio::buffer(chunk_), [self](const boost::system::error_code& ec, std::size_t n) {
       self->awaiting_request_ = false;
-      self->last_active = std::chrono::steady_clock::now();
       if (ec || self->state_->stopped) {
         self->finish();  // EOF (maybe mid-line: nothing to answer), reset, or stop()
         return;
@@ -187,6 +186,8 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
   }
 
   void respond(std::string response) {
+    // Activity is a request answered: blank lines (ignored) do not count.
+    last_active = std::chrono::steady_clock::now();
     out_ = std::move(response);
     out_ += '\n';
     auto self = this->shared_from_this();

@@ -112,6 +112,7 @@ StrainRange strain_range(const std::vector<const SurfaceFrame*>& frames, const X
       r.lo_Pa = std::min(r.lo_Pa, static_cast<double>(e));
       r.hi_Pa = std::max(r.hi_Pa, static_cast<double>(e));
     }
+  if (r.hi_Pa - r.lo_Pa < kStrainRangeFloor_Pa) r.hi_Pa = r.lo_Pa;  // rounding: a constant field
   return r;
 }
 

@@ -62,6 +62,12 @@ inline constexpr std::size_t kLevelPaletteSize = 8;
 std::array<float, 3> level_colour(std::uint8_t level);
 // The strain ramp (viridis, piecewise linear): t in [0,1], clamped.
 std::array<float, 3> strain_colour(double t);
+// A strain range taken from the data (not given) that is narrower than this
+// is rounding, not deformation: a body at rest spanned 0 to 6e-26 Pa and was
+// drawn across the whole ramp. Such a field is drawn as constant (the low
+// end of the ramp). Rounding strains are ~1e-15; 1e-12 Pa is a strain of
+// 3e-8 even at E = 1e3 Pa.
+inline constexpr double kStrainRangeFloor_Pa = 1e-12;
 
 // Per-vertex strain-energy density from per-triangle values (what messages
 // and sessions carry): the mean over the triangles that use the vertex, 0 for

@@ -76,6 +76,8 @@ std::array<double, 2> strain_range_Pa(const x3d::SurfaceFrame& frame, const Rend
   }
   if (frame.vertex_strain_energy_Pa.empty()) return {0.0, 0.0};
   const auto [lo, hi] = std::minmax_element(frame.vertex_strain_energy_Pa.begin(), frame.vertex_strain_energy_Pa.end());
+  if (static_cast<double>(*hi) - static_cast<double>(*lo) < x3d::kStrainRangeFloor_Pa)  // rounding: constant
+    return {static_cast<double>(*lo), static_cast<double>(*lo)};
   return {static_cast<double>(*lo), static_cast<double>(*hi)};
 }
 

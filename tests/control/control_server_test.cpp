@@ -186,9 +186,13 @@ TEST(ControlServer, WhenFullTheLongestIdleConnectionMakesWayForANewClient) {
     ASSERT_TRUE(h.wait_for_connections(static_cast<std::size_t>(i + 1)));
     std::this_thread::sleep_for(std::chrono::milliseconds(5));  // distinct idle times
   }
-  // The first one asks something: now the second is the longest idle.
+  // The first one asks something: now the second is the longest idle. The
+  // second sends blank lines, which are no requests and change nothing.
   ASSERT_TRUE(clients[0]->send_all("{\"id\":0,\"cmd\":\"status\"}\n"));
   ASSERT_TRUE(clients[0]->read_line().has_value());
+  ASSERT_TRUE(clients[1]->send_all("  \n\n"));
+  for (int i = 0; i < 1000 && h.idle_connections() < static_cast<std::size_t>(kLimit); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // the blank lines read
 
   for (int round = 0; round < 2; ++round) {  // the second and then the third make way
     const int victim = 1 + round;

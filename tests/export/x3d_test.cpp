@@ -126,6 +126,15 @@ TEST(X3dSnapshot, StrainColoursUseTheRampAndRecordTheRange) {
     EXPECT_NEAR(clamped[a], strain_colour(0.0)[a], 1e-3);
     EXPECT_NEAR(clamped[21 + a], strain_colour(1.0)[a], 1e-3);
   }
+  // A range from the data narrower than kStrainRangeFloor_Pa is rounding (a
+  // body at rest): every vertex takes the ramp's low end.
+  o.strain_range_Pa.reset();
+  SurfaceFrame at_rest = f;
+  for (std::size_t i = 0; i < at_rest.vertex_strain_energy_Pa.size(); ++i)
+    at_rest.vertex_strain_energy_Pa[i] = static_cast<float>(1e-26 * static_cast<double>(i));
+  const std::vector<double> flat = numbers(attribute(x3d_snapshot(at_rest, o), "Color", "color"));
+  ASSERT_EQ(flat.size(), 24u);
+  for (std::size_t i = 0; i < flat.size(); ++i) EXPECT_NEAR(flat[i], strain_colour(0.0)[i % 3], 1e-3) << i;
   // The ramp is monotonic in brightness (viridis).
   double last = -1.0;
   for (int i = 0; i <= 20; ++i) {

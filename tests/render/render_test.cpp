@@ -160,9 +160,10 @@ TEST(Render, StrainColoursFollowTheField) {
   const Image img = render_frame(f, o);
   const double radius = 0.5 * std::sqrt(0.18);
   const double px_per_m = o.height_px / (2 * 1.05 * radius);
-  const auto pixel_at = [&](double x_m) {
-    return img.pixel(static_cast<int>(o.width_px / 2 + (x_m - 0.2) * px_per_m), o.height_px / 2);
+  const auto pixel_at_in = [&](const Image& picture, double x_m) {
+    return picture.pixel(static_cast<int>(o.width_px / 2 + (x_m - 0.2) * px_per_m), o.height_px / 2);
   };
+  const auto pixel_at = [&](double x_m) { return pixel_at_in(img, x_m); };
   // A triangle takes the mean of its vertices: in the first 0.05 m cube that
   // is 1/3 or 2/3 of the way across, t = 0.04 or 0.08 (and 0.92 / 0.96 at
   // the other end).
@@ -186,6 +187,17 @@ TEST(Render, StrainColoursFollowTheField) {
   const auto p = fixed.pixel(static_cast<int>(o.width_px / 2 + 0.0 * px_per_m), o.height_px / 2);
   const auto top = x3d::strain_colour(1.0);
   for (int k = 0; k < 3; ++k) EXPECT_NEAR(p[k], top[k] * 255.0, 12.0) << k;
+  // Rounding is no strain: a field spanning 6e-26 Pa (a body at rest) is
+  // drawn as constant, the ramp's low end, not across the whole ramp.
+  o.strain_range_Pa.reset();
+  for (std::size_t i = 0; i < f.vertices_m.size(); ++i)
+    f.vertex_strain_energy_Pa[i] = static_cast<float>(6e-26 * f.vertices_m[i][0] / 0.4);
+  const auto noise = strain_range_Pa(f, o);
+  EXPECT_EQ(noise[0], noise[1]);
+  const Image at_rest = render_frame(f, o);
+  const auto low = x3d::strain_colour(0.0);
+  for (const double x_m : {0.02, 0.38})
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(pixel_at_in(at_rest, x_m)[k], low[k] * 255.0, 12.0) << x_m;
   // Strain colouring needs the values.
   f.vertex_strain_energy_Pa.clear();
   EXPECT_THROW(render_frame(f, o), x3d::X3dInputError);
