@@ -12,14 +12,21 @@ namespace tissue::cli {
 
 // A finite number > 0. CLI::PositiveNumber lets NaN through (every
 // comparison with it is false): `--timeout nan` then waited forever.
+namespace detail {
+// Reads all of `v` as a number into *x; the message when it is not one.
+inline std::string whole_number(const std::string& v, double* x) {
+  char* end = nullptr;
+  *x = std::strtod(v.c_str(), &end);
+  return v.empty() || end != v.c_str() + v.size() ? "'" + v + "' is not a number" : std::string();
+}
+}  // namespace detail
+
 inline CLI::Validator finite_positive() {
   return CLI::Validator(
       [](std::string& v) -> std::string {
-        char* end = nullptr;
-        const double x = std::strtod(v.c_str(), &end);
-        if (v.empty() || end != v.c_str() + v.size()) return "'" + v + "' is not a number";
-        if (!(std::isfinite(x) && x > 0.0)) return v + " must be a finite number > 0";
-        return {};
+        double x = 0.0;
+        if (std::string why = detail::whole_number(v, &x); !why.empty()) return why;
+        return std::isfinite(x) && x > 0.0 ? std::string() : v + " must be a finite number > 0";
       },
       "S > 0");
 }
@@ -29,11 +36,9 @@ inline CLI::Validator finite_positive() {
 inline CLI::Validator finite_number() {
   return CLI::Validator(
       [](std::string& v) -> std::string {
-        char* end = nullptr;
-        const double x = std::strtod(v.c_str(), &end);
-        if (v.empty() || end != v.c_str() + v.size()) return "'" + v + "' is not a number";
-        if (!std::isfinite(x)) return v + " is not a finite number";
-        return {};
+        double x = 0.0;
+        if (std::string why = detail::whole_number(v, &x); !why.empty()) return why;
+        return std::isfinite(x) ? std::string() : v + " is not a finite number";
       },
       "T");
 }
