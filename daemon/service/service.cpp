@@ -53,7 +53,8 @@ nlohmann::json status_json(const SimStatus& s) {
           {"refines", s.refines},
           {"merges", s.merges},
           {"energy_J", {{"kinetic", s.kinetic_energy_J}, {"elastic", s.elastic_energy_J}}},
-          {"real_time_factor", s.real_time_factor},
+          // null, not 0, until the first one-second window has been measured
+          {"real_time_factor", s.real_time_factor_measured ? nlohmann::json(s.real_time_factor) : nlohmann::json()},
           {"step_ms", {{"last", s.step_ms_last}, {"max_recent", s.step_ms_max_window}}},
           {"paused", s.paused},
           {"adaptation_shed", s.adaptation_shed},
@@ -263,16 +264,17 @@ void Service::print_status() {
   char capped[64] = "";
   if (s.unconverged_steps > 0)
     std::snprintf(capped, sizeof capped, " | CG capped in %lld steps", static_cast<long long>(s.unconverged_steps));
+  char rtf[16] = "  --";  // not measured yet (the first second)
+  if (s.real_time_factor_measured) std::snprintf(rtf, sizeof rtf, "%.2f", s.real_time_factor);
   std::fprintf(options_.out,
-               "t %8.2f s | nodes %6zu tets %7zu | refines %6lld merges %6lld | rtf %.2f step %.2f ms%s%s%s%s\n",
-               s.sim_time_s, s.nodes, s.tets, static_cast<long long>(s.refines), static_cast<long long>(s.merges),
-               s.real_time_factor, s.step_ms_last, capped, s.paused ? " | paused" : "",
-               s.adaptation_shed ? " | shedding" : "", haptic);
+               "t %8.2f s | nodes %6zu tets %7zu | refines %6lld merges %6lld | rtf %s step %.2f ms%s%s%s%s\n",
+               s.sim_time_s, s.nodes, s.tets, static_cast<long long>(s.refines), static_cast<long long>(s.merges), rtf,
+               s.step_ms_last, capped, s.paused ? " | paused" : "", s.adaptation_shed ? " | shedding" : "", haptic);
   std::fflush(options_.out);
   if (systemd_) {
     char line[160];
-    std::snprintf(line, sizeof line, "t=%.1fs nodes=%zu tets=%zu rtf=%.2f%s", s.sim_time_s, s.nodes, s.tets,
-                  s.real_time_factor, s.paused ? " paused" : "");
+    std::snprintf(line, sizeof line, "t=%.1fs nodes=%zu tets=%zu rtf=%s%s", s.sim_time_s, s.nodes, s.tets, rtf,
+                  s.paused ? " paused" : "");
     systemd_->status(line);
   }
 }

@@ -141,7 +141,10 @@ void SimThread::publish_status(std::int64_t t_ns) {
   const physics::Simulation& sim = runner_->simulation();
   const double window_s = 1e-9 * static_cast<double>(t_ns - window_start_ns_);
   if (window_s >= 1.0 || window_start_ns_ == 0) {
-    if (window_start_ns_ != 0) rtf_ = window_sim_s_ / window_s;
+    if (window_start_ns_ != 0) {
+      rtf_ = window_sim_s_ / window_s;
+      rtf_measured_ = true;
+    }
     window_start_ns_ = t_ns;
     window_sim_s_ = 0.0;
   }
@@ -167,6 +170,7 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.kinetic_energy_J = kinetic_energy_J_;
   s.elastic_energy_J = elastic_energy_J_;
   s.real_time_factor = rtf_;
+  s.real_time_factor_measured = rtf_measured_;
   s.step_ms_last = step_ms_last_;
   s.step_ms_max_window = step_ms_max_;
   s.paused = paused_.load(std::memory_order_relaxed);

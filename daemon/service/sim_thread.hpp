@@ -44,7 +44,8 @@ struct SimStatus {
   std::size_t nodes = 0, tets = 0, springs = 0;
   std::int64_t refines = 0, merges = 0;
   double kinetic_energy_J = 0.0, elastic_energy_J = 0.0;
-  double real_time_factor = 0.0;  // simulated / wall seconds over the last status window
+  double real_time_factor = 0.0;           // simulated / wall seconds over the last status window
+  bool real_time_factor_measured = false;  // false until a first window has ended (status says null)
   double step_ms_last = 0.0, step_ms_max_window = 0.0;
   bool paused = false;
   bool adaptation_shed = false;  // adaptation paused because the loop fell behind
@@ -170,6 +171,7 @@ class SimThread {
   std::int64_t last_energy_ns_ = 0;
   std::uint64_t energy_generation_ = 0;
   double rtf_ = 0.0;
+  bool rtf_measured_ = false;
   // Surface scratch (sim thread): reused, so a snapshot allocates only when
   // the surface grows.
   SnapshotScratch snapshot_scratch_;

@@ -101,6 +101,9 @@ TEST(Service, ServesStatusWithTheHapticSideAndShutsDownCleanly) {
   const nlohmann::json status = client.call("status");
   ASSERT_TRUE(status["ok"].get<bool>()) << status.dump();
   const nlohmann::json& r = status["result"];
+  // Measured over one-second windows: null before the first ended (it read
+  // 0.0 then, as if the sim stood still), a number after; never 0 here.
+  EXPECT_TRUE(r["real_time_factor"].is_null() || r["real_time_factor"].get<double>() > 0.0) << r.dump();
   EXPECT_GT(r["steps"].get<std::int64_t>(), 50);
   EXPECT_GT(r["solver"]["iterations_per_step"].get<double>(), 0.0) << r.dump();  // the implicit CG at work
   EXPECT_EQ(r["solver"]["substeps_per_step"].get<double>(), 1.0) << r.dump();
@@ -110,6 +113,10 @@ TEST(Service, ServesStatusWithTheHapticSideAndShutsDownCleanly) {
   EXPECT_GT(r["haptics"]["ticks"].get<std::uint64_t>(), 100u);
   EXPECT_GT(r["haptics"]["model_version"].get<std::uint64_t>(), 0u);
   EXPECT_EQ(r["scene"]["name"], "cantilever");
+  std::this_thread::sleep_for(1200ms);
+  const nlohmann::json later = client.call("status")["result"];
+  ASSERT_TRUE(later["real_time_factor"].is_number()) << later.dump();
+  EXPECT_GT(later["real_time_factor"].get<double>(), 0.0) << later.dump();
 
   EXPECT_TRUE(client.call("shutdown")["ok"].get<bool>());
   EXPECT_EQ(run.wait(), kServiceOk);
