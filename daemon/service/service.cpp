@@ -445,6 +445,10 @@ nlohmann::json Service::status() {
   nlohmann::json j = status_json(sim_->status());
   j["scene"] = {{"name", scene_.name}, {"source", scene_path_}, {"tool", scene_.tool.has_value()}};
   j["threads"] = {{"sim", sim_->scheduling()}};
+  // Read here on the io thread, where the server's connections live.
+  if (server_)
+    j["control"] = {{"connections", server_->connection_count()},
+                    {"idle_connections", server_->idle_connection_count()}};
   j["haptics"] = haptics_ ? haptics_->status_json() : nlohmann::json(nullptr);
   j["publishing"] = {{"lcm", lcm_ ? nlohmann::json{{"url", lcm_->url()},
                                                    {"meshes", lcm_->counts().meshes},

@@ -113,6 +113,7 @@ TEST(Service, ServesStatusWithTheHapticSideAndShutsDownCleanly) {
   EXPECT_GT(r["haptics"]["ticks"].get<std::uint64_t>(), 100u);
   EXPECT_GT(r["haptics"]["model_version"].get<std::uint64_t>(), 0u);
   EXPECT_EQ(r["scene"]["name"], "cantilever");
+  EXPECT_EQ(r["control"]["connections"], 1) << r.dump();  // this client, answered: idle again by now or soon
   std::this_thread::sleep_for(1200ms);
   const nlohmann::json later = client.call("status")["result"];
   ASSERT_TRUE(later["real_time_factor"].is_number()) << later.dump();
