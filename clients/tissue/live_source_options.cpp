@@ -6,6 +6,7 @@
 #include "tissue/cli_checks.hpp"
 #include "transport/dds_subscriber.hpp"
 #include "transport/lcm_subscriber.hpp"
+#include "util/lcm_url.hpp"
 
 namespace tissue::cli {
 
@@ -37,8 +38,10 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
     if (o.lcm_url) {
       // `--lcm ''` reaches here unchecked (CLI11 validates no empty value):
       // it means the default, said by name in every message.
-      sub = std::make_unique<transport::LcmMeshSubscriber>(o.lcm_url->empty() ? std::string(transport::kLcmSubscribeUrl)
-                                                                              : *o.lcm_url);
+      const std::string url = o.lcm_url->empty() ? std::string(transport::kLcmSubscribeUrl) : *o.lcm_url;
+      // LCM waits for a tcpq server's greeting without a time limit.
+      if (const std::string why = util::tcpq_server_problem(url, o.timeout_s); !why.empty()) throw LiveStartError(why);
+      sub = std::make_unique<transport::LcmMeshSubscriber>(url);
     } else {
       sub = std::make_unique<transport::DdsMeshSubscriber>(o.dds.options());
     }

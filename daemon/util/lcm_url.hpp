@@ -4,9 +4,15 @@
 #pragma once
 
 #include <arpa/inet.h>
+#include <netdb.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -114,6 +120,71 @@ inline std::string lcm_start_failure(const std::string& url) {
   std::ostringstream text;
   text << in.rdbuf();
   return lcm_start_failure(url, text.str());
+}
+
+// Whether a tcpq:// URL's server answers LCM's greeting within timeout_s:
+// "" when it does (or the URL is not tcpq://), else why not. LCM's own
+// client waits for that greeting inside lcm_create() with no time limit, so
+// a port that accepts and says nothing (a web server, a typo) hung the
+// clients past their --timeout. Both sides' first words are a magic number
+// and the protocol version, big-endian (LCM's lcm_tcpq.c).
+inline std::string tcpq_server_problem(const std::string& url, double timeout_s) {
+  if (url.rfind("tcpq://", 0) != 0) return {};
+  const std::string rest = url.substr(7);
+  const std::string address = rest.substr(0, rest.find('?'));
+  const std::size_t colon = address.rfind(':');
+  if (colon == std::string::npos) return {};  // LCM's default port: left to LCM
+  const std::string host = address.substr(0, colon);
+  const std::string port = address.substr(colon + 1);
+  if (!detail::all_digits(port, 5) || std::stoi(port) < 1 || std::stoi(port) > 65535)
+    return "the port must be in [1, 65535]";
+  addrinfo hints{};
+  hints.ai_family = AF_INET;
+  hints.ai_socktype = SOCK_STREAM;
+  addrinfo* found = nullptr;
+  if (::getaddrinfo(host.empty() ? "127.0.0.1" : host.c_str(), port.c_str(), &hints, &found) != 0 || !found)
+    return "cannot resolve '" + host + "'";
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  std::string why;
+  char seconds[32];
+  std::snprintf(seconds, sizeof seconds, "%g s", timeout_s);
+  const auto wait_for = [&](short events) {
+    pollfd p{fd, events, 0};
+    return ::poll(&p, 1, static_cast<int>(timeout_s * 1000.0)) == 1 && (p.revents & events) != 0;
+  };
+  if (fd < 0) {
+    why = std::string("cannot create a socket: ") + std::strerror(errno);
+  } else if (::connect(fd, found->ai_addr, found->ai_addrlen) != 0 && errno != EINPROGRESS) {
+    why = std::string("cannot connect: ") + std::strerror(errno);
+  } else if (!wait_for(POLLOUT)) {
+    why = std::string("no connection within ") + seconds;
+  } else {
+    int err = 0;
+    socklen_t length = sizeof err;
+    ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &length);
+    const std::uint32_t greeting[2] = {htonl(0x287617fbu), htonl(0x0100u)};  // client magic, version
+    std::uint32_t reply[2] = {0, 0};
+    std::size_t got = 0;
+    if (err != 0) {
+      why = std::string("cannot connect: ") + std::strerror(err);
+    } else if (::send(fd, greeting, sizeof greeting, MSG_NOSIGNAL) != static_cast<ssize_t>(sizeof greeting)) {
+      why = std::string("cannot send LCM's greeting: ") + std::strerror(errno);
+    } else {
+      while (got < sizeof reply && wait_for(POLLIN)) {
+        const ssize_t n = ::recv(fd, reinterpret_cast<char*>(reply) + got, sizeof reply - got, 0);
+        if (n <= 0) break;
+        got += static_cast<std::size_t>(n);
+      }
+      if (got < sizeof reply)
+        why =
+            std::string("the server did not answer LCM's greeting within ") + seconds + " (is it an LCM tcpq server?)";
+      else if (ntohl(reply[0]) != 0x287617fau)
+        why = "the server's answer is not LCM's (is it an LCM tcpq server?)";
+    }
+  }
+  if (fd >= 0) ::close(fd);
+  ::freeaddrinfo(found);
+  return why.empty() ? why : "tcpq server at '" + url + "': " + why;
 }
 
 }  // namespace tissue::util

@@ -2,7 +2,15 @@
 
 #include <gtest/gtest.h>
 
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdint>
 #include <string>
+#include <thread>
+#include <utility>
 
 namespace tissue::util {
 namespace {
@@ -58,6 +66,87 @@ TEST(LcmUrl, UdpmUrlProblemsAreNamed) {
   EXPECT_NE(udpm_url_problem("udpm://239.255.76.67:99999").find("port"), std::string::npos);
   EXPECT_NE(udpm_url_problem("udpm://239.255.76.67:7667?ttl=-3").find("ttl"), std::string::npos);
   EXPECT_NE(udpm_url_problem("udpm://239.255.76.67:7667?ttl=256").find("ttl"), std::string::npos);
+}
+
+// A loopback TCP listener on a port the kernel picks; `answer` (if not
+// empty) is written to each connection once accepted, then the connection is
+// held open until the listener goes.
+class LoopbackListener {
+ public:
+  explicit LoopbackListener(std::string answer) : answer_(std::move(answer)) {
+    fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t length = sizeof a;
+    ok_ = fd_ >= 0 && ::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 && ::listen(fd_, 4) == 0 &&
+          ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &length) == 0;
+    port_ = ntohs(a.sin_port);
+    if (ok_)
+      thread_ = std::thread([this] {
+        const int c = ::accept(fd_, nullptr, nullptr);
+        if (c < 0) return;
+        if (!answer_.empty()) (void)!::send(c, answer_.data(), answer_.size(), MSG_NOSIGNAL);
+        char sink[64];
+        while (::recv(c, sink, sizeof sink, 0) > 0) {
+        }
+        ::close(c);
+      });
+  }
+  ~LoopbackListener() {
+    ::shutdown(fd_, SHUT_RDWR);
+    if (thread_.joinable()) {
+      // The test's client is gone; one more connection unblocks accept().
+      const int poke = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+      sockaddr_in a{};
+      a.sin_family = AF_INET;
+      a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+      a.sin_port = htons(port_);
+      (void)::connect(poke, reinterpret_cast<sockaddr*>(&a), sizeof a);
+      ::close(poke);
+      thread_.join();
+    }
+    ::close(fd_);
+  }
+  bool ok() const { return ok_; }
+  std::string url() const { return "tcpq://127.0.0.1:" + std::to_string(port_); }
+
+ private:
+  std::string answer_;
+  int fd_ = -1;
+  bool ok_ = false;
+  std::uint16_t port_ = 0;
+  std::thread thread_;
+};
+
+std::string server_greeting() {
+  const std::uint32_t words[2] = {htonl(0x287617fau), htonl(0x0100u)};
+  return std::string(reinterpret_cast<const char*>(words), sizeof words);
+}
+
+// LCM's tcpq client waits for the server's greeting without a time limit:
+// a port that accepts and stays silent hung `tissue render --lcm tcpq://…`
+// past its --timeout. The probe gives up after the timeout and says why.
+TEST(LcmUrl, ATcpqServerThatNeverGreetsIsFoundWithinTheTimeout) {
+  LoopbackListener silent("");
+  ASSERT_TRUE(silent.ok());
+  const auto start = std::chrono::steady_clock::now();
+  const std::string why = tcpq_server_problem(silent.url(), 0.2);
+  const double waited_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_NE(why.find("did not answer LCM's greeting"), std::string::npos) << why;
+  EXPECT_NE(why.find(silent.url()), std::string::npos) << why;
+  EXPECT_LT(waited_s, 5.0);  // bounded (0.2 s asked; generous for a loaded machine)
+
+  LoopbackListener web("HTTP/1.1 400 Bad Request\r\n\r\n");
+  ASSERT_TRUE(web.ok());
+  EXPECT_NE(tcpq_server_problem(web.url(), 2.0).find("not LCM's"), std::string::npos);
+
+  LoopbackListener lcm(server_greeting());
+  ASSERT_TRUE(lcm.ok());
+  EXPECT_EQ(tcpq_server_problem(lcm.url(), 2.0), "");
+
+  EXPECT_EQ(tcpq_server_problem("udpm://239.255.76.67:7667", 0.1), "");  // not tcpq: not probed
+  EXPECT_NE(tcpq_server_problem("tcpq://127.0.0.1:99999", 0.1).find("port"), std::string::npos);
 }
 
 }  // namespace
