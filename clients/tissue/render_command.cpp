@@ -61,8 +61,7 @@ int run_render(RenderCommandOptions o) {
     std::unique_ptr<x3d::FrameSource> source =
         o.live.live() ? open_live_source(o.live, o.sequence) : x3d::open_session_source(o.session);
     if (o.image.colour == x3d::ColourMode::kStrain && !source->has_strain()) {
-      std::cerr << "tissue render: --colour strain: " << source->name()
-                << " stores no strain energy (session format version 1, or recorded without it); use --colour level\n";
+      std::cerr << "tissue render: " << x3d::no_strain_message(*source) << "\n";
       return kExitBadArguments;
     }
     const std::size_t n = source->frame_count();
@@ -97,15 +96,11 @@ int run_render(RenderCommandOptions o) {
     if (o.sequence) {
       // One camera for the whole sequence (as x3d --animate): the union of
       // the frames' bounds, read in a first pass, so motion shows.
-      std::array<std::array<double, 3>, 2> box{};
-      for (std::size_t i = 0; i < frames.size(); ++i) {
-        const x3d::SurfaceFrame frame = source->read_frame(frames[i]);
-        x3d::validate_frame(frame, false, "frame");
-        const auto one = render::union_box_m({&frame});
-        for (int a = 0; a < 3; ++a) {
-          box[0][a] = i == 0 ? one[0][a] : std::min(box[0][a], one[0][a]);
-          box[1][a] = i == 0 ? one[1][a] : std::max(box[1][a], one[1][a]);
-        }
+      render::Box_m box = render::empty_box_m();
+      for (const std::size_t i : frames) {
+        const x3d::SurfaceFrame frame = source->read_frame(i);
+        x3d::validate_frame(frame, false, "frame");  // has a vertex, all finite
+        render::extend_box_m(box, frame);
       }
       o.image.frame_box_m = box;
     }

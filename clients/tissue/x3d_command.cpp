@@ -141,9 +141,7 @@ int run_x3d(const X3dCommandOptions& o) {
     std::unique_ptr<x3d::FrameSource> source =
         o.live.live() ? open_live_source(o.live, o.animate) : x3d::open_session_source(o.session);
     if (xo.colour == x3d::ColourMode::kStrain && !source->has_strain())
-      throw BadArguments("--colour strain: " + source->name() +
-                         " stores no strain energy (session format version 1, or recorded without it); use --colour "
-                         "level");
+      throw BadArguments(x3d::no_strain_message(*source));
     xo.title = "tissue: " + (o.live.live() ? source->name() : o.session);
     std::string summary;
     const std::string text =

@@ -35,7 +35,14 @@ class FrameSource {
   virtual SurfaceFrame read_frame(std::size_t k) = 0;
   // Whether frames carry vertex_strain_energy_Pa.
   virtual bool has_strain() const = 0;
+  // Why has_strain() is false, in this source's terms, after name(): a
+  // session's format or recording options, a live publisher's frames.
+  virtual std::string why_no_strain() const { return "carries no strain energy"; }
 };
+
+// "--colour strain: NAME WHY; use --colour level": the one message both
+// clients give when strain colouring is asked of a source without it.
+std::string no_strain_message(const FrameSource& source);
 
 // The frame on screen at time t: the last one with time_s <= t + 1 ns (see
 // below). Empty when t is before the first frame (or there are no frames).

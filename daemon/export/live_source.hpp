@@ -43,6 +43,13 @@ class LiveFrameSource final : public FrameSource {
   SurfaceFrame read_frame(std::size_t k) override;
   // True when every collected frame carries strain.
   bool has_strain() const override;
+  // The subscriber keeps a frame whose strain is missing or not finite and
+  // >= 0, without its strain (transport/mesh_subscriber.cpp).
+  std::string why_no_strain() const override {
+    return frames_.empty() ? "sent no frame"
+                           : "sent frames without a finite, non-negative strain energy for every triangle (an old or "
+                             "foreign publisher?)";
+  }
 
   std::size_t skipped_empty() const { return skipped_empty_; }
   std::size_t dropped_backwards() const { return dropped_backwards_; }

@@ -66,6 +66,9 @@ class SessionFrameSource final : public FrameSource {
   double frame_time_s(std::size_t k) const override { return times_.at(k); }
   // Format version 1 stores none; version 2 unless recorded without it.
   bool has_strain() const override { return has_strain_; }
+  std::string why_no_strain() const override {
+    return "stores no strain energy (session format version 1, or recorded without it)";
+  }
 
   SurfaceFrame read_frame(std::size_t k) override {
     if (k >= frames_)
@@ -155,6 +158,10 @@ class SessionFrameSource final : public FrameSource {
 };
 
 }  // namespace
+
+std::string no_strain_message(const FrameSource& source) {
+  return "--colour strain: " + source.name() + " " + source.why_no_strain() + "; use --colour level";
+}
 
 std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s) {
   // Frames are in time order: binary search for the last time <= t.

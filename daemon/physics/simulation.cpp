@@ -44,20 +44,13 @@ StepResult Simulation::step() {
     kinematic_nodes(body_, kinematic_);
     kinematic_version_ = body_.parameters_version();
     loaded_before_.reserve(body_.x_m.size());  // no allocation in the steps until the next mesh change
-    driven_springs_.clear();
-    body_.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
-      if (body_.kind[edge.a] == NodeKind::kPrescribed || body_.kind[edge.b] == NodeKind::kPrescribed)
-        driven_springs_.push_back(e);
-    });
-    x_before_m_.resize(driven_springs_.empty() ? 0 : body_.x_m.size());
+    list_driven_springs();
   }
   // A driver also gives its node the velocity of the track (kinematic nodes
   // keep their mass): that kinetic energy is its work too.
-  double driven_kinetic_before_J = 0.0;
-  if (!driven_springs_.empty()) driven_kinetic_before_J = prescribed_kinetic_energy_J();
+  const double driven_kinetic_before_J = prescribed_kinetic_energy_J();
   set_kinematic_velocities(body_, kinematic_, t_next, dt);
-  if (!driven_springs_.empty())
-    for (const NodeId n : kinematic_) x_before_m_[n] = body_.x_m[n];
+  for (std::size_t i = 0; i < prescribed_.size(); ++i) prescribed_before_m_[i] = body_.x_m[prescribed_[i]];
   loads_.external_forces(body_, t_next, f_ext_N_);
   if (tool_ && tool_->active)
     for (int i = 0; i < 3; ++i) f_ext_N_[tool_->nodes[i]] += tool_->weights[i] * tool_->force_N;
@@ -83,14 +76,13 @@ StepResult Simulation::step() {
     counters_.external_work_J += f_ext_N_[n].dot(body_.x_m[n] - x_before);
   // A driver holds its node on the track against the springs and dampers
   // there: it pushes with minus their force.
-  if (!driven_springs_.empty()) counters_.prescribed_work_J += prescribed_kinetic_energy_J() - driven_kinetic_before_J;
-  for (const EdgeId e : driven_springs_) {
-    const NodeId a = body_.edge_a[e], b = body_.edge_b[e];
-    const Vec3 on_a_N = spring_force_on_a_N(body_, e);
-    if (body_.kind[a] == NodeKind::kPrescribed)
-      counters_.prescribed_work_J -= on_a_N.dot(body_.x_m[a] - x_before_m_[a]);
-    if (body_.kind[b] == NodeKind::kPrescribed)
-      counters_.prescribed_work_J += on_a_N.dot(body_.x_m[b] - x_before_m_[b]);
+  counters_.prescribed_work_J += prescribed_kinetic_energy_J() - driven_kinetic_before_J;
+  for (const DrivenSpring& d : driven_springs_) {
+    const Vec3 on_a_N = spring_force_on_a_N(body_, d.edge);
+    if (d.a_slot >= 0)
+      counters_.prescribed_work_J -= on_a_N.dot(body_.x_m[body_.edge_a[d.edge]] - prescribed_before_m_[d.a_slot]);
+    if (d.b_slot >= 0)
+      counters_.prescribed_work_J += on_a_N.dot(body_.x_m[body_.edge_b[d.edge]] - prescribed_before_m_[d.b_slot]);
   }
 
   counters_.substeps += out.substeps;
@@ -123,9 +115,23 @@ StepResult Simulation::step() {
 
 double Simulation::prescribed_kinetic_energy_J() const {
   double energy_J = 0.0;
-  for (const NodeId n : kinematic_)
-    if (body_.kind[n] == NodeKind::kPrescribed) energy_J += 0.5 * body_.mass_kg[n] * body_.v_m_per_s[n].squaredNorm();
+  for (const NodeId n : prescribed_) energy_J += 0.5 * body_.mass_kg[n] * body_.v_m_per_s[n].squaredNorm();
   return energy_J;
+}
+
+void Simulation::list_driven_springs() {
+  prescribed_.clear();
+  for (const NodeId n : kinematic_)
+    if (body_.kind[n] == NodeKind::kPrescribed) prescribed_.push_back(n);
+  prescribed_before_m_.resize(prescribed_.size());
+  driven_springs_.clear();
+  if (prescribed_.empty()) return;
+  // Slots by node for the edge walk; a mesh change's cost, not a step's.
+  std::vector<std::int32_t> slot(body_.x_m.size(), -1);
+  for (std::size_t i = 0; i < prescribed_.size(); ++i) slot[prescribed_[i]] = static_cast<std::int32_t>(i);
+  body_.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+    if (slot[edge.a] >= 0 || slot[edge.b] >= 0) driven_springs_.push_back({e, slot[edge.a], slot[edge.b]});
+  });
 }
 
 void Simulation::mesh_changed() {

@@ -143,13 +143,24 @@ class Simulation {
   // kinetic + elastic energy before it.
   void book_mesh_change(double energy_before_J);
   double prescribed_kinetic_energy_J() const;  // of the prescribed nodes
+  // Rebuilds prescribed_, driven_springs_ and prescribed_before_m_ from
+  // kinematic_ (after a mesh or parameter change).
+  void list_driven_springs();
+
+  // A spring with a prescribed end: its ends' slots in prescribed_ (-1: not
+  // prescribed), so the drivers' work needs no per-node array.
+  struct DrivenSpring {
+    EdgeId edge;
+    std::int32_t a_slot, b_slot;
+  };
 
   std::vector<Probe> probes_;
   std::vector<Vec3> f_ext_N_;
   std::vector<std::pair<NodeId, Vec3>> loaded_before_;  // free nodes with an external force, x before the step
   std::vector<NodeId> kinematic_;                       // fixed and prescribed nodes
-  std::vector<EdgeId> driven_springs_;                  // springs with a prescribed end
-  std::vector<Vec3> x_before_m_;                        // per node; kept for prescribed nodes only
+  std::vector<NodeId> prescribed_;                      // the prescribed nodes of kinematic_
+  std::vector<DrivenSpring> driven_springs_;            // springs with a prescribed end
+  std::vector<Vec3> prescribed_before_m_;               // x of prescribed_[i] before the step
   std::uint64_t kinematic_version_ = 0;                 // body parameters_version the list is for
   SimCounters counters_;
   double time_s_ = 0.0;

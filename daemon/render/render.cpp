@@ -95,17 +95,14 @@ Renderer::~Renderer() = default;
 Renderer::Renderer(Renderer&&) noexcept = default;
 Renderer& Renderer::operator=(Renderer&&) noexcept = default;
 
-std::array<std::array<double, 3>, 2> union_box_m(const std::vector<const x3d::SurfaceFrame*>& frames) {
+Box_m empty_box_m() {
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  std::array<std::array<double, 3>, 2> box{{{kInf, kInf, kInf}, {-kInf, -kInf, -kInf}}};
-  bool any = false;
-  for (const x3d::SurfaceFrame* f : frames)
-    for (const auto& v : f->vertices_m) {
-      any = true;
-      for (int a = 0; a < 3; ++a) box[0][a] = std::min(box[0][a], v[a]), box[1][a] = std::max(box[1][a], v[a]);
-    }
-  if (!any) throw x3d::X3dInputError("no vertex in any frame");
-  return box;
+  return Box_m{{{kInf, kInf, kInf}, {-kInf, -kInf, -kInf}}};
+}
+
+void extend_box_m(Box_m& box, const x3d::SurfaceFrame& frame) {
+  for (const auto& v : frame.vertices_m)
+    for (int a = 0; a < 3; ++a) box[0][a] = std::min(box[0][a], v[a]), box[1][a] = std::max(box[1][a], v[a]);
 }
 
 Image render_frame(const x3d::SurfaceFrame& frame, const RenderOptions& options) {
@@ -137,20 +134,17 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   OSMesaPixelStore(OSMESA_Y_UP, 0);  // row 0 at the top, as PNG wants
 
   // Orthographic camera fitting the bounding sphere.
-  V3 lo{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-        std::numeric_limits<double>::infinity()};
-  V3 hi{-lo[0], -lo[1], -lo[2]};
+  Box_m box = empty_box_m();
   if (o.frame_box_m) {
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = (*o.frame_box_m)[0][a];
-      hi[a] = (*o.frame_box_m)[1][a];
-      if (!std::isfinite(lo[a]) || !std::isfinite(hi[a]) || lo[a] > hi[a])
+    box = *o.frame_box_m;
+    for (int a = 0; a < 3; ++a)
+      if (!std::isfinite(box[0][a]) || !std::isfinite(box[1][a]) || box[0][a] > box[1][a])
         throw RenderError("render: the camera's box must be finite with lo <= hi on every axis");
-    }
   } else {
-    for (const auto& v : frame.vertices_m)
-      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], v[a]), hi[a] = std::max(hi[a], v[a]);
+    extend_box_m(box, frame);
   }
+  const V3& lo = box[0];
+  const V3& hi = box[1];
   // The picture is drawn in units of the bounding radius about the centre:
   // GL's float pipeline then sees coordinates of order 1 whatever the
   // object's size and place (a surface at ±3e38 m overflowed the projection

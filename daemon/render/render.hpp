@@ -45,13 +45,18 @@ struct RenderOptions {
   // Box the camera frames (lo, hi corners, m); unset: the frame's own
   // bounds. A sequence passes the union over its frames, so one camera
   // shows the motion instead of re-centring on every frame.
-  std::optional<std::array<std::array<double, 3>, 2>> frame_box_m;
+  std::optional<std::array<std::array<double, 3>, 2>> frame_box_m;  // a Box_m
 };
 
-// Axis-aligned bounds (lo, hi) of the frames' vertices together, for
-// RenderOptions::frame_box_m; throws x3d::X3dInputError when no frame has a
-// vertex.
-std::array<std::array<double, 3>, 2> union_box_m(const std::vector<const x3d::SurfaceFrame*>& frames);
+// Axis-aligned bounds (lo, hi corners, m) for RenderOptions::frame_box_m.
+using Box_m = std::array<std::array<double, 3>, 2>;
+
+// The box that covers nothing (lo = +inf, hi = -inf): extend_box_m grows it.
+Box_m empty_box_m();
+
+// Grows `box` to cover `frame`'s vertices, so a sequence read frame by frame
+// gets the union of its frames' bounds without holding them all.
+void extend_box_m(Box_m& box, const x3d::SurfaceFrame& frame);
 
 // The strain range render_frame uses for `frame` with `options` (for
 // captions): options.strain_range_Pa or the frame's min..max. Throws

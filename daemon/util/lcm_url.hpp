@@ -1,126 +1,33 @@
 // LCM URLs: what is wrong with one before LCM is asked to open it, and what
-// to tell the user when LCM could not. Header-only: the config loader checks
-// URLs without linking LCM, the transport explains LCM's failures.
+// to tell the user when LCM could not. Library tissue_lcm_url (no LCM link):
+// the config loader checks URLs without linking LCM, the transport explains
+// LCM's failures, the clients probe a tcpq:// server before LCM waits on it.
 #pragma once
 
-#include <arpa/inet.h>
-#include <netdb.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
-#include <cerrno>
 #include <cstdint>
-#include <cstdio>
-#include <cstring>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <string_view>
 
 namespace tissue::util {
 
-namespace detail {
-
-inline bool all_digits(const std::string& s, std::size_t max_length) {
-  return !s.empty() && s.size() <= max_length && s.find_first_not_of("0123456789") == std::string::npos;
-}
-
-// The multicast group of a udpm:// URL in host byte order; false when the
-// URL does not start with a dotted IPv4 multicast address.
-inline bool udpm_group(const std::string& url, std::uint32_t* group) {
-  if (url.rfind("udpm://", 0) != 0) return false;
-  const std::string rest = url.substr(7);
-  const std::string address = rest.substr(0, rest.find('?'));
-  const std::string host = address.substr(0, address.rfind(':'));
-  int octets[4] = {-1, -1, -1, -1};
-  char tail = 0;
-  if (std::sscanf(host.c_str(), "%d.%d.%d.%d%c", &octets[0], &octets[1], &octets[2], &octets[3], &tail) != 4)
-    return false;
-  if (octets[0] < 224 || octets[0] > 239) return false;
-  for (int i = 1; i < 4; ++i)
-    if (octets[i] < 0 || octets[i] > 255) return false;
-  *group = static_cast<std::uint32_t>(octets[0]) << 24 | static_cast<std::uint32_t>(octets[1]) << 16 |
-           static_cast<std::uint32_t>(octets[2]) << 8 | static_cast<std::uint32_t>(octets[3]);
-  return true;
-}
-
-}  // namespace detail
-
 // What is wrong with a udpm:// URL ("" when nothing, or not udpm): LCM takes
 // port 99999 or ttl=-3 and fails only when it opens the URL.
-inline std::string udpm_url_problem(const std::string& url) {
-  if (url.rfind("udpm://", 0) != 0) return {};
-  std::uint32_t group = 0;
-  if (!detail::udpm_group(url, &group))
-    return "the group must be an IPv4 multicast address (224.0.0.0 to 239.255.255.255)";
-  const std::string rest = url.substr(7);
-  const std::string address = rest.substr(0, rest.find('?'));
-  const std::size_t colon = address.rfind(':');
-  if (colon != std::string::npos) {
-    const std::string port = address.substr(colon + 1);
-    if (!detail::all_digits(port, 5) || std::stoi(port) < 1 || std::stoi(port) > 65535)
-      return "the port must be in [1, 65535]";
-  }
-  if (const std::size_t q = rest.find('?'); q != std::string::npos) {
-    const std::string options = rest.substr(q + 1) + "&";
-    for (std::size_t at = 0, amp; (amp = options.find('&', at)) != std::string::npos; at = amp + 1) {
-      const std::string option = options.substr(at, amp - at);
-      if (option.rfind("ttl=", 0) != 0) continue;
-      const std::string ttl = option.substr(4);
-      if (!detail::all_digits(ttl, 3) || std::stoi(ttl) > 255) return "ttl must be in [0, 255] (0: this host only)";
-    }
-  }
-  return {};
-}
+std::string udpm_url_problem(const std::string& url);
 
 // Whether the IPv4 routing table (the text of /proc/net/route) has a route
 // that covers `group` (host byte order): a default route or one whose
 // destination and mask contain it. That table prints each address as the
 // 32-bit word of its network-order bytes, so the group is compared in the
 // same form.
-inline bool has_route_to(std::uint32_t group, std::string_view proc_net_route) {
-  const std::uint32_t raw = htonl(group);
-  std::istringstream table{std::string(proc_net_route)};
-  std::string line;
-  std::getline(table, line);  // header
-  while (std::getline(table, line)) {
-    std::istringstream fields(line);
-    std::string iface, destination, gateway, flags, refcnt, use, metric, mask;
-    if (!(fields >> iface >> destination >> gateway >> flags >> refcnt >> use >> metric >> mask)) continue;
-    unsigned long dest = 0, netmask = 0, route_flags = 0;
-    try {
-      dest = std::stoul(destination, nullptr, 16);
-      netmask = std::stoul(mask, nullptr, 16);
-      route_flags = std::stoul(flags, nullptr, 16);
-    } catch (const std::exception&) {
-      continue;
-    }
-    if ((route_flags & 0x1) == 0) continue;  // RTF_UP
-    if ((raw & netmask) == dest) return true;
-  }
-  return false;
-}
+bool has_route_to(std::uint32_t group, std::string_view proc_net_route);
 
 // Why lcm::LCM(url) failed, as far as can be told from outside (LCM prints
 // its own reason on stderr): for a udpm:// URL whose group no route covers,
 // the missing multicast route; otherwise a pointer to LCM's message.
-inline std::string lcm_start_failure(const std::string& url, std::string_view proc_net_route) {
-  std::uint32_t group = 0;
-  if (detail::udpm_group(url, &group) && !has_route_to(group, proc_net_route))
-    return "cannot start LCM at '" + url +
-           "': no route covers its multicast group (add one, e.g. `ip route add 224.0.0.0/4 dev lo` for this host "
-           "only)";
-  return "cannot start LCM at '" + url + "' (LCM's own message above on stderr says why)";
-}
+std::string lcm_start_failure(const std::string& url, std::string_view proc_net_route);
 
 // The same, reading this machine's routing table.
-inline std::string lcm_start_failure(const std::string& url) {
-  std::ifstream in("/proc/net/route");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return lcm_start_failure(url, text.str());
-}
+std::string lcm_start_failure(const std::string& url);
 
 // Whether a tcpq:// URL's server answers LCM's greeting within timeout_s:
 // "" when it does (or the URL is not tcpq://), else why not. LCM's own
@@ -128,63 +35,6 @@ inline std::string lcm_start_failure(const std::string& url) {
 // a port that accepts and says nothing (a web server, a typo) hung the
 // clients past their --timeout. Both sides' first words are a magic number
 // and the protocol version, big-endian (LCM's lcm_tcpq.c).
-inline std::string tcpq_server_problem(const std::string& url, double timeout_s) {
-  if (url.rfind("tcpq://", 0) != 0) return {};
-  const std::string rest = url.substr(7);
-  const std::string address = rest.substr(0, rest.find('?'));
-  const std::size_t colon = address.rfind(':');
-  if (colon == std::string::npos) return {};  // LCM's default port: left to LCM
-  const std::string host = address.substr(0, colon);
-  const std::string port = address.substr(colon + 1);
-  if (!detail::all_digits(port, 5) || std::stoi(port) < 1 || std::stoi(port) > 65535)
-    return "the port must be in [1, 65535]";
-  addrinfo hints{};
-  hints.ai_family = AF_INET;
-  hints.ai_socktype = SOCK_STREAM;
-  addrinfo* found = nullptr;
-  if (::getaddrinfo(host.empty() ? "127.0.0.1" : host.c_str(), port.c_str(), &hints, &found) != 0 || !found)
-    return "cannot resolve '" + host + "'";
-  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  std::string why;
-  char seconds[32];
-  std::snprintf(seconds, sizeof seconds, "%g s", timeout_s);
-  const auto wait_for = [&](short events) {
-    pollfd p{fd, events, 0};
-    return ::poll(&p, 1, static_cast<int>(timeout_s * 1000.0)) == 1 && (p.revents & events) != 0;
-  };
-  if (fd < 0) {
-    why = std::string("cannot create a socket: ") + std::strerror(errno);
-  } else if (::connect(fd, found->ai_addr, found->ai_addrlen) != 0 && errno != EINPROGRESS) {
-    why = std::string("cannot connect: ") + std::strerror(errno);
-  } else if (!wait_for(POLLOUT)) {
-    why = std::string("no connection within ") + seconds;
-  } else {
-    int err = 0;
-    socklen_t length = sizeof err;
-    ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &length);
-    const std::uint32_t greeting[2] = {htonl(0x287617fbu), htonl(0x0100u)};  // client magic, version
-    std::uint32_t reply[2] = {0, 0};
-    std::size_t got = 0;
-    if (err != 0) {
-      why = std::string("cannot connect: ") + std::strerror(err);
-    } else if (::send(fd, greeting, sizeof greeting, MSG_NOSIGNAL) != static_cast<ssize_t>(sizeof greeting)) {
-      why = std::string("cannot send LCM's greeting: ") + std::strerror(errno);
-    } else {
-      while (got < sizeof reply && wait_for(POLLIN)) {
-        const ssize_t n = ::recv(fd, reinterpret_cast<char*>(reply) + got, sizeof reply - got, 0);
-        if (n <= 0) break;
-        got += static_cast<std::size_t>(n);
-      }
-      if (got < sizeof reply)
-        why =
-            std::string("the server did not answer LCM's greeting within ") + seconds + " (is it an LCM tcpq server?)";
-      else if (ntohl(reply[0]) != 0x287617fau)
-        why = "the server's answer is not LCM's (is it an LCM tcpq server?)";
-    }
-  }
-  if (fd >= 0) ::close(fd);
-  ::freeaddrinfo(found);
-  return why.empty() ? why : "tcpq server at '" + url + "': " + why;
-}
+std::string tcpq_server_problem(const std::string& url, double timeout_s);
 
 }  // namespace tissue::util

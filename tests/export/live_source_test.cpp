@@ -84,7 +84,14 @@ TEST(LiveFrameSource, StrainIsReportedOnlyWhenEveryFrameHasIt) {
   }
   b.vertex_strain_energy_Pa.clear();
   ScriptedSubscriber sub({a, b});
-  EXPECT_FALSE(LiveFrameSource(sub, o).has_strain());
+  const LiveFrameSource without(sub, o);
+  EXPECT_FALSE(without.has_strain());
+  // Said in a live source's terms: no session format to blame.
+  const std::string message = no_strain_message(without);
+  EXPECT_NE(message.find("scripted topic sent frames without a finite, non-negative strain energy"), std::string::npos)
+      << message;
+  EXPECT_EQ(message.find("session"), std::string::npos) << message;
+  EXPECT_NE(message.find("use --colour level"), std::string::npos) << message;
 }
 
 TEST(LiveFrameSource, NothingWithinTheTimeoutIsANamedError) {

@@ -227,6 +227,32 @@ TEST(Render, ARendererGivesTheSamePicturesAsSingleFrames) {
   }
 }
 
+// A sequence's camera box is grown frame by frame: the union of the frames'
+// bounds, whatever their order, and a frame's own box gives the same picture
+// as no box at all.
+TEST(Render, ExtendingABoxFrameByFrameGivesTheUnionOfTheirBounds) {
+  x3d::SurfaceFrame a = box_surface(false);
+  x3d::SurfaceFrame b = box_surface(false);
+  for (auto& v : b.vertices_m) v = {v[0] - 1.0, v[1] + 0.5, v[2] * 3.0};
+  Box_m ab = empty_box_m(), ba = empty_box_m();
+  extend_box_m(ab, a);
+  extend_box_m(ab, b);
+  extend_box_m(ba, b);
+  extend_box_m(ba, a);
+  EXPECT_EQ(ab, ba);
+  const Box_m expected{{{-1.0, 0.0, 0.0}, {0.4, 0.1 + 0.5, 0.3}}};
+  for (int c = 0; c < 2; ++c)
+    for (int axis = 0; axis < 3; ++axis) EXPECT_NEAR(ab[c][axis], expected[c][axis], 1e-12) << c << " " << axis;
+  Box_m own = empty_box_m();
+  extend_box_m(own, a);
+  RenderOptions boxed;
+  boxed.frame_box_m = own;
+  EXPECT_EQ(render_frame(a, boxed).rgba, render_frame(a, RenderOptions{}).rgba);
+  // An empty box is not a camera box.
+  boxed.frame_box_m = empty_box_m();
+  EXPECT_THROW(render_frame(a, boxed), RenderError);
+}
+
 TEST(Render, BadInputIsAClearError) {
   x3d::SurfaceFrame f = box_surface(false);
   f.triangles[3][1] = 100000;
