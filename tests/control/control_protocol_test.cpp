@@ -43,6 +43,21 @@ TEST(ControlProtocol, StatusRoundTripEchoesAnyId) {
   EXPECT_EQ(handle_request_line(R"({"id":1,"cmd":"pause"})", h), R"({"id":1,"ok":true,"result":{"paused":true}})");
 }
 
+// Numeric ids as docs/control-protocol.md says: every integer below 2^64
+// (and down to -2^63) exactly, larger ones and fractions as the nearest double.
+TEST(ControlProtocol, NumericIdsComeBackAsDocumented) {
+  FakeHandler h;
+  const auto id_text = [&](const std::string& id) {
+    const std::string out = handle_request_line(R"({"id":)" + id + R"(,"cmd":"pause"})", h);
+    const std::size_t start = out.find(':') + 1;
+    return out.substr(start, out.find(",\"ok\"") - start);
+  };
+  EXPECT_EQ(id_text("18446744073709551615"), "18446744073709551615");  // 2^64 - 1
+  EXPECT_EQ(id_text("-9223372036854775808"), "-9223372036854775808");  // -2^63
+  EXPECT_EQ(id_text("18446744073709551616"), "1.8446744073709552e+19");  // 2^64: a double
+  EXPECT_EQ(id_text("1.50"), "1.5");
+}
+
 TEST(ControlProtocol, EveryCommandReachesTheHandlerWithItsArguments) {
   FakeHandler h;
   EXPECT_EQ(handle(R"({"id":1,"cmd":"pause"})", h).at("ok"), true);
