@@ -115,13 +115,14 @@ int run_render(RenderCommandOptions o) {
         return kExitBadInput;
       }
       render::write_png(renderer.render(frame, o.image), path);
-      std::cout << "wrote " << path << ": frame " << frames[i] << " at t=" << frame.time_s << " s, "
-                << frame.triangles.size() << " triangles";
+      std::ostream& said = util::summary_stream(path);  // not into the picture (-o /dev/stdout)
+      said << "wrote " << path << ": frame " << frames[i] << " at t=" << frame.time_s << " s, "
+           << frame.triangles.size() << " triangles";
       if (o.image.colour == x3d::ColourMode::kStrain) {  // the ramp legend has no numbers: its ends are here
         const auto range = render::strain_range_Pa(frame, o.image);
-        std::cout << ", strain " << range[0] << " to " << range[1] << " Pa";
+        said << ", strain " << range[0] << " to " << range[1] << " Pa";
       }
-      std::cout << "\n";
+      said << "\n";
     }
     return kExitOk;
   } catch (const render::RenderError& e) {
@@ -161,9 +162,13 @@ Subcommand add_render_command(CLI::App& parent) {
   cmd->add_option("--to", o->to_s, "Sequence end, session time (s)")->check(finite_number())->needs(seq);
   cmd->add_option("--width", o->image.width_px, "Image width (pixels)")->check(CLI::Range(16, 8192));
   cmd->add_option("--height", o->image.height_px, "Image height (pixels)")->check(CLI::Range(16, 8192));
+  // finite_number(): NaN passes CLI::Range, and reached the renderer as an
+  // unwritable-output exit 1 instead of a bad argument.
   cmd->add_option("--azimuth", o->image.azimuth_deg, "Camera azimuth about +z from +x (degrees)")
+      ->check(finite_number())
       ->capture_default_str();
   cmd->add_option("--elevation", o->image.elevation_deg, "Camera elevation above the xy plane (degrees)")
+      ->check(finite_number())
       ->check(CLI::Range(-90.0, 90.0))
       ->capture_default_str();
   cmd->add_flag("--no-legend", o->no_legend, "Leave out the legend (level swatches, or the strain ramp)");

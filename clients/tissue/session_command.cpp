@@ -19,6 +19,7 @@
 #include "tissue/dds_cli.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
+#include "util/output_file.hpp"
 
 namespace tissue::cli {
 
@@ -168,9 +169,10 @@ int run_session(const SessionOptions& o) {
     }
     if (o.xdmf->parsed()) {
       const record::XdmfReport r = record::write_xdmf(o.file, o.xdmf_out);
-      std::cout << "wrote " << r.out_path << ": " << r.frames << " mesh frames";
-      if (r.skipped_empty > 0) std::cout << " (" << r.skipped_empty << " empty frames skipped)";
-      std::cout << "\n";
+      std::ostream& said = util::summary_stream(r.out_path);  // not into the XDMF (-o /dev/stdout)
+      said << "wrote " << r.out_path << ": " << r.frames << " mesh frames";
+      if (r.skipped_empty > 0) said << " (" << r.skipped_empty << " empty frames skipped)";
+      said << "\n";
       return kExitOk;
     }
     if (o.replay_cmd->parsed()) return run_replay(o.file, o.replay);

@@ -147,7 +147,7 @@ int run_x3d(const X3dCommandOptions& o) {
     const std::string text =
         o.animate ? export_animation(*source, o, xo, &summary) : export_snapshot(*source, o, xo, &summary);
     write_file(o.out, text);
-    std::cout << "wrote " << o.out << ": " << summary << "\n";
+    util::summary_stream(o.out) << "wrote " << o.out << ": " << summary << "\n";  // not into the X3D
     return kExitOk;
   } catch (const BadArguments& e) {
     std::cerr << "tissue x3d: " << e.what() << "\n";

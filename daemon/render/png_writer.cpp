@@ -10,6 +10,8 @@
 #include <string>
 #include <system_error>
 
+#include "util/output_file.hpp"
+
 namespace tissue::render {
 
 namespace {
@@ -47,12 +49,15 @@ void write_png(const Image& image, const std::string& path) {
                       " RGBA needs " + std::to_string(expected_bytes));
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
   if (!file) throw RenderError("cannot write " + path + ": " + std::strerror(errno));
-  // Whatever fails from here on leaves no truncated picture behind (only a
-  // regular file is removed: the path may be a device such as /dev/full).
+  // Whatever fails from here on leaves no truncated picture behind. Only a
+  // regular file named directly is removed: the path may be a device such
+  // as /dev/full, a link (remove() would take the link, not its file), or
+  // /dev/stdout redirected to a file (which would take /dev/stdout itself).
   const auto fail = [&](const std::string& reason) {
     file.reset();
     std::error_code ec;
-    if (std::filesystem::is_regular_file(path, ec)) std::filesystem::remove(path, ec);
+    if (std::filesystem::is_regular_file(std::filesystem::symlink_status(path, ec)) && !util::through_proc(path))
+      std::filesystem::remove(path, ec);
     return RenderError("cannot write " + path + ": " + reason);
   };
   // Static storage: written by the error callback between setjmp and

@@ -39,7 +39,12 @@ SimThread::~SimThread() { stop(); }
 void SimThread::start() {
   if (thread_.joinable()) return;
   stop_.store(false);
-  thread_ = std::thread([this] { run(); });
+  std::promise<void> scheduled;
+  std::future<void> decided = scheduled.get_future();
+  thread_ = std::thread([this, scheduled = std::move(scheduled)]() mutable { run(scheduled); });
+  // The start-up line prints scheduling(): read before the thread had set
+  // it, it was empty ("sim thread , control ...").
+  decided.wait();
 }
 
 void SimThread::stop() {
@@ -198,7 +203,7 @@ void SimThread::publish_status(std::int64_t t_ns) {
   step_ms_max_ = 0.0;
 }
 
-void SimThread::run() {
+void SimThread::run(std::promise<void>& scheduled) {
   {
     std::string what = "SCHED_OTHER (no real-time priority asked)";
     if (options_.priority > 0) {
@@ -208,8 +213,11 @@ void SimThread::run() {
       what = err == 0 ? "SCHED_FIFO " + std::to_string(options_.priority)
                       : std::string("SCHED_OTHER (SCHED_FIFO refused: ") + std::strerror(err) + ")";
     }
-    std::lock_guard<std::mutex> lock(scheduling_mutex_);
-    scheduling_ = what;
+    {
+      std::lock_guard<std::mutex> lock(scheduling_mutex_);
+      scheduling_ = what;
+    }
+    scheduled.set_value();
   }
 
   std::int64_t next_ns = now_ns();

@@ -13,6 +13,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -121,11 +122,13 @@ class SimThread {
   // Advances every loop iteration, paused or not: the watchdog's heartbeat
   // when there is no haptic thread.
   std::uint64_t heartbeat() const { return heartbeat_.load(std::memory_order_relaxed); }
-  // Scheduling actually obtained ("SCHED_FIFO 60" or why not).
+  // Scheduling actually obtained ("SCHED_FIFO 60" or why not); known once
+  // start() has returned (the start-up line prints it), "" before.
   std::string scheduling() const;
 
  private:
-  void run();
+  // `scheduled` is set once the thread has asked for its scheduling.
+  void run(std::promise<void>& scheduled);
   void publish_model(std::int64_t now_ns, bool rebuilt);
   void publish_status(std::int64_t now_ns);
   void record(record::Recorder& recorder, std::int64_t now_ns);

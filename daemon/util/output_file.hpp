@@ -8,9 +8,12 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <climits>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <iostream>
 #include <string>
 #include <string_view>
 
@@ -34,37 +37,102 @@ inline int write_all(int fd, std::string_view text) {
 
 }  // namespace detail
 
+// The canonical directory of `path` joined with its last name (the link
+// itself, not followed); "" when the directory does not resolve.
+inline std::string canonical_link_path(const std::string& path) {
+  const std::filesystem::path p(path);
+  const std::string dir = p.has_parent_path() ? p.parent_path().string() : std::string(".");
+  char* resolved = ::realpath(dir.c_str(), nullptr);
+  if (resolved == nullptr) return {};
+  std::string out(resolved);
+  std::free(resolved);
+  return (out == "/" ? out : out + "/") + p.filename().string();
+}
+
+// Whether `path`, following its symbolic links, passes through /proc: an
+// open descriptor's link such as /dev/stdout (-> /proc/self/fd/1), /dev/fd/N
+// or /proc/PID/fd/N. Its file is one a process already holds open (a
+// shell's `> out`): it is written in place, never renamed over.
+inline bool through_proc(const std::string& path) {
+  std::string p = path;
+  for (int hop = 0; hop < 40; ++hop) {  // the kernel's own limit on a chain
+    const std::string link = canonical_link_path(p);
+    if (link.empty()) return false;
+    if (link.rfind("/proc/", 0) == 0) return true;
+    struct stat st {};
+    if (::lstat(link.c_str(), &st) != 0 || !S_ISLNK(st.st_mode)) return false;
+    char target[PATH_MAX];
+    const ssize_t n = ::readlink(link.c_str(), target, sizeof target - 1);
+    if (n < 0) return false;
+    target[n] = '\0';
+    p = target[0] == '/' ? std::string(target)
+                         : std::filesystem::path(link).parent_path().string() + "/" + std::string(target);
+  }
+  return false;
+}
+
 // Writes `text` to `path`. Returns "" on success, else the reason (what the
 // OS said, e.g. "No space left on device"), for the caller to put after the
 // path in its own message.
 //
 // A regular file (or a new name) is written to PATH.tmp and renamed over
 // PATH, so a failed write never leaves a truncated PATH (nor clobbers a good
-// one). An existing node that is not a regular file (a character device such
-// as /dev/null or /dev/full, a FIFO, a socket) is written in place: a rename
-// would replace the node with a regular file, and a device's own write error
-// (ENOSPC from /dev/full) is the answer the user asked for.
+// one); a symbolic link to a regular file stays a link, and the file it
+// names is replaced. Written in place instead:
+// - an existing node that is not a regular file (a character device such as
+//   /dev/null or /dev/full, a FIFO, a socket): a rename would replace the
+//   node with a regular file, and a device's own write error (ENOSPC from
+//   /dev/full) is the answer the user asked for;
+// - a file reached through /proc (-o /dev/stdout with standard output
+//   redirected to a file): renaming there would have replaced /dev/stdout
+//   itself (as root) or failed. It is appended to, since its holder opened
+//   it (`>` truncated it already; `>>` keeps what was there).
 inline std::string write_output_file(const std::string& path, std::string_view text) {
   struct stat st {};
-  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
-    if (S_ISDIR(st.st_mode)) return "is a directory";
-    const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  const bool exists = ::stat(path.c_str(), &st) == 0;
+  if (exists && S_ISDIR(st.st_mode)) return "is a directory";
+  if (exists && (!S_ISREG(st.st_mode) || through_proc(path))) {
+    const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | (S_ISREG(st.st_mode) ? O_APPEND : 0));
     if (fd < 0) return std::strerror(errno);
     int err = detail::write_all(fd, text);
     if (::close(fd) != 0 && err == 0) err = errno;
     return err == 0 ? std::string() : std::string(std::strerror(err));
   }
-  const std::string tmp = path + ".tmp";
+  std::string target = path;
+  struct stat link {};
+  if (exists && ::lstat(path.c_str(), &link) == 0 && S_ISLNK(link.st_mode)) {
+    char* resolved = ::realpath(path.c_str(), nullptr);
+    if (resolved != nullptr) {
+      target = resolved;
+      std::free(resolved);
+    }
+  }
+  const std::string tmp = target + ".tmp";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
   if (fd < 0) return "cannot create '" + tmp + "': " + std::strerror(errno);
   int err = detail::write_all(fd, text);
   if (::close(fd) != 0 && err == 0) err = errno;
-  if (err == 0 && std::rename(tmp.c_str(), path.c_str()) != 0) err = errno;
+  if (err == 0 && std::rename(tmp.c_str(), target.c_str()) != 0) err = errno;
   if (err != 0) {
     ::unlink(tmp.c_str());  // after saving errno: unlink may change it
     return std::strerror(err);
   }
   return {};
+}
+
+// True when `path` is the file (or pipe) this process's standard output
+// writes to: -o /dev/stdout, or the file stdout was redirected to.
+inline bool is_standard_output(const std::string& path) {
+  struct stat out {
+  }, st{};
+  return ::fstat(STDOUT_FILENO, &out) == 0 && ::stat(path.c_str(), &st) == 0 && out.st_dev == st.st_dev &&
+         out.st_ino == st.st_ino;
+}
+
+// Where a tool says "wrote PATH": standard output, or standard error when
+// PATH is standard output (the line would land inside the output).
+inline std::ostream& summary_stream(const std::string& path) {
+  return is_standard_output(path) ? std::cerr : std::cout;
 }
 
 // True when `out` and `input` name the same existing file (another spelling,

@@ -242,6 +242,19 @@ TEST_F(X3dCli, RefusesToOverwriteTheInputSession) {
   }
 }
 
+// -o /dev/stdout with standard output redirected to a file (as run() does):
+// written in place, the document alone, the "wrote" line on standard error.
+// The rename used for regular files replaced /dev/stdout itself (as root).
+// Spelled /dev/fd/1 here, so a regression cannot touch /dev/stdout.
+TEST_F(X3dCli, ADocumentToStandardOutputIsTheDocumentAlone) {
+  const RunResult r = x3d("--session " + quote(session_) + " -o /dev/fd/1");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.rfind("<?xml", 0), 0u) << r.out.substr(0, 200);
+  ASSERT_GE(r.out.size(), 7u);
+  EXPECT_EQ(r.out.substr(r.out.size() - 7), "</X3D>\n") << "something follows the document";
+  EXPECT_NE(r.err.find("wrote /dev/fd/1"), std::string::npos) << r.err;
+}
+
 // An existing FIFO (or device: /dev/full, /dev/null) is written in place;
 // the temporary + rename used for regular files replaced such a node with a
 // regular file. (A FIFO, not a real device: a broken build must not be able

@@ -77,12 +77,31 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   const RunResult nan_time = render(dir, "--session " + quote(session) + " --time nan -o x.png");
   EXPECT_EQ(nan_time.exit_code, 2);
   EXPECT_NE(nan_time.err.find("not a finite number"), std::string::npos) << nan_time.err;
+  for (const char* angle : {"--azimuth nan", "--elevation nan", "--azimuth inf"}) {
+    const RunResult bad_angle = render(dir, "--session " + quote(session) + " " + angle + " -o x.png");
+    EXPECT_EQ(bad_angle.exit_code, 2) << angle << ": " << bad_angle.err;
+    EXPECT_NE(bad_angle.err.find("not a finite number"), std::string::npos) << bad_angle.err;
+  }
   const RunResult negative = render(dir, "--session " + quote(session) + " --frame -1 -o x.png");
   EXPECT_EQ(negative.exit_code, 2);
   EXPECT_NE(negative.err.find("--frame: -1 is negative"), std::string::npos) << negative.err;
   const RunResult unwritable = render(dir, "--session " + quote(session) + " -o /nonexistent-dir/x.png");
   EXPECT_EQ(unwritable.exit_code, 1);
   EXPECT_NE(unwritable.err.find("/nonexistent-dir/x.png"), std::string::npos) << unwritable.err;
+}
+
+// -o /dev/stdout with standard output redirected to a file (as run() does):
+// the picture alone goes there, the "wrote" line to standard error. (Spelled
+// /dev/fd/1: had a regression renamed over it, /dev/stdout stays intact.)
+TEST(RenderCli, APictureToStandardOutputIsThePictureAlone) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  const RunResult r = render(dir, "--session " + quote(session) + " --width 64 --height 48 -o /dev/fd/1");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_GT(r.out.size(), 20u);
+  EXPECT_EQ(r.out.substr(1, 3), "PNG");
+  EXPECT_EQ(r.out.substr(r.out.size() - 8, 4), "IEND") << "something follows the picture";
+  EXPECT_NE(r.err.find("wrote /dev/fd/1"), std::string::npos) << r.err;
 }
 
 // -o naming the session (another spelling, a symbolic link) would truncate

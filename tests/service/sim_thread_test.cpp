@@ -73,6 +73,23 @@ TEST(SimThread, PacedStepsPublishModelsAndStatus) {
   EXPECT_FALSE(thread.scheduling().empty());
 }
 
+// The daemon prints scheduling() right after start(): it must be decided by
+// then (it was "" in most runs of `tissued --set device.kind=none`).
+TEST(SimThread, SchedulingIsKnownWhenStartReturns) {
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  for (const int priority : {0, 1}) {
+    SimThreadOptions options;
+    options.priority = priority;  // 1: SCHED_FIFO, granted or refused
+    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
+    EXPECT_EQ(thread.scheduling(), "");
+    thread.start();
+    const std::string scheduling = thread.scheduling();
+    thread.stop();
+    EXPECT_EQ(scheduling.rfind("SCHED_", 0), 0u) << "'" << scheduling << "'";
+  }
+}
+
 TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {
   LocalModelChannel models;
   SimThreadOptions options;

@@ -1,0 +1,115 @@
+// util/output_file.hpp: where a tool's -o output goes and how, in the cases
+// where a rename would be wrong (a file held open through /proc, a link).
+#include "util/output_file.hpp"
+
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <string>
+
+#include "support/process_support.hpp"
+
+namespace tissue::util {
+namespace {
+
+using tissue::testing::slurp;
+using tissue::testing::TempDir;
+using tissue::testing::write_text;
+
+ino_t inode_of(const std::string& path) {
+  struct stat st {};
+  EXPECT_EQ(::stat(path.c_str(), &st), 0) << path;
+  return st.st_ino;
+}
+
+bool is_link(const std::string& path) {
+  struct stat st {};
+  return ::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode);
+}
+
+// -o /dev/stdout with stdout redirected to a file reaches the file through
+// /proc/self/fd/1. Renaming PATH.tmp over that path replaced /dev/stdout
+// itself (as root) or failed; the file must be written in place, appended
+// to as its holder opened it. /proc/self/fd/N and /dev/fd/N stand in here
+// for /dev/stdout, so a regression cannot touch this machine's /dev.
+TEST(OutputFile, AFileHeldOpenThroughProcIsWrittenInPlace) {
+  TempDir dir;
+  const std::string file = dir / "redirected.txt";
+  write_text(file, "");
+  const int fd = ::open(file.c_str(), O_WRONLY | O_APPEND);
+  ASSERT_GE(fd, 0);
+  const ino_t before = inode_of(file);
+  for (const std::string& spelled : {"/proc/self/fd/" + std::to_string(fd), "/dev/fd/" + std::to_string(fd)}) {
+    EXPECT_TRUE(through_proc(spelled)) << spelled;
+    EXPECT_EQ(write_output_file(spelled, "<x/>\n"), "") << spelled;
+  }
+  ::close(fd);
+  EXPECT_EQ(slurp(file), "<x/>\n<x/>\n");
+  EXPECT_EQ(inode_of(file), before) << "the file the holder has open was replaced";
+  EXPECT_FALSE(is_link(file));
+}
+
+TEST(OutputFile, PlainPathsAreNotThroughProc) {
+  TempDir dir;
+  write_text(dir / "a.txt", "a");
+  EXPECT_FALSE(through_proc(dir / "a.txt"));
+  EXPECT_FALSE(through_proc(dir / "missing.txt"));
+  EXPECT_FALSE(through_proc("relative-name-that-does-not-exist.txt"));
+  ASSERT_EQ(::symlink((dir / "a.txt").c_str(), (dir / "link.txt").c_str()), 0);
+  EXPECT_FALSE(through_proc(dir / "link.txt"));
+}
+
+// A regular file is replaced whole (a new inode: a failed write never
+// leaves it truncated); a link to one stays a link and its file is replaced.
+TEST(OutputFile, ARegularFileIsReplacedAndALinkKeepsPointingAtIt) {
+  TempDir dir;
+  const std::string file = dir / "out.x3d", link = dir / "latest.x3d";
+  write_text(file, "old");
+  const ino_t before = inode_of(file);
+  EXPECT_EQ(write_output_file(file, "new"), "");
+  EXPECT_EQ(slurp(file), "new");
+  EXPECT_NE(inode_of(file), before);
+  ASSERT_EQ(::symlink("out.x3d", link.c_str()), 0);  // relative, as `ln -s` makes them
+  EXPECT_EQ(write_output_file(link, "newer"), "");
+  EXPECT_TRUE(is_link(link)) << "the link was replaced by a regular file";
+  EXPECT_EQ(slurp(file), "newer");
+  EXPECT_FALSE(std::ifstream(dir / "latest.x3d.tmp").good());
+  EXPECT_FALSE(std::ifstream(dir / "out.x3d.tmp").good());
+}
+
+// The "wrote PATH" line goes to standard error when PATH is where standard
+// output goes, so it never lands inside the output.
+TEST(OutputFile, TheSummaryAvoidsAnOutputThatIsStandardOutput) {
+  TempDir dir;
+  const std::string file = dir / "stdout.txt", other = dir / "other.txt";
+  write_text(file, "");
+  write_text(other, "");
+  std::fflush(stdout);
+  const int saved = ::dup(STDOUT_FILENO);
+  ASSERT_GE(saved, 0);
+  const int fd = ::open(file.c_str(), O_WRONLY);
+  ASSERT_GE(fd, 0);
+  ASSERT_GE(::dup2(fd, STDOUT_FILENO), 0);
+  ::close(fd);
+  const bool file_is_stdout = is_standard_output(file);
+  const bool dev_stdout_is_stdout = is_standard_output("/proc/self/fd/1");
+  const bool other_is_stdout = is_standard_output(other);
+  const bool summary_to_cerr = &summary_stream(file) == &std::cerr;
+  const bool other_summary_to_cout = &summary_stream(other) == &std::cout;
+  ::dup2(saved, STDOUT_FILENO);
+  ::close(saved);
+  EXPECT_TRUE(file_is_stdout);
+  EXPECT_TRUE(dev_stdout_is_stdout);
+  EXPECT_FALSE(other_is_stdout);
+  EXPECT_TRUE(summary_to_cerr);
+  EXPECT_TRUE(other_summary_to_cout);
+  EXPECT_FALSE(is_standard_output(dir / "missing.txt"));
+}
+
+}  // namespace
+}  // namespace tissue::util
