@@ -92,7 +92,12 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
   if (n == 0) throw x3d::SourceError(source.name() + ": the session holds no complete mesh frame");
   const double t0 = o.from_s.value_or(source.frame_time_s(0));
   const double t1 = o.to_s.value_or(source.frame_time_s(n - 1));
-  if (!(t0 < t1)) throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) + ": the window is empty");
+  // An animation needs two frames, so a window of no length (--from 0.1
+  // --to 0.1, which may hold one frame) is refused with the reason.
+  if (!(t0 < t1))
+    throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) +
+                       (t0 == t1 ? ": the window has no length; an animation needs at least 2 frames"
+                                 : ": the window is empty (--from is after --to)"));
   std::vector<std::size_t> picked = x3d::frames_in_window(source, t0, t1);
   std::vector<x3d::SurfaceFrame> frames;
   std::size_t skipped_empty = 0;

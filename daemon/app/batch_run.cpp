@@ -230,6 +230,8 @@ int batch_command(const BatchOptions& options) {
     std::unique_ptr<physics::Simulation> sim;
     try {
       sim = std::make_unique<physics::Simulation>(scene);
+    } catch (const scene::SceneModelError& e) {
+      return fail(kExitUsage, scene::model_error(scene, e).what());  // file: key: reason (set by --set ...)
     } catch (const std::invalid_argument& e) {
       return fail(kExitUsage, scene.source + ": " + e.what());
     }

@@ -26,6 +26,17 @@ const CLI::Validator kSeconds(
     },
     "SECONDS>=0");
 
+// A finite number of seconds > 0 (an interval: 0 would record every step
+// at once, and is refused).
+const CLI::Validator kPositiveSeconds(
+    [](std::string& text) -> std::string {
+      double value = 0.0;
+      if (!CLI::detail::lexical_cast(text, value) || !std::isfinite(value) || value <= 0.0)
+        return "must be a finite number of seconds > 0 (got " + text + ")";
+      return {};
+    },
+    "SECONDS>0");
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -36,8 +47,9 @@ int main(int argc, char** argv) {
   try {
     CLI::App app{"tissued: real-time haptic server for adaptive soft-tissue simulation"};
     app.footer(
-        "Exit codes: 0 success, 1 internal error, 2 bad command line or scene, 3 simulation failure, "
-        "4 report not writable, 5 session file (--batch --record) not writable, 128 + N --batch stopped by signal N "
+        "Exit codes: 0 success, 1 internal error, 2 bad command line, scene or config, 3 --batch: a step failed; "
+        "--config: the service could not start (device, control socket, threads, --record), 4 report not writable, "
+        "5 session file (--batch --record) not writable, 128 + N --batch stopped by signal N "
         "(SIGINT, SIGTERM; the report and session cover the run so far).");
     bool batch = false;
     tissue::app::BatchOptions batch_options;
@@ -61,7 +73,7 @@ int main(int argc, char** argv) {
     CLI::Option* record_interval =
         app.add_option("--record-interval", batch_options.record_frame_interval_s,
                        "--batch --record: simulated seconds between recorded surface frames (default 1/30)")
-            ->check(kSeconds);
+            ->check(kPositiveSeconds);
     bool no_timing = false;
     app.add_flag("--no-timing", no_timing, "leave wall-clock timing out of the report (bit-identical reruns)");
     app.add_option("--progress", batch_options.progress_every_s,

@@ -145,6 +145,15 @@ nlohmann::json ControlClient::request(nlohmann::json request) {
   if (!id.is_null() && id != request["id"])
     throw ControlClientError(Kind::kProtocol, impl_->peer + ": response id " + to_line(id) +
                                                   " does not match request id " + to_line(request["id"]));
+  // docs/control-protocol.md: a success carries an object `result`, a
+  // failure a sentence `error`. Anything else is not tissued answering.
+  const bool ok = response["ok"].get<bool>();
+  if (ok && !(response.contains("result") && response["result"].is_object()))
+    throw ControlClientError(Kind::kProtocol,
+                             impl_->peer + ": a success without an object 'result': " + line.substr(0, 200));
+  if (!ok && !(response.contains("error") && response["error"].is_string()))
+    throw ControlClientError(Kind::kProtocol,
+                             impl_->peer + ": a failure without an 'error' sentence: " + line.substr(0, 200));
   return response;
 }
 

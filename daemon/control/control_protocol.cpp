@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <array>
 #include <exception>
+#include <set>
+#include <string>
 #include <utility>
+#include <vector>
 
 #include "scene/yaml_util.hpp"
 
@@ -155,9 +158,26 @@ std::string error_response(const std::string& message) { return error_line(json(
 std::string handle_request_line(std::string_view line, ControlHandler& handler) {
   json id;  // null until the request says otherwise
   try {
+    // JSON text has no NUL byte (not even inside a string); nlohmann's
+    // iterator input stopped at one and took what came before.
+    if (const std::size_t nul = line.find('\0'); nul != std::string_view::npos)
+      return error_line(id, "malformed JSON: a NUL byte at position " + std::to_string(nul));
+    // Duplicate keys: JSON leaves them to the reader and nlohmann keeps the
+    // last, so {"cmd":"status","cmd":"pause"} paused. Refused, as in YAML.
+    std::vector<std::set<std::string>> object_keys;
+    std::string duplicate;
+    const json::parser_callback_t note_keys = [&](int, json::parse_event_t event, json& parsed) {
+      if (event == json::parse_event_t::object_start) object_keys.emplace_back();
+      if (event == json::parse_event_t::object_end) object_keys.pop_back();
+      if (event == json::parse_event_t::key && !object_keys.back().insert(parsed.get<std::string>()).second &&
+          duplicate.empty())
+        duplicate = parsed.get<std::string>();
+      return true;
+    };
     json request;
     try {
-      request = json::parse(line.begin(), line.end());
+      request = json::parse(line.begin(), line.end(), note_keys);
+      if (!duplicate.empty()) return error_line(id, "duplicate key " + printable(duplicate) + ": give each key once");
     } catch (const json::parse_error& e) {
       return error_line(id, "malformed JSON: " + parse_reason(e));
     } catch (const json::out_of_range& e) {  // a number beyond double, e.g. 1e999

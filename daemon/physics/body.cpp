@@ -66,8 +66,9 @@ void Body::require_every_region_selects_a_node() const {
       const double spacing_mm = 1e3 * scene_.object.cube_size_m / std::exp2(scene_.adaptivity.min_depth / 3.0);
       char spacing[32];
       std::snprintf(spacing, sizeof spacing, "%.3g", spacing_mm);
-      throw std::invalid_argument(key + " selects no node of the mesh (its nodes are about " + spacing +
-                                  " mm apart: a region between them holds none); enlarge it or move it onto nodes");
+      throw scene::SceneModelError(key, std::string("selects no node of the mesh (its nodes are about ") + spacing +
+                                            " mm apart: a region between them holds none); enlarge it or move it "
+                                            "onto nodes");
     }
   };
   for (std::size_t i = 0; i < scene_.fixed.size(); ++i)

@@ -21,7 +21,7 @@ Simulation::Simulation(const scene::Scene& scene)
     try {
       probes_.back().displacement_m(body_);  // locates it now: a bad probe fails at load time
     } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument("probes[" + std::to_string(i) + "].rest_m: " + e.what());
+      throw scene::SceneModelError("probes[" + std::to_string(i) + "].rest_m", e.what());
     }
   }
   counters_.peak_nodes = body_.mesh().node_count();

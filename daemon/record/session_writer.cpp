@@ -95,10 +95,10 @@ std::string host_name() {
 
 }  // namespace
 
-void validate_session_name(const std::string& name) {
+void validate_session_name(const std::string& name, const std::string& what) {
   const auto bad = [&](const char* why) {
-    throw RecordError("session name '" + name + "' rejected: " + why +
-                      " (a session is a plain file name inside the state directory)");
+    throw RecordError(what + " name '" + name + "' rejected: " + why + " (a " + what +
+                      " is a plain file name inside the state directory)");
   };
   if (name.empty()) bad("it is empty");
   if (name.find('/') != std::string::npos) bad("it contains '/'");

@@ -30,8 +30,9 @@ namespace tissue::record {
 // no "..", no NUL or other control character, not hidden (no leading '.'),
 // not only spaces, at most kMaxSessionNameBytes. Sessions (and the daemon's
 // X3D exports, by the same rule) only ever land inside the state directory.
+// `what` names the file in the message ("session", "export").
 inline constexpr std::size_t kMaxSessionNameBytes = 200;
-void validate_session_name(const std::string& name);
+void validate_session_name(const std::string& name, const std::string& what = "session");
 
 // Removes the hidden ".NAME.creating-PID-N" files in `dir` whose process is
 // gone: a recorder killed inside SessionWriter::create, before the file was

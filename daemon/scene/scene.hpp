@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -165,8 +166,24 @@ struct ToolSpec {
   double max_force_N = 20.0;        // force the tool may apply to the object (clamped, never exceeded)
 };
 
+// A scene value that is valid on its own but does not fit the mesh the
+// scene builds (a region between nodes, a probe outside the object), found
+// when the body is built. scene::model_error (scene_yaml.hpp) turns it into
+// the SceneError of the file and of the --set that caused it.
+class SceneModelError : public std::invalid_argument {
+ public:
+  SceneModelError(const std::string& key_path, const std::string& reason)
+      : std::invalid_argument(key_path + ": " + reason), key_path_(key_path), reason_(reason) {}
+  const std::string& key_path() const { return key_path_; }
+  const std::string& reason() const { return reason_; }
+
+ private:
+  std::string key_path_, reason_;
+};
+
 struct Scene {
-  std::string source;  // file the scene came from (for messages)
+  std::string source;                  // file the scene came from (for messages)
+  std::vector<std::string> overrides;  // the --set texts applied to it, for messages
   std::string name;
   ObjectSpec object;
   MaterialSpec material;

@@ -440,6 +440,7 @@ Scene build(const std::string& yaml_text, const std::string& source, const std::
                                                  [&](const YAML::Node& root) {
                                                    Scene s = Converter(source).scene(root);
                                                    validate_scene(s);
+                                                   s.overrides = overrides;
                                                    return s;
                                                  });
 }
@@ -462,6 +463,18 @@ Scene parse_scene_with_overrides(const std::string& yaml_text, const std::string
 }
 
 Scene load_scene_file(const std::string& path) { return build(read_file(path), path, {}); }
+
+SceneError model_error(const Scene& scene, const SceneModelError& e) {
+  std::vector<yaml_util::Override> parsed;
+  for (const std::string& text : scene.overrides) {
+    try {
+      parsed.push_back(yaml_util::parse_override(text, scene.source, kSceneDocument));
+    } catch (const std::exception&) {
+      // It parsed when the scene was loaded; nothing to blame if not.
+    }
+  }
+  return SceneError(scene.source, e.key_path(), yaml_util::blame_override(parsed, e.key_path(), e.reason()));
+}
 
 Scene load_scene_file_with_overrides(const std::string& path, const std::vector<std::string>& overrides) {
   return build(read_file(path), path, overrides);

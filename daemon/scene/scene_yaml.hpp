@@ -29,6 +29,11 @@ class SceneError : public yaml_util::DocumentError {
       : DocumentError(source, key_path, reason, "<scene>") {}
 };
 
+// The SceneError for a value that did not fit the mesh (thrown while the
+// body was built): the scene's file, the key path, the reason, and the
+// --set that set it, as every other scene error.
+SceneError model_error(const Scene& scene, const SceneModelError& e);
+
 // Reads and parses a scene file. A missing, unreadable or oversized file is a
 // SceneError naming the file. Scene::source is set to `path`.
 Scene load_scene_file(const std::string& path);

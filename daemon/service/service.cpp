@@ -182,8 +182,13 @@ void Service::record_event(int kind, const std::string& text) {
 }
 
 void Service::apply_scene(scene::Scene scene, bool restart_haptics) {
-  require_servable(scene);                           // throws std::invalid_argument: nothing changes
-  auto runner = std::make_unique<SimRunner>(scene);  // ditto
+  require_servable(scene);  // throws std::invalid_argument: nothing changes
+  std::unique_ptr<SimRunner> runner;
+  try {
+    runner = std::make_unique<SimRunner>(scene);  // ditto
+  } catch (const scene::SceneModelError& e) {
+    throw scene::model_error(scene, e);  // the file, the key and any --set or `set` to blame
+  }
   const bool had_tool = scene_.tool.has_value();
   scene_ = std::move(scene);
   sim_->replace_runner(std::move(runner));
@@ -548,7 +553,7 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
   }
   scene_sets_ = std::move(sets);
   record_event(static_cast<int>(record::EventKind::kParameterChanged), override + " (scene restarted)");
-  return {{"key", key}, {"applied", "scene restarted with the new value"}};
+  return {{"key", key}, {"value", value}, {"applied", "scene restarted with the new value"}};
 }
 
 nlohmann::json Service::record_start(const std::string& name) {
@@ -576,13 +581,13 @@ nlohmann::json Service::export_x3d(const std::string& name) {
   const std::string file_name = name.empty() ? timestamped_name("surface", ".x3d") : name;
   // Same rule as recordings: a plain file name inside the state directory.
   try {
-    record::validate_session_name(file_name);
+    record::validate_session_name(file_name, "export");
   } catch (const std::exception& e) {
-    throw control::ControlError("export_x3d: " + std::string(e.what()) + "; files go to state_dir " +
-                                config_.state_dir);
+    // No "export_x3d:" prefix: tissue ctl puts the command's name before it.
+    throw control::ControlError(std::string(e.what()) + "; files go to state_dir " + config_.state_dir);
   }
   const MeshSnapshot& snap = sim_->snapshot();
-  if (snap.sequence == 0) throw control::ControlError("export_x3d: no surface yet; try again in a moment");
+  if (snap.sequence == 0) throw control::ControlError("no surface yet; try again in a moment");
   x3d::SurfaceFrame frame;
   frame.time_s = snap.sim_time_s;
   frame.vertices_m = snap.vertices_m;
@@ -592,11 +597,11 @@ nlohmann::json Service::export_x3d(const std::string& name) {
   options.title = scene_.name + " at t = " + std::to_string(snap.sim_time_s) + " s";
   const std::filesystem::path path = std::filesystem::path(config_.state_dir) / file_name;
   if (std::filesystem::exists(path))
-    throw control::ControlError("export_x3d: " + path.string() + " exists; files are never overwritten");
+    throw control::ControlError(path.string() + " exists; files are never overwritten");
   std::ofstream out(path);
   out << x3d::x3d_snapshot(frame, options);
   out.close();
-  if (!out) throw control::ControlError("export_x3d: cannot write " + path.string());
+  if (!out) throw control::ControlError("cannot write " + path.string());
   return {{"file", path.string()}, {"sim_time_s", snap.sim_time_s}, {"triangles", snap.triangles.size()}};
 }
 

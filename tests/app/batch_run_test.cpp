@@ -415,6 +415,17 @@ TEST_F(TissuedProcess, InvalidOverrideExits2NamingTheKey) {
   EXPECT_FALSE(fs::exists(report));  // nothing ran, nothing written
 }
 
+// A value found not to fit the mesh when the body is built (a region between
+// nodes) is reported as every scene error is: file: key: reason, and the
+// --set that set it.
+TEST_F(TissuedProcess, ARegionSetBetweenNodesByAnOverrideIsBlamedOnIt) {
+  const std::string set = "loads[0].region={sphere: {centre_m: [0.1, 0.0125, 0.0125], radius_m: 0.001}}";
+  const Process p = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set", set});
+  EXPECT_EQ(p.exit_code, 2);
+  EXPECT_TRUE(contains(p.err, "cantilever.yaml: loads[0].region: selects no node of the mesh")) << p.err;
+  EXPECT_TRUE(contains(p.err, "(set by --set 'loads[0].region={sphere:")) << p.err;  // cut to 40 bytes
+}
+
 TEST_F(TissuedProcess, MissingSceneExits2NamingTheFile) {
   const std::string missing = (dir_ / "no_such_scene.yaml").string();
   const Process p = run({"--batch", "--scene", missing, "--duration", "0.1"});

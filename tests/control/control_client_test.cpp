@@ -108,13 +108,13 @@ TEST(ControlClient, RequestSendsOneLineWithAnIdAddedWhenAbsent) {
       received.push_back(*line);
       const json request = json::parse(*line, nullptr, false);
       const json id = request.is_object() ? request.value("id", json()) : json();
-      c.send_all(json({{"id", id}, {"ok", true}}).dump() + "\n");
+      c.send_all(json({{"id", id}, {"ok", true}, {"result", json::object()}}).dump() + "\n");
     }
   });
   ASSERT_TRUE(peer.listening());
   {
     ControlClient client = ControlClient::connect_unix(peer.path());
-    EXPECT_EQ(client.request({{"cmd", "status"}}), json({{"id", 1}, {"ok", true}}));
+    EXPECT_EQ(client.request({{"cmd", "status"}}), json({{"id", 1}, {"ok", true}, {"result", json::object()}}));
     EXPECT_EQ(client.request({{"cmd", "pause"}, {"id", "mine"}}).at("id"), "mine");  // kept as given
     EXPECT_EQ(client.request({{"cmd", "status"}}).at("id"), 2);                      // the next own id
     EXPECT_EQ(client.request({{"cmd", "status"}, {"id", nullptr}}).at("id"), nullptr);
@@ -199,12 +199,15 @@ TEST(ControlClient, ResponsesThatAreNotProtocolResponsesAreProtocolErrors) {
   const std::vector<std::string> replies = {
       "this is not json",
       "[true]",
-      R"({"id":1,"result":{}})",           // no "ok"
-      R"({"id":2,"ok":"yes"})",            // "ok" not a boolean
-      R"({"id":99,"ok":true})",            // another request's id
-      R"({"id":"4","ok":true})",           // the id as a string is another id
-      std::string(1000, '#'),              // garbage, shown only in part
-      std::string("{\"ok\":tru\xff}", 10)  // broken bytes
+      R"({"id":1,"result":{}})",               // no "ok"
+      R"({"id":2,"ok":"yes"})",                // "ok" not a boolean
+      R"({"id":99,"ok":true})",                // another request's id
+      R"({"id":"4","ok":true})",               // the id as a string is another id
+      std::string(1000, '#'),                  // garbage, shown only in part
+      std::string("{\"ok\":tru\xff}", 10),     // broken bytes
+      R"({"id":9,"ok":true,"result":[1,2]})",  // a result that is not an object
+      R"({"id":10,"ok":true})",                // no result
+      R"({"id":11,"ok":false,"error":5})",     // an error that is not a sentence
   };
   ScriptedPeer peer([&](PeerConnection& c) {
     for (const std::string& reply : replies) {
@@ -212,7 +215,7 @@ TEST(ControlClient, ResponsesThatAreNotProtocolResponsesAreProtocolErrors) {
       c.send_all(reply + "\n");
     }
     if (c.read_line())
-      c.send_all(R"({"id":9,"ok":true,"result":"fine"})"
+      c.send_all(R"({"id":12,"ok":true,"result":{"fine":true}})"
                  "\n");
   });
   ASSERT_TRUE(peer.listening());
@@ -229,14 +232,17 @@ TEST(ControlClient, ResponsesThatAreNotProtocolResponsesAreProtocolErrors) {
   EXPECT_NE(long_one.find(std::string(200, '#')), std::string::npos) << long_one;
   EXPECT_EQ(long_one.find(std::string(201, '#')), std::string::npos) << "the line is cut to 200 bytes";
   expect_client_error(status, Kind::kProtocol, {"not a control protocol response: {\"ok\":tru"});
+  expect_client_error(status, Kind::kProtocol, {name + ": a success without an object 'result': {\"id\":9"});
+  expect_client_error(status, Kind::kProtocol, {name + ": a success without an object 'result': {\"id\":10"});
+  expect_client_error(status, Kind::kProtocol, {name + ": a failure without an 'error' sentence: {\"id\":11"});
   // After all that the connection still carries a good answer.
-  EXPECT_EQ(client.call("status").at("result"), "fine");
+  EXPECT_EQ(client.call("status").at("result"), nlohmann::json({{"fine", true}}));
 }
 
 TEST(ControlClient, ReadLineSplitsLinesAndKeepsBytesPastTheLast) {
   ScriptedPeer peer([](PeerConnection& c) {
     c.send_all("first\nsecond\nthi");
-    if (c.read_line()) c.send_all("rd\n\n{\"id\":1,\"ok\":true}\nlast\n");
+    if (c.read_line()) c.send_all("rd\n\n{\"id\":1,\"ok\":true,\"result\":{}}\nlast\n");
     c.read_to_eof();
   });
   ASSERT_TRUE(peer.listening());

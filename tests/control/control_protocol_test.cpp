@@ -52,10 +52,26 @@ TEST(ControlProtocol, NumericIdsComeBackAsDocumented) {
     const std::size_t start = out.find(':') + 1;
     return out.substr(start, out.find(",\"ok\"") - start);
   };
-  EXPECT_EQ(id_text("18446744073709551615"), "18446744073709551615");  // 2^64 - 1
-  EXPECT_EQ(id_text("-9223372036854775808"), "-9223372036854775808");  // -2^63
+  EXPECT_EQ(id_text("18446744073709551615"), "18446744073709551615");    // 2^64 - 1
+  EXPECT_EQ(id_text("-9223372036854775808"), "-9223372036854775808");    // -2^63
   EXPECT_EQ(id_text("18446744073709551616"), "1.8446744073709552e+19");  // 2^64: a double
   EXPECT_EQ(id_text("1.50"), "1.5");
+}
+
+// A key given twice is refused, at any depth, before anything runs: nlohmann
+// kept the last, so {"cmd":"status","cmd":"pause"} paused. A NUL byte is not
+// JSON (it ended the parse early and what came before was taken).
+TEST(ControlProtocol, DuplicateKeysAndNulBytesAreRefusedAndNothingRuns) {
+  FakeHandler h;
+  expect_error(handle(R"({"id":1,"cmd":"status","cmd":"pause"})", h), nullptr, "duplicate key 'cmd'");
+  expect_error(handle(R"({"id":2,"id":3,"cmd":"pause"})", h), nullptr, "duplicate key 'id'");
+  expect_error(handle(R"({"id":4,"cmd":"set","key":"name","value":{"a":1,"a":2}})", h), nullptr, "duplicate key 'a'");
+  const std::string nul(1, '\0');
+  expect_error(handle(R"({"id":5,"cmd":"pause"})" + nul, h), nullptr, "malformed JSON: a NUL byte at position 22");
+  expect_error(handle(R"({"id":6,"cmd":"pa)" + nul + R"(use"})", h), nullptr, "a NUL byte at position 17");
+  EXPECT_TRUE(h.calls().empty());
+  // The same key in two different objects is fine.
+  EXPECT_EQ(handle(R"({"id":{"a":1},"cmd":"set","key":"name","value":{"a":2}})", h).at("ok"), true);
 }
 
 TEST(ControlProtocol, EveryCommandReachesTheHandlerWithItsArguments) {

@@ -214,7 +214,8 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2(s + " --animate --frame 1", "excludes");
   expect_2(s + " --from 0.5", "requires --animate");
   expect_2(s + " --animate --from 2 --to 3", "0 non-empty frames between 2 s and 3 s");
-  expect_2(s + " --animate --from 1 --to 0.5", "the window is empty");
+  expect_2(s + " --animate --from 1 --to 0.5", "the window is empty (--from is after --to)");
+  expect_2(s + " --animate --from 0.5 --to 0.5", "the window has no length; an animation needs at least 2 frames");
   expect_2(s + " --colour purple", "purple");
   expect_2(s + " --colour strain", "stores no strain energy (session format version 1, or recorded without it)");
   // Live waits: NaN passed CLI11's PositiveNumber and waited forever (no

@@ -70,8 +70,9 @@ TEST(Body, ARegionThatSelectsNoNodeIsRefusedNamingItsKey) {
     try {
       Body body(s);
       ADD_FAILURE() << key << ": accepted";
-    } catch (const std::invalid_argument& e) {
-      EXPECT_NE(std::string(e.what()).find(key + " selects no node of the mesh"), std::string::npos) << e.what();
+    } catch (const scene::SceneModelError& e) {
+      EXPECT_EQ(e.key_path(), key);
+      EXPECT_EQ(e.reason().rfind("selects no node of the mesh", 0), 0u) << e.what();
     }
   };
   scene::Scene s = testing::free_cube_scene(1, 0);

@@ -235,7 +235,11 @@ TEST(Service, SetChangesTheRunningSceneAndLoadSceneTakesTheFileAsWritten) {
   TempDir dir;
   Running run(write_config(dir, scene_file("cantilever.yaml")));
   ControlClient client = connect(dir / "ctl.sock");
-  EXPECT_TRUE(client.call("set", {{"key", "name"}, {"value", "renamed"}})["ok"].get<bool>());
+  const nlohmann::json renamed = client.call("set", {{"key", "name"}, {"value", "renamed"}});
+  EXPECT_TRUE(renamed["ok"].get<bool>()) << renamed.dump();
+  // The result is the key and its new value (docs/control-protocol.md).
+  EXPECT_EQ(renamed["result"]["key"], "name") << renamed.dump();
+  EXPECT_EQ(renamed["result"]["value"], "renamed") << renamed.dump();
   EXPECT_TRUE(client.call("set", {{"key", "probes[1].name"}, {"value", "centre2"}})["ok"].get<bool>());
   EXPECT_TRUE(client.call("set", {{"key", "name"}, {"value", "renamed again"}})["ok"].get<bool>());
   EXPECT_EQ(client.call("status")["result"]["scene"]["name"], "renamed again");
@@ -327,7 +331,8 @@ TEST(Service, AFailedReloadChangesNothing) {
   std::ofstream(config) << config_text;
   ASSERT_EQ(::raise(SIGHUP), 0);
   ASSERT_TRUE(written_within_5_s(run.err, "reload failed")) << "the reload did not fail: " << file_text(run.err);
-  EXPECT_NE(file_text(run.err).find("fixed[0].region selects no node"), std::string::npos) << file_text(run.err);
+  EXPECT_NE(file_text(run.err).find(bad_scene + ": fixed[0].region: selects no node"), std::string::npos)
+      << file_text(run.err);
   EXPECT_EQ(client.call("status")["result"]["scene"]["source"], source);
   const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 6e4}});
   EXPECT_TRUE(set["ok"].get<bool>()) << set.dump();
@@ -514,8 +519,13 @@ TEST(Service, ExportsTheCurrentSurfaceAsX3d) {
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("<X3D"), std::string::npos);
   EXPECT_NE(text.find("IndexedTriangleSet"), std::string::npos);
-  EXPECT_FALSE(client.call("export_x3d", {{"name", "now.x3d"}})["ok"].get<bool>());  // never overwrites
-  EXPECT_FALSE(client.call("export_x3d", {{"name", "../up.x3d"}})["ok"].get<bool>());
+  const nlohmann::json again = client.call("export_x3d", {{"name", "now.x3d"}});
+  EXPECT_FALSE(again["ok"].get<bool>());  // never overwrites
+  EXPECT_EQ(again["error"], (dir / "now.x3d") + " exists; files are never overwritten") << again.dump();
+  const nlohmann::json up = client.call("export_x3d", {{"name", "../up.x3d"}});
+  EXPECT_FALSE(up["ok"].get<bool>());
+  EXPECT_EQ(up["error"].get<std::string>().rfind("export name '../up.x3d' rejected: it contains '/'", 0), 0u)
+      << up.dump();
   const nlohmann::json unnamed = client.call("export_x3d");
   ASSERT_TRUE(unnamed["ok"].get<bool>()) << unnamed.dump();
   EXPECT_TRUE(std::filesystem::exists(unnamed["result"]["file"].get<std::string>()));
