@@ -192,6 +192,7 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
       "replay", "Publish a recorded session over LCM and/or Fast DDS at the recorded pace, as tissued would");
   cmd->add_option("file", options.file, "Session file (.h5)")->required();
   cmd->add_option("--lcm", r.lcm_url, "Publish over LCM at URL (publish.lcm.url)")
+      ->check(lcm_url())  // as the daemon's config checks publish.lcm.url
       ->expected(0, 1)
       ->default_str(defaults.lcm.url);
   CLI::Option* dds = add_dds_options(cmd, r.dds, "Publish over Fast DDS (topics <prefix>surface_mesh, ...)");

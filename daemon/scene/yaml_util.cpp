@@ -232,6 +232,11 @@ FieldMap Reader::fields(const YAML::Node& n, const std::string& path, KeyList al
     const YAML::Node key = it->first;
     if (!key.IsScalar()) fail(path, "map keys must be plain names, got " + describe(key));
     const std::string& name = key.Scalar();
+    // yaml-cpp reads a merge key as the plain key "<<" (no merging): say so.
+    if (name == "<<")
+      fail(join_key(path, "<<"),
+           "YAML merge keys (<<: *anchor) are not supported; write the keys out (anchors "
+           "and aliases of whole values are)");
     // A key that is no plain name is not echoed: a file that is not a scene
     // (an /etc/shadow line reads as a YAML key) must not come back through
     // the control socket, which reads files with the daemon's rights.

@@ -367,6 +367,11 @@ TEST(ReplayCli, BadArgumentsExitTwoAndBadTransportsExitThree) {
   r = replay("--lcm memq:// --from 9 --to 10");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("nothing to replay"), std::string::npos) << r.err;
+  // A udpm URL the daemon's config would refuse is refused before LCM opens
+  // it. (A loopback, ttl=0 URL: even a regression stays on this host.)
+  r = replay("--lcm 'udpm://127.0.0.1:7667?ttl=0'");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("the group must be an IPv4 multicast address"), std::string::npos) << r.err;
   r = replay("--lcm nosuchprovider://x");
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("nosuchprovider://x"), std::string::npos) << r.err;

@@ -403,6 +403,11 @@ TEST(YamlUtil, FieldsChecksKeysAgainstTheAllowedOnes) {
                       "sec.<key not shown>",
                       "unknown key that is not a plain name (letters, digits, '_', '-'; up to 64), not shown; allowed "
                       "keys: width");
+  // A merge key is named as one (yaml-cpp does not merge: it is a key "<<").
+  expect_path_error([&] { r.fields(YAML::Load("{base: &m {a: 1}, sec: {<<: *m}}")["sec"], "sec", {"a"}); }, "f.yaml",
+                    "sec.<<",
+                    "YAML merge keys (<<: *anchor) are not supported; write the keys out (anchors and aliases of "
+                    "whole values are)");
   expect_path_error(
       [&] {
         r.fields(YAML::Load("{a: 1, b: 2, a: 3}"), "sec", {"a", "b"});
