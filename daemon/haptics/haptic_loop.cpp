@@ -136,7 +136,12 @@ void HapticLoop::tick(std::int64_t now_ns) noexcept {
   const bool had_model = have_model_;
   if (const auto read = models_.read(); read.is_new) {
     const LocalModel& m = *read.value;
-    if (m.version != 0 && !(have_model_ && m.version == model_slot_[active_].version)) {
+    if (have_model_ && m.version == model_slot_[active_].version) {
+      // The same model re-published (the sim re-affirms it while paused):
+      // it is fresh as of now. Ignored, it went stale after stale_model_s
+      // and a paused object stopped pushing back.
+      model_slot_[active_].built_ns = std::max(model_slot_[active_].built_ns, m.built_ns);
+    } else if (m.version != 0) {
       if (!local_model_is_valid(m)) {
         bump(rejected_models_);
       } else {

@@ -139,6 +139,31 @@ TEST(HapticLoop, StaleModelRampsTheForceToZeroWithinRampOut) {
   EXPECT_GE(rig.loop->stats().stale_model_trips, 1u);
 }
 
+// A paused sim re-publishes the same model (same version) with a newer
+// build time: the loop must take it as fresh and keep rendering the frozen
+// object. It kept the first build time, tripped "stale model" after
+// stale_model_s and ramped the force to zero under a pressing hand.
+TEST(HapticLoop, TheSameModelRepublishedStaysFreshAndKeepsPushingBack) {
+  Rig rig;
+  rig.build();
+  LocalModel m = test::make_flat_patch();
+  press(rig, m, 700);
+  ASSERT_NEAR(rig.device.last_force_N.z(), 0.8, 1e-6);
+  m.version = rig.version;  // from here on: the same model, re-affirmed every tick
+  const int stale_ticks = static_cast<int>(std::lround(rig.device_spec.limits.stale_model_s / kDt_s));
+  for (int i = 0; i < 5 * stale_ticks; ++i) {
+    m.built_ns = rig.now_ns;
+    rig.models->write(m);
+    rig.tick();
+  }
+  EXPECT_NEAR(rig.device.last_force_N.z(), 0.8, 1e-6);
+  EXPECT_EQ(rig.loop->stats().stale_model_trips, 0u);
+  EXPECT_EQ(rig.loop->stats().safety_trips, 0u);
+  // And once the re-publishing stops, staleness is still seen.
+  for (int i = 0; i < stale_ticks + 2; ++i) rig.tick();
+  EXPECT_GE(rig.loop->stats().stale_model_trips, 1u);
+}
+
 TEST(HapticLoop, DeviceTimeoutRampsTheForceOut) {
   Rig rig;
   rig.device_spec.limits.stale_model_s = 10.0;
