@@ -52,7 +52,9 @@ nlohmann::json status_json(const SimStatus& s) {
           {"springs", s.springs},
           {"refines", s.refines},
           {"merges", s.merges},
-          {"energy_J", {{"kinetic", s.kinetic_energy_J}, {"elastic", s.elastic_energy_J}}},
+          // Summed at the stats rate: `at_sim_time_s` says when (it can trail sim_time_s).
+          {"energy_J",
+           {{"kinetic", s.kinetic_energy_J}, {"elastic", s.elastic_energy_J}, {"at_sim_time_s", s.energy_sim_time_s}}},
           // null, not 0, until the first one-second window has been measured
           {"real_time_factor", s.real_time_factor_measured ? nlohmann::json(s.real_time_factor) : nlohmann::json()},
           {"step_ms", {{"last", s.step_ms_last}, {"max_recent", s.step_ms_max_window}}},

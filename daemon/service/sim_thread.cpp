@@ -169,11 +169,13 @@ void SimThread::publish_status(std::int64_t t_ns) {
       t_ns - last_energy_ns_ >= static_cast<std::int64_t>(options_.energy_every_s * 1e9)) {
     kinetic_energy_J_ = sim.kinetic_energy_J();
     elastic_energy_J_ = sim.elastic_energy_J();
+    energy_sim_time_s_ = sim.time_s();
     last_energy_ns_ = t_ns;
     energy_generation_ = generation_;
   }
   s.kinetic_energy_J = kinetic_energy_J_;
   s.elastic_energy_J = elastic_energy_J_;
+  s.energy_sim_time_s = energy_sim_time_s_;
   s.real_time_factor = rtf_;
   s.real_time_factor_measured = rtf_measured_;
   s.step_ms_last = step_ms_last_;

@@ -45,6 +45,9 @@ struct SimStatus {
   std::size_t nodes = 0, tets = 0, springs = 0;
   std::int64_t refines = 0, merges = 0;
   double kinetic_energy_J = 0.0, elastic_energy_J = 0.0;
+  // The sim time the energies were summed at: they refresh at the stats rate,
+  // not with every status, so they can trail sim_time_s.
+  double energy_sim_time_s = 0.0;
   double real_time_factor = 0.0;           // simulated / wall seconds over the last status window
   bool real_time_factor_measured = false;  // false until a first window has ended (status says null)
   double step_ms_last = 0.0, step_ms_max_window = 0.0;
@@ -170,7 +173,7 @@ class SimThread {
   std::int64_t window_start_ns_ = 0;
   double step_ms_last_ = 0.0, step_ms_max_ = 0.0;
   // Energies as last summed (publish_status), and when.
-  double kinetic_energy_J_ = 0.0, elastic_energy_J_ = 0.0;
+  double kinetic_energy_J_ = 0.0, elastic_energy_J_ = 0.0, energy_sim_time_s_ = 0.0;
   std::int64_t last_energy_ns_ = 0;
   std::uint64_t energy_generation_ = 0;
   double rtf_ = 0.0;

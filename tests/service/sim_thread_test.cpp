@@ -313,6 +313,12 @@ TEST(SimThread, EnergiesRefreshAtTheirOwnRate) {
       if (times.empty() || s.sim_time_s != times.back()) {
         times.push_back(s.sim_time_s);
         kinetic.push_back(s.kinetic_energy_J);
+        // The energies say when they were summed: never later than the
+        // status, and exactly then when summed for every status.
+        EXPECT_LE(s.energy_sim_time_s, s.sim_time_s);
+        if (energy_every_s == 0.0) {
+          EXPECT_EQ(s.energy_sim_time_s, s.sim_time_s);
+        }
       }
       std::this_thread::sleep_for(1ms);
     }
