@@ -16,21 +16,23 @@ using Vec3 = std::array<double, 3>;
 // Per-device force safety. Every limit applies after the coupling computes a
 // force and before the device sees it.
 struct ForceLimits {
-  double max_force_N = 3.0;               // |F| clamp (Phantom Omni/Touch peak is 3.3 N)
-  double max_force_rate_N_per_s = 300.0;  // |dF/dt| clamp
-  double max_stiffness_N_per_m = 1000.0;  // rendered stiffness clamp (coupling and K_c)
-  double ramp_in_s = 0.5;                 // force scale ramps 0 -> 1 after start
-  double ramp_out_s = 0.05;               // ... and 1 -> 0 on a fault or stop
-  double stale_model_s = 0.1;             // no new LocalModel for this long: ramp to zero
-  double device_timeout_s = 0.01;         // no valid device sample for this long: ramp to zero
-  double max_speed_m_per_s = 5.0;         // device input faster than this is rejected as a glitch
-  double workspace_radius_m = 1.0;        // device input farther than this from the origin is rejected
+  double max_force_N = 3.0;                             // |F| clamp (Phantom Omni/Touch peak is 3.3 N)
+  double max_force_rate_N_per_s = 300.0;                // |dF/dt| clamp
+  double max_stiffness_N_per_m = 1000.0;                // rendered stiffness clamp (coupling and K_c)
+  double ramp_in_s = 0.5;                               // force scale ramps 0 -> 1 after start
+  double ramp_out_s = 0.05;                             // ... and 1 -> 0 on a fault or stop
+  double stale_model_s = 0.1;                           // no new LocalModel for this long: ramp to zero
+  double device_timeout_s = 0.01;                       // no valid device sample for this long: ramp to zero
+  double max_speed_m_per_s = 5.0;                       // device input faster than this is rejected as a glitch
+  double workspace_radius_m = 1.0;                      // device input farther than this from the origin is rejected
+  bool operator==(const ForceLimits&) const = default;  // a reload tells what changed
 };
 
 // A scripted target position at a time (piecewise-linear in between).
 struct Waypoint {
   double time_s = 0.0;
   Vec3 position_m{};
+  bool operator==(const Waypoint&) const = default;  // a reload tells what changed
 };
 
 // The simulated device. kTrajectory: the tip follows the waypoints exactly.
@@ -45,17 +47,20 @@ struct SimDeviceSpec {
   double hand_mass_kg = 0.1;
   double hand_stiffness_N_per_m = 200.0;
   double hand_damping_N_s_per_m = 4.0;
+  bool operator==(const SimDeviceSpec&) const = default;  // a reload tells what changed
 };
 
 struct UdpDeviceSpec {
   std::string bind_address = "127.0.0.1";
   int port = 47800;
   double timeout_s = 0.05;
+  bool operator==(const UdpDeviceSpec&) const = default;  // a reload tells what changed
 };
 
 struct OpenHapticsSpec {
   std::string library = "libHD.so";
   std::string device_name = "Default Device";
+  bool operator==(const OpenHapticsSpec&) const = default;  // a reload tells what changed
 };
 
 // Plays the device positions of a recorded session back (scene frame), at
@@ -64,6 +69,7 @@ struct ReplayDeviceSpec {
   std::string session;  // session file (.h5); relative paths resolve against the config's directory
   double speed = 1.0;
   bool loop = false;
+  bool operator==(const ReplayDeviceSpec&) const = default;  // a reload tells what changed
 };
 
 struct DeviceSpec {
@@ -77,21 +83,24 @@ struct DeviceSpec {
   UdpDeviceSpec udp;
   OpenHapticsSpec openhaptics;
   ReplayDeviceSpec replay;
+  bool operator==(const DeviceSpec&) const = default;  // a reload tells what changed
 };
 
 struct HapticSpec {
   double rate_hz = 1000.0;
   double coupling_stiffness_N_per_m = 400.0;  // virtual coupling spring, proxy <-> device
   double coupling_damping_N_s_per_m = 1.0;
-  double crossfade_s = 0.01;  // blend time when a new LocalModel arrives
+  double crossfade_s = 0.01;                           // blend time when a new LocalModel arrives
+  bool operator==(const HapticSpec&) const = default;  // a reload tells what changed
 };
 
 struct RealtimeSpec {
   bool sched_fifo = true;  // try SCHED_FIFO; fall back to SCHED_OTHER and say so
   int haptic_priority = 80;
   int sim_priority = 60;
-  bool lock_memory = true;  // try mlockall; undo it when the memlock limit is too small
-  int haptic_cpu = -1;      // pin the haptic thread to this CPU (-1: no pinning)
+  bool lock_memory = true;                               // try mlockall; undo it when the memlock limit is too small
+  int haptic_cpu = -1;                                   // pin the haptic thread to this CPU (-1: no pinning)
+  bool operator==(const RealtimeSpec&) const = default;  // a reload tells what changed
 };
 
 struct ControlSpec {
@@ -99,6 +108,7 @@ struct ControlSpec {
   int tcp_port = 0;                                            // 0: no TCP; otherwise bound to 127.0.0.1 only
   std::size_t max_line_bytes = 65536;
   int max_connections = 16;
+  bool operator==(const ControlSpec&) const = default;  // a reload tells what changed
 };
 
 // Live data out (proto/README.md). LCM by default sends to a multicast group
@@ -106,6 +116,7 @@ struct ControlSpec {
 struct LcmPublishSpec {
   bool enabled = false;
   std::string url = "udpm://239.255.76.67:7667?ttl=0";
+  bool operator==(const LcmPublishSpec&) const = default;  // a reload tells what changed
 };
 
 // Fast DDS: loopback + shared memory by default (this host only); the lab
@@ -116,14 +127,16 @@ struct DdsPublishSpec {
   std::string topic_prefix = "tissue/";
   bool loopback_only = true;
   std::size_t max_mesh_bytes = std::size_t{8} << 20;
+  bool operator==(const DdsPublishSpec&) const = default;  // a reload tells what changed
 };
 
 struct PublishSpec {
   LcmPublishSpec lcm;
   DdsPublishSpec dds;
-  double mesh_rate_hz = 30.0;     // surface_mesh on channel TISSUE_SURFACE_MESH
-  double haptic_rate_hz = 100.0;  // haptic_state (decimated from 1 kHz) on TISSUE_HAPTIC_STATE
-  double stats_rate_hz = 5.0;     // sim_stats on TISSUE_SIM_STATS
+  double mesh_rate_hz = 30.0;                           // surface_mesh on channel TISSUE_SURFACE_MESH
+  double haptic_rate_hz = 100.0;                        // haptic_state (decimated from 1 kHz) on TISSUE_HAPTIC_STATE
+  double stats_rate_hz = 5.0;                           // sim_stats on TISSUE_SIM_STATS
+  bool operator==(const PublishSpec&) const = default;  // a reload tells what changed
 };
 
 struct DaemonConfig {

@@ -103,6 +103,7 @@ class HapticSideImpl final : public HapticSide {
       throw std::runtime_error("haptic thread: " + error);
     }
     rate_hz_ = config.haptics.rate_hz;
+    limits_ = config.device.limits;
   }
   ~HapticSideImpl() override { stop(); }
 
@@ -132,6 +133,11 @@ class HapticSideImpl final : public HapticSide {
         {"contact", s.contact},
         {"force_N", s.force_N},
         {"force_scale", s.force_scale},
+        // The limits in force (a reload applies new ones): what the operator set.
+        {"limits",
+         {{"max_force_N", limits_.max_force_N},
+          {"max_force_rate_N_per_s", limits_.max_force_rate_N_per_s},
+          {"max_stiffness_N_per_m", limits_.max_stiffness_N_per_m}}},
         {"model_version", s.model_version},
         {"passivity_energy_J", s.passivity_energy_J},
         {"rejected_inputs", s.rejected_inputs},
@@ -167,6 +173,7 @@ class HapticSideImpl final : public HapticSide {
   std::unique_ptr<haptics::HapticThread> thread_;
   haptics::MemoryLockReport memory_;
   double rate_hz_ = 0.0;
+  config::ForceLimits limits_;
   bool stopped_ = false;
 };
 

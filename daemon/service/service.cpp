@@ -225,26 +225,46 @@ void Service::request_stop(const std::string& why) {
   // The threads stop in run() once the io_context has no more work.
 }
 
+std::vector<std::string> restart_only_changes(const config::DaemonConfig& running, const config::DaemonConfig& file) {
+  std::vector<std::string> changed;
+  const config::DeviceSpec& a = running.device;
+  const config::DeviceSpec& b = file.device;
+  if (a.kind != b.kind) changed.push_back("device.kind");
+  if (a.offset_m != b.offset_m || a.scale != b.scale) changed.push_back("device.offset_m/scale");
+  if (!(a.sim == b.sim)) changed.push_back("device.sim");
+  if (!(a.udp == b.udp)) changed.push_back("device.udp");
+  if (!(a.openhaptics == b.openhaptics)) changed.push_back("device.openhaptics");
+  if (!(a.replay == b.replay)) changed.push_back("device.replay");
+  if (!(running.realtime == file.realtime)) changed.push_back("realtime");
+  if (!(running.control == file.control)) changed.push_back("control");
+  if (!(running.publish == file.publish)) changed.push_back("publish");
+  if (running.state_dir != file.state_dir) changed.push_back("state_dir");
+  return changed;
+}
+
 void Service::reload() {
   if (systemd_) systemd_->reloading();
   try {
     config::DaemonConfig config = config::load_daemon_config(options_.config_path, config_overrides());
     scene::Scene scene = scene::load_scene_file_with_overrides(config.scene_path, scene_overrides());
-    // Device and socket changes need a restart; the rest applies now. Nothing
-    // changes unless the new scene is running: a failed reload keeps it all.
+    // The scene, haptics.*, device.limits, status_interval_s and
+    // max_scene_tets apply now (the haptic thread restarts for the haptic
+    // ones: a lowered force limit must not wait for a restart). The device
+    // itself, sockets, publishing, state_dir and threads need a restart:
+    // said below, never silently kept. Nothing changes unless the new scene
+    // is running: a failed reload keeps it all.
     const config::HapticSpec old_haptics = config_.haptics;
-    const config::HapticSpec& h = config.haptics;
-    const bool haptics_changed = h.rate_hz != old_haptics.rate_hz ||
-                                 h.coupling_stiffness_N_per_m != old_haptics.coupling_stiffness_N_per_m ||
-                                 h.coupling_damping_N_s_per_m != old_haptics.coupling_damping_N_s_per_m ||
-                                 h.crossfade_s != old_haptics.crossfade_s;
+    const config::ForceLimits old_limits = config_.device.limits;
+    const bool haptics_changed = !(config.haptics == old_haptics) || !(config.device.limits == old_limits);
     const int old_max_scene_tets = config_.max_scene_tets;
     config_.haptics = config.haptics;
+    config_.device.limits = config.device.limits;
     config_.max_scene_tets = config.max_scene_tets;
     try {
       apply_scene(std::move(scene), haptics_changed);
     } catch (...) {
       config_.haptics = old_haptics;
+      config_.device.limits = old_limits;
       config_.max_scene_tets = old_max_scene_tets;
       throw;
     }
@@ -252,11 +272,23 @@ void Service::reload() {
     scene_path_ = config.scene_path;
     base_scene_overrides_ = scene_overrides();
     scene_sets_.clear();
-    std::fprintf(options_.out, "tissued: reloaded %s and %s\n", options_.config_path.c_str(), scene_path_.c_str());
+    std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
+                 haptics_changed ? " (haptic settings changed: the haptic thread restarted)" : "");
     record_event(static_cast<int>(record::EventKind::kSceneLoaded),
                  "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_);
+    const std::vector<std::string> kept = restart_only_changes(config_, config);
+    if (!kept.empty()) {
+      std::string list;
+      for (const std::string& k : kept) list += (list.empty() ? "" : ", ") + k;
+      const std::string warning = "reload: " + list + " changed in " + options_.config_path +
+                                  " but take effect only at a restart; the old values stay in use";
+      std::fprintf(options_.err, "tissued: %s\n", warning.c_str());
+      record_event(static_cast<int>(record::EventKind::kWarning), warning);
+    }
   } catch (const std::exception& e) {
     std::fprintf(options_.err, "tissued: reload failed, keeping the running scene: %s\n", e.what());
+    record_event(static_cast<int>(record::EventKind::kError),
+                 std::string("reload (SIGHUP) failed, running scene kept: ") + e.what());
   }
   std::fflush(options_.out);
   if (systemd_) systemd_->ready();

@@ -340,6 +340,47 @@ TEST(Service, AFailedReloadChangesNothing) {
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
+// A reload applies device.limits (the haptic thread restarts with them: a
+// lowered force limit must not wait for a restart) and says which settings
+// it cannot apply instead of printing "reloaded" over them.
+TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"));
+  Running run(config);
+  ControlClient client = connect(dir / "ctl.sock");
+  EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_force_N"], 3.0);
+  std::ofstream(config, std::ios::app) << "publish: {stats_rate_hz: 7}\n";
+  std::string text = file_text(config);
+  text.replace(text.find("device:\n"), 8, "device:\n  limits: {max_force_N: 1.25}\n  scale: 2\n");
+  std::ofstream(config) << text;
+  ASSERT_EQ(::raise(SIGHUP), 0);
+  ASSERT_TRUE(written_within_5_s(run.err, "take effect only at a restart")) << file_text(run.err);
+  EXPECT_NE(file_text(run.err).find("reload: device.offset_m/scale, publish changed in " + config), std::string::npos)
+      << file_text(run.err);
+  EXPECT_NE(file_text(run.out).find("haptic thread restarted"), std::string::npos) << file_text(run.out);
+  EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_force_N"], 1.25);
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+TEST(Service, RestartOnlyChangesAreListedInAFixedOrder) {
+  config::DaemonConfig a, b;
+  EXPECT_TRUE(restart_only_changes(a, b).empty());
+  b.haptics.rate_hz = 500;  // applies at a reload: not listed
+  b.device.limits.max_force_N = 1.0;
+  b.status_interval_s = 2.0;
+  b.max_scene_tets = 10;
+  EXPECT_TRUE(restart_only_changes(a, b).empty());
+  b.state_dir = "/elsewhere";
+  b.device.kind = config::DeviceSpec::Kind::kUdp;
+  b.device.udp.port = 1;
+  b.device.sim.waypoints.push_back({});
+  b.realtime.haptic_cpu = 1;
+  b.control.tcp_port = 47900;
+  EXPECT_EQ(restart_only_changes(a, b),
+            (std::vector<std::string>{"device.kind", "device.sim", "device.udp", "realtime", "control", "state_dir"}));
+}
+
 // Plays systemd: READY=1 once serving, WATCHDOG=1 while the haptic loop
 // beats, RELOADING=1 then READY=1 on SIGHUP, STOPPING=1 on SIGTERM.
 TEST(Service, SpeaksTheSystemdNotifyProtocol) {
