@@ -124,6 +124,8 @@ int run_render(RenderCommandOptions o) {
       }
       said << "\n";
     }
+    if (const std::string dropped = source->dropped_note(); !dropped.empty())
+      util::summary_stream(o.out) << "tissue render: " << dropped << "\n";
     return kExitOk;
   } catch (const render::RenderError& e) {
     std::cerr << "tissue render: " << e.what() << "\n";

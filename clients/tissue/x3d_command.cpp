@@ -127,6 +127,7 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
     *summary = std::to_string(frames.size()) + " frames from t=" + fmt(frames.front().time_s) + " s to " +
                fmt(frames.back().time_s) + " s, " + std::to_string(runs) + " topology run(s)";
     if (skipped_empty > 0) *summary += ", " + std::to_string(skipped_empty) + " empty frames skipped";
+    if (const std::string dropped = source.dropped_note(); !dropped.empty()) *summary += "; " + dropped;
     return text;
   } catch (const x3d::X3dInputError& e) {
     throw x3d::SourceError(source.name() + ": " + e.what());

@@ -38,6 +38,9 @@ class FrameSource {
   // Why has_strain() is false, in this source's terms, after name(): a
   // session's format or recording options, a live publisher's frames.
   virtual std::string why_no_strain() const { return "carries no strain energy"; }
+  // Frames the source received but did not keep, said for a summary line
+  // (e.g. "12 frames dropped: ..."); "" when none.
+  virtual std::string dropped_note() const { return {}; }
 };
 
 // "--colour strain: NAME WHY; use --colour level": the one message both

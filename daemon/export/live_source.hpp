@@ -51,6 +51,12 @@ class LiveFrameSource final : public FrameSource {
                              "foreign publisher?)";
   }
 
+  std::string dropped_note() const override {
+    if (dropped_backwards_ == 0) return {};
+    return std::to_string(dropped_backwards_) +
+           " frames dropped: their time was before the last frame kept (the daemon reset or a replay looped)";
+  }
+
   std::size_t skipped_empty() const { return skipped_empty_; }
   std::size_t dropped_backwards() const { return dropped_backwards_; }
 

@@ -51,6 +51,7 @@ TEST(LiveFrameSource, SnapshotIsTheFirstDrawableFrame) {
   EXPECT_EQ(src.frame_time_s(0), 0.2);
   EXPECT_EQ(src.read_frame(0).vertices_m.size(), 8u);
   EXPECT_EQ(src.skipped_empty(), 1u);
+  EXPECT_EQ(src.dropped_note(), "");
   EXPECT_EQ(src.name(), "scripted topic");
   EXPECT_THROW(src.read_frame(1), std::out_of_range);
 }
@@ -67,6 +68,8 @@ TEST(LiveFrameSource, WindowCollectsInTimeOrderDroppingFramesThatGoBack) {
   EXPECT_EQ(src.frame_time_s(1), 1.5);
   EXPECT_EQ(src.frame_time_s(2), 2.0);
   EXPECT_EQ(src.dropped_backwards(), 1u);
+  EXPECT_EQ(src.dropped_note(),
+            "1 frames dropped: their time was before the last frame kept (the daemon reset or a replay looped)");
   EXPECT_EQ(frames_in_window(src, 1.2, 2.0), (std::vector<std::size_t>{1, 2}));
 }
 
