@@ -123,6 +123,8 @@ class HapticSideImpl final : public HapticSide {
     format_haptic_summary(loop_->stats(), device_->name(), udp_ ? &link : nullptr, buffer, size);
   }
 
+  haptics::HapticStats stats() const override { return loop_->stats(); }
+
   nlohmann::json status_json() const override {
     const haptics::HapticStats s = loop_->stats();
     const haptics::TimingSummary t = thread_->timing();

@@ -44,6 +44,8 @@ class HapticSide {
   // format_haptic_summary() of the loop's current stats.
   virtual void summary(char* buffer, std::size_t size) const = 0;
   virtual nlohmann::json status_json() const = 0;
+  // The loop's counters (relaxed reads: a snapshot for the io thread).
+  virtual haptics::HapticStats stats() const = 0;
   // Device, scheduling and memory locking actually obtained.
   virtual void print_startup(std::FILE* out) const = 0;
 };

@@ -391,11 +391,34 @@ void Service::publish_stats() {
   if (dds_) dds_->publish_stats(s);
 }
 
+void Service::note_safety_trips() {
+  if (!haptics_) return;
+  const haptics::HapticStats h = haptics_->stats();
+  if (haptics_.get() != trips_side_ || h.safety_trips < trips_seen_) {
+    trips_side_ = haptics_.get();
+    trips_seen_ = stale_trips_seen_ = lost_trips_seen_ = 0;
+  }
+  if (h.safety_trips > trips_seen_) {
+    const std::uint64_t stale = h.stale_model_trips - stale_trips_seen_, lost = h.device_lost_trips - lost_trips_seen_;
+    const std::uint64_t all = h.safety_trips - trips_seen_;
+    std::string why;
+    if (stale > 0) why += std::to_string(stale) + " stale model";
+    if (lost > 0) why += (why.empty() ? "" : ", ") + std::to_string(lost) + " device lost";
+    if (all > stale + lost) why += (why.empty() ? "" : ", ") + std::to_string(all - stale - lost) + " other";
+    record_event(static_cast<int>(record::EventKind::kWarning),
+                 "haptic safety tripped (" + why + "): the force ramped to zero, and back in once clear");
+  }
+  trips_seen_ = h.safety_trips;
+  stale_trips_seen_ = h.stale_model_trips;
+  lost_trips_seen_ = h.device_lost_trips;
+}
+
 void Service::arm_status_timer() {
   status_timer_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(config_.status_interval_s)));
   status_timer_.async_wait([this](const boost::system::error_code& ec) {
     if (ec || stopping_) return;
+    note_safety_trips();
     print_status();
     arm_status_timer();
   });

@@ -105,6 +105,10 @@ class Service : public control::ControlHandler {
   void publish_mesh();
   void publish_haptic();
   void publish_stats();
+  // Records a warning event when the haptic safety tripped since the last
+  // look (the 1 kHz thread itself does no I/O), at every status line: a
+  // session shows when and why the force was ramped out.
+  void note_safety_trips();
   void arm_status_timer();
   void arm_watchdog_timer();
   void print_status();
@@ -134,6 +138,10 @@ class Service : public control::ControlHandler {
   std::unique_ptr<LocalModelChannel> models_;  // sim -> haptic
   std::unique_ptr<SimThread> sim_;
   std::unique_ptr<HapticSide> haptics_;  // null without device or tool
+  // Trip counts note_safety_trips last saw, and of which haptic side (a
+  // restarted side counts from zero).
+  const HapticSide* trips_side_ = nullptr;
+  std::uint64_t trips_seen_ = 0, stale_trips_seen_ = 0, lost_trips_seen_ = 0;
   std::unique_ptr<control::ControlServer> server_;
   std::unique_ptr<control::SystemdNotifier> systemd_;
   std::unique_ptr<control::WatchdogFeeder> watchdog_;

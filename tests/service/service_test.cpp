@@ -8,6 +8,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -18,6 +19,7 @@
 #include "control/control_client.hpp"
 #include "control/fake_systemd.hpp"
 #include "control/temp_dir.hpp"
+#include "record/record_test_support.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
 #include "support/process_support.hpp"
@@ -445,6 +447,34 @@ TEST(Service, RecordsASessionOnRequest) {
   EXPECT_GT(info.rows.sim_rows, 100u);     // one per sim step: fewer when the sim runs slow (sanitizers)
   EXPECT_GT(info.rows.mesh_frames, 5u);    // 30 Hz
   EXPECT_EQ(info.rows.events, 5u);         // recording started, scene loaded, paused, resumed, reset
+}
+
+// Haptic safety trips become warning events in the recording (the 1 kHz
+// thread does no I/O; the io thread looks at its counters): a model that
+// goes stale after 0.2 ms trips all the time.
+TEST(Service, HapticSafetyTripsAreRecordedAsEvents) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"));
+  std::string text = file_text(config);
+  text.replace(text.find("device:\n"), 8, "device:\n  limits: {stale_model_s: 0.0002}\n");
+  std::ofstream(config) << text;
+  {
+    Running run(config, 0.0, {}, "trips.h5");
+    ControlClient client = connect(dir / "ctl.sock");
+    for (int i = 0; i < 100 && client.call("status")["result"]["haptics"]["stale_model_trips"].get<int>() == 0; ++i)
+      std::this_thread::sleep_for(20ms);
+    std::this_thread::sleep_for(500ms);  // a few looks (one per status line, every 0.1 s here)
+    client.call("shutdown");
+    EXPECT_EQ(run.wait(), kServiceOk);
+  }
+  const hid_t file = H5Fopen((dir / "trips.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const std::vector<std::string> events = record::testing::read_messages(file, "/events/message");
+  H5Fclose(file);
+  const auto trip = std::find_if(events.begin(), events.end(), [](const std::string& m) {
+    return m.rfind("haptic safety tripped (", 0) == 0 && m.find(" stale model") != std::string::npos;
+  });
+  EXPECT_NE(trip, events.end()) << "no trip event among " << events.size() << " events";
 }
 
 // A session creation left by a killed recorder goes when the daemon starts,
