@@ -186,8 +186,11 @@ TEST(DaemonConfigYaml, ShippedConfigLoadsAndPressesTheCantileverTopFace) {
     if (i > 0 && w[i].position_m == w[i - 1].position_m && w[i].position_m[2] < top_z_m)
       held_s += w[i].time_s - w[i - 1].time_s;
   }
-  EXPECT_GE(deepest_m, 0.005 - 1e-12);
-  EXPECT_LE(deepest_m, 0.008 + 1e-12);
+  // Deep enough that the press refines the mesh around the contact (a 7 mm
+  // target, 0.75 N, never did; 20 mm gives about 2.2 N and 15 splits, see
+  // docs/daemon-config.md), shallow enough to stay under the 3 N limit.
+  EXPECT_GE(deepest_m, 0.015 - 1e-12);
+  EXPECT_LE(deepest_m, 0.025 + 1e-12);
   EXPECT_GT(held_s, 0.0) << "the press must hold";
 }
 
