@@ -30,7 +30,9 @@ DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
 
 def find_types(explicit):
     here = os.path.dirname(os.path.abspath(__file__))
-    candidates = [explicit] if explicit else [
+    # Installed (share/tissued/python): the types are beside the script.
+    # In a source tree: a build tree's generated ones.
+    candidates = [explicit] if explicit else [here] + [
         os.path.join(here, "..", "..", "build", tree, "proto", "generated", "python")
         for tree in ("release", "dev", "asan", "tsan")
     ]
