@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cstdint>
 #include <future>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -176,7 +177,10 @@ class SimThread {
   double kinetic_energy_J_ = 0.0, elastic_energy_J_ = 0.0, energy_sim_time_s_ = 0.0;
   std::int64_t last_energy_ns_ = 0;
   std::uint64_t energy_generation_ = 0;
-  double rtf_ = 0.0;
+  // NaN until the first one-second window is measured: the recorded rows and
+  // the published statistics say "not measured" as status says null (they
+  // said 0, a sim that stands still, for the first second).
+  double rtf_ = std::numeric_limits<double>::quiet_NaN();
   bool rtf_measured_ = false;
   // Surface scratch (sim thread): reused, so a snapshot allocates only when
   // the surface grows.

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <thread>
 #include <vector>
@@ -71,6 +72,11 @@ TEST(SimThread, PacedStepsPublishModelsAndStatus) {
   EXPECT_GT(s.sim_time_s, 0.1 * wall_s);   // and not stalled (generous: shared machine, sanitizers)
   EXPECT_EQ(s.failed_steps, 0);
   EXPECT_FALSE(thread.scheduling().empty());
+  // 0.3 s: no one-second window measured yet. The pace is NaN ("not
+  // measured", as status says null), not 0 (a sim standing still), in what
+  // is recorded and published.
+  EXPECT_FALSE(s.real_time_factor_measured);
+  EXPECT_TRUE(std::isnan(s.real_time_factor)) << s.real_time_factor;
 }
 
 // The daemon prints scheduling() right after start(): it must be decided by
