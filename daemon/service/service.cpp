@@ -257,6 +257,15 @@ void Service::reload() {
     const config::ForceLimits old_limits = config_.device.limits;
     const bool haptics_changed = !(config.haptics == old_haptics) || !(config.device.limits == old_limits);
     const int old_max_scene_tets = config_.max_scene_tets;
+    // What the reload changes besides the scene, for its event.
+    std::string applied;
+    const auto note = [&](bool changed, const char* what) {
+      if (changed) applied += std::string(applied.empty() ? "" : ", ") + what;
+    };
+    note(!(config.haptics == old_haptics), "haptics");
+    note(!(config.device.limits == old_limits), "device.limits");
+    note(config.status_interval_s != config_.status_interval_s, "status_interval_s");
+    note(config.max_scene_tets != old_max_scene_tets, "max_scene_tets");
     config_.haptics = config.haptics;
     config_.device.limits = config.device.limits;
     config_.max_scene_tets = config.max_scene_tets;
@@ -275,7 +284,8 @@ void Service::reload() {
     std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
                  haptics_changed ? " (haptic settings changed: the haptic thread restarted)" : "");
     record_event(static_cast<int>(record::EventKind::kSceneLoaded),
-                 "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_);
+                 "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
+                     (applied.empty() ? "" : "; changed: " + applied));
     const std::vector<std::string> kept = restart_only_changes(config_, config);
     if (!kept.empty()) {
       std::string list;

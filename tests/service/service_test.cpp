@@ -348,7 +348,7 @@ TEST(Service, AFailedReloadChangesNothing) {
 TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   TempDir dir;
   const std::string config = write_config(dir, scene_file("cantilever.yaml"));
-  Running run(config);
+  Running run(config, 0.0, {}, "reload.h5");
   ControlClient client = connect(dir / "ctl.sock");
   EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_force_N"], 3.0);
   std::ofstream(config, std::ios::app) << "publish: {stats_rate_hz: 7}\n";
@@ -363,6 +363,17 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_force_N"], 1.25);
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
+  // The recording says what the reload changed and what it could not.
+  const hid_t file = H5Fopen((dir / "reload.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const std::vector<std::string> events = record::testing::read_messages(file, "/events/message");
+  H5Fclose(file);
+  const auto has = [&](const std::string& part) {
+    return std::any_of(events.begin(), events.end(), [&](const std::string& m) { return m.find(part) != m.npos; });
+  };
+  EXPECT_TRUE(has("reloaded (SIGHUP): scene cantilever from ")) << events.size() << " events";
+  EXPECT_TRUE(has("; changed: device.limits")) << events.size() << " events";
+  EXPECT_TRUE(has("reload: device.offset_m/scale, publish changed in ")) << events.size() << " events";
 }
 
 TEST(Service, RestartOnlyChangesAreListedInAFixedOrder) {
