@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "export/frame_source.hpp"
+#include "record/record_test_support.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
 #include "scene/scene_yaml.hpp"
@@ -355,25 +356,7 @@ class TissuedProcess : public ::testing::Test {
   fs::path dir_;
 };
 
-// /events/message of a closed session, through the plain HDF5 C API.
-std::vector<std::string> event_messages(const std::string& path) {
-  std::vector<std::string> out;
-  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-  if (file < 0) return out;
-  const hid_t set = H5Dopen2(file, "/events/message", H5P_DEFAULT);
-  const hid_t type = H5Dget_type(set), space = H5Dget_space(set);
-  const std::size_t width = H5Tget_size(type);
-  const auto rows = static_cast<std::size_t>(H5Sget_simple_extent_npoints(space));
-  std::vector<char> text(rows * width + 1, '\0');
-  if (rows > 0 && H5Dread(set, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, text.data()) >= 0)
-    for (std::size_t i = 0; i < rows; ++i)
-      out.emplace_back(text.data() + i * width, strnlen(text.data() + i * width, width));
-  H5Sclose(space);
-  H5Tclose(type);
-  H5Dclose(set);
-  H5Fclose(file);
-  return out;
-}
+using record::testing::event_messages;
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 

@@ -218,6 +218,14 @@ std::vector<std::string> read_messages(hid_t file, const char* path) {
   return out;
 }
 
+std::vector<std::string> event_messages(const std::string& path) {
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (file < 0) return {};
+  std::vector<std::string> out = read_messages(file, "/events/message");
+  H5Fclose(file);
+  return out;
+}
+
 int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, std::uint64_t frames,
                            std::uint64_t events) {
   int bad = 0;

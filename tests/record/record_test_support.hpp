@@ -76,6 +76,8 @@ std::vector<std::int64_t> read_i64(hid_t file, const char* path);
 std::vector<std::int32_t> read_i32(hid_t file, const char* path);
 std::vector<std::uint8_t> read_u8(hid_t file, const char* path);
 std::vector<std::string> read_messages(hid_t file, const char* path);
+// /events/message of the session at `path`; empty when it cannot be opened.
+std::vector<std::string> event_messages(const std::string& path);
 
 // Checks every row of a session against the generators: haptic rows
 // [0, haptic), sim rows [0, sim), frames [0, frames), events [0, events).

@@ -364,10 +364,7 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
   // The recording says what the reload changed and what it could not.
-  const hid_t file = H5Fopen((dir / "reload.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-  ASSERT_GE(file, 0);
-  const std::vector<std::string> events = record::testing::read_messages(file, "/events/message");
-  H5Fclose(file);
+  const std::vector<std::string> events = record::testing::event_messages(dir / "reload.h5");
   const auto has = [&](const std::string& part) {
     return std::any_of(events.begin(), events.end(), [&](const std::string& m) { return m.find(part) != m.npos; });
   };
@@ -478,10 +475,7 @@ TEST(Service, HapticSafetyTripsAreRecordedAsEvents) {
     client.call("shutdown");
     EXPECT_EQ(run.wait(), kServiceOk);
   }
-  const hid_t file = H5Fopen((dir / "trips.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-  ASSERT_GE(file, 0);
-  const std::vector<std::string> events = record::testing::read_messages(file, "/events/message");
-  H5Fclose(file);
+  const std::vector<std::string> events = record::testing::event_messages(dir / "trips.h5");
   const auto trip = std::find_if(events.begin(), events.end(), [](const std::string& m) {
     return m.rfind("haptic safety tripped (", 0) == 0 && m.find(" stale model") != std::string::npos;
   });
