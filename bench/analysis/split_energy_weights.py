@@ -16,7 +16,8 @@ III), and reports:
     every split neutral are all zero, i.e. no per-type, per-edge-class
     weights can.
 Needs numpy (Debian: python3-numpy, pulled in by python3-h5py in
-scripts/install-deps.sh). Takes ~10 s. Run: bench/analysis/split_energy_weights.py
+scripts/install-deps.sh). Takes ~1 s (0.96 s with Debian's python3 and numpy).
+Run: bench/analysis/split_energy_weights.py
 """
 import itertools
 
