@@ -1,12 +1,16 @@
 #include "service/service.hpp"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <boost/asio/post.hpp>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <ctime>
 #include <exception>
 #include <filesystem>
-#include <fstream>
 #include <stdexcept>
 
 #include "config/daemon_config_yaml.hpp"
@@ -19,6 +23,7 @@
 #include "service/haptic_side.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
+#include "util/output_file.hpp"
 
 namespace tissue::service {
 
@@ -663,12 +668,18 @@ nlohmann::json Service::export_x3d(const std::string& name) {
   x3d::X3dOptions options;
   options.title = scene_.name + " at t = " + std::to_string(snap.sim_time_s) + " s";
   const std::filesystem::path path = std::filesystem::path(config_.state_dir) / file_name;
-  if (std::filesystem::exists(path))
-    throw control::ControlError(path.string() + " exists; files are never overwritten");
-  std::ofstream out(path);
-  out << x3d::x3d_snapshot(frame, options);
-  out.close();
-  if (!out) throw control::ControlError("cannot write " + path.string());
+  // O_EXCL: "never overwritten" holds even against a file (or a link)
+  // made between a check and the open; a failed write leaves no part file.
+  const std::string text = x3d::x3d_snapshot(frame, options);
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0 && errno == EEXIST) throw control::ControlError(path.string() + " exists; files are never overwritten");
+  if (fd < 0) throw control::ControlError("cannot create " + path.string() + ": " + std::strerror(errno));
+  int err = util::detail::write_all(fd, text);
+  if (::close(fd) != 0 && err == 0) err = errno;
+  if (err != 0) {
+    ::unlink(path.c_str());
+    throw control::ControlError("cannot write " + path.string() + ": " + std::strerror(err));
+  }
   return {{"file", path.string()}, {"sim_time_s", snap.sim_time_s}, {"triangles", snap.triangles.size()}};
 }
 

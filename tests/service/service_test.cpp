@@ -598,6 +598,13 @@ TEST(Service, ExportsTheCurrentSurfaceAsX3d) {
   const nlohmann::json again = client.call("export_x3d", {{"name", "now.x3d"}});
   EXPECT_FALSE(again["ok"].get<bool>());  // never overwrites
   EXPECT_EQ(again["error"], (dir / "now.x3d") + " exists; files are never overwritten") << again.dump();
+  // A dangling link in the state directory is not written through (the old
+  // exists() check followed it, found nothing, and the write created its
+  // target wherever it pointed).
+  ASSERT_EQ(::symlink((dir / "outside.x3d").c_str(), (dir / "link.x3d").c_str()), 0);
+  const nlohmann::json linked = client.call("export_x3d", {{"name", "link.x3d"}});
+  EXPECT_FALSE(linked["ok"].get<bool>()) << linked.dump();
+  EXPECT_FALSE(std::filesystem::exists(dir / "outside.x3d"));
   const nlohmann::json up = client.call("export_x3d", {{"name", "../up.x3d"}});
   EXPECT_FALSE(up["ok"].get<bool>());
   EXPECT_EQ(up["error"].get<std::string>().rfind("export name '../up.x3d' rejected: it contains '/'", 0), 0u)
