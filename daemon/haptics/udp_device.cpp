@@ -1,5 +1,7 @@
 #include "haptics/udp_device.hpp"
 
+#include <sys/socket.h>
+
 #include <boost/asio/buffer.hpp>
 #include <boost/asio/ip/address.hpp>
 #include <cmath>
@@ -83,6 +85,22 @@ bool UdpDevice::start(std::string* error) {
     stop();
     return fail("cannot read the bound port of " + where + ": " + ec.message());
   }
+  if (spec_.port == 0) {
+    // Port 0 took an ephemeral port, which Linux gives back when the peer
+    // filter disconnects (connect(AF_UNSPEC) keeps only a port bound by
+    // number). Bind that number explicitly on a fresh socket.
+    const ip::udp::endpoint numbered(address, local_port_);
+    socket_.close(ec);
+    socket_.open(numbered.protocol(), ec);
+    if (!ec) socket_.bind(numbered, ec);
+    if (!ec) socket_.non_blocking(true, ec);
+    if (ec) {
+      const std::string why = "cannot bind " + spec_.bind_address + ":" + std::to_string(local_port_) +
+                              " (the ephemeral port that port 0 gave): " + ec.message();
+      stop();
+      return fail(why);
+    }
+  }
 
   timeout_ns_ = static_cast<std::int64_t>(std::llround(spec_.timeout_s * 1e9));
   // Packet::getHash() computes the fingerprint once behind a function-local
@@ -99,6 +117,7 @@ bool UdpDevice::start(std::string* error) {
   behind_count_ = 0;
   behind_last_sequence_number_ = 0;
   peer_ = ip::udp::endpoint();
+  filtered_ = false;  // a new socket: not connected
   buttons_.store(0, std::memory_order_relaxed);
   for (auto& r : rejected_) r.store(0, std::memory_order_relaxed);
   for (auto* c :
@@ -163,8 +182,21 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
   return Verdict::kAccepted;
 }
 
+void UdpDevice::filter_to(const ip::udp::endpoint* peer) noexcept {
+  sockaddr unspecified{};
+  unspecified.sa_family = AF_UNSPEC;  // connect(AF_UNSPEC) dissolves a UDP association
+  const int rc = peer ? ::connect(socket_.native_handle(), peer->data(), static_cast<socklen_t>(peer->size()))
+                      : ::connect(socket_.native_handle(), &unspecified, sizeof unspecified);
+  filtered_ = peer != nullptr && rc == 0;
+}
+
 bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   if (!socket_.is_open()) return false;
+  // The kernel filters for the session: while a sender is live the socket is
+  // connected to it, so datagrams from other addresses never queue (a flood
+  // from elsewhere took the 64 reads of a tick and the kernel's buffer, and
+  // crowded the device out); once it is lost, any address may start anew.
+  if (filtered_ && !sender_live(now_ns)) filter_to(nullptr);
   bool fresh = false;
   for (int i = 0; i < kMaxDatagramsPerRead; ++i) {
     boost::system::error_code ec;
@@ -179,6 +211,7 @@ bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     bump(received_);
     if (consider(bytes, now_ns) == Verdict::kAccepted) fresh = true;
   }
+  if (fresh && !filtered_) filter_to(&peer_);
   // Only a pose that arrived during this read is a sample: handing the held
   // pose back every tick would make a 250 Hz device look like one that jumps
   // 4 ms of motion in 1 ms (the loop's speed check) and would hide a device

@@ -22,6 +22,8 @@
 //   kind          not a pose packet (e.g. a force packet looped back)
 //   non_finite    a position or velocity component is NaN or infinite
 //   other_sender  while a sender is live, datagrams from any other address
+//                 (only those queued before it went live: from then on the
+//                 socket is connected to it and the kernel drops the rest)
 // and then the ordering rule: sequence_number must exceed the last accepted
 // one (duplicates and reordered packets are dropped and counted as
 // out_of_order), except that kResyncPackets valid poses in a row below it,
@@ -111,6 +113,10 @@ class UdpDevice final : public Device {
   // Outcome of one datagram: accepted, rejected for a reason, or out of order.
   enum class Verdict { kAccepted, kRejected, kOutOfOrder };
   Verdict consider(std::size_t bytes, std::int64_t now_ns) noexcept;
+  // Connects the socket to `peer` (the kernel then drops datagrams from
+  // every other address before they queue) or, with nullptr, disconnects it
+  // (any address may start the next session). One syscall, no allocation.
+  void filter_to(const boost::asio::ip::udp::endpoint* peer) noexcept;
   static void bump(std::atomic<std::uint64_t>& counter) noexcept {
     counter.store(counter.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // one writer
   }
@@ -124,6 +130,7 @@ class UdpDevice final : public Device {
   boost::asio::ip::udp::socket socket_;
   boost::asio::ip::udp::endpoint from_;  // scratch for receive_from
   boost::asio::ip::udp::endpoint peer_;  // sender of the newest accepted pose
+  bool filtered_ = false;                // the socket is connected to peer_ (filter_to)
   std::array<unsigned char, kReceiveBufferBytes> receive_buffer_{};
   std::array<unsigned char, kReceiveBufferBytes> send_buffer_{};
 
