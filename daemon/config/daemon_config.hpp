@@ -154,6 +154,7 @@ struct DaemonConfig {
   // every client for 7.6 s, past systemd's 5 s watchdog, and could never run
   // in real time anyway.
   int max_scene_tets = 1'000'000;
+  bool operator==(const DaemonConfig&) const = default;  // a reload tells what changed
 };
 
 }  // namespace tissue::config

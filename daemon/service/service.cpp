@@ -244,6 +244,17 @@ std::vector<std::string> restart_only_changes(const config::DaemonConfig& runnin
   if (!(running.control == file.control)) changed.push_back("control");
   if (!(running.publish == file.publish)) changed.push_back("publish");
   if (running.state_dir != file.state_dir) changed.push_back("state_dir");
+  // Whatever else differs once the settings a reload applies are taken as
+  // they run: a section added to DaemonConfig and not named above is still
+  // reported, never silently kept.
+  config::DaemonConfig rest = file;
+  rest.source = running.source;
+  rest.scene_path = running.scene_path;
+  rest.haptics = running.haptics;
+  rest.device.limits = running.device.limits;
+  rest.status_interval_s = running.status_interval_s;
+  rest.max_scene_tets = running.max_scene_tets;
+  if (changed.empty() && !(rest == running)) changed.push_back("other settings");
   return changed;
 }
 

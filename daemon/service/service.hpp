@@ -53,12 +53,14 @@ struct ServiceOptions {
   std::FILE* err = stderr;  // one-line errors
 };
 
-// Process exit codes of the service mode (batch mode shares 0-2).
 // The settings that differ between the running config and the file a
 // reload read, among those a reload cannot apply (the device, sockets,
 // publishing, state_dir, threads): "device.kind", "control", ... in a fixed
-// order; empty when none.
+// order, or "other settings" for a difference no name above covers (a
+// section added later); empty when none.
 std::vector<std::string> restart_only_changes(const config::DaemonConfig& running, const config::DaemonConfig& file);
+
+// Process exit codes of the service mode (batch mode shares 0-2).
 
 enum ServiceExit : int { kServiceOk = 0, kServiceInternal = 1, kServiceBadConfig = 2, kServiceStartFailed = 3 };
 
