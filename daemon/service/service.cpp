@@ -685,7 +685,7 @@ nlohmann::json Service::export_x3d(const std::string& name) {
   const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd < 0 && errno == EEXIST) throw control::ControlError(path.string() + " exists; files are never overwritten");
   if (fd < 0) throw control::ControlError("cannot create " + path.string() + ": " + std::strerror(errno));
-  int err = util::detail::write_all(fd, text);
+  int err = util::write_all(fd, text);
   if (::close(fd) != 0 && err == 0) err = errno;
   if (err != 0) {
     ::unlink(path.c_str());
