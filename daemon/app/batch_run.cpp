@@ -12,6 +12,8 @@
 #include "app/batch_record.hpp"
 #include "app/output_file.hpp"
 #include "app/stop_signals.hpp"
+#include "physics/diagnostics.hpp"
+#include "physics/forces.hpp"
 #include "record/record_types.hpp"
 #include "scene/scene_yaml.hpp"
 
@@ -38,6 +40,10 @@ double percentile(const std::vector<double>& sorted, double p) {
 
 bool says_nonfinite(const std::string& error) { return error.find("non-finite") != std::string::npos; }
 
+// The energy excess (result.energy_audit.worst_excess) a run is warned of:
+// above rounding, below anything a user could see.
+constexpr double kReportedEnergyExcess = 1e-6;
+
 // What the integrator spent per step and what accuracy it gave up (steps
 // whose solver stopped at cg_max_iterations short of cg_tolerance).
 nlohmann::json solver_json(const physics::SimCounters& c) {
@@ -46,7 +52,8 @@ nlohmann::json solver_json(const physics::SimCounters& c) {
           {"unconverged_steps", c.unconverged_steps},
           {"offset_layout_steps", c.offset_layout_steps},
           {"verified_substep_steps", c.verified_substep_steps},
-          {"rerun_steps", c.rerun_steps}};
+          {"rerun_steps", c.rerun_steps},
+          {"energy_limited", {{"steps", c.energy_limited_steps}, {"removed_J", c.energy_limited_J}}}};
 }
 
 struct Tally {
@@ -120,6 +127,24 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
   };
   track_probes();
 
+  // The run's health, checked after every step outside its timing: the
+  // energy held against what was put in (diagnostics.hpp) and the tets
+  // turned inside out (springs cannot see inversion; NUMERICS.md §3).
+  const physics::EnergyBudget budget(sim);
+  double worst_excess = 0.0, worst_excess_at_s = NAN;
+  std::size_t inverted_peak = physics::inverted_tet_count(sim.body());
+  double inverted_peak_at_s = inverted_peak > 0 ? sim.time_s() : NAN;
+  auto track_health = [&] {
+    if (const double excess = budget.excess(sim); excess > worst_excess) {
+      worst_excess = excess;
+      worst_excess_at_s = sim.time_s();
+    }
+    if (const std::size_t inverted = physics::inverted_tet_count(sim.body()); inverted > inverted_peak) {
+      inverted_peak = inverted;
+      inverted_peak_at_s = sim.time_s();
+    }
+  };
+
   const double expected_steps = std::ceil(std::max(0.0, options.duration_s - sim.time_s()) / dt) + 1.0;
   std::vector<double> step_ms;
   step_ms.reserve(static_cast<std::size_t>(std::min(expected_steps, static_cast<double>(kMaxReservedSteps))));
@@ -148,6 +173,7 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
       break;
     }
     track_probes();
+    track_health();
     if (after_step) after_step(sim, step_ms.back());
     if (every_s > 0.0 && sim.time_s() >= static_cast<double>(next_line) * every_s - slack_s) {
       print_progress(progress, sim, seconds_between(start, Clock::now()));
@@ -169,7 +195,9 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
                      {"name", scene.name},
                      {"integrator", sim.integrator().name()},
                      {"dt_s", dt},
-                     {"adaptivity", scene.adaptivity.enabled}};
+                     {"adaptivity", scene.adaptivity.enabled},
+                     {"overrides", scene.overrides}};
+  const auto time_or_null = [](double t_s) { return std::isnan(t_s) ? nlohmann::json(nullptr) : nlohmann::json(t_s); };
   report["result"] = {
       {"sim_time_s", sim.time_s()},
       {"steps", c.steps},
@@ -182,6 +210,11 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
       {"external_work_J", c.external_work_J},
       {"prescribed_work_J", c.prescribed_work_J},
       {"adaptation_energy_J", {{"net", c.adaptation_energy_J}, {"added", c.adaptation_energy_added_J}}},
+      {"energy_audit", {{"worst_excess", worst_excess}, {"at_t_s", time_or_null(worst_excess_at_s)}}},
+      {"inverted_tets",
+       {{"final", physics::inverted_tet_count(sim.body())},
+        {"peak", inverted_peak},
+        {"peak_at_t_s", time_or_null(inverted_peak_at_s)}}},
       {"nonfinite_events", says_nonfinite(error) ? 1 : 0},
       {"rejected_steps", c.rejected_steps},
       {"solver", solver_json(c)},
@@ -207,7 +240,13 @@ nlohmann::json run_batch(const scene::Scene& scene, const BatchOptions& options,
   return run_batch(sim, options, progress);
 }
 
-std::string report_text(const nlohmann::json& report) { return report.dump(2) + "\n"; }
+// Strings in the report are checked where they come in (a scene's name must
+// be UTF-8), but the report must come out whatever: a byte that is not UTF-8
+// is written as U+FFFD rather than throwing after the run, with the session
+// still to be finished.
+std::string report_text(const nlohmann::json& report) {
+  return report.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+}
 
 int batch_command(const BatchOptions& options) {
   // stdout carries the live figures; flush it before each stderr line so the
@@ -329,6 +368,37 @@ int batch_command(const BatchOptions& options) {
                    static_cast<long long>(c.unconverged_steps), static_cast<long long>(c.steps),
                    scene.integrator.cg_max_iterations, scene.integrator.cg_tolerance, hint_two_level ? "," : " or",
                    hint_two_level ? ", or (slender or heavily damped objects) try cg_preconditioner: two_level" : "");
+    }
+    // What the report's health figures say, said once more where a user
+    // looks: a run that passes the stability bar prints none of it.
+    const physics::SimCounters& c = sim->counters();
+    if (c.energy_limited_steps > 0) {
+      std::fflush(stdout);
+      std::fprintf(stderr,
+                   "tissued: warning: %lld of %lld implicit steps ended with more energy than the body was given and "
+                   "were slowed (%.3g J taken out): the springs turned far within a step; lower dt_s for a faithful "
+                   "trajectory\n",
+                   static_cast<long long>(c.energy_limited_steps), static_cast<long long>(c.steps), c.energy_limited_J);
+    }
+    if (const auto& audit = result["energy_audit"]; audit["worst_excess"].get<double>() > kReportedEnergyExcess) {
+      std::fflush(stdout);
+      std::fprintf(stderr,
+                   "tissued: warning: the body held %.3g %% more energy than it started with plus the work done on it "
+                   "(at t = %.6g s)%s\n",
+                   100.0 * audit["worst_excess"].get<double>(), audit["at_t_s"].get<double>(),
+                   scene.integrator.kind == scene::IntegratorKind::kExplicit
+                       ? "; explicit steps swing in energy by O(h omega): lower integrator.substep_safety or add "
+                         "damping"
+                       : "");
+    }
+    if (const auto& inverted = result["inverted_tets"]; inverted["peak"].get<std::size_t>() > 0) {
+      std::fflush(stdout);
+      std::fprintf(stderr,
+                   "tissued: warning: %zu tets were inside out at the worst (t = %.6g s), %zu at the end: springs do "
+                   "not resist inversion (NUMERICS.md section 3)\n",
+                   inverted["peak"].get<std::size_t>(),
+                   inverted["peak_at_t_s"].is_null() ? 0.0 : inverted["peak_at_t_s"].get<double>(),
+                   inverted["final"].get<std::size_t>());
     }
     if (talk) {
       std::printf("done: %.6g s simulated in %lld steps", sim->time_s(), static_cast<long long>(sim->counters().steps));

@@ -5,17 +5,23 @@
 //   tissued --batch --scene FILE --duration SECONDS [--set key.path=value ...]
 //           [--report out.json] [--no-timing] [--progress SECONDS] [--record session.h5]
 //
-// The report (keys sorted, doubles printed so they round-trip):
-//   scene   {source, name, integrator, dt_s, adaptivity}
+// The report (keys sorted, doubles printed so they round-trip; every field:
+// docs/batch-report.md):
+//   scene   {source, name, overrides, integrator, dt_s, adaptivity}
 //   result  {sim_time_s, steps, nodes/tets/springs {final, peak}, refines,
 //            merges, energy_J {kinetic, elastic}, external_work_J (loads,
 //            gravity), prescribed_work_J (drivers of prescribed nodes),
 //            adaptation_energy_J {net, added} (what splits and merges
 //            changed the kinetic + elastic energy by; see SimCounters),
+//            energy_audit {worst_excess, at_t_s} (the most the body held
+//            beyond E0 + work + adaptation net, physics/diagnostics.hpp),
+//            inverted_tets {final, peak, peak_at_t_s},
 //            nonfinite_events, rejected_steps, error (null | message),
 //            interrupted_by (null | "SIGINT" | "SIGTERM"),
 //            solver {substeps {mean, max}, iterations {mean, max},
-//                    unconverged_steps},
+//                    unconverged_steps, offset_layout_steps,
+//                    verified_substep_steps, rerun_steps,
+//                    energy_limited {steps, removed_J}},
 //            probes {NAME: {final_displacement_m [x,y,z], peak_magnitude_m}}}
 //   timing  {wall_s, step_ms {p50, p99, max}, real_time_factor}
 // Everything except `timing` depends only on the scene and the overrides, so

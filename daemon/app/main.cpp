@@ -1,8 +1,7 @@
 // tissued — the daemon's entry point: parses the command line and dispatches
 // to a mode. Modes live in their own files (batch_run.cpp); this file stays
-// thin. Exit codes: 0 success, 1 internal error, 2 bad command line or scene,
-// 3 simulation failure, 4 report not writable, 5 session file not writable,
-// 128 + N a batch run stopped by signal N (batch_run.hpp).
+// thin. Exit codes: as the --help footer below says (batch_run.hpp has the
+// batch mode's, service/service.hpp the service's).
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <csignal>

@@ -135,9 +135,16 @@ void usage(const std::string& program, std::FILE* to) {
       "          a scene file: its own)\n"
       "  beam-theory: [--beam-depth D]\n"
       "no mode flag: all three modes (with --scene-file: the sweep)\n"
+      "--quick: shorter runs and fewer points everywhere (the defaults in brackets below)\n"
+      "--scene: cantilever (the paper's, 5 N tip load), beam (PERFORMANCE.md's 0.4 m beam, 8x2x2 cubes),\n"
+      "  beam-r (the same beam as 12x3x3 cubes, whose uniform depths 0, 3, 6, 9 are PERFORMANCE.md's R1..R4)\n"
+      "defaults: --duration 0.5 s for the cantilever and a scene file, 1 s for the beams [0.2 / 0.5];\n"
+      "  --metric rms; --run-cap 30 s of wall (or CPU) time per run [3]; --depths 3,6 [3];\n"
+      "  --dts 0.001,0.005; --integrators all three; --beam-depth 6 [4]\n"
       "--csv / --svg are created before any run. Ctrl-C (or SIGTERM) during the sweep stops it after the\n"
       "step in progress and still prints its tables and writes its files for the runs done; Ctrl-C again kills.\n"
-      "exit codes: 0 done, 2 bad option or scene, 4 --csv/--svg not writable, 128+N sweep stopped by signal N\n",
+      "exit codes: 0 done, 2 bad option or scene, 3 every run of the sweep failed or was refused, 4 --csv/--svg not\n"
+      "writable, 128+N sweep stopped by signal N\n",
       to);
 }
 
@@ -1035,7 +1042,14 @@ struct OutputError : std::runtime_error {
 // Runs the sweep, prints its tables and writes `csv` / `svg` (those opened).
 // Returns the signal that interrupted it (the tables and files then hold the
 // runs done), or 0.
-int run_sweep(const Options& o, OutputFile& csv, OutputFile& svg, const volatile std::sig_atomic_t* stop) {
+// How a sweep ended: the signal that stopped it (0: none), and whether any
+// run gave figures (ok, or capped by --run-cap with what it reached).
+struct SweepEnd {
+  int signal = 0;
+  bool any_figures = false;
+};
+
+SweepEnd run_sweep(const Options& o, OutputFile& csv, OutputFile& svg, const volatile std::sig_atomic_t* stop) {
   SweepSetup s;
   s.scene = o.sweep_scene;
   s.cost_uses_cpu = o.cpu_clock;
@@ -1291,7 +1305,13 @@ int run_sweep(const Options& o, OutputFile& csv, OutputFile& svg, const volatile
     if (const std::string why = svg.write(svg_text(s, points, o.metric)); !why.empty()) throw OutputError(why);
     std::printf("wrote %s\n", o.svg_path.c_str());
   }
-  return s.stopped() ? *s.stop : 0;
+  SweepEnd end;
+  end.signal = s.stopped() ? *s.stop : 0;
+  end.any_figures = std::any_of(points.begin(), points.end(), [](const Point& p) {
+    const std::string status = p.status();
+    return status == "ok" || status == "capped";
+  });
+  return end;
 }
 
 }  // namespace
@@ -1337,7 +1357,8 @@ int run_trade_study(const std::string& program, const std::vector<std::string>& 
       // Ctrl-C (or SIGTERM) during the sweep, which can take hours, ends it
       // after the step in progress and keeps what it measured.
       const StopOnSignals stop;
-      if (const int signo = run_sweep(o, csv, svg, stop.flag()); signo != 0) {
+      const SweepEnd end = run_sweep(o, csv, svg, stop.flag());
+      if (const int signo = end.signal; signo != 0) {
         std::string files;
         for (const std::string* path : {&o.csv_path, &o.svg_path})
           if (!path->empty()) files += (files.empty() ? "; " : ", ") + *path;
@@ -1345,6 +1366,9 @@ int run_trade_study(const std::string& program, const std::vector<std::string>& 
                                                      (files.empty() ? "" : " and files") +
                                                      " hold the runs done (the rest say \"not run\")" + files);
       }
+      if (!end.any_figures)
+        return fail(kTradeExitNoRun,
+                    "every run failed or was refused (the table says why for each); no figure came out of the sweep");
     }
     std::printf("\ntotal wall time %.1f s\n", seconds_between(t0, Clock::now()));
   } catch (const OutputError& e) {

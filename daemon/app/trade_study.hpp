@@ -15,6 +15,7 @@ namespace tissue::app {
 enum TradeExitCode : int {
   kTradeExitOk = 0,
   kTradeExitUsage = 2,   // a bad option, a scene file that does not load, a run that cannot start
+  kTradeExitNoRun = 3,   // every run of the sweep failed or was refused: no figure came out
   kTradeExitOutput = 4,  // --csv or --svg cannot be written (checked before any run)
   // 128 + N: the sweep was stopped by signal N (SIGINT 130, SIGTERM 143;
   // stop_signals.hpp); its tables and files hold the runs done.

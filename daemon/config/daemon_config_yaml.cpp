@@ -35,6 +35,10 @@ constexpr std::size_t kMaxLineBytes = 64u << 20;
 constexpr int kMaxConnections = 1024;
 // The haptic loop is 1 kHz; faster than this no device or scheduler keeps up.
 constexpr double kMaxHapticRateHz = 10000.0;
+constexpr double kMinHapticRateHz = 1.0;
+constexpr double kMaxRamp_s = 10.0;
+constexpr double kMaxTimeout_s = 60.0;
+constexpr double kMaxStatusInterval_s = 3600.0;
 // Linux SCHED_FIFO priorities.
 constexpr int kMinRtPriority = 1;
 constexpr int kMaxRtPriority = 99;
@@ -213,6 +217,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (c_.scene_path.empty()) fail("scene", "must not be empty (the scene file to load)");
     if (c_.state_dir.empty()) fail("state_dir", "must not be empty (recordings and exports go there)");
     positive(c_.status_interval_s, "status_interval_s");
+    at_most(c_.status_interval_s, kMaxStatusInterval_s, "status_interval_s", "the status timer must fit its clock");
     if (c_.max_scene_tets < 1) fail("max_scene_tets", "must be >= 1 (got " + std::to_string(c_.max_scene_tets) + ")");
 
     const DeviceSpec& d = c_.device;
@@ -232,6 +237,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
 
     const HapticSpec& h = c_.haptics;
     positive(h.rate_hz, "haptics.rate_hz");
+    // The tick period is kept in int64 nanoseconds; 1e-300 Hz overflowed it.
+    at_least(h.rate_hz, kMinHapticRateHz, "haptics.rate_hz", "the loop's period must fit its clock");
     if (h.rate_hz > kMaxHapticRateHz)
       fail("haptics.rate_hz", "must be <= " + fmt_num(kMaxHapticRateHz) + " Hz (got " + fmt_num(h.rate_hz) + ")");
     positive(h.coupling_stiffness_N_per_m, "haptics.coupling_stiffness_N_per_m");
@@ -278,7 +285,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     for (const auto& [rate, key] :
          {std::pair{pub.mesh_rate_hz, "publish.mesh_rate_hz"}, std::pair{pub.haptic_rate_hz, "publish.haptic_rate_hz"},
           std::pair{pub.stats_rate_hz, "publish.stats_rate_hz"}})
-      if (!(rate > 0.0 && rate <= 1000.0)) fail(key, "must be in (0, 1000] Hz (got " + std::to_string(rate) + ")");
+      // At least 0.01 Hz: the timer's period (1 / rate) must fit its clock.
+      if (!(rate >= 0.01 && rate <= 1000.0)) fail(key, "must be in [0.01, 1000] Hz (got " + fmt_num(rate) + ")");
     if (pub.dds.domain_id < 0 || pub.dds.domain_id > 232)
       fail("publish.dds.domain_id",
            "must be a DDS domain id in [0, 232] (got " + std::to_string(pub.dds.domain_id) + ")");
@@ -315,8 +323,13 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     positive(l.max_stiffness_N_per_m, p + ".max_stiffness_N_per_m");
     non_negative(l.ramp_in_s, p + ".ramp_in_s");
     non_negative(l.ramp_out_s, p + ".ramp_out_s");
+    // A stop waits for the ramp out: 1e308 s made the daemon unstoppable.
+    at_most(l.ramp_in_s, kMaxRamp_s, p + ".ramp_in_s", "a ramp longer than that is not a ramp");
+    at_most(l.ramp_out_s, kMaxRamp_s, p + ".ramp_out_s", "a stop waits for it");
     positive(l.stale_model_s, p + ".stale_model_s");
     positive(l.device_timeout_s, p + ".device_timeout_s");
+    at_most(l.stale_model_s, kMaxTimeout_s, p + ".stale_model_s", "a hand would feel a frozen model that long");
+    at_most(l.device_timeout_s, kMaxTimeout_s, p + ".device_timeout_s", "a lost device would keep its force that long");
     positive(l.max_speed_m_per_s, p + ".max_speed_m_per_s");
     positive(l.workspace_radius_m, p + ".workspace_radius_m");
   }

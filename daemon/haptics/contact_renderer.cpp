@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+#include "haptics/closest_point.hpp"
+
 namespace tissue::haptics {
 namespace {
 
@@ -20,44 +22,6 @@ constexpr double kDegenerateArea2_m4 = 1e-30;
 // behind the surface did not meet it; it is left free, as one that starts
 // inside.
 constexpr double kCaptureDepth_m = 0.005;
-
-struct TriangleClosest {
-  Vec3 point;
-  std::array<double, 3> weight;
-  int feature_a, feature_b;  // local corner indices 0..2: face (-1,-1), edge (a,b), vertex (a,-1)
-};
-
-// Closest point of triangle abc to p with its Voronoi region (Ericson,
-// Real-Time Collision Detection, 5.1.5).
-TriangleClosest closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0.0 && d2 <= 0.0) return {a, {1, 0, 0}, 0, -1};
-  const Vec3 bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0.0 && d4 <= d3) return {b, {0, 1, 0}, 1, -1};
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
-    const double v = d1 / (d1 - d3);
-    return {a + v * ab, {1 - v, v, 0}, 0, 1};
-  }
-  const Vec3 cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0.0 && d5 <= d6) return {c, {0, 0, 1}, 2, -1};
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
-    const double w = d2 / (d2 - d6);
-    return {a + w * ac, {1 - w, 0, w}, 0, 2};
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return {b + w * (c - b), {0, 1 - w, w}, 1, 2};
-  }
-  const double denom = 1.0 / (va + vb + vc);
-  const double v = vb * denom, w = vc * denom;
-  return {a + v * ab + w * ac, {1 - v - w, v, w}, -1, -1};
-}
 
 double angle_between(const Vec3& u, const Vec3& v) { return std::atan2(u.cross(v).norm(), u.dot(v)); }
 
@@ -168,12 +132,12 @@ ContactRenderer::Closest ContactRenderer::closest_facing(const Vec3& device_m, c
     const auto& tri = model_->triangle[t];
     const Vec3& a = vertex_m_[tri[0]];
     if (filter && normal_[t].dot(reference_m - a) < -kBehindTolerance_m) continue;  // faces away from the contact
-    const TriangleClosest c = closest_on_triangle(device_m, a, vertex_m_[tri[1]], vertex_m_[tri[2]]);
-    const double d2 = (device_m - c.point).squaredNorm();
+    const TriangleClosest c = closest_point_on_triangle(device_m, a, vertex_m_[tri[1]], vertex_m_[tri[2]]);
+    const double d2 = (device_m - c.point_m).squaredNorm();
     if (d2 >= best.distance2) continue;
     best.triangle = t;
     best.distance2 = d2;
-    best.point = c.point;
+    best.point = c.point_m;
     best.weight = c.weight;
     best.feature_a = c.feature_a < 0 ? -1 : tri[c.feature_a];
     best.feature_b = c.feature_b < 0 ? -1 : tri[c.feature_b];

@@ -1,4 +1,5 @@
-// Device: what the 1 kHz loop talks to (simulated hand, UDP bridge, vendor SDK).
+// Device: what the 1 kHz loop talks to (simulated hand, UDP bridge, vendor SDK,
+// a recorded session's hand played back).
 //
 // start()/stop() may allocate, load libraries and do I/O; they run outside the
 // real-time loop. read()/write() run inside HapticLoop::tick() and must not

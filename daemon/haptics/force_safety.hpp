@@ -44,7 +44,6 @@ class ForceSafety {
   double scale() const noexcept { return scale_; }
   // Scale and output both zero: safe to stop writing.
   bool quiescent() const noexcept { return scale_ == 0.0 && output_N_.isZero(0.0); }
-  unsigned active_faults() const noexcept { return faults_; }
   // Rising edges of each fault kind (index = bit position) and in total.
   std::uint64_t trips(int fault_bit) const noexcept { return trips_[fault_bit]; }
   std::uint64_t total_trips() const noexcept;

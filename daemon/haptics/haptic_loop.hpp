@@ -103,11 +103,9 @@ class HapticLoop {
   double period_s() const noexcept { return period_s_; }
   // Tick-thread only: the last sample handed to the sim (for tests/diagnostics).
   const ToolSample& last_sample() const noexcept { return last_sample_; }
-  const RenderParams& render_params() const noexcept { return render_params_; }
 
  private:
   bool accept_sample(std::int64_t now_ns, const DeviceSample& s) noexcept;
-  void take_new_model(std::int64_t now_ns, const Vec3& device_m, const Vec3& device_velocity_m_per_s) noexcept;
 
   Device& device_;
   config::ForceLimits limits_;

@@ -47,7 +47,8 @@ struct LocalModel {
   std::array<Vec3, kMaxPatchVertices> vertex_m{};
   std::array<Vec3, kMaxPatchVertices> vertex_velocity_m_per_s{};
   std::array<std::uint32_t, kMaxPatchVertices> vertex_node{};  // mesh node id of each patch vertex
-  std::array<std::array<std::int32_t, 3>, kMaxPatchTriangles> triangle{};  // outward (counter-clockwise seen from outside)
+  std::array<std::array<std::int32_t, 3>, kMaxPatchTriangles>
+      triangle{};  // outward (counter-clockwise seen from outside)
 
   // Contact linearisation (see above).
   bool in_contact = false;  // the sim applied a tool force in the step this model describes

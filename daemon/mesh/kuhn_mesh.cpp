@@ -85,7 +85,6 @@ KuhnMesh::KuhnMesh(const BoxSpec& spec) : spec_(spec) {
   for (std::int64_t z = 0; z < nz; ++z)
     for (std::int64_t y = 0; y < ny; ++y)
       for (std::int64_t x = 0; x < nx; ++x) add_node({x * h, y * h, z * h}, kInvalidId, kInvalidId, 0, nullptr);
-  coarse_node_count_ = node_count_;
   auto coarse_id = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
     return static_cast<NodeId>(x + nx * (y + ny * z));
   };

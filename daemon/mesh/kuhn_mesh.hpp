@@ -90,7 +90,6 @@ class KuhnMesh {
   std::size_t node_capacity() const { return nodes_.size(); }
   std::size_t edge_capacity() const { return edges_.size(); }
   std::size_t tet_capacity() const { return tets_.size(); }
-  std::size_t coarse_node_count() const { return coarse_node_count_; }
 
   const Node& node(NodeId id) const { return nodes_[id]; }
   const Edge& edge(EdgeId id) const { return edges_[id]; }
@@ -184,7 +183,6 @@ class KuhnMesh {
   std::int64_t total_six_volume_ = 0;
   std::uint64_t topology_version_ = next_topology_version();
   static std::uint64_t next_topology_version();
-  std::size_t coarse_node_count_ = 0;
 
   std::vector<Node> nodes_;
   std::vector<Edge> edges_;

@@ -167,7 +167,7 @@ void Body::rebuild_parameters() {
   });
   const double rho = scene_.material.density_kg_per_m3;
   mesh_.for_each_node([&](NodeId n, const mesh::Node& node) {
-    mass_kg[n] = rho * static_cast<double>(node.six_volume) * unit * unit * unit / 24.0;  // eq. (2)
+    mass_kg[n] = node_mass_kg(rho, node.six_volume, unit);
     inv_mass_per_kg[n] = kind[n] == NodeKind::kFree ? 1.0 / mass_kg[n] : 0.0;
   });
   mesh_.for_each_edge([&](EdgeId e, const mesh::Edge&) { refresh_edge(e); });
@@ -267,7 +267,7 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
   for (NodeId n : touched_nodes_) {
     node_touched_[n] = 0;
     if (!mesh_.node_alive(n)) continue;
-    mass_kg[n] = rho * static_cast<double>(mesh_.node(n).six_volume) * unit * unit * unit / 24.0;
+    mass_kg[n] = node_mass_kg(rho, mesh_.node(n).six_volume, unit);
     inv_mass_per_kg[n] = kind[n] == NodeKind::kFree ? 1.0 / mass_kg[n] : 0.0;
   }
   touched_nodes_.clear();
@@ -304,7 +304,7 @@ std::vector<EdgeId> moving_springs(const Body& body) {
   return out;
 }
 
-Vec3 Body::momentum() const {
+Vec3 Body::momentum_kg_m_per_s() const {
   Vec3 p = Vec3::Zero();
   mesh_.for_each_node([&](NodeId n, const mesh::Node&) { p += mass_kg[n] * v_m_per_s[n]; });
   return p;

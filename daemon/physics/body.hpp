@@ -79,7 +79,7 @@ class Body {
 
   // Total mass [kg] and momentum [kg m/s] of all nodes.
   double total_mass_kg() const;
-  Vec3 momentum() const;
+  Vec3 momentum_kg_m_per_s() const;
 
  private:
   void apply_log(const mesh::MeshChangeLog& log);

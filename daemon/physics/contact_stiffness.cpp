@@ -48,7 +48,7 @@ void ContactStiffness::factor(const Body& body) {
   ++factorizations_;
 }
 
-Mat3 ContactStiffness::at_node(const Body& body, NodeId node) {
+Mat3 ContactStiffness::stiffness_N_per_m_at_node(const Body& body, NodeId node) {
   if (!body.mesh().node_alive(node))
     throw std::invalid_argument("contact stiffness: node " + std::to_string(node) + " is not in the mesh");
   if (!factored_ || dof_of_node_.size() != body.x_m.size()) {

@@ -32,7 +32,7 @@ class ContactStiffness {
   // K_c at `node` (symmetric positive definite). Refactors first when the
   // mesh changed since the last call (mesh_changed()). Throws
   // std::invalid_argument for a dead node.
-  Mat3 at_node(const Body& body, NodeId node);
+  Mat3 stiffness_N_per_m_at_node(const Body& body, NodeId node);
   void mesh_changed() {
     factored_ = false;
     cached_node_ = mesh::kInvalidId;

@@ -7,11 +7,27 @@
 
 namespace tissue::physics {
 
+namespace {
+double work_J(const Simulation& sim) { return sim.counters().external_work_J + sim.counters().prescribed_work_J; }
+double energy_J(const Simulation& sim) { return sim.kinetic_energy_J() + sim.elastic_energy_J(); }
+}  // namespace
+
+EnergyBudget::EnergyBudget(const Simulation& sim)
+    : energy0_J_(energy_J(sim)), work0_J_(work_J(sim)), adaptation0_J_(sim.counters().adaptation_energy_J) {}
+
+double EnergyBudget::budget_J(const Simulation& sim) const {
+  return energy0_J_ + std::max(0.0, work_J(sim) - work0_J_) + (sim.counters().adaptation_energy_J - adaptation0_J_);
+}
+
+double EnergyBudget::excess(const Simulation& sim) const {
+  const double energy = energy_J(sim);
+  // 1e-15 J: below that, energies are rounding noise of an almost-rest state.
+  return energy > 1e-15 ? energy / std::max(budget_J(sim), 1e-15) - 1.0 : 0.0;
+}
+
 EnergyAudit audit_steps(Simulation& sim, int steps) {
   EnergyAudit audit;
-  const double e0 = sim.kinetic_energy_J() + sim.elastic_energy_J();
-  const auto work_J = [&] { return sim.counters().external_work_J + sim.counters().prescribed_work_J; };
-  const double w0 = work_J(), a0 = sim.counters().adaptation_energy_J;
+  const EnergyBudget budget(sim);
   for (int i = 0; i < steps; ++i) {
     const StepResult r = sim.step();
     if (!r.ok) {
@@ -24,13 +40,7 @@ EnergyAudit audit_steps(Simulation& sim, int steps) {
       audit.nonfinite = true;
       break;
     }
-    // What mesh changes made is booked apart (SimCounters::adaptation_energy_J):
-    // the audit judges the steps, and every split or merge is in the budget
-    // with the exact energy it added or took away.
-    const double budget = e0 + std::max(0.0, work_J() - w0) + (sim.counters().adaptation_energy_J - a0);
-    const double energy = sim.kinetic_energy_J() + sim.elastic_energy_J();
-    // 1e-15 J: below that, energies are rounding noise of an almost-rest state.
-    if (energy > 1e-15) audit.worst_excess = std::max(audit.worst_excess, energy / std::max(budget, 1e-15) - 1.0);
+    audit.worst_excess = std::max(audit.worst_excess, budget.excess(sim));
   }
   audit.inverted_tets = inverted_tet_count(sim.body());
   return audit;

@@ -13,6 +13,23 @@
 
 namespace tissue::physics {
 
+// What the body may hold from a given state on: the energy it had then, plus
+// the work done on it since (loads, gravity, prescribed nodes' drivers; taken
+// as 0 when negative) plus what its mesh changes made since (booked apart in
+// SimCounters::adaptation_energy_J: the audit judges the steps, and every
+// split or merge is in the budget with the exact energy it added or took).
+class EnergyBudget {
+ public:
+  explicit EnergyBudget(const Simulation& sim);
+  double budget_J(const Simulation& sim) const;
+  // E / budget − 1 for the state `sim` is in now: <= 0 while the body holds no
+  // more than was put in. 0 while E is rounding noise of a body at rest.
+  double excess(const Simulation& sim) const;
+
+ private:
+  double energy0_J_, work0_J_, adaptation0_J_;
+};
+
 struct EnergyAudit {
   int steps_taken = 0;
   bool refused = false;  // a step was refused or rejected (see error)

@@ -10,7 +10,7 @@ SpringFrame spring_frame(const Body& body, EdgeId e) {
   const NodeId a = body.edge_a[e], b = body.edge_b[e];
   Vec3 d = body.x_m[b] - body.x_m[a];
   const double l = d.norm();
-  if (l > 1e-9 * body.rest_length_m[e]) return {d / l, l};
+  if (l > kCollapsedSpringRatio * body.rest_length_m[e]) return {d / l, l};
   d = body.rest_m[b] - body.rest_m[a];
   const double rest = d.norm();
   return {rest > 0.0 ? Vec3(d / rest) : Vec3::Zero(), l};

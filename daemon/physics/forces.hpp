@@ -9,9 +9,15 @@
 
 namespace tissue::physics {
 
+// Below this fraction of its rest length a spring counts as collapsed (its
+// ends on one point): its current direction means nothing there, so every
+// kernel (scalar and SIMD, explicit and implicit) takes the rest direction
+// instead and no force divides by a vanishing length.
+constexpr double kCollapsedSpringRatio = 1e-9;
+
 // Unit direction a→b of a spring and its length; for a spring squashed below
-// 1e-9 of its rest length (collapsed nodes) the rest direction stands in, so
-// no force ever divides by zero.
+// kCollapsedSpringRatio of its rest length (collapsed nodes) the rest
+// direction stands in, so no force ever divides by zero.
 struct SpringFrame {
   Vec3 direction;
   double length_m;
@@ -25,7 +31,7 @@ Vec3 spring_force_on_a_N(const Body& body, EdgeId e, bool with_damper = true);
 // Adds spring forces [N] of every live edge into `f` (indexed by node; must
 // already hold body.x_m.size() entries); with `with_dampers` also the
 // dampers' forces at the current velocities.
-void add_spring_forces(const Body& body, std::vector<Vec3>& f, bool with_dampers = true);
+void add_spring_forces(const Body& body, std::vector<Vec3>& f_N, bool with_dampers = true);
 
 // Applies every spring damper implicitly for a time h, one spring at a time
 // (a Gauss–Seidel sweep in edge order): the relative velocity along the

@@ -2,7 +2,9 @@
 //   explicit   — symplectic Euler with automatic sub-steps below a safe
 //                stable bound; refuses when more than max_substeps are needed.
 //   implicit   — backward Euler (Baraff & Witkin 1998) with the clamped spring
-//                Hessian (Choi & Ko 2002), matrix-free Jacobi-PCG, warm start.
+//                Hessian (Choi & Ko 2002), matrix-free PCG (Jacobi, or
+//                two-level from 1,000 free nodes with cg_preconditioner:
+//                auto), warm-started where that start beats zero.
 //   projective — Liu et al. 2013 local/global springs with a prefactored
 //                system, refactored once after each adaptation batch.
 // Every integrator leaves the body untouched when a step fails (non-finite

@@ -245,7 +245,7 @@ void spring_scalar(const ExplicitSpringBatch& s, int j, const double* x, const d
   const double l2 = (dx[0] * dx[0] + dx[1] * dx[1]) + (dx[2] * dx[2] + 0.0);
   const double l = std::sqrt(l2);
   double force[3];
-  if (l > 1e-9 * rest) {
+  if (l > kCollapsedSpringRatio * rest) {
     const double inv = 1.0 / l;
     double along = k * (l - rest);
     if constexpr (kDamped) {
@@ -301,7 +301,7 @@ TISSUE_AVX2 void forces_avx2(const ExplicitSpringBatch* batches, std::size_t cou
   const double* v = kDamped ? v_pad[0].v : nullptr;
   double* f = f_pad[0].v;
   const __m256d xyz = _mm256_castsi256_pd(_mm256_setr_epi64x(-1, -1, -1, 0));
-  const __m256d collapse = _mm256_set1_pd(1e-9);
+  const __m256d collapse = _mm256_set1_pd(kCollapsedSpringRatio);
   for (std::size_t i = 0; i < count; ++i) {
     const ExplicitSpringBatch& s = batches[i];
     __m256d dx[4], dv[4];
@@ -379,7 +379,10 @@ void explicit_spring_forces(Simd simd, const ExplicitSpringBatch* batches, std::
 
 ExplicitIntegrator::ExplicitIntegrator(const scene::IntegratorSpec& spec, const scene::MaterialSpec& material,
                                        Simd simd)
-    : spec_(spec), alpha_per_s_(material.rayleigh_alpha_per_s), simd_(simd) {}
+    : spec_(spec),
+      alpha_per_s_(material.rayleigh_alpha_per_s),
+      paper_damping_(material.damping == scene::DampingLaw::kPaper),
+      simd_(simd) {}
 
 void ExplicitIntegrator::build_layout(const Body& body) {
   bounds_ = explicit_bounds(body);
@@ -549,7 +552,7 @@ constexpr const char* kNonFiniteRejected =
 
 // The refusal when a step needs more than max_substeps.
 std::string too_many_substeps(double dt_s, double needed, double limit_s, const ExplicitStableStep& stable,
-                              int max_substeps) {
+                              int max_substeps, bool paper_damping) {
   std::ostringstream os;
   os << "explicit integrator: dt_s = " << dt_s << " needs " << needed << " sub-steps (stable sub-step " << limit_s
      << " s), more than integrator.max_substeps = " << max_substeps
@@ -558,8 +561,9 @@ std::string too_many_substeps(double dt_s, double needed, double limit_s, const 
   // here: say so when they, not the springs, set the sub-step.
   if (stable.dt_s < 0.5 * stable.undamped_dt_s)
     os << " (the spring dampers cut the stable sub-step " << std::setprecision(2) << stable.undamped_dt_s / stable.dt_s
-       << "-fold: lower material.rayleigh_beta_s, or with damping: paper switch to rayleigh, or take the implicit "
-          "integrator, which damps implicitly)";
+       << (paper_damping ? "-fold: switch material.damping to rayleigh with a small rayleigh_beta_s"
+                         : "-fold: lower material.rayleigh_beta_s")
+       << ", or take the implicit integrator, which damps implicitly)";
   return os.str();
 }
 
@@ -582,7 +586,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   const double needed = std::ceil(dt_s / limit);
   if (!(needed <= spec_.max_substeps)) {
     out.ok = false;
-    out.error = too_many_substeps(dt_s, needed, limit, stable_, spec_.max_substeps);
+    out.error = too_many_substeps(dt_s, needed, limit, stable_, spec_.max_substeps, paper_damping_);
     return out;
   }
   int count = std::max(1, static_cast<int>(needed));

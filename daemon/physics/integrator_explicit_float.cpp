@@ -55,7 +55,8 @@ void spring_float_scalar(const ExplicitSpringBatchF& s, int j, const float* u, c
     for (int i = 0; i < 3; ++i) force[i] = coef * d[i];
   } else {
     // Near collapse: the length from d itself; below 1e-6 of rest, the rest
-    // direction stands in (as the double kernels).
+    // direction stands in (as the double kernels do below 1e-9 of rest: a
+    // float length has no digits left beneath 1e-6 of it).
     const float l = std::sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]);
     const bool collapsed = !(l > 1e-6f * rest);
     float dir[3];

@@ -64,6 +64,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "physics/forces.hpp"
 #include "physics/integrator_impl.hpp"
 
 namespace tissue::physics {
@@ -91,7 +92,7 @@ void lane_force(const OffsetBatchD& s, int j, std::size_t stride, const double* 
     return;
   }
   const double l = std::sqrt((dx[0] * dx[0] + dx[1] * dx[1]) + (dx[2] * dx[2] + 0.0));
-  if (l > 1e-9 * rest) {
+  if (l > kCollapsedSpringRatio * rest) {
     const double inv = 1.0 / l;
     double along = k * (l - rest);
     if constexpr (kDamped) {
@@ -291,7 +292,7 @@ struct AvxDouble {
     const V l2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx[0], dx[0]), _mm256_mul_pd(dx[1], dx[1])),
                                _mm256_add_pd(_mm256_mul_pd(dx[2], dx[2]), zero()));
     const V l = _mm256_sqrt_pd(l2);
-    const V ok = _mm256_or_pd(_mm256_cmp_pd(l, _mm256_mul_pd(_mm256_set1_pd(1e-9), rest), _CMP_GT_OQ),
+    const V ok = _mm256_or_pd(_mm256_cmp_pd(l, _mm256_mul_pd(_mm256_set1_pd(kCollapsedSpringRatio), rest), _CMP_GT_OQ),
                               _mm256_andnot_pd(lane, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))));
     if (_mm256_movemask_pd(ok) != 0xF) return false;
     const V inv = _mm256_div_pd(_mm256_set1_pd(1.0), l);

@@ -353,6 +353,7 @@ class ExplicitIntegrator final : public Integrator {
 
   scene::IntegratorSpec spec_;
   double alpha_per_s_;
+  bool paper_damping_;  // material.damping: paper (what a refusal advises)
   Simd simd_;
   std::uint64_t layout_version_ = 0;  // body.parameters_version() the layout was built for
   ExplicitBounds bounds_;

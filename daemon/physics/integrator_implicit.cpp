@@ -1,6 +1,8 @@
 // Backward Euler (Baraff & Witkin 1998) with the clamped spring Hessian (Choi
 // & Ko 2002): solve (M' − h D − h² K) Δv = h (f + h K v), M' = (1 + h α) M, by
-// Jacobi-preconditioned CG warm-started from the last step's Δv.
+// preconditioned CG (Jacobi; or two-level, integrator_implicit_two_level.cpp,
+// which cg_preconditioner: auto picks from 1,000 free nodes) warm-started
+// from the last step's Δv where that start is nearer the solution than zero.
 //
 // Cost is the CG matvec: per spring per iteration two gathers, two scatters
 // and ~20 flops. Measured with bench/physics_bench (Release, 2-core Debian 12
@@ -253,7 +255,7 @@ void setup_spring_scalar(const SetupInput& in, EdgeId e, Pad3* rhs, Pad3* diag, 
   const double length = std::sqrt((d[0] * d[0] + d[1] * d[1]) + (d[2] * d[2] + 0.0));
   const double inv_length = 1.0 / length;
   double dir[3];
-  if (length > 1e-9 * rest) {
+  if (length > kCollapsedSpringRatio * rest) {
     for (int i = 0; i < 3; ++i) dir[i] = d[i] * inv_length;
   } else {  // collapsed: the rest direction stands in (as spring_frame)
     const Vec3 r = in.rest_position[nb] - in.rest_position[na];
@@ -315,7 +317,7 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
         _mm256_setr_pd(in.rest_length[e[0]], in.rest_length[e[1]], in.rest_length[e[2]], in.rest_length[e[3]]);
     const __m256d length = _mm256_sqrt_pd(lane_sums_avx2(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1]),
                                                          _mm256_mul_pd(d[2], d[2]), _mm256_mul_pd(d[3], d[3])));
-    if (_mm256_movemask_pd(_mm256_cmp_pd(length, _mm256_mul_pd(_mm256_set1_pd(1e-9), rest), _CMP_GT_OQ)) != 0xF) {
+    if (_mm256_movemask_pd(_mm256_cmp_pd(length, _mm256_mul_pd(_mm256_set1_pd(kCollapsedSpringRatio), rest), _CMP_GT_OQ)) != 0xF) {
       for (int j = 0; j < 4; ++j) setup_spring_scalar(in, e[j], rhs_pad, diag_pad, records + i + j);  // collapsed: rare
       continue;
     }
@@ -655,6 +657,30 @@ StepOutcome ImplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
       rz += r_[i].v[k] * z_[i].v[k];
       rr += r_[i].v[k] * r_[i].v[k];
     }
+  // The warm start only where it beats a cold one. CG minimises
+  // φ(Δv) = ½ Δvᵀ A Δv − bᵀ Δv, and φ(Δv) − φ(Δv*) is half the squared A-norm
+  // error, so φ(warm) ≥ φ(0) = 0 means the last step's Δv is further from
+  // this step's solution than zero is (a release, a reversal). With the
+  // iterations capped short of the tolerance, starting there fed a wrong
+  // guess forward step after step: cg_max_iterations 5 at dt 10 ms took the
+  // cantilever from 0.3 J to 1e17 J in 2 s. From zero, a capped CG returns
+  // the A-projection of the solution onto its Krylov space, never longer in
+  // the A-norm than the solution itself. φ(warm) = −½ Δvᵀ (b + r): one pass.
+  double phi_warm = 0.0;
+  for (std::uint32_t i = 0; i < unknowns_; ++i)
+    for (int k = 0; k < 3; ++k) phi_warm -= 0.5 * dv_[i].v[k] * (rhs_[i].v[k] + r_[i].v[k]);
+  if (!(phi_warm < 0.0)) {
+    rz = rr = 0.0;
+    for (std::uint32_t i = 0; i < unknowns_; ++i) {
+      dv_[i] = Pad3{};
+      r_[i] = rhs_[i];
+      for (int k = 0; k < 3; ++k) {
+        z_[i].v[k] = diag_inv_[i].v[k] * r_[i].v[k];
+        rz += r_[i].v[k] * z_[i].v[k];
+        rr += r_[i].v[k] * r_[i].v[k];
+      }
+    }
+  }
   if (coarse_ok_) rz = coarse_correct();
   std::copy(z_.begin(), z_.begin() + unknowns_, p_.begin());
   double residual = rhs_norm > 0.0 ? std::sqrt(rr) / rhs_norm : 0.0;

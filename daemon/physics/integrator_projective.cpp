@@ -1,5 +1,4 @@
 #include <cmath>
-#include <sstream>
 
 #include "physics/forces.hpp"
 #include "physics/integrator_impl.hpp"

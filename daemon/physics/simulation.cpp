@@ -24,13 +24,16 @@ Simulation::Simulation(const scene::Scene& scene)
       throw scene::SceneModelError("probes[" + std::to_string(i) + "].rest_m", e.what());
     }
   }
+  limits_energy_ = scene.integrator.kind == scene::IntegratorKind::kImplicit;
   counters_.peak_nodes = body_.mesh().node_count();
   counters_.peak_tets = body_.mesh().tet_count();
   counters_.peak_springs = body_.mesh().edge_count();
 }
 
 void Simulation::book_mesh_change(double energy_before_J) {
-  const double change_J = kinetic_energy_J() + elastic_energy_J() - energy_before_J;
+  energy_J_ = kinetic_energy_J() + elastic_energy_J();
+  energy_known_ = true;
+  const double change_J = energy_J_ - energy_before_J;
   counters_.adaptation_energy_J += change_J;
   if (change_J > 0.0) counters_.adaptation_energy_added_J += change_J;
 }
@@ -61,6 +64,9 @@ StepResult Simulation::step() {
     if (body_.inv_mass_per_kg[n] != 0.0 && !f_ext_N_[n].isZero(0.0))
       loaded_before_.push_back({static_cast<NodeId>(n), body_.x_m[n]});
 
+  if (limits_energy_ && !energy_known_) energy_J_ = kinetic_energy_J() + elastic_energy_J();
+  const double energy_before_J = energy_J_;
+
   const StepOutcome out = integrator_->step(body_, f_ext_N_, dt);
   result.substeps = out.substeps;
   result.solver_iterations = out.solver_iterations;
@@ -72,18 +78,10 @@ StepResult Simulation::step() {
     ++counters_.rejected_steps;
     return result;
   }
-  for (const auto& [n, x_before] : loaded_before_)
-    counters_.external_work_J += f_ext_N_[n].dot(body_.x_m[n] - x_before);
-  // A driver holds its node on the track against the springs and dampers
-  // there: it pushes with minus their force.
-  counters_.prescribed_work_J += prescribed_kinetic_energy_J() - driven_kinetic_before_J;
-  for (const DrivenSpring& d : driven_springs_) {
-    const Vec3 on_a_N = spring_force_on_a_N(body_, d.edge);
-    if (d.a_slot >= 0)
-      counters_.prescribed_work_J -= on_a_N.dot(body_.x_m[body_.edge_a[d.edge]] - prescribed_before_m_[d.a_slot]);
-    if (d.b_slot >= 0)
-      counters_.prescribed_work_J += on_a_N.dot(body_.x_m[body_.edge_b[d.edge]] - prescribed_before_m_[d.b_slot]);
-  }
+  if (limits_energy_) limit_energy(energy_before_J, driven_kinetic_before_J);
+  const StepWork work = step_work(driven_kinetic_before_J);
+  counters_.external_work_J += work.external_J;
+  counters_.prescribed_work_J += work.prescribed_J;
 
   counters_.substeps += out.substeps;
   counters_.max_substeps = std::max(counters_.max_substeps, out.substeps);
@@ -111,6 +109,69 @@ StepResult Simulation::step() {
     }
   }
   return result;
+}
+
+Simulation::StepWork Simulation::step_work(double driven_kinetic_before_J) const {
+  StepWork work;
+  for (const auto& [n, x_before] : loaded_before_) work.external_J += f_ext_N_[n].dot(body_.x_m[n] - x_before);
+  // A driver holds its node on the track against the springs and dampers
+  // there: it pushes with minus their force.
+  work.prescribed_J = prescribed_kinetic_energy_J() - driven_kinetic_before_J;
+  for (const DrivenSpring& d : driven_springs_) {
+    const Vec3 on_a_N = spring_force_on_a_N(body_, d.edge);
+    if (d.a_slot >= 0)
+      work.prescribed_J -= on_a_N.dot(body_.x_m[body_.edge_a[d.edge]] - prescribed_before_m_[d.a_slot]);
+    if (d.b_slot >= 0)
+      work.prescribed_J += on_a_N.dot(body_.x_m[body_.edge_b[d.edge]] - prescribed_before_m_[d.b_slot]);
+  }
+  return work;
+}
+
+void Simulation::limit_energy(double energy_before_J, double driven_kinetic_before_J) {
+  double kinetic_free_J = 0.0, kinetic_kinematic_J = 0.0;
+  body_.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    const double e = 0.5 * body_.mass_kg[n] * body_.v_m_per_s[n].squaredNorm();
+    (body_.inv_mass_per_kg[n] != 0.0 ? kinetic_free_J : kinetic_kinematic_J) += e;
+  });
+  // What the body may hold at the end of the step, with room for rounding:
+  // a step that dissipates nothing (an undamped body at rest, a rigid drift)
+  // must not be touched.
+  const auto budget_J = [&] {
+    const StepWork w = step_work(driven_kinetic_before_J);
+    const double work_J = w.external_J + w.prescribed_J;
+    return energy_before_J + work_J + 1e-9 * std::max(std::abs(energy_before_J), std::abs(work_J)) + 1e-18;
+  };
+  double elastic_J = elastic_energy_J();
+  energy_J_ = elastic_J + kinetic_free_J + kinetic_kinematic_J;
+  energy_known_ = true;
+  double budget = budget_J();
+  if (!(energy_J_ > budget)) return;
+  // Backward Euler moved each free node by h v. Where the excess is elastic
+  // (the springs turned far within the step), shorten that move to θ h v,
+  // θ halved until the positions fit the budget, down to θ = 0 (the free
+  // nodes stay where they were; the kinematic ones follow their track).
+  // Velocities follow θ, then are scaled until the kinetic energy fits too.
+  const double h = scene().integrator.dt_s;
+  double theta = 1.0;
+  while (elastic_J + kinetic_kinematic_J > budget && theta > 0.0) {
+    const double next = theta > 1.0 / 1024 ? 0.5 * theta : 0.0;
+    const double back_s = (theta - next) * h;
+    body_.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (body_.inv_mass_per_kg[n] != 0.0) body_.x_m[n] -= back_s * body_.v_m_per_s[n];
+    });
+    theta = next;
+    elastic_J = elastic_energy_J();
+    budget = budget_J();
+  }
+  const double room_J = std::max(0.0, budget - elastic_J - kinetic_kinematic_J);
+  const double scale = theta * theta * kinetic_free_J > room_J ? std::sqrt(room_J / kinetic_free_J) : theta;
+  body_.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if (body_.inv_mass_per_kg[n] != 0.0) body_.v_m_per_s[n] *= scale;
+  });
+  const double energy_J = elastic_J + kinetic_kinematic_J + scale * scale * kinetic_free_J;
+  ++counters_.energy_limited_steps;
+  counters_.energy_limited_J += energy_J_ - energy_J;
+  energy_J_ = energy_J;
 }
 
 double Simulation::prescribed_kinetic_energy_J() const {

@@ -1,8 +1,9 @@
 // One simulation run of a scene: the step pipeline, readable top to bottom
 // in Simulation::step():
 //   kinematics (fixed/prescribed nodes) → external forces (gravity, loads)
-//   → integrate (explicit | implicit | projective) → adapt every K steps
-//   → probes.
+//   → integrate (explicit | implicit | projective) → the implicit rung's
+//   energy guard → work booked → adapt every K steps. Probes are read on
+//   demand (probe_displacement_m), not in the step.
 // Single-threaded, no I/O, deterministic: the same scene gives bit-identical
 // results. Clients read the body and the statistics; only step() mutates.
 #pragma once
@@ -66,6 +67,11 @@ struct SimCounters {
   std::int64_t offset_layout_steps = 0;     // explicit steps run on the offset layout
   std::int64_t verified_substep_steps = 0;  // explicit steps shortened by the measured deformation
   std::int64_t rerun_steps = 0;             // explicit steps run again with more sub-steps
+  // Implicit steps whose end state held more energy than the state before
+  // plus the work done on the body in the step, and the energy their
+  // velocities gave up to remove that excess (Simulation::limit_energy).
+  std::int64_t energy_limited_steps = 0;
+  double energy_limited_J = 0.0;
   // Means over the steps taken (0 before the first).
   double substeps_per_step() const { return steps > 0 ? static_cast<double>(substeps) / steps : 0.0; }
   double solver_iterations_per_step() const { return steps > 0 ? static_cast<double>(solver_iterations) / steps : 0.0; }
@@ -84,8 +90,13 @@ class Simulation {
   double time_s() const { return time_s_; }
   const Body& body() const { return body_; }
   // For setting initial conditions (velocities, a deformed start) between
-  // steps. Mesh changes must go through Body::split/merge.
-  Body& mutable_body() { return body_; }
+  // steps. Mesh changes must go through Body::split/merge. Call it again
+  // after a step before changing the state: it drops the energy the next
+  // step would otherwise take from the last one.
+  Body& mutable_body() {
+    energy_known_ = false;
+    return body_;
+  }
   // False when the scene asked for no adaptivity: no adaptivity state exists.
   bool adaptive() const { return adaptivity_ != nullptr; }
   const SimCounters& counters() const { return counters_; }
@@ -143,6 +154,21 @@ class Simulation {
   // kinetic + elastic energy before it.
   void book_mesh_change(double energy_before_J);
   double prescribed_kinetic_energy_J() const;  // of the prescribed nodes
+  // The implicit rung's passivity guard: backward Euler linearises the
+  // springs at the step's start, and where they turn far within a step (a
+  // soft body under a large load at a long dt) the end state can hold more
+  // energy than the start plus the work done on it (7.9x in one step),
+  // or, with the CG capped at one iteration, without bound. When it does,
+  // the free nodes' move is shortened until their positions fit the budget
+  // and their velocities scaled down until the whole state does; counted in
+  // SimCounters::energy_limited_*.
+  void limit_energy(double energy_before_J, double driven_kinetic_before_J);
+  // The work done on the body in the step now ending, from the state as it
+  // is: the loads on free nodes, and the drivers of prescribed nodes.
+  struct StepWork {
+    double external_J = 0.0, prescribed_J = 0.0;
+  };
+  StepWork step_work(double driven_kinetic_before_J) const;
   // Rebuilds prescribed_, driven_springs_ and prescribed_before_m_ from
   // kinematic_ (after a mesh or parameter change).
   void list_driven_springs();
@@ -164,6 +190,11 @@ class Simulation {
   std::uint64_t kinematic_version_ = 0;                 // body parameters_version the list is for
   SimCounters counters_;
   double time_s_ = 0.0;
+  // Kinetic + elastic energy of the state now, for the next step's guard;
+  // computed again when a caller may have changed the state (mutable_body).
+  bool limits_energy_ = false;
+  bool energy_known_ = false;
+  double energy_J_ = 0.0;
 };
 
 }  // namespace tissue::physics

@@ -27,6 +27,13 @@ double isotropic_edge_weight(int depth, std::int64_t length2, std::int64_t longe
 double edge_weight(scene::StiffnessLaw law, int depth, std::int64_t length2, std::int64_t longest2);
 
 // Eq. (3) for one edge from its weighted incident volume Σ w V [m³].
+// Eq. (2): a node's mass is a quarter of the mass of every tet around it,
+// from the node's six-fold volume sum in lattice units (exact integers, so
+// the same after any split and merge) and the lattice unit's length.
+inline double node_mass_kg(double density_kg_per_m3, std::int64_t six_volume, double lattice_unit_m) {
+  return density_kg_per_m3 * static_cast<double>(six_volume) * lattice_unit_m * lattice_unit_m * lattice_unit_m / 24.0;
+}
+
 inline double spring_stiffness_N_per_m(double youngs_modulus_Pa, double weighted_volume_m3, double rest_length_m) {
   return youngs_modulus_Pa * weighted_volume_m3 / (rest_length_m * rest_length_m);
 }

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "scene/yaml_util.hpp"
+#include "util/text.hpp"
 
 namespace tissue::scene {
 
@@ -33,6 +34,7 @@ constexpr std::uintmax_t kMaxSceneFileBytes = 16u << 20;
 constexpr long long kMaxTotalCubes = 10'000'000;
 constexpr int kMaxDepthLimit = 30;
 constexpr std::size_t kMaxNameLength = 64;
+constexpr std::size_t kMaxSceneNameBytes = 200;  // the scene's own name (free text)
 
 // ------------------------------------------------------------ YAML -> Scene
 
@@ -134,9 +136,13 @@ class Converter : public yaml_util::Reader {
   }
 
  private:
+  // The file's stem, unless a file name is not something a name may be
+  // (bytes that are not UTF-8, control characters): then "scene".
   static std::string default_name(const std::string& source) {
     std::string stem = std::filesystem::path(source).stem().string();
-    return stem.empty() ? std::string("scene") : stem;
+    return stem.empty() || !util::why_not_clean_text(stem).empty() || stem.size() > kMaxSceneNameBytes
+               ? std::string("scene")
+               : stem;
   }
 
   void object(const YAML::Node& n, const std::string& p, ObjectSpec& o) const {
@@ -230,6 +236,13 @@ class Validator : private yaml_util::ValueChecks<Validator> {
   explicit Validator(const Scene& s) : s_(s) {}
 
   void run() {
+    // The scene's name reaches JSON reports, HDF5 events and terminals as
+    // given (it may hold spaces and any script; the sub-names below are
+    // stricter: they label columns).
+    if (const std::string why = util::why_not_clean_text(s_.name); !why.empty()) fail("name", why);
+    if (s_.name.size() > kMaxSceneNameBytes)
+      fail("name", "too long (" + std::to_string(s_.name.size()) + " bytes, at most " +
+                       std::to_string(kMaxSceneNameBytes) + ")");
     const ObjectSpec& o = s_.object;
     long long total = 1;
     for (int a = 0; a < 3; ++a) {

@@ -290,6 +290,14 @@ class ValueChecks {
     finite(v, path);
     if (!(v >= 0.0)) self().fail(path, "must be >= 0 (got " + fmt_num(v) + ")");
   }
+  // A bound where a value beyond it would hang a thread or overflow a clock
+  // (a ramp of 1e308 s, a period past int64 nanoseconds): `why` says which.
+  void at_most(double v, double max, const std::string& path, const std::string& why) const {
+    if (v > max) self().fail(path, "must be <= " + fmt_num(max) + " (got " + fmt_num(v) + "): " + why);
+  }
+  void at_least(double v, double min, const std::string& path, const std::string& why) const {
+    if (v < min) self().fail(path, "must be >= " + fmt_num(min) + " (got " + fmt_num(v) + "): " + why);
+  }
 
  private:
   const Derived& self() const { return static_cast<const Derived&>(*this); }

@@ -9,36 +9,6 @@ namespace tissue::service {
 
 using physics::Vec3;
 
-ClosestPoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0.0 && d2 <= 0.0) return {a, {1.0, 0.0, 0.0}};
-  const Vec3 bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0.0 && d4 <= d3) return {b, {0.0, 1.0, 0.0}};
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
-    const double v = d1 / (d1 - d3);
-    return {a + v * ab, {1.0 - v, v, 0.0}};
-  }
-  const Vec3 cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0.0 && d5 <= d6) return {c, {0.0, 0.0, 1.0}};
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
-    const double w = d2 / (d2 - d6);
-    return {a + w * ac, {1.0 - w, 0.0, w}};
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return {b + w * (c - b), {0.0, 1.0 - w, w}};
-  }
-  const double denom = 1.0 / (va + vb + vc);
-  const double v = vb * denom, w = vc * denom;
-  return {a + v * ab + w * ac, {1.0 - v - w, v, w}};
-}
-
 void LocalModelBuilder::refresh_surface(const physics::Simulation& sim) {
   const std::int64_t revision = sim.counters().splits + sim.counters().merges;
   if (revision == surface_revision_) return;
@@ -58,11 +28,12 @@ void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query,
 
   // Nearest surface point, and each triangle's distance for the patch.
   by_distance_.clear();
-  ClosestPoint nearest{Vec3::Zero(), {1.0, 0.0, 0.0}};
+  haptics::TriangleClosest nearest{Vec3::Zero(), {1.0, 0.0, 0.0}, 0, -1};
   std::uint32_t nearest_tri = 0;
   double nearest_d = std::numeric_limits<double>::infinity();
   for (std::uint32_t t = 0; t < tri.size(); ++t) {
-    const ClosestPoint cp = closest_point_on_triangle(query.tool_m, pos(tri[t][0]), pos(tri[t][1]), pos(tri[t][2]));
+    const haptics::TriangleClosest cp =
+        haptics::closest_point_on_triangle(query.tool_m, pos(tri[t][0]), pos(tri[t][1]), pos(tri[t][2]));
     const double d = (cp.point_m - query.tool_m).norm();
     if (d < nearest_d) {
       nearest_d = d;
@@ -125,7 +96,7 @@ void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query,
   }
   const bool engaged = out->in_contact || nearest_d <= tool.engage_distance_m;
   out->contact_stiffness_N_per_m =
-      engaged && !tri.empty() ? contact_.at_node(body, contact_node) : physics::Mat3::Zero();
+      engaged && !tri.empty() ? contact_.stiffness_N_per_m_at_node(body, contact_node) : physics::Mat3::Zero();
 }
 
 }  // namespace tissue::service

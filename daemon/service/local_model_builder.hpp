@@ -15,6 +15,7 @@
 
 #include <cstdint>
 
+#include "haptics/closest_point.hpp"
 #include "haptics/local_model.hpp"
 #include "mesh/surface.hpp"
 #include "physics/contact_stiffness.hpp"
@@ -50,14 +51,5 @@ class LocalModelBuilder {
   std::vector<std::int32_t> patch_index_;                      // surface vertex -> patch vertex, -1
   double surface_distance_m_ = 0.0;
 };
-
-// Closest point to `p` on triangle (a, b, c) (Ericson, Real-Time Collision
-// Detection §5.1.5), with its barycentric weights.
-struct ClosestPoint {
-  physics::Vec3 point_m;
-  std::array<double, 3> weight;
-};
-ClosestPoint closest_point_on_triangle(const physics::Vec3& p, const physics::Vec3& a, const physics::Vec3& b,
-                                       const physics::Vec3& c);
 
 }  // namespace tissue::service

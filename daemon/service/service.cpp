@@ -114,6 +114,22 @@ void Service::load_config() {
   base_scene_overrides_ = scene_overrides();
   scene_ = load_scene_file(scene_path_);
   require_servable(scene_);
+  try {
+    require_steppable(scene_);
+  } catch (const scene::SceneModelError& e) {
+    throw scene::model_error(scene_, e);
+  }
+}
+
+void Service::require_steppable(const scene::Scene& scene) const {
+  // One step of a throwaway copy: a scene whose first step fails (forces
+  // beyond range, an explicit step above its sub-step cap) would otherwise be
+  // answered "ok" and then sit at t = 0 failing every step. Bounded like the
+  // build itself (max_scene_tets).
+  physics::Simulation trial(scene);
+  if (const physics::StepResult r = trial.step(); !r.ok)
+    throw std::invalid_argument("scene '" + scene.name + "' (" + scene.source + "): its first step fails: " + r.error +
+                                "; nothing changed");
 }
 
 void Service::require_servable(const scene::Scene& scene) const {
@@ -192,6 +208,7 @@ void Service::apply_scene(scene::Scene scene, bool restart_haptics) {
   require_servable(scene);  // throws std::invalid_argument: nothing changes
   std::unique_ptr<SimRunner> runner;
   try {
+    require_steppable(scene);                     // ditto
     runner = std::make_unique<SimRunner>(scene);  // ditto
   } catch (const scene::SceneModelError& e) {
     throw scene::model_error(scene, e);  // the file, the key and any --set or `set` to blame
@@ -417,6 +434,19 @@ void Service::publish_stats() {
   if (dds_) dds_->publish_stats(s);
 }
 
+void Service::note_failing_steps() {
+  const SimStatus s = sim_->status();
+  if (s.failed_steps < failed_steps_seen_) failed_steps_seen_ = 0;  // a new runner counts from 0
+  if (s.failed_steps > failed_steps_seen_) {
+    const std::string what =
+        std::to_string(s.failed_steps - failed_steps_seen_) +
+        " simulation steps failed since the last status (the state before each is kept): " + s.last_error;
+    record_event(static_cast<int>(record::EventKind::kError), what);
+    std::fprintf(options_.err, "tissued: %s\n", what.c_str());
+  }
+  failed_steps_seen_ = s.failed_steps;
+}
+
 void Service::note_safety_trips() {
   if (!haptics_) return;
   const haptics::HapticStats h = haptics_->stats();
@@ -445,6 +475,7 @@ void Service::arm_status_timer() {
   status_timer_.async_wait([this](const boost::system::error_code& ec) {
     if (ec || stopping_) return;
     note_safety_trips();
+    note_failing_steps();
     print_status();
     arm_status_timer();
   });

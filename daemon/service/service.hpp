@@ -111,6 +111,12 @@ class Service : public control::ControlHandler {
   // look (the 1 kHz thread itself does no I/O), at every status line: a
   // session shows when and why the force was ramped out.
   void note_safety_trips();
+  // Steps the sim thread failed since the last status line: an error event
+  // and a line on stderr (the sim thread itself does no I/O).
+  void note_failing_steps();
+  // Throws std::invalid_argument (or scene::SceneModelError) when the
+  // scene's first step fails.
+  void require_steppable(const scene::Scene& scene) const;
   void arm_status_timer();
   void arm_watchdog_timer();
   void print_status();
@@ -144,6 +150,7 @@ class Service : public control::ControlHandler {
   // restarted side counts from zero).
   const HapticSide* trips_side_ = nullptr;
   std::uint64_t trips_seen_ = 0, stale_trips_seen_ = 0, lost_trips_seen_ = 0;
+  std::int64_t failed_steps_seen_ = 0;
   std::unique_ptr<control::ControlServer> server_;
   std::unique_ptr<control::SystemdNotifier> systemd_;
   std::unique_ptr<control::WatchdogFeeder> watchdog_;

@@ -40,8 +40,6 @@ class SimRunner {
 
   physics::Simulation& simulation() { return *sim_; }
   const physics::Simulation& simulation() const { return *sim_; }
-  // Where the tool was last seen (scene frame); far away until a sample came.
-  const physics::Vec3& tool_position_m() const { return query_.tool_m; }
 
  private:
   void apply_tool(std::span<const haptics::ToolSample> samples, RunnerStep* out);

@@ -83,11 +83,6 @@ std::string DdsMeshSubscriber::name() const {
          ")";
 }
 
-int DdsMeshSubscriber::matched_writers() const {
-  dds::SubscriptionMatchedStatus s;
-  return impl_->reader->get_subscription_matched_status(s) == ReturnCode_t::RETCODE_OK ? s.current_count : 0;
-}
-
 std::optional<x3d::SurfaceFrame> DdsMeshSubscriber::next_frame(double timeout_s) {
   using Clock = std::chrono::steady_clock;
   const auto deadline =

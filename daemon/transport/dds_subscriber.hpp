@@ -26,8 +26,6 @@ class DdsMeshSubscriber final : public MeshSubscriber {
   std::string name() const override;
   std::optional<x3d::SurfaceFrame> next_frame(double timeout_s) override;
   const MeshReceiveCounts& counts() const override { return counts_; }
-  // Writers matched right now (diagnostics, tests).
-  int matched_writers() const;
 
  private:
   DdsOptions options_;

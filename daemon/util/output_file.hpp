@@ -1,6 +1,8 @@
 // Writing a file the user named with -o: `tissue x3d`, `render`, the XDMF
-// sidecar writer (tissue_record), the trade study and the service's export.
-// Part of tissue_util, which links nothing of the simulation.
+// sidecar writer (tissue_record); write_all for the service's export and
+// same_file for the trade study. Part of tissue_util, which links nothing of
+// the simulation. (Batch reports and the trade study's CSV/SVG are opened
+// before their run instead: app/output_file.hpp.)
 #pragma once
 
 #include <iosfwd>

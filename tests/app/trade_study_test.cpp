@@ -171,6 +171,24 @@ TEST(TradeStudy, OverridesApplyToTheSceneFile) {
   EXPECT_NEAR(ratio, 0.5, 0.02);
 }
 
+// A sweep in which no run gave a figure (explicit at 1 GPa needs far more
+// sub-steps than its cap) says so and exits 3; its table and CSV still come
+// out with each refusal.
+TEST(TradeStudy, ASweepWithNoRunThatGaveFiguresExits3) {
+  TempDir dir;
+  const RunResult r = run(kTrade + " --scene-file " + quote(kCantilever) +
+                              " --quick --integrators explicit --depths 1 --th 20 --duration 0.05 --csv " +
+                              quote(dir / "none.csv") + " --set material.youngs_modulus_Pa=1e9",
+                          dir);
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("every run failed or was refused"), std::string::npos) << r.err;
+  const auto rows = read_csv(dir / "none.csv");
+  ASSERT_FALSE(rows.empty());
+  for (const auto& row : rows) EXPECT_NE(row.at("status"), "ok");
+  // One run with figures is a success.
+  EXPECT_EQ(sweep(dir, kCantilever, dir / "some.csv").exit_code, 0);
+}
+
 TEST(TradeStudy, ASceneWithoutProbesHasNoTipErrorButANodeError) {
   TempDir dir;
   write_text(dir / "block.yaml",

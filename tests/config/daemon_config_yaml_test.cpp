@@ -247,6 +247,27 @@ TEST(DaemonConfigYaml, OutOfRangeValuesNameTheKey) {
   expect_error(edit("scale: 1.0", "scale: 0"), "device.scale", "must be > 0");
 }
 
+// Values that pass "finite and positive" but would hang a thread or overflow
+// a clock: a 1e308 s ramp out made the daemon unstoppable (a stop waits for
+// it), a 1e-300 Hz loop overflowed its int64-nanosecond period (UBSan), and
+// the timers' periods (1 / rate, the status interval) must fit theirs.
+TEST(DaemonConfigYaml, ValuesThatWouldHangOrOverflowAClockAreRefused) {
+  expect_error(edit("ramp_out_s: 0.05", "ramp_out_s: 1e308"), "device.limits.ramp_out_s", "a stop waits for it");
+  expect_error(edit("ramp_out_s: 0.05", "ramp_out_s: 10.5"), "device.limits.ramp_out_s", "must be <= 10");
+  expect_error(edit("ramp_in_s: 0.5", "ramp_in_s: 2147483648"), "device.limits.ramp_in_s", "must be <= 10");
+  expect_error(edit("stale_model_s: 0.1", "stale_model_s: 1e300"), "device.limits.stale_model_s", "must be <= 60");
+  expect_error(edit("device_timeout_s: 0.01", "device_timeout_s: 61"), "device.limits.device_timeout_s",
+               "must be <= 60");
+  expect_error(edit("rate_hz: 1000", "rate_hz: 1e-300"), "haptics.rate_hz", "must be >= 1");
+  expect_error(edit("rate_hz: 1000", "rate_hz: 5e-324"), "haptics.rate_hz", "its clock");
+  expect_error(edit("status_interval_s: 1.0", "status_interval_s: 1e308"), "status_interval_s", "must be <= 3600");
+  expect_error(kBase, "publish.mesh_rate_hz", "must be in [0.01, 1000] Hz (got 1e-300)",
+               {"publish.mesh_rate_hz=1e-300"});
+  // The bounds themselves are fine.
+  EXPECT_NO_THROW(parse_daemon_config(edit("ramp_out_s: 0.05", "ramp_out_s: 10"), kSource));
+  EXPECT_NO_THROW(parse_daemon_config(edit("rate_hz: 1000", "rate_hz: 1"), kSource));
+}
+
 TEST(DaemonConfigYaml, PortsPrioritiesAndControlLimits) {
   expect_error(edit("port: 47800", "port: 70000"), "device.udp.port", "port out of range");
   expect_error(edit("port: 47800", "port: 0"), "device.udp.port", "port out of range");

@@ -40,7 +40,7 @@ scene::Scene unloaded_beam_with_tool() {
 TEST(ContactStiffness, IsSymmetricPositiveDefinite) {
   Simulation sim(unloaded_beam_with_tool());
   ContactStiffness contact;
-  const Mat3 k = contact.at_node(sim.body(), node_at(sim.body(), Vec3(0.4, 0.05, 0.1)));
+  const Mat3 k = contact.stiffness_N_per_m_at_node(sim.body(), node_at(sim.body(), Vec3(0.4, 0.05, 0.1)));
   EXPECT_LT((k - k.transpose()).norm(), 1e-9 * k.norm());
   const Eigen::SelfAdjointEigenSolver<Mat3> eig(k);
   EXPECT_GT(eig.eigenvalues().minCoeff(), 0.0);
@@ -54,7 +54,7 @@ TEST(ContactStiffness, PredictsTheStaticDeflectionUnderAToolForce) {
   Simulation sim(unloaded_beam_with_tool());
   const NodeId tip = node_at(sim.body(), Vec3(0.4, 0.05, 0.1));
   ContactStiffness contact;
-  const Mat3 k_c = contact.at_node(sim.body(), tip);
+  const Mat3 k_c = contact.stiffness_N_per_m_at_node(sim.body(), tip);
   const Vec3 force_N(0.0, 0.0, -0.02);
   ASSERT_TRUE(sim.set_tool_force({tip, tip, tip}, {1.0, 0.0, 0.0}, force_N));
   ASSERT_TRUE(run_until(sim, 30.0));
@@ -82,8 +82,8 @@ TEST(ContactStiffness, RefactorsOnlyWhenTheMeshChanged) {
   Simulation sim(s);
   ContactStiffness contact;
   const NodeId tip = node_at(sim.body(), Vec3(0.4, 0.05, 0.1));
-  const Mat3 before = contact.at_node(sim.body(), tip);
-  EXPECT_EQ(contact.at_node(sim.body(), tip), before);
+  const Mat3 before = contact.stiffness_N_per_m_at_node(sim.body(), tip);
+  EXPECT_EQ(contact.stiffness_N_per_m_at_node(sim.body(), tip), before);
   EXPECT_EQ(contact.factorizations(), 1);
   EXPECT_EQ(contact.solves(), 1);  // the same node again is answered from the cache
 
@@ -95,7 +95,7 @@ TEST(ContactStiffness, RefactorsOnlyWhenTheMeshChanged) {
     FAIL() << e.what();
   }
   contact.mesh_changed();
-  const Mat3 after = contact.at_node(sim.body(), tip);
+  const Mat3 after = contact.stiffness_N_per_m_at_node(sim.body(), tip);
   EXPECT_EQ(contact.factorizations(), 2);
   EXPECT_EQ(contact.solves(), 2);
   EXPECT_TRUE(after.allFinite());
@@ -106,8 +106,8 @@ TEST(ContactStiffness, FixedNodesAreRigidAndDeadNodesAreRejected) {
   Simulation sim(unloaded_beam_with_tool());
   ContactStiffness contact;
   const NodeId root = node_at(sim.body(), Vec3(0.0, 0.05, 0.05));  // on the clamped face
-  EXPECT_EQ(contact.at_node(sim.body(), root), ContactStiffness::kRigid_N_per_m * Mat3::Identity());
-  EXPECT_THROW(contact.at_node(sim.body(), static_cast<NodeId>(sim.body().x_m.size() + 10)), std::invalid_argument);
+  EXPECT_EQ(contact.stiffness_N_per_m_at_node(sim.body(), root), ContactStiffness::kRigid_N_per_m * Mat3::Identity());
+  EXPECT_THROW(contact.stiffness_N_per_m_at_node(sim.body(), static_cast<NodeId>(sim.body().x_m.size() + 10)), std::invalid_argument);
 }
 
 TEST(SimulationTool, ForcesNeedAToolAndValidInput) {

@@ -103,6 +103,17 @@ TEST(ExplicitIntegrator, RefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
   // says so and names the key; without them it does not.
   EXPECT_NE(r.error.find("spring dampers cut the stable sub-step"), std::string::npos) << r.error;
   EXPECT_NE(r.error.find("material.rayleigh_beta_s"), std::string::npos) << r.error;
+  EXPECT_EQ(r.error.find("damping: paper"), std::string::npos) << r.error;  // advice for the law that ran only
+  // The paper's dampers: the advice is to leave them, not to lower a key they ignore.
+  scene::Scene paper = s;
+  paper.material.stiffness = scene::StiffnessLaw::kPaper;
+  paper.material.damping = scene::DampingLaw::kPaper;
+  Simulation paper_sim(paper);
+  const StepResult pr = paper_sim.step();
+  ASSERT_FALSE(pr.ok);
+  EXPECT_NE(pr.error.find("spring dampers cut the stable sub-step"), std::string::npos) << pr.error;
+  EXPECT_NE(pr.error.find("switch material.damping to rayleigh"), std::string::npos) << pr.error;
+  EXPECT_EQ(pr.error.find("lower material.rayleigh_beta_s"), std::string::npos) << pr.error;
   s.material.rayleigh_beta_s = 0.0;
   Simulation undamped(s);
   const StepResult u = undamped.step();

@@ -79,5 +79,16 @@ TEST(SpringLaw, DampingLaws) {
   EXPECT_DOUBLE_EQ(spring_damping_N_s_per_m(m, 50.0, 1.0, 1.0, 0.5), 2.0 * 10.0 / 0.5);
 }
 
+// Eq. (2): a quarter of each incident tet's mass. A corner node of one cube
+// of 6 Kuhn tets (each 1/6 of the cube; a corner on the main diagonal is in
+// all six: six_volume = 6 x 1 in lattice units) holds a quarter of the cube.
+TEST(SpringLaw, NodeMassIsAQuarterOfItsTetsMass) {
+  const double unit_m = 0.01, rho = 100.0;
+  const double cube_kg = rho * unit_m * unit_m * unit_m;
+  EXPECT_DOUBLE_EQ(node_mass_kg(rho, 6, unit_m), cube_kg / 4.0);
+  EXPECT_DOUBLE_EQ(node_mass_kg(rho, 1, unit_m), cube_kg / 24.0);  // one tet
+  EXPECT_EQ(node_mass_kg(rho, 0, unit_m), 0.0);
+}
+
 }  // namespace
 }  // namespace tissue::physics

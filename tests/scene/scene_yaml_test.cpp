@@ -424,6 +424,25 @@ TEST(SceneYamlErrors, DuplicateNames) {
   EXPECT_NO_THROW(parse_scene(kBase, "test.yaml"));
 }
 
+// The scene's own name is free text (spaces, any script) but must be text:
+// it reaches the batch report's JSON, the session's UTF-8 events and
+// terminals. A name that was not UTF-8 used to end a batch run after its
+// last step with an internal error and no report.
+TEST(SceneYamlErrors, TheScenesNameMustBeCleanText) {
+  EXPECT_EQ(parse_scene(base_with("name: base", "name: Liver poke 3 (Stoß)"), "test.yaml").name, "Liver poke 3 (Stoß)");
+  expect_error(base_with("name: base", "name: x\xff"), "name", "not UTF-8");  // a raw byte 0xff
+  expect_error(base_with("name: base", "name: \"red\\e[31m\""), "name", "control character");
+  expect_error(base_with("name: base", "name: \"two\\nlines\""), "name", "control character");
+  expect_error(base_with("name: base", "name: " + std::string(201, 'n')), "name", "too long");
+  // Through --set, blamed on it.
+  const std::string what = expect_error(kBase, "name", "not UTF-8", {"name=x\xff"});
+  EXPECT_NE(what.find("--set"), std::string::npos) << what;
+  // A file name that is not text gives the default name instead of an error.
+  const std::string no_name = base_with("name: base\n", "");
+  EXPECT_EQ(parse_scene(no_name, "/tmp/odd\xff.yaml").name, "scene");
+  EXPECT_EQ(parse_scene(no_name, "/tmp/liver.yaml").name, "liver");
+}
+
 TEST(SceneYamlErrors, MissingObject) {
   expect_error("name: x\n", "object", "missing required");
   expect_error("object: {cubes: [4, 4, 4]}\n", "object.cube_size_m", "missing required");

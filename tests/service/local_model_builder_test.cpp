@@ -13,41 +13,6 @@ namespace {
 
 using physics::Vec3;
 
-TEST(ClosestPointOnTriangle, VertexEdgeAndFaceRegions) {
-  const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0);
-  EXPECT_EQ(closest_point_on_triangle(Vec3(-1, -1, 1), a, b, c).point_m, a);
-  EXPECT_EQ(closest_point_on_triangle(Vec3(2, -0.5, 0), a, b, c).point_m, b);
-  const ClosestPoint edge = closest_point_on_triangle(Vec3(0.5, -1, 3), a, b, c);
-  EXPECT_NEAR((edge.point_m - Vec3(0.5, 0, 0)).norm(), 0.0, 1e-15);
-  const ClosestPoint hyp = closest_point_on_triangle(Vec3(1, 1, 0), a, b, c);
-  EXPECT_NEAR((hyp.point_m - Vec3(0.5, 0.5, 0)).norm(), 0.0, 1e-15);
-  const ClosestPoint face = closest_point_on_triangle(Vec3(0.2, 0.3, -2), a, b, c);
-  EXPECT_NEAR((face.point_m - Vec3(0.2, 0.3, 0)).norm(), 0.0, 1e-15);
-  EXPECT_NEAR(face.weight[0], 0.5, 1e-15);
-  EXPECT_NEAR(face.weight[1], 0.2, 1e-15);
-  EXPECT_NEAR(face.weight[2], 0.3, 1e-15);
-}
-
-// Against brute force: no sampled point of the triangle is closer, and the
-// weights reproduce the point.
-TEST(ClosestPointOnTriangle, NoSampledPointIsCloser) {
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (int trial = 0; trial < 200; ++trial) {
-    const Vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)), c(u(rng), u(rng), u(rng)),
-        p(2 * u(rng), 2 * u(rng), 2 * u(rng));
-    const ClosestPoint cp = closest_point_on_triangle(p, a, b, c);
-    EXPECT_LT((cp.weight[0] * a + cp.weight[1] * b + cp.weight[2] * c - cp.point_m).norm(), 1e-12);
-    for (double w : cp.weight) EXPECT_GE(w, -1e-12);
-    const double d = (cp.point_m - p).norm();
-    for (int i = 0; i <= 20; ++i)
-      for (int j = 0; i + j <= 20; ++j) {
-        const Vec3 q = a + (b - a) * (i / 20.0) + (c - a) * (j / 20.0);
-        EXPECT_GE((q - p).norm(), d - 1e-12);
-      }
-  }
-}
-
 scene::Scene cantilever_with_tool() {
   scene::Scene s = physics::testing::cantilever_scene();
   s.loads.clear();
@@ -72,8 +37,8 @@ TEST(LocalModelBuilder, PatchUnderAToolAboveTheTopFace) {
   for (int t = 0; t < model.triangle_count; ++t) {
     const auto& tr = model.triangle[t];
     const Vec3 n = (model.vertex_m[tr[1]] - model.vertex_m[tr[0]]).cross(model.vertex_m[tr[2]] - model.vertex_m[tr[0]]);
-    const ClosestPoint cp =
-        closest_point_on_triangle(query.tool_m, model.vertex_m[tr[0]], model.vertex_m[tr[1]], model.vertex_m[tr[2]]);
+    const haptics::TriangleClosest cp = haptics::closest_point_on_triangle(
+        query.tool_m, model.vertex_m[tr[0]], model.vertex_m[tr[1]], model.vertex_m[tr[2]]);
     EXPECT_LE((cp.point_m - query.tool_m).norm(), sim.scene().tool->patch_radius_m + 1e-12);
     // Every patch triangle near the top centre lies on the top face, facing up.
     EXPECT_NEAR(model.vertex_m[tr[0]].z(), 0.1, 1e-12);
@@ -142,8 +107,8 @@ TEST(LocalModelBuilder, PatchRespectsTheFixedCapacity) {
     std::array<std::uint32_t, 3> n{surface.vertex_nodes[tr[0]], surface.vertex_nodes[tr[1]],
                                    surface.vertex_nodes[tr[2]]};
     const auto& x = sim.body().x_m;
-    all.emplace_back((closest_point_on_triangle(query.tool_m, x[n[0]], x[n[1]], x[n[2]]).point_m - query.tool_m).norm(),
-                     n);
+    all.emplace_back(
+        (haptics::closest_point_on_triangle(query.tool_m, x[n[0]], x[n[1]], x[n[2]]).point_m - query.tool_m).norm(), n);
   }
   std::sort(all.begin(), all.end());
   const double cutoff = all[100].first;

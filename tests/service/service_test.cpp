@@ -81,6 +81,15 @@ struct Running {
     thread.join();
     return exit_code;
   }
+  // What the service wrote to its error stream so far.
+  std::string err_text() const {
+    std::fflush(err);
+    std::rewind(err);
+    std::string text;
+    char buf[4096];
+    for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, err)) > 0;) text.append(buf, n);
+    return text;
+  }
 };
 
 // Connects once the socket answers (the service starts asynchronously).
@@ -480,6 +489,48 @@ TEST(Service, HapticSafetyTripsAreRecordedAsEvents) {
     return m.rfind("haptic safety tripped (", 0) == 0 && m.find(" stale model") != std::string::npos;
   });
   EXPECT_NE(trip, events.end()) << "no trip event among " << events.size() << " events";
+}
+
+// A `set` whose scene cannot take its first step is refused with the step's
+// reason, and the running scene goes on (it used to be answered "ok" and sit
+// at t = 0 failing every step). Steps that start failing later (here the
+// explicit rung's sub-step cap once the tip load refines the mesh) are
+// recorded as an error event with the reason, and said on stderr.
+TEST(Service, ASceneThatCannotStepIsRefusedAndStepsThatFailLaterAreRecorded) {
+  TempDir dir;
+  {
+    Running run(write_config(dir, scene_file("cantilever.yaml")), 0.0, {}, "failing.h5");
+    ControlClient client = connect(dir / "ctl.sock");
+    const nlohmann::json bad = client.call("set", {{"key", "gravity_m_per_s2"}, {"value", {0, 0, -1e300}}});
+    ASSERT_FALSE(bad["ok"].get<bool>()) << bad.dump();
+    const std::string why = bad["error"].get<std::string>();
+    EXPECT_NE(why.find("its first step fails"), std::string::npos) << why;
+    EXPECT_NE(why.find("non-finite"), std::string::npos) << why;
+    const double t0 = client.call("status")["result"]["sim_time_s"].get<double>();
+    std::this_thread::sleep_for(100ms);
+    EXPECT_GT(client.call("status")["result"]["sim_time_s"].get<double>(), t0) << "the old scene runs on";
+    EXPECT_EQ(client.call("status")["result"]["failed_steps"].get<long long>(), 0);
+
+    // 15 sub-steps on the coarse mesh, up to 59 once it refines: a cap of 20
+    // passes the first step and fails a few tenths of a second later.
+    ASSERT_TRUE(client.call("set", {{"key", "integrator.kind"}, {"value", "explicit"}})["ok"].get<bool>());
+    const nlohmann::json capped = client.call("set", {{"key", "integrator.max_substeps"}, {"value", 20}});
+    ASSERT_TRUE(capped["ok"].get<bool>()) << capped.dump();
+    for (int i = 0; i < 200 && client.call("status")["result"]["failed_steps"].get<long long>() == 0; ++i)
+      std::this_thread::sleep_for(20ms);
+    EXPECT_GT(client.call("status")["result"]["failed_steps"].get<long long>(), 0);
+    std::this_thread::sleep_for(300ms);  // a few status lines (every 0.1 s here)
+    client.call("shutdown");
+    EXPECT_EQ(run.wait(), kServiceOk);
+    const std::string err = run.err_text();
+    EXPECT_NE(err.find("simulation steps failed since the last status"), std::string::npos) << err;
+  }
+  const std::vector<std::string> events = record::testing::event_messages(dir / "failing.h5");
+  const auto failing = std::find_if(events.begin(), events.end(), [](const std::string& m) {
+    return m.find("simulation steps failed since the last status") != std::string::npos &&
+           m.find("max_substeps") != std::string::npos;
+  });
+  EXPECT_NE(failing, events.end()) << "no failing-steps event among " << events.size() << " events";
 }
 
 // A session creation left by a killed recorder goes when the daemon starts,

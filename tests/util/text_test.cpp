@@ -1,0 +1,39 @@
+// util/text.hpp: what counts as clean text for names that reach JSON, HDF5
+// and terminals.
+#include "util/text.hpp"
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+namespace tissue::util {
+namespace {
+
+TEST(CleanText, PlainAndInternationalNamesPass) {
+  for (const std::string ok : {"cantilever", "Liver poke #3", "Leber-Stoß", "肝臓", "emoji 🙂", ""})
+    EXPECT_EQ(why_not_clean_text(ok), "") << ok;
+}
+
+TEST(CleanText, BrokenUtf8IsNamedByItsByte) {
+  EXPECT_EQ(why_not_clean_text("ab\xff"), "byte 3 (0xff) is not UTF-8");
+  EXPECT_EQ(why_not_clean_text("\xc3"), "byte 1 (0xc3) is not UTF-8");  // cut short
+  EXPECT_EQ(why_not_clean_text("a\xc3"
+                               "b"),
+            "byte 3 (0x62) is not UTF-8");                                          // bad continuation
+  EXPECT_EQ(why_not_clean_text("\xc0\xaf"), "byte 1 (0xc0) is not UTF-8");          // overlong '/'
+  EXPECT_EQ(why_not_clean_text("\xe0\x80\xaf"), "byte 1 (0xe0) is not UTF-8");      // overlong, 3 bytes
+  EXPECT_EQ(why_not_clean_text("\xed\xa0\x80"), "byte 1 (0xed) is not UTF-8");      // a surrogate
+  EXPECT_EQ(why_not_clean_text("\xf4\x90\x80\x80"), "byte 1 (0xf4) is not UTF-8");  // beyond U+10FFFF
+}
+
+TEST(CleanText, ControlCharactersAndLineSeparatorsAreRefused) {
+  EXPECT_EQ(why_not_clean_text("a\x1b[31m"), "character 2 is a control character (U+001B)");
+  EXPECT_EQ(why_not_clean_text("two\nlines"), "character 4 is a control character (U+000A)");
+  EXPECT_EQ(why_not_clean_text("del\x7f"), "character 4 is a control character (U+007F)");
+  EXPECT_EQ(why_not_clean_text("c1 \xc2\x85"), "character 4 is a control character (U+0085)");
+  EXPECT_EQ(why_not_clean_text("\xe2\x80\xa8"), "character 1 is a control character (U+2028)");
+  EXPECT_EQ(why_not_clean_text(std::string("nul\0", 4)), "character 4 is a control character (U+0000)");
+}
+
+}  // namespace
+}  // namespace tissue::util
