@@ -206,6 +206,7 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
       {"springs", {{"final", final_tally.springs}, {"peak", std::max(c.peak_springs, final_tally.springs)}}},
       {"refines", c.splits},
       {"merges", c.merges},
+      {"refine_ceiling_passes", c.refine_ceiling_passes},
       {"energy_J", {{"kinetic", sim.kinetic_energy_J()}, {"elastic", sim.elastic_energy_J()}}},
       {"external_work_J", c.external_work_J},
       {"prescribed_work_J", c.prescribed_work_J},
@@ -390,6 +391,13 @@ int batch_command(const BatchOptions& options) {
                        ? "; explicit steps swing in energy by O(h omega): lower integrator.substep_safety or add "
                          "damping"
                        : "");
+    }
+    if (c.refine_ceiling_passes > 0) {
+      std::fflush(stdout);
+      std::fprintf(stderr,
+                   "tissued: warning: %lld adaptation passes stopped refining at adaptivity.max_tets = %d; raise it "
+                   "or the threshold (adaptivity.refine_threshold_Pa)\n",
+                   static_cast<long long>(c.refine_ceiling_passes), scene.adaptivity.max_tets);
     }
     if (const auto& inverted = result["inverted_tets"]; inverted["peak"].get<std::size_t>() > 0) {
       std::fflush(stdout);

@@ -9,7 +9,7 @@
 // docs/batch-report.md):
 //   scene   {source, name, overrides, integrator, dt_s, adaptivity}
 //   result  {sim_time_s, steps, nodes/tets/springs {final, peak}, refines,
-//            merges, energy_J {kinetic, elastic}, external_work_J (loads,
+//            merges, refine_ceiling_passes, energy_J {kinetic, elastic}, external_work_J (loads,
 //            gravity), prescribed_work_J (drivers of prescribed nodes),
 //            adaptation_energy_J {net, added} (what splits and merges
 //            changed the kinetic + elastic energy by; see SimCounters),

@@ -57,6 +57,13 @@ AdaptStats Adaptivity::adapt(Body& body) {
   std::sort(refine_.begin(), refine_.end());
   int budget = spec_.max_ops_per_step;
   for (std::size_t i = 0; i < refine_.size() && budget > 0; ++i) {
+    // The ceiling (adaptivity.max_tets): a threshold far below every tet's
+    // density with a deep max_depth doubled the mesh each pass until the
+    // process ran out of memory. Merges below still run.
+    if (mesh.tet_count() >= static_cast<std::size_t>(spec_.max_tets)) {
+      stats.ceiling_reached = true;
+      break;
+    }
     const mesh::Key d = refine_[i].second;
     if (!mesh.can_split(d)) continue;  // split already (closure of an earlier one) or at max depth
     const int n = body.split(d);

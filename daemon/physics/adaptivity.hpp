@@ -23,6 +23,8 @@ struct AdaptStats {
   // elastic_energy_J (same sum in the same order), from the lengths the
   // pass measures anyway: the energy booking needs it for free.
   double elastic_energy_before_J = 0.0;
+  // The pass stopped splitting at adaptivity.max_tets.
+  bool ceiling_reached = false;
 };
 
 class Adaptivity {

@@ -6,6 +6,10 @@
 
 namespace tissue::physics {
 
+namespace {
+constexpr double kRegularisation_per_s2 = 1.0;  // M / (1 s)^2, see the header
+}  // namespace
+
 void ContactStiffness::factor(const Body& body) {
   const mesh::KuhnMesh& mesh = body.mesh();
   dof_of_node_.assign(body.x_m.size(), -1);
@@ -15,10 +19,12 @@ void ContactStiffness::factor(const Body& body) {
       dof_of_node_[n] = dofs;
       dofs += 3;
     }
+  local_bound_ = dofs > 3 * kMaxCondensedFreeNodes;
+  factored_ = true;
+  if (local_bound_) return;  // answered by own_block_N_per_m: nothing to factor
 
   std::vector<Eigen::Triplet<double>> entries;
   entries.reserve(static_cast<std::size_t>(dofs) * 3 + 36 * mesh.edge_count());
-  constexpr double kRegularisation_per_s2 = 1.0;  // M / (1 s)^2, see the header
   for (std::size_t n = 0; n < dof_of_node_.size(); ++n)
     if (dof_of_node_[n] >= 0)
       for (int i = 0; i < 3; ++i)
@@ -42,10 +48,21 @@ void ContactStiffness::factor(const Body& body) {
   Eigen::SparseMatrix<double> k_matrix(dofs, dofs);
   k_matrix.setFromTriplets(entries.begin(), entries.end());
   ldlt_.compute(k_matrix);
-  if (ldlt_.info() != Eigen::Success)
+  if (ldlt_.info() != Eigen::Success) {
+    factored_ = false;
     throw std::runtime_error("contact stiffness: the stiffness matrix could not be factored");
-  factored_ = true;
+  }
   ++factorizations_;
+}
+
+Mat3 ContactStiffness::own_block_N_per_m(const Body& body, NodeId node) const {
+  Mat3 k_cc = kRegularisation_per_s2 * body.mass_kg[node] * Mat3::Identity();
+  body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
+    if (edge.a != node && edge.b != node) return;
+    const Vec3 d = (body.rest_m[edge.b] - body.rest_m[edge.a]).normalized();
+    k_cc += body.stiffness_N_per_m[e] * d * d.transpose();
+  });
+  return k_cc;
 }
 
 Mat3 ContactStiffness::stiffness_N_per_m_at_node(const Body& body, NodeId node) {
@@ -58,6 +75,11 @@ Mat3 ContactStiffness::stiffness_N_per_m_at_node(const Body& body, NodeId node) 
   if (node == cached_node_) return cached_;
   const int dof = dof_of_node_[node];
   if (dof < 0) return kRigid_N_per_m * Mat3::Identity();
+  if (local_bound_) {
+    cached_ = own_block_N_per_m(body, node);
+    cached_node_ = node;
+    return cached_;
+  }
   rhs_.setZero(ldlt_.rows(), 3);
   for (int i = 0; i < 3; ++i) rhs_(dof + i, i) = 1.0;
   solution_ = ldlt_.solve(rhs_);

@@ -103,6 +103,7 @@ StepResult Simulation::step() {
     result.adapted = adaptivity_->adapt(body_);
     counters_.splits += result.adapted.splits;
     counters_.merges += result.adapted.merges;
+    if (result.adapted.ceiling_reached) ++counters_.refine_ceiling_passes;
     if (result.adapted.splits + result.adapted.merges > 0) {
       book_mesh_change(kinetic_before_J + result.adapted.elastic_energy_before_J);
       mesh_changed();

@@ -38,7 +38,8 @@ struct SimCounters {
   std::int64_t steps = 0;
   std::int64_t splits = 0;
   std::int64_t merges = 0;
-  std::int64_t rejected_steps = 0;  // non-finite or refused
+  std::int64_t refine_ceiling_passes = 0;  // adaptation passes stopped at adaptivity.max_tets
+  std::int64_t rejected_steps = 0;         // non-finite or refused
   std::size_t peak_nodes = 0, peak_tets = 0, peak_springs = 0;
   double external_work_J = 0.0;  // work of loads and gravity on free nodes
   // Work the drivers of prescribed nodes did on the body: against the

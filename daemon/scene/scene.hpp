@@ -63,10 +63,9 @@ struct Region {
         if (p[a] < min_m[a] - tolerance_m || p[a] > max_m[a] + tolerance_m) return false;
       return true;
     }
-    double d2 = 0.0;
-    for (int a = 0; a < 3; ++a) d2 += (p[a] - centre_m[a]) * (p[a] - centre_m[a]);
-    const double r = radius_m + tolerance_m;
-    return d2 <= r * r;
+    // hypot, not a sum of squares: a centre and radius near 1e308 would
+    // square to inf <= inf and select every node.
+    return std::hypot(p[0] - centre_m[0], p[1] - centre_m[1], p[2] - centre_m[2]) <= radius_m + tolerance_m;
   }
 };
 
@@ -123,6 +122,9 @@ struct AdaptivitySpec {
   int max_ops_per_step = 64;         // split+merge budget per adaptation pass
   int min_age_steps = 20;            // a diamond that just changed is left alone
   double midpoint_tolerance = 1e-3;  // merge only when |z - mid| < tol * L
+  // No split once the mesh holds this many leaf tets (a pass's closure may
+  // pass it by a few). 4e6: about 0.8 GB at the measured <= 200 B per tet.
+  int max_tets = 4'000'000;
 };
 
 enum class IntegratorKind { kExplicit, kImplicit, kProjective };

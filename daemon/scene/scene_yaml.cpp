@@ -33,6 +33,9 @@ constexpr std::uintmax_t kMaxSceneFileBytes = 16u << 20;
 // A guard against typos such as cubes: [4000, 4000, 4] allocating gigabytes.
 constexpr long long kMaxTotalCubes = 10'000'000;
 constexpr int kMaxDepthLimit = 30;
+constexpr double kMinDt_s = 1e-7;
+constexpr int kMaxSubsteps = 100'000;
+constexpr std::size_t kMaxProbes = 1000;
 constexpr std::size_t kMaxNameLength = 64;
 constexpr std::size_t kMaxSceneNameBytes = 200;  // the scene's own name (free text)
 
@@ -198,7 +201,7 @@ class Converter : public yaml_util::Reader {
     const FieldMap f =
         fields(n, p,
                {"enabled", "criterion", "refine_threshold_Pa", "simplify_factor", "stretch_ratio", "min_depth",
-                "max_depth", "every_steps", "max_ops_per_step", "min_age_steps", "midpoint_tolerance"});
+                "max_depth", "every_steps", "max_ops_per_step", "min_age_steps", "midpoint_tolerance", "max_tets"});
     opt(f, "enabled", p, a.enabled);
     opt_choice<RefineCriterion>(f, "criterion", p, kCriteria, a.criterion);
     opt(f, "refine_threshold_Pa", p, a.refine_threshold_Pa);
@@ -208,6 +211,7 @@ class Converter : public yaml_util::Reader {
     opt(f, "max_depth", p, a.max_depth);
     opt(f, "every_steps", p, a.every_steps);
     opt(f, "max_ops_per_step", p, a.max_ops_per_step);
+    opt(f, "max_tets", p, a.max_tets);
     opt(f, "min_age_steps", p, a.min_age_steps);
     opt(f, "midpoint_tolerance", p, a.midpoint_tolerance);
   }
@@ -314,6 +318,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
            "must be <= max_depth (" + std::to_string(a.max_depth) + ") (got " + std::to_string(a.min_depth) + ")");
     at_least(a.every_steps, 1, "adaptivity.every_steps");
     at_least(a.max_ops_per_step, 1, "adaptivity.max_ops_per_step");
+    at_least(a.max_tets, 1, "adaptivity.max_tets");
     at_least(a.min_age_steps, 0, "adaptivity.min_age_steps");
     positive(a.midpoint_tolerance, "adaptivity.midpoint_tolerance");
 
@@ -321,7 +326,15 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     enumerator(static_cast<int>(g.kind), 3, "integrator.kind");
     positive(g.dt_s, "integrator.dt_s");
     if (g.dt_s > 1.0) fail("integrator.dt_s", "must be <= 1 s (got " + fmt_num(g.dt_s) + ")");
+    // 1e-300 s was accepted: 120,000 steps later the time had not moved.
+    if (g.dt_s < kMinDt_s)
+      fail("integrator.dt_s", "must be >= " + fmt_num(kMinDt_s) + " s (got " + fmt_num(g.dt_s) +
+                                  "; the explicit integrator takes sub-steps below dt itself)");
     at_least(g.max_substeps, 1, "integrator.max_substeps");
+    // One step is not interruptible: 2^31 sub-steps ran one step for minutes.
+    if (g.max_substeps > kMaxSubsteps)
+      fail("integrator.max_substeps",
+           "must be <= " + std::to_string(kMaxSubsteps) + " (got " + std::to_string(g.max_substeps) + ")");
     finite(g.substep_safety, "integrator.substep_safety");
     if (!(g.substep_safety > 0.0 && g.substep_safety <= 1.0))
       fail("integrator.substep_safety", "must be in (0, 1] (got " + fmt_num(g.substep_safety) + ")");
@@ -348,6 +361,9 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     unique_names(s_.prescribed, "prescribed");
     unique_names(s_.loads, "loads");
     unique_names(s_.probes, "probes");
+    // Each probe is located in the mesh after every step: 20,000 took 2 s per step.
+    if (s_.probes.size() > kMaxProbes)
+      fail("probes", "too many (" + std::to_string(s_.probes.size()) + ", at most " + std::to_string(kMaxProbes) + ")");
   }
 
  private:
@@ -403,14 +419,14 @@ class Validator : private yaml_util::ValueChecks<Validator> {
         const std::string sp = path + ".sphere";
         finite(r.centre_m, sp + ".centre_m");
         non_negative(r.radius_m, sp + ".radius_m");
-        double d2 = 0.0;
+        std::array<double, 3> gap{};  // from the object's box, per axis
         for (std::size_t a = 0; a < 3; ++a) {
           const double c = r.centre_m[a];
-          const double d = c < 0.0 ? -c : (c > extent_[a] ? c - extent_[a] : 0.0);
-          d2 += d * d;
+          gap[a] = c < 0.0 ? -c : (c > extent_[a] ? c - extent_[a] : 0.0);
         }
-        const double reach = r.radius_m + tolerance_;
-        if (d2 > reach * reach)
+        // hypot: squares of a 1e308 centre and radius overflow to inf > inf
+        // (false), and the far sphere passed as if it touched the object.
+        if (std::hypot(gap[0], gap[1], gap[2]) > r.radius_m + tolerance_)
           fail(path, "the sphere lies entirely outside the object " + object_box() + " (a typo?)");
         return;
       }

@@ -124,8 +124,14 @@ void Service::load_config() {
 void Service::require_steppable(const scene::Scene& scene) const {
   // One step of a throwaway copy: a scene whose first step fails (forces
   // beyond range, an explicit step above its sub-step cap) would otherwise be
-  // answered "ok" and then sit at t = 0 failing every step. Bounded like the
-  // build itself (max_scene_tets).
+  // answered "ok" and then sit at t = 0 failing every step. The copy doubles
+  // the build and adds a step on this (the control) thread: past
+  // kMaxTrialTets starting tets that would near systemd's 5 s watchdog
+  // (750,000 tets: ~1 s to build, 1.2 s for one implicit step), so larger
+  // scenes start untried and a failing step is reported as it happens
+  // (note_failing_steps).
+  constexpr double kMaxTrialTets = 200'000;
+  if (scene::starting_tet_count(scene) > kMaxTrialTets) return;
   physics::Simulation trial(scene);
   if (const physics::StepResult r = trial.step(); !r.ok)
     throw std::invalid_argument("scene '" + scene.name + "' (" + scene.source + "): its first step fails: " + r.error +

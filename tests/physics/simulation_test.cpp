@@ -374,6 +374,25 @@ TEST(Simulation, TheEnergyGuardLeavesOrdinaryImplicitStepsAlone) {
   }
 }
 
+// adaptivity.max_tets stops the splits (a threshold far below every tet's
+// density and a deep max_depth doubled the mesh each pass until the process
+// ran out of memory); a pass's last split may pass it by its closure.
+TEST(Simulation, RefinementStopsAtTheTetCeiling) {
+  scene::Scene s = cantilever_scene();
+  s.adaptivity.every_steps = 1;
+  s.adaptivity.max_tets = 500;
+  Simulation sim(s);
+  ASSERT_TRUE(run_until(sim, 0.15));
+  EXPECT_GT(sim.counters().refine_ceiling_passes, 0);
+  EXPECT_GE(sim.counters().peak_tets, 500u);
+  EXPECT_LT(sim.counters().peak_tets, 600u);
+  s.adaptivity.max_tets = scene::AdaptivitySpec{}.max_tets;  // the default does not bind here
+  Simulation free(s);
+  ASSERT_TRUE(run_until(free, 0.15));
+  EXPECT_EQ(free.counters().refine_ceiling_passes, 0);
+  EXPECT_GT(free.counters().peak_tets, 1000u);
+}
+
 // By default (cg_preconditioner: auto) an adaptive mesh that grows past
 // kAutoTwoLevelUnknowns free nodes changes to the two-level preconditioner at
 // the next mesh change: the cantilever refining to depth 5 under its load.

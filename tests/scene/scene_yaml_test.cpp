@@ -405,6 +405,12 @@ TEST(SceneYamlErrors, Regions) {
                 "{box: {min_m: [0.1, 0, 0], max_m: [0.1, 0.1, 0.1]}, sphere: {centre_m: [0,0,0], radius_m: 1}}"),
       "loads[0].region", "got both");
   expect_error(base_with("min_m: [0.1, 0, 0], ", ""), "loads[0].region.box.min_m", "missing required key");
+  // A sphere far away whose numbers square past the largest double: its
+  // squared distance and reach were both inf, and it passed as touching.
+  const std::string far =
+      base_with("centre_m: [0.1, 0.05, 0.05], radius_m: 0.001", "centre_m: [1e308, 1e308, 1e308], radius_m: 1e308");
+  expect_error(far, "prescribed[0].region", "outside the object");
+  EXPECT_NO_THROW(parse_scene(base_with("centre_m: [0.1, 0.05, 0.05]", "centre_m: [0.05, 0.05, 0.05]"), "t.yaml"));
   // Touching the box at a face, edge or corner is inside.
   EXPECT_NO_THROW(parse_scene(base_with("rest_m: [0.1, 0.05, 0.05]", "rest_m: [0.1, 0.1, 0.1]"), "test.yaml"));
   EXPECT_NO_THROW(parse_scene(base_with("centre_m: [0.1, 0.05, 0.05]", "centre_m: [0.101, 0.05, 0.05]"), "t.yaml"));
@@ -441,6 +447,20 @@ TEST(SceneYamlErrors, TheScenesNameMustBeCleanText) {
   const std::string no_name = base_with("name: base\n", "");
   EXPECT_EQ(parse_scene(no_name, "/tmp/odd\xff.yaml").name, "scene");
   EXPECT_EQ(parse_scene(no_name, "/tmp/liver.yaml").name, "liver");
+}
+
+// Values that pass "positive" but would hang a run: a step of 1e-300 s (time
+// never moved), 2^31 sub-steps in one uninterruptible step, 200,000 probes
+// located after every step.
+TEST(SceneYamlErrors, ValuesThatWouldHangARunAreRefused) {
+  expect_error(kBase, "integrator.dt_s", "must be >= 1e-07", {"integrator.dt_s=1e-300"});
+  expect_error(kBase, "integrator.max_substeps", "must be <= 100000", {"integrator.max_substeps=2147483647"});
+  std::string many = "probes:\n";
+  for (int i = 0; i < 1001; ++i) many += "  - {name: p" + std::to_string(i) + ", rest_m: [0.05, 0.05, 0.05]}\n";
+  std::string text = kBase.substr(0, kBase.find("probes:")) + many;
+  expect_error(text, "probes", "too many (1001, at most 1000)");
+  EXPECT_EQ(parse_scene_with_overrides(kBase, "test.yaml", {"adaptivity.max_tets=5000"}).adaptivity.max_tets, 5000);
+  expect_error(kBase, "adaptivity.max_tets", ">= 1", {"adaptivity.max_tets=0"});
 }
 
 TEST(SceneYamlErrors, MissingObject) {
