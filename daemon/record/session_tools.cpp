@@ -430,12 +430,35 @@ void read_into(const SessionFile& f, DatasetId id, std::vector<Row>& rows, T Row
 
 // Session times must be finite and in order: replay paces by them and the
 // replay device interpolates between them.
+// Beyond this a time is damage, not a session (31 years): replay would wait
+// for it (1e308 s kept a replay running with no end).
+constexpr double kMaxSessionTime_s = 1e9;
+
 template <typename Row>
 void read_times(const SessionFile& f, DatasetId id, std::vector<Row>& rows) {
   read_into(f, id, rows, &Row::time_s);
-  for (std::size_t i = 0; i < rows.size(); ++i)
+  for (std::size_t i = 0; i < rows.size(); ++i) {
     if (!std::isfinite(rows[i].time_s) || (i > 0 && rows[i].time_s < rows[i - 1].time_s))
       f.fail(std::string(kDatasets[id].path) + " is not finite and non-decreasing at row " + std::to_string(i));
+    if (std::abs(rows[i].time_s) > kMaxSessionTime_s)
+      f.fail(std::string(kDatasets[id].path) + " is " + std::to_string(rows[i].time_s) + " s at row " +
+             std::to_string(i) + ", beyond any session (" + std::to_string(kMaxSessionTime_s) + " s)");
+  }
+}
+
+// Values that go out to subscribers as they are: a damaged file's NaN or inf
+// would reach every client (the recorder never writes one; real_time_factor
+// is NaN until measured, by design, and not checked).
+template <typename Row, typename Field>
+void require_finite(const SessionFile& f, DatasetId id, const std::vector<Row>& rows, Field Row::*field) {
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    bool finite = true;
+    if constexpr (std::is_floating_point_v<Field>)
+      finite = std::isfinite(rows[i].*field);
+    else
+      for (const auto x : rows[i].*field) finite = finite && std::isfinite(x);
+    if (!finite) f.fail(std::string(kDatasets[id].path) + " is not finite at row " + std::to_string(i));
+  }
 }
 
 std::vector<HapticRow> read_haptic_rows(const SessionFile& f) {
@@ -446,6 +469,9 @@ std::vector<HapticRow> read_haptic_rows(const SessionFile& f) {
   read_into(f, kHapticForce, rows, &HapticRow::force_N);
   read_into(f, kHapticContact, rows, &HapticRow::contact);
   read_into(f, kHapticModelVersion, rows, &HapticRow::model_version);
+  require_finite(f, kHapticDevicePosition, rows, &HapticRow::device_position_m);
+  require_finite(f, kHapticProxyPosition, rows, &HapticRow::proxy_position_m);
+  require_finite(f, kHapticForce, rows, &HapticRow::force_N);
   return rows;
 }
 
@@ -462,6 +488,10 @@ std::vector<SimRow> read_sim_rows(const SessionFile& f) {
   read_into(f, kSimMerges, rows, &SimRow::merges);
   read_into(f, kSimKinetic, rows, &SimRow::kinetic_J);
   read_into(f, kSimElastic, rows, &SimRow::elastic_J);
+  require_finite(f, kSimSimTime, rows, &SimRow::sim_time_s);
+  require_finite(f, kSimStepMs, rows, &SimRow::step_ms);
+  require_finite(f, kSimKinetic, rows, &SimRow::kinetic_J);
+  require_finite(f, kSimElastic, rows, &SimRow::elastic_J);
   return rows;
 }
 

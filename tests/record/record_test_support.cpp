@@ -355,13 +355,16 @@ void make_version_1(const std::string& path) {
 namespace {
 
 template <typename T>
-void overwrite(const std::string& path, const char* dataset, std::uint64_t row, hid_t mem_type, T value) {
+void overwrite(const std::string& path, const char* dataset, std::uint64_t row, hid_t mem_type, T value,
+               std::uint64_t column = 0) {
   const hid_t file = open_for_edit(path);
   ASSERT_GE(file, 0) << path;
   const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
   ASSERT_GE(ds, 0) << dataset;
   const hid_t space = H5Dget_space(ds);
-  const hsize_t start[1] = {row}, count[1] = {1};
+  const int rank = H5Sget_simple_extent_ndims(space);
+  ASSERT_TRUE(rank == 1 || rank == 2) << dataset;
+  const hsize_t start[2] = {row, column}, count[2] = {1, 1};
   const hid_t mem = H5Screate_simple(1, count, nullptr);
   EXPECT_GE(H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, count, nullptr), 0);
   EXPECT_GE(H5Dwrite(ds, mem_type, mem, space, H5P_DEFAULT, &value), 0);
@@ -379,6 +382,11 @@ void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t r
 
 void overwrite_f64(const std::string& path, const char* dataset, std::uint64_t row, double value) {
   overwrite(path, dataset, row, H5T_NATIVE_DOUBLE, value);
+}
+
+void overwrite_f64_at(const std::string& path, const char* dataset, std::uint64_t row, std::uint64_t column,
+                      double value) {
+  overwrite(path, dataset, row, H5T_NATIVE_DOUBLE, value, column);
 }
 
 bool have_system_h5py() { return std::system("/usr/bin/python3 -c 'import h5py' >/dev/null 2>&1") == 0; }

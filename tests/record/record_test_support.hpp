@@ -94,6 +94,9 @@ void make_version_1(const std::string& path);
 // Overwrites row `row` of a 1-D float32 / float64 dataset of a closed session.
 void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value);
 void overwrite_f64(const std::string& path, const char* dataset, std::uint64_t row, double value);
+// The same for the element (row, column) of an N x 3 float64 dataset.
+void overwrite_f64_at(const std::string& path, const char* dataset, std::uint64_t row, std::uint64_t column,
+                      double value);
 
 // Runs a shell command line with stdout/stderr captured into `scratch`.
 

@@ -606,6 +606,43 @@ TEST(SessionTools, ColumnsOfTheWrongShapeOrTypeAreRefusedNamingTheDataset) {
   H5Tclose(text);
 }
 
+// What replay publishes as it is read must be finite (a damaged file's NaN
+// force went out in every haptic message), and times must be plausible (1e308
+// s kept a replay waiting with no end). Each is named with its dataset and row.
+TEST(SessionTools, RowsReplayWouldPublishMustBeFiniteAndTheirTimesPlausible) {
+  TempDir dir;
+  struct Case {
+    DatasetId id;
+    std::uint64_t row, column;  // column 0 for a 1-D dataset
+    double value;
+    const char* says;
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  int n = 0;
+  for (const Case& c : {Case{kHapticForce, 7, 2, nan, "/haptic/force_N is not finite at row 7"},
+                        Case{kHapticProxyPosition, 2, 0, inf, "/haptic/proxy_position_m is not finite at row 2"},
+                        Case{kSimKinetic, 1, 0, nan, "/sim/kinetic_J is not finite at row 1"},
+                        Case{kSimTime, 39, 0, 1e308, "beyond any session"}}) {  // the last sim row
+    const std::string path = dir / ("rows" + std::to_string(++n) + ".h5");
+    write_small_session(path, 5);
+    testing::overwrite_f64_at(path, kDatasets[c.id].path, c.row, c.column, c.value);
+    try {
+      read_session_rows(path);
+      ADD_FAILURE() << "read " << kDatasets[c.id].path << " holding " << c.value;
+    } catch (const RecordError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(path), std::string::npos) << what;
+      EXPECT_NE(what.find(c.says), std::string::npos) << what;
+    }
+  }
+  // A real_time_factor of NaN is what the recorder writes before the first
+  // measured second: it reads.
+  const std::string fine = dir / "rtf.h5";
+  write_small_session(fine, 5);
+  testing::overwrite_f64(fine, kDatasets[kSimRealTimeFactor].path, 0, nan);
+  EXPECT_NO_THROW(read_session_rows(fine));
+}
+
 // `session xdmf` checks frame times as every other frame reader does:
 // ParaView would get <Time Value="nan"/> or grids out of order.
 TEST(SessionTools, XdmfRefusesFrameTimesThatAreNotFiniteOrGoBack) {
