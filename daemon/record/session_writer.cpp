@@ -18,6 +18,8 @@
 #include <stdexcept>
 #include <system_error>
 
+#include "util/text.hpp"
+
 namespace tissue::record {
 
 namespace {
@@ -96,9 +98,12 @@ std::string host_name() {
 }  // namespace
 
 void validate_session_name(const std::string& name, const std::string& what) {
-  const auto bad = [&](const char* why) {
-    throw RecordError(what + " name '" + name + "' rejected: " + why + " (a " + what +
-                      " is a plain file name inside the state directory)");
+  // A name that is not clean text is not echoed: its bytes would go into a
+  // JSON reply and a terminal as they are.
+  const std::string not_text = util::why_not_clean_text(name);
+  const auto bad = [&](const std::string& why) {
+    throw RecordError(what + " name " + (not_text.empty() ? "'" + name + "' " : std::string()) + "rejected: " + why +
+                      " (a " + what + " is a plain file name inside the state directory)");
   };
   if (name.empty()) bad("it is empty");
   if (name.find('/') != std::string::npos) bad("it contains '/'");
@@ -109,13 +114,12 @@ void validate_session_name(const std::string& name, const std::string& what) {
   // removed at start (remove_abandoned_creations), so a user's file named
   // like one would be deleted with them.
   if (name.front() == '.') bad("it starts with '.' (hidden names are the daemon's temporary files)");
-  for (const char c : name)
-    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) bad("it contains a control character");
+  // Control characters (C0, DEL, C1, U+2028/2029) and bytes that are not UTF-8.
+  if (!not_text.empty()) bad(not_text);
   if (name.find_first_not_of(' ') == std::string::npos) bad("it is only spaces");
   // Room for the temporary ".NAME.creating-PID-N" within the 255 bytes a
   // file name may have.
-  if (name.size() > kMaxSessionNameBytes)
-    bad(("it is longer than " + std::to_string(kMaxSessionNameBytes) + " bytes").c_str());
+  if (name.size() > kMaxSessionNameBytes) bad("it is longer than " + std::to_string(kMaxSessionNameBytes) + " bytes");
 }
 
 namespace {

@@ -113,13 +113,18 @@ TEST(SessionWriter, OpenInRejectsNamesThatLeaveTheStateDirectory) {
   for (const std::string& bad :
        {std::string(""), std::string("a/b.h5"), std::string("../x.h5"), std::string(".."), std::string("x..h5"),
         std::string("/etc/passwd"), std::string(".evil.creating-999999-0"), std::string(".hidden.h5"),
-        std::string("a\nb.h5"), std::string("tab\t.h5"), std::string("   "),
+        std::string("a\nb.h5"), std::string("tab\t.h5"), std::string("   "), std::string("nel\xc2\x85.h5"),
+        std::string("ls\xe2\x80\xa8.h5"), std::string("del\x7f.h5"), std::string("bad\xff.h5"),
         std::string(kMaxSessionNameBytes - 2, 'x') + ".h5"}) {
     try {
       SessionWriter::open_in(dir.path(), bad, test_metadata());
       ADD_FAILURE() << "accepted '" << bad << "'";
     } catch (const RecordError& e) {
       EXPECT_NE(std::string(e.what()).find("rejected"), std::string::npos) << e.what();
+      // A name that is not clean text is not echoed into the message.
+      if (bad.find_first_of("\n\t\x7f\xff\xc2\xe2") != std::string::npos) {
+        EXPECT_EQ(std::string(e.what()).find(bad), std::string::npos) << e.what();
+      }
     }
   }
   EXPECT_TRUE(std::filesystem::is_empty(dir.path()));
