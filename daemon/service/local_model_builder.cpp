@@ -10,11 +10,15 @@ namespace tissue::service {
 using physics::Vec3;
 
 void LocalModelBuilder::refresh_surface(const physics::Simulation& sim) {
-  const std::int64_t revision = sim.counters().splits + sim.counters().merges;
-  if (revision == surface_revision_) return;
+  // The mesh's own version (unique across meshes, bumped by every change),
+  // as the surface snapshot uses: counts of splits and merges would repeat
+  // for another simulation handed to the same builder.
+  const std::uint64_t revision = sim.body().mesh().topology_version();
+  if (surface_known_ && revision == surface_revision_) return;
   mesh::extract_surface(sim.body().mesh(), &surface_);
   contact_.mesh_changed();
   surface_revision_ = revision;
+  surface_known_ = true;
 }
 
 void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query, haptics::LocalModel* out) {

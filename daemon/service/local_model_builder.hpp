@@ -45,7 +45,8 @@ class LocalModelBuilder {
   void refresh_surface(const physics::Simulation& sim);
 
   mesh::SurfaceMesh surface_;
-  std::int64_t surface_revision_ = -1;  // splits + merges when surface_ was extracted
+  bool surface_known_ = false;
+  std::uint64_t surface_revision_ = 0;  // mesh topology_version() when surface_ was extracted
   physics::ContactStiffness contact_;
   std::vector<std::pair<double, std::uint32_t>> by_distance_;  // (distance, triangle)
   std::vector<std::int32_t> patch_index_;                      // surface vertex -> patch vertex, -1

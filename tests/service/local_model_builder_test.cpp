@@ -51,6 +51,31 @@ TEST(LocalModelBuilder, PatchUnderAToolAboveTheTopFace) {
             1e-9 * model.contact_stiffness_N_per_m.norm());
 }
 
+// The surface is extracted again for another mesh, even one with as many
+// splits and merges (none) as the last: the patch comes from the mesh asked
+// about. A taller object: its top face is at 0.2 m.
+TEST(LocalModelBuilder, AnotherSimulationGetsItsOwnSurface) {
+  physics::Simulation first(cantilever_with_tool());
+  scene::Scene tall = cantilever_with_tool();
+  tall.object.cubes = {4, 4, 8};
+  physics::Simulation second(tall);
+  LocalModelBuilder builder;
+  haptics::LocalModel model;
+  PatchQuery query;
+  query.tool_m = Vec3(0.05, 0.05, 0.105);
+  builder.build(first, query, &model);
+  ASSERT_GT(model.triangle_count, 0);
+  EXPECT_NEAR(model.vertex_m[model.triangle[0][0]].z(), 0.1, 1e-12);
+  query.tool_m = Vec3(0.05, 0.05, 0.205);
+  builder.build(second, query, &model);
+  ASSERT_GT(model.triangle_count, 0);
+  for (int v = 0; v < model.vertex_count; ++v) {
+    ASSERT_LT(model.vertex_node[v], second.body().x_m.size());
+    EXPECT_EQ(model.vertex_m[v], second.body().x_m[model.vertex_node[v]]);
+  }
+  EXPECT_NEAR(model.vertex_m[model.triangle[0][0]].z(), 0.2, 1e-12);
+}
+
 TEST(LocalModelBuilder, FarToolGetsNoStiffnessAndAOneTrianglePatch) {
   physics::Simulation sim(cantilever_with_tool());
   LocalModelBuilder builder;
