@@ -20,8 +20,11 @@ void ContactStiffness::factor(const Body& body) {
       dofs += 3;
     }
   local_bound_ = dofs > 3 * kMaxCondensedFreeNodes;
-  factored_ = true;
-  if (local_bound_) return;  // answered by own_block_N_per_m: nothing to factor
+  if (local_bound_) {  // answered by own_block_N_per_m: nothing to factor
+    factored_ = true;
+    return;
+  }
+  factored_ = false;  // until the factorisation below succeeds (an exception leaves it false)
 
   std::vector<Eigen::Triplet<double>> entries;
   entries.reserve(static_cast<std::size_t>(dofs) * 3 + 36 * mesh.edge_count());
@@ -48,10 +51,9 @@ void ContactStiffness::factor(const Body& body) {
   Eigen::SparseMatrix<double> k_matrix(dofs, dofs);
   k_matrix.setFromTriplets(entries.begin(), entries.end());
   ldlt_.compute(k_matrix);
-  if (ldlt_.info() != Eigen::Success) {
-    factored_ = false;
+  if (ldlt_.info() != Eigen::Success)
     throw std::runtime_error("contact stiffness: the stiffness matrix could not be factored");
-  }
+  factored_ = true;
   ++factorizations_;
 }
 

@@ -49,6 +49,11 @@ StepResult Simulation::step() {
     loaded_before_.reserve(body_.x_m.size());  // no allocation in the steps until the next mesh change
     list_driven_springs();
   }
+  // The energy the step starts from, for the implicit rung's guard: taken
+  // before the drivers set this step's velocities, as the cached value from
+  // the last step was (their kinetic energy change is in the step's work).
+  if (limits_energy_ && !energy_known_) energy_J_ = kinetic_energy_J() + elastic_energy_J();
+  const double energy_before_J = energy_J_;
   // A driver also gives its node the velocity of the track (kinematic nodes
   // keep their mass): that kinetic energy is its work too.
   const double driven_kinetic_before_J = prescribed_kinetic_energy_J();
@@ -64,9 +69,6 @@ StepResult Simulation::step() {
     if (body_.inv_mass_per_kg[n] != 0.0 && !f_ext_N_[n].isZero(0.0))
       loaded_before_.push_back({static_cast<NodeId>(n), body_.x_m[n]});
 
-  if (limits_energy_ && !energy_known_) energy_J_ = kinetic_energy_J() + elastic_energy_J();
-  const double energy_before_J = energy_J_;
-
   const StepOutcome out = integrator_->step(body_, f_ext_N_, dt);
   result.substeps = out.substeps;
   result.solver_iterations = out.solver_iterations;
@@ -76,6 +78,7 @@ StepResult Simulation::step() {
     result.ok = false;
     result.error = out.error;
     ++counters_.rejected_steps;
+    energy_known_ = false;  // the drivers' velocities were set for a step that did not happen
     return result;
   }
   if (limits_energy_) limit_energy(energy_before_J, driven_kinetic_before_J);
@@ -164,11 +167,23 @@ void Simulation::limit_energy(double energy_before_J, double driven_kinetic_befo
     elastic_J = elastic_energy_J();
     budget = budget_J();
   }
-  const double room_J = std::max(0.0, budget - elastic_J - kinetic_kinematic_J);
-  const double scale = theta * theta * kinetic_free_J > room_J ? std::sqrt(room_J / kinetic_free_J) : theta;
-  body_.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-    if (body_.inv_mass_per_kg[n] != 0.0) body_.v_m_per_s[n] *= scale;
-  });
+  // Velocities follow θ, then shrink until the kinetic energy fits the room
+  // left. The drivers' work depends on the dampers at their nodes, hence on
+  // these velocities: the budget is taken again after each scaling (twice is
+  // enough for it to settle; a third pass changes nothing measurable).
+  double scale = 1.0;  // applied so far to the free nodes' velocities
+  for (int pass = 0; pass < 3; ++pass) {
+    const double room_J = std::max(0.0, budget - elastic_J - kinetic_kinematic_J);
+    const double held_J = scale * scale * kinetic_free_J;
+    double next = pass == 0 ? theta : 1.0;
+    if (next * next * held_J > room_J) next = held_J > 0.0 ? std::sqrt(room_J / held_J) : 0.0;
+    if (next == 1.0) break;
+    body_.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (body_.inv_mass_per_kg[n] != 0.0) body_.v_m_per_s[n] *= next;
+    });
+    scale *= next;
+    budget = budget_J();
+  }
   const double energy_J = elastic_J + kinetic_kinematic_J + scale * scale * kinetic_free_J;
   ++counters_.energy_limited_steps;
   counters_.energy_limited_J += energy_J_ - energy_J;

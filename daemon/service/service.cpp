@@ -121,17 +121,32 @@ void Service::load_config() {
   }
 }
 
+namespace {
+// What a scene's trial step may cost the control thread, at most (estimated).
+constexpr double kMaxTrial_s = 1.0;
+}  // namespace
+
 void Service::require_steppable(const scene::Scene& scene) const {
   // One step of a throwaway copy: a scene whose first step fails (forces
   // beyond range, an explicit step above its sub-step cap) would otherwise be
   // answered "ok" and then sit at t = 0 failing every step. The copy doubles
-  // the build and adds a step on this (the control) thread: past
-  // kMaxTrialTets starting tets that would near systemd's 5 s watchdog
-  // (750,000 tets: ~1 s to build, 1.2 s for one implicit step), so larger
-  // scenes start untried and a failing step is reported as it happens
-  // (note_failing_steps).
-  constexpr double kMaxTrialTets = 200'000;
-  if (scene::starting_tet_count(scene) > kMaxTrialTets) return;
+  // the build and adds a step on this (the control) thread, whose timer
+  // feeds systemd's 5 s watchdog: a scene whose trial could cost more than
+  // about a second starts untried, and a failing step is reported as it
+  // happens (note_failing_steps). The estimate takes the worst the caps
+  // allow, from measured rates: ~1.2 springs per tet; a CG iteration or an
+  // explicit sub-step 2-7 ns per spring (docs/performance.md), taken as 15
+  // (a 750,000-tet implicit step at 100 iterations, setup included, took
+  // 1.2 s: 13 ns); 750,000 tets build in ~1 s. Projective factors its system
+  // first: up to 50,000 tets.
+  const double tets = scene::starting_tet_count(scene);
+  const scene::IntegratorSpec& g = scene.integrator;
+  const double per_spring_s = 15e-9, springs = 1.2 * tets;
+  double trial_s = tets * (1.0 / 750'000);
+  if (g.kind == scene::IntegratorKind::kExplicit) trial_s += springs * per_spring_s * g.max_substeps;
+  if (g.kind == scene::IntegratorKind::kImplicit) trial_s += springs * per_spring_s * g.cg_max_iterations;
+  if (g.kind == scene::IntegratorKind::kProjective && tets > 50'000) return;
+  if (trial_s > kMaxTrial_s) return;
   physics::Simulation trial(scene);
   if (const physics::StepResult r = trial.step(); !r.ok)
     throw std::invalid_argument("scene '" + scene.name + "' (" + scene.source + "): its first step fails: " + r.error +
@@ -441,12 +456,15 @@ void Service::publish_stats() {
 }
 
 void Service::note_failing_steps() {
+  // failed_steps counts over the sim thread's life (every runner); a scene
+  // change clears last_error, so failures followed by one before this look
+  // have no reason left to give.
   const SimStatus s = sim_->status();
-  if (s.failed_steps < failed_steps_seen_) failed_steps_seen_ = 0;  // a new runner counts from 0
   if (s.failed_steps > failed_steps_seen_) {
-    const std::string what =
-        std::to_string(s.failed_steps - failed_steps_seen_) +
-        " simulation steps failed since the last status (the state before each is kept): " + s.last_error;
+    const std::string why = s.last_error[0] != '\0' ? std::string(s.last_error)
+                                                    : std::string("the scene was changed since; its reason is gone");
+    const std::string what = std::to_string(s.failed_steps - failed_steps_seen_) +
+                             " simulation steps failed since the last status (the state before each is kept): " + why;
     record_event(static_cast<int>(record::EventKind::kError), what);
     std::fprintf(options_.err, "tissued: %s\n", what.c_str());
   }
