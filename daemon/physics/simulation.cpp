@@ -154,7 +154,6 @@ void Simulation::limit_energy(double energy_before_J, double driven_kinetic_befo
   // (the springs turned far within the step), shorten that move to θ h v,
   // θ halved until the positions fit the budget, down to θ = 0 (the free
   // nodes stay where they were; the kinematic ones follow their track).
-  // Velocities follow θ, then are scaled until the kinetic energy fits too.
   const double h = scene().integrator.dt_s;
   double theta = 1.0;
   while (elastic_J + kinetic_kinematic_J > budget && theta > 0.0) {
