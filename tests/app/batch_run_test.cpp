@@ -527,7 +527,10 @@ TEST_F(TissuedProcess, AnExtremeRunReportsItsInvertedTetsAndItsEnergy) {
   EXPECT_GT(limited["steps"].get<long long>(), 0);
   EXPECT_GT(limited["removed_J"].get<double>(), 0.0);
   EXPECT_TRUE(contains(p.err, "were slowed")) << p.err;
-  EXPECT_EQ(r["result"]["energy_audit"]["worst_excess"].get<double>(), 0.0);  // the guard held it
+  // The guard held it, to within the room it leaves for rounding (1e-9 of
+  // the budget), below what the batch warns of.
+  EXPECT_LE(r["result"]["energy_audit"]["worst_excess"].get<double>(), 1e-8);
+  EXPECT_FALSE(contains(p.err, "more energy than it started with")) << p.err;
 
   const Process q =
       run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.6", "--set", "integrator.kind=explicit",
