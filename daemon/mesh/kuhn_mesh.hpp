@@ -150,6 +150,30 @@ class KuhnMesh {
       if (edges_[e].six_volume > 0) f(e, edges_[e]);
   }
 
+  // Calls f(e, edge) for every live edge at `node` (dead nodes have none).
+  // Every edge of the hierarchy joins lattice points p and p + s δ with
+  // s = 2^j ≤ H (the coarse cube) and δ ∈ {−1, 0, 1}³ \ {0} (Kuhn tets and
+  // their Maubach children are scaled Kuhn tets), so this is 26 (K + 1) hash
+  // lookups, not a walk over every edge.
+  template <class F>
+  void for_each_edge_at_node(NodeId node, F&& f) const {
+    if (!node_alive(node)) return;
+    const Vec3i& p = nodes_[node].lattice;
+    for (std::int64_t s = 1; s <= domain_.coarse_cube(); s *= 2)
+      for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dz = -1; dz <= 1; ++dz) {
+            if (dx == 0 && dy == 0 && dz == 0) continue;
+            const Vec3i q{p[0] + s * dx, p[1] + s * dy, p[2] + s * dz};
+            if (!domain_.contains(q)) continue;
+            const EdgeId e = edge_index_.find(edge_key(p, q));
+            // A midpoint names at most one live edge, which need not end here.
+            if (e == kInvalidId) continue;
+            const Edge& edge = edges_[e];
+            if (edge.six_volume > 0 && (edge.a == node || edge.b == node)) f(e, edge);
+          }
+  }
+
   // Changes whenever the set of leaf tets may have changed (split, merge),
   // and is unique across all meshes of the process: two equal versions mean
   // the same topology, so a surface or layout derived from it can be reused.

@@ -59,8 +59,10 @@ void ContactStiffness::factor(const Body& body) {
 
 Mat3 ContactStiffness::own_block_N_per_m(const Body& body, NodeId node) const {
   Mat3 k_cc = kRegularisation_per_s2 * body.mass_kg[node] * Mat3::Identity();
-  body.mesh().for_each_edge([&](EdgeId e, const mesh::Edge& edge) {
-    if (edge.a != node && edge.b != node) return;
+  // The node's own edges by lattice lookup: a tool sliding over a big mesh
+  // asks for a new node every few steps, and walking every edge for each
+  // took O(E) of the sim thread.
+  body.mesh().for_each_edge_at_node(node, [&](EdgeId e, const mesh::Edge& edge) {
     const Vec3 d = (body.rest_m[edge.b] - body.rest_m[edge.a]).normalized();
     k_cc += body.stiffness_N_per_m[e] * d * d.transpose();
   });

@@ -60,7 +60,7 @@ class ContactStiffness {
  private:
   void factor(const Body& body);
   // K_cc: the springs at `node`, k d d^T over its edges, plus the
-  // regularisation.
+  // regularisation. O(1) in the mesh size (KuhnMesh::for_each_edge_at_node).
   Mat3 own_block_N_per_m(const Body& body, NodeId node) const;
 
   bool factored_ = false;

@@ -232,6 +232,49 @@ INSTANTIATE_TEST_SUITE_P(Shapes, RandomChurn,
                                            std::make_tuple(BoxSpec{4, 1, 1, 0.1, 15}, 4u),
                                            std::make_tuple(BoxSpec{3, 3, 3, 0.1, 9}, 5u)));
 
+// The edges at a node found by lattice lookups are exactly those a walk over
+// every edge finds, on meshes refined unevenly to several depths (including
+// depths that are not a multiple of 3, whose tets are not Kuhn cubes') and
+// partly merged back.
+TEST(KuhnMesh, EdgesAtANodeByLookupAreTheEdgesAWalkFinds) {
+  for (const BoxSpec& spec : {BoxSpec{2, 1, 1, 0.1, 7}, BoxSpec{1, 2, 3, 0.05, 12}}) {
+    KuhnMesh mesh(spec);
+    std::mt19937 rng(7);
+    for (int op = 0; op < 1500; ++op) {
+      TetId t;
+      do t = static_cast<TetId>(rng() % mesh.tet_capacity());
+      while (!mesh.tet_alive(t));
+      const Key d = mesh.diamond_of(t);
+      if (mesh.can_split(d)) mesh.split(d);
+      if (op % 3 == 0) {
+        NodeId n;
+        do n = static_cast<NodeId>(rng() % mesh.node_capacity());
+        while (!mesh.node_alive(n));
+        if (mesh.node(n).edge_a != kInvalidId && mesh.can_merge(mesh.node_key(n))) mesh.merge(mesh.node_key(n));
+      }
+    }
+    std::vector<std::set<EdgeId>> walked(mesh.node_capacity());
+    mesh.for_each_edge([&](EdgeId e, const Edge& edge) {
+      walked[edge.a].insert(e);
+      walked[edge.b].insert(e);
+    });
+    std::size_t checked = 0, deepest = 0;
+    mesh.for_each_node([&](NodeId n, const Node& node) {
+      std::set<EdgeId> found;
+      mesh.for_each_edge_at_node(n, [&](EdgeId e, const Edge&) { EXPECT_TRUE(found.insert(e).second) << e; });
+      EXPECT_EQ(found, walked[n]) << "node " << n << " at depth " << int(node.depth);
+      ++checked;
+      deepest = std::max<std::size_t>(deepest, node.depth);
+    });
+    EXPECT_GT(checked, 300u);
+    EXPECT_GE(deepest, static_cast<std::size_t>(spec.max_depth - 1));  // the walk reached deep levels
+    std::size_t dead_calls = 0;
+    for (NodeId n = 0; n < mesh.node_capacity(); ++n)
+      if (!mesh.node_alive(n)) mesh.for_each_edge_at_node(n, [&](EdgeId, const Edge&) { ++dead_calls; });
+    EXPECT_EQ(dead_calls, 0u);
+  }
+}
+
 TEST(KuhnMesh, RefineAllToMaxDepthThenMergeAllRestoresTheMesh) {
   KuhnMesh mesh({2, 1, 2, 0.1, 9});
   const auto before = mesh_sets(mesh);
