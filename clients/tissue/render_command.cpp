@@ -116,7 +116,7 @@ int run_render(RenderCommandOptions o) {
       }
       render::write_png(renderer.render(frame, o.image), path);
       std::ostream& said = util::summary_stream(path);  // not into the picture (-o /dev/stdout)
-      said << "wrote " << path << ": frame " << frames[i] << " at t=" << frame.time_s << " s, "
+      said << "wrote " << path << ": frame " << frames[i] << " at t=" << x3d::frame_time_text(frame.time_s) << " s, "
            << frame.triangles.size() << " triangles";
       if (o.image.colour == x3d::ColourMode::kStrain) {  // the ramp legend has no numbers: its ends are here
         const auto range = render::strain_range_Pa(frame, o.image);
@@ -162,8 +162,12 @@ Subcommand add_render_command(CLI::App& parent) {
   seq->excludes(time)->excludes(frame);
   cmd->add_option("--from", o->from_s, "Sequence start, session time (s)")->check(finite_number())->needs(seq);
   cmd->add_option("--to", o->to_s, "Sequence end, session time (s)")->check(finite_number())->needs(seq);
-  cmd->add_option("--width", o->image.width_px, "Image width (pixels)")->check(CLI::Range(16, 8192));
-  cmd->add_option("--height", o->image.height_px, "Image height (pixels)")->check(CLI::Range(16, 8192));
+  cmd->add_option("--width", o->image.width_px, "Image width (pixels)")
+      ->check(CLI::Range(16, 8192))
+      ->capture_default_str();
+  cmd->add_option("--height", o->image.height_px, "Image height (pixels)")
+      ->check(CLI::Range(16, 8192))
+      ->capture_default_str();
   // finite_number(): NaN passes CLI::Range, and reached the renderer as an
   // unwritable-output exit 1 instead of a bad argument.
   cmd->add_option("--azimuth", o->image.azimuth_deg, "Camera azimuth about +z from +x (degrees)")

@@ -229,7 +229,9 @@ Subcommand add_session_command(CLI::App& parent) {
       parent.add_subcommand("session", "Inspect, repair, export and replay recorded session files (HDF5)");
   session->require_subcommand(1);
   options->list = session->add_subcommand(
-      "list", "The sessions in a state directory: state (clean, crashed, repaired), start, duration, rows, scene");
+      "list",
+      "The sessions in a state directory: state (closed cleanly, OPEN: recording or crashed, repaired, NOT closed "
+      "cleanly), start, duration, rows, scene");
   options->list->add_option("dir", options->dir, "Directory (default: tissued's default state_dir)")
       ->capture_default_str();
   options->list->footer(

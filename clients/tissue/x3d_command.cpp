@@ -77,7 +77,7 @@ std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o
     // Validated here first so a bad stored frame is named by its number.
     x3d::validate_frame(frame, xo.colour == x3d::ColourMode::kStrain, "frame " + std::to_string(k));
     std::string text = x3d::x3d_snapshot(frame, xo);
-    *summary = "frame " + std::to_string(k) + " at t=" + fmt(frame.time_s) + " s, " +
+    *summary = "frame " + std::to_string(k) + " at t=" + x3d::frame_time_text(frame.time_s) + " s, " +
                std::to_string(frame.vertices_m.size()) + " vertices, " + std::to_string(frame.triangles.size()) +
                " triangles";
     return text;
@@ -124,8 +124,9 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
   try {
     std::string text = x3d::x3d_animation(frames, xo);
     const std::size_t runs = x3d::animation_runs(frames, xo).size();
-    *summary = std::to_string(frames.size()) + " frames from t=" + fmt(frames.front().time_s) + " s to " +
-               fmt(frames.back().time_s) + " s, " + std::to_string(runs) + " topology run(s)";
+    *summary = std::to_string(frames.size()) + " frames from t=" + x3d::frame_time_text(frames.front().time_s) +
+               " s to " + x3d::frame_time_text(frames.back().time_s) + " s, " + std::to_string(runs) +
+               " topology run(s)";
     if (skipped_empty > 0) *summary += ", " + std::to_string(skipped_empty) + " empty frames skipped";
     if (const std::string dropped = source.dropped_note(); !dropped.empty()) *summary += "; " + dropped;
     return text;
@@ -189,7 +190,8 @@ Subcommand add_x3d_command(CLI::App& parent) {
       ->needs(animate);
   cmd->add_option("--to", o->to_s, "Animation window end, session time (s)")->check(finite_number())->needs(animate);
   cmd->add_option("--colour", o->colour, "Vertex colours: level (bisection depth) or strain (energy density)")
-      ->check(CLI::IsMember({"level", "strain"}));
+      ->check(CLI::IsMember({"level", "strain"}))
+      ->capture_default_str();
   cmd->add_option("-o,--output", o->out, "Output file (.x3d)")->required();
   add_live_source_options(cmd, o->live, session, animate);
   // Frame numbers and session times select among a session's frames only.

@@ -57,14 +57,17 @@ int main(int argc, char** argv) {
                    "run the service (threads, device, control socket) with this daemon config "
                    "(YAML, see docs/daemon-config.md)");
     app.add_flag("--batch", batch, "run a scene for --duration simulated seconds as fast as possible, then exit");
-    app.add_option("--scene", batch_options.scene_path, "scene file (YAML, see docs/scene-format.md)");
+    CLI::Option* scene = app.add_option("--scene", batch_options.scene_path,
+                                        "--batch: scene file (YAML, see docs/scene-format.md); the service serves "
+                                        "its config's `scene:` (--set scene=FILE)");
     CLI::Option* duration =
         app.add_option("--duration", batch_options.duration_s,
                        "--batch: simulated seconds to run; --config: stop the service after this many wall seconds")
             ->check(kSeconds);
     app.add_option("--set", batch_options.overrides,
                    "override a scene value (or, with --config, a daemon value): key.path=value (repeatable)");
-    app.add_option("--report", batch_options.report_path, "write the JSON report to this file");
+    CLI::Option* report =
+        app.add_option("--report", batch_options.report_path, "--batch: write the JSON report to this file");
     std::string record_name;
     app.add_option("--record", record_name,
                    "--config: record the session from the start to this file name in the config's state_dir; "
@@ -74,11 +77,12 @@ int main(int argc, char** argv) {
                        "--batch --record: simulated seconds between recorded surface frames (default 1/30)")
             ->check(kPositiveSeconds);
     bool no_timing = false;
-    app.add_flag("--no-timing", no_timing, "leave wall-clock timing out of the report (bit-identical reruns)");
-    app.add_option("--progress", batch_options.progress_every_s,
-                   "simulated seconds between live lines on stdout (0: quiet)")
-        ->check(kSeconds)
-        ->capture_default_str();
+    CLI::Option* timing = app.add_flag("--no-timing", no_timing,
+                                       "--batch: leave wall-clock timing out of the report (bit-identical reruns)");
+    CLI::Option* progress = app.add_option("--progress", batch_options.progress_every_s,
+                                           "--batch: simulated seconds between live lines on stdout (0: quiet)")
+                                ->check(kSeconds)
+                                ->capture_default_str();
 
     try {
       app.parse(argc, argv);
@@ -93,11 +97,17 @@ int main(int argc, char** argv) {
       return tissue::app::kExitUsage;
     }
     if (!config_path.empty()) {
-      if (record_interval->count() > 0) {
-        // The service records its frames at the recorder's own rate (30 Hz of wall time).
-        std::fprintf(stderr, "tissued: --record-interval is for --batch --record (see --help)\n");
-        return tissue::app::kExitUsage;
-      }
+      // Batch-only options are refused, not ignored: `--config ... --scene B`
+      // served the config's scene and said nothing. (The service records its
+      // frames at the recorder's own rate, 30 Hz of wall time.)
+      for (const CLI::Option* only_batch : {scene, report, timing, progress, record_interval})
+        if (only_batch->count() > 0) {
+          std::fprintf(stderr, "tissued: %s is for --batch%s (see --help)\n", only_batch->get_name().c_str(),
+                       only_batch == scene             ? "; the service serves its config's scene: --set scene=FILE"
+                       : only_batch == record_interval ? " --record"
+                                                       : "");
+          return tissue::app::kExitUsage;
+        }
       if (duration->count() > 0 && !(batch_options.duration_s > 0.0)) {
         // 0 would mean "no limit" to the service: a user who typed it meant "stop at once" or a typo.
         std::fprintf(stderr,

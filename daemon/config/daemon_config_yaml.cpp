@@ -39,6 +39,8 @@ constexpr double kMinHapticRateHz = 1.0;
 constexpr double kMaxRamp_s = 10.0;
 constexpr double kMaxTimeout_s = 60.0;
 constexpr double kMaxStatusInterval_s = 3600.0;
+// A replayed device track faster than this is no longer a hand.
+constexpr double kMaxReplaySpeed = 100.0;
 // Linux SCHED_FIFO priorities.
 constexpr int kMinRtPriority = 1;
 constexpr int kMaxRtPriority = 99;
@@ -228,10 +230,15 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     positive(d.scale, "device.scale");
     // Every section is checked whatever the kind, so a typo in an unused
     // section does not wait for the day someone switches to it. Only "has
-    // waypoints" depends on the kind.
+    // waypoints" and "names a session" depend on the kind.
     limits(d.limits, "device.limits");
     sim(d.sim, "device.sim", d.kind == DeviceSpec::Kind::kSim);
     udp(d.udp, "device.udp");
+    if (!(d.replay.speed > 0.0 && d.replay.speed <= kMaxReplaySpeed))
+      fail("device.replay.speed",
+           "must be in (0, " + fmt_num(kMaxReplaySpeed) + "] (got " + fmt_num(d.replay.speed) + ")");
+    if (d.kind == DeviceSpec::Kind::kReplay && d.replay.session.empty())
+      fail("device.replay.session", "a replay device needs the session file to play back");
     if (d.openhaptics.library.empty()) fail("device.openhaptics.library", "must not be empty");
     if (d.openhaptics.device_name.empty()) fail("device.openhaptics.device_name", "must not be empty");
 
@@ -273,13 +280,6 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (k.max_connections < 1 || k.max_connections > kMaxConnections)
       fail("control.max_connections",
            "must be in [1, " + std::to_string(kMaxConnections) + "] (got " + std::to_string(k.max_connections) + ")");
-
-    if (c_.device.kind == DeviceSpec::Kind::kReplay) {
-      if (c_.device.replay.session.empty())
-        fail("device.replay.session", "a replay device needs the session file to play back");
-      if (!(c_.device.replay.speed > 0.0 && c_.device.replay.speed <= 100.0))
-        fail("device.replay.speed", "must be in (0, 100] (got " + std::to_string(c_.device.replay.speed) + ")");
-    }
 
     const PublishSpec& pub = c_.publish;
     for (const auto& [rate, key] :
@@ -339,7 +339,10 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (mode < 0 || mode >= static_cast<int>(kSimModes.size()))
       fail(p + ".mode", "invalid mode " + std::to_string(mode));
     const std::string wl = p + ".waypoints";
-    if (in_use && s.waypoints.empty()) fail(wl, "a simulated device needs at least one waypoint");
+    if (in_use && s.waypoints.empty())
+      fail(wl,
+           "a simulated device (device.kind: sim, the default) needs at least one waypoint; "
+           "device.kind: none serves without a device");
     for (std::size_t i = 0; i < s.waypoints.size(); ++i) {
       const Waypoint& w = s.waypoints[i];
       const std::string wp = join_index(wl, i);

@@ -57,6 +57,11 @@ std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s);
 // at 0.5 s, as --time 0.5 picks it. NaN is in no window.
 bool time_in_window(double t_s, std::optional<double> t0_s, std::optional<double> t1_s);
 
+// A frame's time for people, to 9 significant digits: "1.5", not the
+// accumulated 1.4999999999999456 (frames 1/30 s apart stay distinct for over
+// a year of session time). Both clients say frame times this way.
+std::string frame_time_text(double t_s);
+
 // The frames whose times are in the window [t0, t1] (time_in_window), in order.
 std::vector<std::size_t> frames_in_window(const FrameSource& source, double t0_s, double t1_s);
 

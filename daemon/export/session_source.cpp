@@ -3,6 +3,7 @@
 // record::SessionFile, the one session reader (its file checks, complete-frame
 // counts and range-checked row reads).
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <limits>
 
@@ -175,6 +176,12 @@ std::optional<std::size_t> frame_at_time(const FrameSource& source, double t_s) 
   }
   if (lo == 0) return std::nullopt;
   return lo - 1;
+}
+
+std::string frame_time_text(double t_s) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, t_s, std::chars_format::general, 9);
+  return std::string(buf, r.ptr);
 }
 
 bool time_in_window(double t_s, std::optional<double> t0_s, std::optional<double> t1_s) {

@@ -108,11 +108,26 @@ scene::Scene Service::load_scene_file(const std::string& path) const {
   return scene::load_scene_file_with_overrides(path, scene_overrides());
 }
 
+scene::Scene Service::load_config_scene(const config::DaemonConfig& config) const {
+  try {
+    return load_scene_file(config.scene_path);
+  } catch (const scene::SceneError& e) {
+    // A scene file that cannot be read is the config's `scene` at fault (or
+    // the --set that changed it): name them. Errors inside the file name
+    // the file and key themselves.
+    if (!e.key_path().empty() || e.source() != config.scene_path || e.reason().rfind("cannot read", 0) != 0) throw;
+    std::string blame;
+    for (const std::string& o : config_overrides())
+      if (o.rfind("scene=", 0) == 0) blame = " (set by --set " + yaml_util::printable(o) + ")";
+    throw config::ConfigError(config.source, "scene", e.source() + ": " + e.reason() + blame);
+  }
+}
+
 void Service::load_config() {
   config_ = config::load_daemon_config(options_.config_path, config_overrides());
   scene_path_ = config_.scene_path;
   base_scene_overrides_ = scene_overrides();
-  scene_ = load_scene_file(scene_path_);
+  scene_ = load_config_scene(config_);
   require_servable(scene_);
   try {
     require_steppable(scene_);
@@ -300,7 +315,7 @@ void Service::reload() {
   if (systemd_) systemd_->reloading();
   try {
     config::DaemonConfig config = config::load_daemon_config(options_.config_path, config_overrides());
-    scene::Scene scene = scene::load_scene_file_with_overrides(config.scene_path, scene_overrides());
+    scene::Scene scene = load_config_scene(config);
     // The scene, haptics.*, device.limits, status_interval_s and
     // max_scene_tets apply now (the haptic thread restarts for the haptic
     // ones: a lowered force limit must not wait for a restart). The device
@@ -345,7 +360,7 @@ void Service::reload() {
       std::string list;
       for (const std::string& k : kept) list += (list.empty() ? "" : ", ") + k;
       const std::string warning = "reload: " + list + " changed in " + options_.config_path +
-                                  " but take effect only at a restart; the old values stay in use";
+                                  ": a restart applies them; until then the old values stay in use";
       std::fprintf(options_.err, "tissued: %s\n", warning.c_str());
       record_event(static_cast<int>(record::EventKind::kWarning), warning);
     }
@@ -456,19 +471,11 @@ void Service::publish_stats() {
 }
 
 void Service::note_failing_steps() {
-  // failed_steps counts over the sim thread's life (every runner); a scene
-  // change clears last_error, so failures followed by one before this look
-  // have no reason left to give.
-  const SimStatus s = sim_->status();
-  if (s.failed_steps > failed_steps_seen_) {
-    const std::string why = s.last_error[0] != '\0' ? std::string(s.last_error)
-                                                    : std::string("the scene was changed since; its reason is gone");
-    const std::string what = std::to_string(s.failed_steps - failed_steps_seen_) +
-                             " simulation steps failed since the last status (the state before each is kept): " + why;
-    record_event(static_cast<int>(record::EventKind::kError), what);
-    std::fprintf(options_.err, "tissued: %s\n", what.c_str());
-  }
-  failed_steps_seen_ = s.failed_steps;
+  const double now_s = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  const std::optional<FailingStepsNotice> notice = failing_steps_.update(sim_->status(), now_s);
+  if (!notice) return;
+  record_event(static_cast<int>(notice->error ? record::EventKind::kError : record::EventKind::kInfo), notice->text);
+  std::fprintf(options_.err, "tissued: %s\n", notice->text.c_str());
 }
 
 void Service::note_safety_trips() {
@@ -551,8 +558,13 @@ int Service::run() {
     return kServiceStartFailed;
   }
 
+  std::string control;
+  if (!config_.control.unix_socket_path.empty()) control = config_.control.unix_socket_path;
+  if (config_.control.tcp_port != 0)
+    control +=
+        (control.empty() ? "" : " and ") + std::string("tcp 127.0.0.1:") + std::to_string(config_.control.tcp_port);
   std::fprintf(options_.out, "tissued: scene '%s' (%s), sim thread %s, control %s%s\n", scene_.name.c_str(),
-               scene_path_.c_str(), sim_->scheduling().c_str(), config_.control.unix_socket_path.c_str(),
+               scene_path_.c_str(), sim_->scheduling().c_str(), control.empty() ? "off" : control.c_str(),
                haptics_ ? "" : ", no haptic thread (no device or the scene has no tool)");
   if (haptics_) haptics_->print_startup(options_.out);
   std::fflush(options_.out);

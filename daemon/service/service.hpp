@@ -22,6 +22,7 @@
 #include "config/daemon_config.hpp"
 #include "control/control_protocol.hpp"
 #include "scene/scene.hpp"
+#include "service/failing_steps.hpp"
 #include "service/sim_thread.hpp"
 
 namespace tissue::record {
@@ -89,6 +90,9 @@ class Service : public control::ControlHandler {
  private:
   void load_config();  // throws config::ConfigError / scene::SceneError
   scene::Scene load_scene_file(const std::string& path) const;
+  // The scene `config` names, with the --set scene overrides; a file that
+  // cannot be read is a ConfigError at the config's `scene` key.
+  scene::Scene load_config_scene(const config::DaemonConfig& config) const;
   void start_threads();
   void stop_threads();
   // New runner on the sim thread, haptics started/stopped to match (and
@@ -150,7 +154,7 @@ class Service : public control::ControlHandler {
   // restarted side counts from zero).
   const HapticSide* trips_side_ = nullptr;
   std::uint64_t trips_seen_ = 0, stale_trips_seen_ = 0, lost_trips_seen_ = 0;
-  std::int64_t failed_steps_seen_ = 0;
+  FailingSteps failing_steps_;  // what note_failing_steps says, and when
   std::unique_ptr<control::ControlServer> server_;
   std::unique_ptr<control::SystemdNotifier> systemd_;
   std::unique_ptr<control::WatchdogFeeder> watchdog_;

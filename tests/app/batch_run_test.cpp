@@ -633,6 +633,22 @@ TEST_F(TissuedProcess, RecordIntervalSpacesTheFrames) {
   EXPECT_FALSE(fs::exists(dir_ / "zero.h5"));
 }
 
+// The batch run's own options were silently ignored by the service:
+// `--config C --scene B` served C's scene. Each is a usage error there, before
+// the config is even read, naming the option.
+TEST_F(TissuedProcess, BatchOnlyOptionsAreRefusedWithConfig) {
+  for (const std::vector<std::string>& extra :
+       {std::vector<std::string>{"--scene", scene_path("beam")}, std::vector<std::string>{"--report", "r.json"},
+        std::vector<std::string>{"--no-timing"}, std::vector<std::string>{"--progress", "0"}}) {
+    std::vector<std::string> args{"--config", "whatever.yaml"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const Process p = run(args);
+    EXPECT_EQ(p.exit_code, 2) << p.err;
+    EXPECT_TRUE(contains(p.err, extra.front() + " is for --batch")) << p.err;
+  }
+  EXPECT_TRUE(contains(run({"--config", "whatever.yaml", "--scene", "b.yaml"}).err, "--set scene=FILE"));
+}
+
 // --duration 0 with --config meant "no limit" to the service and it never
 // stopped: a usage error now, before anything starts.
 TEST_F(TissuedProcess, AZeroDurationForTheServiceIsAUsageError) {

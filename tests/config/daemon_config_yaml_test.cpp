@@ -296,7 +296,7 @@ TEST(DaemonConfigYaml, SimDeviceWaypoints) {
   expect_error(edit("    waypoints:\n      - {time_s: 0.0, position_m: [0.05, 0.05, 0.13]}\n      - {time_s: 1.0, "
                     "position_m: [0.05, 0.05, 0.094]}\n",
                     "    waypoints: []\n"),
-               "device.sim.waypoints", "at least one waypoint");
+               "device.sim.waypoints", "at least one waypoint; device.kind: none serves without a device");
   expect_error(edit("{time_s: 1.0,", "{time_s: 0.0,"), "device.sim.waypoints[1].time_s",
                "waypoint times must increase: must be > device.sim.waypoints[0].time_s (0) (got 0)");
   expect_error(edit("{time_s: 0.0,", "{time_s: -1.0,"), "device.sim.waypoints[0].time_s", "must be >= 0");
@@ -314,6 +314,13 @@ TEST(DaemonConfigYaml, SimDeviceWaypoints) {
   expect_error(kBase, "device.limits.max_force_N", "must be > 0", {"device.kind=none", "device.limits.max_force_N=-1"});
   expect_error(kBase, "device.sim.waypoints[1].time_s", "must increase",
                {"device.kind=udp", "device.sim.waypoints[1].time_s=0"});
+  // The replay section too: a speed of 0 waited for the day someone chose
+  // kind: replay. Only "names a session" depends on the kind.
+  for (const char* speed : {"0", "-3", "1000"})
+    expect_error(kBase, "device.replay.speed", std::string("must be in (0, 100] (got ") + speed + ")",
+                 {"device.kind=sim", std::string("device.replay.speed=") + speed});
+  expect_error(kBase, "device.replay.session", "needs the session file", {"device.kind=replay"});
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.replay.speed=100"}));
   // kind none: no coupling-versus-limit check (there is no coupling).
   EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.kind=none", "haptics.coupling_stiffness_N_per_m=5000"}));
 }

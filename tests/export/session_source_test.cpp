@@ -97,6 +97,16 @@ void poke(const std::string& path, const char* dataset, hsize_t row, hsize_t col
 
 // ---------------------------------------------------------------- files
 
+// x3d printed the accumulated 1.4999999999999456 where render printed 1.5.
+TEST(FrameTimeText, NineSignificantDigits) {
+  EXPECT_EQ(frame_time_text(1.4999999999999456), "1.5");
+  EXPECT_EQ(frame_time_text(30 * (1.0 / 30.0)), "1");
+  EXPECT_EQ(frame_time_text(0.0), "0");
+  EXPECT_EQ(frame_time_text(1.0 / 30.0), "0.0333333333");
+  EXPECT_EQ(frame_time_text(3600.0 + 1.0 / 30.0), "3600.03333");
+  EXPECT_NE(frame_time_text(1e6), frame_time_text(1e6 + 1.0 / 30.0));
+}
+
 TEST(SessionSource, FilesThatAreNotSessionsAreSourceErrorsNamingTheFile) {
   TempDir dir;
   for (const std::string& path : rt::bad_session_files(dir)) {

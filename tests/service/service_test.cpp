@@ -5,8 +5,10 @@
 #include "service/service.hpp"
 
 #include <gtest/gtest.h>
+
 #include <signal.h>
 #include <unistd.h>
+#include <boost/asio/ip/tcp.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -209,6 +211,51 @@ TEST(Service, BadConfigExitsWithCodeTwoNamingTheFile) {
   std::fclose(options.out);
 }
 
+// A scene file the config names but that cannot be read is the config's
+// `scene` at fault, named with the --set that chose it; it used to say only
+// "<scene>: cannot read scene file".
+TEST(Service, AnUnreadableSceneNamesTheConfigsSceneKey) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("beam.yaml"));
+  for (const bool by_set : {false, true}) {
+    if (!by_set) {
+      std::string text = file_text(config);
+      text.replace(text.find(scene_file("beam.yaml")), scene_file("beam.yaml").size(), "missing.yaml");
+      std::ofstream(config) << text;
+    }
+    ServiceOptions options;
+    options.config_path = config;
+    if (by_set) options.overrides = {"scene=gone.yaml"};
+    options.err = std::tmpfile();
+    options.out = std::tmpfile();
+    EXPECT_EQ(Service(options).run(), kServiceBadConfig);
+    const std::string err = file_text(options.err);
+    const std::string scene = dir / (by_set ? "gone.yaml" : "missing.yaml");
+    EXPECT_NE(err.find(config + ": scene: " + scene + ": cannot read scene file: no such file"), std::string::npos)
+        << err;
+    EXPECT_EQ(err.find("(set by --set 'scene=gone.yaml')") != std::string::npos, by_set) << err;
+    std::fclose(options.err);
+    std::fclose(options.out);
+  }
+}
+
+// The start-up line names every control endpoint: with TCP only it printed
+// "control " and nothing.
+TEST(Service, TheStartupLineNamesTheControlEndpoints) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("beam.yaml"));
+  int port = 0;  // a port free a moment ago on loopback (the kernel picks it)
+  {
+    boost::asio::io_context io;
+    boost::asio::ip::tcp::acceptor probe(io, {boost::asio::ip::address_v4::loopback(), 0});
+    port = probe.local_endpoint().port();
+  }
+  Running run(config, 0.3, {"control.unix_socket_path=", "control.tcp_port=" + std::to_string(port)});
+  ASSERT_EQ(run.wait(), kServiceOk) << run.err_text();
+  const std::string out = file_text(run.out);
+  EXPECT_NE(out.find(", control tcp 127.0.0.1:" + std::to_string(port) + ","), std::string::npos) << out;
+}
+
 // Scene changes under load: the sim takes each new runner between steps, the
 // haptic loop keeps ticking, bad requests are answered with the reason and
 // change nothing.
@@ -365,7 +412,8 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   text.replace(text.find("device:\n"), 8, "device:\n  limits: {max_force_N: 1.25}\n  scale: 2\n");
   std::ofstream(config) << text;
   ASSERT_EQ(::raise(SIGHUP), 0);
-  ASSERT_TRUE(written_within_5_s(run.err, "take effect only at a restart")) << file_text(run.err);
+  ASSERT_TRUE(written_within_5_s(run.err, ": a restart applies them; until then the old values stay in use"))
+      << file_text(run.err);
   EXPECT_NE(file_text(run.err).find("reload: device.offset_m/scale, publish changed in " + config), std::string::npos)
       << file_text(run.err);
   EXPECT_NE(file_text(run.out).find("haptic thread restarted"), std::string::npos) << file_text(run.out);
