@@ -2,8 +2,8 @@
 // blocking, proven on 10,000 ticks with a SimDevice (hand mode, in contact)
 // while another thread publishes LocalModels through the LatestValue.
 //
-// - Allocation: this binary replaces the global operator new/delete with
-//   counting versions; the count inside the window must be exactly 0 (it
+// - Allocation: this binary links the counting operator new/delete
+//   (support/allocation_counter); the count inside the window must be exactly 0 (it
 //   counts every thread, including the publisher, which writes in place).
 // - Mutexes: pthread_mutex_lock is interposed (the executable's definition
 //   wins over libc's for every caller in the process) and counted.
@@ -26,32 +26,20 @@
 #include "haptics/haptic_loop.hpp"
 #include "haptics/haptics_test_support.hpp"
 #include "haptics/sim_device.hpp"
+#include "support/allocation_counter.hpp"
 
 namespace {
 
+// While on, pthread_mutex_lock calls are counted (allocations: the counter).
 std::atomic<bool> g_counting{false};
-std::atomic<std::uint64_t> g_allocations{0};
 std::atomic<std::uint64_t> g_mutex_locks{0};
 
-void* counted_malloc(std::size_t n) {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
+void count_everything(bool on) {
+  g_counting.store(on);
+  tissue::testing::count_all_threads(on);
 }
 
 }  // namespace
-
-void* operator new(std::size_t n) { return counted_malloc(n); }
-void* operator new[](std::size_t n) { return counted_malloc(n); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n ? n : 1);
-}
-void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept { return operator new(n, t); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 
 #if !defined(__SANITIZE_THREAD__)  // TSan owns pthread_mutex_lock; this binary is not run under TSan
 extern "C" int pthread_mutex_lock(pthread_mutex_t* m) {
@@ -132,9 +120,9 @@ TEST(HapticLoopRealtime, TenThousandTicksAllocateNothingLockNothingAndNeverBlock
   std::uint64_t contact_ticks = 0;
   const std::uint64_t updates_before = loop->stats().model_updates;
   const long switches_before = voluntary_switches_of_this_thread();
-  g_allocations.store(0);
+  tissue::testing::reset_allocations();
   g_mutex_locks.store(0);
-  g_counting.store(true);
+  count_everything(true);
   for (int i = 0; i < 10000; ++i) {
     loop_now_ns.store(now_ns, std::memory_order_relaxed);
     if (i % 20 == 0) {
@@ -156,9 +144,9 @@ TEST(HapticLoopRealtime, TenThousandTicksAllocateNothingLockNothingAndNeverBlock
       }
     }
   }
-  g_counting.store(false);
+  count_everything(false);
   const long switches_after = voluntary_switches_of_this_thread();
-  const std::uint64_t allocations = g_allocations.load();
+  const std::uint64_t allocations = tissue::testing::allocations();
   const std::uint64_t mutex_locks = g_mutex_locks.load();
   done.store(true);
   publisher.join();
@@ -178,16 +166,16 @@ TEST(HapticLoopRealtime, TenThousandTicksAllocateNothingLockNothingAndNeverBlock
 
 // The instruments themselves work: the same window catches an allocation and a mutex.
 TEST(HapticLoopRealtime, TheInstrumentsDetectAllocationAndLocking) {
-  g_allocations.store(0);
+  tissue::testing::reset_allocations();
   g_mutex_locks.store(0);
-  g_counting.store(true);
+  count_everything(true);
   auto* p = new std::vector<int>(100);
   pthread_mutex_t m = PTHREAD_MUTEX_INITIALIZER;
   pthread_mutex_lock(&m);
   pthread_mutex_unlock(&m);
-  g_counting.store(false);
+  count_everything(false);
   delete p;
-  EXPECT_GE(g_allocations.load(), 1u);
+  EXPECT_GE(tissue::testing::allocations(), 1u);
 #ifdef TISSUE_COUNTS_MUTEXES
   EXPECT_EQ(g_mutex_locks.load(), 1u);
 #endif

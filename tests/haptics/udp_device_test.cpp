@@ -9,9 +9,9 @@
 // formally synchronous with send_to, so tests poll (eventually()) until the
 // device has taken the datagrams they sent, with a generous deadline.
 //
-// This binary replaces the global operator new to count allocations made on
-// the thread that calls read()/write() (a thread_local switch), so the fake
-// device may allocate freely meanwhile.
+// Allocations are counted on the thread that calls read()/write() only
+// (support/allocation_counter, count_this_thread), so the fake device may
+// allocate freely meanwhile.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -30,33 +30,9 @@
 #include "haptics/device.hpp"
 #include "haptics/haptic_loop.hpp"
 #include "haptics/udp_device.hpp"
+#include "support/allocation_counter.hpp"
 #include "tissue_lcm/tissue/device_packet.hpp"
 #include "tissue_lcm/tissue/haptic_state.hpp"
-
-namespace {
-
-thread_local bool t_count_allocations = false;
-std::atomic<std::uint64_t> g_allocations{0};
-
-void* counted_malloc(std::size_t n) {
-  if (t_count_allocations) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-
-}  // namespace
-
-void* operator new(std::size_t n) { return counted_malloc(n); }
-void* operator new[](std::size_t n) { return counted_malloc(n); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  if (t_count_allocations) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n ? n : 1);
-}
-void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept { return operator new(n, t); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 
 namespace tissue::haptics {
 namespace {
@@ -664,7 +640,7 @@ TEST(UdpDeviceRealtime, TenThousandReadWriteCallsAllocateNothing) {
   constexpr int kCalls = 10'000;
   int valid_reads = 0;
   std::int64_t now_ns = kT0;
-  g_allocations.store(0);
+  tissue::testing::reset_allocations();
   for (int i = 0; i < kCalls; ++i) {
     // Every tenth tick a fresh valid pose (its sequence keeps growing) or a
     // rejected datagram arrives, so both decode paths run in the window.
@@ -676,13 +652,13 @@ TEST(UdpDeviceRealtime, TenThousandReadWriteCallsAllocateNothing) {
     if (i % 100 == 99) fake.drain();
     now_ns += kMs;
     DeviceSample sample;
-    t_count_allocations = true;
+    tissue::testing::count_this_thread(true);
     const bool ok = s.device.read(now_ns, &sample);
     s.device.write(now_ns, Vec3(0.001 * (i % 7), 0, 0));
-    t_count_allocations = false;
+    tissue::testing::count_this_thread(false);
     valid_reads += ok ? 1 : 0;
   }
-  EXPECT_EQ(g_allocations.load(), 0u) << "read()/write() allocated";
+  EXPECT_EQ(tissue::testing::allocations(), 0u) << "read()/write() allocated";
   const UdpDevice::Stats st = s.device.stats();
   EXPECT_GT(st.accepted, 900u) << "the valid path ran";
   EXPECT_LE(static_cast<std::uint64_t>(valid_reads), st.accepted) << "each pose is a sample once";
@@ -691,11 +667,11 @@ TEST(UdpDeviceRealtime, TenThousandReadWriteCallsAllocateNothing) {
   EXPECT_GT(st.sent, static_cast<std::uint64_t>(kCalls) * 9 / 10);
 
   // The counter itself works (a check that guards against a silent zero).
-  t_count_allocations = true;
+  tissue::testing::count_this_thread(true);
   auto* probe = new std::vector<int>(8);
-  t_count_allocations = false;
+  tissue::testing::count_this_thread(false);
   delete probe;
-  EXPECT_GE(g_allocations.load(), 1u);
+  EXPECT_GE(tissue::testing::allocations(), 1u);
 }
 
 }  // namespace
