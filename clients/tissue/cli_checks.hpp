@@ -3,10 +3,11 @@
 
 #include <CLI/CLI.hpp>
 #include <cmath>
-#include <cstdlib>
+#include <optional>
 #include <string>
 
 #include "util/lcm_url.hpp"
+#include "util/text.hpp"
 
 namespace tissue::cli {
 
@@ -15,9 +16,10 @@ namespace tissue::cli {
 namespace detail {
 // Reads all of `v` as a number into *x; the message when it is not one.
 inline std::string whole_number(const std::string& v, double* x) {
-  char* end = nullptr;
-  *x = std::strtod(v.c_str(), &end);
-  return v.empty() || end != v.c_str() + v.size() ? "'" + v + "' is not a number" : std::string();
+  const std::optional<double> read = util::whole_number(v);
+  if (!read) return "'" + v + "' is not a number";
+  *x = *read;
+  return {};
 }
 }  // namespace detail
 

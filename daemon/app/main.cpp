@@ -11,6 +11,7 @@
 
 #include "app/batch_run.hpp"
 #include "service/service.hpp"
+#include "util/text.hpp"
 
 namespace {
 
@@ -18,8 +19,8 @@ namespace {
 // and prints DBL_MAX in full when it fails).
 const CLI::Validator kSeconds(
     [](std::string& text) -> std::string {
-      double value = 0.0;
-      if (!CLI::detail::lexical_cast(text, value) || !std::isfinite(value) || value < 0.0)
+      const std::optional<double> value = tissue::util::whole_number(text);
+      if (!value || !std::isfinite(*value) || *value < 0.0)
         return "must be a finite number of seconds >= 0 (got " + text + ")";
       return {};
     },
@@ -29,8 +30,8 @@ const CLI::Validator kSeconds(
 // at once, and is refused).
 const CLI::Validator kPositiveSeconds(
     [](std::string& text) -> std::string {
-      double value = 0.0;
-      if (!CLI::detail::lexical_cast(text, value) || !std::isfinite(value) || value <= 0.0)
+      const std::optional<double> value = tissue::util::whole_number(text);
+      if (!value || !std::isfinite(*value) || *value <= 0.0)
         return "must be a finite number of seconds > 0 (got " + text + ")";
       return {};
     },

@@ -67,6 +67,7 @@
 #include "scene/scene.hpp"
 #include "scene/scene_yaml.hpp"
 #include "util/output_file.hpp"
+#include "util/text.hpp"
 #include "util/xml.hpp"
 
 namespace tissue::app {
@@ -154,14 +155,9 @@ namespace {
 // depths); anything else is the option's error, naming the value. std::stod
 // alone took "20abc" as 20, "nan" as NaN and said only "stod" for ",".
 double positive_number(const std::string& option, const std::string& text) {
-  std::size_t used = 0;
-  double v = 0.0;
-  try {
-    v = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != text.size()) throw std::invalid_argument(option + ": '" + text + "' is not a number");
+  const std::optional<double> read = util::whole_number(text);
+  if (!read) throw std::invalid_argument(option + ": '" + text + "' is not a number");
+  const double v = *read;
   if (!(std::isfinite(v) && v > 0.0))
     throw std::invalid_argument(option + ": " + text + " must be a finite number > 0");
   return v;

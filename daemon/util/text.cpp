@@ -1,9 +1,26 @@
 #include "util/text.hpp"
 
+#include <charconv>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 
 namespace tissue::util {
+
+std::optional<double> whole_number(std::string_view text) {
+  double v = 0.0;
+  const char* end = text.data() + text.size();
+  // from_chars takes no '+'; people type one: allow it (not "+-5").
+  const char* begin = !text.empty() && text.front() == '+' ? text.data() + 1 : text.data();
+  if (begin == end || (begin != text.data() && *begin == '-')) return std::nullopt;
+  const auto r = std::from_chars(begin, end, v);
+  if (r.ptr != end) return std::nullopt;
+  // Out of range (1e999, 1e-999): a number all the same, as strtod reads it
+  // (±inf, or 0 / subnormal), so "1e999" is refused as not finite.
+  if (r.ec == std::errc::result_out_of_range) return std::strtod(std::string(begin, end).c_str(), nullptr);
+  if (r.ec != std::errc()) return std::nullopt;
+  return v;
+}
 
 std::string why_not_clean_text(std::string_view text) {
   const auto byte_error = [&](std::size_t at) {

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <string>
 
 namespace tissue::util {
@@ -33,6 +35,23 @@ TEST(CleanText, ControlCharactersAndLineSeparatorsAreRefused) {
   EXPECT_EQ(why_not_clean_text("c1 \xc2\x85"), "character 4 is a control character (U+0085)");
   EXPECT_EQ(why_not_clean_text("\xe2\x80\xa8"), "character 1 is a control character (U+2028)");
   EXPECT_EQ(why_not_clean_text(std::string("nul\0", 4)), "character 4 is a control character (U+0000)");
+}
+
+// The command lines' one number reader: the whole text or nothing (std::stod
+// took "20abc" as 20; strtod took " 1" and followed the locale).
+TEST(WholeNumber, TheWholeTextOrNothing) {
+  EXPECT_EQ(whole_number("20"), 20.0);
+  EXPECT_EQ(whole_number("+0.5"), 0.5);
+  EXPECT_EQ(whole_number("-1e-3"), -1e-3);
+  EXPECT_EQ(whole_number("1E3"), 1000.0);
+  for (const char* bad : {"", "20abc", " 1", "1 ", "+", "+-5", "--1", "1,5", "0x10", "abc"})
+    EXPECT_FALSE(whole_number(bad).has_value()) << "'" << bad << "'";
+  ASSERT_TRUE(whole_number("nan").has_value());  // read; the caller refuses it in its own words
+  EXPECT_TRUE(std::isnan(*whole_number("nan")));
+  EXPECT_TRUE(std::isinf(*whole_number("-inf")));
+  EXPECT_EQ(whole_number("1e999"), HUGE_VAL);  // out of range: read as strtod reads it
+  EXPECT_EQ(whole_number("-1e999"), -HUGE_VAL);
+  EXPECT_EQ(whole_number("1e-999"), 0.0);
 }
 
 }  // namespace
