@@ -139,6 +139,19 @@ struct PublishSpec {
   bool operator==(const PublishSpec&) const = default;  // a reload tells what changed
 };
 
+// Recording without a client asking: the service records from its start
+// (auto-<UTC time>.h5 in state_dir) and starts a new file every rotate_s, so
+// a daemon that runs for weeks leaves files of a size a tool can open. The
+// oldest automatic files go once they hold more than keep_gb together (the
+// shipped scene writes ~1.2 GB an hour); files a client named, or started
+// with record_start, are never removed.
+struct RecordSpec {
+  bool auto_start = false;
+  double rotate_s = 3600.0;
+  double keep_gb = 50.0;                               // 0: keep every automatic file
+  bool operator==(const RecordSpec&) const = default;  // a reload tells what changed
+};
+
 struct DaemonConfig {
   std::string source;                          // file the config came from (for messages)
   std::string scene_path;                      // resolved against the config file's directory when relative
@@ -148,6 +161,7 @@ struct DaemonConfig {
   RealtimeSpec realtime;
   ControlSpec control;
   PublishSpec publish;
+  RecordSpec record;
   double status_interval_s = 1.0;  // live status line on stdout and STATUS= to systemd
   // Largest starting mesh the service builds (scene::starting_tet_count). A
   // scene is built on the control thread, ~1.3 us per tet: 6e6 tets blocked

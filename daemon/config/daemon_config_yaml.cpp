@@ -39,6 +39,9 @@ constexpr double kMinHapticRateHz = 1.0;
 constexpr double kMaxRamp_s = 10.0;
 constexpr double kMaxTimeout_s = 60.0;
 constexpr double kMaxStatusInterval_s = 3600.0;
+// record.rotate_s: a week at most (files of a few GB at 1 kHz haptic rows).
+constexpr double kMinRotate_s = 1.0;
+constexpr double kMaxRotate_s = 7 * 24 * 3600.0;
 // A replayed device track faster than this is no longer a hand.
 constexpr double kMaxReplaySpeed = 100.0;
 // Linux SCHED_FIFO priorities.
@@ -47,8 +50,9 @@ constexpr int kMaxRtPriority = 99;
 // CPU_SETSIZE: sched_setaffinity cannot name a CPU beyond it.
 constexpr int kMaxCpuIndex = 1023;
 
-const std::array<std::string_view, 9> kTopLevelKeys{
-    "scene", "state_dir", "status_interval_s", "max_scene_tets", "device", "haptics", "realtime", "control", "publish"};
+const std::array<std::string_view, 10> kTopLevelKeys{"scene",   "state_dir", "status_interval_s", "max_scene_tets",
+                                                     "device",  "haptics",   "realtime",          "control",
+                                                     "publish", "record"};
 
 const yaml_util::DocumentKind kConfigDocument{
     "daemon config", "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
@@ -82,6 +86,12 @@ class Converter : public yaml_util::Reader {
     if (const auto it = f.find("realtime"); it != f.end()) realtime(it->second, "realtime", c.realtime);
     if (const auto it = f.find("control"); it != f.end()) control(it->second, "control", c.control);
     if (const auto it = f.find("publish"); it != f.end()) publish(it->second, "publish", c.publish);
+    if (const auto it = f.find("record"); it != f.end()) {
+      const FieldMap g = fields(it->second, "record", {"auto_start", "rotate_s", "keep_gb"});
+      opt(g, "auto_start", "record", c.record.auto_start);
+      opt(g, "rotate_s", "record", c.record.rotate_s);
+      opt(g, "keep_gb", "record", c.record.keep_gb);
+    }
     return c;
   }
 
@@ -280,6 +290,12 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (k.max_connections < 1 || k.max_connections > kMaxConnections)
       fail("control.max_connections",
            "must be in [1, " + std::to_string(kMaxConnections) + "] (got " + std::to_string(k.max_connections) + ")");
+
+    positive(c_.record.rotate_s, "record.rotate_s");
+    at_least(c_.record.rotate_s, kMinRotate_s, "record.rotate_s", "a file every few seconds is not a session");
+    at_most(c_.record.rotate_s, kMaxRotate_s, "record.rotate_s", "the rotation timer must fit its clock");
+    non_negative(c_.record.keep_gb, "record.keep_gb");
+    at_most(c_.record.keep_gb, 1e9, "record.keep_gb", "an exabyte; 0 keeps every file");
 
     const PublishSpec& pub = c_.publish;
     for (const auto& [rate, key] :

@@ -17,6 +17,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <system_error>
+#include <tuple>
 
 #include "util/text.hpp"
 
@@ -184,6 +185,54 @@ std::vector<std::string> remove_abandoned_creations(const std::string& dir) {
     if (pid <= 0 || pid == ::getpid()) continue;
     if (::kill(pid, 0) == 0 || errno != ESRCH) continue;  // alive, or not ours to judge (EPERM)
     if (fs::remove(it->path(), ec)) removed.push_back(it->path().string());
+  }
+  return removed;
+}
+
+std::vector<std::string> remove_oldest_automatic_recordings(const std::string& dir, std::uintmax_t keep_bytes,
+                                                            const std::string& keep) {
+  namespace fs = std::filesystem;
+  // Oldest first: by the time in the name, then by the "-K" a second file
+  // of the same second got (by name alone "…-2.h5" sorts before "….h5").
+  struct Candidate {
+    std::string time;
+    long k = 1;
+    std::string path;
+    std::uintmax_t bytes = 0;
+  };
+  std::vector<Candidate> files;
+  std::uintmax_t total = 0;
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec), end;
+  if (ec) return {};
+  for (; it != end; it.increment(ec)) {
+    if (ec) return {};
+    const std::string name = it->path().filename().string();
+    if (name.rfind(kAutomaticPrefix, 0) != 0 || it->path().extension() != ".h5" || !it->is_regular_file(ec)) continue;
+    const std::uintmax_t bytes = it->file_size(ec);
+    if (ec) continue;
+    total += bytes;
+    if (!keep.empty() && fs::equivalent(it->path(), keep, ec)) continue;                  // counted, never removed
+    const std::string stem = it->path().stem().string().substr(kAutomaticPrefix.size());  // YYYYmmdd-HHMMSS[-K]
+    Candidate c{stem, 1, it->path().string(), bytes};
+    if (stem.size() > 16 && stem[15] == '-' &&
+        std::all_of(stem.begin() + 16, stem.end(), [](char ch) { return ch >= '0' && ch <= '9'; }) &&
+        stem.size() < 16 + 9) {
+      c.time = stem.substr(0, 15);
+      c.k = std::stol(stem.substr(16));
+    }
+    files.push_back(std::move(c));
+  }
+  std::sort(files.begin(), files.end(), [](const Candidate& x, const Candidate& y) {
+    return std::tie(x.time, x.k, x.path) < std::tie(y.time, y.k, y.path);
+  });
+  std::vector<std::string> removed;
+  for (const Candidate& c : files) {
+    if (total <= keep_bytes) break;
+    if (fs::remove(c.path, ec)) {
+      removed.push_back(c.path);
+      total -= c.bytes;
+    }
   }
   return removed;
 }

@@ -18,6 +18,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "record/h5_util.hpp"
@@ -40,6 +41,17 @@ void validate_session_name(const std::string& name, const std::string& what = "s
 // included) stay, and so does anything that is not such a file. Returns the
 // removed paths; a directory that cannot be read removes nothing.
 std::vector<std::string> remove_abandoned_creations(const std::string& dir);
+
+// The service's automatic recordings (record.auto_start) are named
+// kAutomaticPrefix + "YYYYmmdd-HHMMSS[-K].h5": their names sort by time.
+inline constexpr std::string_view kAutomaticPrefix = "auto-";
+// Removes the oldest automatic recordings in `dir` (regular files named
+// kAutomaticPrefix...".h5", oldest first by name) until those left hold at
+// most `keep_bytes` together, never `keep` (the file being written) nor any
+// other file. Returns the removed paths; a directory that cannot be read
+// removes nothing.
+std::vector<std::string> remove_oldest_automatic_recordings(const std::string& dir, std::uintmax_t keep_bytes,
+                                                            const std::string& keep);
 
 // A file's whole text for SessionMetadata (scene_text, config_text); empty
 // when it cannot be read: the session is recorded without it.

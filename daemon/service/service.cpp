@@ -40,13 +40,28 @@ SimThreadOptions sim_options(const config::DaemonConfig& c) {
 }
 
 // PREFIX-20261123-101500.EXT (UTC): the file name when a command gives none.
-std::string timestamped_name(const char* prefix, const char* extension) {
+// PREFIX + YYYYmmdd-HHMMSS (UTC) + EXTENSION, or with "-2", "-3", ... before
+// the extension when a file of that name is in `dir`: two nameless
+// record_start or export_x3d within one second (or a rotation) failed with
+// "already exists" on a name the user never gave.
+std::string free_timestamped_name(const std::string& dir, std::string_view prefix, std::string_view extension) {
   const std::time_t now = std::time(nullptr);
   std::tm utc{};
   gmtime_r(&now, &utc);
   char stamp[32];
   std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &utc);
-  return std::string(prefix) + "-" + stamp + extension;
+  std::string stem(prefix);
+  stem += stamp;
+  std::string name = stem;
+  name += extension;
+  std::error_code ec;
+  for (int k = 2; k < 1000 && std::filesystem::exists(std::filesystem::path(dir) / name, ec); ++k) {
+    name = stem;
+    name += '-';
+    name += std::to_string(k);
+    name += extension;
+  }
+  return name;
 }
 
 nlohmann::json status_json(const SimStatus& s) {
@@ -214,12 +229,46 @@ void Service::start_recording(const std::string& name) {
       std::fflush(options_.err);
     });
   };
-  recorder_ = record::Recorder::start(config_.state_dir, name.empty() ? timestamped_name("session", ".h5") : name, meta,
-                                      options);
+  recorder_ = record::Recorder::start(config_.state_dir,
+                                      name.empty() ? free_timestamped_name(config_.state_dir, "session-", ".h5") : name,
+                                      meta, options);
   if (sim_ && sim_->set_recorder(recorder_.get())) retired_recorders_.clear();
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), "recording " + scene_.name + " from " + scene_path_);
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
   std::fflush(options_.out);
+}
+
+void Service::start_automatic_recording() {
+  automatic_recording_ = true;
+  automatic_since_ = std::chrono::steady_clock::now();
+  try {
+    start_recording(free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5"));
+    // The oldest automatic files go once they hold more than keep_gb, this
+    // one counted; said on stderr and in the new file's events.
+    if (config_.record.keep_gb > 0.0)
+      for (const std::string& gone : record::remove_oldest_automatic_recordings(
+               config_.state_dir, static_cast<std::uintmax_t>(config_.record.keep_gb * 1e9), recorder_->path())) {
+        const std::string what = "removed the oldest automatic recording " + gone + " (record.keep_gb " +
+                                 yaml_util::fmt_num(config_.record.keep_gb) + " reached)";
+        std::fprintf(options_.out, "tissued: %s\n", what.c_str());
+        record_event(static_cast<int>(record::EventKind::kInfo), what);
+      }
+  } catch (const std::exception& e) {
+    std::fprintf(options_.err, "tissued: automatic recording: %s; serving without it, trying again in %s s\n", e.what(),
+                 yaml_util::fmt_num(config_.record.rotate_s).c_str());
+    std::fflush(options_.err);
+  }
+}
+
+void Service::rotate_automatic_recording() {
+  if (!automatic_recording_) return;
+  const std::chrono::duration<double> running = std::chrono::steady_clock::now() - automatic_since_;
+  if (running.count() < config_.record.rotate_s) return;
+  record_event(static_cast<int>(record::EventKind::kInfo), "record.rotate_s (" +
+                                                               yaml_util::fmt_num(config_.record.rotate_s) +
+                                                               " s) reached: the recording goes on in a new file");
+  stop_recording();
+  start_automatic_recording();
 }
 
 void Service::stop_recording() {
@@ -297,6 +346,7 @@ std::vector<std::string> restart_only_changes(const config::DaemonConfig& runnin
   if (!(running.control == file.control)) changed.push_back("control");
   if (!(running.publish == file.publish)) changed.push_back("publish");
   if (running.state_dir != file.state_dir) changed.push_back("state_dir");
+  if (!(running.record == file.record)) changed.push_back("record");
   // Whatever else differs once the settings a reload applies are taken as
   // they run: a section added to DaemonConfig and not named above is still
   // reported, never silently kept.
@@ -507,6 +557,7 @@ void Service::arm_status_timer() {
     if (ec || stopping_) return;
     note_safety_trips();
     note_failing_steps();
+    rotate_automatic_recording();
     print_status();
     arm_status_timer();
   });
@@ -551,7 +602,10 @@ int Service::run() {
     start_threads();
     server_ = std::make_unique<control::ControlServer>(io_, control::ServerSettings::from_spec(config_.control), *this);
     server_->start();
-    if (!options_.record_name.empty()) start_recording(options_.record_name);
+    if (!options_.record_name.empty())
+      start_recording(options_.record_name);
+    else if (config_.record.auto_start)
+      start_automatic_recording();
   } catch (const std::exception& e) {
     std::fprintf(options_.err, "tissued: %s\n", e.what());
     stop_threads();
@@ -629,7 +683,8 @@ nlohmann::json Service::status() {
                       {"sim_rows", r.sim_rows_written},
                       {"mesh_frames", r.mesh_frames_written},
                       {"drops", r.haptic_drops + r.sim_drops + r.mesh_frame_drops + r.event_drops},
-                      {"bytes", r.bytes_written}};
+                      {"bytes", r.bytes_written},
+                      {"automatic", automatic_recording_}};
   } else {
     j["recording"] = nullptr;
   }
@@ -707,9 +762,17 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
 }
 
 nlohmann::json Service::record_start(const std::string& name) {
-  if (recorder_ && recorder_->state() == record::RecorderState::kRecording)
-    throw control::ControlError("already recording to " + recorder_->path() + "; record_stop first");
-  stop_recording();  // a failed earlier recording: close it out
+  // The daemon's own recording gives way to a client's (the lab's "record
+  // this as exp1.h5"); a client's is stopped by a client.
+  if (recorder_ && recorder_->state() == record::RecorderState::kRecording) {
+    if (!automatic_recording_)
+      throw control::ControlError("already recording to " + recorder_->path() + "; record_stop first");
+    record_event(static_cast<int>(record::EventKind::kInfo), "record_start " +
+                                                                 (name.empty() ? std::string("(no name)") : name) +
+                                                                 " (control): the automatic recording ends here");
+  }
+  stop_recording();              // a failed earlier recording: close it out
+  automatic_recording_ = false;  // the client's from now on
   try {
     start_recording(name);
   } catch (const std::exception& e) {
@@ -723,12 +786,13 @@ nlohmann::json Service::record_stop() {
   const std::string path = recorder_->path();
   const std::string error = recorder_->error();
   stop_recording();
+  automatic_recording_ = false;
   // Stats are gone with the recorder; the file says it all (tissue session info).
   return {{"file", path}, {"error", error.empty() ? nlohmann::json(nullptr) : nlohmann::json(error)}};
 }
 
 nlohmann::json Service::export_x3d(const std::string& name) {
-  const std::string file_name = name.empty() ? timestamped_name("surface", ".x3d") : name;
+  const std::string file_name = name.empty() ? free_timestamped_name(config_.state_dir, "surface-", ".x3d") : name;
   // Same rule as recordings: a plain file name inside the state directory.
   try {
     record::validate_session_name(file_name, "export");

@@ -13,6 +13,7 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <memory>
@@ -126,6 +127,11 @@ class Service : public control::ControlHandler {
   void print_status();
   void start_recording(const std::string& name);  // throws record::RecordError
   void stop_recording();
+  // record.auto_start: a timestamped file, new every record.rotate_s. A
+  // file that cannot be created is said and tried again at the next
+  // rotation; the service keeps serving.
+  void start_automatic_recording();
+  void rotate_automatic_recording();
   void record_event(int kind, const std::string& text);  // no-op when not recording
   std::vector<std::string> scene_overrides() const;
   std::vector<std::string> config_overrides() const;
@@ -166,6 +172,10 @@ class Service : public control::ControlHandler {
   // set_recorder's wait): freed once a later hand-over completes or the sim
   // thread has stopped, never under it.
   std::vector<std::unique_ptr<record::Recorder>> retired_recorders_;
+  // Recording on its own (record.auto_start) until a client takes over with
+  // record_start or record_stop; since when the current file runs.
+  bool automatic_recording_ = false;
+  std::chrono::steady_clock::time_point automatic_since_{};
   std::unique_ptr<transport::LcmPublisher> lcm_;  // null unless publish.lcm.enabled and LCM started
   std::unique_ptr<transport::DdsPublisher> dds_;  // null unless publish.dds.enabled and DDS started
   bool stopping_ = false;

@@ -268,6 +268,23 @@ TEST(DaemonConfigYaml, ValuesThatWouldHangOrOverflowAClockAreRefused) {
   EXPECT_NO_THROW(parse_daemon_config(edit("rate_hz: 1000", "rate_hz: 1"), kSource));
 }
 
+// record: off by default in code (the shipped config turns it on), a new
+// file every hour; the rotation is bounded like every other clock.
+TEST(DaemonConfigYaml, AutomaticRecordingAndItsRotation) {
+  const DaemonConfig d = parse_daemon_config(kBase, kSource);
+  EXPECT_FALSE(d.record.auto_start);
+  EXPECT_EQ(d.record.rotate_s, 3600.0);
+  const DaemonConfig on = parse_daemon_config(kBase + "record: {auto_start: true, rotate_s: 600}\n", kSource);
+  EXPECT_TRUE(on.record.auto_start);
+  EXPECT_EQ(on.record.rotate_s, 600.0);
+  expect_error(kBase, "record.rotate_s", "must be > 0 (got 0)", {"record.rotate_s=0"});
+  expect_error(kBase, "record.rotate_s", "must be >= 1", {"record.rotate_s=0.5"});
+  expect_error(kBase, "record.rotate_s", "must be <= 604800", {"record.rotate_s=1e9"});
+  expect_error(kBase, "record.rotate_s", "finite", {"record.rotate_s=.nan"});
+  expect_error(kBase + "record: {auto: true}\n", "record.auto", "unknown key");
+  EXPECT_TRUE(load_daemon_config(kShipped).record.auto_start) << "the lab default records";
+}
+
 TEST(DaemonConfigYaml, PortsPrioritiesAndControlLimits) {
   expect_error(edit("port: 47800", "port: 70000"), "device.udp.port", "port out of range");
   expect_error(edit("port: 47800", "port: 0"), "device.udp.port", "port out of range");

@@ -177,6 +177,30 @@ TEST(SessionWriter, AbandonedCreationsOfGoneProcessesAreRemoved) {
   EXPECT_TRUE(remove_abandoned_creations(dir / "missing").empty());
 }
 
+// record.keep_gb: the oldest automatic recordings go first, until those left
+// (the one being written counted, never removed) fit; nothing else is touched.
+TEST(SessionWriter, TheOldestAutomaticRecordingsGoFirstAndNothingElse) {
+  TempDir dir;
+  const auto file = [&](const std::string& name, std::size_t bytes) {
+    std::ofstream(dir / name) << std::string(bytes, 'x');
+    return dir / name;
+  };
+  const std::string a = file("auto-20261101-000000.h5", 100), b = file("auto-20261101-010000.h5", 100),
+                    c = file("auto-20261101-010000-2.h5", 100), d = file("auto-20261101-010000-10.h5", 100),
+                    now = file("auto-20261101-020000.h5", 100);
+  const std::vector<std::string> others = {file("session-20261101-000000.h5", 1000), file("auto-notes.txt", 1000),
+                                           file("mine.h5", 1000)};
+  std::filesystem::create_directory(dir / "auto-dir.h5");
+  EXPECT_TRUE(remove_oldest_automatic_recordings(dir.path(), 500, now).empty()) << "500 B fit";
+  // Oldest first: by time, then "-K" numerically (by name, "-10" and "-2" sort before the first).
+  EXPECT_EQ(remove_oldest_automatic_recordings(dir.path(), 250, now), (std::vector<std::string>{a, b, c}));
+  EXPECT_EQ(remove_oldest_automatic_recordings(dir.path(), 0, now), (std::vector<std::string>{d}));
+  EXPECT_TRUE(std::filesystem::exists(now)) << "the file being written stays, whatever the budget";
+  for (const std::string& f : others) EXPECT_TRUE(std::filesystem::exists(f)) << f;
+  EXPECT_TRUE(std::filesystem::is_directory(dir / "auto-dir.h5"));
+  EXPECT_TRUE(remove_oldest_automatic_recordings(dir / "missing", 0, "").empty());
+}
+
 TEST(SessionWriter, InvalidMeshFramesAreRefusedWithoutTouchingTheFile) {
   TempDir dir;
   auto w = SessionWriter::open_in(dir.path(), "s.h5", test_metadata());

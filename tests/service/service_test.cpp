@@ -444,8 +444,9 @@ TEST(Service, RestartOnlyChangesAreListedInAFixedOrder) {
   b.device.sim.waypoints.push_back({});
   b.realtime.haptic_cpu = 1;
   b.control.tcp_port = 47900;
-  EXPECT_EQ(restart_only_changes(a, b),
-            (std::vector<std::string>{"device.kind", "device.sim", "device.udp", "realtime", "control", "state_dir"}));
+  b.record.rotate_s = 60;
+  EXPECT_EQ(restart_only_changes(a, b), (std::vector<std::string>{"device.kind", "device.sim", "device.udp", "realtime",
+                                                                  "control", "state_dir", "record"}));
 }
 
 // Plays systemd: READY=1 once serving, WATCHDOG=1 while the haptic loop
@@ -623,6 +624,115 @@ TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
   EXPECT_GT(status["result"]["steps"].get<std::int64_t>(), 0);
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// The session files in `dir`, sorted.
+std::vector<std::string> session_files(const std::string& dir) {
+  std::vector<std::string> files;
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().extension() == ".h5") files.push_back(e.path().string());
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+// record.auto_start: the service records from its start without a client,
+// a new file every record.rotate_s, each closed cleanly with its rows; a
+// client's record_stop ends it (no file after that).
+TEST(Service, RecordsOnItsOwnAndRotatesTheFile) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", state), 0.0,
+              {"record.auto_start=true", "record.rotate_s=1"});
+  ControlClient client = connect(dir / "ctl.sock");
+  nlohmann::json recording = client.call("status")["result"]["recording"];
+  ASSERT_TRUE(recording.is_object()) << recording.dump();
+  EXPECT_TRUE(recording["automatic"].get<bool>());
+  EXPECT_EQ(recording["state"], "recording");
+  std::this_thread::sleep_for(2500ms);
+  EXPECT_GE(session_files(state).size(), 2u) << "rotated at least once in 2.5 s";
+  // A client's record_start takes over (the automatic file ends), and is
+  // neither rotated nor refused as "already recording".
+  const nlohmann::json mine = client.call("record_start", {{"name", "mine.h5"}});
+  ASSERT_TRUE(mine["ok"].get<bool>()) << mine.dump();
+  EXPECT_FALSE(client.call("status")["result"]["recording"]["automatic"].get<bool>());
+  EXPECT_FALSE(client.call("record_start", {{"name", "other.h5"}})["ok"].get<bool>()) << "a client's is not replaced";
+  const nlohmann::json stop = client.call("record_stop");
+  ASSERT_TRUE(stop["ok"].get<bool>()) << stop.dump();
+  EXPECT_EQ(stop["result"]["file"], state + "/mine.h5");
+  const std::size_t files = session_files(state).size();
+  std::this_thread::sleep_for(1500ms);
+  EXPECT_EQ(session_files(state).size(), files) << "no rotation after record_stop";
+  EXPECT_TRUE(client.call("status")["result"]["recording"].is_null());
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+  for (const std::string& f : session_files(state)) {
+    const record::SessionInfo info = record::read_session_info(f);
+    EXPECT_TRUE(info.closed_cleanly) << f;
+    EXPECT_GT(info.rows.sim_rows, 0u) << f;
+  }
+  const std::vector<std::string> first = record::testing::event_messages(session_files(state).front());
+  EXPECT_TRUE(std::any_of(first.begin(), first.end(),
+                          [](const std::string& m) {
+                            return m.find("record.rotate_s (1 s) reached: the recording goes on in a new file") !=
+                                   std::string::npos;
+                          }))
+      << first.size() << " events";
+}
+
+// record.keep_gb: past the budget the oldest automatic files go at each
+// rotation (said on stdout); a file a client named stays.
+TEST(Service, OldAutomaticRecordingsGoPastTheirBudget) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  std::ofstream(state + "/mine.h5") << "a client's file";
+  Running run(write_config(dir, scene_file("beam.yaml"), "none", state), 3.5,
+              {"record.auto_start=true", "record.rotate_s=1", "record.keep_gb=1e-9"});
+  EXPECT_EQ(run.wait(), kServiceOk);
+  const std::string out = file_text(run.out);
+  EXPECT_NE(out.find("removed the oldest automatic recording " + state + "/auto-"), std::string::npos) << out;
+  EXPECT_NE(out.find("(record.keep_gb 1e-09 reached)"), std::string::npos) << out;
+  EXPECT_EQ(session_files(state), (std::vector<std::string>{session_files(state).front(), state + "/mine.h5"}))
+      << "the newest automatic file and the client's";
+}
+
+// Names the daemon makes up never collide: two nameless record_start (or
+// export_x3d) within one second failed with "already exists".
+TEST(Service, NamelessRecordingsAndExportsWithinOneSecondGetTheirOwnFiles) {
+  TempDir dir;
+  Running run(write_config(dir, scene_file("cantilever.yaml")));
+  ControlClient client = connect(dir / "ctl.sock");
+  for (int i = 0; i < 50 && client.call("export_x3d").value("ok", false) == false; ++i)
+    std::this_thread::sleep_for(20ms);
+  std::vector<std::string> files;
+  for (int i = 0; i < 3; ++i) {
+    const nlohmann::json start = client.call("record_start");
+    ASSERT_TRUE(start["ok"].get<bool>()) << start.dump();
+    files.push_back(start["result"]["file"]);
+    ASSERT_TRUE(client.call("record_stop")["ok"].get<bool>());
+    const nlohmann::json x3d = client.call("export_x3d");
+    ASSERT_TRUE(x3d["ok"].get<bool>()) << x3d.dump();
+  }
+  std::sort(files.begin(), files.end());
+  EXPECT_EQ(std::unique(files.begin(), files.end()), files.end());
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// An automatic recording that cannot start does not stop the service: it is
+// said, and tried again at the next rotation.
+TEST(Service, AnAutomaticRecordingThatCannotStartLeavesTheServiceServing) {
+  TempDir dir;
+  const std::string not_a_dir = dir / "state-is-a-file";
+  std::ofstream(not_a_dir) << "x";
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", not_a_dir), 1.5,
+              {"record.auto_start=true", "record.rotate_s=1"});
+  EXPECT_EQ(run.wait(), kServiceOk);
+  const std::string err = run.err_text();
+  EXPECT_NE(err.find("tissued: automatic recording: "), std::string::npos) << err;
+  EXPECT_NE(err.find("trying again in 1 s"), std::string::npos) << err;
+  EXPECT_NE(err.find("state-is-a-file"), std::string::npos) << err;
 }
 
 // Peak and mean force of the two tracks agree (25 % / 30 %); the original pressed.
