@@ -58,7 +58,15 @@ class SessionBase {
   // Closes an idle connection after a best-effort error line (a short write
   // to an idle socket fits its buffer).
   virtual void evict(const std::string& line) = 0;
+  // Mid-request (part of a line received, or a response not yet taken) and
+  // no byte moved either way for `after`: a client that sent half a line
+  // and went quiet, or stopped reading. 16 of them locked every client out
+  // (tissue ctl shutdown included) until they closed.
+  bool stalled(std::chrono::steady_clock::time_point now, std::chrono::milliseconds after) const {
+    return !idle() && now - last_progress >= after;
+  }
   std::chrono::steady_clock::time_point last_active = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point last_progress = std::chrono::steady_clock::now();
 };
 
 struct ControlServer::State : std::enable_shared_from_this<ControlServer::State> {
@@ -132,6 +140,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
     awaiting_request_ = line_.empty() && !discarding_ && out_.empty();
     socket_.async_read_some(asio::buffer(chunk_), [self](const boost::system::error_code& ec, std::size_t n) {
       self->awaiting_request_ = false;
+      self->last_progress = std::chrono::steady_clock::now();
       if (ec || self->state_->stopped) {
         self->finish();  // EOF (maybe mid-line: nothing to answer), reset, or stop()
         return;
@@ -187,7 +196,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
 
   void respond(std::string response) {
     // Activity is a request answered: blank lines (ignored) do not count.
-    last_active = std::chrono::steady_clock::now();
+    last_active = last_progress = std::chrono::steady_clock::now();
     out_ = std::move(response);
     out_ += '\n';
     auto self = this->shared_from_this();
@@ -197,6 +206,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
         return;
       }
       self->out_.clear();
+      self->last_progress = std::chrono::steady_clock::now();
       self->process();
     });
   }
@@ -225,18 +235,32 @@ void ControlServer::State::admit(Socket socket) {
   if (sessions.size() >= static_cast<std::size_t>(settings.max_connections)) {
     // Full: the connection idle the longest (nothing asked since its last
     // answer) makes way, so forgotten connections (a script that never
-    // closed its socket) cannot lock every client out. Only when every
-    // connection is in the middle of a request is the newcomer refused.
+    // closed its socket) cannot lock every client out; failing that, the one
+    // stalled the longest mid-request (half a line, then silence). Only when
+    // every connection is busy with a request is the newcomer refused.
+    const auto now = std::chrono::steady_clock::now();
     SessionBase* longest_idle = nullptr;
-    for (const auto& [session, owner] : sessions)
+    SessionBase* longest_stalled = nullptr;
+    for (const auto& [session, owner] : sessions) {
       if (session->idle() && (!longest_idle || session->last_active < longest_idle->last_active))
         longest_idle = session;
+      if (session->stalled(now, settings.stalled_after) &&
+          (!longest_stalled || session->last_progress < longest_stalled->last_progress))
+        longest_stalled = session;
+    }
     if (longest_idle) {
       longest_idle->evict(error_response("closed: this connection was the longest idle of " +
                                          std::to_string(settings.max_connections) +
                                          " open ones and a new client needed its place") +
                           "\n");
       sessions.erase(longest_idle);
+    } else if (longest_stalled) {
+      longest_stalled->evict(error_response("closed: this connection stalled mid-request (no byte for " +
+                                            std::to_string(settings.stalled_after.count()) + " ms) with all " +
+                                            std::to_string(settings.max_connections) +
+                                            " places taken, and a new client needed its place") +
+                             "\n");
+      sessions.erase(longest_stalled);
     }
   }
   if (sessions.size() >= static_cast<std::size_t>(settings.max_connections)) {

@@ -20,6 +20,7 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -36,6 +37,9 @@ struct ServerSettings {
   std::optional<std::uint16_t> tcp_port;  // nullopt: no TCP; 0: any free port (tests); bound to 127.0.0.1 only
   std::size_t max_line_bytes = 65536;     // longest request line, without its '\n'
   int max_connections = 16;               // open connections over both listeners; more are refused
+  // When full, a connection mid-request with no byte moved for this long
+  // makes way for a newcomer (after any idle one).
+  std::chrono::milliseconds stalled_after{5000};
 
   // ControlSpec's tcp_port 0 means "no TCP".
   static ServerSettings from_spec(const config::ControlSpec& spec);

@@ -257,6 +257,41 @@ TEST(ControlServer, WhenEveryConnectionIsMidRequestANewcomerIsRefused) {
   }
 }
 
+// ... unless it has stalled there: half a line and then nothing for
+// stalled_after. Sixteen such connections locked every client out until
+// they closed; the one stalled the longest now makes way.
+TEST(ControlServer, AConnectionStalledMidRequestMakesWayWhenFull) {
+  constexpr int kLimit = 3;
+  ServerSettings settings = unix_settings(65536, kLimit);
+  settings.stalled_after = std::chrono::milliseconds(200);
+  ServerHarness h(settings);
+  std::vector<std::unique_ptr<RawClient>> stalled;
+  for (int i = 0; i < kLimit; ++i) {
+    stalled.push_back(std::make_unique<RawClient>(h.socket_path()));
+    ASSERT_TRUE(stalled.back()->connected());
+    ASSERT_TRUE(h.wait_for_connections(static_cast<std::size_t>(i + 1)));
+    ASSERT_TRUE(stalled.back()->send_all("{\"cmd\":\"sta"));
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // distinct stall times
+  }
+  for (int i = 0; i < 1000 && h.idle_connections() > 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // all three past stalled_after
+  RawClient newcomer(h.socket_path());
+  ASSERT_TRUE(newcomer.connected());
+  const auto told = stalled[0]->read_line();
+  ASSERT_TRUE(told.has_value()) << "the longest stalled was not told";
+  EXPECT_NE(json::parse(*told).at("error").get<std::string>().find("stalled mid-request"), std::string::npos) << *told;
+  EXPECT_TRUE(stalled[0]->sees_eof());
+  ASSERT_TRUE(newcomer.send_all("{\"id\":1,\"cmd\":\"status\"}\n"));
+  const auto answer = newcomer.read_line();
+  ASSERT_TRUE(answer.has_value());
+  EXPECT_EQ(json::parse(*answer).at("ok"), true);
+  // The others keep their half lines, and finish them.
+  ASSERT_TRUE(stalled[1]->send_all("tus\"}\n"));
+  const auto finished = stalled[1]->read_line();
+  ASSERT_TRUE(finished.has_value());
+  EXPECT_EQ(json::parse(*finished).at("ok"), true);
+}
+
 TEST(ControlServer, ManySimultaneousClientsAreAllServedWithinTheLimit) {
   constexpr int kClients = 100;
   ServerHarness h(unix_settings(65536, kClients));
