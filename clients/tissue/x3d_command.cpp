@@ -93,7 +93,15 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
   const double t0 = o.from_s.value_or(source.frame_time_s(0));
   const double t1 = o.to_s.value_or(source.frame_time_s(n - 1));
   // An animation needs two frames, so a window of no length (--from 0.1
-  // --to 0.1, which may hold one frame) is refused with the reason.
+  // --to 0.1, which may hold one frame) is refused with the reason. Without
+  // --from/--to the window is the source's own: frames all at one time
+  // (a live stream from a paused daemon) are the source's, not the
+  // arguments' (it said "--from 0 --to 0" to a user who gave neither).
+  const bool window_given = o.from_s.has_value() || o.to_s.has_value();
+  if (!window_given && !(t0 < t1))
+    throw x3d::SourceError(source.name() + ": its " + std::to_string(n) +
+                           " frames are all at t=" + x3d::frame_time_text(t0) +
+                           " s (a paused simulation sends the same time); an animation needs frames at 2 times");
   if (!(t0 < t1))
     throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) +
                        (t0 == t1 ? ": the window has no length; an animation needs at least 2 frames"

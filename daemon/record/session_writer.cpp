@@ -104,7 +104,8 @@ void validate_session_name(const std::string& name, const std::string& what) {
   const std::string not_text = util::why_not_clean_text(name);
   const auto bad = [&](const std::string& why) {
     throw RecordError(what + " name " + (not_text.empty() ? "'" + name + "' " : std::string()) + "rejected: " + why +
-                      " (a " + what + " is a plain file name inside the state directory)");
+                      (what.find_first_of("aeiou") == 0 ? " (an " : " (a ") + what +
+                      " is a plain file name inside the state directory)");
   };
   if (name.empty()) bad("it is empty");
   if (name.find('/') != std::string::npos) bad("it contains '/'");

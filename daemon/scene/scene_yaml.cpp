@@ -310,6 +310,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
                                          std::to_string(a.min_depth) + "), more than " +
                                          std::to_string(6 * kMaxTotalCubes));
     }
+    // Before min <= max: a negative max_depth was reported at min_depth.
+    at_least(a.max_depth, 0, "adaptivity.max_depth");
     if (a.max_depth > kMaxDepthLimit)
       fail("adaptivity.max_depth",
            "must be <= " + std::to_string(kMaxDepthLimit) + " (got " + std::to_string(a.max_depth) + ")");

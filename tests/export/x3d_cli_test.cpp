@@ -231,6 +231,20 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
 }
 
+// Frames all at one time (a paused daemon's stream, recorded or live) cannot
+// animate: the source's fault, said of the source (exit 1), not of
+// --from/--to, which the user never gave (it said "--from 0 --to 0", exit 2).
+TEST_F(X3dCli, AnAnimationOfFramesAllAtOneTimeIsTheSourcesFault) {
+  const std::string paused = write_session(
+      dir_, "paused.h5",
+      {testing::tetra_frame(0.5, 0.0625), testing::tetra_frame(0.5, 0.0625), testing::tetra_frame(0.5, 0.0625)});
+  const RunResult r = x3d("--session " + quote(paused) + " --animate -o " + quote(dir_ / "p.x3d"));
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("'" + paused + "': its 3 frames are all at t=0.5 s"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("--from"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "p.x3d"));
+}
+
 // -o naming the session would rename the export over the recording.
 TEST_F(X3dCli, RefusesToOverwriteTheInputSession) {
   std::filesystem::create_symlink(session_, dir_ / "link.x3d");

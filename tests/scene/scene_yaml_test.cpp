@@ -373,6 +373,8 @@ TEST(SceneYamlErrors, PhysicallyMeaninglessValues) {
                "the starting mesh would have 412316860416 tetrahedra (64 cubes x 6 x 2^30), more than 60000000");
   EXPECT_NO_THROW(parse_scene(base_with("min_depth: 0\n  max_depth: 3", "min_depth: 12\n  max_depth: 12"), "ok.yaml"));
   expect_error(base_with("max_depth: 3", "max_depth: 31"), "adaptivity.max_depth", "<= 30");
+  // A negative max_depth was reported at min_depth ("must be <= max_depth (-1) (got 0)").
+  expect_error(base_with("max_depth: 3", "max_depth: -1"), "adaptivity.max_depth", "must be >= 0 (got -1)");
   expect_error(base_with("simplify_factor: 0.25", "simplify_factor: 1"), "adaptivity.simplify_factor", "(0, 1)");
   expect_error(base_with("stretch_ratio: 1.05", "stretch_ratio: 1"), "adaptivity.stretch_ratio", "> 1");
   expect_error(base_with("every_steps: 5", "every_steps: 0"), "adaptivity.every_steps", ">= 1");
