@@ -39,11 +39,11 @@ SimThreadOptions sim_options(const config::DaemonConfig& c) {
   return o;
 }
 
-// PREFIX-20261123-101500.EXT (UTC): the file name when a command gives none.
-// PREFIX + YYYYmmdd-HHMMSS (UTC) + EXTENSION, or with "-2", "-3", ... before
-// the extension when a file of that name is in `dir`: two nameless
-// record_start or export_x3d within one second (or a rotation) failed with
-// "already exists" on a name the user never gave.
+// The file name when a command gives none: PREFIX + YYYYmmdd-HHMMSS (UTC)
+// + EXTENSION, or with "-2", "-3", ... before the extension when a file of
+// that name is in `dir`: two nameless record_start or export_x3d within one
+// second (or a rotation) failed with "already exists" on a name the user
+// never gave.
 std::string free_timestamped_name(const std::string& dir, std::string_view prefix, std::string_view extension) {
   const std::time_t now = std::time(nullptr);
   std::tm utc{};
@@ -244,7 +244,9 @@ void Service::start_automatic_recording() {
   try {
     start_recording(free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5"));
     // The oldest automatic files go once they hold more than keep_gb, this
-    // one counted; said on stderr and in the new file's events.
+    // one counted; said on stdout and in the new file's events. (Rows that
+    // arrive between the old file's close and this one's start, a few ms,
+    // are in neither.)
     if (config_.record.keep_gb > 0.0)
       for (const std::string& gone : record::remove_oldest_automatic_recordings(
                config_.state_dir, static_cast<std::uintmax_t>(config_.record.keep_gb * 1e9), recorder_->path())) {
