@@ -249,6 +249,65 @@ std::string report_text(const nlohmann::json& report) {
   return report.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
+namespace {
+
+// What the report's health figures say, said once more where a user looks
+// (stderr, after the run): a run that passes the stability bar
+// prints none of it.
+void warn_of_health(const scene::Scene& scene, const physics::SimCounters& c, const nlohmann::json& result) {
+  if (c.unconverged_steps > 0) {
+    // The run succeeded, but part of it is less accurate than the scene asked.
+    std::fflush(stdout);
+    // The two-level hint only for the implicit rung (the preconditioner is
+    // its CG's; projective has none) and where it is not what ran already.
+    const bool hint_two_level = scene.integrator.kind == scene::IntegratorKind::kImplicit &&
+                                scene.integrator.cg_preconditioner != scene::CgPreconditioner::kTwoLevel;
+    std::fprintf(stderr,
+                 "tissued: warning: %lld of %lld steps stopped at integrator.cg_max_iterations = %d short of "
+                 "integrator.cg_tolerance = %g; raise cg_max_iterations%s lower dt_s%s\n",
+                 static_cast<long long>(c.unconverged_steps), static_cast<long long>(c.steps),
+                 scene.integrator.cg_max_iterations, scene.integrator.cg_tolerance, hint_two_level ? "," : " or",
+                 hint_two_level ? ", or (slender or heavily damped objects) try cg_preconditioner: two_level" : "");
+  }
+  if (c.energy_limited_steps > 0) {
+    std::fflush(stdout);
+    std::fprintf(stderr,
+                 "tissued: warning: %lld of %lld implicit steps ended with more energy than the body was given and "
+                 "were slowed (%.3g J taken out): the springs turned far within a step; lower dt_s for a faithful "
+                 "trajectory\n",
+                 static_cast<long long>(c.energy_limited_steps), static_cast<long long>(c.steps), c.energy_limited_J);
+  }
+  if (const auto& audit = result["energy_audit"]; audit["worst_excess"].get<double>() > kReportedEnergyExcess) {
+    std::fflush(stdout);
+    std::fprintf(stderr,
+                 "tissued: warning: the body held %.3g %% more energy than it started with plus the work done on it "
+                 "(at t = %.6g s)%s\n",
+                 100.0 * audit["worst_excess"].get<double>(), audit["at_t_s"].get<double>(),
+                 scene.integrator.kind == scene::IntegratorKind::kExplicit
+                     ? "; explicit steps swing in energy by O(h omega): lower integrator.substep_safety or add "
+                       "damping"
+                     : "");
+  }
+  if (c.refine_ceiling_passes > 0) {
+    std::fflush(stdout);
+    std::fprintf(stderr,
+                 "tissued: warning: %lld adaptation passes stopped refining at adaptivity.max_tets = %d; raise it "
+                 "or the threshold (adaptivity.refine_threshold_Pa)\n",
+                 static_cast<long long>(c.refine_ceiling_passes), scene.adaptivity.max_tets);
+  }
+  if (const auto& inverted = result["inverted_tets"]; inverted["peak"].get<std::size_t>() > 0) {
+    std::fflush(stdout);
+    std::fprintf(stderr,
+                 "tissued: warning: %zu tets were inside out at the worst (t = %.6g s), %zu at the end: springs do "
+                 "not resist inversion (NUMERICS.md section 3)\n",
+                 inverted["peak"].get<std::size_t>(),
+                 inverted["peak_at_t_s"].is_null() ? 0.0 : inverted["peak_at_t_s"].get<double>(),
+                 inverted["final"].get<std::size_t>());
+  }
+}
+
+}  // namespace
+
 int batch_command(const BatchOptions& options) {
   // stdout carries the live figures; flush it before each stderr line so the
   // two read in order on a terminal.
@@ -356,58 +415,7 @@ int batch_command(const BatchOptions& options) {
       return fail(kExitReport, write_error);
     }
     if (!record_error.empty()) return fail(kExitRecord, record_error);
-    if (const physics::SimCounters& c = sim->counters(); c.unconverged_steps > 0) {
-      // The run succeeded, but part of it is less accurate than the scene asked.
-      std::fflush(stdout);
-      // The two-level hint only for the implicit rung (the preconditioner is
-      // its CG's; projective has none) and where it is not what ran already.
-      const bool hint_two_level = scene.integrator.kind == scene::IntegratorKind::kImplicit &&
-                                  scene.integrator.cg_preconditioner != scene::CgPreconditioner::kTwoLevel;
-      std::fprintf(stderr,
-                   "tissued: warning: %lld of %lld steps stopped at integrator.cg_max_iterations = %d short of "
-                   "integrator.cg_tolerance = %g; raise cg_max_iterations%s lower dt_s%s\n",
-                   static_cast<long long>(c.unconverged_steps), static_cast<long long>(c.steps),
-                   scene.integrator.cg_max_iterations, scene.integrator.cg_tolerance, hint_two_level ? "," : " or",
-                   hint_two_level ? ", or (slender or heavily damped objects) try cg_preconditioner: two_level" : "");
-    }
-    // What the report's health figures say, said once more where a user
-    // looks: a run that passes the stability bar prints none of it.
-    const physics::SimCounters& c = sim->counters();
-    if (c.energy_limited_steps > 0) {
-      std::fflush(stdout);
-      std::fprintf(stderr,
-                   "tissued: warning: %lld of %lld implicit steps ended with more energy than the body was given and "
-                   "were slowed (%.3g J taken out): the springs turned far within a step; lower dt_s for a faithful "
-                   "trajectory\n",
-                   static_cast<long long>(c.energy_limited_steps), static_cast<long long>(c.steps), c.energy_limited_J);
-    }
-    if (const auto& audit = result["energy_audit"]; audit["worst_excess"].get<double>() > kReportedEnergyExcess) {
-      std::fflush(stdout);
-      std::fprintf(stderr,
-                   "tissued: warning: the body held %.3g %% more energy than it started with plus the work done on it "
-                   "(at t = %.6g s)%s\n",
-                   100.0 * audit["worst_excess"].get<double>(), audit["at_t_s"].get<double>(),
-                   scene.integrator.kind == scene::IntegratorKind::kExplicit
-                       ? "; explicit steps swing in energy by O(h omega): lower integrator.substep_safety or add "
-                         "damping"
-                       : "");
-    }
-    if (c.refine_ceiling_passes > 0) {
-      std::fflush(stdout);
-      std::fprintf(stderr,
-                   "tissued: warning: %lld adaptation passes stopped refining at adaptivity.max_tets = %d; raise it "
-                   "or the threshold (adaptivity.refine_threshold_Pa)\n",
-                   static_cast<long long>(c.refine_ceiling_passes), scene.adaptivity.max_tets);
-    }
-    if (const auto& inverted = result["inverted_tets"]; inverted["peak"].get<std::size_t>() > 0) {
-      std::fflush(stdout);
-      std::fprintf(stderr,
-                   "tissued: warning: %zu tets were inside out at the worst (t = %.6g s), %zu at the end: springs do "
-                   "not resist inversion (NUMERICS.md section 3)\n",
-                   inverted["peak"].get<std::size_t>(),
-                   inverted["peak_at_t_s"].is_null() ? 0.0 : inverted["peak_at_t_s"].get<double>(),
-                   inverted["final"].get<std::size_t>());
-    }
+    warn_of_health(scene, sim->counters(), result);
     if (talk) {
       std::printf("done: %.6g s simulated in %lld steps", sim->time_s(), static_cast<long long>(sim->counters().steps));
       if (report.contains("timing")) {
