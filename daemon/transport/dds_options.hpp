@@ -11,7 +11,8 @@ namespace tissue::transport {
 struct DdsOptions {
   int domain_id = 0;                     // 0..232 (Fast DDS's default port mapping)
   std::string topic_prefix = "tissue/";  // topics: <prefix>surface_mesh, <prefix>haptic_state, <prefix>sim_stats
-  // true: UDPv4 whitelisted to 127.0.0.1 + shared memory, this host only;
+  // true: UDPv4 whitelisted to 127.0.0.1 + shared memory (the publisher;
+  // DdsMeshSubscriber never maps shared memory, see dds_subscriber.cpp), this host only;
   // false: UDPv4 on every interface too (a peer on another host).
   bool loopback_only = true;
   // Sizes the shared-memory segment; the publisher does not send larger

@@ -1,5 +1,8 @@
 #include "transport/dds_subscriber.hpp"
 
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
+#include <algorithm>
 #include <chrono>
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
@@ -10,6 +13,7 @@
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
+#include <limits>
 #include <stdexcept>
 
 #include "tissue_dds/surface_meshPubSubTypes.h"
@@ -51,8 +55,32 @@ struct DdsMeshSubscriber::Impl {
 DdsMeshSubscriber::DdsMeshSubscriber(const DdsOptions& o) : options_(o), impl_(std::make_unique<Impl>()) {
   const std::string where = "DDS subscribing on domain " + std::to_string(o.domain_id);
   if (o.domain_id < 0 || o.domain_id > 232) throw std::runtime_error(where + ": domain id must be within 0..232");
-  impl_->participant = dds::DomainParticipantFactory::get_instance()->create_participant(
-      static_cast<dds::DomainId_t>(o.domain_id), dds_participant_qos(o.loopback_only, o.max_mesh_bytes, "tissue"));
+  // UDP only, no shared memory, on the subscriber side. A reader that dies
+  // by SIGKILL leaves its shared-memory ports behind; the next subscriber
+  // gets the same participant id, hence the same port names, and Fast DDS
+  // 2.9.1 recreates those ports, but a publisher that had opened the old
+  // ones keeps writing into them (unlinked, nobody listening) whenever the
+  // dead listener was not blocked in its wait: every later subscriber on
+  // that id then gets nothing until the publisher restarts. UDP leaves no
+  // such state. The publisher keeps both transports and uses UDP for us.
+  dds::DomainParticipantQos pq = dds_participant_qos(o.loopback_only, o.max_mesh_bytes, "tissue");
+  auto& transports = pq.transport().user_transports;
+  transports.erase(
+      std::remove_if(transports.begin(), transports.end(),
+                     [](const auto& t) {
+                       return std::dynamic_pointer_cast<eprosima::fastdds::rtps::SharedMemTransportDescriptor>(t) !=
+                              nullptr;
+                     }),
+      transports.end());
+  // Room for every fragment of a full-size mesh (the kernel caps it at
+  // net.core.rmem_max; reliable repairs cover the rest).
+  const std::size_t rcvbuf =
+      std::min<std::size_t>(o.max_mesh_bytes + (1u << 20), std::numeric_limits<std::uint32_t>::max() / 2);
+  for (auto& t : transports)
+    if (auto udp = std::dynamic_pointer_cast<eprosima::fastdds::rtps::UDPv4TransportDescriptor>(t))
+      udp->receiveBufferSize = static_cast<std::uint32_t>(rcvbuf);
+  impl_->participant =
+      dds::DomainParticipantFactory::get_instance()->create_participant(static_cast<dds::DomainId_t>(o.domain_id), pq);
   if (!impl_->participant) throw std::runtime_error(where + ": cannot create the domain participant");
   if (impl_->type.register_type(impl_->participant) != ReturnCode_t::RETCODE_OK)
     throw std::runtime_error(where + ": cannot register type " + impl_->type.get_type_name());
