@@ -14,12 +14,14 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <system_error>
 #include <tuple>
 
 #include "util/text.hpp"
+#include "util/timestamped_name.hpp"
 
 namespace tissue::record {
 
@@ -196,8 +198,7 @@ std::vector<std::string> remove_oldest_automatic_recordings(const std::string& d
   // Oldest first: by the time in the name, then by the "-K" a second file
   // of the same second got (by name alone "…-2.h5" sorts before "….h5").
   struct Candidate {
-    std::string time;
-    long k = 1;
+    util::NameStamp stamp;
     std::string path;
     std::uintmax_t bytes = 0;
   };
@@ -210,22 +211,18 @@ std::vector<std::string> remove_oldest_automatic_recordings(const std::string& d
     if (ec) return {};
     const std::string name = it->path().filename().string();
     if (name.rfind(kAutomaticPrefix, 0) != 0 || it->path().extension() != ".h5" || !it->is_regular_file(ec)) continue;
+    // Only the names the service makes up: a client's "auto-notes.h5" is the client's.
+    const std::optional<util::NameStamp> stamp =
+        util::read_name_stamp(it->path().stem().string().substr(kAutomaticPrefix.size()));
+    if (!stamp) continue;
     const std::uintmax_t bytes = it->file_size(ec);
     if (ec) continue;
     total += bytes;
-    if (!keep.empty() && fs::equivalent(it->path(), keep, ec)) continue;                  // counted, never removed
-    const std::string stem = it->path().stem().string().substr(kAutomaticPrefix.size());  // YYYYmmdd-HHMMSS[-K]
-    Candidate c{stem, 1, it->path().string(), bytes};
-    if (stem.size() > 16 && stem[15] == '-' &&
-        std::all_of(stem.begin() + 16, stem.end(), [](char ch) { return ch >= '0' && ch <= '9'; }) &&
-        stem.size() < 16 + 9) {
-      c.time = stem.substr(0, 15);
-      c.k = std::stol(stem.substr(16));
-    }
-    files.push_back(std::move(c));
+    if (!keep.empty() && fs::equivalent(it->path(), keep, ec)) continue;  // counted, never removed
+    files.push_back({*stamp, it->path().string(), bytes});
   }
   std::sort(files.begin(), files.end(), [](const Candidate& x, const Candidate& y) {
-    return std::tie(x.time, x.k, x.path) < std::tie(y.time, y.k, y.path);
+    return std::tie(x.stamp.time, x.stamp.k, x.path) < std::tie(y.stamp.time, y.stamp.k, y.path);
   });
   std::vector<std::string> removed;
   for (const Candidate& c : files) {

@@ -43,12 +43,12 @@ void validate_session_name(const std::string& name, const std::string& what = "s
 std::vector<std::string> remove_abandoned_creations(const std::string& dir);
 
 // The service's automatic recordings (record.auto_start) are named
-// kAutomaticPrefix + "YYYYmmdd-HHMMSS[-K].h5": their names sort by time.
+// kAutomaticPrefix + "YYYYmmdd-HHMMSS[-K].h5" (util/timestamped_name).
 inline constexpr std::string_view kAutomaticPrefix = "auto-";
 // Removes the oldest automatic recordings in `dir` (regular files named
-// kAutomaticPrefix...".h5", oldest first by name) until those left hold at
-// most `keep_bytes` together, never `keep` (the file being written) nor any
-// other file. Returns the removed paths; a directory that cannot be read
+// kAutomaticPrefix + "YYYYmmdd-HHMMSS[-K].h5", oldest first by that time,
+// then K) until those left hold at most `keep_bytes` together, never `keep`
+// (the file being written) nor any other file, whatever its prefix. Returns the removed paths; a directory that cannot be read
 // removes nothing.
 std::vector<std::string> remove_oldest_automatic_recordings(const std::string& dir, std::uintmax_t keep_bytes,
                                                             const std::string& keep);

@@ -24,6 +24,7 @@
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 #include "util/output_file.hpp"
+#include "util/timestamped_name.hpp"
 
 namespace tissue::service {
 
@@ -37,31 +38,6 @@ SimThreadOptions sim_options(const config::DaemonConfig& c) {
   // Energies are only read by sim_stats and `status`: sum them at the stats rate.
   o.energy_every_s = 1.0 / std::max(c.publish.stats_rate_hz, 1.0);
   return o;
-}
-
-// The file name when a command gives none: PREFIX + YYYYmmdd-HHMMSS (UTC)
-// + EXTENSION, or with "-2", "-3", ... before the extension when a file of
-// that name is in `dir`: two nameless record_start or export_x3d within one
-// second (or a rotation) failed with "already exists" on a name the user
-// never gave.
-std::string free_timestamped_name(const std::string& dir, std::string_view prefix, std::string_view extension) {
-  const std::time_t now = std::time(nullptr);
-  std::tm utc{};
-  gmtime_r(&now, &utc);
-  char stamp[32];
-  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &utc);
-  std::string stem(prefix);
-  stem += stamp;
-  std::string name = stem;
-  name += extension;
-  std::error_code ec;
-  for (int k = 2; k < 1000 && std::filesystem::exists(std::filesystem::path(dir) / name, ec); ++k) {
-    name = stem;
-    name += '-';
-    name += std::to_string(k);
-    name += extension;
-  }
-  return name;
 }
 
 nlohmann::json status_json(const SimStatus& s) {
@@ -229,9 +205,10 @@ void Service::start_recording(const std::string& name) {
       std::fflush(options_.err);
     });
   };
-  recorder_ = record::Recorder::start(config_.state_dir,
-                                      name.empty() ? free_timestamped_name(config_.state_dir, "session-", ".h5") : name,
-                                      meta, options);
+  recorder_ = record::Recorder::start(
+      config_.state_dir,
+      name.empty() ? util::free_timestamped_name(config_.state_dir, "session-", ".h5", std::time(nullptr)) : name, meta,
+      options);
   if (sim_ && sim_->set_recorder(recorder_.get())) retired_recorders_.clear();
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), "recording " + scene_.name + " from " + scene_path_);
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
@@ -242,7 +219,8 @@ void Service::start_automatic_recording() {
   automatic_recording_ = true;
   automatic_since_ = std::chrono::steady_clock::now();
   try {
-    start_recording(free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5"));
+    start_recording(
+        util::free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5", std::time(nullptr)));
     // The oldest automatic files go once they hold more than keep_gb, this
     // one counted; said on stdout and in the new file's events. (Rows that
     // arrive between the old file's close and this one's start, a few ms,
@@ -794,7 +772,8 @@ nlohmann::json Service::record_stop() {
 }
 
 nlohmann::json Service::export_x3d(const std::string& name) {
-  const std::string file_name = name.empty() ? free_timestamped_name(config_.state_dir, "surface-", ".x3d") : name;
+  const std::string file_name =
+      name.empty() ? util::free_timestamped_name(config_.state_dir, "surface-", ".x3d", std::time(nullptr)) : name;
   // Same rule as recordings: a plain file name inside the state directory.
   try {
     record::validate_session_name(file_name, "export");

@@ -189,7 +189,8 @@ TEST(SessionWriter, TheOldestAutomaticRecordingsGoFirstAndNothingElse) {
                     c = file("auto-20261101-010000-2.h5", 100), d = file("auto-20261101-010000-10.h5", 100),
                     now = file("auto-20261101-020000.h5", 100);
   const std::vector<std::string> others = {file("session-20261101-000000.h5", 1000), file("auto-notes.txt", 1000),
-                                           file("mine.h5", 1000)};
+                                           file("mine.h5", 1000), file("auto-mine.h5", 1000),
+                                           file("auto-20261101-000000-x.h5", 1000)};
   std::filesystem::create_directory(dir / "auto-dir.h5");
   EXPECT_TRUE(remove_oldest_automatic_recordings(dir.path(), 500, now).empty()) << "500 B fit";
   // Oldest first: by time, then "-K" numerically (by name, "-10" and "-2" sort before the first).
