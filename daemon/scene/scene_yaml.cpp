@@ -477,7 +477,7 @@ Scene build(const std::string& yaml_text, const std::string& source, const std::
 }
 
 std::string read_file(const std::string& path) {
-  return yaml_util::read_text_file_as<SceneError>(path, kMaxSceneFileBytes, "scene file");
+  return yaml_util::read_text_file_as<SceneFileUnreadable>(path, kMaxSceneFileBytes, "scene file");
 }
 
 }  // namespace

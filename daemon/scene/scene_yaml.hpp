@@ -29,13 +29,21 @@ class SceneError : public yaml_util::DocumentError {
       : DocumentError(source, key_path, reason, "<scene>") {}
 };
 
+// A scene file that could not be read at all (missing, a directory, not
+// readable, too large): the fault of whoever named it (a daemon config's
+// `scene`, a control request), not of a key inside it.
+class SceneFileUnreadable : public SceneError {
+ public:
+  using SceneError::SceneError;
+};
+
 // The SceneError for a value that did not fit the mesh (thrown while the
 // body was built): the scene's file, the key path, the reason, and the
 // --set that set it, as every other scene error.
 SceneError model_error(const Scene& scene, const SceneModelError& e);
 
 // Reads and parses a scene file. A missing, unreadable or oversized file is a
-// SceneError naming the file. Scene::source is set to `path`.
+// SceneFileUnreadable naming the file. Scene::source is set to `path`.
 Scene load_scene_file(const std::string& path);
 
 // Parses scene text; `source_name` is used in messages, stored in

@@ -102,11 +102,10 @@ scene::Scene Service::load_scene_file(const std::string& path) const {
 scene::Scene Service::load_config_scene(const config::DaemonConfig& config) const {
   try {
     return load_scene_file(config.scene_path);
-  } catch (const scene::SceneError& e) {
+  } catch (const scene::SceneFileUnreadable& e) {
     // A scene file that cannot be read is the config's `scene` at fault (or
     // the --set that changed it): name them. Errors inside the file name
     // the file and key themselves.
-    if (!e.key_path().empty() || e.source() != config.scene_path || e.reason().rfind("cannot read", 0) != 0) throw;
     std::string blame;
     for (const std::string& o : config_overrides())
       if (o.rfind("scene=", 0) == 0) blame = " (set by --set " + yaml_util::printable(o) + ")";

@@ -12,8 +12,13 @@
 #include <string>
 #include <vector>
 
+#include "support/process_support.hpp"
+
 namespace tissue::scene {
 namespace {
+
+using tissue::testing::TempDir;
+using tissue::testing::write_text;
 
 std::string scene_path(const std::string& file) { return std::string(TISSUE_SOURCE_DIR) + "/config/scenes/" + file; }
 
@@ -475,12 +480,32 @@ TEST(SceneYamlErrors, MissingFile) {
   try {
     load_scene_file(path);
     FAIL() << "no error";
-  } catch (const SceneError& e) {
+  } catch (const SceneFileUnreadable& e) {
     EXPECT_EQ(e.source(), path);
     EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("no such file"), std::string::npos) << e.what();
   }
-  EXPECT_THROW(load_scene_file(std::string(TISSUE_SOURCE_DIR) + "/config/scenes"), SceneError);  // a directory
+  EXPECT_THROW(load_scene_file(std::string(TISSUE_SOURCE_DIR) + "/config/scenes"), SceneFileUnreadable);  // a directory
+}
+
+// What is wrong inside a file that was read is the file's own error, not an
+// unreadable file (the daemon blames its config's `scene` key only for the
+// latter).
+TEST(SceneYamlErrors, AnErrorInsideAReadFileIsNotAnUnreadableFile) {
+  TempDir dir;
+  for (const std::string& text :
+       {std::string("object: [\n"), std::string("name: x\n"), std::string("cannot read: 1\n")}) {
+    const std::string path = dir / "bad.yaml";
+    write_text(path, text);
+    try {
+      load_scene_file(path);
+      FAIL() << "no error for " << text;
+    } catch (const SceneFileUnreadable& e) {
+      ADD_FAILURE() << "an error inside the file counted as unreadable: " << e.what();
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.source(), path);
+    }
+  }
 }
 
 TEST(SceneYamlErrors, YamlSyntaxErrorGivesTheLine) {
