@@ -35,21 +35,169 @@ void add_spring_forces(const Body& body, std::vector<Vec3>& f, bool with_dampers
   }
 }
 
-void apply_spring_dampers_implicitly(Body& body, double h_s) {
+namespace {
+constexpr int kDamperSolveMaxIterations = 500;
+
+bool is_free(const Body& body, NodeId n) { return body.inv_mass_per_kg[n] != 0.0; }
+
+// out = (mass_scale M + h C) v over the free nodes; kinematic entries of v
+// are taken as zero (their known velocities are on the right-hand side) and
+// those of out are zero.
+void apply_damped_mass(const Body& body, double h_s, double mass_scale, const std::vector<Vec3>& direction,
+                       const std::vector<Vec3>& v, std::vector<Vec3>& out) {
+  const std::size_t nodes = v.size();
+  for (NodeId n = 0; n < nodes; ++n)
+    out[n] = is_free(body, n) ? Vec3(mass_scale * body.mass_kg[n] * v[n]) : Vec3::Zero();
   const std::size_t edges = body.damping_N_s_per_m.size();
   for (EdgeId e = 0; e < edges; ++e) {
     const double c = body.damping_N_s_per_m[e];
     if (c == 0.0) continue;
     const NodeId a = body.edge_a[e], b = body.edge_b[e];
-    const double wa = body.inv_mass_per_kg[a], wb = body.inv_mass_per_kg[b];
-    const double w = wa + wb;
-    if (w == 0.0) continue;  // both ends kinematic
-    const Vec3 d = spring_frame(body, e).direction;
-    const double u = (body.v_m_per_s[b] - body.v_m_per_s[a]).dot(d);
-    const double impulse = (u / (1.0 + h_s * c * w) - u) / w;  // changes u by exactly that
-    body.v_m_per_s[a] -= wa * impulse * d;
-    body.v_m_per_s[b] += wb * impulse * d;
+    const bool free_a = is_free(body, a), free_b = is_free(body, b);
+    const Vec3& d = direction[e];
+    const Vec3 va = free_a ? v[a] : Vec3::Zero(), vb = free_b ? v[b] : Vec3::Zero();
+    const Vec3 f = (h_s * c * d.dot(va - vb)) * d;  // h × the damper's force on b, −that on a
+    if (free_a) out[a] += f;
+    if (free_b) out[b] -= f;
   }
+}
+
+NodeId find(std::vector<NodeId>& parent, NodeId n) {
+  while (parent[n] != n) n = parent[n] = parent[parent[n]];  // path halving
+  return n;
+}
+
+void join(std::vector<NodeId>& parent, NodeId a, NodeId b) {
+  a = find(parent, a);
+  b = find(parent, b);
+  if (a != b) parent[std::max(a, b)] = std::min(a, b);
+}
+
+double dot_free(const Body& body, const std::vector<Vec3>& x, const std::vector<Vec3>& y) {
+  double sum = 0.0;
+  for (NodeId n = 0; n < x.size(); ++n)
+    if (is_free(body, n)) sum += x[n].dot(y[n]);
+  return sum;
+}
+
+// The springs' directions; b = M v plus, for a damper to a kinematic node,
+// that node's known share; the Jacobi preconditioner, per component
+// 1 / (mass_scale m + h Σ c d_i²) (the 3×3 blocks mass_scale m I + h Σ c d dᵀ
+// inverted saved 6 % of the iterations and cost more time: the shipped
+// cantilever on the projective rung, 33.3 against 35.6 per step, 0.52 against
+// 0.47 s of 1.2); the sets of free nodes joined by dampers
+// (union–find) and which of them a damper ties to a kinematic node.
+void set_up_damper_solve(const Body& body, double h_s, double mass_scale, ImplicitDamperWork& work) {
+  const std::size_t nodes = body.v_m_per_s.size(), edges = body.damping_N_s_per_m.size();
+  work.direction.resize(edges);
+  for (auto* v : {&work.rhs, &work.r, &work.z, &work.p, &work.q}) v->resize(nodes);
+  work.inv_diag.resize(nodes);
+  work.component.resize(nodes);
+  work.tied.assign(nodes, 0);
+  for (NodeId n = 0; n < nodes; ++n) {
+    const bool free = is_free(body, n);
+    work.rhs[n] = free ? Vec3(body.mass_kg[n] * body.v_m_per_s[n]) : Vec3::Zero();
+    work.inv_diag[n] = Vec3::Constant(free ? mass_scale * body.mass_kg[n] : 0.0);
+    work.component[n] = n;
+  }
+  for (EdgeId e = 0; e < edges; ++e) {
+    const double c = body.damping_N_s_per_m[e];
+    if (c == 0.0) continue;
+    const NodeId a = body.edge_a[e], b = body.edge_b[e];
+    const Vec3 d = spring_frame(body, e).direction;
+    work.direction[e] = d;
+    const bool free_a = is_free(body, a), free_b = is_free(body, b);
+    const Vec3 diagonal = h_s * c * d.cwiseProduct(d);
+    if (free_a) work.inv_diag[a] += diagonal;
+    if (free_b) work.inv_diag[b] += diagonal;
+    if (free_a && free_b) join(work.component, a, b);
+    if (free_a && !free_b) {
+      work.rhs[a] += (h_s * c * d.dot(body.v_m_per_s[b])) * d;
+      work.tied[a] = 1;
+    }
+    if (free_b && !free_a) {
+      work.rhs[b] += (h_s * c * d.dot(body.v_m_per_s[a])) * d;
+      work.tied[b] = 1;
+    }
+  }
+  for (NodeId n = 0; n < nodes; ++n)
+    if (is_free(body, n)) work.inv_diag[n] = work.inv_diag[n].cwiseInverse();
+}
+
+// A set of free nodes joined by dampers changes its momentum by −Σ r /
+// mass_scale over it (C's rows sum to zero), a residual's worth, unless a
+// damper ties it to a kinematic node (then the world takes momentum anyway).
+// Spread that back over the set uniformly: its uniform motion is in C's null
+// space, so the damping stays as solved and a free body keeps its momentum to
+// rounding, step after step. `r` must be the true residual b − A v (CG's
+// updated one drifts from it when the system is stiff).
+void restore_momentum(const Body& body, double mass_scale, ImplicitDamperWork& work, std::vector<Vec3>& v) {
+  const std::size_t nodes = v.size();
+  work.set_mass_kg.assign(nodes, 0.0);
+  for (NodeId n = 0; n < nodes; ++n) work.q[n] = Vec3::Zero();  // the set's lost momentum, at its root
+  for (NodeId n = 0; n < nodes; ++n) {
+    if (!is_free(body, n)) continue;
+    const NodeId root = find(work.component, n);
+    work.q[root] += work.r[n];
+    work.set_mass_kg[root] += body.mass_kg[n];
+    if (work.tied[n]) work.tied[root] = 1;
+  }
+  for (NodeId n = 0; n < nodes; ++n) {
+    if (!is_free(body, n)) continue;
+    const NodeId root = find(work.component, n);
+    if (!work.tied[root]) v[n] += work.q[root] / (mass_scale * work.set_mass_kg[root]);
+  }
+}
+}  // namespace
+
+ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s, double mass_scale,
+                                                    double relative_tolerance, ImplicitDamperWork& work) {
+  set_up_damper_solve(body, h_s, mass_scale, work);
+  // Preconditioned conjugate gradients on the free nodes, from v /
+  // mass_scale (the answer without spring dampers).
+  const std::size_t nodes = body.v_m_per_s.size();
+  std::vector<Vec3>& v = body.v_m_per_s;
+  for (NodeId n = 0; n < nodes; ++n)
+    if (is_free(body, n)) v[n] /= mass_scale;
+  apply_damped_mass(body, h_s, mass_scale, work.direction, v, work.q);
+  for (NodeId n = 0; n < nodes; ++n) {
+    work.r[n] = work.rhs[n] - work.q[n];
+    work.z[n] = work.inv_diag[n].cwiseProduct(work.r[n]);
+    work.p[n] = work.z[n];
+  }
+  const double rhs_norm = std::sqrt(dot_free(body, work.rhs, work.rhs));
+  ImplicitDamperSolve out;
+  double rz = dot_free(body, work.r, work.z);
+  double r_norm = std::sqrt(dot_free(body, work.r, work.r));
+  while (r_norm > relative_tolerance * rhs_norm && out.iterations < kDamperSolveMaxIterations) {
+    apply_damped_mass(body, h_s, mass_scale, work.direction, work.p, work.q);
+    const double pq = dot_free(body, work.p, work.q);
+    if (!(pq > 0.0)) break;  // the residual is at rounding
+    const double step = rz / pq;
+    for (NodeId n = 0; n < nodes; ++n) {
+      if (!is_free(body, n)) continue;
+      v[n] += step * work.p[n];
+      work.r[n] -= step * work.q[n];
+      work.z[n] = work.inv_diag[n].cwiseProduct(work.r[n]);
+    }
+    const double rz_next = dot_free(body, work.r, work.z);
+    const double beta = rz_next / rz;
+    rz = rz_next;
+    for (NodeId n = 0; n < nodes; ++n)
+      if (is_free(body, n)) work.p[n] = work.z[n] + beta * work.p[n];
+    r_norm = std::sqrt(dot_free(body, work.r, work.r));
+    ++out.iterations;
+  }
+  apply_damped_mass(body, h_s, mass_scale, work.direction, v, work.q);
+  for (NodeId n = 0; n < nodes; ++n) work.r[n] = work.rhs[n] - work.q[n];
+  out.relative_residual = rhs_norm > 0.0 ? std::sqrt(dot_free(body, work.r, work.r)) / rhs_norm : 0.0;
+  restore_momentum(body, mass_scale, work, v);
+  return out;
+}
+
+ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s) {
+  ImplicitDamperWork work;
+  return apply_spring_dampers_implicitly(body, h_s, 1.0, 1e-10, work);
 }
 
 double elastic_energy_J(const Body& body) {

@@ -33,14 +33,40 @@ Vec3 spring_force_on_a_N(const Body& body, EdgeId e, bool with_damper = true);
 // dampers' forces at the current velocities.
 void add_spring_forces(const Body& body, std::vector<Vec3>& f_N, bool with_dampers = true);
 
-// Applies every spring damper implicitly for a time h, one spring at a time
-// (a Gauss–Seidel sweep in edge order): the relative velocity along the
-// spring decays as u / (1 + h c (1/m_a + 1/m_b)), by equal and opposite
-// impulses. Momentum is conserved, kinetic energy never grows, and there is
-// no step-size limit however stiff the damping. One sweep relaxes each spring
-// locally, so low modes get less than their Rayleigh ratio: the projective
-// integrator uses it (its own numerical dissipation dominates anyway).
-void apply_spring_dampers_implicitly(Body& body, double h_s);
+// Scratch space of apply_spring_dampers_implicitly, kept by its caller so
+// that a step allocates nothing once the mesh has stopped growing.
+struct ImplicitDamperWork {
+  std::vector<Vec3> direction;  // per edge: the spring's unit direction
+  std::vector<Vec3> rhs, r, z, p, q;
+  std::vector<Vec3> inv_diag;       // per node: the Jacobi preconditioner
+  std::vector<NodeId> component;    // union–find over the dampers between free nodes
+  std::vector<unsigned char> tied;  // in a set with a damper to a kinematic node
+  std::vector<double> set_mass_kg;  // per set, at its root
+};
+struct ImplicitDamperSolve {
+  int iterations = 0;
+  double relative_residual = 0.0;  // |b − A v| / |b| at the end
+};
+
+// Applies the spring dampers (and a mass damping folded into `mass_scale`)
+// implicitly over a time h: solves (mass_scale M + h C) v' = M v for the free
+// nodes' velocities, C the dampers' matrix (c d dᵀ per spring, d its
+// direction now), the kinematic nodes' velocities known; positions are not
+// touched. Jacobi-preconditioned conjugate gradients from v / mass_scale to
+// `relative_tolerance` (at most 500 iterations: the system's condition
+// number is at most 1 + h c (1/m_a + 1/m_b) times the springs at a node).
+// Momentum is kept (C's rows sum to zero; a free body's to rounding) and
+// kinetic energy does not grow beyond the residual, however stiff the
+// damping or long the step.
+// (One Gauss–Seidel sweep spring by spring, which it replaced, relaxed each
+// spring locally and gave a cantilever's slow swing a fifth of its Rayleigh
+// damping: the projective rung overshot, tip −11.1 mm at 20 ms against
+// explicit's −9.7 and implicit's −9.1.)
+ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s, double mass_scale,
+                                                    double relative_tolerance, ImplicitDamperWork& work);
+// The same with its own scratch space, mass_scale 1 and a tolerance of 1e-10
+// (tests, tools).
+ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s);
 
 // Σ ½ k (l − L)² over live edges [J].
 double elastic_energy_J(const Body& body);

@@ -10,6 +10,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "physics/forces.hpp"
 #include "physics/frequency_estimate.hpp"
 #include "physics/integrator.hpp"
 #include "physics/integrator_simd.hpp"
@@ -533,6 +534,7 @@ class ProjectiveIntegrator final : public Integrator {
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver_;
   Eigen::MatrixXd rhs_, solution_;
   std::vector<Vec3> inertial_, d_, x_prev_;
+  ImplicitDamperWork dampers_;
   StateSave save_;
 };
 

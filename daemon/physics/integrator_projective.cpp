@@ -136,12 +136,14 @@ StepOutcome ProjectiveIntegrator::step(Body& body, const std::vector<Vec3>& f_ex
   out.solver_converged = converged();
   for (std::size_t n = 0; n < nodes; ++n) {
     if (body.inv_mass_per_kg[n] == 0.0) continue;
-    body.v_m_per_s[n] = (body.x_m[n] - x_prev_[n]) / h / (1.0 + h * alpha_per_s_);
+    body.v_m_per_s[n] = (body.x_m[n] - x_prev_[n]) / h;
   }
-  // The local/global solve has no dampers; apply them implicitly to the new
-  // velocities. (Re-deriving positions from the damped velocities was tried
-  // and diverged: the positions stay those of the solve.)
-  apply_spring_dampers_implicitly(body, h);
+  // The local/global solve has no dampers; apply them (and the mass
+  // damping) implicitly to the new velocities: the next step's inertial
+  // target carries them into the positions. (Re-deriving positions from the
+  // damped velocities was tried and diverged: the positions stay those of
+  // the solve.)
+  apply_spring_dampers_implicitly(body, h, 1.0 + h * alpha_per_s_, spec_.cg_tolerance, dampers_);
 
   if (!state_is_finite(body)) {
     save_.restore(body);
