@@ -1,0 +1,84 @@
+// The trade study's command line (app/trade_options.hpp) read directly: the
+// modes it defaults to, the lists it splits, and the errors that name the
+// option (the CLI tests in trade_study_test.cpp check the same errors reach
+// stderr with exit 2).
+#include "app/trade_options.hpp"
+
+#include <gtest/gtest.h>
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace tissue::app {
+namespace {
+
+// The message parse_trade_options throws for `args` ("" if it accepts them).
+std::string parse_error(const std::vector<std::string>& args) {
+  try {
+    parse_trade_options(args);
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(TradeOptions, NoModeFlagRunsAllThreeButASceneFileOnlyTheSweep) {
+  const TradeOptions all = parse_trade_options({});
+  EXPECT_TRUE(all.table1 && all.sweep && all.beam_theory);
+  EXPECT_EQ(all.metric, "rms");
+  EXPECT_EQ(all.sweep_scene, "cantilever");
+
+  const TradeOptions file = parse_trade_options({"--scene-file", "my.yaml"});
+  EXPECT_TRUE(file.sweep);
+  EXPECT_FALSE(file.table1 || file.beam_theory) << "a scene file is for the sweep";
+
+  const TradeOptions one = parse_trade_options({"--beam-theory"});
+  EXPECT_TRUE(one.beam_theory);
+  EXPECT_FALSE(one.table1 || one.sweep) << "a mode flag runs that mode only";
+}
+
+TEST(TradeOptions, ListsAndNumbersAreReadWhole) {
+  const TradeOptions o = parse_trade_options({"--sweep",    "--th",          "2,20.5",
+                                              "--depths",   "3,6",           "--dts",
+                                              "0.001",      "--integrators", "implicit,explicit",
+                                              "--duration", "0.25",          "--beam-depth",
+                                              "0",          "--clock",       "cpu",
+                                              "--set",      "a.b=1",         "--set",
+                                              "c=2",        "--scene-file",  "s.yaml"});
+  EXPECT_EQ(o.th_Pa, (std::vector<double>{2.0, 20.5}));
+  EXPECT_EQ(o.max_depths, (std::vector<int>{3, 6}));
+  EXPECT_EQ(o.dts_s, (std::vector<double>{0.001}));
+  EXPECT_EQ(o.integrators, (std::vector<std::string>{"implicit", "explicit"}));
+  EXPECT_EQ(o.sweep_duration_s, 0.25);
+  EXPECT_EQ(o.beam_max_depth, 0);  // 0 is a depth, not "unset" (-1)
+  EXPECT_TRUE(o.cpu_clock);
+  EXPECT_EQ(o.scene_overrides, (std::vector<std::string>{"a.b=1", "c=2"}));  // --set accumulates
+}
+
+TEST(TradeOptions, HelpStopsReadingTheRest) {
+  EXPECT_TRUE(parse_trade_options({"--help", "--frobnicate"}).help);
+  EXPECT_TRUE(parse_trade_options({"-h"}).help);
+  // An unknown option before it is still an error.
+  EXPECT_EQ(parse_error({"--frobnicate", "--help"}), "unknown argument --frobnicate");
+}
+
+TEST(TradeOptions, EachErrorNamesTheOptionOrTheConflict) {
+  EXPECT_EQ(parse_error({"--csv"}), "missing value after --csv");
+  EXPECT_EQ(parse_error({"--th", "5,-1"}), "--th: -1 must be a finite number > 0");
+  EXPECT_EQ(parse_error({"--dts", "1ms"}), "--dts: '1ms' is not a number");
+  EXPECT_EQ(parse_error({"--depths", "31"}), "--depths: 31 must be a depth in [0, 30]");
+  EXPECT_EQ(parse_error({"--beam-depth", "x"}), "--beam-depth: 'x' is not an integer");
+  EXPECT_EQ(parse_error({"--clock", "gpu"}), "--clock must be wall or cpu");
+  EXPECT_EQ(parse_error({"--scene", "plate"}), "--scene must be cantilever, beam or beam-r");
+  EXPECT_EQ(parse_error({"--metric", "l2"}), "--metric must be rms, max, tip or path");
+  EXPECT_EQ(parse_error({"--set", "a=1"}), "--set applies to --scene-file; the built-in scenes take none");
+  EXPECT_EQ(parse_error({"--table1", "--svg", "p.svg"}), "--csv and --svg are the sweep's files: add --sweep");
+  EXPECT_EQ(parse_error({"--sweep", "--csv", "x", "--svg", "x"}),
+            "--csv and --svg name the same file 'x': the plot would replace the table");
+  // With the sweep in the defaulted modes, its files are fine.
+  EXPECT_EQ(parse_error({"--csv", "t.csv", "--svg", "p.svg"}), "");
+}
+
+}  // namespace
+}  // namespace tissue::app

@@ -1,0 +1,83 @@
+// Where an adaptive point lies relative to the uniform curve
+// (app/trade_sweep_report.hpp): the curve it is compared with and the verdict.
+#include "app/trade_sweep_report.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+namespace tissue::app {
+namespace {
+
+// Uniform L0 at cost 1 s/s with 10 % error, L1 at 10 s/s with 1 %: a
+// straight line in log-log, one decade of error per decade of cost.
+const LogCurve kCurve = {{0.0, -1.0}, {1.0, -2.0}};
+
+TEST(TradeSweepReport, InsideTheCurveTheUniformErrorIsInterpolatedLogLog) {
+  // At cost 10^0.5 the line gives 10^-1.5 = 3.16 %; 0.1 % is 10^1.5 = 32x less.
+  const CurveVerdict below = compare_with_uniform_curve(std::pow(10.0, 0.5), 1e-3, kCurve, 100.0);
+  EXPECT_EQ(below.uniform_error, "3.16 %");
+  EXPECT_EQ(below.verdict, "below (32x less error)");
+  // A quarter of the way along (cost 10^0.25) the line gives 10^-1.25 =
+  // 5.62 %, and 10 % is 10^0.25 = 1.8x more.
+  const CurveVerdict above = compare_with_uniform_curve(std::pow(10.0, 0.25), 0.1, kCurve, 100.0);
+  EXPECT_EQ(above.uniform_error, "5.62 %");
+  EXPECT_EQ(above.verdict, "above (1.8x more error)");
+}
+
+TEST(TradeSweepReport, OutsideTheCurveTheVerdictSaysWhere) {
+  const CurveVerdict cheap = compare_with_uniform_curve(0.1, 0.01, kCurve, 100.0);
+  EXPECT_EQ(cheap.uniform_error, "—");
+  EXPECT_EQ(cheap.verdict, "cheaper than L0, and more accurate: below");
+  EXPECT_EQ(compare_with_uniform_curve(0.1, 0.5, kCurve, 100.0).verdict, "cheaper than L0");
+  // Costlier than L1 but cheaper than the reference (100 s/s)...
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, 100.0).verdict,
+            "below (between L(max-1) and the reference in cost)");
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 0.05, kCurve, 100.0).verdict,
+            "above (costlier and less accurate than L(max-1))");
+  // ...or not: then accuracy does not redeem it, nor does an unknown reference cost.
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, 15.0).verdict, "costs more than the reference itself");
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, NAN).verdict, "costs more than the reference itself");
+}
+
+TEST(TradeSweepReport, OnePointIsNoCurve) {
+  const CurveVerdict v = compare_with_uniform_curve(1.0, 0.01, {{0.0, -1.0}}, 100.0);
+  EXPECT_EQ(v.uniform_error, "n/a");
+  EXPECT_EQ(v.verdict, "no uniform curve");
+}
+
+SweepPoint uniform_point(int level, double cost, double rms_err, double dt_s = 1e-3) {
+  SweepPoint p;
+  p.integrator = "implicit";
+  p.dt_s = dt_s;
+  p.level = level;
+  p.max_depth = 2;
+  p.st.sim_s = 1.0;
+  p.st.wall_s = cost;
+  p.rms_err = rms_err;
+  p.path_err = rms_err;
+  return p;
+}
+
+TEST(TradeSweepReport, TheCurveIsTheSameSettingsLevelsBelowTheReference) {
+  SweepPoint adaptive = uniform_point(0, 3.0, 0.02);
+  adaptive.adaptive = true;
+  const std::vector<SweepPoint> points = {
+      uniform_point(1, 10.0, 0.01),     uniform_point(0, 1.0, 0.1),
+      uniform_point(2, 100.0, 0.001),              // the reference: its rms error is 0 against itself
+      uniform_point(0, 2.0, 0.3, 5e-3),            // another dt
+      uniform_point(1, NAN, 0.01),      adaptive,  // no cost; not uniform
+  };
+  const LogCurve curve = uniform_curve(points, adaptive, "rms");
+  ASSERT_EQ(curve.size(), 2u);
+  EXPECT_NEAR(curve[0].first, 0.0, 1e-12);  // sorted by cost: L0 first
+  EXPECT_NEAR(curve[0].second, -1.0, 1e-12);
+  EXPECT_NEAR(curve[1].first, 1.0, 1e-12);
+  // The path error is against the truth run: the reference is on that curve.
+  EXPECT_EQ(uniform_curve(points, adaptive, "path").size(), 3u);
+  EXPECT_EQ(reference_cost(points, adaptive), 100.0);
+}
+
+}  // namespace
+}  // namespace tissue::app
