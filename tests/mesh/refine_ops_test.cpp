@@ -78,5 +78,21 @@ TEST(RefineOps, RejectsDepthOutsideTheRangeAndBadRadius) {
   EXPECT_EQ(mesh.tet_count(), 6u);
 }
 
+// refine_ops.hpp: a tet touches a region when its bounding box meets it, a
+// shared face included. A box that is only the plane x = 0.05 between the
+// two cubes touches every tet of both (each Kuhn tet spans its cube).
+TEST(RefineOps, ABoxTouchingTetsOnlyAlongAFaceRefinesThem) {
+  KuhnMesh mesh({2, 1, 1, 0.05, 3});
+  refine_box(mesh, {{0.05, 0.0, 0.0}, {0.05, 0.05, 0.05}}, 1);
+  int left = 0, right = 0;
+  mesh.for_each_tet([&](TetId t, const Tet& tet) {
+    EXPECT_GE(tet.depth, 1) << "tet " << t;
+    (tet_bounds_m(mesh, t).max_m[0] <= 0.05 ? left : right) += 1;
+  });
+  EXPECT_EQ(left, 12);
+  EXPECT_EQ(right, 12);
+  EXPECT_TRUE(testing::check_conformity(mesh).problems.empty());
+}
+
 }  // namespace
 }  // namespace tissue::mesh

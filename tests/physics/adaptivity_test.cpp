@@ -2,7 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
 #include <set>
+#include <utility>
 
 #include "physics/forces.hpp"
 #include "physics/physics_test_support.hpp"
@@ -128,6 +134,263 @@ TEST(Adaptivity, StretchCriterionRefinesUnderLoad) {
   Simulation sim(s);
   ASSERT_TRUE(run_until(sim, 0.3));
   EXPECT_GT(sim.counters().splits, 0);
+}
+
+// A free 2x2x2-cube body with adaptivity on, for passes run by hand.
+scene::Scene relaxed_cube_scene() {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 3;
+  return s;
+}
+
+// Splits the cube diagonal of a coarse tet (no closure: a coarse diamond
+// has no parents) and returns its key.
+mesh::Key split_a_cube_diagonal(Body& body) {
+  const mesh::Key d = body.mesh().diamond_of(0);
+  EXPECT_EQ(body.mesh().tet(0).depth, 0);
+  EXPECT_EQ(body.split(d), 1);
+  return d;
+}
+
+// Every node at (1 + eps) times its rest position: every edge's strain is eps.
+void dilate(Body& body, double eps) {
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n] = (1.0 + eps) * body.rest_m[n]; });
+}
+
+// Under a uniform dilation or compression by ε every edge has strain ε, so
+// every tet's strain-energy density is (E/2) Σ ε² = 3 E ε² (eq. (1), squared:
+// compression counts as stretch does) and its worst edge strain |ε|. A
+// threshold 5 % above refines nothing, 5 % below refines.
+TEST(Adaptivity, UniformStrainRefinesExactlyWhenItsDensityPassesTheThreshold) {
+  for (auto criterion : {scene::RefineCriterion::kStrainEnergy, scene::RefineCriterion::kStretch}) {
+    for (double eps : {1e-3, -1e-3}) {
+      for (double side : {1.05, 0.95}) {
+        SCOPED_TRACE(::testing::Message()
+                     << "criterion " << static_cast<int>(criterion) << " eps " << eps << " side " << side);
+        scene::Scene s = relaxed_cube_scene();
+        s.adaptivity.criterion = criterion;
+        const double density_Pa = 3.0 * s.material.youngs_modulus_Pa * eps * eps;
+        s.adaptivity.refine_threshold_Pa = side * density_Pa;
+        s.adaptivity.stretch_ratio = 1.0 + side * std::abs(eps);
+        Body body(s);
+        dilate(body, eps);
+        Adaptivity adaptivity(s.adaptivity);
+        const AdaptStats stats = adaptivity.adapt(body);
+        if (side > 1.0) {
+          EXPECT_EQ(stats.splits, 0);
+        } else {
+          EXPECT_GT(stats.splits, 0);
+        }
+      }
+    }
+  }
+}
+
+// Hysteresis, age: a diamond split at step k may merge from step
+// k + min_age_steps on, not before (the body is at rest: every other
+// condition holds).
+TEST(Adaptivity, ADiamondMergesOnlyOnceMinAgeStepsHavePassed) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.min_age_steps = 20;
+  Body body(s);
+  body.step_index = 7;
+  const mesh::Key d = split_a_cube_diagonal(body);
+  Adaptivity adaptivity(s.adaptivity);
+  body.step_index = 7 + 19;
+  EXPECT_EQ(adaptivity.adapt(body).merges, 0);
+  EXPECT_TRUE(body.mesh().is_split(d));
+  body.step_index = 7 + 20;
+  EXPECT_EQ(adaptivity.adapt(body).merges, 1);
+  EXPECT_FALSE(body.mesh().is_split(d));
+}
+
+// Hysteresis, midpoint: a node further than midpoint_tolerance · L from its
+// edge's midpoint stays (merging it would visibly move the surface).
+TEST(Adaptivity, ADiamondMergesOnlyWhenItsNodeIsNearItsEdgesMidpoint) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.refine_threshold_Pa = 1e9;  // the offset must not refine
+  s.adaptivity.midpoint_tolerance = 1e-3;
+  for (double offset : {2e-3, 0.5e-3}) {
+    Body body(s);
+    const mesh::Key d = split_a_cube_diagonal(body);
+    body.step_index = 1000;
+    const NodeId z = body.mesh().find_node(d);
+    const mesh::Node& node = body.mesh().node(z);
+    const Vec3 along = body.rest_m[node.edge_b] - body.rest_m[node.edge_a];
+    const Vec3 across = along.unitOrthogonal();
+    body.x_m[z] += offset * along.norm() * across;
+    Adaptivity adaptivity(s.adaptivity);
+    const AdaptStats stats = adaptivity.adapt(body);
+    EXPECT_EQ(stats.splits, 0);
+    EXPECT_EQ(stats.merges, offset < 1e-3 ? 1 : 0) << "offset " << offset << " L";
+  }
+}
+
+// Hysteresis, threshold: merge only below Th · simplify_factor. A uniform
+// dilation (midpoints stay midpoints) with density between Th/4 and Th
+// neither refines nor merges; below Th/4 it merges.
+TEST(Adaptivity, ADiamondMergesOnlyBelowTheThresholdTimesTheSimplifyFactor) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.refine_threshold_Pa = 4.0;
+  s.adaptivity.simplify_factor = 0.25;
+  for (double fraction : {0.5, 0.2}) {  // of Th
+    Body body(s);
+    const mesh::Key d = split_a_cube_diagonal(body);
+    body.step_index = 1000;
+    // 3 E ε² = fraction · Th.
+    dilate(body, std::sqrt(fraction * s.adaptivity.refine_threshold_Pa / (3.0 * s.material.youngs_modulus_Pa)));
+    Adaptivity adaptivity(s.adaptivity);
+    const AdaptStats stats = adaptivity.adapt(body);
+    EXPECT_EQ(stats.splits, 0);
+    EXPECT_EQ(stats.merges, fraction < 0.25 ? 1 : 0) << fraction << " Th";
+    EXPECT_EQ(body.mesh().is_split(d), fraction >= 0.25);
+  }
+}
+
+// The mesh starts refined to min_depth and never simplifies below it: at
+// rest, old enough, nothing of the starting mesh merges; a diamond split
+// beyond it does.
+TEST(Adaptivity, NothingMergesBelowMinDepth) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.min_depth = 1;
+  Body body(s);
+  const std::size_t start_tets = body.mesh().tet_count();
+  ASSERT_EQ(start_tets, 8u * 6u * 2u);
+  std::optional<mesh::Key> d;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
+    if (!d) d = body.mesh().diamond_of(t);  // a face diamond: its parents are split
+  });
+  ASSERT_TRUE(d.has_value());
+  ASSERT_TRUE(body.mesh().can_split(*d));
+  ASSERT_GT(body.split(*d), 0);
+  body.step_index = 1000;
+  Adaptivity adaptivity(s.adaptivity);
+  const AdaptStats stats = adaptivity.adapt(body);
+  EXPECT_GT(stats.merges, 0);
+  EXPECT_EQ(body.mesh().tet_count(), start_tets);
+  EXPECT_EQ(adaptivity.adapt(body).merges, 0);
+  EXPECT_EQ(body.mesh().tet_count(), start_tets);
+}
+
+// Merges count against the pass's budget as splits do.
+TEST(Adaptivity, MergesPerPassStayWithinTheBudget) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.max_ops_per_step = 3;
+  Body body(s);
+  std::set<mesh::Key> cube_diagonals;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) { cube_diagonals.insert(body.mesh().diamond_of(t)); });
+  ASSERT_EQ(cube_diagonals.size(), 8u);
+  for (const mesh::Key d : cube_diagonals) ASSERT_EQ(body.split(d), 1);
+  body.step_index = 1000;
+  Adaptivity adaptivity(s.adaptivity);
+  EXPECT_EQ(adaptivity.adapt(body).merges, 3);
+  EXPECT_EQ(adaptivity.adapt(body).merges, 3);
+  EXPECT_EQ(adaptivity.adapt(body).merges, 2);
+  EXPECT_EQ(body.mesh().tet_count(), 48u);
+}
+
+// Finest diamonds first: a relaxed two-level refinement merges its children
+// and then, in the same pass, the parents they were blocking.
+TEST(Adaptivity, ARelaxedNestedRefinementMergesBackInOnePass) {
+  scene::Scene s = relaxed_cube_scene();
+  Body body(s);
+  split_a_cube_diagonal(body);
+  std::optional<mesh::Key> child;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+    if (!child && tet.depth == 1) child = body.mesh().diamond_of(t);
+  });
+  ASSERT_TRUE(child.has_value());
+  ASSERT_GT(body.split(*child), 0);
+  ASSERT_GT(body.mesh().tet_count(), 48u);
+  body.step_index = 1000;
+  Adaptivity adaptivity(s.adaptivity);
+  const AdaptStats stats = adaptivity.adapt(body);
+  EXPECT_GE(stats.merges, 2);
+  EXPECT_EQ(body.mesh().tet_count(), 48u);
+}
+
+// adaptivity.max_tets: no split once the mesh holds that many leaf tets.
+TEST(Adaptivity, NoSplitOnceTheMeshHoldsMaxTets) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.refine_threshold_Pa = 1e-9;  // everything strained wants refining
+  for (int extra : {0, 1}) {
+    s.adaptivity.max_tets = 48 + extra;
+    Body body(s);
+    dilate(body, 1e-3);
+    Adaptivity adaptivity(s.adaptivity);
+    const AdaptStats stats = adaptivity.adapt(body);
+    EXPECT_TRUE(stats.ceiling_reached);
+    EXPECT_EQ(stats.splits, extra) << "max_tets " << s.adaptivity.max_tets;
+  }
+}
+
+// The budget counts a split's closure: once one split and the parents it
+// needed use up max_ops_per_step, the pass splits nothing more. Here every
+// wanted diamond (a coarse cube edge around the one split face diamond)
+// needs at least two unsplit face diamonds first, so a budget of 2 allows
+// one wanted split.
+TEST(Adaptivity, ASplitsClosureCountsAgainstTheBudget) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.max_depth = 6;
+  s.adaptivity.refine_threshold_Pa = 1e-6;
+  s.adaptivity.max_ops_per_step = 2;
+  Body body(s);
+  std::set<mesh::Key> cube_diagonals;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) { cube_diagonals.insert(body.mesh().diamond_of(t)); });
+  for (const mesh::Key d : cube_diagonals) ASSERT_EQ(body.split(d), 1);
+  // The face diamond between the cubes at x = 0 and x = h, y = z = 0.
+  const std::int64_t h = body.mesh().domain().coarse_cube();
+  const mesh::Key face = mesh::vertex_key({h, h / 2, h / 2});
+  ASSERT_EQ(body.split(face), 1);
+  const NodeId z = body.mesh().find_node(face);
+  body.x_m[z] += Vec3(0.0, 0.0, 1e-3);  // strains exactly the tets around z
+  std::set<mesh::Key> wanted;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+    if (std::find(tet.v.begin(), tet.v.end(), z) != tet.v.end()) wanted.insert(body.mesh().diamond_of(t));
+  });
+  ASSERT_EQ(wanted.size(), 4u);  // the face's four edges
+  Adaptivity adaptivity(s.adaptivity);
+  const AdaptStats stats = adaptivity.adapt(body);
+  EXPECT_GE(stats.splits, 3);
+  int wanted_split = 0;
+  for (const mesh::Key d : wanted) wanted_split += body.mesh().is_split(d);
+  EXPECT_EQ(wanted_split, 1);
+}
+
+// While a tool presses, the mesh under it stays: a relaxed, old, mergeable
+// diamond whose node is in the frozen sphere is not merged; unfrozen, it is.
+TEST(Adaptivity, AFrozenNodeIsNotMerged) {
+  scene::Scene s = relaxed_cube_scene();
+  Body body(s);
+  const mesh::Key d = split_a_cube_diagonal(body);
+  body.step_index = 1000;
+  const Vec3 node_m = body.x_m[body.mesh().find_node(d)];
+  Adaptivity adaptivity(s.adaptivity);
+  adaptivity.freeze_sphere(node_m + Vec3(0.005, 0.0, 0.0), 0.01);
+  EXPECT_EQ(adaptivity.adapt(body).merges, 0);
+  EXPECT_TRUE(body.mesh().is_split(d));
+  adaptivity.unfreeze();
+  EXPECT_EQ(adaptivity.adapt(body).merges, 1);
+  EXPECT_FALSE(body.mesh().is_split(d));
+}
+
+// docs/scene-format.md: `stretch` refines when any l/L or L/l exceeds
+// stretch_ratio. A spring compressed to 40 % has L/l = 2.5 > 2.
+// DISABLED: a real bug. The pass compares |l/L - 1| with stretch_ratio - 1,
+// so a compression never reaches a ratio of 2 or more (|0.4 - 1| = 0.6 < 1),
+// and below that it refines late (l/L = 0.951: L/l = 1.0515 > 1.05 is not
+// refined).
+TEST(Adaptivity, DISABLED_StretchCriterionRefinesACompressionWhoseLOverlExceedsTheRatio) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.criterion = scene::RefineCriterion::kStretch;
+  for (const auto& [ratio, length_ratio] : {std::pair{2.0, 0.4}, std::pair{1.05, 0.951}}) {
+    s.adaptivity.stretch_ratio = ratio;
+    Body body(s);
+    dilate(body, length_ratio - 1.0);
+    Adaptivity adaptivity(s.adaptivity);
+    EXPECT_GT(adaptivity.adapt(body).splits, 0) << "l/L " << length_ratio << ", stretch_ratio " << ratio;
+  }
 }
 
 }  // namespace

@@ -303,5 +303,69 @@ TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
   EXPECT_GT(fixed, 25);
 }
 
+// docs/scene-format.md: nodes in a fixed region never move. A node in a
+// fixed and a prescribed region at once is fixed; the rest of the
+// prescribed region is prescribed.
+TEST(Body, ANodeInBothAFixedAndAPrescribedRegionIsFixed) {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.fixed.push_back({scene::Region::box({0, 0, 0}, {0, 0.1, 0.1})});                                  // face x = 0
+  s.prescribed.push_back({"push", scene::Region::box({0, 0, 0}, {0.1, 0.1, 0}), {0, 0, 0.001}, {}});  // face z = 0
+  Body body(s);
+  int both = 0, prescribed = 0;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    const Vec3& p = body.rest_m[n];
+    if (p.x() == 0.0) {
+      EXPECT_EQ(body.kind[n], NodeKind::kFixed) << p.transpose();
+      EXPECT_EQ(body.inv_mass_per_kg[n], 0.0);
+      both += p.z() == 0.0;
+    } else if (p.z() == 0.0) {
+      EXPECT_EQ(body.kind[n], NodeKind::kPrescribed) << p.transpose();
+      ++prescribed;
+    }
+  });
+  EXPECT_EQ(both, 3);
+  EXPECT_EQ(prescribed, 6);
+}
+
+// Merge hands the vanishing node's momentum to the free ends of its edge
+// only: a fixed end stays at rest (its support takes that half), and a
+// prescribed node's motion is its driver's, so merging one changes no free
+// node's velocity.
+TEST(Body, MergeGivesMomentumOnlyFromAFreeNodeToAFreeEnd) {
+  // The corner cube's diagonal runs from a = (0, 0, 0) to b = (h, h, h),
+  // h = 0.05 m; its node z sits at h/2 (x, y, z).
+  for (const bool prescribed_node : {false, true}) {
+    SCOPED_TRACE(prescribed_node ? "prescribed node and end a" : "free node, fixed end a");
+    scene::Scene s = adaptive_cube();
+    if (prescribed_node)
+      s.prescribed.push_back({"push", scene::Region::box({0, 0, 0}, {0.03, 0.03, 0.03}), {0, 0, 0.001}, {}});
+    else
+      s.fixed.push_back({scene::Region::box({0, 0, 0}, {0.01, 0.01, 0.01})});
+    Body body(s);
+    NodeId a = mesh::kInvalidId, b = mesh::kInvalidId;
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (body.rest_m[n].isZero(0.0)) a = n;
+      if ((body.rest_m[n] - Vec3(0.05, 0.05, 0.05)).isZero(1e-12)) b = n;
+    });
+    ASSERT_NE(a, mesh::kInvalidId);
+    ASSERT_NE(b, mesh::kInvalidId);
+    const mesh::Key d = mesh::edge_key(body.mesh().node(a).lattice, body.mesh().node(b).lattice);
+    ASSERT_EQ(body.split(d), 1);
+    const NodeId z = body.mesh().find_node(d);
+    ASSERT_EQ(body.kind[z], prescribed_node ? NodeKind::kPrescribed : NodeKind::kFree);
+    ASSERT_EQ(body.kind[a], prescribed_node ? NodeKind::kPrescribed : NodeKind::kFixed);
+    ASSERT_EQ(body.kind[b], NodeKind::kFree);
+    const Vec3 v_z(1.0, 2.0, 3.0);
+    body.v_m_per_s[z] = v_z;
+    body.merge(d);
+    EXPECT_EQ(body.v_m_per_s[a], Vec3::Zero());
+    if (prescribed_node) {
+      EXPECT_EQ(body.v_m_per_s[b], Vec3::Zero());
+    } else {
+      EXPECT_GT(body.v_m_per_s[b].dot(v_z), 0.0) << "the free end takes its half";
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tissue::physics

@@ -127,5 +127,22 @@ TEST(Diagnostics, InvertedTetsAreCountedAtTheEnd) {
   EXPECT_EQ(audit.inverted_tets, inverted_tet_count(sim.body()));
 }
 
+// diagnostics.hpp: work done on the body counts, negative work (the body
+// pushing its load back) as 0: the budget is then the energy it started
+// with, not less.
+TEST(Diagnostics, NegativeWorkCountsAsZeroInTheBudget) {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.loads.push_back({"brake", box({0.1, 0, 0}, {0.1, 0.1, 0.1}), {-1.0, 0.0, 0.0}, {}});
+  Simulation sim(s);
+  Body& body = sim.mutable_body();
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.v_m_per_s[n] = Vec3(0.1, 0.0, 0.0); });
+  const double e0_J = total_energy_J(sim);
+  const EnergyBudget budget(sim);
+  for (int i = 0; i < 10; ++i) ASSERT_TRUE(sim.step().ok);
+  ASSERT_LT(sim.counters().external_work_J, 0.0);
+  EXPECT_EQ(budget.budget_J(sim), e0_J);
+}
+
 }  // namespace
 }  // namespace tissue::physics

@@ -483,5 +483,38 @@ TEST(ExplicitIntegrator, TrajectoryIsBitIdenticalAcrossInstructionSetsAndFollows
   EXPECT_GT(energies[0], 0.0);
 }
 
+// The refusal's edge: a step that needs exactly max_substeps sub-steps at
+// the guaranteed bound runs; one fewer allowed refuses it.
+TEST(ExplicitIntegrator, AStepNeedingExactlyMaxSubstepsRuns) {
+  scene::Scene s = beam_scene();
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.integrator.dt_s = 0.01;
+  const Body rest(s);
+  const double needed = std::ceil(s.integrator.dt_s / (s.integrator.substep_safety * explicit_stable_dt_s(rest)));
+  ASSERT_GT(needed, 2.0);
+  s.integrator.max_substeps = static_cast<int>(needed);
+  Simulation at_cap(s);
+  const StepResult ok = at_cap.step();
+  EXPECT_TRUE(ok.ok) << ok.error;
+  EXPECT_LE(ok.substeps, s.integrator.max_substeps);
+  s.integrator.max_substeps = static_cast<int>(needed) - 1;
+  Simulation below_cap(s);
+  EXPECT_FALSE(below_cap.step().ok);
+}
+
+// The deformed bound is the documented rest + ε · graph with
+// ε = r + r / (1 − r) (sin θ ≤ r for the turn, |1 − L/l| ≤ r / (1 − r) for
+// the length), capped at max(rest, graph); the cap alone from r = ½ on.
+TEST(ExplicitIntegrator, DeformedFrequencyBoundIsRestPlusEpsilonTimesGraph) {
+  const double rest = 100.0, graph = 1000.0;
+  for (const double r : {0.01, 0.1, 0.2, 0.4}) {
+    const double epsilon = r + r / (1.0 - r);
+    EXPECT_DOUBLE_EQ(deformed_frequency2_bound_per_s2(rest, graph, r), std::min(rest + epsilon * graph, graph))
+        << "r " << r;
+  }
+  EXPECT_EQ(deformed_frequency2_bound_per_s2(rest, graph, 0.5), graph);
+  EXPECT_EQ(deformed_frequency2_bound_per_s2(rest, graph, std::nan("")), graph);
+}
+
 }  // namespace
 }  // namespace tissue::physics

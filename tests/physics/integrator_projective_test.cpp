@@ -291,5 +291,39 @@ TEST(ProjectiveIntegrator, ABodyAtRestStopsAfterOneIteration) {
   }
 }
 
+// The local/global solve has no dampers: the spring dampers (Rayleigh β)
+// act on the solve's velocities afterwards, implicitly. So β leaves the
+// positions of a step exactly as without it, and takes kinetic energy out
+// of the velocities: exactly what apply_spring_dampers_implicitly does to
+// the undamped step's.
+TEST(ProjectiveIntegrator, SpringDampersActOnTheSolvesVelocitiesOnly) {
+  scene::Scene s = beam_scene();
+  s.adaptivity.min_depth = 1;
+  s.material.rayleigh_beta_s = 0.0;
+  Body undamped(s);
+  testing::jiggle_free_nodes(undamped, 5, 0.002, 0.05);
+  s.material.rayleigh_beta_s = 0.01;
+  Body damped(s);
+  damped.x_m = undamped.x_m;
+  damped.v_m_per_s = undamped.v_m_per_s;
+  ASSERT_EQ(damped.stiffness_N_per_m, undamped.stiffness_N_per_m);
+  const std::vector<Vec3> f = tip_load(undamped, 0.05);
+  const double h = 1e-3;
+  ProjectiveIntegrator without(s.integrator, s.material), with(s.integrator, s.material);
+  ASSERT_TRUE(without.step(undamped, f, h).ok);
+  ASSERT_TRUE(with.step(damped, f, h).ok);
+  EXPECT_EQ(damped.x_m, undamped.x_m);
+  EXPECT_LT(kinetic_energy_J(damped), 0.99 * kinetic_energy_J(undamped));
+  Body expected = damped;
+  expected.v_m_per_s = undamped.v_m_per_s;
+  apply_spring_dampers_implicitly(expected, h);
+  double worst = 0.0, scale = 0.0;
+  damped.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    worst = std::max(worst, (damped.v_m_per_s[n] - expected.v_m_per_s[n]).norm());
+    scale = std::max(scale, expected.v_m_per_s[n].norm());
+  });
+  EXPECT_LE(worst, 1e-12 * scale);
+}
+
 }  // namespace
 }  // namespace tissue::physics

@@ -462,5 +462,82 @@ TEST(Simulation, ProbeOutsideTheObjectIsRejected) {
   }
 }
 
+// A free cube with a tool, no gravity, explicit (momentum to rounding).
+scene::Scene free_cube_with_tool() {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.tool = scene::ToolSpec{};
+  s.adaptivity.enabled = true;  // for split_diamond / merge_diamond
+  s.adaptivity.every_steps = 1000;
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  return s;
+}
+
+// The tool's force is shared by the weights normalised to sum 1: the body
+// receives the whole force, no more. On a free body the momentum it gains
+// over a step is exactly force · dt.
+TEST(SimulationTool, TheBodyReceivesTheWholeToolForceWhateverTheWeightsSum) {
+  Simulation sim(free_cube_with_tool());
+  const Vec3 force_N(0.0, 0.0, -0.5);
+  ASSERT_LT(force_N.norm(), sim.scene().tool->max_force_N);
+  ASSERT_TRUE(sim.set_tool_force({0, 1, 2}, {1, 1, 2}, force_N));
+  const Vec3 p0 = sim.body().momentum_kg_m_per_s();
+  ASSERT_TRUE(sim.step().ok);
+  const Vec3 gained = sim.body().momentum_kg_m_per_s() - p0;
+  EXPECT_LT((gained - sim.scene().integrator.dt_s * force_N).norm(),
+            1e-12 * sim.scene().integrator.dt_s * force_N.norm())
+      << gained.transpose();
+}
+
+// Barycentric weights on the touched triangle are never negative: a negative
+// one (normalised with the rest) would push one node harder than
+// tool.max_force_N and pull another back. Refused, nothing applied.
+TEST(SimulationTool, ANegativeWeightIsRefused) {
+  Simulation sim(free_cube_with_tool());
+  EXPECT_FALSE(sim.set_tool_force({0, 1, 2}, {2, -1, 0}, Vec3(0, 0, -0.5)));
+  EXPECT_EQ(sim.tool_force_N(), Vec3::Zero());
+}
+
+// A node the tool pushes on that merges away releases the tool (its id may
+// be reused by another node anywhere in the body).
+TEST(SimulationTool, MergingAwayAToolNodeReleasesTheTool) {
+  Simulation sim(free_cube_with_tool());
+  const mesh::Key d = sim.body().mesh().diamond_of(0);
+  ASSERT_EQ(sim.split_diamond(d), 1);
+  const NodeId z = sim.body().mesh().find_node(d);
+  ASSERT_TRUE(sim.set_tool_force({z, z, z}, {1, 0, 0}, Vec3(0, 0, -0.5)));
+  ASSERT_NE(sim.tool_force_N(), Vec3::Zero());
+  sim.merge_diamond(d);
+  EXPECT_EQ(sim.tool_force_N(), Vec3::Zero());
+  // A tool on nodes that survive the merge stays.
+  ASSERT_EQ(sim.split_diamond(d), 1);
+  ASSERT_TRUE(sim.set_tool_force({0, 1, 2}, {1, 0, 0}, Vec3(0, 0, -0.5)));
+  sim.merge_diamond(d);
+  EXPECT_NE(sim.tool_force_N(), Vec3::Zero());
+}
+
+// A surface load is shared anew after every mesh change: when a loaded node
+// merges away, its share goes to the nodes that remain, so a free body still
+// gains exactly load · dt of momentum per step.
+TEST(Simulation, ALoadKeepsItsResultantWhenALoadedNodeMergesAway) {
+  scene::Scene s = testing::free_cube_scene(2, 2);  // face centres are nodes
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 3;
+  s.adaptivity.every_steps = 1000;
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  const Vec3 load_N(0.0, 0.0, -1.0);
+  s.loads.push_back({"push", testing::box({0.1, 0, 0}, {0.1, 0.1, 0.1}), {load_N.x(), load_N.y(), load_N.z()}, {}});
+  Simulation sim(s);
+  // The centre of the loaded face of the cube at x in [h, 2h], y, z in [0, h].
+  const std::int64_t h = sim.body().mesh().domain().coarse_cube();
+  const mesh::Key face_centre = mesh::vertex_key({2 * h, h / 2, h / 2});
+  ASSERT_NE(sim.body().mesh().find_node(face_centre), mesh::kInvalidId);
+  sim.merge_diamond(face_centre);
+  ASSERT_FALSE(sim.body().mesh().is_split(face_centre));
+  const Vec3 p0 = sim.body().momentum_kg_m_per_s();
+  ASSERT_TRUE(sim.step().ok);
+  const double dt = s.integrator.dt_s;
+  EXPECT_LT((sim.body().momentum_kg_m_per_s() - p0 - dt * load_N).norm(), 1e-12 * dt * load_N.norm());
+}
+
 }  // namespace
 }  // namespace tissue::physics

@@ -77,6 +77,9 @@ TEST(SpringLaw, DampingLaws) {
   m.damping = scene::DampingLaw::kPaper;
   // Eq. (4): 2 sqrt(k (m_i + m_j)) / L.
   EXPECT_DOUBLE_EQ(spring_damping_N_s_per_m(m, 50.0, 1.0, 1.0, 0.5), 2.0 * 10.0 / 0.5);
+  // Both end masses count: unequal ends, 2 sqrt(2 (1 + 7)) / 0.5 = 16.
+  EXPECT_DOUBLE_EQ(spring_damping_N_s_per_m(m, 2.0, 1.0, 7.0, 0.5), 16.0);
+  EXPECT_DOUBLE_EQ(spring_damping_N_s_per_m(m, 2.0, 7.0, 1.0, 0.5), 16.0);
 }
 
 // Eq. (2): a quarter of each incident tet's mass. A corner node of one cube

@@ -721,5 +721,94 @@ TEST(SceneYamlErrors, ToolValuesAreChecked) {
   expect_error(kBase + "tool: {radius: 1}\n", "tool.radius", "unknown key");
 }
 
+// Every numeric key lands in its own field. kBase leaves many at their
+// struct defaults (a key read into the wrong field, or not at all, would
+// pass EveryKeyOfTheBaseSceneIsRead there): each is set here to a value
+// neither its default nor kBase's, and no other field may move.
+TEST(SceneYaml, EachNumericKeyLandsInItsOwnField) {
+  struct Case {
+    const char* from;
+    const char* to;
+    double (*get)(const Scene&);
+    double want;
+  };
+  const Case cases[] = {
+      {"cube_size_m: 0.025", "cube_size_m: 0.03", [](const Scene& s) { return s.object.cube_size_m; }, 0.03},
+      {"youngs_modulus_Pa: 5.0e4", "youngs_modulus_Pa: 7.0e4",
+       [](const Scene& s) { return s.material.youngs_modulus_Pa; }, 7.0e4},
+      {"density_kg_per_m3: 100", "density_kg_per_m3: 120", [](const Scene& s) { return s.material.density_kg_per_m3; },
+       120.0},
+      {"rayleigh_alpha_per_s: 0.0", "rayleigh_alpha_per_s: 2.5",
+       [](const Scene& s) { return s.material.rayleigh_alpha_per_s; }, 2.5},
+      {"rayleigh_beta_s: 0.003", "rayleigh_beta_s: 0.004", [](const Scene& s) { return s.material.rayleigh_beta_s; },
+       0.004},
+      {"gravity_m_per_s2: [0, 0, 0]", "gravity_m_per_s2: [0, 0, -9.5]",
+       [](const Scene& s) { return s.gravity_m_per_s2[2]; }, -9.5},
+      {"refine_threshold_Pa: 20", "refine_threshold_Pa: 21",
+       [](const Scene& s) { return s.adaptivity.refine_threshold_Pa; }, 21.0},
+      {"simplify_factor: 0.25", "simplify_factor: 0.3", [](const Scene& s) { return s.adaptivity.simplify_factor; },
+       0.3},
+      {"stretch_ratio: 1.05", "stretch_ratio: 1.07", [](const Scene& s) { return s.adaptivity.stretch_ratio; }, 1.07},
+      {"min_depth: 0", "min_depth: 1", [](const Scene& s) { return double(s.adaptivity.min_depth); }, 1.0},
+      {"max_depth: 3", "max_depth: 4", [](const Scene& s) { return double(s.adaptivity.max_depth); }, 4.0},
+      {"every_steps: 5", "every_steps: 7", [](const Scene& s) { return double(s.adaptivity.every_steps); }, 7.0},
+      {"max_ops_per_step: 64", "max_ops_per_step: 33",
+       [](const Scene& s) { return double(s.adaptivity.max_ops_per_step); }, 33.0},
+      {"min_age_steps: 20", "min_age_steps: 21", [](const Scene& s) { return double(s.adaptivity.min_age_steps); },
+       21.0},
+      {"midpoint_tolerance: 1.0e-3", "midpoint_tolerance: 2.0e-3",
+       [](const Scene& s) { return s.adaptivity.midpoint_tolerance; }, 2.0e-3},
+      {"dt_s: 0.001", "dt_s: 0.002", [](const Scene& s) { return s.integrator.dt_s; }, 0.002},
+      {"max_substeps: 1000", "max_substeps: 999", [](const Scene& s) { return double(s.integrator.max_substeps); },
+       999.0},
+      {"substep_safety: 0.8", "substep_safety: 0.7", [](const Scene& s) { return s.integrator.substep_safety; }, 0.7},
+      {"cg_tolerance: 1.0e-6", "cg_tolerance: 3.0e-6", [](const Scene& s) { return s.integrator.cg_tolerance; },
+       3.0e-6},
+      {"cg_max_iterations: 100", "cg_max_iterations: 77",
+       [](const Scene& s) { return double(s.integrator.cg_max_iterations); }, 77.0},
+  };
+  const Scene base = parse_scene(kBase, "test.yaml");
+  const Scene defaults;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.to);
+    ASSERT_NE(c.want, c.get(base));
+    ASSERT_NE(c.want, c.get(defaults));
+    const Scene s = parse_scene(base_with(c.from, c.to), "test.yaml");
+    EXPECT_EQ(c.get(s), c.want);
+    for (const Case& other : cases)
+      if (&other != &c) {
+        EXPECT_EQ(other.get(s), other.get(base)) << "moved: " << other.from;
+      }
+  }
+}
+
+// Bounds of the numeric keys PhysicallyMeaninglessValues leaves out, each
+// refused naming its key, and the closed bounds' edges accepted.
+TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
+  expect_error(base_with("rayleigh_alpha_per_s: 0.0", "rayleigh_alpha_per_s: -1"), "material.rayleigh_alpha_per_s",
+               ">= 0");
+  expect_error(base_with("refine_threshold_Pa: 20", "refine_threshold_Pa: 0"), "adaptivity.refine_threshold_Pa",
+               "must be > 0");
+  expect_error(base_with("max_ops_per_step: 64", "max_ops_per_step: 0"), "adaptivity.max_ops_per_step", ">= 1");
+  expect_error(base_with("min_age_steps: 20", "min_age_steps: -1"), "adaptivity.min_age_steps", ">= 0");
+  expect_error(base_with("midpoint_tolerance: 1.0e-3", "midpoint_tolerance: 0"), "adaptivity.midpoint_tolerance",
+               "must be > 0");
+  expect_error(base_with("max_substeps: 1000", "max_substeps: 0"), "integrator.max_substeps", ">= 1");
+  expect_error(base_with("cg_max_iterations: 100", "cg_max_iterations: 0"), "integrator.cg_max_iterations", ">= 1");
+  expect_error(kBase + "tool: {engage_distance_m: 0}\n", "tool.engage_distance_m", "must be > 0");
+  expect_error(base_with("cubes: [4, 4, 4]", "cubes: [1000, 100, 101]"), "object.cubes", "too many cubes");
+
+  // docs/scene-format.md: dt_s <= 1 s, substep_safety in (0, 1], min_age_steps
+  // and rayleigh_alpha_per_s >= 0, at most 10^7 cubes: the edges themselves are valid.
+  const Scene edges = parse_scene_with_overrides(
+      kBase, "test.yaml",
+      {"integrator.dt_s=1", "integrator.substep_safety=1", "adaptivity.min_age_steps=0",
+       "object.cubes=[1000, 100, 100]", "object.cube_size_m=0.001", "adaptivity.enabled=false"});
+  EXPECT_EQ(edges.integrator.dt_s, 1.0);
+  EXPECT_EQ(edges.integrator.substep_safety, 1.0);
+  EXPECT_EQ(edges.adaptivity.min_age_steps, 0);
+  EXPECT_EQ(edges.object.cubes, (std::array<int, 3>{1000, 100, 100}));
+}
+
 }  // namespace
 }  // namespace tissue::scene
