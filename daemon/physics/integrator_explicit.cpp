@@ -216,10 +216,15 @@ double collapse_factor(double length_ratio) {
 bool state_is_finite(const Body& body) {
   constexpr double kLimit = 1e100;
   bool finite = true;
-  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-    finite = finite && body.x_m[n].cwiseAbs().maxCoeff() < kLimit && body.v_m_per_s[n].cwiseAbs().maxCoeff() < kLimit;
-  });
-  return finite;  // NaN fails every comparison, so it is caught too
+  // Component by component: a NaN fails every comparison, but Eigen's
+  // maxCoeff() over a vector holding one may return another component
+  // (a NaN in y or z passed as finite).
+  const auto within = [](const Vec3& v) {
+    return std::abs(v.x()) < kLimit && std::abs(v.y()) < kLimit && std::abs(v.z()) < kLimit;
+  };
+  body.mesh().for_each_node(
+      [&](NodeId n, const mesh::Node&) { finite = finite && within(body.x_m[n]) && within(body.v_m_per_s[n]); });
+  return finite;
 }
 
 namespace {

@@ -202,7 +202,7 @@ TEST(Integrator, StateIsFiniteRefusesInfinitiesAndMagnitudesFrom1e100) {
 // Eigen's maxCoeff is undefined with a NaN present: here it skips a NaN in y
 // or z, so the implicit and projective rungs (and audit_steps) accept such a
 // state as finite and keep it as the "last finite state".
-TEST(Integrator, DISABLED_StateIsFiniteCatchesANaNInAnyComponent) {
+TEST(Integrator, StateIsFiniteCatchesANaNInAnyComponent) {
   const Body rest(free_cube_scene(1, 0));
   for (const bool velocity : {false, true})
     for (int component = 0; component < 3; ++component) {
