@@ -9,7 +9,7 @@
 namespace tissue::physics {
 
 double Adaptivity::measure(const Body& body, TetId t) const {
-  return spec_.criterion == scene::RefineCriterion::kStretch ? max_edge_strain(body, t)
+  return spec_.criterion == scene::RefineCriterion::kStretch ? max_edge_stretch(body, t)
                                                              : strain_energy_density_Pa(body, t);
 }
 
@@ -22,7 +22,7 @@ double Adaptivity::measure_from_edges(const mesh::Tet& tet) const {
   for (EdgeId e : tet.e) {
     const double strain = edge_strain_[e];
     sum += strain * strain;
-    worst = std::max(worst, std::abs(strain));
+    worst = std::max(worst, stretch_from_strain(strain));
   }
   return spec_.criterion == scene::RefineCriterion::kStretch ? worst : 0.5 * youngs_modulus_Pa_ * sum;
 }

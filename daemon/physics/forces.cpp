@@ -264,9 +264,9 @@ std::size_t inverted_tet_count(const Body& body) {
   return inverted;
 }
 
-double max_edge_strain(const Body& body, TetId t) {
+double max_edge_stretch(const Body& body, TetId t) {
   double worst = 0.0;
-  for (double strain : tet_edge_strains(body, t)) worst = std::max(worst, std::abs(strain));
+  for (double strain : tet_edge_strains(body, t)) worst = std::max(worst, stretch_from_strain(strain));
   return worst;
 }
 

@@ -2,6 +2,7 @@
 // stage): springs along every mesh edge with a damper in parallel.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <vector>
 
@@ -88,7 +89,19 @@ double strain_energy_density_Pa(const std::array<const Vec3*, 4>& x_m, const std
 // reported, not corrected.
 std::size_t inverted_tet_count(const Body& body);
 
-// Largest |l/L − 1| over a tet's edges (the stretch criterion).
-double max_edge_strain(const Body& body, TetId t);
+// How far a spring of strain l/L − 1 is from its rest length as a ratio,
+// max(l/L, L/l) − 1: a spring at 40 % of its length is as far (1.5) as one
+// stretched to 2.5×. (|l/L − 1|, used before, never passed 1 for any
+// compression, so a stretch_ratio of 2 refined none.) A spring collapsed
+// below kCollapsedSpringRatio counts as that ratio, not as infinity.
+inline double stretch_from_strain(double strain) {
+  const double ratio = 1.0 + strain;  // l/L
+  if (ratio >= 1.0) return strain;
+  return 1.0 / std::max(ratio, kCollapsedSpringRatio) - 1.0;
+}
+
+// Largest max(l/L, L/l) − 1 over a tet's edges (the stretch criterion:
+// refine when it exceeds stretch_ratio − 1).
+double max_edge_stretch(const Body& body, TetId t);
 
 }  // namespace tissue::physics

@@ -117,7 +117,7 @@ TEST(Adaptivity, RefinesExactlyTheTetsAboveThreshold) {
     std::set<mesh::Key> wanted;
     body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
       const double m =
-          criterion == scene::RefineCriterion::kStretch ? max_edge_strain(body, t) : strain_energy_density_Pa(body, t);
+          criterion == scene::RefineCriterion::kStretch ? max_edge_stretch(body, t) : strain_energy_density_Pa(body, t);
       EXPECT_NEAR(adaptivity.measure(body, t), m, 1e-12 * std::max(1.0, m));
       if (m > adaptivity.refine_threshold()) wanted.insert(body.mesh().diamond_of(t));
     });
@@ -376,12 +376,11 @@ TEST(Adaptivity, AFrozenNodeIsNotMerged) {
 }
 
 // docs/scene-format.md: `stretch` refines when any l/L or L/l exceeds
-// stretch_ratio. A spring compressed to 40 % has L/l = 2.5 > 2.
-// DISABLED: a real bug. The pass compares |l/L - 1| with stretch_ratio - 1,
-// so a compression never reaches a ratio of 2 or more (|0.4 - 1| = 0.6 < 1),
-// and below that it refines late (l/L = 0.951: L/l = 1.0515 > 1.05 is not
-// refined).
-TEST(Adaptivity, DISABLED_StretchCriterionRefinesACompressionWhoseLOverlExceedsTheRatio) {
+// stretch_ratio. A spring compressed to 40 % has L/l = 2.5 > 2. (The pass
+// compared |l/L - 1| with stretch_ratio - 1, so a compression never reached
+// a ratio of 2 or more (|0.4 - 1| = 0.6 < 1), and below that it refined late
+// (l/L = 0.951: L/l = 1.0515 > 1.05 was not refined).)
+TEST(Adaptivity, StretchCriterionRefinesACompressionWhoseLOverlExceedsTheRatio) {
   scene::Scene s = relaxed_cube_scene();
   s.adaptivity.criterion = scene::RefineCriterion::kStretch;
   for (const auto& [ratio, length_ratio] : {std::pair{2.0, 0.4}, std::pair{1.05, 0.951}}) {

@@ -394,7 +394,7 @@ TEST(Forces, AtRestNoTetIsStrainedOrInverted) {
   int tets = 0;
   body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
     EXPECT_NEAR(strain_energy_density_Pa(body, t), 0.0, 1e-20) << "tet " << t;
-    EXPECT_NEAR(max_edge_strain(body, t), 0.0, 1e-13) << "tet " << t;  // split nodes: mean of the ends, rounded
+    EXPECT_NEAR(max_edge_stretch(body, t), 0.0, 1e-13) << "tet " << t;  // split nodes: mean of the ends, rounded
     ++tets;
   });
   EXPECT_GT(tets, 192);  // refined beyond the coarse 8x2x2 cubes
@@ -497,18 +497,23 @@ TEST(Forces, InvertedTetCountCountsMirroredAndFlatTets) {
   }
 }
 
-// Largest |l/L − 1|: the x axis edge under a uniaxial stretch or squash,
-// and under stretch x 1% with squash y 3% the y axis edge (a squash counts
-// by its size).
-TEST(Forces, MaxEdgeStrainIsTheLargestAbsoluteEdgeStrain) {
+// Largest max(l/L, L/l) − 1: the x axis edge under a uniaxial stretch or
+// squash (a squash to 99 % is 1/0.99 − 1), and under stretch x 1 % with
+// squash y 3 % the y axis edge; a squash to 40 % is as far from rest as a
+// stretch to 250 %.
+TEST(Forces, MaxEdgeStretchIsTheLargestLengthRatioAwayFromRest) {
   Body body(testing::free_cube_scene(1, 0));
-  const struct { double ex, ey, expected; } cases[] = {{0.01, 0.0, 0.01}, {-0.01, 0.0, 0.01}, {0.01, -0.03, 0.03}};
+  const struct {
+    double ex, ey, expected;
+  } cases[] = {{0.01, 0.0, 0.01}, {-0.01, 0.0, 1 / 0.99 - 1}, {0.01, -0.03, 1 / 0.97 - 1}, {-0.6, 0.0, 1.5}};
   for (const auto& k : cases) {
     stretch(body, k.ex, k.ey);
     body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
-      EXPECT_NEAR(max_edge_strain(body, t), k.expected, 1e-14) << "tet " << t << " x " << k.ex << " y " << k.ey;
+      EXPECT_NEAR(max_edge_stretch(body, t), k.expected, 1e-14) << "tet " << t << " x " << k.ex << " y " << k.ey;
     });
-  }
+  }  // A collapsed spring is far from rest, but finitely so.
+  EXPECT_TRUE(std::isfinite(stretch_from_strain(-1.0)));
+  EXPECT_GE(stretch_from_strain(-1.0), 1.0 / kCollapsedSpringRatio - 1.0);
 }
 
 }  // namespace
