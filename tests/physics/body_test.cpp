@@ -327,6 +327,28 @@ TEST(Body, ANodeInBothAFixedAndAPrescribedRegionIsFixed) {
   EXPECT_EQ(prescribed, 6);
 }
 
+// docs/scene-format.md: a node in two prescribed regions follows the first
+// one listed (the face z = 0 and the face x = 0 share an edge of 3 nodes).
+TEST(Body, ANodeInTwoPrescribedRegionsFollowsTheFirstListed) {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.prescribed.push_back({"first", scene::Region::box({0, 0, 0}, {0.1, 0.1, 0}), {0, 0, 0.001}, {}});   // z = 0
+  s.prescribed.push_back({"second", scene::Region::box({0, 0, 0}, {0, 0.1, 0.1}), {0.001, 0, 0}, {}});  // x = 0
+  Body body(s);
+  int shared = 0, second_only = 0;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    const Vec3& p = body.rest_m[n];
+    if (p.z() == 0.0) {
+      EXPECT_EQ(body.prescribed_index[n], 0) << p.transpose();
+      shared += p.x() == 0.0;
+    } else if (p.x() == 0.0) {
+      EXPECT_EQ(body.prescribed_index[n], 1) << p.transpose();
+      ++second_only;
+    }
+  });
+  EXPECT_EQ(shared, 3);
+  EXPECT_EQ(second_only, 6);
+}
+
 // Merge hands the vanishing node's momentum to the free ends of its edge
 // only: a fixed end stays at rest (its support takes that half), and a
 // prescribed node's motion is its driver's, so merging one changes no free
