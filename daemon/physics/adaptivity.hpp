@@ -1,7 +1,8 @@
 // Adaptation of the mesh to the deformation (seed paper §3.1, 3.2, 3.4, with
 // the corrections of NUMERICS.md §2):
 // - refine: split the diamond of every tet whose strain-energy density
-//   exceeds Th (or whose worst edge strain exceeds stretch_ratio − 1);
+//   exceeds Th (or whose worst edge length ratio, max(l/L, L/l), exceeds
+//   stretch_ratio);
 // - simplify, with hysteresis: merge a split diamond when it can merge, every
 //   tet around its node is below Th · simplify_factor, its node sits within
 //   midpoint_tolerance · L of its edge's midpoint (merging then moves nothing

@@ -36,7 +36,6 @@ void add_spring_forces(const Body& body, std::vector<Vec3>& f, bool with_dampers
 }
 
 namespace {
-constexpr int kDamperSolveMaxIterations = 500;
 
 bool is_free(const Body& body, NodeId n) { return body.inv_mass_per_kg[n] != 0.0; }
 
@@ -90,7 +89,7 @@ double dot_free(const Body& body, const std::vector<Vec3>& x, const std::vector<
 void set_up_damper_solve(const Body& body, double h_s, double mass_scale, ImplicitDamperWork& work) {
   const std::size_t nodes = body.v_m_per_s.size(), edges = body.damping_N_s_per_m.size();
   work.direction.resize(edges);
-  for (auto* v : {&work.rhs, &work.r, &work.z, &work.p, &work.q}) v->resize(nodes);
+  for (auto* v : {&work.rhs, &work.r, &work.z, &work.p, &work.q, &work.set_lost_kg_m_s}) v->resize(nodes);
   work.inv_diag.resize(nodes);
   work.component.resize(nodes);
   work.tied.assign(nodes, 0);
@@ -134,18 +133,18 @@ void set_up_damper_solve(const Body& body, double h_s, double mass_scale, Implic
 void restore_momentum(const Body& body, double mass_scale, ImplicitDamperWork& work, std::vector<Vec3>& v) {
   const std::size_t nodes = v.size();
   work.set_mass_kg.assign(nodes, 0.0);
-  for (NodeId n = 0; n < nodes; ++n) work.q[n] = Vec3::Zero();  // the set's lost momentum, at its root
+  for (NodeId n = 0; n < nodes; ++n) work.set_lost_kg_m_s[n] = Vec3::Zero();
   for (NodeId n = 0; n < nodes; ++n) {
     if (!is_free(body, n)) continue;
     const NodeId root = find(work.component, n);
-    work.q[root] += work.r[n];
+    work.set_lost_kg_m_s[root] += work.r[n];
     work.set_mass_kg[root] += body.mass_kg[n];
     if (work.tied[n]) work.tied[root] = 1;
   }
   for (NodeId n = 0; n < nodes; ++n) {
     if (!is_free(body, n)) continue;
     const NodeId root = find(work.component, n);
-    if (!work.tied[root]) v[n] += work.q[root] / (mass_scale * work.set_mass_kg[root]);
+    if (!work.tied[root]) v[n] += work.set_lost_kg_m_s[root] / (mass_scale * work.set_mass_kg[root]);
   }
 }
 }  // namespace
@@ -165,14 +164,18 @@ ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s, doub
     work.z[n] = work.inv_diag[n].cwiseProduct(work.r[n]);
     work.p[n] = work.z[n];
   }
-  const double rhs_norm = std::sqrt(dot_free(body, work.rhs, work.rhs));
   ImplicitDamperSolve out;
   double rz = dot_free(body, work.r, work.z);
   double r_norm = std::sqrt(dot_free(body, work.r, work.r));
-  while (r_norm > relative_tolerance * rhs_norm && out.iterations < kDamperSolveMaxIterations) {
+  const double r0_norm = r_norm;
+  bool at_rounding = false;
+  while (r_norm > relative_tolerance * r0_norm && out.iterations < kDamperSolveMaxIterations) {
     apply_damped_mass(body, h_s, mass_scale, work.direction, work.p, work.q);
     const double pq = dot_free(body, work.p, work.q);
-    if (!(pq > 0.0)) break;  // the residual is at rounding
+    if (!(pq > 0.0)) {  // the residual is at rounding
+      at_rounding = true;
+      break;
+    }
     const double step = rz / pq;
     for (NodeId n = 0; n < nodes; ++n) {
       if (!is_free(body, n)) continue;
@@ -190,7 +193,10 @@ ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s, doub
   }
   apply_damped_mass(body, h_s, mass_scale, work.direction, v, work.q);
   for (NodeId n = 0; n < nodes; ++n) work.r[n] = work.rhs[n] - work.q[n];
-  out.relative_residual = rhs_norm > 0.0 ? std::sqrt(dot_free(body, work.r, work.r)) / rhs_norm : 0.0;
+  out.relative_residual = r0_norm > 0.0 ? std::sqrt(dot_free(body, work.r, work.r)) / r0_norm : 0.0;
+  // Converged unless stopped at the cap (the true residual can sit above the
+  // tolerance at rounding: a first residual that is rounding itself).
+  out.converged = at_rounding || r_norm <= relative_tolerance * r0_norm;
   restore_momentum(body, mass_scale, work, v);
   return out;
 }

@@ -37,32 +37,40 @@ void add_spring_forces(const Body& body, std::vector<Vec3>& f_N, bool with_dampe
 // Scratch space of apply_spring_dampers_implicitly, kept by its caller so
 // that a step allocates nothing once the mesh has stopped growing.
 struct ImplicitDamperWork {
-  std::vector<Vec3> direction;  // per edge: the spring's unit direction
-  std::vector<Vec3> rhs, r, z, p, q;
-  std::vector<Vec3> inv_diag;       // per node: the Jacobi preconditioner
-  std::vector<NodeId> component;    // union–find over the dampers between free nodes
-  std::vector<unsigned char> tied;  // in a set with a damper to a kinematic node
-  std::vector<double> set_mass_kg;  // per set, at its root
+  std::vector<Vec3> direction;        // per edge: the spring's unit direction
+  std::vector<Vec3> rhs, r, q;        // per node, kg m/s: b, the residual b − A v, A p
+  std::vector<Vec3> z, p;             // per node, m/s: the preconditioned residual, the search direction
+  std::vector<Vec3> inv_diag;         // per node, 1/kg: the Jacobi preconditioner
+  std::vector<NodeId> component;      // union–find over the dampers between free nodes
+  std::vector<unsigned char> tied;    // in a set with a damper to a kinematic node
+  std::vector<double> set_mass_kg;    // per set, at its root
+  std::vector<Vec3> set_lost_kg_m_s;  // per set, at its root: −Σ r, the momentum the residual leaves out
 };
-struct ImplicitDamperSolve {
+struct [[nodiscard]] ImplicitDamperSolve {
   int iterations = 0;
-  double relative_residual = 0.0;  // |b − A v| / |b| at the end
+  double relative_residual = 0.0;  // |b − A v| / |b − A v₀| at the end, v₀ = v / mass_scale
+  bool converged = true;           // not stopped at kDamperSolveMaxIterations short of the tolerance
 };
 
 // Applies the spring dampers (and a mass damping folded into `mass_scale`)
 // implicitly over a time h: solves (mass_scale M + h C) v' = M v for the free
 // nodes' velocities, C the dampers' matrix (c d dᵀ per spring, d its
 // direction now), the kinematic nodes' velocities known; positions are not
-// touched. Jacobi-preconditioned conjugate gradients from v / mass_scale to
-// `relative_tolerance` (at most 500 iterations: the system's condition
-// number is at most 1 + h c (1/m_a + 1/m_b) times the springs at a node).
-// Momentum is kept (C's rows sum to zero; a free body's to rounding) and
-// kinetic energy does not grow beyond the residual, however stiff the
-// damping or long the step.
+// touched. Jacobi-preconditioned conjugate gradients from v₀ = v /
+// mass_scale (the answer without spring dampers) until the residual is
+// `relative_tolerance` times the first one, b − A v₀ = −h C v₀ (the part the
+// dampers act on: a drifting body's bulk momentum does not loosen it), at
+// most kDamperSolveMaxIterations (the system's condition number is at most
+// 1 + h c (1/m_a + 1/m_b) times the springs at a node). The dampers change
+// no momentum (C's rows sum to zero; a free body's to rounding), so the free
+// nodes' momentum ends divided by mass_scale (the mass damping), and kinetic
+// energy does not grow beyond the residual, however stiff the damping or
+// long the step.
 // (One Gauss–Seidel sweep spring by spring, which it replaced, relaxed each
 // spring locally and gave a cantilever's slow swing a fifth of its Rayleigh
 // damping: the projective rung overshot, tip −11.1 mm at 20 ms against
 // explicit's −9.7 and implicit's −9.1.)
+constexpr int kDamperSolveMaxIterations = 500;
 ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s, double mass_scale,
                                                     double relative_tolerance, ImplicitDamperWork& work);
 // The same with its own scratch space, mass_scale 1 and a tolerance of 1e-10

@@ -142,8 +142,11 @@ StepOutcome ProjectiveIntegrator::step(Body& body, const std::vector<Vec3>& f_ex
   // damping) implicitly to the new velocities: the next step's inertial
   // target carries them into the positions. (Re-deriving positions from the
   // damped velocities was tried and diverged: the positions stay those of
-  // the solve.)
-  apply_spring_dampers_implicitly(body, h, 1.0 + h * alpha_per_s_, spec_.cg_tolerance, dampers_);
+  // the solve.) A damper solve short of cg_tolerance makes the step
+  // unconverged, as the local/global iterations' do (reports count both).
+  const ImplicitDamperSolve dampers =
+      apply_spring_dampers_implicitly(body, h, 1.0 + h * alpha_per_s_, spec_.cg_tolerance, dampers_);
+  out.solver_converged = out.solver_converged && dampers.converged;
 
   if (!state_is_finite(body)) {
     save_.restore(body);

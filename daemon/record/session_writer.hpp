@@ -48,8 +48,8 @@ inline constexpr std::string_view kAutomaticPrefix = "auto-";
 // Removes the oldest automatic recordings in `dir` (regular files named
 // kAutomaticPrefix + "YYYYmmdd-HHMMSS[-K].h5", oldest first by that time,
 // then K) until those left hold at most `keep_bytes` together, never `keep`
-// (the file being written) nor any other file, whatever its prefix. Returns the removed paths; a directory that cannot be read
-// removes nothing.
+// (the file being written) nor any other file, whatever its prefix. Returns
+// the removed paths; a directory that cannot be read removes nothing.
 std::vector<std::string> remove_oldest_automatic_recordings(const std::string& dir, std::uintmax_t keep_bytes,
                                                             const std::string& keep);
 

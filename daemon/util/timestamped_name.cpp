@@ -43,9 +43,11 @@ std::optional<NameStamp> read_name_stamp(std::string_view stem) {
   NameStamp out{std::string(stem.substr(0, kTimeChars)), 1};
   if (stem.size() == kTimeChars) return out;
   const std::string_view suffix = stem.substr(kTimeChars + 1);
-  // "-K" with K in [2, kMaxSuffix): what the maker writes, nothing longer.
-  if (stem[kTimeChars] != '-' || !all_digits(suffix) || suffix.size() > 4) return std::nullopt;
+  // "-K" with K in [2, kMaxSuffix) written plainly: what the maker writes and
+  // nothing else ("-0", "-1", "-02" are a client's names).
+  if (stem[kTimeChars] != '-' || !all_digits(suffix) || suffix.size() > 3 || suffix[0] == '0') return std::nullopt;
   std::from_chars(suffix.data(), suffix.data() + suffix.size(), out.k);
+  if (out.k < 2) return std::nullopt;
   return out;
 }
 

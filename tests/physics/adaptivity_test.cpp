@@ -160,8 +160,9 @@ void dilate(Body& body, double eps) {
 
 // Under a uniform dilation or compression by ε every edge has strain ε, so
 // every tet's strain-energy density is (E/2) Σ ε² = 3 E ε² (eq. (1), squared:
-// compression counts as stretch does) and its worst edge strain |ε|. A
-// threshold 5 % above refines nothing, 5 % below refines.
+// compression counts as stretch does) and its stretch max(l/L, L/l) − 1 is
+// ε, or 1/(1 + ε) − 1 ≈ |ε| for a compression. A threshold 5 % above
+// refines nothing, 5 % below refines.
 TEST(Adaptivity, UniformStrainRefinesExactlyWhenItsDensityPassesTheThreshold) {
   for (auto criterion : {scene::RefineCriterion::kStrainEnergy, scene::RefineCriterion::kStretch}) {
     for (double eps : {1e-3, -1e-3}) {

@@ -197,11 +197,10 @@ TEST(Integrator, StateIsFiniteRefusesInfinitiesAndMagnitudesFrom1e100) {
   EXPECT_TRUE(state_is_finite(large));
 }
 
-// The same for a NaN in any one component ("NaN fails every comparison").
-// DISABLED: a real bug. state_is_finite compares cwiseAbs().maxCoeff(), and
-// Eigen's maxCoeff is undefined with a NaN present: here it skips a NaN in y
-// or z, so the implicit and projective rungs (and audit_steps) accept such a
-// state as finite and keep it as the "last finite state".
+// The same for a NaN in any one component. (state_is_finite compared
+// cwiseAbs().maxCoeff(), and Eigen's maxCoeff is undefined with a NaN
+// present: it skipped a NaN in y or z, so the implicit and projective rungs
+// and audit_steps took such a state as finite.)
 TEST(Integrator, StateIsFiniteCatchesANaNInAnyComponent) {
   const Body rest(free_cube_scene(1, 0));
   for (const bool velocity : {false, true})

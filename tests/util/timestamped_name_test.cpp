@@ -51,11 +51,15 @@ TEST(TimestampedName, ReadsBackWhatItMade) {
 TEST(TimestampedName, ReadsNothingElse) {
   for (const char* stem :
        {"", "notes", "20261127", "20261127-02240", "2026112x-022405", "20261127_022405", "20261127-022405-",
-        "20261127-022405x2", "20261127-022405-2a", "20261127-022405-99999", "20261127-022405--2"})
+        "20261127-022405x2", "20261127-022405-2a", "20261127-022405-99999", "20261127-022405--2", "20261127-022405-0",
+        "20261127-022405-1", "20261127-022405-02", "20261127-022405-1000"})
     EXPECT_FALSE(read_name_stamp(stem)) << '"' << stem << '"';
   const std::optional<NameStamp> two = read_name_stamp("20261127-022405-2");
   ASSERT_TRUE(two);
   EXPECT_EQ(two->k, 2);
+  const std::optional<NameStamp> last = read_name_stamp("20261127-022405-999");
+  ASSERT_TRUE(last);
+  EXPECT_EQ(last->k, 999);
 }
 
 }  // namespace
