@@ -330,7 +330,7 @@ int batch_command(const BatchOptions& options) {
     try {
       sim = std::make_unique<physics::Simulation>(scene);
     } catch (const scene::SceneModelError& e) {
-      return fail(kExitUsage, scene::model_error(scene, e).what());  // file: key: reason (set by --set ...)
+      return fail(kExitUsage, scene::model_error(scene, e).what());  // file: key: reason (set by the override ...)
     } catch (const std::invalid_argument& e) {
       return fail(kExitUsage, scene.source + ": " + e.what());
     }

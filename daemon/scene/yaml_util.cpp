@@ -518,7 +518,7 @@ Document load_with_overrides(const std::string& text, const std::string& source,
 std::string blame_override(const std::vector<Override>& overrides, const std::string& key_path,
                            const std::string& reason) {
   for (auto it = overrides.rbegin(); it != overrides.rend(); ++it)
-    if (paths_related(it->path, key_path)) return reason + " (set by --set " + printable(it->text) + ")";
+    if (paths_related(it->path, key_path)) return reason + " (set by the override " + printable(it->text) + ")";
   return reason;
 }
 

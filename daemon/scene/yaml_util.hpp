@@ -219,8 +219,10 @@ struct Document {
 Document load_with_overrides(const std::string& text, const std::string& source,
                              const std::vector<std::string>& overrides, const DocumentKind& doc);
 
-// `reason`, plus " (set by --set '...')" when the latest override whose path
-// contains or lies inside `key_path` probably caused the error.
+// `reason`, plus " (set by the override '...')" when the latest override
+// whose path contains or lies inside `key_path` probably caused the error.
+// Overrides come from a command line's --set and from the control socket's
+// `set` alike, so the words name neither ("set by --set" misled a client).
 std::string blame_override(const std::vector<Override>& overrides, const std::string& key_path,
                            const std::string& reason);
 

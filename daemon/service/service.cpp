@@ -108,7 +108,7 @@ scene::Scene Service::load_config_scene(const config::DaemonConfig& config) cons
     // the file and key themselves.
     std::string blame;
     for (const std::string& o : config_overrides())
-      if (o.rfind("scene=", 0) == 0) blame = " (set by --set " + yaml_util::printable(o) + ")";
+      if (o.rfind("scene=", 0) == 0) blame = " (set by the override " + yaml_util::printable(o) + ")";
     throw config::ConfigError(config.source, "scene", e.source() + ": " + e.reason() + blame);
   }
 }

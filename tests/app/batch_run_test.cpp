@@ -414,7 +414,7 @@ TEST_F(TissuedProcess, ARegionSetBetweenNodesByAnOverrideIsBlamedOnIt) {
   const Process p = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set", set});
   EXPECT_EQ(p.exit_code, 2);
   EXPECT_TRUE(contains(p.err, "cantilever.yaml: loads[0].region: selects no node of the mesh")) << p.err;
-  EXPECT_TRUE(contains(p.err, "(set by --set 'loads[0].region={sphere:")) << p.err;  // cut to 40 bytes
+  EXPECT_TRUE(contains(p.err, "(set by the override 'loads[0].region={sphere:")) << p.err;  // cut to 40 bytes
 }
 
 TEST_F(TissuedProcess, MissingSceneExits2NamingTheFile) {

@@ -224,7 +224,7 @@ TEST(TradeStudy, ABadSceneFileIsAnErrorNamingTheFileAndKey) {
   const RunResult o = sweep(dir, kCantilever, dir / "o.csv", "--set 'integrator.dt_s=-1'");
   EXPECT_EQ(o.exit_code, 2);
   EXPECT_NE(o.err.find("integrator.dt_s"), std::string::npos) << o.err;
-  EXPECT_NE(o.err.find("--set"), std::string::npos) << o.err;
+  EXPECT_NE(o.err.find("(set by the override 'integrator.dt_s=-1')"), std::string::npos) << o.err;
 }
 
 TEST(TradeStudy, AMaxDepthAtTheScenesMinDepthIsRefused) {

@@ -383,7 +383,7 @@ TEST(DaemonConfigYaml, OverridesApplyAndAreBlamedInErrors) {
   EXPECT_EQ(load_daemon_config(path, {"haptics.rate_hz=250"}).haptics.rate_hz, 250.0);
   EXPECT_EQ(load_daemon_config(path).haptics.rate_hz, 1000.0);
 
-  expect_error(kBase, "haptics.rate_hz", "must be > 0 (got -1) (set by --set 'haptics.rate_hz=-1')",
+  expect_error(kBase, "haptics.rate_hz", "must be > 0 (got -1) (set by the override 'haptics.rate_hz=-1')",
                {"haptics.rate_hz=-1"});
   expect_error(kBase, "haptics.rate_hzz", "unknown key", {"haptics.rate_hzz=5"});
   expect_error(kBase, "", "malformed override", {"haptics.rate_hz"});

@@ -653,12 +653,12 @@ TEST(YamlUtil, LoadWithOverridesAppliesThemInOrder) {
 TEST(YamlUtil, BlameOverrideNamesTheLatestRelatedOverride) {
   const Document d = load_with_overrides("l: [0]", "f.yaml", {"a.b=1", "l[0]=2", "a.b=3", "x=4"}, kKind);
   const auto& ovs = d.overrides;
-  EXPECT_EQ(blame_override(ovs, "a.b", "bad"), "bad (set by --set 'a.b=3')");    // the later of two
-  EXPECT_EQ(blame_override(ovs, "a.b.c", "bad"), "bad (set by --set 'a.b=3')");  // inside it
-  EXPECT_EQ(blame_override(ovs, "a", "bad"), "bad (set by --set 'a.b=3')");      // contains it
-  EXPECT_EQ(blame_override(ovs, "l[0].name", "bad"), "bad (set by --set 'l[0]=2')");
-  EXPECT_EQ(blame_override(ovs, "l", "bad"), "bad (set by --set 'l[0]=2')");
-  EXPECT_EQ(blame_override(ovs, "x", "bad"), "bad (set by --set 'x=4')");
+  EXPECT_EQ(blame_override(ovs, "a.b", "bad"), "bad (set by the override 'a.b=3')");    // the later of two
+  EXPECT_EQ(blame_override(ovs, "a.b.c", "bad"), "bad (set by the override 'a.b=3')");  // inside it
+  EXPECT_EQ(blame_override(ovs, "a", "bad"), "bad (set by the override 'a.b=3')");      // contains it
+  EXPECT_EQ(blame_override(ovs, "l[0].name", "bad"), "bad (set by the override 'l[0]=2')");
+  EXPECT_EQ(blame_override(ovs, "l", "bad"), "bad (set by the override 'l[0]=2')");
+  EXPECT_EQ(blame_override(ovs, "x", "bad"), "bad (set by the override 'x=4')");
   // Unrelated paths, including a mere common prefix, are not blamed.
   EXPECT_EQ(blame_override(ovs, "a.bc", "bad"), "bad");
   EXPECT_EQ(blame_override(ovs, "xy", "bad"), "bad");
@@ -681,8 +681,8 @@ TEST(YamlUtil, ConvertDocumentRaisesTheLoadersErrorWithTheBlame) {
     ADD_FAILURE() << "no error";
   } catch (const TestError& e) {
     EXPECT_EQ(e.key_path(), "a.b");
-    EXPECT_EQ(e.reason(), "expected a number, got 'fast' (set by --set 'a.b=fast')");
-    EXPECT_STREQ(e.what(), "f.yaml: a.b: expected a number, got 'fast' (set by --set 'a.b=fast')");
+    EXPECT_EQ(e.reason(), "expected a number, got 'fast' (set by the override 'a.b=fast')");
+    EXPECT_STREQ(e.what(), "f.yaml: a.b: expected a number, got 'fast' (set by the override 'a.b=fast')");
   }
   // The loader's own error from the converter: blamed the same way.
   try {
@@ -691,7 +691,7 @@ TEST(YamlUtil, ConvertDocumentRaisesTheLoadersErrorWithTheBlame) {
     ADD_FAILURE() << "no error";
   } catch (const TestError& e) {
     EXPECT_EQ(e.key_path(), "v");
-    EXPECT_EQ(e.reason(), "must be > 0 (set by --set 'v=0')");
+    EXPECT_EQ(e.reason(), "must be > 0 (set by the override 'v=0')");
   }
   // Errors loading the document or an override: the loader's type, no blame.
   try {

@@ -233,7 +233,7 @@ TEST(Service, AnUnreadableSceneNamesTheConfigsSceneKey) {
     const std::string scene = dir / (by_set ? "gone.yaml" : "missing.yaml");
     EXPECT_NE(err.find(config + ": scene: " + scene + ": cannot read scene file: no such file"), std::string::npos)
         << err;
-    EXPECT_EQ(err.find("(set by --set 'scene=gone.yaml')") != std::string::npos, by_set) << err;
+    EXPECT_EQ(err.find("(set by the override 'scene=gone.yaml')") != std::string::npos, by_set) << err;
     std::fclose(options.err);
     std::fclose(options.out);
   }
@@ -280,6 +280,11 @@ TEST(Service, SceneChangesUnderLoadKeepServing) {
   const nlohmann::json bad = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", -1}});
   EXPECT_FALSE(bad["ok"].get<bool>());
   EXPECT_NE(bad["error"].get<std::string>().find("material.youngs_modulus_Pa"), std::string::npos) << bad.dump();
+  // The client's own request is named, not a command line it never used.
+  EXPECT_NE(bad["error"].get<std::string>().find("(set by the override 'material.youngs_modulus_Pa=-1')"),
+            std::string::npos)
+      << bad.dump();
+  EXPECT_EQ(bad["error"].get<std::string>().find("--set"), std::string::npos) << bad.dump();
   const nlohmann::json missing = client.call("load_scene", {{"path", dir / "missing.yaml"}});
   EXPECT_FALSE(missing["ok"].get<bool>());
   EXPECT_NE(missing["error"].get<std::string>().find("missing.yaml"), std::string::npos) << missing.dump();
