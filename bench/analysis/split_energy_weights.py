@@ -82,7 +82,7 @@ def main():
     tets = coarse_tets(4)
     # Energy density of the (isotropic) level-0 lattice for each strain: the
     # scale the changes are measured on, as in the C++ test
-    # Body.OnlyCubeDiagonalSplitsKeepTheEnergyOfEveryAffineDeformation.
+    # Body.CubeDiagonalSplitsKeepTheEnergyOfEachStrainComponentAlone.
     lattice = np.tensordot(TABULATED, sum(energy_forms(t) for t in tets), 1) / sum(volume(t[0]) for t in tets)
     density = {name: eps @ lattice @ eps for name, eps in strains.items()}
     rows = []

@@ -52,8 +52,10 @@ struct SimCounters {
   // mesh are not energy-consistent: the per-type weights make each uniform
   // level isotropic, but a single face- or axis-diagonal diamond split changes
   // the energy of an affine deformation by up to ±75% of the diamond's share
-  // (cube-diagonal splits by 0), and no choice of per-type weights removes
-  // that (README, "Energy across mesh changes"). So the energy the model
+  // (cube-diagonal splits too, for a normal strain mixed with a shear), and no
+  // choice of per-type weights removes that; at a coarse mesh's equilibrium
+  // the change is mostly an increase (README, "Energy across mesh changes").
+  // So the energy the model
   // change made is kept apart from what the integrator did: a step never
   // adds energy beyond external_work_J; a mesh change adds this.
   double adaptation_energy_J = 0.0;
