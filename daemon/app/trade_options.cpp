@@ -6,10 +6,14 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "scene/scene_names.hpp"
 #include "util/output_file.hpp"
 #include "util/text.hpp"
 
 namespace tissue::app {
+
+namespace sc = tissue::scene;
+
 namespace {
 
 std::vector<std::string> split_list(const std::string& s) {
@@ -105,11 +109,11 @@ bool read_choice(const std::string& a, const NextValue& value, TradeOptions& o) 
     o.cpu_clock = c == "cpu";
   } else if (a == "--preconditioner") {
     o.preconditioner = value();
-    if (o.preconditioner != "jacobi" && o.preconditioner != "two_level" && o.preconditioner != "auto")
+    if (!sc::value_named(sc::kCgPreconditionerNames, o.preconditioner))
       throw std::invalid_argument("--preconditioner must be jacobi, two_level or auto");
   } else if (a == "--explicit-precision") {
     o.explicit_precision = value();
-    if (o.explicit_precision != "double" && o.explicit_precision != "float")
+    if (!sc::value_named(sc::kExplicitPrecisionNames, o.explicit_precision))
       throw std::invalid_argument("--explicit-precision must be double or float");
   } else {
     return false;

@@ -3,6 +3,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "scene/scene_names.hpp"
 #include "scene/scene_yaml.hpp"
 
 namespace tissue::app {
@@ -16,12 +17,9 @@ namespace {
 void set_solver_choices(const TradeOptions& o, SweepSetup& s) {
   const std::string preconditioner = !o.preconditioner.empty() ? o.preconditioner : s.from_file ? "" : "jacobi";
   if (!preconditioner.empty())
-    s.preconditioner = preconditioner == "two_level" ? sc::CgPreconditioner::kTwoLevel
-                       : preconditioner == "auto"    ? sc::CgPreconditioner::kAuto
-                                                     : sc::CgPreconditioner::kJacobi;
+    s.preconditioner = sc::value_named(sc::kCgPreconditionerNames, preconditioner).value();  // checked by the options
   const std::string precision = !o.explicit_precision.empty() ? o.explicit_precision : s.from_file ? "" : "double";
-  if (!precision.empty())
-    s.explicit_precision = precision == "float" ? sc::ExplicitPrecision::kFloat : sc::ExplicitPrecision::kDouble;
+  if (!precision.empty()) s.explicit_precision = sc::value_named(sc::kExplicitPrecisionNames, precision).value();
 }
 
 // --th, or thresholds around the scene file's own, or the built-in scene's list.

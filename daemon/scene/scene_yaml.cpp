@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "scene/scene_names.hpp"
 #include "scene/yaml_util.hpp"
 #include "util/text.hpp"
 
@@ -40,25 +41,6 @@ constexpr std::size_t kMaxNameLength = 64;
 constexpr std::size_t kMaxSceneNameBytes = 200;  // the scene's own name (free text)
 
 // ------------------------------------------------------------ YAML -> Scene
-
-constexpr std::array<std::pair<std::string_view, StiffnessLaw>, 2> kStiffnessLaws{
-    {{"isotropic", StiffnessLaw::kIsotropic}, {"paper", StiffnessLaw::kPaper}}};
-constexpr std::array<std::pair<std::string_view, DampingLaw>, 2> kDampingLaws{
-    {{"rayleigh", DampingLaw::kRayleigh}, {"paper", DampingLaw::kPaper}}};
-constexpr std::array<std::pair<std::string_view, RefineCriterion>, 2> kCriteria{
-    {{"strain_energy", RefineCriterion::kStrainEnergy}, {"stretch", RefineCriterion::kStretch}}};
-constexpr std::array<std::pair<std::string_view, IntegratorKind>, 3> kIntegrators{
-    {{"explicit", IntegratorKind::kExplicit},
-     {"implicit", IntegratorKind::kImplicit},
-     {"projective", IntegratorKind::kProjective}}};
-
-constexpr std::array<std::pair<std::string_view, CgPreconditioner>, 3> kPreconditioners{
-    {{"auto", CgPreconditioner::kAuto},
-     {"jacobi", CgPreconditioner::kJacobi},
-     {"two_level", CgPreconditioner::kTwoLevel}}};
-
-constexpr std::array<std::pair<std::string_view, ExplicitPrecision>, 2> kExplicitPrecisions{
-    {{"double", ExplicitPrecision::kDouble}, {"float", ExplicitPrecision::kFloat}}};
 
 // Scene sections -> Scene; key checking and typed reads come from the shared Reader.
 class Converter : public yaml_util::Reader {
@@ -160,8 +142,8 @@ class Converter : public yaml_util::Reader {
         {"youngs_modulus_Pa", "density_kg_per_m3", "stiffness", "damping", "rayleigh_alpha_per_s", "rayleigh_beta_s"});
     opt(f, "youngs_modulus_Pa", p, m.youngs_modulus_Pa);
     opt(f, "density_kg_per_m3", p, m.density_kg_per_m3);
-    opt_choice<StiffnessLaw>(f, "stiffness", p, kStiffnessLaws, m.stiffness);
-    opt_choice<DampingLaw>(f, "damping", p, kDampingLaws, m.damping);
+    opt_choice<StiffnessLaw>(f, "stiffness", p, kStiffnessLawNames, m.stiffness);
+    opt_choice<DampingLaw>(f, "damping", p, kDampingLawNames, m.damping);
     opt(f, "rayleigh_alpha_per_s", p, m.rayleigh_alpha_per_s);
     opt(f, "rayleigh_beta_s", p, m.rayleigh_beta_s);
   }
@@ -203,7 +185,7 @@ class Converter : public yaml_util::Reader {
                {"enabled", "criterion", "refine_threshold_Pa", "simplify_factor", "stretch_ratio", "min_depth",
                 "max_depth", "every_steps", "max_ops_per_step", "min_age_steps", "midpoint_tolerance", "max_tets"});
     opt(f, "enabled", p, a.enabled);
-    opt_choice<RefineCriterion>(f, "criterion", p, kCriteria, a.criterion);
+    opt_choice<RefineCriterion>(f, "criterion", p, kRefineCriterionNames, a.criterion);
     opt(f, "refine_threshold_Pa", p, a.refine_threshold_Pa);
     opt(f, "simplify_factor", p, a.simplify_factor);
     opt(f, "stretch_ratio", p, a.stretch_ratio);
@@ -220,14 +202,14 @@ class Converter : public yaml_util::Reader {
     const FieldMap f = fields(n, p,
                               {"kind", "dt_s", "max_substeps", "substep_safety", "explicit_precision", "cg_tolerance",
                                "cg_max_iterations", "cg_preconditioner"});
-    opt_choice<IntegratorKind>(f, "kind", p, kIntegrators, g.kind);
+    opt_choice<IntegratorKind>(f, "kind", p, kIntegratorNames, g.kind);
     opt(f, "dt_s", p, g.dt_s);
     opt(f, "max_substeps", p, g.max_substeps);
     opt(f, "substep_safety", p, g.substep_safety);
-    opt_choice<ExplicitPrecision>(f, "explicit_precision", p, kExplicitPrecisions, g.explicit_precision);
+    opt_choice<ExplicitPrecision>(f, "explicit_precision", p, kExplicitPrecisionNames, g.explicit_precision);
     opt(f, "cg_tolerance", p, g.cg_tolerance);
     opt(f, "cg_max_iterations", p, g.cg_max_iterations);
-    opt_choice<CgPreconditioner>(f, "cg_preconditioner", p, kPreconditioners, g.cg_preconditioner);
+    opt_choice<CgPreconditioner>(f, "cg_preconditioner", p, kCgPreconditionerNames, g.cg_preconditioner);
   }
 };
 
