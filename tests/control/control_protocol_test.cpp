@@ -74,6 +74,15 @@ TEST(ControlProtocol, DuplicateKeysAndNulBytesAreRefusedAndNothingRuns) {
   EXPECT_EQ(handle(R"({"id":{"a":1},"cmd":"set","key":"name","value":{"a":2}})", h).at("ok"), true);
 }
 
+// Duplicates are per object: a key of a nested object (here inside "id" and
+// "value") may also be a key of the object around it.
+TEST(ControlProtocol, AKeyOfANestedObjectMayRecurInTheObjectAroundIt) {
+  FakeHandler h;
+  EXPECT_EQ(handle(R"({"id":{"cmd":"x"},"cmd":"status"})", h).at("ok"), true);
+  EXPECT_EQ(handle(R"({"id":1,"cmd":"set","value":{"key":1,"value":2},"key":"name"})", h).at("ok"), true);
+  EXPECT_EQ(h.call_count(), 2u);
+}
+
 TEST(ControlProtocol, EveryCommandReachesTheHandlerWithItsArguments) {
   FakeHandler h;
   EXPECT_EQ(handle(R"({"id":1,"cmd":"pause"})", h).at("ok"), true);
@@ -170,6 +179,56 @@ TEST(ControlProtocol, ArgumentsAreCheckedBeforeTheHandler) {
   EXPECT_EQ(h.call_count(), 1u);
 }
 
+// docs/control-protocol.md gives the limits as "at most": a value of exactly
+// the limit is taken, one byte more is refused before the handler.
+TEST(ControlProtocol, ArgumentsOfExactlyTheDocumentedLengthAreTakenAndOneByteMoreIsRefused) {
+  FakeHandler h;
+  const auto request = [](const char* cmd, const char* arg, const std::string& text) {
+    json r{{"id", 1}, {"cmd", cmd}, {arg, text}};
+    if (std::string(cmd) == "set") r["value"] = 1;
+    return r.dump();
+  };
+  struct Limit {
+    const char* cmd;
+    const char* arg;
+    std::size_t bytes;
+  };
+  for (const Limit& l :
+       {Limit{"load_scene", "path", kMaxPathBytes}, Limit{"set", "key", kMaxKeyPathBytes},
+        Limit{"record_start", "name", kMaxFileNameBytes}, Limit{"export_x3d", "name", kMaxFileNameBytes}}) {
+    const std::size_t before = h.call_count();
+    EXPECT_EQ(handle(request(l.cmd, l.arg, std::string(l.bytes, 'k')), h).at("ok"), true) << l.cmd;
+    EXPECT_EQ(h.call_count(), before + 1) << l.cmd;
+    expect_error(handle(request(l.cmd, l.arg, std::string(l.bytes + 1, 'k')), h), 1,
+                 "is too long (" + std::to_string(l.bytes + 1) + " bytes, at most " + std::to_string(l.bytes) + ")");
+    EXPECT_EQ(h.call_count(), before + 1) << l.cmd;
+  }
+}
+
+// A NUL escaped inside a JSON string (\u0000) is valid JSON, but a path or
+// name holding one would be cut there by every C API the daemon hands it to
+// (a different file than the one asked for): refused naming the argument.
+TEST(ControlProtocol, AnEscapedNulInsideAStringArgumentIsRefusedNamingTheArgument) {
+  FakeHandler h;
+  expect_error(handle(R"({"id":1,"cmd":"load_scene","path":"/tmp/a.yaml\u0000.txt"})", h), 1,
+               "argument 'path' of 'load_scene' must not contain a NUL character");
+  expect_error(handle(R"({"id":2,"cmd":"record_start","name":"s\u0000.h5"})", h), 2,
+               "argument 'name' of 'record_start' must not contain a NUL character");
+  EXPECT_EQ(h.call_count(), 0u);
+}
+
+// "id: any JSON value (nesting at most 16 levels)": 16 levels echo, 17 are refused.
+TEST(ControlProtocol, AnIdNestedSixteenLevelsIsEchoedAndSeventeenAreRefused) {
+  FakeHandler h;
+  const auto nested = [](int levels) { return std::string(levels, '[') + std::string(levels, ']'); };
+  const json r = handle("{\"id\":" + nested(16) + ",\"cmd\":\"pause\"}", h);
+  EXPECT_EQ(r.at("ok"), true) << r;
+  EXPECT_EQ(r.at("id"), json::parse(nested(16)));
+  expect_error(handle("{\"id\":" + nested(17) + ",\"cmd\":\"pause\"}", h), nullptr,
+               "'id' is nested too deeply (more than 16 levels)");
+  EXPECT_EQ(h.call_count(), 1u);
+}
+
 TEST(ControlProtocol, HandlerFailuresBecomeErrorResponses) {
   FakeHandler h;
   h.fail_with(FakeHandler::Failure::kControlError, "no scene loaded: load one with load_scene");
@@ -193,7 +252,8 @@ TEST(ControlProtocol, HelpersForTheService) {
   EXPECT_TRUE(is_valid_key_path("material.youngs_modulus_Pa"));
   EXPECT_TRUE(is_valid_key_path("loads[0].total_force_N[2]"));
   EXPECT_TRUE(is_valid_key_path("haptics.rate_hz"));
-  for (const char* bad : {"", ".a", "a.", "a..b", "a[", "a[x]", "[0]", "a b", "a]", "a[0]b", "a=b"})
+  for (const char* bad :
+       {"", ".a", "a.", "a..b", "a[", "a[x]", "[0]", "a b", "a]", "a[0]b", "a=b", "a[0", "a[0x", "a[1}.b"})
     EXPECT_FALSE(is_valid_key_path(bad)) << bad;
   EXPECT_EQ(set_override_text("material.youngs_modulus_Pa", 80000.0), "material.youngs_modulus_Pa=80000.0");
   EXPECT_EQ(set_override_text("integrator.kind", "implicit"), "integrator.kind=\"implicit\"");

@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <random>
 #include <string>
@@ -85,7 +86,8 @@ TEST(ControlServer, MalformedLinesGetErrorsAndTheConnectionLivesOn) {
   RawClient c(h.socket_path());
   ASSERT_TRUE(c.connected());
   // Several requests in one write, a CRLF line, blank lines (ignored).
-  ASSERT_TRUE(c.send_all("{oops\n[1,2]\n\n  \n{\"id\":1}\n{\"id\":2,\"cmd\":\"status\"}\r\n"));
+  // A blank CRLF line (telnet, nc -C) is blank too: no answer.
+  ASSERT_TRUE(c.send_all("{oops\n[1,2]\n\n  \n\r\n \t\r\n{\"id\":1}\n{\"id\":2,\"cmd\":\"status\"}\r\n"));
   const char* expected_errors[] = {"malformed JSON", "must be a JSON object", "missing 'cmd'"};
   for (const char* part : expected_errors) {
     const auto line = c.read_line();
@@ -361,6 +363,33 @@ TEST(ControlServer, ControlSpecMapsToSettings) {
   EXPECT_EQ(s.unix_socket_path, spec.unix_socket_path);
   EXPECT_EQ(s.max_line_bytes, 4096u);
   EXPECT_EQ(s.max_connections, 3);
+}
+
+// Limits of zero would refuse every request or every connection: start()
+// refuses them, naming the setting, and opens nothing.
+TEST(ControlServer, StartRefusesLimitsOfZeroNamingTheSetting) {
+  testing::TempDir dir;
+  boost::asio::io_context io;
+  testing::FakeHandler handler;
+  struct Case {
+    std::size_t max_line_bytes;
+    int max_connections;
+    const char* says;
+  };
+  for (const Case& c : {Case{0, 16, "max_line_bytes must be >= 1"}, Case{65536, 0, "max_connections must be >= 1"}}) {
+    ServerSettings s;
+    s.unix_socket_path = dir / "control.sock";
+    s.max_line_bytes = c.max_line_bytes;
+    s.max_connections = c.max_connections;
+    ControlServer server(io, s, handler);
+    try {
+      server.start();
+      ADD_FAILURE() << "started with " << c.says;
+    } catch (const ControlError& e) {
+      EXPECT_NE(std::string(e.what()).find(c.says), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(s.unix_socket_path)) << c.says;
+  }
 }
 
 TEST(ControlServer, SocketFileModeStaleReplacementAndRemoval) {

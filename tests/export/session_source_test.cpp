@@ -326,6 +326,39 @@ TEST(SessionSource, StrainIsNaNForAWholeFrameOrNotAtAll) {
     expect_source_error([&] { source->read_frame(1); },
                         {"'" + path + "': ", std::string(strain) + " row " + std::to_string(first + 3) + " (frame 1)"});
   }
+  {
+    // A finite value below 0 is no energy density either.
+    const std::string path = write_frames(dir / "negative.h5", 3, true);
+    rt::overwrite_f32(path, strain, first + 2, -1.5f);
+    auto source = open_session_source(path);
+    EXPECT_NO_THROW(source->read_frame(0));
+    expect_source_error([&] { source->read_frame(1); },
+                        {"'" + path + "': ", std::string(strain) + " row " + std::to_string(first + 2) + " (frame 1)",
+                         "must be finite and >= 0"});
+  }
+}
+
+// Frames of vertices only (the writer takes them) have no strain row to
+// look at: the session still opens (no read past the empty strain column)
+// and its frames read.
+TEST(SessionSource, ASessionWhoseFramesHaveNoTrianglesOpensAndReads) {
+  TempDir dir;
+  const std::string path = dir / "points.h5";
+  {
+    auto w = record::SessionWriter::create(path, record::SessionMetadata{});
+    for (std::uint64_t f = 0; f < 2; ++f) {
+      rt::TestFrame points = rt::test_frame(f);
+      points.triangles.clear();
+      points.triangle_strain_energy_J_per_m3.clear();
+      w->append_mesh_frame(points.view());
+    }
+    w->close();
+  }
+  auto source = open_session_source(path);
+  ASSERT_EQ(source->frame_count(), 2u);
+  const SurfaceFrame f1 = source->read_frame(1);
+  EXPECT_EQ(f1.vertices_m.size(), rt::test_frame(1).vertices_m.size());
+  EXPECT_TRUE(f1.triangles.empty());
 }
 
 // SWMR read: a session whose writer died without closing it (the superblock

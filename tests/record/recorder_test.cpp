@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <filesystem>
 #include <limits>
 #include <thread>
 
@@ -149,6 +150,41 @@ TEST(Recorder, StartRejectsBadNamesAndDirectoriesWithTheReason) {
   RecorderOptions o;
   o.flush_interval_s = 5.0;
   EXPECT_THROW(Recorder::start(dir.path(), "s.h5", meta(), o), RecordError);
+  // A frame interval that is not a number >= 0 would make mesh_frame_due()
+  // never (NaN) or always true: refused naming the option.
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), -0.5, std::numeric_limits<double>::infinity()}) {
+    RecorderOptions bad_interval;
+    bad_interval.mesh_frame_interval_s = bad;
+    try {
+      Recorder::start(dir.path(), "s.h5", meta(), bad_interval);
+      ADD_FAILURE() << "started with mesh_frame_interval_s " << bad;
+    } catch (const RecordError& e) {
+      EXPECT_NE(std::string(e.what()).find("mesh_frame_interval_s"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "s.h5")) << "nothing is created for refused options";
+}
+
+// The capacities are maxima: a frame of exactly mesh_max_vertices vertices
+// and mesh_max_triangles triangles fits its buffer and is recorded.
+TEST(Recorder, AFrameOfExactlyTheBufferCapacityIsRecorded) {
+  TempDir dir;
+  const RecorderOptions o = fast_options();
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  testing::TestFrame full;
+  full.time_s = 0.5;
+  for (std::size_t v = 0; v < o.mesh_max_vertices; ++v) full.vertices_m.push_back({0.001 * v, 0.0, 0.0});
+  for (std::uint32_t t = 0; t < o.mesh_max_triangles; ++t) {
+    const auto n = static_cast<std::uint32_t>(o.mesh_max_vertices);
+    full.triangles.push_back({t % n, (t + 1) % n, (t + 2) % n});
+  }
+  EXPECT_TRUE(rec->push_mesh_frame(full.view()));
+  rec->stop();
+  EXPECT_EQ(rec->stats().mesh_frames_too_big, 0u);
+  EXPECT_EQ(rec->stats().mesh_frames_written, 1u);
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_EQ(info.rows.mesh_vertices, o.mesh_max_vertices);
+  EXPECT_EQ(info.rows.mesh_triangles, o.mesh_max_triangles);
 }
 
 TEST(Recorder, PushesAfterStopAreRefusedAndCounted) {

@@ -550,6 +550,54 @@ TEST(SessionTools, ABrokenFrameIndexInAClosedFileIsAnErrorNamingTheRow) {
   }
 }
 
+// Cuts dataset `id` of a closed session to `rows` rows (its other columns
+// keep theirs), as a crash between two column writes leaves it.
+void shorten(const std::string& path, DatasetId id, std::uint64_t rows) {
+  const hid_t file = testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t ds = H5Dopen2(file, kDatasets[id].path, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << kDatasets[id].path;
+  const hsize_t dims[2] = {rows, static_cast<hsize_t>(kDatasets[id].columns)};
+  EXPECT_GE(H5Dset_extent(ds, dims), 0);
+  H5Dclose(ds);
+  H5Fclose(file);
+}
+
+// docs/session-format.md: readers use the shortest column of a group as its
+// row count, whichever column it is (the event kind is written first, the
+// time last).
+TEST(SessionTools, EachGroupCountsTheRowsOfItsShortestColumn) {
+  TempDir dir;
+  testing::TestSession content;
+  content.events = 4;
+  struct Cut {
+    DatasetId id;
+    std::uint64_t rows;
+    std::uint64_t GroupCounts::*count;
+  };
+  for (const Cut& c : {Cut{kHapticForce, 1200, &GroupCounts::haptic_rows}, Cut{kSimNodes, 30, &GroupCounts::sim_rows},
+                       Cut{kEventMessage, 3, &GroupCounts::events}, Cut{kEventTime, 2, &GroupCounts::events}}) {
+    const std::string path = dir / ("short" + std::to_string(c.id) + ".h5");
+    testing::write_test_session(path, content);
+    shorten(path, c.id, c.rows);
+    EXPECT_EQ(read_session_info(path).rows.*c.count, c.rows) << kDatasets[c.id].path;
+  }
+}
+
+// A frame is complete when offset + count fits inside every data column of
+// the vertices: a /mesh/vertex_level one row short makes the last frame's
+// count run past it, which a closed file reports as damage naming the row
+// (a frame read with it would read levels that are not there).
+TEST(SessionTools, AVertexLevelColumnShorterThanTheFramesIsAnErrorNamingTheFrame) {
+  TempDir dir;
+  const std::string path = dir / "levels.h5";
+  write_small_session(path, 5);
+  const std::uint64_t vertices = read_session_info(path).rows.mesh_vertices;
+  shorten(path, kMeshVertexLevel, vertices - 1);
+  expect_every_tool_refuses(path, dir, "/mesh/vertex_count[4] is ");
+  expect_every_tool_refuses(path, dir, "(/mesh/vertices_m, /mesh/vertex_level)");
+}
+
 // Extents of 2^36 rows (chunks never written, so the file stays small) must
 // be refused before a read allocates for them (a bare std::bad_alloc, or
 // gigabytes and a minute for 1e8 rows).
@@ -622,6 +670,9 @@ TEST(SessionTools, RowsReplayWouldPublishMustBeFiniteAndTheirTimesPlausible) {
   for (const Case& c : {Case{kHapticForce, 7, 2, nan, "/haptic/force_N is not finite at row 7"},
                         Case{kHapticProxyPosition, 2, 0, inf, "/haptic/proxy_position_m is not finite at row 2"},
                         Case{kSimKinetic, 1, 0, nan, "/sim/kinetic_J is not finite at row 1"},
+                        Case{kSimElastic, 3, 0, -inf, "/sim/elastic_J is not finite at row 3"},
+                        Case{kSimStepMs, 0, 0, nan, "/sim/step_ms is not finite at row 0"},
+                        Case{kSimSimTime, 2, 0, inf, "/sim/sim_time_s is not finite at row 2"},
                         Case{kSimTime, 39, 0, 1e308, "beyond any session"}}) {  // the last sim row
     const std::string path = dir / ("rows" + std::to_string(++n) + ".h5");
     write_small_session(path, 5);
@@ -641,6 +692,40 @@ TEST(SessionTools, RowsReplayWouldPublishMustBeFiniteAndTheirTimesPlausible) {
   write_small_session(fine, 5);
   testing::overwrite_f64(fine, kDatasets[kSimRealTimeFactor].path, 0, nan);
   EXPECT_NO_THROW(read_session_rows(fine));
+}
+
+// "Session times finite and non-decreasing": rows recorded in the same clock
+// tick (equal times) are a session like any other.
+TEST(SessionReader, EqualConsecutiveTimesAreReadNotRefused) {
+  TempDir dir;
+  const std::string path = dir / "equal.h5";
+  write_small_session(path, 5);
+  const double t4 = read_session_rows(path).haptic[4].time_s;
+  testing::overwrite_f64(path, kDatasets[kHapticTime].path, 5, t4);
+  testing::overwrite_f64(path, kDatasets[kSimTime].path, 1, read_session_rows(path).sim[0].time_s);
+  const SessionRows rows = read_session_rows(path);
+  EXPECT_EQ(rows.haptic[5].time_s, rows.haptic[4].time_s);
+  EXPECT_EQ(rows.sim[1].time_s, rows.sim[0].time_s);
+  EXPECT_EQ(read_haptic_track(path).time_s[5], t4);
+}
+
+// A cleanly closed file whose duration_s is not finite (damaged, or a foreign
+// writer's) reports the last time stamp recorded, never a NaN duration.
+TEST(SessionTools, ANonFiniteRecordedDurationFallsBackToTheLastTimeStamp) {
+  TempDir dir;
+  const std::string path = dir / "nan-duration.h5";
+  write_small_session(path, 5);
+  const double last = read_session_rows(path).haptic.back().time_s;
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    const hid_t file = testing::open_for_edit(path);
+    ASSERT_GE(file, 0);
+    h5::write_f64_attribute(file, kAttrDurationS, bad);
+    H5Fclose(file);
+    const SessionInfo info = read_session_info(path);
+    EXPECT_TRUE(info.closed_cleanly);
+    EXPECT_TRUE(std::isfinite(info.duration_s)) << bad;
+    EXPECT_GE(info.duration_s, last) << bad;
+  }
 }
 
 // `session xdmf` checks frame times as every other frame reader does:
@@ -664,6 +749,87 @@ TEST(SessionTools, XdmfRefusesFrameTimesThatAreNotFiniteOrGoBack) {
     }
     EXPECT_FALSE(std::filesystem::exists(dir / (std::isnan(bad) ? "nan.xdmf" : "back.xdmf")));
   }
+}
+
+// Frame times need only be non-decreasing: two frames of the same instant
+// are two grids at one time, not an error.
+TEST(SessionTools, XdmfTakesTwoFramesOfTheSameTime) {
+  TempDir dir;
+  const std::string path = dir / "same.h5";
+  write_small_session(path, 5);
+  testing::overwrite_f64(path, kDatasets[kMeshFrameTime].path, 3, testing::test_frame(2).time_s);
+  const XdmfReport report = write_xdmf(path, "");
+  EXPECT_EQ(report.frames, 5u);
+  EXPECT_EQ(report.skipped_empty, 0u);
+}
+
+// XDMF cannot express a grid without cells: a frame with vertices but no
+// triangles (or neither) is skipped and counted, the others are written.
+TEST(SessionTools, XdmfSkipsAndCountsFramesWithoutTriangles) {
+  TempDir dir;
+  const std::string path = dir / "empty-frames.h5";
+  {
+    auto w = SessionWriter::create(path, SessionMetadata{});
+    const testing::TestFrame full = testing::test_frame(0);
+    testing::TestFrame points = testing::test_frame(1);  // vertices only
+    points.triangles.clear();
+    points.triangle_strain_energy_J_per_m3.clear();
+    const testing::TestFrame nothing{2.0, {}, {}, {}, {}};
+    w->append_mesh_frame(full.view());
+    w->append_mesh_frame(points.view());
+    w->append_mesh_frame(nothing.view());
+    w->close();
+  }
+  const XdmfReport report = write_xdmf(path, "");
+  EXPECT_EQ(report.frames, 1u);
+  EXPECT_EQ(report.skipped_empty, 2u);
+  const std::string xml = testing::slurp(report.out_path);
+  EXPECT_NE(xml.find("frame_0"), std::string::npos) << xml;
+  EXPECT_EQ(xml.find("frame_1"), std::string::npos) << xml;
+}
+
+// A session still marked open for writing (crashed, or being recorded) is
+// refused by `xdmf` with what to do: ParaView's ordinary open would refuse it.
+TEST(SessionTools, XdmfOfACrashedSessionIsRefusedSayingToRepairItFirst) {
+  TempDir dir;
+  const std::string crashed = dir / "crashed.h5";
+  testing::write_crashed_session(crashed, 100, 2);
+  try {
+    write_xdmf(crashed, "");
+    ADD_FAILURE() << "wrote a sidecar for a session still open for writing";
+  } catch (const RecordError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("'" + crashed + "'"), std::string::npos) << what;
+    EXPECT_NE(what.find("run `tissue session repair` first"), std::string::npos) << what;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "crashed.xdmf"));
+}
+
+// Repair trims only what a crash left incomplete: every flushed frame keeps
+// all its vertices, levels, triangles and strain values.
+TEST(SessionTools, RepairOfACrashedSessionKeepsEveryFlushedFrameWhole) {
+  TempDir dir;
+  const std::string crashed = dir / "crashed.h5";
+  testing::write_crashed_session(crashed, 200, 4);
+  const RepairReport report = repair_session(crashed);
+  EXPECT_TRUE(report.repair_needed);
+  EXPECT_EQ(report.after.rows, report.before);
+  EXPECT_EQ(report.after.rows.mesh_frames, 4u);
+  const SessionFile file(crashed);
+  std::uint64_t v0 = 0, t0 = 0;
+  for (std::uint64_t f = 0; f < 4; ++f) {
+    const testing::TestFrame frame = testing::test_frame(f);
+    const std::uint64_t nv = frame.vertices_m.size(), nt = frame.triangles.size();
+    const std::vector<double> xyz = file.rows<double>(kMeshVertices, v0, nv);
+    for (std::uint64_t v = 0; v < nv; ++v)
+      for (int k = 0; k < 3; ++k) EXPECT_EQ(xyz[3 * v + k], frame.vertices_m[v][k]) << "frame " << f;
+    EXPECT_EQ(file.rows<std::uint8_t>(kMeshVertexLevel, v0, nv), frame.vertex_level) << "frame " << f;
+    EXPECT_EQ(file.rows<float>(kMeshTriangleStrain, t0, nt), frame.triangle_strain_energy_J_per_m3) << "frame " << f;
+    v0 += nv;
+    t0 += nt;
+  }
+  EXPECT_EQ(report.after.rows.mesh_vertices, v0);
+  EXPECT_EQ(report.after.rows.mesh_triangles, t0);
 }
 
 // "--" may not appear inside an XML comment: the sidecar of run--2.h5 must

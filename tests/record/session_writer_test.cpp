@@ -5,11 +5,15 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 
+#include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
 #include "record_test_support.hpp"
@@ -75,6 +79,60 @@ TEST(SessionWriter, LongEventMessagesAreCutAtAUtf8Boundary) {
   const Event e = Event::make(1.0, EventKind::kInfo, text);
   EXPECT_EQ(std::string(e.message), std::string(254, 'a'));
   EXPECT_EQ(std::string(Event::make(0, EventKind::kInfo, "short").message), "short");
+}
+
+// Event is a plain struct a producer may fill by hand: a message of 256
+// bytes without its NUL is stored cut to 255 and NUL-terminated, as the
+// format says (a reader taking the fixed string up to its NUL would read past it).
+TEST(SessionWriter, AHandFilledEventMessageWithoutItsNulIsStoredCutTo255Bytes) {
+  TempDir dir;
+  Event e;
+  e.time_s = 2.0;
+  e.kind = EventKind::kWarning;
+  std::fill(std::begin(e.message), std::end(e.message), 'm');
+  {
+    auto w = SessionWriter::open_in(dir.path(), "s.h5", test_metadata());
+    w->append_events({&e, 1});
+    w->close();
+  }
+  const hid_t file = H5Fopen((dir / "s.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const hid_t ds = H5Dopen2(file, "/events/message", H5P_DEFAULT);
+  ASSERT_GE(ds, 0);
+  // The stored bytes as they are: read with the file's own type, no conversion.
+  const hid_t type = H5Dget_type(ds);
+  ASSERT_EQ(H5Tget_size(type), kEventMessageBytes);
+  std::array<char, kEventMessageBytes> stored{};
+  EXPECT_GE(H5Dread(ds, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, stored.data()), 0);
+  H5Tclose(type);
+  H5Dclose(ds);
+  H5Fclose(file);
+  EXPECT_EQ(std::string(stored.data(), kEventMessageBytes - 1), std::string(kEventMessageBytes - 1, 'm'));
+  EXPECT_EQ(stored.back(), '\0');
+}
+
+// close(duration): "unset, negative or not finite: the wall time" since the
+// writer opened, never a NaN or negative duration_s in the file.
+TEST(SessionWriter, ACloseGivenANegativeOrNonFiniteDurationRecordsTheWallTime) {
+  TempDir dir;
+  int n = 0;
+  for (const double given : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), -2.0}) {
+    const std::string name = "d" + std::to_string(++n) + ".h5";
+    const auto opened = std::chrono::steady_clock::now();
+    SessionWriter::open_in(dir.path(), name, test_metadata())->close(given);
+    const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - opened).count();
+    const hid_t file = H5Fopen((dir / name).c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    ASSERT_GE(file, 0);
+    double stored = -1.0;
+    EXPECT_TRUE(h5::read_f64_attribute(file, kAttrDurationS, &stored));
+    H5Fclose(file);
+    EXPECT_TRUE(std::isfinite(stored)) << "given " << given;
+    EXPECT_GE(stored, 0.0) << "given " << given;
+    EXPECT_LE(stored, wall_s) << "given " << given;
+  }
+  // A valid duration is stored as given (a batch run's simulated seconds).
+  SessionWriter::open_in(dir.path(), "given.h5", test_metadata())->close(12.5);
+  EXPECT_DOUBLE_EQ(read_session_info(dir / "given.h5").duration_s, 12.5);
 }
 
 TEST(SessionWriter, InfoReportsACleanCloseWithMetadataAndCounts) {
@@ -166,15 +224,32 @@ TEST(SessionWriter, AbandonedCreationsOfGoneProcessesAreRemoved) {
   };
   const std::string abandoned = touch(".a.h5" + std::string(kCreatingInfix) + std::to_string(gone) + "-0");
   const std::vector<std::string> kept = {
-      touch(".b.h5" + std::string(kCreatingInfix) + std::to_string(::getpid()) + "-3"),             // this process
-      touch(".c.h5" + std::string(kCreatingInfix) + std::to_string(::getppid()) + "-0"),            // a live one
-      touch(".d.h5" + std::string(kCreatingInfix) + "x1-0"),                                        // no pid
-      touch(".notes"), touch("e.h5" + std::string(kCreatingInfix) + std::to_string(gone) + "-0")};  // not hidden
+      touch(".b.h5" + std::string(kCreatingInfix) + std::to_string(::getpid()) + "-3"),            // this process
+      touch(".c.h5" + std::string(kCreatingInfix) + std::to_string(::getppid()) + "-0"),           // a live one
+      touch(".d.h5" + std::string(kCreatingInfix) + "x1-0"),                                       // no pid
+      touch(".notes"), touch("e.h5" + std::string(kCreatingInfix) + std::to_string(gone) + "-0"),  // not hidden
+      // Digits no pid has (a pid_t holds 9 at most here): not a name the writer makes.
+      touch(".f.h5" + std::string(kCreatingInfix) + "12345678901-0"),
+      touch(".g.h5" + std::string(kCreatingInfix) + std::string(25, '9') + "-0")};
   EXPECT_EQ(remove_abandoned_creations(dir.path()), std::vector<std::string>{abandoned});
   EXPECT_FALSE(std::filesystem::exists(abandoned));
   for (const std::string& f : kept) EXPECT_TRUE(std::filesystem::exists(f)) << f;
   EXPECT_EQ(read_session_info(dir / "kept.h5").rows.haptic_rows, 10u);
   EXPECT_TRUE(remove_abandoned_creations(dir / "missing").empty());
+}
+
+// Oldest first is by the time in the name, and only then by "-K": a
+// second file of an early second goes before the first file of a later one.
+TEST(SessionWriter, AnOlderAutomaticRecordingGoesFirstWhateverItsSuffix) {
+  TempDir dir;
+  const auto file = [&](const std::string& name) {
+    std::ofstream(dir / name) << std::string(100, 'x');
+    return dir / name;
+  };
+  const std::string older = file("auto-20261101-000000-3.h5"), newer = file("auto-20261101-000001.h5"),
+                    now = file("auto-20261101-000002.h5");
+  EXPECT_EQ(remove_oldest_automatic_recordings(dir.path(), 200, now), std::vector<std::string>{older});
+  EXPECT_TRUE(std::filesystem::exists(newer));
 }
 
 // record.keep_gb: the oldest automatic recordings go first, until those left

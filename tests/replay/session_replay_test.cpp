@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <lcm/lcm-cpp.hpp>
+#include <limits>
 #include <thread>
 
 #include "record_test_support.hpp"
@@ -85,6 +86,41 @@ TEST(ReplayTimeline, BadOptionsAreErrors) {
   o = {};
   o.haptic_rate_hz = -1.0;
   EXPECT_THROW(build_timeline({0.0}, {}, {}, o), ReplayError);
+}
+
+// The window is inclusive at both ends, so one instant (from == to) is a
+// window too: it holds the items at exactly that time.
+TEST(ReplayTimeline, AWindowOfOneInstantHoldsTheItemsAtThatTime) {
+  TimelineOptions o;
+  o.haptic_rate_hz = 0;
+  o.stats_rate_hz = 0;
+  o.from_s = o.to_s = 0.5;
+  const auto items = build_timeline({0.0, 0.5, 1.0}, {0.25, 0.5, 0.75}, {0.1, 0.6}, o);
+  const std::vector<TimelineItem> expected = {{0.5, StreamKind::kMesh, 1}, {0.5, StreamKind::kHaptic, 1}};
+  EXPECT_EQ(items, expected);
+}
+
+// A rate must be a finite number >= 0 (0: every row); an infinite or NaN
+// rate is a mistyped option, refused naming the stream.
+TEST(ReplayTimeline, ARateThatIsNotAFiniteNumberIsRefusedNamingTheStream) {
+  for (const double bad : {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN()}) {
+    TimelineOptions o;
+    o.haptic_rate_hz = bad;
+    try {
+      build_timeline({0.0}, {0.0}, {}, o);
+      ADD_FAILURE() << "haptic rate " << bad << " accepted";
+    } catch (const ReplayError& e) {
+      EXPECT_NE(std::string(e.what()).find("haptic rate"), std::string::npos) << e.what();
+    }
+    o = {};
+    o.stats_rate_hz = bad;
+    try {
+      build_timeline({0.0}, {}, {0.0}, o);
+      ADD_FAILURE() << "stats rate " << bad << " accepted";
+    } catch (const ReplayError& e) {
+      EXPECT_NE(std::string(e.what()).find("stats rate"), std::string::npos) << e.what();
+    }
+  }
 }
 
 // ---------------------------------------------------------------- pacing
@@ -172,6 +208,36 @@ TEST(ReplayPacing, ASlowPublishDelaysOnlyTheItemsRightAfterIt) {
   EXPECT_LE(s.max_lag_s, 0.25 + 1e-9);
 }
 
+// "Items sent more than 10 ms after their due time" are late: a publish of
+// 5 ms delays the items right after it a little, and none of them is late.
+TEST(ReplayPacing, ALagOfTenMillisecondsOrLessIsNotCountedLate) {
+  Material m;
+  FakeClock clock(0.0);
+  RecordingSink sink(&clock);
+  sink.mesh_cost_s = {{4, 0.005}};
+  std::atomic<bool> stop{false};
+  ReplayOptions o;
+  o.timeline.haptic_rate_hz = 0;
+  o.timeline.stats_rate_hz = 0;
+  const ReplaySummary s = replay_session(m.frames, m.rows, o, sink, clock, stop);
+  EXPECT_NEAR(s.max_lag_s, 0.005, 1e-9) << "the items right after the slow frame lag";
+  EXPECT_EQ(s.late_items, 0u);
+}
+
+// speed is "a finite number > 0": infinity would send everything at once.
+TEST(ReplayPacing, AnInfiniteOrNanSpeedIsRefused) {
+  Material m;
+  FakeClock clock(0.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{false};
+  for (const double bad : {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN()}) {
+    ReplayOptions o;
+    o.speed = bad;
+    EXPECT_THROW(replay_session(m.frames, m.rows, o, sink, clock, stop), ReplayError) << bad;
+  }
+  EXPECT_TRUE(sink.sent.empty());
+}
+
 TEST(ReplayPacing, LoopStartsTheNextPassWhenTheLastEndsUntilStopped) {
   Material m;
   FakeClock clock(0.0);
@@ -251,6 +317,15 @@ TEST(ReplayConversions, SnapshotCarriesTheFrameAndStrainWhenPresent) {
     const auto& tri = f.triangles[t];
     EXPECT_FLOAT_EQ(s.triangle_strain_energy_J_per_m3[t], static_cast<float>(tri[0] + tri[1] + tri[2]))
         << "only per-vertex strain: each triangle gets the mean of its vertices";
+  }
+  // A triangle naming a vertex without a value (a damaged frame) counts that
+  // vertex as 0, never another vertex's value or memory past the array.
+  {
+    x3d::SurfaceFrame bad = f;
+    bad.vertex_strain_energy_Pa[0] = 30.0f;
+    bad.triangles[0] = {1, 2, static_cast<std::uint32_t>(bad.vertex_strain_energy_Pa.size())};
+    const service::MeshSnapshot b = to_snapshot(bad, 10);
+    EXPECT_FLOAT_EQ(b.triangle_strain_energy_J_per_m3[0], static_cast<float>((3.0 + 6.0 + 0.0) / 3.0));
   }
   // Per-triangle values present (next to the per-vertex ones): sent unchanged.
   f.triangle_strain_energy_J_per_m3 = record::testing::test_frame(0).triangle_strain_energy_J_per_m3;

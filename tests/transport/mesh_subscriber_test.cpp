@@ -89,10 +89,10 @@ TEST(MeshDecode, MissingOrNonFiniteStrainLeavesOnlyTheStrainOut) {
 }
 
 // An encoded surface_mesh from the daemon's own encoder.
-std::vector<std::uint8_t> encoded_mesh(int quads) {
+std::vector<std::uint8_t> encoded_mesh(int quads, double time_s = 1.25) {
   service::MeshSnapshot s;
   s.sequence = 1;
-  s.sim_time_s = 1.25;
+  s.sim_time_s = time_s;
   for (int i = 0; i <= quads; ++i) {
     s.vertices_m.push_back({0.01 * i, 0.0, 0.0});
     s.vertices_m.push_back({0.01 * i, 0.01, 0.0});
@@ -178,12 +178,17 @@ TEST(LcmMeshSubscriber, DecodesGoodMessagesAndCountsEveryMalformedOne) {
 
 TEST(LcmMeshSubscriber, KeepsTheNewestFramesWhenTheReaderFallsBehind) {
   LcmMeshSubscriber sub("memq://");
-  const std::vector<std::uint8_t> good = encoded_mesh(2);
-  for (std::size_t i = 0; i < LcmMeshSubscriber::kMaxPending + 5; ++i) sub.on_message(good.data(), good.size());
+  // Frame i at time i: the reader must get the newest kMaxPending in order
+  // (the 5 oldest are the ones dropped, not the 5 newest).
+  for (std::size_t i = 0; i < LcmMeshSubscriber::kMaxPending + 5; ++i) {
+    const std::vector<std::uint8_t> frame = encoded_mesh(2, static_cast<double>(i));
+    sub.on_message(frame.data(), frame.size());
+  }
   EXPECT_EQ(sub.counts().overflow, 5u);
-  std::size_t n = 0;
-  while (sub.next_frame(0.0)) ++n;
-  EXPECT_EQ(n, LcmMeshSubscriber::kMaxPending);
+  std::vector<double> times;
+  while (const auto f = sub.next_frame(0.0)) times.push_back(f->time_s);
+  ASSERT_EQ(times.size(), LcmMeshSubscriber::kMaxPending);
+  for (std::size_t k = 0; k < times.size(); ++k) EXPECT_EQ(times[k], static_cast<double>(k + 5)) << k;
 }
 
 TEST(LcmMeshSubscriber, ABadUrlIsAnErrorNamingIt) {
