@@ -263,6 +263,35 @@ TEST(ReplayPacing, LoopStartsTheNextPassWhenTheLastEndsUntilStopped) {
   EXPECT_EQ(s.frames, meshes.size());
 }
 
+// `stopped` says the replay was cut short. A single pass whose stop request
+// comes while its last item goes out has sent everything: it ended by its
+// end, and says so (a caller reporting "stopped" would claim items were lost).
+TEST(ReplayPacing, AStopDuringTheLastItemOfAPassWithoutLoopIsNotAStop) {
+  Material m;
+  m.rows = testing::rows(90, 0.01, 18, 0.05);  // rows end before the last frame (0.9 s): it is the last item
+  FakeClock clock(0.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{false};
+  sink.stop_after = 10;  // the 10th and last frame of the pass
+  sink.stop = &stop;
+  ReplayOptions o;
+  o.timeline.haptic_rate_hz = 0;
+  o.timeline.stats_rate_hz = 0;
+  const ReplaySummary s = replay_session(m.frames, m.rows, o, sink, clock, stop);
+  EXPECT_EQ(s.frames, 10u);
+  EXPECT_EQ(s.passes, 1u);
+  EXPECT_FALSE(s.stopped) << "every item was sent";
+  // Looping, the same request ends the replay before a second pass: a stop.
+  std::atomic<bool> stop2{false};
+  RecordingSink sink2(&clock);
+  sink2.stop_after = 10;
+  sink2.stop = &stop2;
+  o.loop = true;
+  const ReplaySummary looped = replay_session(m.frames, m.rows, o, sink2, clock, stop2);
+  EXPECT_EQ(looped.passes, 1u);
+  EXPECT_TRUE(looped.stopped);
+}
+
 TEST(ReplayPacing, StopEndsAWaitAndBadOptionsAreRefused) {
   Material m;
   FakeClock clock(0.0);
