@@ -37,20 +37,9 @@
 using namespace tissue;
 using namespace tissue::physics;
 using Mat3 = Eigen::Matrix3d;
-using LeafTet = std::pair<std::array<NodeId, 4>, int>;  // sorted vertices, depth
+using LeafTet = mesh::SortedTet;
 
 namespace {
-
-std::vector<LeafTet> leaf_tets(const Body& body) {
-  std::vector<LeafTet> tets;
-  body.mesh().for_each_tet([&](TetId, const mesh::Tet& t) {
-    std::array<NodeId, 4> v = t.v;
-    std::sort(v.begin(), v.end());
-    tets.push_back({v, t.depth});
-  });
-  std::sort(tets.begin(), tets.end());
-  return tets;
-}
 
 Mat3 rest_frame(const Body& b, const std::array<NodeId, 4>& v) {
   Mat3 r;
@@ -58,20 +47,17 @@ Mat3 rest_frame(const Body& b, const std::array<NodeId, 4>& v) {
   return r;
 }
 
-// Energy [J] of a tet's spring shares with its rest shape mapped by F:
-// exact, and linearised in the Green strain G (each edge's strain nᵀGn).
-std::pair<double, double> tet_energy_J(const Body& b, const LeafTet& t, const Mat3& F, const Mat3& G) {
+// The tet's spring-share energy [J] linearised in the Green strain G (each
+// edge's strain nᵀGn): the small-strain form, against the exact one.
+double linear_tet_energy_J(const Body& b, const LeafTet& t, const Mat3& G) {
   const auto shares_m3 = b.tet_edge_shares_m3(t.first, t.second);
-  double exact_J = 0.0, linear_J = 0.0;
+  double energy_J = 0.0;
   for (int i = 0; i < 6; ++i) {
     const Vec3 d_m = b.rest_m[t.first[mesh::kTetEdgeSlots[i][1]]] - b.rest_m[t.first[mesh::kTetEdgeSlots[i][0]]];
-    const double length_m = d_m.norm();
-    const double k_N_per_m = b.scene().material.youngs_modulus_Pa * shares_m3[i] / (length_m * length_m);
-    const double stretch_m = (F * d_m).norm() - length_m, linear_m = d_m.dot(G * d_m) / length_m;
-    exact_J += 0.5 * k_N_per_m * stretch_m * stretch_m;
-    linear_J += 0.5 * k_N_per_m * linear_m * linear_m;
+    const double length_m = d_m.norm(), linear_m = d_m.dot(G * d_m) / length_m;
+    energy_J += 0.5 * b.scene().material.youngs_modulus_Pa * shares_m3[i] / (length_m * length_m) * linear_m * linear_m;
   }
-  return {exact_J, linear_J};
+  return energy_J;
 }
 
 struct SplitChange {
@@ -81,11 +67,11 @@ struct SplitChange {
 // Splits one diamond (no closure needed) through the simulation.
 SplitChange measured_split(Simulation& sim, mesh::Key d) {
   const Body& b = sim.body();
-  const auto before = leaf_tets(b);
+  const auto before = mesh::sorted_live_tets(b.mesh());
   const double elastic_J = sim.elastic_energy_J(), kinetic_J = sim.kinetic_energy_J();
   if (sim.split_diamond(d) != 1) std::fprintf(stderr, "split of one diamond split more\n");
   SplitChange c{sim.elastic_energy_J() - elastic_J, sim.kinetic_energy_J() - kinetic_J, 0, 0};
-  const auto after = leaf_tets(b);
+  const auto after = mesh::sorted_live_tets(b.mesh());
   std::vector<LeafTet> removed, added;
   std::set_difference(before.begin(), before.end(), after.begin(), after.end(), std::back_inserter(removed));
   std::set_difference(after.begin(), after.end(), before.begin(), before.end(), std::back_inserter(added));
@@ -99,20 +85,18 @@ SplitChange measured_split(Simulation& sim, mesh::Key d) {
   }
   for (std::size_t i = 0; i < removed.size(); ++i) {
     const Mat3 G = 0.5 * (F[i].transpose() * F[i] - Mat3::Identity());
-    const auto parent_J = tet_energy_J(b, removed[i], F[i], G);
-    c.predicted_J -= parent_J.first;
-    c.linear_J -= parent_J.second;
-    c.mean_strain_J -= tet_energy_J(b, removed[i], F[i], mean_G).second;
+    c.predicted_J -= tet_spring_energy_J(b, removed[i].first, removed[i].second, F[i]);
+    c.linear_J -= linear_tet_energy_J(b, removed[i], G);
+    c.mean_strain_J -= linear_tet_energy_J(b, removed[i], mean_G);
     const Mat3 to_barycentric = rest_frame(b, removed[i].first).inverse();
     for (const LeafTet& child : added) {
       Vec3 centroid_m = Vec3::Zero();
       for (NodeId n : child.first) centroid_m += 0.25 * b.rest_m[n];
       const Vec3 l = to_barycentric * (centroid_m - b.rest_m[removed[i].first[0]]);
       if (l.minCoeff() <= 0.0 || l.sum() >= 1.0) continue;
-      const auto child_J = tet_energy_J(b, child, F[i], G);
-      c.predicted_J += child_J.first;
-      c.linear_J += child_J.second;
-      c.mean_strain_J += tet_energy_J(b, child, F[i], mean_G).second;
+      c.predicted_J += tet_spring_energy_J(b, child.first, child.second, F[i]);
+      c.linear_J += linear_tet_energy_J(b, child, G);
+      c.mean_strain_J += linear_tet_energy_J(b, child, mean_G);
     }
   }
   return c;

@@ -494,4 +494,16 @@ void KuhnMesh::reserve_tets(std::size_t tets) {
   node_index_.reserve(tets / 5 + 8);
 }
 
+std::vector<SortedTet> sorted_live_tets(const KuhnMesh& mesh) {
+  std::vector<SortedTet> tets;
+  tets.reserve(mesh.tet_count());
+  mesh.for_each_tet([&](TetId, const Tet& t) {
+    std::array<NodeId, 4> v = t.v;
+    std::sort(v.begin(), v.end());
+    tets.push_back({v, t.depth});
+  });
+  std::sort(tets.begin(), tets.end());
+  return tets;
+}
+
 }  // namespace tissue::mesh

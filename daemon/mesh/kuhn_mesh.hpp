@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "mesh/lattice.hpp"
@@ -223,5 +224,14 @@ class KuhnMesh {
 
 // Refinement tag of a tet at `depth`: the refinement edge is (v0, v_tag).
 constexpr int maubach_tag(int depth) { return 3 - depth % 3; }
+
+// A live tet by its corners, sorted, and its depth. TetIds are reused across
+// split and merge and corners come in Maubach order, so this is what stays
+// equal for the same tet: the set difference of two sorted lists taken before
+// and after a mesh change is the tets it removed and added (analyses of what
+// a change did, e.g. the energy a split makes).
+using SortedTet = std::pair<std::array<NodeId, 4>, int>;
+// Every live tet of `mesh` as a SortedTet, the list sorted.
+std::vector<SortedTet> sorted_live_tets(const KuhnMesh& mesh);
 
 }  // namespace tissue::mesh

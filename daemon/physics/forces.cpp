@@ -241,6 +241,20 @@ std::array<double, 6> tet_edge_strains(const Body& body, TetId t) {
 }
 }  // namespace
 
+double tet_spring_energy_J(const Body& body, const std::array<NodeId, 4>& corners, int depth,
+                           const Eigen::Matrix3d& F) {
+  const std::array<double, 6> shares_m3 = body.tet_edge_shares_m3(corners, depth);
+  double energy_J = 0.0;
+  for (int i = 0; i < 6; ++i) {
+    const Vec3 rest_m =
+        body.rest_m[corners[mesh::kTetEdgeSlots[i][1]]] - body.rest_m[corners[mesh::kTetEdgeSlots[i][0]]];
+    const double rest_length_m = rest_m.norm(), stretch_m = (F * rest_m).norm() - rest_length_m;
+    energy_J += 0.5 * body.scene().material.youngs_modulus_Pa * shares_m3[i] / (rest_length_m * rest_length_m) *
+                stretch_m * stretch_m;
+  }
+  return energy_J;
+}
+
 double strain_energy_density_Pa(const Body& body, TetId t) {
   double sum = 0.0;
   for (double strain : tet_edge_strains(body, t)) sum += strain * strain;

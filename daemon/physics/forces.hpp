@@ -81,6 +81,12 @@ ImplicitDamperSolve apply_spring_dampers_implicitly(Body& body, double h_s);
 double elastic_energy_J(const Body& body);
 // Σ ½ m v² over live nodes [J].
 double kinetic_energy_J(const Body& body);
+// The spring energy [J] of one tet's stiffness shares (Body::tet_edge_shares_m3,
+// corners in any order) when its rest shape is mapped by F: its part of
+// elastic_energy_J in an affine field. A split changes the energy by exactly
+// Σ children − parent of this at the parent's F (README, "Energy across mesh
+// changes"); the body's positions are not read.
+double tet_spring_energy_J(const Body& body, const std::array<NodeId, 4>& corners, int depth, const Eigen::Matrix3d& F);
 
 // Per-tet strain-energy density [Pa] with the square the paper's eq. (1)
 // omits: D_T = (1/V_T) Σ_e ½ k_e^T (l_e − L_e)² with k_e^T = E V_T / L_e², i.e.

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <random>
 #include <set>
 
@@ -108,6 +109,36 @@ TEST(KuhnMesh, ThreeBisectionsGiveHalvedTypeOneTets) {
   });
   EXPECT_EQ(shapes0, shapes3);
   EXPECT_EQ(mesh.tet_count(), 48u);
+}
+
+// Before and after a split, the sorted lists differ by the diamond's tets
+// (removed) and their children (added, one deeper, each with the new node):
+// corners sorted, lists sorted, whatever TetIds the mesh reused.
+TEST(KuhnMesh, SortedLiveTetsGiveWhatASplitRemovedAndAdded) {
+  KuhnMesh mesh({2, 2, 2, 1.0, 6});
+  const std::int64_t H = mesh.domain().coarse_cube();
+  const Key diagonal = vertex_key({H / 2, H / 2, H / 2});  // the first cube's: its 6 tets
+  const std::vector<SortedTet> before = sorted_live_tets(mesh);
+  ASSERT_EQ(before.size(), mesh.tet_count());
+  ASSERT_EQ(mesh.split(diagonal), 1);
+  const std::vector<SortedTet> after = sorted_live_tets(mesh);
+  ASSERT_EQ(after.size(), mesh.tet_count());
+  for (const auto* list : {&before, &after}) {
+    EXPECT_TRUE(std::is_sorted(list->begin(), list->end()));
+    for (const auto& [corners, depth] : *list) EXPECT_TRUE(std::is_sorted(corners.begin(), corners.end()));
+  }
+  std::vector<SortedTet> removed, added;
+  std::set_difference(before.begin(), before.end(), after.begin(), after.end(), std::back_inserter(removed));
+  std::set_difference(after.begin(), after.end(), before.begin(), before.end(), std::back_inserter(added));
+  ASSERT_EQ(removed.size(), 6u);
+  ASSERT_EQ(added.size(), 12u);
+  const NodeId centre = mesh.find_node(diagonal);
+  ASSERT_NE(centre, kInvalidId);
+  for (const auto& [corners, depth] : removed) EXPECT_EQ(depth, 0);
+  for (const auto& [corners, depth] : added) {
+    EXPECT_EQ(depth, 1);
+    EXPECT_NE(std::find(corners.begin(), corners.end(), centre), corners.end());
+  }
 }
 
 TEST(KuhnMesh, DiamondSizesInteriorAndBoundary) {

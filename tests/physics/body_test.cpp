@@ -282,35 +282,11 @@ TEST(Body, ACubeDiagonalSplitChangesTheEnergyOfANormalStrainMixedWithAShear) {
 // static bend of the depth-0 cantilever adds a quarter of its energy. The
 // same splits on a smooth field (the depth-3 mesh's equilibrium, read at the
 // same nodes) change it by under 1 %.
-std::vector<std::pair<std::array<NodeId, 4>, int>> leaf_tets(const Body& body) {
-  std::vector<std::pair<std::array<NodeId, 4>, int>> tets;
-  body.mesh().for_each_tet([&](TetId, const mesh::Tet& t) {
-    std::array<NodeId, 4> v = t.v;
-    std::sort(v.begin(), v.end());
-    tets.push_back({v, t.depth});
-  });
-  std::sort(tets.begin(), tets.end());
-  return tets;
-}
-
-// Spring energy [J] of one tet's shares when its rest shape is mapped by F.
-double tet_energy_J(const Body& body, const std::array<NodeId, 4>& v, int depth, const Eigen::Matrix3d& F) {
-  const auto shares_m3 = body.tet_edge_shares_m3(v, depth);
-  double energy_J = 0.0;
-  for (int i = 0; i < 6; ++i) {
-    const Vec3 rest_m = body.rest_m[v[mesh::kTetEdgeSlots[i][1]]] - body.rest_m[v[mesh::kTetEdgeSlots[i][0]]];
-    const double rest_length_m = rest_m.norm(), stretch_m = (F * rest_m).norm() - rest_length_m;
-    energy_J += 0.5 * body.scene().material.youngs_modulus_Pa * shares_m3[i] / (rest_length_m * rest_length_m) *
-                stretch_m * stretch_m;
-  }
-  return energy_J;
-}
-
 // Σ over the tets one split removed of (Σ over its children of E_c(F) − E(F)),
 // F the removed tet's deformation gradient.
-double predicted_split_change_J(const Body& after, const std::vector<std::pair<std::array<NodeId, 4>, int>>& before) {
-  const auto now = leaf_tets(after);
-  std::vector<std::pair<std::array<NodeId, 4>, int>> removed, added;
+double predicted_split_change_J(const Body& after, const std::vector<mesh::SortedTet>& before) {
+  const auto now = mesh::sorted_live_tets(after.mesh());
+  std::vector<mesh::SortedTet> removed, added;
   std::set_difference(before.begin(), before.end(), now.begin(), now.end(), std::back_inserter(removed));
   std::set_difference(now.begin(), now.end(), before.begin(), before.end(), std::back_inserter(added));
   double change_J = 0.0;
@@ -321,12 +297,13 @@ double predicted_split_change_J(const Body& after, const std::vector<std::pair<s
       moved.col(i) = after.x_m[p[i + 1]] - after.x_m[p[0]];
     }
     const Eigen::Matrix3d F = moved * rest.inverse();
-    change_J -= tet_energy_J(after, p, depth, F);
+    change_J -= tet_spring_energy_J(after, p, depth, F);
     for (const auto& [c, child_depth] : added) {
       Vec3 centroid_m = Vec3::Zero();
       for (NodeId n : c) centroid_m += 0.25 * after.rest_m[n];
       const Vec3 barycentric = rest.inverse() * (centroid_m - after.rest_m[p[0]]);
-      if (barycentric.minCoeff() > 0.0 && barycentric.sum() < 1.0) change_J += tet_energy_J(after, c, child_depth, F);
+      if (barycentric.minCoeff() > 0.0 && barycentric.sum() < 1.0)
+        change_J += tet_spring_energy_J(after, c, child_depth, F);
     }
   }
   return change_J;
@@ -359,7 +336,7 @@ TEST(Body, RefiningACoarseStaticBendAddsEnergyThatASmoothFieldDoesNotHold) {
     cubes.erase(std::unique(cubes.begin(), cubes.end()), cubes.end());
     EXPECT_EQ(cubes.size(), 64u);
     for (const mesh::Key d : cubes) {
-      const auto tets = leaf_tets(body);
+      const auto tets = mesh::sorted_live_tets(body.mesh());
       const double energy_J = elastic_energy_J(body);
       EXPECT_EQ(body.split(d), 1);
       EXPECT_NEAR(elastic_energy_J(body) - energy_J, predicted_split_change_J(body, tets), 1e-12 * before_J);

@@ -529,5 +529,27 @@ TEST(Forces, MaxEdgeStretchIsTheLargestLengthRatioAwayFromRest) {
   EXPECT_GE(stretch_from_strain(-1.0), 1.0 / kCollapsedSpringRatio - 1.0);
 }
 
+// Per-tet stiffness shares add up to the springs: in an affine field every
+// tet sees the same F, and the tets' spring energies sum to the body's elastic
+// energy (each spring's stretch is shared by all its tets). A refined beam
+// mixes depths, so every tet type and boundary share takes part.
+TEST(Forces, TetSpringEnergiesOfAnAffineFieldSumToTheElasticEnergy) {
+  Body body = testing::randomly_refined_beam(7);
+  Eigen::Matrix3d F;
+  F << 1.004, 0.003, -0.002, 0.001, 0.997, 0.005, -0.003, 0.002, 1.006;  // stretches, shears, a small turn
+  for (NodeId n = 0; n < body.x_m.size(); ++n) body.x_m[n] = F * body.rest_m[n];
+  double sum_J = 0.0;
+  for (const auto& [corners, depth] : mesh::sorted_live_tets(body.mesh()))
+    sum_J += tet_spring_energy_J(body, corners, depth, F);
+  const double elastic_J = elastic_energy_J(body);
+  ASSERT_GT(elastic_J, 0.0);
+  EXPECT_NEAR(sum_J, elastic_J, 1e-12 * elastic_J);
+  // Corner order does not matter: the reversed corners give the same energy.
+  const auto [corners, depth] = mesh::sorted_live_tets(body.mesh()).front();
+  const std::array<NodeId, 4> reversed{corners[3], corners[2], corners[1], corners[0]};
+  EXPECT_NEAR(tet_spring_energy_J(body, reversed, depth, F), tet_spring_energy_J(body, corners, depth, F),
+              1e-15 * elastic_J);
+}
+
 }  // namespace
 }  // namespace tissue::physics
