@@ -231,6 +231,7 @@ void SimThread::run(std::promise<void>& scheduled) {
     if (std::unique_lock<std::mutex> lock(pending_mutex_, std::try_to_lock); lock.owns_lock() && pending_) {
       runner_ = std::move(pending_);
       ++generation_;
+      first_model_version_ = model_version_ + 1;
       scratch_model_.version = 0;
       shed_ = false;
       last_error_.clear();
@@ -243,7 +244,12 @@ void SimThread::run(std::promise<void>& scheduled) {
     batch_.clear();
     if (samples_)
       samples_->drain([this](const haptics::ToolSample& s) {
-        if (batch_.size() < batch_.capacity()) batch_.push_back(s);
+        if (batch_.size() >= batch_.capacity()) return;
+        batch_.push_back(s);
+        // Pressed on the runner before a reset / load / set: where the tool
+        // is still counts, what it touched does not (pushing old node ids
+        // into the new mesh would put a force on unrelated nodes).
+        if (s.model_version < first_model_version_) batch_.back().contact = false;
       });
     samples_total_ += batch_.size();
     if (!batch_.empty()) last_tick_ = batch_.back();

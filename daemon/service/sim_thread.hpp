@@ -165,6 +165,10 @@ class SimThread {
   haptics::LocalModel scratch_model_;
   std::uint64_t model_version_ = 0;
   std::uint64_t generation_ = 0;
+  // The first model version the current runner published (or will): ticks
+  // rendered against an older model touched the old runner's surface, so
+  // their contact is dropped (their nodes mean nothing in the new mesh).
+  std::uint64_t first_model_version_ = 0;
   std::uint64_t samples_total_ = 0;
   std::int64_t overruns_ = 0, failed_steps_ = 0;
   bool shed_ = false;

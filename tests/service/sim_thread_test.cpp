@@ -115,6 +115,52 @@ TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {
   EXPECT_TRUE(wait_for([&] { return thread.status().sim_time_s > t_paused; }));
 }
 
+// A tick pressing on the first triangle of `model`, rendered against it.
+haptics::ToolSample press(const haptics::LocalModel& model) {
+  haptics::ToolSample s;
+  const auto& tr = model.triangle[0];
+  s.contact = true;
+  s.model_version = model.version;
+  s.contact_node = {model.vertex_node[tr[0]], model.vertex_node[tr[1]], model.vertex_node[tr[2]]};
+  s.contact_weight = {1.0 / 3, 1.0 / 3, 1.0 / 3};
+  s.proxy_position_m = (model.vertex_m[tr[0]] + model.vertex_m[tr[1]] + model.vertex_m[tr[2]]) / 3.0;
+  s.device_position_m = s.proxy_position_m;
+  s.force_on_object_N = haptics::Vec3(0.0, 0.0, -2.0);
+  s.force_on_device_N = -s.force_on_object_N;
+  return s;
+}
+
+// Ticks rendered against the old runner's model name the old mesh's nodes.
+// Drained after a reset / load / set, they must not push on the new mesh
+// (same ids, other nodes or none): the new runner starts untouched.
+TEST(SimThread, TicksRenderedBeforeANewRunnerPushNothingOnIt) {
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThreadOptions options;
+  options.status_every_s = 0.002;
+  scene::Scene scene = cantilever_with_tool();
+  scene.loads.clear();
+  SimThread thread(std::make_unique<SimRunner>(scene), &samples, &models, options);
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return models.read().value->version > 0; }));
+  const haptics::LocalModel model = *models.read().value;
+  const haptics::ToolSample pressed = press(model);
+  // The press is real: on the runner it was rendered against, it pushes.
+  ASSERT_TRUE(samples.try_push(pressed));
+  ASSERT_TRUE(wait_for([&] { return thread.status().tool_pushing; }));
+  // Hold the thread between a drain and its step, queue the same press and
+  // a new runner: the next loop takes the runner first, then drains the press.
+  thread.inject_stall(300ms);
+  std::this_thread::sleep_for(50ms);
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(samples.try_push(pressed));
+  thread.replace_runner(std::make_unique<SimRunner>(scene));
+  ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 3; }));
+  const SimStatus st = thread.status();
+  thread.stop();
+  EXPECT_FALSE(st.tool_pushing);
+  EXPECT_EQ(st.tool_force_N, (std::array<double, 3>{0.0, 0.0, 0.0}));
+}
+
 TEST(SimThread, ReplacingTheRunnerStartsANewGeneration) {
   SimThreadOptions options;
   options.status_every_s = 0.005;
