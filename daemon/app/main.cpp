@@ -44,6 +44,11 @@ int main(int argc, char** argv) {
   // it must fail with EFBIG, which the session writers report and survive,
   // not kill the daemon (SIGXFSZ's default action) and lose the session.
   std::signal(SIGXFSZ, SIG_IGN);
+  // Output to a pipe whose reader went away (`tissued ... | tee log` and tee
+  // ended) must fail that write with EPIPE, not kill the daemon or the batch
+  // run (SIGPIPE's default action) before its session is closed. systemd
+  // ignores SIGPIPE for its services anyway (IgnoreSIGPIPE=yes).
+  std::signal(SIGPIPE, SIG_IGN);
   try {
     CLI::App app{"tissued: real-time haptic server for adaptive soft-tissue simulation"};
     app.footer(

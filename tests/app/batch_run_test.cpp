@@ -695,6 +695,21 @@ TEST_F(TissuedProcess, AFileSizeLimitStopsTheRecordingNotTheRun) {
   EXPECT_EQ(json::parse(read_file(report))["result"]["steps"].get<long long>(), 200);  // the run went on
 }
 
+// Standard output on a pipe whose reader has gone (a log viewer closed): the
+// run's lines fail with EPIPE instead of SIGPIPE killing it, so it finishes
+// and writes its report. (If the reader were slow to go, the test would pass
+// without proving anything, never fail wrongly.)
+TEST_F(TissuedProcess, AClosedStdoutPipeDoesNotKillTheRun) {
+  const fs::path report = dir_ / "r.json", code = dir_ / "code.txt";
+  std::string command = "( " + shell_quote(TISSUED_BINARY);
+  command.append(" --batch --scene ").append(shell_quote(scene_path("cantilever")));
+  command.append(" --duration 0.2 --report ").append(shell_quote(report.string()));
+  command.append(" 2>/dev/null; echo $? >").append(shell_quote(code.string())).append(" ) | true");
+  ASSERT_EQ(std::system(command.c_str()), 0);
+  EXPECT_EQ(read_file(code), "0\n") << "141 is 128 + SIGPIPE";
+  EXPECT_EQ(json::parse(read_file(report))["result"]["steps"].get<long long>(), 200);
+}
+
 // A batch run of the cantilever for 1000 simulated seconds (far longer than
 // any test waits) in the background, with its session, report, progress
 // lines and stderr under `dir`, named after `name`: for the signal tests.
