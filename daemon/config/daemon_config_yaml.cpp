@@ -37,6 +37,10 @@ constexpr int kMaxConnections = 1024;
 constexpr double kMaxHapticRateHz = 10000.0;
 constexpr double kMinHapticRateHz = 1.0;
 constexpr double kMaxRamp_s = 10.0;
+// A ramp-out is waited for on the io thread, which also feeds systemd's
+// watchdog (WatchdogSec 5 s in the shipped unit, fed every 2.5 s): a longer
+// wait would get the daemon killed by its own safety fade.
+constexpr double kMaxRampOut_s = 1.0;
 constexpr double kMaxTimeout_s = 60.0;
 constexpr double kMaxStatusInterval_s = 3600.0;
 // record.rotate_s: a week at most (files of a few GB at 1 kHz haptic rows).
@@ -341,7 +345,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     non_negative(l.ramp_out_s, p + ".ramp_out_s");
     // A stop waits for the ramp out: 1e308 s made the daemon unstoppable.
     at_most(l.ramp_in_s, kMaxRamp_s, p + ".ramp_in_s", "a ramp longer than that is not a ramp");
-    at_most(l.ramp_out_s, kMaxRamp_s, p + ".ramp_out_s", "a stop waits for it");
+    at_most(l.ramp_out_s, kMaxRampOut_s, p + ".ramp_out_s",
+            "a stop waits for it on the thread that feeds the watchdog");
     positive(l.stale_model_s, p + ".stale_model_s");
     positive(l.device_timeout_s, p + ".device_timeout_s");
     at_most(l.stale_model_s, kMaxTimeout_s, p + ".stale_model_s", "a hand would feel a frozen model that long");

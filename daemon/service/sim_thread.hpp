@@ -116,7 +116,12 @@ class SimThread {
   // false when the sim thread has not taken the change by then, and the old
   // recorder must then be kept alive (it may still be used) until a later
   // set_recorder returns true or the thread has stopped.
-  bool set_recorder(record::Recorder* recorder, double wait_s = 5.0);
+  // The default wait is short because the caller is the io thread, which
+  // also feeds systemd's watchdog: blocking it longer than about a quarter of
+  // WatchdogSec (5 s in the shipped unit) gets a healthy daemon killed
+  // mid-session. A stalled sim thread's recorder is retired instead.
+  static constexpr double kRecorderHandOverWait_s = 1.0;
+  bool set_recorder(record::Recorder* recorder, double wait_s = kRecorderHandOverWait_s);
 
   // One reader (the service's io thread).
   SimStatus status() { return *status_.read().value; }

@@ -335,11 +335,17 @@ TEST(SimThread, RecorderHandOverReportsAStalledSimThread) {
     SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr, options);
     thread.start();
     ASSERT_TRUE(thread.set_recorder(recorder.get()));
-    thread.inject_stall(800ms);
+    thread.inject_stall(3000ms);
     std::this_thread::sleep_for(100ms);  // the stall has begun (steps are 1 ms apart)
     const auto t0 = std::chrono::steady_clock::now();
     EXPECT_FALSE(thread.set_recorder(nullptr, 0.05));
-    EXPECT_LT(std::chrono::steady_clock::now() - t0, 600ms);  // bounded: well before the stall ends
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 600ms);  // bounded by the wait asked for
+    // The default wait gives up well inside the watchdog's margin (the io
+    // thread calls this and feeds the watchdog: 5 s in the unit, fed every
+    // 2.5 s), not after the stall.
+    const auto t1 = std::chrono::steady_clock::now();
+    EXPECT_FALSE(thread.set_recorder(nullptr));
+    EXPECT_LT(std::chrono::steady_clock::now() - t1, 2000ms);
     recorder->stop();                                 // the file closes; the stalled thread still holds the recorder
     EXPECT_TRUE(thread.set_recorder(nullptr, 10.0));  // the stall ends, the thread lets go
     thread.stop();
