@@ -268,7 +268,7 @@ void Service::record_event(int kind, const std::string& text) {
                                                                            static_cast<record::EventKind>(kind), text));
 }
 
-void Service::apply_scene(scene::Scene scene, bool restart_haptics) {
+std::string Service::apply_scene(scene::Scene scene, bool restart_haptics) {
   require_servable(scene);  // throws std::invalid_argument: nothing changes
   std::unique_ptr<SimRunner> runner;
   try {
@@ -289,8 +289,25 @@ void Service::apply_scene(scene::Scene scene, bool restart_haptics) {
     haptics_->stop();
     haptics_.reset();
   } else if (want_haptics && !haptics_) {
-    haptics_ = HapticSide::start(config_, *samples_, *models_, options_.out);
+    try {
+      haptics_ = HapticSide::start(config_, *samples_, *models_, options_.out);
+    } catch (const std::exception& e) {
+      // Said, not thrown: the sim thread already runs the new scene, and a
+      // caller told "failed" would keep the old scene's path and overrides.
+      // The next reset, load_scene, set or reload tries the device again.
+      return std::string("the haptic device could not start, the scene runs without it: ") + e.what();
+    }
   }
+  return {};
+}
+
+nlohmann::json Service::with_device_warning(nlohmann::json result, const std::string& device_problem) {
+  if (device_problem.empty()) return result;
+  std::fprintf(options_.err, "tissued: %s\n", device_problem.c_str());
+  std::fflush(options_.err);
+  record_event(static_cast<int>(record::EventKind::kWarning), device_problem);
+  result["warning"] = device_problem;
+  return result;
 }
 
 void Service::request_stop(const std::string& why) {
@@ -367,8 +384,9 @@ void Service::reload() {
     config_.haptics = config.haptics;
     config_.device.limits = config.device.limits;
     config_.max_scene_tets = config.max_scene_tets;
+    std::string device_problem;
     try {
-      apply_scene(std::move(scene), haptics_changed);
+      device_problem = apply_scene(std::move(scene), haptics_changed);
     } catch (...) {
       config_.haptics = old_haptics;
       config_.device.limits = old_limits;
@@ -384,6 +402,7 @@ void Service::reload() {
     record_event(static_cast<int>(record::EventKind::kSceneLoaded),
                  "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
                      (applied.empty() ? "" : "; changed: " + applied));
+    (void)with_device_warning({}, device_problem);  // said on stderr and recorded; a signal has no reply
     const std::vector<std::string> kept = restart_only_changes(config_, config);
     if (!kept.empty()) {
       std::string list;
@@ -685,22 +704,24 @@ nlohmann::json Service::resume() {
 }
 
 nlohmann::json Service::reset() {
+  std::string device_problem;
   try {
-    apply_scene(scene_);
+    device_problem = apply_scene(scene_);
   } catch (const std::exception& e) {
     throw control::ControlError(std::string("reset failed: ") + e.what());
   }
   record_event(static_cast<int>(record::EventKind::kInfo), "scene " + scene_.name + " reset to rest (control)");
-  return {{"scene", scene_.name}, {"reset", true}};
+  return with_device_warning({{"scene", scene_.name}, {"reset", true}}, device_problem);
 }
 
 nlohmann::json Service::load_scene(const std::string& path) {
   scene::Scene scene;
+  std::string device_problem;
   try {
     // The file as written: earlier `set`s and the command line's --set were
     // for the scene that was running.
     scene = scene::load_scene_file_with_overrides(path, {});
-    apply_scene(scene);
+    device_problem = apply_scene(scene);
   } catch (const std::exception& e) {
     throw control::ControlError(e.what());  // names the file, the key and the reason
   }
@@ -708,7 +729,7 @@ nlohmann::json Service::load_scene(const std::string& path) {
   base_scene_overrides_.clear();
   scene_sets_.clear();
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), "scene " + scene_.name + " loaded from " + path);
-  return {{"scene", scene_.name}, {"source", path}};
+  return with_device_warning({{"scene", scene_.name}, {"source", path}}, device_problem);
 }
 
 nlohmann::json Service::set(const std::string& key, const nlohmann::json& value) {
@@ -729,15 +750,17 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
   std::vector<std::string> overrides = base_scene_overrides_;
   overrides.insert(overrides.end(), sets.begin(), sets.end());
   scene::Scene scene;
+  std::string device_problem;
   try {
     scene = scene::load_scene_file_with_overrides(scene_path_, overrides);
-    apply_scene(std::move(scene));
+    device_problem = apply_scene(std::move(scene));
   } catch (const std::exception& e) {
     throw control::ControlError(e.what());
   }
   scene_sets_ = std::move(sets);
   record_event(static_cast<int>(record::EventKind::kParameterChanged), override + " (scene restarted)");
-  return {{"key", key}, {"value", value}, {"applied", "scene restarted with the new value"}};
+  return with_device_warning({{"key", key}, {"value", value}, {"applied", "scene restarted with the new value"}},
+                             device_problem);
 }
 
 nlohmann::json Service::record_start(const std::string& name) {

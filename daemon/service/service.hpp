@@ -98,8 +98,14 @@ class Service : public control::ControlHandler {
   void stop_threads();
   // New runner on the sim thread, haptics started/stopped to match (and
   // restarted when restart_haptics: its settings changed). Throws before
-  // changing anything when the scene cannot be built.
-  void apply_scene(scene::Scene scene, bool restart_haptics = false);
+  // changing anything when the scene cannot be built. Once the scene is
+  // committed nothing is thrown: a device that cannot start (its port taken,
+  // its session file gone) leaves the scene running without it, and the
+  // returned text says so (empty: the device is as the scene wants).
+  [[nodiscard]] std::string apply_scene(scene::Scene scene, bool restart_haptics = false);
+  // `result` with apply_scene's device problem as its "warning" (also said on
+  // stderr and recorded as a warning event); `result` itself when none.
+  nlohmann::json with_device_warning(nlohmann::json result, const std::string& device_problem);
   // Throws std::invalid_argument when the scene's starting mesh is over
   // config max_scene_tets (see DaemonConfig).
   void require_servable(const scene::Scene& scene) const;

@@ -6,7 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <unistd.h>
 #include <boost/asio/ip/tcp.hpp>
 
@@ -382,6 +385,44 @@ TEST(Service, AScenePastMaxSceneTetsIsRefusedBeforeItIsBuilt) {
 // A reload whose scene loads but cannot be built (a fixed region that lies
 // between the nodes passes the file's checks and fails on the mesh) changes
 // nothing: the running scene's file stays the one `set` reloads.
+// A device that cannot start once the scene is committed (here: a tool
+// scene loaded on a UDP device whose port another socket holds) leaves the
+// new scene running without it, and the reply says so as a warning: it is
+// not an error, which would tell the client nothing changed while the old
+// scene was already gone. The next load tries the device again.
+TEST(Service, ALoadWhoseDeviceCannotStartRunsTheSceneAndWarns) {
+  TempDir dir;
+  const int holder = ::socket(AF_INET, SOCK_DGRAM, 0);
+  ASSERT_GE(holder, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(holder, reinterpret_cast<const sockaddr*>(&address), sizeof address), 0);
+  socklen_t length = sizeof address;
+  ASSERT_EQ(::getsockname(holder, reinterpret_cast<sockaddr*>(&address), &length), 0);
+  const int port = ntohs(address.sin_port);
+  std::string config_text = file_text(write_config(dir, scene_file("beam.yaml"), "udp"));  // beam: no tool
+  config_text.replace(config_text.find("  sim:\n"), 7, "  udp: {port: " + std::to_string(port) + "}\n  sim:\n");
+  std::ofstream(dir / "tissued.yaml") << config_text;
+  Running run(dir / "tissued.yaml");
+  ControlClient client = connect(dir / "ctl.sock");
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("cantilever.yaml")}});
+  // EXPECT, not ASSERT, until the shutdown: a service left running hangs the test.
+  EXPECT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
+  const std::string warning = loaded.value("result", nlohmann::json::object()).value("warning", "");
+  EXPECT_NE(warning.find("the haptic device could not start"), std::string::npos) << loaded.dump();
+  EXPECT_NE(warning.find(std::to_string(port)), std::string::npos) << "names the port: " << warning;
+  const nlohmann::json status = client.call("status")["result"];
+  EXPECT_EQ(status["scene"]["source"], scene_file("cantilever.yaml")) << "the loaded scene runs";
+  EXPECT_TRUE(written_within_5_s(run.err, "the haptic device could not start")) << file_text(run.err);
+  ::close(holder);  // the port is free again: a reset starts the device
+  const nlohmann::json reset = client.call("reset");
+  EXPECT_TRUE(reset["ok"].get<bool>()) << reset.dump();
+  EXPECT_FALSE(reset.value("result", nlohmann::json::object()).contains("warning")) << reset.dump();
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
 TEST(Service, AFailedReloadChangesNothing) {
   TempDir dir;
   const std::string config = write_config(dir, scene_file("cantilever.yaml"));
