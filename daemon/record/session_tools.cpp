@@ -773,6 +773,10 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
     if (f > 0 && times[f] < times[f - 1])
       bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + " goes backwards at frame " + std::to_string(f) +
                             " (frames must be in time order)");
+    if (std::abs(times[f]) > kMaxSessionTime_s)
+      bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + "[" + std::to_string(f) + "] is " +
+                            std::to_string(times[f]) + " s, beyond any session (" + std::to_string(kMaxSessionTime_s) +
+                            " s)");
   }
 
   namespace fs = std::filesystem;

@@ -387,5 +387,35 @@ TEST(SessionReading, ASimExtentTheFileCannotHoldIsAnErrorNotAnAllocation) {
   EXPECT_NE(what.find("more than the whole file"), std::string::npos) << what;
 }
 
+// A frame time that is finite but beyond any session: replay paced by it
+// waited for ever (1e300 s), and frames at -1.7e308 and 1.7e308 s made its
+// span inf - inf = NaN. Rows already had this bound; frames now share it.
+TEST(SessionReading, AFrameTimeBeyondAnySessionIsAnErrorNotAnEndlessReplay) {
+  TempDir dir;
+  struct Case {
+    std::uint64_t frame;
+    double time_s;
+  };
+  int n = 0;
+  for (const Case c : {Case{3, 1e300}, Case{0, -1.7e308}, Case{3, 2 * kMaxSessionTime_s}}) {
+    const std::string path = dir / ("t" + std::to_string(++n) + ".h5");
+    testing::write_test_session(path, small_session());
+    testing::overwrite_f64(path, kDatasets[kMeshFrameTime].path, c.frame, c.time_s);
+    SCOPED_TRACE(path);
+    const std::string frames = error_of<x3d::SourceError>([&] { x3d::open_session_source(path); });
+    const std::string xdmf = error_of<RecordError>([&] { write_xdmf(path, dir / "out.xdmf"); });
+    for (const std::string& what : {frames, xdmf}) {
+      EXPECT_NE(what.find("'" + path + "'"), std::string::npos) << what;
+      EXPECT_NE(what.find("/mesh/frame_time_s[" + std::to_string(c.frame) + "]"), std::string::npos) << what;
+      EXPECT_NE(what.find("beyond any session"), std::string::npos) << what;
+    }
+  }
+  // The bound is the rows' own: a frame at it still reads.
+  const std::string edge = dir / "edge.h5";
+  testing::write_test_session(edge, small_session());
+  testing::overwrite_f64(edge, kDatasets[kMeshFrameTime].path, 3, kMaxSessionTime_s);
+  EXPECT_EQ(x3d::open_session_source(edge)->frame_time_s(3), kMaxSessionTime_s);
+}
+
 }  // namespace
 }  // namespace tissue::record
