@@ -493,6 +493,13 @@ std::vector<SimRow> read_sim_rows(const SessionFile& f) {
   require_finite(f, kSimStepMs, rows, &SimRow::step_ms);
   require_finite(f, kSimKinetic, rows, &SimRow::kinetic_J);
   require_finite(f, kSimElastic, rows, &SimRow::elastic_J);
+  // NaN until the first second has been measured (by design); otherwise a
+  // pace. An infinite or negative one is damage, sent on to every
+  // sim_stats subscriber of a replay.
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    if (const double r = rows[i].real_time_factor; !std::isnan(r) && !(std::isfinite(r) && r >= 0.0))
+      f.fail(std::string(kDatasets[kSimRealTimeFactor].path) + " is " + std::to_string(r) + " at row " +
+             std::to_string(i) + ": a pace is NaN (not yet measured) or finite and >= 0");
   return rows;
 }
 

@@ -417,5 +417,29 @@ TEST(SessionReading, AFrameTimeBeyondAnySessionIsAnErrorNotAnEndlessReplay) {
   EXPECT_EQ(x3d::open_session_source(edge)->frame_time_s(3), kMaxSessionTime_s);
 }
 
+// real_time_factor is NaN until the first second has been measured (by
+// design, and it reads); an infinite or negative one is damage, and it went
+// out to every sim_stats subscriber of a replay.
+TEST(SessionReading, ARealTimeFactorIsNaNOrAPaceNeverInfiniteOrNegative) {
+  TempDir dir;
+  int n = 0;
+  for (const double bad : {std::numeric_limits<double>::infinity(), -1.0}) {
+    const std::string path = dir / ("rtf" + std::to_string(++n) + ".h5");
+    testing::write_test_session(path, small_session());
+    testing::overwrite_f64(path, kDatasets[kSimRealTimeFactor].path, 3, bad);
+    const std::string what = error_of<RecordError>([&] { read_session_rows(path); });
+    EXPECT_NE(what.find("'" + path + "'"), std::string::npos) << what;
+    EXPECT_NE(what.find("/sim/real_time_factor"), std::string::npos) << what;
+    EXPECT_NE(what.find("row 3"), std::string::npos) << what;
+  }
+  const std::string fine = dir / "nan.h5";
+  testing::write_test_session(fine, small_session());
+  testing::overwrite_f64(fine, kDatasets[kSimRealTimeFactor].path, 3, std::numeric_limits<double>::quiet_NaN());
+  const SessionRows rows = read_session_rows(fine);
+  ASSERT_EQ(rows.sim.size(), 10u);
+  EXPECT_TRUE(std::isnan(rows.sim[3].real_time_factor));
+  EXPECT_EQ(rows.sim[4].real_time_factor, testing::sim_row(4).real_time_factor);
+}
+
 }  // namespace
 }  // namespace tissue::record
