@@ -122,7 +122,12 @@ class SessionFrameSource final : public FrameSource {
       for (std::size_t t = 0; t < nt; ++t) {
         const float e = strain[t];
         // All NaN: recorded without strain. Anything else must be a real
-        // energy density: finite and >= 0.
+        // energy density: finite and >= 0. A value after a first NaN is
+        // named as the mix it is (the value itself may be fine).
+        if (not_computed && !std::isnan(e))
+          fail(dataset + " row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
+               ") holds " + std::to_string(e) + " J/m^3 but row " + std::to_string(triangle_offset_[k]) +
+               " is NaN (recorded without strain): a frame's strain is all NaN or all finite and >= 0");
         if (std::isnan(e) != not_computed || (!not_computed && (!std::isfinite(e) || e < 0.0f)))
           fail(dataset + " row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
                ") holds " + std::to_string(e) + " J/m^3: not a strain energy density (must be finite and >= 0)");

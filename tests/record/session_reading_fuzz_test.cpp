@@ -441,5 +441,23 @@ TEST(SessionReading, ARealTimeFactorIsNaNOrAPaceNeverInfiniteOrNegative) {
   EXPECT_EQ(rows.sim[4].real_time_factor, testing::sim_row(4).real_time_factor);
 }
 
+// A frame's strain is all NaN (recorded without it) or all real values. A
+// frame that starts with NaN and then holds a value was refused saying the
+// value (e.g. 305 J/m^3) "is not a strain energy density (must be finite and
+// >= 0)": true of neither. The error now says what is wrong: the mix.
+TEST(SessionReading, AFrameMixingRecordedAndMissingStrainSaysSo) {
+  TempDir dir;
+  const std::string path = testing::write_test_session(dir / "s.h5", small_session());
+  // Frame 1 (triangles 6 to 13 of test_frame's 6, 8, 10, 12): its first NaN.
+  testing::overwrite_f32(path, kDatasets[kMeshTriangleStrain].path, 6, std::numeric_limits<float>::quiet_NaN());
+  const std::unique_ptr<x3d::FrameSource> source = x3d::open_session_source(path);
+  EXPECT_NO_THROW(source->read_frame(0));
+  const std::string what = error_of<x3d::SourceError>([&] { source->read_frame(1); });
+  EXPECT_NE(what.find("'" + path + "'"), std::string::npos) << what;
+  EXPECT_NE(what.find("/mesh/triangle_strain_energy_J_per_m3 row 7 (frame 1)"), std::string::npos) << what;
+  EXPECT_NE(what.find("row 6 is NaN"), std::string::npos) << what;
+  EXPECT_EQ(what.find("must be finite and >= 0"), std::string::npos) << what;
+}
+
 }  // namespace
 }  // namespace tissue::record
