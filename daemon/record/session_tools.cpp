@@ -101,8 +101,16 @@ Handle open_dataset(hid_t file, const std::string& path, const char* dataset) {
   // H5Lexists on "/a/b" fails (rather than returning 0) when /a is missing.
   const std::string ds(dataset);
   const std::string group = ds.substr(0, ds.find('/', 1));
-  if (H5Lexists(file, group.c_str(), H5P_DEFAULT) <= 0 || H5Lexists(file, dataset, H5P_DEFAULT) <= 0)
-    bad_file(path, std::string("dataset ") + dataset + " is missing: not a complete tissue session file");
+  // A failed look-up (< 0) is damage, not absence: a flipped byte in a
+  // group's link index (a fractal heap block has no checksum) was reported
+  // as "dataset ... is missing: not a complete tissue session file".
+  for (const char* link : {group.c_str(), dataset}) {
+    const htri_t exists = H5Lexists(file, link, H5P_DEFAULT);
+    if (exists < 0)
+      bad_file(path, h5::describe(std::string("cannot look up dataset ") + dataset + ": corrupt metadata"));
+    if (exists == 0)
+      bad_file(path, std::string("dataset ") + dataset + " is missing: not a complete tissue session file");
+  }
   Handle d(H5Dopen2(file, dataset, H5P_DEFAULT));
   if (!d) bad_file(path, h5::describe(std::string("cannot open dataset ") + dataset));
   return d;

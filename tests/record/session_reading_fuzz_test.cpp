@@ -459,5 +459,30 @@ TEST(SessionReading, AFrameMixingRecordedAndMissingStrainSaysSo) {
   EXPECT_EQ(what.find("must be finite and >= 0"), std::string::npos) << what;
 }
 
+// Links of a group with many members live in a fractal heap whose direct
+// blocks carry no checksum here: a flipped byte in one makes H5Lexists fail
+// (< 0), which the readers took for "no such link" and reported as
+// "dataset ... is missing: not a complete tissue session file". It is
+// corrupt metadata, and said so with HDF5's reason.
+TEST(SessionReading, ADamagedLinkIndexIsCorruptMetadataNotAMissingDataset) {
+  TempDir dir;
+  const std::string path = testing::write_test_session(dir / "s.h5", small_session());
+  std::string bytes = testing::slurp(path);
+  // The /mesh group's heap block: "FHDB", version, then the 8-byte address
+  // of its heap header (HDF5 file format spec, fractal heap direct block),
+  // then the link messages naming the datasets.
+  std::size_t block = std::string::npos;
+  for (std::size_t at = bytes.find("FHDB"); at != std::string::npos; at = bytes.find("FHDB", at + 4))
+    if (bytes.find("vertices_m", at) < at + 64) block = at;
+  ASSERT_NE(block, std::string::npos) << "no heap block naming vertices_m";
+  bytes[block + 9] = static_cast<char>(bytes[block + 9] ^ 0x5a);  // the heap header's address
+  testing::write_bytes(path, bytes);
+  const std::string what = error_of<RecordError>([&] { read_session_info(path); });
+  EXPECT_NE(what.find("'" + path + "'"), std::string::npos) << what;
+  EXPECT_NE(what.find("cannot look up dataset /mesh/"), std::string::npos) << what;
+  EXPECT_NE(what.find("corrupt metadata"), std::string::npos) << what;
+  EXPECT_EQ(what.find("is missing"), std::string::npos) << what;
+}
+
 }  // namespace
 }  // namespace tissue::record
