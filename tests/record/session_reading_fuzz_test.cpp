@@ -15,8 +15,8 @@
 #include <filesystem>
 #include <limits>
 #include <random>
-#include <regex>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "export/frame_source.hpp"
@@ -73,10 +73,15 @@ std::vector<bool> raw_bytes_of(const std::string& path, std::size_t size) {
 }
 
 // "inf", "-inf" or "nan" as a value in generated text (not inside a word
-// such as "info").
+// such as "info"): a token of those letters between separators.
 bool has_non_finite_token(const std::string& text) {
-  static const std::regex token("(^|[\\s'\"=,>])-?(inf|nan)([\\s'\",<]|$)", std::regex::icase);
-  return std::regex_search(text, token);
+  const auto separator = [&](std::size_t at) {
+    return at >= text.size() || std::string_view(" \t\n'\"=,<>-").find(text[at]) != std::string_view::npos;
+  };
+  for (const std::string_view word : {"inf", "nan", "INF", "NAN", "NaN", "Inf"})
+    for (std::size_t at = text.find(word); at != std::string::npos; at = text.find(word, at + 1))
+      if ((at == 0 || separator(at - 1)) && separator(at + word.size())) return true;
+  return false;
 }
 
 struct NullSink final : replay::ReplaySink {
