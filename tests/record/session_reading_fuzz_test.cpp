@@ -259,7 +259,7 @@ TEST(SessionReadingFuzz, MutatedSessionsEitherReadConsistentlyOrNameTheFile) {
                                     0x7fc000007fc00000};  // two float NaNs
   int all_read = 0, some_refused = 0;
   Outcome outcome;
-  for (int iteration = 0; iteration < 240; ++iteration) {
+  for (int iteration = 0; iteration < 160; ++iteration) {
     std::string b = bytes;
     std::string mutation = "mutant " + std::to_string(iteration) + ":";
     const int edits = 1 + static_cast<int>(pick(3));
@@ -320,8 +320,8 @@ TEST(SessionReadingFuzz, MutatedSessionsEitherReadConsistentlyOrNameTheFile) {
   // Both outcomes occur: the mutations neither always break the file nor
   // never reach what the readers check.
   EXPECT_GT(all_read, 20);
-  EXPECT_GT(some_refused, 100);
-  EXPECT_GT(outcome.read, 500);
+  EXPECT_GT(some_refused, 80);
+  EXPECT_GT(outcome.read, 250);  // counted per reader run, 8 a copy
   EXPECT_GT(outcome.refused, 500);
 }
 
