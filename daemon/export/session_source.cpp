@@ -47,6 +47,11 @@ class SessionFrameSource final : public FrameSource {
       if (!std::isfinite(times_[k])) fail("/mesh/frame_time_s[" + std::to_string(k) + "] is not finite");
       if (k > 0 && times_[k] < times_[k - 1])
         fail("/mesh/frame_time_s goes backwards at frame " + std::to_string(k) + " (frames must be in time order)");
+      // The rows' bound: replay paces by frame times too (1e300 s waited for
+      // ever, -1.7e308 to 1.7e308 s made its span NaN).
+      if (std::abs(times_[k]) > record::kMaxSessionTime_s)
+        fail("/mesh/frame_time_s[" + std::to_string(k) + "] is " + std::to_string(times_[k]) +
+             " s, beyond any session (" + std::to_string(record::kMaxSessionTime_s) + " s)");
     }
     // Version 2 stores strain; a frame recorded without it holds NaN. The
     // first frame with triangles says whether this recording computed it
@@ -117,7 +122,12 @@ class SessionFrameSource final : public FrameSource {
       for (std::size_t t = 0; t < nt; ++t) {
         const float e = strain[t];
         // All NaN: recorded without strain. Anything else must be a real
-        // energy density: finite and >= 0.
+        // energy density: finite and >= 0. A value after a first NaN is
+        // named as the mix it is (the value itself may be fine).
+        if (not_computed && !std::isnan(e))
+          fail(dataset + " row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
+               ") holds " + std::to_string(e) + " J/m^3 but row " + std::to_string(triangle_offset_[k]) +
+               " is NaN (recorded without strain): a frame's strain is all NaN or all finite and >= 0");
         if (std::isnan(e) != not_computed || (!not_computed && (!std::isfinite(e) || e < 0.0f)))
           fail(dataset + " row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
                ") holds " + std::to_string(e) + " J/m^3: not a strain energy density (must be finite and >= 0)");

@@ -101,8 +101,16 @@ Handle open_dataset(hid_t file, const std::string& path, const char* dataset) {
   // H5Lexists on "/a/b" fails (rather than returning 0) when /a is missing.
   const std::string ds(dataset);
   const std::string group = ds.substr(0, ds.find('/', 1));
-  if (H5Lexists(file, group.c_str(), H5P_DEFAULT) <= 0 || H5Lexists(file, dataset, H5P_DEFAULT) <= 0)
-    bad_file(path, std::string("dataset ") + dataset + " is missing: not a complete tissue session file");
+  // A failed look-up (< 0) is damage, not absence: a flipped byte in a
+  // group's link index (a fractal heap block has no checksum) was reported
+  // as "dataset ... is missing: not a complete tissue session file".
+  for (const char* link : {group.c_str(), dataset}) {
+    const htri_t exists = H5Lexists(file, link, H5P_DEFAULT);
+    if (exists < 0)
+      bad_file(path, h5::describe(std::string("cannot look up dataset ") + dataset + ": corrupt metadata"));
+    if (exists == 0)
+      bad_file(path, std::string("dataset ") + dataset + " is missing: not a complete tissue session file");
+  }
   Handle d(H5Dopen2(file, dataset, H5P_DEFAULT));
   if (!d) bad_file(path, h5::describe(std::string("cannot open dataset ") + dataset));
   return d;
@@ -428,15 +436,17 @@ void read_into(const SessionFile& f, DatasetId id, std::vector<Row>& rows, T Row
   }
 }
 
-// Session times must be finite and in order: replay paces by them and the
-// replay device interpolates between them.
-// Beyond this a time is damage, not a session (31 years): replay would wait
-// for it (1e308 s kept a replay running with no end).
-constexpr double kMaxSessionTime_s = 1e9;
-
+// Session times must be finite, in order and within kMaxSessionTime_s:
+// replay paces by them and the replay device interpolates between them.
+// The time column is read first and a Row made per time read: the column
+// read refuses rows the file cannot hold, whereas a Row per claimed row,
+// allocated before any read, made a damaged extent of 10^10 rows a
+// std::bad_alloc (960 GB of HapticRow) instead of an error.
 template <typename Row>
-void read_times(const SessionFile& f, DatasetId id, std::vector<Row>& rows) {
-  read_into(f, id, rows, &Row::time_s);
+std::vector<Row> read_times(const SessionFile& f, DatasetId id, std::uint64_t count) {
+  const std::vector<double> times = f.rows<double>(id, 0, count);
+  std::vector<Row> rows(times.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) rows[i].time_s = times[i];
   for (std::size_t i = 0; i < rows.size(); ++i) {
     if (!std::isfinite(rows[i].time_s) || (i > 0 && rows[i].time_s < rows[i - 1].time_s))
       f.fail(std::string(kDatasets[id].path) + " is not finite and non-decreasing at row " + std::to_string(i));
@@ -444,6 +454,7 @@ void read_times(const SessionFile& f, DatasetId id, std::vector<Row>& rows) {
       f.fail(std::string(kDatasets[id].path) + " is " + std::to_string(rows[i].time_s) + " s at row " +
              std::to_string(i) + ", beyond any session (" + std::to_string(kMaxSessionTime_s) + " s)");
   }
+  return rows;
 }
 
 // Values that go out to subscribers as they are: a damaged file's NaN or inf
@@ -462,8 +473,7 @@ void require_finite(const SessionFile& f, DatasetId id, const std::vector<Row>& 
 }
 
 std::vector<HapticRow> read_haptic_rows(const SessionFile& f) {
-  std::vector<HapticRow> rows(f.info().rows.haptic_rows);
-  read_times(f, kHapticTime, rows);
+  std::vector<HapticRow> rows = read_times<HapticRow>(f, kHapticTime, f.info().rows.haptic_rows);
   read_into(f, kHapticDevicePosition, rows, &HapticRow::device_position_m);
   read_into(f, kHapticProxyPosition, rows, &HapticRow::proxy_position_m);
   read_into(f, kHapticForce, rows, &HapticRow::force_N);
@@ -476,8 +486,7 @@ std::vector<HapticRow> read_haptic_rows(const SessionFile& f) {
 }
 
 std::vector<SimRow> read_sim_rows(const SessionFile& f) {
-  std::vector<SimRow> rows(f.info().rows.sim_rows);
-  read_times(f, kSimTime, rows);
+  std::vector<SimRow> rows = read_times<SimRow>(f, kSimTime, f.info().rows.sim_rows);
   read_into(f, kSimSimTime, rows, &SimRow::sim_time_s);
   read_into(f, kSimRealTimeFactor, rows, &SimRow::real_time_factor);
   read_into(f, kSimStepMs, rows, &SimRow::step_ms);
@@ -492,6 +501,13 @@ std::vector<SimRow> read_sim_rows(const SessionFile& f) {
   require_finite(f, kSimStepMs, rows, &SimRow::step_ms);
   require_finite(f, kSimKinetic, rows, &SimRow::kinetic_J);
   require_finite(f, kSimElastic, rows, &SimRow::elastic_J);
+  // NaN until the first second has been measured (by design); otherwise a
+  // pace. An infinite or negative one is damage, sent on to every
+  // sim_stats subscriber of a replay.
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    if (const double r = rows[i].real_time_factor; !std::isnan(r) && !(std::isfinite(r) && r >= 0.0))
+      f.fail(std::string(kDatasets[kSimRealTimeFactor].path) + " is " + std::to_string(r) + " at row " +
+             std::to_string(i) + ": a pace is NaN (not yet measured) or finite and >= 0");
   return rows;
 }
 
@@ -772,6 +788,10 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
     if (f > 0 && times[f] < times[f - 1])
       bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + " goes backwards at frame " + std::to_string(f) +
                             " (frames must be in time order)");
+    if (std::abs(times[f]) > kMaxSessionTime_s)
+      bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + "[" + std::to_string(f) + "] is " +
+                            std::to_string(times[f]) + " s, beyond any session (" + std::to_string(kMaxSessionTime_s) +
+                            " s)");
   }
 
   namespace fs = std::filesystem;

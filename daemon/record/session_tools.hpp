@@ -110,6 +110,11 @@ class SessionFile {
   std::unique_ptr<Impl> impl_;
 };
 
+// Beyond this a session time (any group's, frame times too) is damage, not a
+// session (31 years): replay would wait for it (1e308 s kept a replay running
+// with no end).
+inline constexpr double kMaxSessionTime_s = 1e9;
+
 // Every column of /haptic and /sim (docs/session-format.md), complete rows
 // only, session times finite and non-decreasing. Held in memory (about 100
 // bytes per haptic tick).

@@ -314,7 +314,7 @@ TEST(SessionSource, StrainIsNaNForAWholeFrameOrNotAtAll) {
     EXPECT_NO_THROW(source->read_frame(0));
     expect_source_error([&] { source->read_frame(1); },
                         {"'" + path + "': ", std::string(strain) + " row " + std::to_string(first + 1) + " (frame 1)",
-                         "must be finite and >= 0"});
+                         "but row " + std::to_string(first) + " is NaN"});
   }
   {
     const std::string path = write_frames(dir / "one_value.h5", 3, false);
