@@ -138,6 +138,20 @@ void SimThread::publish_model(std::int64_t t_ns, bool rebuilt) {
   // resting object as a stale model.
   if (rebuilt) scratch_model_.version = ++model_version_;
   if (scratch_model_.version == 0) return;  // nothing built yet
+  // A paused object stands still. Its last model still carries the surface
+  // velocities of the step before the pause, and the haptic side, finding
+  // the model fresh at every re-affirmation, would extrapolate the patch
+  // along them (a sawtooth of velocity x step) and damp against a moving
+  // surface. So the first re-affirmation while paused is a new version with
+  // the velocities zeroed; later ones re-stamp it.
+  if (!rebuilt && paused_.load(std::memory_order_relaxed)) {
+    auto& velocity = scratch_model_.vertex_velocity_m_per_s;
+    const auto moving = [](const haptics::Vec3& v) { return !v.isZero(0.0); };
+    if (std::any_of(velocity.begin(), velocity.begin() + scratch_model_.vertex_count, moving)) {
+      std::fill(velocity.begin(), velocity.begin() + scratch_model_.vertex_count, haptics::Vec3::Zero());
+      scratch_model_.version = ++model_version_;
+    }
+  }
   scratch_model_.built_ns = t_ns;
   models_->write(scratch_model_);
 }

@@ -103,6 +103,13 @@ TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {
   SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), nullptr, &models, options);
   thread.start();
   ASSERT_TRUE(wait_for([&] { return thread.status().steps > 5; }));
+  const auto moving = [&] {
+    const haptics::LocalModel& m = *models.read().value;
+    for (int i = 0; i < m.vertex_count; ++i)
+      if (!m.vertex_velocity_m_per_s[i].isZero(0.0)) return true;
+    return false;
+  };
+  ASSERT_TRUE(wait_for(moving)) << "the loaded cantilever swings";
   thread.pause();
   ASSERT_TRUE(wait_for([&] { return thread.status().paused; }));
   std::this_thread::sleep_for(20ms);
@@ -111,6 +118,16 @@ TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {
   std::this_thread::sleep_for(50ms);
   EXPECT_EQ(thread.status().sim_time_s, t_paused);
   EXPECT_GT(models.read().value->built_ns, built_before);  // re-stamped while paused
+  // Paused, the surface stands still: the model the haptic side holds has
+  // no velocity to extrapolate (the cantilever was swinging when paused),
+  // and re-affirming it does not make new versions.
+  const haptics::LocalModel& held = *models.read().value;
+  ASSERT_GT(held.vertex_count, 0);
+  for (int i = 0; i < held.vertex_count; ++i)
+    EXPECT_EQ(held.vertex_velocity_m_per_s[i], haptics::Vec3::Zero()) << "vertex " << i;
+  const std::uint64_t paused_version = held.version;
+  std::this_thread::sleep_for(30ms);
+  EXPECT_EQ(models.read().value->version, paused_version);
   thread.resume();
   EXPECT_TRUE(wait_for([&] { return thread.status().sim_time_s > t_paused; }));
 }
