@@ -43,16 +43,9 @@ class SessionFrameSource final : public FrameSource {
     vertex_count_ = read<std::uint64_t>(record::kMeshVertexCount, 0, frames_);
     triangle_offset_ = read<std::uint64_t>(record::kMeshTriangleOffset, 0, frames_);
     triangle_count_ = read<std::uint64_t>(record::kMeshTriangleCount, 0, frames_);
-    for (std::size_t k = 0; k < frames_; ++k) {
-      if (!std::isfinite(times_[k])) fail("/mesh/frame_time_s[" + std::to_string(k) + "] is not finite");
-      if (k > 0 && times_[k] < times_[k - 1])
-        fail("/mesh/frame_time_s goes backwards at frame " + std::to_string(k) + " (frames must be in time order)");
-      // The rows' bound: replay paces by frame times too (1e300 s waited for
-      // ever, -1.7e308 to 1.7e308 s made its span NaN).
-      if (std::abs(times_[k]) > record::kMaxSessionTime_s)
-        fail("/mesh/frame_time_s[" + std::to_string(k) + "] is " + std::to_string(times_[k]) +
-             " s, beyond any session (" + std::to_string(record::kMaxSessionTime_s) + " s)");
-    }
+    // Replay paces by these (1e300 s waited for ever, -1.7e308 to 1.7e308 s
+    // made its span NaN).
+    if (const std::string problem = record::frame_times_problem(times_); !problem.empty()) fail(problem);
     // Version 2 stores strain; a frame recorded without it holds NaN. The
     // first frame with triangles says whether this recording computed it
     // (the daemon does for every frame or for none).

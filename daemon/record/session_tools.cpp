@@ -442,6 +442,23 @@ void read_into(const SessionFile& f, DatasetId id, std::vector<Row>& rows, T Row
 // read refuses rows the file cannot hold, whereas a Row per claimed row,
 // allocated before any read, made a damaged extent of 10^10 rows a
 // std::bad_alloc (960 GB of HapticRow) instead of an error.
+}  // namespace
+
+std::string frame_times_problem(const std::vector<double>& times_s) {
+  const std::string column = kDatasets[kMeshFrameTime].path;
+  for (std::size_t f = 0; f < times_s.size(); ++f) {
+    if (!std::isfinite(times_s[f])) return column + "[" + std::to_string(f) + "] is not finite";
+    if (f > 0 && times_s[f] < times_s[f - 1])
+      return column + " goes backwards at frame " + std::to_string(f) + " (frames must be in time order)";
+    if (std::abs(times_s[f]) > kMaxSessionTime_s)
+      return column + "[" + std::to_string(f) + "] is " + std::to_string(times_s[f]) + " s, beyond any session (" +
+             std::to_string(kMaxSessionTime_s) + " s)";
+  }
+  return {};
+}
+
+namespace {
+
 template <typename Row>
 std::vector<Row> read_times(const SessionFile& f, DatasetId id, std::uint64_t count) {
   const std::vector<double> times = f.rows<double>(id, 0, count);
@@ -782,17 +799,7 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   const auto tcnt = read_column<std::uint64_t>(file.get(), h5_path, kMeshTriangleCount, 0, frames);
   // The same rule as every other reader of frames (the frame source, replay):
   // ParaView steps through the grids by these times.
-  for (std::uint64_t f = 0; f < frames; ++f) {
-    if (!std::isfinite(times[f]))
-      bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + "[" + std::to_string(f) + "] is not finite");
-    if (f > 0 && times[f] < times[f - 1])
-      bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + " goes backwards at frame " + std::to_string(f) +
-                            " (frames must be in time order)");
-    if (std::abs(times[f]) > kMaxSessionTime_s)
-      bad_file(h5_path, std::string(kDatasets[kMeshFrameTime].path) + "[" + std::to_string(f) + "] is " +
-                            std::to_string(times[f]) + " s, beyond any session (" + std::to_string(kMaxSessionTime_s) +
-                            " s)");
-  }
+  if (const std::string problem = frame_times_problem(times); !problem.empty()) bad_file(h5_path, problem);
 
   namespace fs = std::filesystem;
   XdmfReport report;

@@ -115,6 +115,12 @@ class SessionFile {
 // with no end).
 inline constexpr double kMaxSessionTime_s = 1e9;
 
+// What is wrong with a session's frame times (/mesh/frame_time_s), or "" when
+// nothing is: each finite, within kMaxSessionTime_s and none before the one
+// ahead of it. The one rule of every reader of frames (the frame source,
+// replay, xdmf): replay paces by them, ParaView steps through them.
+std::string frame_times_problem(const std::vector<double>& times_s);
+
 // Every column of /haptic and /sim (docs/session-format.md), complete rows
 // only, session times finite and non-decreasing. Held in memory (about 100
 // bytes per haptic tick).
