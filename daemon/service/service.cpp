@@ -58,6 +58,7 @@ nlohmann::json status_json(const SimStatus& s) {
           {"adaptation_shed", s.adaptation_shed},
           {"overruns", s.overruns},
           {"failed_steps", s.failed_steps},
+          {"halted", s.halted},
           {"solver",
            {{"integrator", std::string(s.integrator)},
             {"substeps_per_step", s.substeps_per_step},

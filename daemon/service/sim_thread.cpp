@@ -6,7 +6,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
+#include <stdexcept>
 
 #include "record/recorder.hpp"
 
@@ -88,6 +90,8 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
     row.model_version = s.model_version;
     recorder.push_haptic(row);
   }
+  // A halted runner's state may be half-changed: no rows or frames from it.
+  if (halted_) return;
   const physics::Simulation& sim = runner_->simulation();
   const double session_s = recorder.session_time_s(t_ns);
   record::SimRow row;
@@ -118,6 +122,14 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
   recorder.push_mesh_frame(frame);  // copies: the snapshot is published after this
   snapshots_.publish();
   last_snapshot_ns_ = t_ns;
+}
+
+void SimThread::halt(const char* what) noexcept {
+  halted_ = true;
+  last_step_.tool_pushing = false;
+  // The advice first: the reason may be cut at the status field's length.
+  std::snprintf(halt_reason_, sizeof halt_reason_, "a step threw, so the scene is halted (reset or load a scene): %s",
+                what);
 }
 
 MeshSnapshot& SimThread::build_snapshot() {
@@ -179,8 +191,10 @@ void SimThread::publish_status(std::int64_t t_ns) {
   // The energies are O(mesh) sums: at the status rate (100 Hz for haptic
   // messages) they would cost the sim thread for nothing, so they refresh at
   // energy_every_s (the stats rate) and on a new runner.
-  if (energy_generation_ != generation_ || last_energy_ns_ == 0 ||
-      t_ns - last_energy_ns_ >= static_cast<std::int64_t>(options_.energy_every_s * 1e9)) {
+  // (Not from a halted runner: the sums walk a mesh that may be half-changed.
+  // The counts below only read container sizes.)
+  if (!halted_ && (energy_generation_ != generation_ || last_energy_ns_ == 0 ||
+                   t_ns - last_energy_ns_ >= static_cast<std::int64_t>(options_.energy_every_s * 1e9))) {
     kinetic_energy_J_ = sim.kinetic_energy_J();
     elastic_energy_J_ = sim.elastic_energy_J();
     energy_sim_time_s_ = sim.time_s();
@@ -198,6 +212,7 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.adaptation_shed = shed_;
   s.overruns = overruns_;
   s.failed_steps = failed_steps_;
+  s.halted = halted_;
   s.substeps_per_step = sim.counters().substeps_per_step();
   s.solver_iterations_per_step = sim.counters().solver_iterations_per_step();
   s.unconverged_steps = sim.counters().unconverged_steps;
@@ -214,7 +229,7 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.force_on_device_N = {last_tick_.force_on_device_N.x(), last_tick_.force_on_device_N.y(),
                          last_tick_.force_on_device_N.z()};
   s.tool_contact = last_tick_.contact;
-  std::snprintf(s.last_error, sizeof s.last_error, "%s", last_error_.c_str());
+  std::snprintf(s.last_error, sizeof s.last_error, "%s", halted_ ? halt_reason_ : last_error_.c_str());
   status_.publish();
   step_ms_max_ = 0.0;
 }
@@ -248,6 +263,8 @@ void SimThread::run(std::promise<void>& scheduled) {
       first_model_version_ = model_version_ + 1;
       scratch_model_.version = 0;
       shed_ = false;
+      halted_ = false;
+      last_step_ = RunnerStep{};
       last_error_.clear();
       next_ns = now_ns();
     }
@@ -271,27 +288,48 @@ void SimThread::run(std::promise<void>& scheduled) {
     if (const std::int64_t stall = stall_ns_.exchange(0, std::memory_order_relaxed); stall > 0)
       sleep_until_ns(now_ns() + stall);
     const std::int64_t t0 = now_ns();
-    bool rebuilt = false;
-    if (!paused_.load(std::memory_order_relaxed)) {
-      last_step_ = runner_->step(batch_, &scratch_model_);
-      rebuilt = last_step_.model_built;
-      if (last_step_.ok) {
-        window_sim_s_ += dt_s;
-      } else {
-        ++failed_steps_;
-        last_error_ = last_step_.error;
+    std::int64_t t1 = t0;
+    const bool paused = paused_.load(std::memory_order_relaxed);
+    // The exception barrier: a library call that throws inside a step
+    // (std::bad_alloc while refining, a std::logic_error from a broken mesh
+    // invariant) would otherwise end the daemon through std::terminate, the
+    // session file unclosed. The runner halts instead; status, control,
+    // recording and the haptic side (which ramps its force out on the model
+    // that stops refreshing) go on, and a reset / load / set starts afresh.
+    try {
+      bool rebuilt = false;
+      if (!paused && !halted_) {
+        if (throw_next_step_.exchange(false, std::memory_order_relaxed))
+          throw std::runtime_error("injected step fault (SimThread::inject_step_exception)");
+        last_step_ = runner_->step(batch_, &scratch_model_);
+        rebuilt = last_step_.model_built;
+        if (last_step_.ok) {
+          window_sim_s_ += dt_s;
+        } else {
+          ++failed_steps_;
+          last_error_ = last_step_.error;
+        }
       }
+      t1 = now_ns();
+      step_ms_last_ = 1e-6 * static_cast<double>(t1 - t0);
+      step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
+      if (!halted_) publish_model(t1, rebuilt);
+      if (recorder) record(*recorder, t1);
+      if (!halted_ && t1 - last_snapshot_ns_ >= static_cast<std::int64_t>(options_.snapshot_every_s * 1e9)) {
+        build_snapshot();
+        snapshots_.publish();
+        last_snapshot_ns_ = t1;
+      }
+    } catch (const std::exception& e) {
+      halt(e.what());
+      t1 = now_ns();
+    } catch (...) {
+      halt("an exception that is not a std::exception");
+      t1 = now_ns();
     }
-    const std::int64_t t1 = now_ns();
-    step_ms_last_ = 1e-6 * static_cast<double>(t1 - t0);
-    step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
-    publish_model(t1, rebuilt);
-    if (recorder) record(*recorder, t1);
-    if (t1 - last_snapshot_ns_ >= static_cast<std::int64_t>(options_.snapshot_every_s * 1e9)) {
-      build_snapshot();
-      snapshots_.publish();
-      last_snapshot_ns_ = t1;
-    }
+    // Every step a halted runner cannot take is a failed step: the status
+    // and the failing-steps notices say so, with the reason, until it goes.
+    if (halted_ && !paused) ++failed_steps_;
     if (t1 - last_status_ns >= static_cast<std::int64_t>(options_.status_every_s * 1e9)) {
       publish_status(t1);
       last_status_ns = t1;

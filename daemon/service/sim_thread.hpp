@@ -56,6 +56,11 @@ struct SimStatus {
   bool adaptation_shed = false;  // adaptation paused because the loop fell behind
   std::int64_t overruns = 0;     // schedule re-anchored after falling max_lag_s behind
   std::int64_t failed_steps = 0;
+  // A step threw (a broken mesh invariant, memory exhausted): the runner's
+  // state may be half-changed, so it is not stepped again, and every step it
+  // cannot take counts as failed (last_error says why) until a new runner
+  // (reset / load / set) takes over.
+  bool halted = false;
   // Solver work since the runner started (physics::SimCounters): mean
   // explicit sub-steps and CG / local-global iterations per step, and the
   // steps whose solver stopped at cg_max_iterations short of cg_tolerance.
@@ -106,6 +111,11 @@ class SimThread {
   // for this long, as a pathological step would. The haptic side must ride
   // it out: it keeps its rate and ramps the force out on a stale model.
   void inject_stall(std::chrono::nanoseconds duration) { stall_ns_.store(duration.count(), std::memory_order_relaxed); }
+  // Fault injection: the next step throws, as a library call that fails
+  // inside it would (std::bad_alloc while refining, a std::logic_error from
+  // a broken mesh invariant). The runner halts (SimStatus::halted); the
+  // thread, its status and the haptic side keep going.
+  void inject_step_exception() { throw_next_step_.store(true, std::memory_order_relaxed); }
 
   // Recording: the sim thread is the single producer of the session's
   // haptic rows (from the tool samples it drains anyway), sim rows and mesh
@@ -138,6 +148,9 @@ class SimThread {
  private:
   // `scheduled` is set once the thread has asked for its scheduling.
   void run(std::promise<void>& scheduled);
+  // A step (or reading the mesh after it) threw: stop using the runner.
+  // Allocates nothing (the exception may be std::bad_alloc).
+  void halt(const char* what) noexcept;
   void publish_model(std::int64_t now_ns, bool rebuilt);
   void publish_status(std::int64_t now_ns);
   void record(record::Recorder& recorder, std::int64_t now_ns);
@@ -154,6 +167,7 @@ class SimThread {
   std::atomic<bool> paused_{false};
   std::atomic<std::uint64_t> heartbeat_{0};
   std::atomic<std::int64_t> stall_ns_{0};
+  std::atomic<bool> throw_next_step_{false};
   std::atomic<record::Recorder*> recorder_{nullptr};
 
   std::mutex pending_mutex_;  // guards pending_ only; the sim thread only try_locks
@@ -177,6 +191,8 @@ class SimThread {
   std::uint64_t samples_total_ = 0;
   std::int64_t overruns_ = 0, failed_steps_ = 0;
   bool shed_ = false;
+  bool halted_ = false;  // see SimStatus::halted; cleared by a new runner
+  char halt_reason_[sizeof(SimStatus::last_error)] = {};
   RunnerStep last_step_;
   std::string last_error_;
   double window_sim_s_ = 0.0;

@@ -113,13 +113,21 @@ TEST(Service, ServesStatusWithTheHapticSideAndShutsDownCleanly) {
   TempDir dir;
   Running run(write_config(dir, scene_file("cantilever.yaml")));
   ControlClient client = connect(dir / "ctl.sock");
-  // Until the sim has stepped a while: a fixed sleep read 46 steps in 400 ms
-  // under TSan on a loaded machine. The status is what is tested, not the pace.
+  // Until the sim has stepped and the haptic loop ticked a while: a fixed
+  // sleep read 46 steps in 400 ms under TSan on a loaded machine, and 96
+  // ticks once the sim had 50 steps (load 8). The status is what is tested,
+  // not the pace.
   nlohmann::json status;
+  const auto settled = [](const nlohmann::json& st) {
+    if (!st["ok"].get<bool>()) return false;
+    const nlohmann::json& r = st["result"];
+    return r["steps"].get<std::int64_t>() > 50 && r["haptics"].is_object() &&
+           r["haptics"]["ticks"].get<std::uint64_t>() > 100u;
+  };
   for (const auto end = std::chrono::steady_clock::now() + 10s; std::chrono::steady_clock::now() < end;) {
     std::this_thread::sleep_for(100ms);
     status = client.call("status");
-    if (status["ok"].get<bool>() && status["result"]["steps"].get<std::int64_t>() > 50) break;
+    if (settled(status)) break;
   }
   ASSERT_TRUE(status["ok"].get<bool>()) << status.dump();
   const nlohmann::json& r = status["result"];

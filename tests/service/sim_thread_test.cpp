@@ -191,6 +191,79 @@ TEST(SimThread, ReplacingTheRunnerStartsANewGeneration) {
   thread.stop();  // idempotent
 }
 
+// A step that throws (std::bad_alloc while refining, a broken mesh
+// invariant) halts the runner instead of ending the daemon through
+// std::terminate: the thread keeps publishing status with the reason, stops
+// stepping the half-changed state, publishing models from it and recording
+// sim rows from it (haptic rows still go in), and a new runner starts afresh.
+TEST(SimThread, AStepThatThrowsHaltsTheRunnerAndTheThreadKeepsServing) {
+  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  {
+    record::RecorderOptions recording;
+    recording.flush_interval_s = 0.01;  // rows are written (and counted) within 10 ms of their push
+    auto recorder = record::Recorder::start(dir, "halt.h5", record::SessionMetadata{}, recording);
+    ToolSampleRing samples;
+    LocalModelChannel models;
+    SimThreadOptions options;
+    options.status_every_s = 0.002;
+    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
+    thread.start();
+    ASSERT_TRUE(thread.set_recorder(recorder.get()));
+    haptics::ToolSample hover;
+    hover.proxy_position_m = haptics::Vec3(0.05, 0.05, 0.102);
+    const auto feed = [&](std::chrono::milliseconds how_long) {
+      const auto end = std::chrono::steady_clock::now() + how_long;
+      while (std::chrono::steady_clock::now() < end) {
+        samples.try_push(hover);
+        std::this_thread::sleep_for(1ms);
+      }
+    };
+    ASSERT_TRUE(wait_for([&] { return thread.status().steps > 20 && models.read().value->version > 0; }));
+    EXPECT_FALSE(thread.status().halted);
+
+    thread.inject_step_exception();
+    EXPECT_TRUE(wait_for([&] { return thread.status().halted; }));
+    const SimStatus at_halt = thread.status();
+    const haptics::LocalModel model_at_halt = *models.read().value;
+    feed(100ms);  // what was pushed before the halt is written
+    const record::RecorderStats rows_at_halt = recorder->stats();
+    feed(200ms);
+    const SimStatus later = thread.status();
+    EXPECT_TRUE(later.halted);
+    EXPECT_NE(std::string(later.last_error).find("injected step fault"), std::string::npos) << later.last_error;
+    EXPECT_NE(std::string(later.last_error).find("reset or load a scene"), std::string::npos) << later.last_error;
+    EXPECT_EQ(later.steps, at_halt.steps);                     // not stepped again
+    EXPECT_EQ(later.sim_time_s, at_halt.sim_time_s);           // time stands
+    EXPECT_GT(later.failed_steps, at_halt.failed_steps + 20);  // every step it cannot take fails, with the reason
+    EXPECT_FALSE(later.tool_pushing);
+    // The haptic side sees the model stop refreshing (it ramps its force out).
+    const haptics::LocalModel model_later = *models.read().value;
+    EXPECT_EQ(model_later.version, model_at_halt.version);
+    EXPECT_EQ(model_later.built_ns, model_at_halt.built_ns);
+    // Recording: the device's rows still go in, the halted sim's do not.
+    ASSERT_TRUE(thread.set_recorder(nullptr));
+    const record::RecorderStats rows_later = recorder->stats();
+    EXPECT_EQ(rows_later.sim_rows_written, rows_at_halt.sim_rows_written);
+    EXPECT_EQ(rows_later.sim_drops, rows_at_halt.sim_drops);
+    EXPECT_GT(rows_later.haptic_rows_written, rows_at_halt.haptic_rows_written + 20);
+
+    thread.replace_runner(std::make_unique<SimRunner>(cantilever_with_tool()));
+    EXPECT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps > 20; }));
+    const SimStatus fresh = thread.status();
+    EXPECT_FALSE(fresh.halted);
+    EXPECT_STREQ(fresh.last_error, "");
+    EXPECT_TRUE(wait_for([&] { return models.read().value->version > model_at_halt.version; }));
+    const std::int64_t failed = thread.status().failed_steps;
+    feed(50ms);
+    EXPECT_EQ(thread.status().failed_steps, failed);  // the new runner steps
+    thread.stop();
+    recorder->stop();
+  }
+  std::filesystem::remove_all(dir);
+}
+
 // The status carries the solver's work: CG iterations per step and the
 // steps that stopped at cg_max_iterations (none with the shipped tolerance;
 // every one when one iteration must reach 1e-12).
