@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,25 @@ struct SimDeviceSpec {
   double hand_stiffness_N_per_m = 200.0;
   double hand_damping_N_s_per_m = 4.0;
   bool operator==(const SimDeviceSpec&) const = default;  // a reload tells what changed
+
+  // The hand is integrated with semi-implicit Euler in sub-steps of at most
+  // kHandSubstep_s. Its update matrix is stable while h²k/m + 2hc/m < 4 and
+  // hc/m < 2 (the Jury conditions); past that the hand's position grows
+  // without bound and turns non-finite within a few hundred sub-steps (a
+  // 0.1 g hand with the default spring and damper, pushed by 1 N: 240). Specs are held to half the limit.
+  static constexpr double kHandSubstep_s = 0.0005;
+  static constexpr double kMaxHandStabilityIndex = 2.0;
+  // h²k/m + 2hc/m at kHandSubstep_s (NaN unless the mass is > 0).
+  double hand_stability_index() const {
+    const double h = kHandSubstep_s;
+    return hand_mass_kg > 0.0 ? (h * h * hand_stiffness_N_per_m + 2.0 * h * hand_damping_N_s_per_m) / hand_mass_kg
+                              : std::numeric_limits<double>::quiet_NaN();
+  }
+  // The lightest hand the stiffness and damping allow.
+  double min_hand_mass_kg() const {
+    const double h = kHandSubstep_s;
+    return (h * h * hand_stiffness_N_per_m + 2.0 * h * hand_damping_N_s_per_m) / kMaxHandStabilityIndex;
+  }
 };
 
 struct UdpDeviceSpec {

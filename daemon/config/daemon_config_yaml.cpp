@@ -379,6 +379,15 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     positive(s.hand_mass_kg, p + ".hand_mass_kg");
     positive(s.hand_stiffness_N_per_m, p + ".hand_stiffness_N_per_m");
     non_negative(s.hand_damping_N_s_per_m, p + ".hand_damping_N_s_per_m");
+    if (in_use && s.mode == SimDeviceSpec::Mode::kHand &&
+        !(s.hand_stability_index() <= SimDeviceSpec::kMaxHandStabilityIndex))
+      fail(p + ".hand_mass_kg", "too light for hand_stiffness_N_per_m " + fmt_num(s.hand_stiffness_N_per_m) +
+                                    " and hand_damping_N_s_per_m " + fmt_num(s.hand_damping_N_s_per_m) +
+                                    ": the hand's 0.5 ms integration sub-steps need h²k/m + 2hc/m <= " +
+                                    fmt_num(SimDeviceSpec::kMaxHandStabilityIndex) + " (here " +
+                                    fmt_num(s.hand_stability_index()) + "; unstable from 4), so a mass of at least " +
+                                    fmt_num(s.min_hand_mass_kg()) + " kg, or less stiffness and damping (got " +
+                                    fmt_num(s.hand_mass_kg) + ")");
   }
 
   void udp(const UdpDeviceSpec& u, const std::string& p) const {

@@ -13,10 +13,15 @@ namespace tissue::haptics {
 
 class LatencyHistogram {
  public:
+  // A bucket's count. The daemon's histograms run for the haptic thread's
+  // life: 32 bits would wrap after 49.7 days of 1 kHz ticks in one bucket.
+  using Count = std::uint64_t;
+  static_assert(std::atomic<Count>::is_always_lock_free, "the real-time writer must not lock");
+
   LatencyHistogram(std::int64_t bucket_width_ns, std::size_t bucket_count)
       : bucket_width_ns_(std::max<std::int64_t>(1, bucket_width_ns)),
         bucket_count_(std::max<std::size_t>(1, bucket_count)),
-        counts_(new std::atomic<std::uint32_t>[bucket_count_]) {
+        counts_(new std::atomic<Count>[bucket_count_]) {
     reset();
   }
 
@@ -71,7 +76,7 @@ class LatencyHistogram {
  private:
   std::int64_t bucket_width_ns_;
   std::size_t bucket_count_;
-  std::unique_ptr<std::atomic<std::uint32_t>[]> counts_;
+  std::unique_ptr<std::atomic<Count>[]> counts_;
   std::atomic<std::uint64_t> overflow_{0};
   std::atomic<std::uint64_t> count_{0};
   std::atomic<std::int64_t> max_ns_{0};

@@ -32,6 +32,10 @@ bool SimDevice::start(std::string* error) {
         std::isfinite(spec_.hand_mass_kg) && std::isfinite(spec_.hand_stiffness_N_per_m) &&
         std::isfinite(spec_.hand_damping_N_s_per_m)))
     return fail("hand mass must be > 0, stiffness and damping >= 0 and finite");
+  if (spec_.mode == config::SimDeviceSpec::Mode::kHand &&
+      !(spec_.hand_stability_index() <= config::SimDeviceSpec::kMaxHandStabilityIndex))
+    return fail("hand mass " + std::to_string(spec_.hand_mass_kg) + " kg is too light for its stiffness and damping (" +
+                "the 0.5 ms sub-steps need at least " + std::to_string(spec_.min_hand_mass_kg()) + " kg)");
   started_clock_ = false;
   position_m_ = waypoint_m_.front();
   velocity_m_per_s_.setZero();
@@ -87,7 +91,9 @@ bool SimDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     velocity_m_per_s_ = target_velocity_m_per_s(t_s);
   } else {
     double remaining_s = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, now_ns - last_ns_));
-    const int substeps = std::min(kMaxSubsteps, static_cast<int>(std::ceil(remaining_s / kMaxSubstep_s)));
+    // Clamped as a double: a long gap (a caller that read days ago) would
+    // overflow the conversion to int.
+    const int substeps = static_cast<int>(std::min<double>(kMaxSubsteps, std::ceil(remaining_s / kMaxSubstep_s)));
     if (substeps > 0) {
       const double h_s = std::min(kMaxSubstep_s, remaining_s / substeps);
       const double t_begin_s = t_s - h_s * substeps;

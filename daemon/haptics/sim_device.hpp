@@ -21,8 +21,10 @@ namespace tissue::haptics {
 class SimDevice final : public Device {
  public:
   // Stability of the hand integration: the stiffest loop is hand spring +
-  // coupling (~1 kN/m on 0.1 kg, omega ~ 100 rad/s); 0.5 ms keeps omega*dt small.
-  static constexpr double kMaxSubstep_s = 0.0005;
+  // coupling (~1 kN/m on 0.1 kg, omega ~ 100 rad/s); 0.5 ms keeps omega*dt
+  // small. start() refuses a hand too light for its spring and damper at this
+  // step (config::SimDeviceSpec::hand_stability_index).
+  static constexpr double kMaxSubstep_s = config::SimDeviceSpec::kHandSubstep_s;
   // A stalled caller must not make read() do unbounded work.
   static constexpr int kMaxSubsteps = 64;
 

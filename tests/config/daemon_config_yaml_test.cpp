@@ -321,6 +321,14 @@ TEST(DaemonConfigYaml, SimDeviceWaypoints) {
   expect_error(edit("{time_s: 1.0, position_m: [0.05, 0.05, 0.094]}", "{time_s: 1.0}"),
                "device.sim.waypoints[1].position_m", "missing required key");
   expect_error(edit("hand_mass_kg: 0.1", "hand_mass_kg: 0"), "device.sim.hand_mass_kg", "must be > 0");
+  // A hand too light for its spring and damper at the 0.5 ms sub-step turns
+  // NaN; the file says which mass would do (the default 200 N/m, 4 N s/m
+  // need 2.025 g).
+  expect_error(edit("hand_mass_kg: 0.1", "hand_mass_kg: 0.0001"), "device.sim.hand_mass_kg",
+               "too light for hand_stiffness_N_per_m 200 and hand_damping_N_s_per_m 4");
+  expect_error(edit("hand_mass_kg: 0.1", "hand_mass_kg: 0.0001"), "device.sim.hand_mass_kg",
+               "a mass of at least 0.002025 kg");
+  EXPECT_NO_THROW(parse_daemon_config(edit("hand_mass_kg: 0.1", "hand_mass_kg: 0.002025"), kSource));
   // A loop needs a timeline with a length.
   expect_error(kBase, "device.sim.loop", "positive length",
                {"device.sim.waypoints=[{time_s: 0, position_m: [0, 0, 0.2]}]"});

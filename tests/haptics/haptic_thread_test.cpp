@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <limits>
 #include <thread>
 #include <vector>
 
@@ -115,6 +116,14 @@ TEST(LatencyHistogram, PercentilesAreBucketUpperEdges) {
   EXPECT_EQ(h.max_ns(), 10'000'000);
   EXPECT_EQ(h.count_at_least(40000), 201u);
   EXPECT_EQ(h.count_at_least(200'000), 1u);  // past the last bucket: the overflow only
+}
+
+// The daemon's histograms are never reset while the haptic thread runs: a
+// service up for months puts more than 2^32 ticks in one bucket (49.7 days at
+// 1 kHz), where 32-bit counts wrapped and the percentiles went wrong.
+TEST(LatencyHistogram, BucketsCountYearsOfOneKilohertzTicks) {
+  constexpr std::uint64_t kTenYearsOfTicks = 10ull * 366 * 86'400 * 1000;
+  EXPECT_GE(std::numeric_limits<LatencyHistogram::Count>::max(), kTenYearsOfTicks);
 }
 
 // The benchmark control: fixed work after every tick, timed in its own

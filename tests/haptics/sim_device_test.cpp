@@ -80,5 +80,47 @@ TEST(SimDevice, StartRejectsBadSpecsWithAMessage) {
   EXPECT_NE(error.find("mass"), std::string::npos) << error;
 }
 
+// 0.1 g on the default spring and damper: semi-implicit Euler at 0.5 ms
+// blows up (h c / m = 20): pushed by 1 N, the hand's position is non-finite
+// after 240 sub-steps (120 reads), and every sample after that was refused. start() refuses it; the
+// lightest hand it accepts settles.
+TEST(SimDevice, StartRefusesAHandTooLightToIntegrate) {
+  config::SimDeviceSpec s;
+  s.mode = config::SimDeviceSpec::Mode::kHand;
+  s.waypoints = {{0.0, {0.0, 0.0, 0.0}}};
+  s.hand_mass_kg = 1e-4;
+  std::string error;
+  EXPECT_FALSE(SimDevice(s).start(&error));
+  EXPECT_NE(error.find("too light"), std::string::npos) << error;
+
+  s.hand_mass_kg = s.min_hand_mass_kg();
+  SimDevice d(s);
+  ASSERT_TRUE(d.start(&error)) << error;
+  DeviceSample sample;
+  for (int i = 0; i <= 3000; ++i) {
+    ASSERT_TRUE(d.read(i * kMs, &sample));
+    ASSERT_TRUE(sample.position_m.allFinite()) << i;
+    d.write(i * kMs, Vec3(0, 0, 1.0));
+  }
+  EXPECT_NEAR(sample.position_m.z(), 1.0 / s.hand_stiffness_N_per_m, 1e-6);
+}
+
+// A read long after the last one (a caller that stopped for weeks)
+// integrates the hand's last kMaxSubsteps sub-steps; the sub-step count was
+// converted to int before the clamp, which overflowed and integrated nothing.
+TEST(SimDevice, AReadAfterALongGapStillMovesTheHand) {
+  config::SimDeviceSpec s;
+  s.mode = config::SimDeviceSpec::Mode::kHand;
+  s.waypoints = {{0.0, {0.0, 0.0, 0.0}}, {1.0, {0.1, 0.0, 0.0}}};
+  SimDevice d(s);
+  ASSERT_TRUE(d.start(nullptr));
+  DeviceSample first, later;
+  ASSERT_TRUE(d.read(0, &first));
+  const std::int64_t gap_ns = 3'000'000'000'000'000;  // ~35 days: 6e12 sub-steps of 0.5 ms
+  ASSERT_TRUE(d.read(gap_ns, &later));
+  EXPECT_TRUE(later.position_m.allFinite());
+  EXPECT_GT(later.position_m.x(), 1e-4);  // pulled towards the last waypoint (0.1 m)
+}
+
 }  // namespace
 }  // namespace tissue::haptics
