@@ -2,7 +2,10 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -56,11 +59,38 @@ inline CLI::Validator lcm_url() {
       "URL");
 }
 
+namespace detail {
+// CLI11 reads integers with base 0 (strtoll(v, 0)): "010" was 8, "0x10" 16,
+// and a number past 64 bits became the largest one with no word said. So an
+// integer option takes decimal digits only, its leading zeros dropped here
+// (the validator may rewrite the value before CLI11 converts it), and must
+// fit in 64 bits; the option's own Range then bounds it.
+inline std::string decimal_digits(std::string& v) {
+  if (v.empty() || !std::all_of(v.begin(), v.end(), [](char c) { return c >= '0' && c <= '9'; }))
+    return "'" + v + "' is not a whole number in decimal digits";
+  const std::size_t first = std::min(v.find_first_not_of('0'), v.size() - 1);
+  v.erase(0, first);
+  std::uint64_t x = 0;
+  const auto [end, error] = std::from_chars(v.data(), v.data() + v.size(), x);
+  if (error != std::errc() || end != v.data() + v.size()) return v + " is too large";
+  return {};
+}
+}  // namespace detail
+
+// A whole number written in decimal digits (see detail::decimal_digits).
+// Add it with Option::transform, not check: CLI11 runs a check() on a copy,
+// so the leading zeros would stay for its base-0 conversion.
+inline CLI::Validator decimal_integer() {
+  return CLI::Validator([](std::string& v) { return detail::decimal_digits(v); }, "N");
+}
+
 // A frame index: unsigned parsing would wrap "-1" to 18446744073709551615.
+// Decimal digits only, as decimal_integer (and added the same way).
 inline CLI::Validator frame_index() {
   return CLI::Validator(
       [](std::string& v) {
-        return !v.empty() && v.front() == '-' ? v + " is negative: frames are numbered from 0" : std::string();
+        if (!v.empty() && v.front() == '-') return v + " is negative: frames are numbered from 0";
+        return detail::decimal_digits(v);
       },
       "K >= 0");
 }

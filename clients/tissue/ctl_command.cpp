@@ -12,6 +12,7 @@
 #include "config/daemon_config.hpp"
 #include "control/control_client.hpp"
 #include "control/control_protocol.hpp"
+#include "tissue/cli_checks.hpp"
 
 namespace tissue::cli {
 
@@ -130,6 +131,7 @@ Subcommand add_ctl_command(CLI::App& parent) {
   auto* socket_opt =
       app->add_option("--socket", options->socket_path, "Unix socket of the daemon")->capture_default_str();
   app->add_option("--tcp", options->tcp_port, "talk to 127.0.0.1:PORT instead of the Unix socket")
+      ->transform(decimal_integer())
       ->check(CLI::Range(1, 65535))
       ->excludes(socket_opt);
   app->add_option("--timeout", options->timeout_s, "seconds to wait for the daemon")->capture_default_str();

@@ -1,4 +1,5 @@
 #include "tissue/dds_cli.hpp"
+#include "tissue/cli_checks.hpp"
 
 #include <CLI/CLI.hpp>
 
@@ -15,6 +16,7 @@ transport::DdsOptions DdsCliOptions::options() const {
 CLI::Option* add_dds_options(CLI::App* cmd, DdsCliOptions& o, const std::string& dds_help) {
   CLI::Option* dds = cmd->add_flag("--dds", o.enabled, dds_help);
   cmd->add_option("--dds-domain", o.domain_id, "DDS domain (publish.dds.domain_id)")
+      ->transform(decimal_integer())
       ->check(CLI::Range(0, 232))
       ->capture_default_str()
       ->needs(dds);

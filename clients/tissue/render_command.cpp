@@ -93,15 +93,30 @@ int run_render(RenderCommandOptions o) {
     } else {
       frames = {n - 1};
     }
+    std::size_t skipped_empty = 0;
     if (o.sequence) {
       // One camera for the whole sequence (as x3d --animate): the union of
-      // the frames' bounds, read in a first pass, so motion shows.
+      // the frames' bounds, read in a first pass, so motion shows. A session
+      // may record an empty surface (before a scene is loaded): skipped and
+      // counted, as x3d --animate and xdmf do; it made the whole sequence fail.
       render::Box_m box = render::empty_box_m();
+      std::vector<std::size_t> drawn;
       for (const std::size_t i : frames) {
         const x3d::SurfaceFrame frame = source->read_frame(i);
-        x3d::validate_frame(frame, false, "frame");  // has a vertex, all finite
+        if (frame.vertices_m.empty() || frame.triangles.empty()) {
+          ++skipped_empty;
+          continue;
+        }
+        x3d::validate_frame(frame, false, "frame " + std::to_string(i));  // all finite, indices in range
         render::extend_box_m(box, frame);
+        drawn.push_back(i);
       }
+      if (drawn.empty()) {
+        std::cerr << "tissue render: the " << frames.size()
+                  << " frames in the --from/--to window are all empty surfaces: nothing to draw\n";
+        return kExitBadInput;
+      }
+      frames = std::move(drawn);
       o.image.frame_box_m = box;
     }
     render::Renderer renderer;  // one context for the whole sequence
@@ -124,6 +139,8 @@ int run_render(RenderCommandOptions o) {
       }
       said << "\n";
     }
+    if (skipped_empty > 0)
+      util::summary_stream(o.out) << "tissue render: " << skipped_empty << " empty frames skipped\n";
     if (const std::string dropped = source->dropped_note(); !dropped.empty())
       util::summary_stream(o.out) << "tissue render: " << dropped << "\n";
     return kExitOk;
@@ -156,16 +173,18 @@ Subcommand add_render_command(CLI::App& parent) {
   CLI::Option* time =
       cmd->add_option("--time", o->time_s, "The frame shown at session time T (s)")->check(finite_number());
   CLI::Option* frame =
-      cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)")->check(frame_index());
+      cmd->add_option("--frame", o->frame, "Frame K (0-based; default: the last)")->transform(frame_index());
   time->excludes(frame);
   CLI::Option* seq = cmd->add_flag("--sequence", o->sequence, "Every frame in --from..--to, numbered files");
   seq->excludes(time)->excludes(frame);
   cmd->add_option("--from", o->from_s, "Sequence start, session time (s)")->check(finite_number())->needs(seq);
   cmd->add_option("--to", o->to_s, "Sequence end, session time (s)")->check(finite_number())->needs(seq);
   cmd->add_option("--width", o->image.width_px, "Image width (pixels)")
+      ->transform(decimal_integer())
       ->check(CLI::Range(16, 8192))
       ->capture_default_str();
   cmd->add_option("--height", o->image.height_px, "Image height (pixels)")
+      ->transform(decimal_integer())
       ->check(CLI::Range(16, 8192))
       ->capture_default_str();
   // finite_number(): NaN passes CLI::Range, and reached the renderer as an

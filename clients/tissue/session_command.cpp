@@ -197,21 +197,24 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
       ->default_str(defaults.lcm.url);
   CLI::Option* dds = add_dds_options(cmd, r.dds, "Publish over Fast DDS (topics <prefix>surface_mesh, ...)");
   cmd->add_option("--dds-wait", r.dds_wait_s, "Wait up to S seconds for a DDS mesh reader before starting")
+      ->check(finite_number())  // CLI::Range lets NaN through (every comparison with it is false)
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str()
       ->needs(dds);
   cmd->add_option("--speed", r.replay.speed, "Session seconds per wall second (2: twice as fast)")
       ->check(finite_positive())
       ->capture_default_str();
-  cmd->add_option("--from", r.replay.timeline.from_s, "Start at this session time (s)");
-  cmd->add_option("--to", r.replay.timeline.to_s, "End at this session time (s)");
+  cmd->add_option("--from", r.replay.timeline.from_s, "Start at this session time (s)")->check(finite_number());
+  cmd->add_option("--to", r.replay.timeline.to_s, "End at this session time (s)")->check(finite_number());
   cmd->add_flag("--loop", r.replay.loop, "Start over after the end, until Ctrl-C");
   cmd->add_option("--haptic-rate", r.replay.timeline.haptic_rate_hz,
                   "haptic_state rate in Hz (publish.haptic_rate_hz); 0: every recorded tick")
+      ->check(finite_number())
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--stats-rate", r.replay.timeline.stats_rate_hz,
                   "sim_stats rate in Hz (publish.stats_rate_hz); 0: every recorded sample")
+      ->check(finite_number())
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->footer(

@@ -188,8 +188,8 @@ Subcommand add_x3d_command(CLI::App& parent) {
   CLI::Option* session = cmd->add_option("--session", o->session, "Session file (.h5) to read frames from");
   CLI::Option* time =
       cmd->add_option("--time", o->time_s, "Snapshot of the frame shown at session time T (s)")->check(finite_number());
-  CLI::Option* frame =
-      cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)")->check(frame_index());
+  CLI::Option* frame = cmd->add_option("--frame", o->frame, "Snapshot of frame K (0-based; default: the last)")
+                           ->transform(frame_index());
   time->excludes(frame);
   CLI::Option* animate = cmd->add_flag("--animate", o->animate, "Animation over --from..--to (default: all frames)");
   animate->excludes(time)->excludes(frame);

@@ -68,6 +68,34 @@ TEST(RenderCli, ASequenceKeepsOneCameraSoMotionShows) {
   EXPECT_GT(differing, first.rgba.size() / 4 / 20) << "the box did not move in the pictures";
 }
 
+// A session may record empty surfaces (before a scene is loaded): a sequence
+// skips and counts them, as x3d --animate and xdmf do (it failed with "frame
+// ...: vertices_m is empty"); a window of empty frames only is an error.
+TEST(RenderCli, ASequenceSkipsEmptyFrames) {
+  TempDir dir;
+  const std::string session = dir / "gaps.h5";
+  {
+    auto writer = record::SessionWriter::create(session, record::SessionMetadata{});
+    const x3d::SurfaceFrame empty;
+    for (int k = 0; k < 4; ++k) {
+      const x3d::SurfaceFrame box = x3d::testing::box_frame(0.1 * k, {0, 0, 0}, {0.1, 0.05, 0.02});
+      const x3d::SurfaceFrame& f = k == 0 || k == 2 ? empty : box;
+      writer->append_mesh_frame(record::MeshFrameView{0.1 * k, f.vertices_m, f.triangles, f.vertex_level, {}});
+    }
+    writer->close();
+  }
+  RunResult r =
+      render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(dir / "f.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(std::filesystem::exists(dir / "f-0000.png"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "f-0001.png"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "f-0002.png"));
+  EXPECT_NE(r.out.find("2 empty frames skipped"), std::string::npos) << r.out << r.err;
+  r = render(dir, "--session " + quote(session) + " --sequence --from 0 --to 0.05 -o " + quote(dir / "g.png"));
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("all empty surfaces"), std::string::npos) << r.err;
+}
+
 TEST(RenderCli, ErrorsHaveExitCodes) {
   TempDir dir;
   const std::string session = write_session(dir);

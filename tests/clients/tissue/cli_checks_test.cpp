@@ -39,5 +39,26 @@ TEST(CliChecks, FrameIndexRefusesNegatives) {
   EXPECT_NE(verdict(frame_index(), "-1").find("negative"), std::string::npos);
 }
 
+// Integer options read decimal digits only: CLI11 parses with base 0, so
+// `--frame 010` showed frame 8, `--tcp 01750` talked to port 1000, and a
+// frame number past 64 bits became 18446744073709551615.
+TEST(CliChecks, IntegerOptionsAreDecimalAndFitIn64Bits) {
+  CLI::App app;
+  std::size_t frame = 0;
+  int port = 0;
+  app.add_option("--frame", frame)->transform(frame_index());
+  app.add_option("--tcp", port)->transform(decimal_integer())->check(CLI::Range(1, 65535));
+  app.parse(std::vector<std::string>{"01750", "--tcp", "010", "--frame"});  // CLI11 takes them reversed
+  EXPECT_EQ(frame, 10u);
+  EXPECT_EQ(port, 1750);
+  app.parse(std::vector<std::string>{"0", "--frame"});
+  EXPECT_EQ(frame, 0u);  // a lone zero stays a zero
+  for (const char* bad : {"0x10", "+3", " 3", "3 ", "1e3", "", "-0"})
+    EXPECT_NE(verdict(decimal_integer(), bad).find("decimal digits"), std::string::npos) << bad;
+  EXPECT_NE(verdict(frame_index(), "0x10").find("decimal digits"), std::string::npos);
+  EXPECT_NE(verdict(frame_index(), "99999999999999999999").find("too large"), std::string::npos);
+  EXPECT_EQ(verdict(frame_index(), "18446744073709551615"), "");
+}
+
 }  // namespace
 }  // namespace tissue::cli
