@@ -471,6 +471,13 @@ TEST(ReplayCli, BadArgumentsExitTwoAndBadTransportsExitThree) {
   r = replay("--lcm memq:// --from 9 --to 10");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("nothing to replay"), std::string::npos) << r.err;
+  // NaN passed --from / --to ("nothing to replay") and CLI::Range on
+  // --dds-wait (every comparison with NaN is false, so the wait was skipped).
+  for (const char* bad : {"--from nan", "--to nan", "--dds --dds-wait nan", "--haptic-rate nan", "--stats-rate inf"}) {
+    r = replay(std::string("--lcm memq:// ") + bad);
+    EXPECT_EQ(r.exit_code, 2) << bad;
+    EXPECT_NE(r.err.find("not a finite number"), std::string::npos) << bad << ": " << r.err;
+  }
   // A udpm URL the daemon's config would refuse is refused before LCM opens
   // it. (A loopback, ttl=0 URL: even a regression stays on this host.)
   r = replay("--lcm 'udpm://127.0.0.1:7667?ttl=0'");
