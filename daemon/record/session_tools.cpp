@@ -356,15 +356,27 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   // not a foreign file without the attribute.
   if (H5Aexists(file, kAttrFormatVersion) < 0)
     bad_file(path, h5::describe("cannot read the root group's attributes (corrupt metadata)"));
-  if (!h5::read_i64_attribute(file, kAttrFormatVersion, &info.format_version))
+  // The writer has always stored format_version as int64 and closed_cleanly
+  // as uint8 (docs/session-format.md): any other kind of value is damage or
+  // a foreign writer's, refused by name, never truncated (2.5 read as 2).
+  const auto integer_attribute = [&](const char* name, std::int64_t* out) {
+    if (h5::read_i64_attribute(file, name, out)) return true;
+    const std::string holds = h5::describe_attribute(file, name);
+    if (holds == "missing") return false;
+    bad_file(path, std::string("root attribute ") + name + " is " + holds +
+                       ", expected an integer: corrupt, or not a tissue session file");
+  };
+  if (!integer_attribute(kAttrFormatVersion, &info.format_version))
     bad_file(path, "HDF5 file without a format_version attribute: not a tissue session file");
   if (info.format_version < kOldestReadableFormatVersion || info.format_version > kSessionFormatVersion)
     bad_file(path, "session format version " + std::to_string(info.format_version) +
                        " is not supported (this tool reads " + std::to_string(kOldestReadableFormatVersion) + " to " +
                        std::to_string(kSessionFormatVersion) + ")");
   info.has_strain = dataset_in_version(kDatasets[kMeshTriangleStrain], info.format_version);
-  std::int64_t clean = 0;
-  h5::read_i64_attribute(file, kAttrClosedCleanly, &clean);
+  std::int64_t clean = 0;  // missing: a file from before the mark was created with it
+  if (integer_attribute(kAttrClosedCleanly, &clean) && clean != 0 && clean != 1)
+    bad_file(path, std::string("root attribute ") + kAttrClosedCleanly + " is " + std::to_string(clean) +
+                       ", expected 0 or 1: corrupt session file");
   info.closed_cleanly = clean == 1 && !info.open_for_write_flag;
   h5::read_string_attribute(file, kAttrSceneName, &info.scene_name);
   h5::read_string_attribute(file, kAttrStartTime, &info.start_time_utc);

@@ -313,6 +313,54 @@ TEST(SessionTools, AFutureFormatVersionIsRefusedByName) {
   }
 }
 
+// The writer stores format_version as int64 and closed_cleanly as uint8
+// (docs/session-format.md). HDF5 converts a floating-point attribute to an
+// integer on read, truncating: format_version 2.5 read as 2, closed_cleanly
+// 1.5 as 1 (clean). Another kind of value is refused by every tool, naming
+// the file and the attribute; an integer of another width still reads.
+TEST(SessionTools, RootIntegerAttributesHoldingAnotherKindOfValueAreRefusedByName) {
+  TempDir dir;
+  struct Case {
+    const char* attribute;
+    int kind;  // 0 float64, 1 string, 2 int64
+    double value;
+    const char* says;
+  };
+  int n = 0;
+  for (const Case& c :
+       {Case{kAttrFormatVersion, 0, 2.5, "root attribute format_version is a floating-point value (2.5), expected"},
+        Case{kAttrFormatVersion, 0, 2.0, "root attribute format_version is a floating-point value (2), expected"},
+        Case{kAttrFormatVersion, 1, 2.0, "root attribute format_version is a string, expected an integer"},
+        Case{kAttrClosedCleanly, 0, 1.5, "root attribute closed_cleanly is a floating-point value (1.5), expected"},
+        Case{kAttrClosedCleanly, 1, 1.0, "root attribute closed_cleanly is a string, expected an integer"},
+        Case{kAttrClosedCleanly, 2, 7.0, "root attribute closed_cleanly is 7, expected 0 or 1"}}) {
+    const std::string path = dir / ("attr" + std::to_string(++n) + ".h5");
+    write_small_session(path, 2);
+    const hid_t file = open_for_edit(path);
+    ASSERT_GE(file, 0);
+    ASSERT_GE(H5Adelete(file, c.attribute), 0);
+    if (c.kind == 0) h5::write_f64_attribute(file, c.attribute, c.value);
+    if (c.kind == 1) h5::write_string_attribute(file, c.attribute, std::to_string(static_cast<int>(c.value)));
+    if (c.kind == 2) h5::write_i64_attribute(file, c.attribute, static_cast<std::int64_t>(c.value));
+    H5Fclose(file);
+    expect_every_tool_refuses(path, dir, c.says);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.out;
+    EXPECT_NE(cli.err.find("'" + path + "': " + c.says), std::string::npos) << cli.err;
+  }
+  // Integers of other widths are integers.
+  const std::string narrow = dir / "narrow.h5";
+  write_small_session(narrow, 2);
+  const hid_t file = open_for_edit(narrow);
+  ASSERT_GE(file, 0);
+  ASSERT_GE(H5Adelete(file, kAttrFormatVersion), 0);
+  h5::write_u8_attribute(file, kAttrFormatVersion, 2);
+  H5Fclose(file);
+  const SessionInfo info = read_session_info(narrow);
+  EXPECT_EQ(info.format_version, 2);
+  EXPECT_TRUE(info.closed_cleanly);
+}
+
 // A closed file whose strain column does not have one row per triangle is
 // damaged: every tool says so, naming the file and the dataset.
 TEST(SessionTools, StrainDatasetOfTheWrongLengthIsAClearError) {
