@@ -246,6 +246,16 @@ std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, st
   return out;
 }
 
+// What is wrong with `t`, row `row` of the time column `column`, as a
+// session time, or "" when nothing is: finite and within kMaxSessionTime_s.
+std::string session_time_problem(const char* column, std::uint64_t row, double t) {
+  const std::string at = std::string(column) + "[" + std::to_string(row) + "]";
+  if (!std::isfinite(t)) return at + " is not finite";
+  if (std::abs(t) > kMaxSessionTime_s)
+    return at + " is " + std::to_string(t) + " s, beyond any session (" + std::to_string(kMaxSessionTime_s) + " s)";
+  return {};
+}
+
 struct Counts {
   GroupCounts rows;
   std::array<std::uint64_t, kDatasetCount> extents{};  // 0 for datasets the file's version does not have
@@ -333,10 +343,16 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
   c.rows.mesh_vertices = v_end;
   c.rows.mesh_triangles = t_end;
 
+  // The last time stamp of every group (the duration of a session without a
+  // recorded one) is a session time like those the row and frame readers
+  // check: finite and within kMaxSessionTime_s. An inf here was skipped (the
+  // duration silently another group's) and 1e300 s reported as the duration.
   const auto last_time = [&](DatasetId id, std::uint64_t n) {
     if (n == 0) return;
     const double t = read_column<double>(file, path, id, n - 1, 1)[0];
-    if (std::isfinite(t)) c.last_time_s = std::max(c.last_time_s, t);
+    if (const std::string problem = session_time_problem(kDatasets[id].path, n - 1, t); !problem.empty())
+      bad_file(path, problem + " (its last row)");
+    c.last_time_s = std::max(c.last_time_s, t);
   };
   last_time(kHapticTime, c.rows.haptic_rows);
   last_time(kSimTime, c.rows.sim_rows);
@@ -386,11 +402,13 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   h5::read_string_attribute(file, kAttrRepairedTime, &info.repaired_utc);
   Counts counts = count_rows(file, path, info.format_version, partial_ok || info.open_for_write_flag);
   info.rows = counts.rows;
+  // A recorded duration is a session's length: finite, >= 0 and within
+  // kMaxSessionTime_s (a damaged 1e300 was printed as the duration). Without
+  // one (not closed cleanly, or damaged), the last time stamp recorded.
   double duration = 0.0;
-  if (info.closed_cleanly && h5::read_f64_attribute(file, kAttrDurationS, &duration) && std::isfinite(duration))
-    info.duration_s = duration;
-  else
-    info.duration_s = counts.last_time_s;
+  info.duration_recorded = info.closed_cleanly && h5::read_f64_attribute(file, kAttrDurationS, &duration) &&
+                           duration >= 0.0 && duration <= kMaxSessionTime_s;
+  info.duration_s = info.duration_recorded ? duration : counts.last_time_s;
   if (counts_out) *counts_out = counts;
   return info;
 }
@@ -459,12 +477,10 @@ void read_into(const SessionFile& f, DatasetId id, std::vector<Row>& rows, T Row
 std::string frame_times_problem(const std::vector<double>& times_s) {
   const std::string column = kDatasets[kMeshFrameTime].path;
   for (std::size_t f = 0; f < times_s.size(); ++f) {
-    if (!std::isfinite(times_s[f])) return column + "[" + std::to_string(f) + "] is not finite";
+    if (!std::isfinite(times_s[f])) return session_time_problem(column.c_str(), f, times_s[f]);
     if (f > 0 && times_s[f] < times_s[f - 1])
       return column + " goes backwards at frame " + std::to_string(f) + " (frames must be in time order)";
-    if (std::abs(times_s[f]) > kMaxSessionTime_s)
-      return column + "[" + std::to_string(f) + "] is " + std::to_string(times_s[f]) + " s, beyond any session (" +
-             std::to_string(kMaxSessionTime_s) + " s)";
+    if (std::string problem = session_time_problem(column.c_str(), f, times_s[f]); !problem.empty()) return problem;
   }
   return {};
 }
@@ -591,7 +607,7 @@ std::string format_session_info(const SessionInfo& info) {
   if (!info.end_time_utc.empty()) o << "end time (UTC):   " << info.end_time_utc << "\n";
   char duration[64];
   std::snprintf(duration, sizeof duration, "%.3f s", info.duration_s);
-  o << "duration:         " << duration << (info.closed_cleanly ? "" : " (last time stamp recorded)") << "\n";
+  o << "duration:         " << duration << (info.duration_recorded ? "" : " (last time stamp recorded)") << "\n";
   o << "host:             " << info.host_name << "\n";
   o << "software version: " << info.software_version << "\n";
   o << "format version:   " << info.format_version << "\n";

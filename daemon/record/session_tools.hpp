@@ -36,7 +36,11 @@ struct SessionInfo {
   bool open_for_write_flag = false;
   std::string repaired_utc;  // set by repair_session
   std::string scene_name, start_time_utc, end_time_utc, host_name, software_version;
-  double duration_s = 0.0;  // clean close: the recorded duration; otherwise the last time stamp seen
+  // Clean close: the recorded duration; otherwise (or when the recorded one
+  // is not finite, negative or beyond kMaxSessionTime_s) the last time stamp
+  // of any group. Always finite, within kMaxSessionTime_s.
+  double duration_s = 0.0;
+  bool duration_recorded = false;  // duration_s is the clean close's duration_s attribute
   // Rows every column of the group has (a crash between column flushes can
   // leave columns of unequal length; readers should use these counts).
   GroupCounts rows;

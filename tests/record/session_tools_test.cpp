@@ -757,22 +757,68 @@ TEST(SessionReader, EqualConsecutiveTimesAreReadNotRefused) {
   EXPECT_EQ(read_haptic_track(path).time_s[5], t4);
 }
 
-// A cleanly closed file whose duration_s is not finite (damaged, or a foreign
-// writer's) reports the last time stamp recorded, never a NaN duration.
-TEST(SessionTools, ANonFiniteRecordedDurationFallsBackToTheLastTimeStamp) {
+// A cleanly closed file whose duration_s is not a session's length (not
+// finite, negative or beyond kMaxSessionTime_s: damaged, or a foreign
+// writer's) reports the last time stamp recorded, and says so; never a NaN
+// or absurd duration (1e300 was printed as the duration).
+TEST(SessionTools, ARecordedDurationThatIsNotALengthFallsBackToTheLastTimeStamp) {
   TempDir dir;
   const std::string path = dir / "nan-duration.h5";
   write_small_session(path, 5);
   const double last = read_session_rows(path).haptic.back().time_s;
-  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+  EXPECT_TRUE(read_session_info(path).duration_recorded);
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), 1e300,
+                           2 * kMaxSessionTime_s, -1.0}) {
     const hid_t file = testing::open_for_edit(path);
     ASSERT_GE(file, 0);
     h5::write_f64_attribute(file, kAttrDurationS, bad);
     H5Fclose(file);
     const SessionInfo info = read_session_info(path);
     EXPECT_TRUE(info.closed_cleanly);
-    EXPECT_TRUE(std::isfinite(info.duration_s)) << bad;
-    EXPECT_GE(info.duration_s, last) << bad;
+    EXPECT_FALSE(info.duration_recorded) << bad;
+    EXPECT_EQ(info.duration_s, last) << bad;
+    EXPECT_NE(format_session_info(info).find(" s (last time stamp recorded)"), std::string::npos)
+        << bad << "\n"
+        << format_session_info(info);
+  }
+}
+
+// Without a recorded duration, info and list report the last time stamp of
+// any group: each is a session time like those replay checks. A last frame
+// time of +inf was skipped (the duration silently the haptic rows'), and a
+// last haptic time of 1e300 s was printed as the duration. Now every reader
+// refuses the file, naming the dataset and row.
+TEST(SessionTools, ALastTimeStampThatIsNotASessionTimeIsRefusedNotTheDuration) {
+  TempDir dir;
+  struct Case {
+    DatasetId id;
+    std::uint64_t row;  // the group's last
+    double value;
+  };
+  const double inf = std::numeric_limits<double>::infinity();
+  int n = 0;
+  for (const Case& c : {Case{kMeshFrameTime, 4, inf}, Case{kMeshFrameTime, 4, 1e300}, Case{kHapticTime, 1499, 1e300},
+                        Case{kSimTime, 39, -inf}, Case{kEventTime, 0, 2 * kMaxSessionTime_s}}) {
+    const std::string path = dir / ("last" + std::to_string(++n) + ".h5");
+    write_small_session(path, 5);
+    {  // not closed cleanly: the duration is the last time stamp
+      const hid_t file = testing::open_for_edit(path);
+      ASSERT_GE(file, 0);
+      h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
+      H5Fclose(file);
+    }
+    testing::overwrite_f64(path, kDatasets[c.id].path, c.row, c.value);
+    const std::string says = std::string(kDatasets[c.id].path) + "[" + std::to_string(c.row) + "] is " +
+                             (std::isinf(c.value) ? "not finite" : std::to_string(c.value) + " s, beyond any session");
+    expect_every_tool_refuses(path, dir, says);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.out;
+    EXPECT_NE(cli.err.find("'" + path + "': " + says), std::string::npos) << cli.err;
+    const SessionListing listing = list_sessions(dir.path());
+    EXPECT_TRUE(listing.sessions.empty()) << "listed with duration " << listing.sessions[0].duration_s;
+    ASSERT_EQ(listing.unreadable.size(), 1u);
+    EXPECT_NE(listing.unreadable[0].reason.find(says), std::string::npos) << listing.unreadable[0].reason;
+    std::filesystem::remove(path);
   }
 }
 
