@@ -361,6 +361,31 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
   return c;
 }
 
+// Rows of each dataset its readers use: the complete rows of its group, and
+// for the mesh data the rows the complete frames reference.
+std::array<std::uint64_t, kDatasetCount> rows_in_use(const Counts& counts) {
+  std::array<std::uint64_t, kDatasetCount> used{};
+  for (std::size_t i = 0; i < kDatasetCount; ++i) {
+    switch (kDatasets[i].group) {
+      case Group::kHaptic:
+        used[i] = counts.rows.haptic_rows;
+        break;
+      case Group::kSim:
+        used[i] = counts.rows.sim_rows;
+        break;
+      case Group::kEvents:
+        used[i] = counts.rows.events;
+        break;
+      case Group::kMesh:
+        used[i] = counts.rows.mesh_frames;
+        break;
+    }
+  }
+  used[kMeshVertices] = used[kMeshVertexLevel] = counts.rows.mesh_vertices;
+  used[kMeshTriangles] = used[kMeshTriangleStrain] = counts.rows.mesh_triangles;
+  return used;
+}
+
 // `partial_ok`: tolerate columns one write apart even though the superblock
 // flag is clear (repair, after it has cleared the flag itself).
 SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Counts* counts_out = nullptr,
@@ -409,6 +434,17 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   info.duration_recorded = info.closed_cleanly && h5::read_f64_attribute(file, kAttrDurationS, &duration) &&
                            duration >= 0.0 && duration <= kMaxSessionTime_s;
   info.duration_s = info.duration_recorded ? duration : counts.last_time_s;
+  // A file left open by a crash (or being recorded) has rows one write ahead
+  // of their group or frame index: repair trims them. The writer leaves none
+  // in a closed file, so any there are data no tool reads (damage, or a
+  // foreign writer's): reported, not hidden. The rows that are read stay
+  // readable: each row is aligned by its number, and a frame is what the
+  // index says (an index that does not match the data is an error above).
+  if (!info.open_for_write_flag && !partial_ok) {
+    const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
+    for (std::size_t i = 0; i < kDatasetCount; ++i)
+      if (counts.extents[i] > used[i]) info.unreferenced_rows[i] = counts.extents[i] - used[i];
+  }
   if (counts_out) *counts_out = counts;
   return info;
 }
@@ -618,6 +654,15 @@ std::string format_session_info(const SessionInfo& info) {
     << info.rows.mesh_triangles << " triangles"
     << (info.has_strain ? ", strain energy density per triangle" : ", no strain (format version 1)") << ")\n";
   o << "  /events         " << info.rows.events << " events\n";
+  if (std::any_of(info.unreferenced_rows.begin(), info.unreferenced_rows.end(),
+                  [](std::uint64_t n) { return n > 0; })) {
+    o << "unreferenced rows (past the shortest column of their group, or in no frame of the index; no tool reads "
+         "them):\n";
+    for (std::size_t i = 0; i < kDatasetCount; ++i)
+      if (const std::uint64_t n = info.unreferenced_rows[i]; n > 0)
+        o << "  " << std::left << std::setw(40) << kDatasets[i].path << std::right << n << (n == 1 ? " row" : " rows")
+          << "\n";
+  }
   return o.str();
 }
 
@@ -766,25 +811,7 @@ RepairReport repair_session(const std::string& path) {
   const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts, /*partial_ok=*/true);
   // Trim every column to what its whole group has, so plain readers see
   // aligned columns and only complete mesh frames.
-  std::array<std::uint64_t, kDatasetCount> keep{};
-  for (std::size_t i = 0; i < kDatasetCount; ++i) {
-    switch (kDatasets[i].group) {
-      case Group::kHaptic:
-        keep[i] = counts.rows.haptic_rows;
-        break;
-      case Group::kSim:
-        keep[i] = counts.rows.sim_rows;
-        break;
-      case Group::kEvents:
-        keep[i] = counts.rows.events;
-        break;
-      case Group::kMesh:
-        keep[i] = counts.rows.mesh_frames;
-        break;
-    }
-  }
-  keep[kMeshVertices] = keep[kMeshVertexLevel] = counts.rows.mesh_vertices;
-  keep[kMeshTriangles] = keep[kMeshTriangleStrain] = counts.rows.mesh_triangles;
+  const std::array<std::uint64_t, kDatasetCount> keep = rows_in_use(counts);
   for (std::size_t i = 0; i < kDatasetCount; ++i) {
     if (!dataset_in_version(kDatasets[i], mid.format_version) || counts.extents[i] == keep[i]) continue;
     Handle d = open_dataset(file.get(), path, kDatasets[i].path);

@@ -44,6 +44,12 @@ struct SessionInfo {
   // Rows every column of the group has (a crash between column flushes can
   // leave columns of unequal length; readers should use these counts).
   GroupCounts rows;
+  // Closed or repaired files (the superblock's flags clear): rows a dataset
+  // holds beyond those its readers use (past the shortest column of its
+  // group; vertex and triangle rows in no frame of the index), by DatasetId.
+  // The writer leaves none; `tissue session info` lists them. Always 0 in a
+  // file open for writing, whose last write may be ahead of its group.
+  std::array<std::uint64_t, kDatasetCount> unreferenced_rows{};
 };
 
 // Opens read-only (SWMR read when the superblock says it is still open for

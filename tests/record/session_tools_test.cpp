@@ -822,6 +822,60 @@ TEST(SessionTools, ALastTimeStampThatIsNotASessionTimeIsRefusedNotTheDuration) {
   }
 }
 
+// Rows past what a closed session's readers use (past the shortest column
+// of a group, or mesh data in no frame of the index) were ignored without a
+// word. The writer leaves none in a closed file: info now lists them per
+// dataset, and the rows and frames that are read read as before.
+TEST(SessionTools, InfoReportsRowsOfAClosedSessionThatNoReaderUses) {
+  TempDir dir;
+  const std::string path = dir / "trailing.h5";
+  write_small_session(path, 5);
+  const SessionInfo before = read_session_info(path);
+  for (const std::uint64_t n : before.unreferenced_rows) EXPECT_EQ(n, 0u);
+  EXPECT_EQ(format_session_info(before).find("unreferenced"), std::string::npos) << format_session_info(before);
+  const std::vector<std::pair<DatasetId, std::uint64_t>> extra = {{kMeshVertices, 12}, {kMeshVertexLevel, 5},
+                                                                  {kMeshTriangles, 3}, {kMeshTriangleStrain, 3},
+                                                                  {kMeshFrameTime, 1}, {kHapticForce, 2}};
+  {
+    const hid_t file = testing::open_for_edit(path);
+    ASSERT_GE(file, 0);
+    for (const auto& [id, more] : extra) {
+      const hid_t ds = H5Dopen2(file, kDatasets[id].path, H5P_DEFAULT);
+      ASSERT_GE(ds, 0) << kDatasets[id].path;
+      const hsize_t dims[2] = {static_cast<hsize_t>(h5::rows(ds)) + more, static_cast<hsize_t>(kDatasets[id].columns)};
+      ASSERT_GE(H5Dset_extent(ds, dims), 0) << kDatasets[id].path;
+      H5Dclose(ds);
+    }
+    H5Fclose(file);
+  }
+  const SessionInfo info = read_session_info(path);
+  EXPECT_EQ(info.rows, before.rows) << "the rows read are the same";
+  for (std::size_t i = 0; i < kDatasetCount; ++i) {
+    const auto it = std::find_if(extra.begin(), extra.end(), [&](const auto& e) { return e.first == i; });
+    EXPECT_EQ(info.unreferenced_rows[i], it == extra.end() ? 0u : it->second) << kDatasets[i].path;
+  }
+  const auto cli = run(tissue() + " session info " + quote(path), dir);
+  EXPECT_EQ(cli.exit_code, 0) << cli.err;
+  EXPECT_NE(cli.out.find("unreferenced rows"), std::string::npos) << cli.out;
+  for (const auto& [id, more] : extra) {
+    const std::string line = std::string(kDatasets[id].path) + " ";
+    const std::size_t at = cli.out.find("  " + line);
+    ASSERT_NE(at, std::string::npos) << line << "\n" << cli.out;
+    const std::string row = cli.out.substr(at, cli.out.find('\n', at) - at);
+    EXPECT_NE(row.find(" " + std::to_string(more) + (more == 1 ? " row" : " rows")), std::string::npos) << row;
+  }
+  // What is read reads as before.
+  EXPECT_EQ(read_session_rows(path).haptic.size(), before.rows.haptic_rows);
+  EXPECT_EQ(write_xdmf(path, "").frames, 5u);
+
+  // A crashed file's last write is ahead of its group by design: repair
+  // trims it, and nothing is reported as unreferenced before or after.
+  const std::string crashed = dir / "crashed.h5";
+  testing::write_crashed_session(crashed, 300, 3);
+  for (const std::uint64_t n : read_session_info(crashed).unreferenced_rows) EXPECT_EQ(n, 0u);
+  for (const std::uint64_t n : repair_session(crashed).after.unreferenced_rows) EXPECT_EQ(n, 0u);
+}
+
 // `session xdmf` checks frame times as every other frame reader does:
 // ParaView would get <Time Value="nan"/> or grids out of order.
 TEST(SessionTools, XdmfRefusesFrameTimesThatAreNotFiniteOrGoBack) {
