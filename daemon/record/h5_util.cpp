@@ -1,6 +1,7 @@
 #include "record/h5_util.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 #include <vector>
 
@@ -166,6 +167,10 @@ bool read_i64_attribute(hid_t object, const char* name, std::int64_t* out) {
   Handle attr(H5Aopen(object, name, H5P_DEFAULT));
   Handle space(attr ? H5Aget_space(attr.get()) : H5I_INVALID_HID);
   if (!space || H5Sget_simple_extent_npoints(space.get()) != 1) return false;
+  // Integers only: HDF5 converts a floating-point attribute on read,
+  // truncating (format_version 2.5 read as 2).
+  Handle type(H5Aget_type(attr.get()));
+  if (!type || H5Tget_class(type.get()) != H5T_INTEGER) return false;
   std::int64_t v = 0;
   if (H5Aread(attr.get(), H5T_NATIVE_INT64, &v) < 0) return false;
   *out = v;
@@ -181,6 +186,33 @@ bool read_f64_attribute(hid_t object, const char* name, double* out) {
   if (H5Aread(attr.get(), H5T_NATIVE_DOUBLE, &v) < 0) return false;
   *out = v;
   return true;
+}
+
+std::string describe_attribute(hid_t object, const char* name) {
+  const htri_t exists = H5Aexists(object, name);
+  if (exists < 0) return "unreadable (corrupt metadata)";
+  if (exists == 0) return "missing";
+  Handle attr(H5Aopen(object, name, H5P_DEFAULT));
+  Handle space(attr ? H5Aget_space(attr.get()) : H5I_INVALID_HID);
+  Handle type(attr ? H5Aget_type(attr.get()) : H5I_INVALID_HID);
+  if (!space || !type) return "unreadable";
+  const hssize_t n = H5Sget_simple_extent_npoints(space.get());
+  if (n != 1) return std::to_string(n) + " values, not one";
+  switch (H5Tget_class(type.get())) {
+    case H5T_INTEGER:
+      return "an integer";
+    case H5T_FLOAT: {
+      double v = 0.0;
+      if (H5Aread(attr.get(), H5T_NATIVE_DOUBLE, &v) < 0) return "a floating-point value";
+      char text[64];
+      std::snprintf(text, sizeof text, "a floating-point value (%.17g)", v);
+      return text;
+    }
+    case H5T_STRING:
+      return "a string";
+    default:
+      return "neither a number nor a string";
+  }
 }
 
 std::int64_t rows(hid_t dataset) {

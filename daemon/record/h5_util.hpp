@@ -73,10 +73,16 @@ void write_string_attribute(hid_t object, const char* name, const std::string& v
 void write_u8_attribute(hid_t object, const char* name, std::uint8_t value);
 void write_i64_attribute(hid_t object, const char* name, std::int64_t value);
 void write_f64_attribute(hid_t object, const char* name, double value);
-// Return false (and leave `out` alone) when the attribute is missing or unreadable.
+// Return false (and leave `out` alone) when the attribute is missing or
+// unreadable as one value of the kind: read_i64_attribute reads integer
+// attributes only (never a floating-point one truncated: 2.5 is not 2),
+// read_f64_attribute floating-point and integer ones.
 bool read_string_attribute(hid_t object, const char* name, std::string* out);
 bool read_i64_attribute(hid_t object, const char* name, std::int64_t* out);
 bool read_f64_attribute(hid_t object, const char* name, double* out);
+// What an attribute holds, for an error saying why it could not be read:
+// "missing", "a floating-point value (2.5)", "a string", "2 values, not one".
+std::string describe_attribute(hid_t object, const char* name);
 
 // Current extent of a dataset's first dimension; -1 when it cannot be read.
 std::int64_t rows(hid_t dataset);

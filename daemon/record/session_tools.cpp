@@ -246,6 +246,16 @@ std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, st
   return out;
 }
 
+// What is wrong with `t`, row `row` of the time column `column`, as a
+// session time, or "" when nothing is: finite and within kMaxSessionTime_s.
+std::string session_time_problem(const char* column, std::uint64_t row, double t) {
+  const std::string at = std::string(column) + "[" + std::to_string(row) + "]";
+  if (!std::isfinite(t)) return at + " is not finite";
+  if (std::abs(t) > kMaxSessionTime_s)
+    return at + " is " + std::to_string(t) + " s, beyond any session (" + std::to_string(kMaxSessionTime_s) + " s)";
+  return {};
+}
+
 struct Counts {
   GroupCounts rows;
   std::array<std::uint64_t, kDatasetCount> extents{};  // 0 for datasets the file's version does not have
@@ -333,16 +343,47 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
   c.rows.mesh_vertices = v_end;
   c.rows.mesh_triangles = t_end;
 
+  // The last time stamp of every group (the duration of a session without a
+  // recorded one) is a session time like those the row and frame readers
+  // check: finite and within kMaxSessionTime_s. An inf here was skipped (the
+  // duration silently another group's) and 1e300 s reported as the duration.
   const auto last_time = [&](DatasetId id, std::uint64_t n) {
     if (n == 0) return;
     const double t = read_column<double>(file, path, id, n - 1, 1)[0];
-    if (std::isfinite(t)) c.last_time_s = std::max(c.last_time_s, t);
+    if (const std::string problem = session_time_problem(kDatasets[id].path, n - 1, t); !problem.empty())
+      bad_file(path, problem + " (its last row)");
+    c.last_time_s = std::max(c.last_time_s, t);
   };
   last_time(kHapticTime, c.rows.haptic_rows);
   last_time(kSimTime, c.rows.sim_rows);
   last_time(kEventTime, c.rows.events);
   last_time(kMeshFrameTime, c.rows.mesh_frames);
   return c;
+}
+
+// Rows of each dataset its readers use: the complete rows of its group, and
+// for the mesh data the rows the complete frames reference.
+std::array<std::uint64_t, kDatasetCount> rows_in_use(const Counts& counts) {
+  std::array<std::uint64_t, kDatasetCount> used{};
+  for (std::size_t i = 0; i < kDatasetCount; ++i) {
+    switch (kDatasets[i].group) {
+      case Group::kHaptic:
+        used[i] = counts.rows.haptic_rows;
+        break;
+      case Group::kSim:
+        used[i] = counts.rows.sim_rows;
+        break;
+      case Group::kEvents:
+        used[i] = counts.rows.events;
+        break;
+      case Group::kMesh:
+        used[i] = counts.rows.mesh_frames;
+        break;
+    }
+  }
+  used[kMeshVertices] = used[kMeshVertexLevel] = counts.rows.mesh_vertices;
+  used[kMeshTriangles] = used[kMeshTriangleStrain] = counts.rows.mesh_triangles;
+  return used;
 }
 
 // `partial_ok`: tolerate columns one write apart even though the superblock
@@ -356,15 +397,27 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   // not a foreign file without the attribute.
   if (H5Aexists(file, kAttrFormatVersion) < 0)
     bad_file(path, h5::describe("cannot read the root group's attributes (corrupt metadata)"));
-  if (!h5::read_i64_attribute(file, kAttrFormatVersion, &info.format_version))
+  // The writer has always stored format_version as int64 and closed_cleanly
+  // as uint8 (docs/session-format.md): any other kind of value is damage or
+  // a foreign writer's, refused by name, never truncated (2.5 read as 2).
+  const auto integer_attribute = [&](const char* name, std::int64_t* out) {
+    if (h5::read_i64_attribute(file, name, out)) return true;
+    const std::string holds = h5::describe_attribute(file, name);
+    if (holds == "missing") return false;
+    bad_file(path, std::string("root attribute ") + name + " is " + holds +
+                       ", expected an integer: corrupt, or not a tissue session file");
+  };
+  if (!integer_attribute(kAttrFormatVersion, &info.format_version))
     bad_file(path, "HDF5 file without a format_version attribute: not a tissue session file");
   if (info.format_version < kOldestReadableFormatVersion || info.format_version > kSessionFormatVersion)
     bad_file(path, "session format version " + std::to_string(info.format_version) +
                        " is not supported (this tool reads " + std::to_string(kOldestReadableFormatVersion) + " to " +
                        std::to_string(kSessionFormatVersion) + ")");
   info.has_strain = dataset_in_version(kDatasets[kMeshTriangleStrain], info.format_version);
-  std::int64_t clean = 0;
-  h5::read_i64_attribute(file, kAttrClosedCleanly, &clean);
+  std::int64_t clean = 0;  // missing: a file from before the mark was created with it
+  if (integer_attribute(kAttrClosedCleanly, &clean) && clean != 0 && clean != 1)
+    bad_file(path, std::string("root attribute ") + kAttrClosedCleanly + " is " + std::to_string(clean) +
+                       ", expected 0 or 1: corrupt session file");
   info.closed_cleanly = clean == 1 && !info.open_for_write_flag;
   h5::read_string_attribute(file, kAttrSceneName, &info.scene_name);
   h5::read_string_attribute(file, kAttrStartTime, &info.start_time_utc);
@@ -374,11 +427,24 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   h5::read_string_attribute(file, kAttrRepairedTime, &info.repaired_utc);
   Counts counts = count_rows(file, path, info.format_version, partial_ok || info.open_for_write_flag);
   info.rows = counts.rows;
+  // A recorded duration is a session's length: finite, >= 0 and within
+  // kMaxSessionTime_s (a damaged 1e300 was printed as the duration). Without
+  // one (not closed cleanly, or damaged), the last time stamp recorded.
   double duration = 0.0;
-  if (info.closed_cleanly && h5::read_f64_attribute(file, kAttrDurationS, &duration) && std::isfinite(duration))
-    info.duration_s = duration;
-  else
-    info.duration_s = counts.last_time_s;
+  info.duration_recorded = info.closed_cleanly && h5::read_f64_attribute(file, kAttrDurationS, &duration) &&
+                           duration >= 0.0 && duration <= kMaxSessionTime_s;
+  info.duration_s = info.duration_recorded ? duration : counts.last_time_s;
+  // A file left open by a crash (or being recorded) has rows one write ahead
+  // of their group or frame index: repair trims them. The writer leaves none
+  // in a closed file, so any there are data no tool reads (damage, or a
+  // foreign writer's): reported, not hidden. The rows that are read stay
+  // readable: each row is aligned by its number, and a frame is what the
+  // index says (an index that does not match the data is an error above).
+  if (!info.open_for_write_flag && !partial_ok) {
+    const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
+    for (std::size_t i = 0; i < kDatasetCount; ++i)
+      if (counts.extents[i] > used[i]) info.unreferenced_rows[i] = counts.extents[i] - used[i];
+  }
   if (counts_out) *counts_out = counts;
   return info;
 }
@@ -447,12 +513,10 @@ void read_into(const SessionFile& f, DatasetId id, std::vector<Row>& rows, T Row
 std::string frame_times_problem(const std::vector<double>& times_s) {
   const std::string column = kDatasets[kMeshFrameTime].path;
   for (std::size_t f = 0; f < times_s.size(); ++f) {
-    if (!std::isfinite(times_s[f])) return column + "[" + std::to_string(f) + "] is not finite";
+    if (!std::isfinite(times_s[f])) return session_time_problem(column.c_str(), f, times_s[f]);
     if (f > 0 && times_s[f] < times_s[f - 1])
       return column + " goes backwards at frame " + std::to_string(f) + " (frames must be in time order)";
-    if (std::abs(times_s[f]) > kMaxSessionTime_s)
-      return column + "[" + std::to_string(f) + "] is " + std::to_string(times_s[f]) + " s, beyond any session (" +
-             std::to_string(kMaxSessionTime_s) + " s)";
+    if (std::string problem = session_time_problem(column.c_str(), f, times_s[f]); !problem.empty()) return problem;
   }
   return {};
 }
@@ -579,7 +643,7 @@ std::string format_session_info(const SessionInfo& info) {
   if (!info.end_time_utc.empty()) o << "end time (UTC):   " << info.end_time_utc << "\n";
   char duration[64];
   std::snprintf(duration, sizeof duration, "%.3f s", info.duration_s);
-  o << "duration:         " << duration << (info.closed_cleanly ? "" : " (last time stamp recorded)") << "\n";
+  o << "duration:         " << duration << (info.duration_recorded ? "" : " (last time stamp recorded)") << "\n";
   o << "host:             " << info.host_name << "\n";
   o << "software version: " << info.software_version << "\n";
   o << "format version:   " << info.format_version << "\n";
@@ -590,6 +654,15 @@ std::string format_session_info(const SessionInfo& info) {
     << info.rows.mesh_triangles << " triangles"
     << (info.has_strain ? ", strain energy density per triangle" : ", no strain (format version 1)") << ")\n";
   o << "  /events         " << info.rows.events << " events\n";
+  if (std::any_of(info.unreferenced_rows.begin(), info.unreferenced_rows.end(),
+                  [](std::uint64_t n) { return n > 0; })) {
+    o << "unreferenced rows (past the shortest column of their group, or in no frame of the index; no tool reads "
+         "them):\n";
+    for (std::size_t i = 0; i < kDatasetCount; ++i)
+      if (const std::uint64_t n = info.unreferenced_rows[i]; n > 0)
+        o << "  " << std::left << std::setw(40) << kDatasets[i].path << std::right << n << (n == 1 ? " row" : " rows")
+          << "\n";
+  }
   return o.str();
 }
 
@@ -738,25 +811,7 @@ RepairReport repair_session(const std::string& path) {
   const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts, /*partial_ok=*/true);
   // Trim every column to what its whole group has, so plain readers see
   // aligned columns and only complete mesh frames.
-  std::array<std::uint64_t, kDatasetCount> keep{};
-  for (std::size_t i = 0; i < kDatasetCount; ++i) {
-    switch (kDatasets[i].group) {
-      case Group::kHaptic:
-        keep[i] = counts.rows.haptic_rows;
-        break;
-      case Group::kSim:
-        keep[i] = counts.rows.sim_rows;
-        break;
-      case Group::kEvents:
-        keep[i] = counts.rows.events;
-        break;
-      case Group::kMesh:
-        keep[i] = counts.rows.mesh_frames;
-        break;
-    }
-  }
-  keep[kMeshVertices] = keep[kMeshVertexLevel] = counts.rows.mesh_vertices;
-  keep[kMeshTriangles] = keep[kMeshTriangleStrain] = counts.rows.mesh_triangles;
+  const std::array<std::uint64_t, kDatasetCount> keep = rows_in_use(counts);
   for (std::size_t i = 0; i < kDatasetCount; ++i) {
     if (!dataset_in_version(kDatasets[i], mid.format_version) || counts.extents[i] == keep[i]) continue;
     Handle d = open_dataset(file.get(), path, kDatasets[i].path);

@@ -36,10 +36,20 @@ struct SessionInfo {
   bool open_for_write_flag = false;
   std::string repaired_utc;  // set by repair_session
   std::string scene_name, start_time_utc, end_time_utc, host_name, software_version;
-  double duration_s = 0.0;  // clean close: the recorded duration; otherwise the last time stamp seen
+  // Clean close: the recorded duration; otherwise (or when the recorded one
+  // is not finite, negative or beyond kMaxSessionTime_s) the last time stamp
+  // of any group. Always finite, within kMaxSessionTime_s.
+  double duration_s = 0.0;
+  bool duration_recorded = false;  // duration_s is the clean close's duration_s attribute
   // Rows every column of the group has (a crash between column flushes can
   // leave columns of unequal length; readers should use these counts).
   GroupCounts rows;
+  // Closed or repaired files (the superblock's flags clear): rows a dataset
+  // holds beyond those its readers use (past the shortest column of its
+  // group; vertex and triangle rows in no frame of the index), by DatasetId.
+  // The writer leaves none; `tissue session info` lists them. Always 0 in a
+  // file open for writing, whose last write may be ahead of its group.
+  std::array<std::uint64_t, kDatasetCount> unreferenced_rows{};
 };
 
 // Opens read-only (SWMR read when the superblock says it is still open for

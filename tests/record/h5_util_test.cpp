@@ -359,7 +359,8 @@ TEST(H5Util, ReadersRefuseMissingWrongTypeAndWrongShapeAttributesLeavingTheOutpu
   std::int64_t i = kUntouchedI;
   double x = kUntouchedF;
   std::string s = kUntouchedS;
-  for (const char* name : {"missing", "a_string", "int_pair", "vl_string", "string_pair"}) {
+  // A floating-point value is not read as an integer (0.5 converted to 0).
+  for (const char* name : {"missing", "a_double", "a_string", "int_pair", "vl_string", "string_pair"}) {
     SCOPED_TRACE(name);
     EXPECT_FALSE(read_i64_attribute(f, name, &i));
     EXPECT_EQ(i, kUntouchedI);
@@ -381,9 +382,16 @@ TEST(H5Util, ReadersRefuseMissingWrongTypeAndWrongShapeAttributesLeavingTheOutpu
   EXPECT_EQ(i, kUntouchedI);
   EXPECT_EQ(x, kUntouchedF);
   EXPECT_EQ(s, kUntouchedS);
-  // Numbers convert between numeric types (HDF5 converts on read).
+  // Integers read as doubles (exactly, below 2^53).
   ASSERT_TRUE(read_f64_attribute(f, "an_int", &x));
   EXPECT_EQ(x, 5.0);
+  // What each holds, for the errors of the readers that refuse it.
+  EXPECT_EQ(describe_attribute(f, "missing"), "missing");
+  EXPECT_EQ(describe_attribute(f, "an_int"), "an integer");
+  EXPECT_EQ(describe_attribute(f, "a_double"), "a floating-point value (0.5)");
+  EXPECT_EQ(describe_attribute(f, "a_string"), "a string");
+  EXPECT_EQ(describe_attribute(f, "vl_string"), "a string");
+  EXPECT_EQ(describe_attribute(f, "int_pair"), "2 values, not one");
 }
 
 TEST(H5Util, StringsOfOtherWritersReadWithoutTheirPadding) {

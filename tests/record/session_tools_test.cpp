@@ -313,6 +313,54 @@ TEST(SessionTools, AFutureFormatVersionIsRefusedByName) {
   }
 }
 
+// The writer stores format_version as int64 and closed_cleanly as uint8
+// (docs/session-format.md). HDF5 converts a floating-point attribute to an
+// integer on read, truncating: format_version 2.5 read as 2, closed_cleanly
+// 1.5 as 1 (clean). Another kind of value is refused by every tool, naming
+// the file and the attribute; an integer of another width still reads.
+TEST(SessionTools, RootIntegerAttributesHoldingAnotherKindOfValueAreRefusedByName) {
+  TempDir dir;
+  struct Case {
+    const char* attribute;
+    int kind;  // 0 float64, 1 string, 2 int64
+    double value;
+    const char* says;
+  };
+  int n = 0;
+  for (const Case& c :
+       {Case{kAttrFormatVersion, 0, 2.5, "root attribute format_version is a floating-point value (2.5), expected"},
+        Case{kAttrFormatVersion, 0, 2.0, "root attribute format_version is a floating-point value (2), expected"},
+        Case{kAttrFormatVersion, 1, 2.0, "root attribute format_version is a string, expected an integer"},
+        Case{kAttrClosedCleanly, 0, 1.5, "root attribute closed_cleanly is a floating-point value (1.5), expected"},
+        Case{kAttrClosedCleanly, 1, 1.0, "root attribute closed_cleanly is a string, expected an integer"},
+        Case{kAttrClosedCleanly, 2, 7.0, "root attribute closed_cleanly is 7, expected 0 or 1"}}) {
+    const std::string path = dir / ("attr" + std::to_string(++n) + ".h5");
+    write_small_session(path, 2);
+    const hid_t file = open_for_edit(path);
+    ASSERT_GE(file, 0);
+    ASSERT_GE(H5Adelete(file, c.attribute), 0);
+    if (c.kind == 0) h5::write_f64_attribute(file, c.attribute, c.value);
+    if (c.kind == 1) h5::write_string_attribute(file, c.attribute, std::to_string(static_cast<int>(c.value)));
+    if (c.kind == 2) h5::write_i64_attribute(file, c.attribute, static_cast<std::int64_t>(c.value));
+    H5Fclose(file);
+    expect_every_tool_refuses(path, dir, c.says);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.out;
+    EXPECT_NE(cli.err.find("'" + path + "': " + c.says), std::string::npos) << cli.err;
+  }
+  // Integers of other widths are integers.
+  const std::string narrow = dir / "narrow.h5";
+  write_small_session(narrow, 2);
+  const hid_t file = open_for_edit(narrow);
+  ASSERT_GE(file, 0);
+  ASSERT_GE(H5Adelete(file, kAttrFormatVersion), 0);
+  h5::write_u8_attribute(file, kAttrFormatVersion, 2);
+  H5Fclose(file);
+  const SessionInfo info = read_session_info(narrow);
+  EXPECT_EQ(info.format_version, 2);
+  EXPECT_TRUE(info.closed_cleanly);
+}
+
 // A closed file whose strain column does not have one row per triangle is
 // damaged: every tool says so, naming the file and the dataset.
 TEST(SessionTools, StrainDatasetOfTheWrongLengthIsAClearError) {
@@ -709,23 +757,123 @@ TEST(SessionReader, EqualConsecutiveTimesAreReadNotRefused) {
   EXPECT_EQ(read_haptic_track(path).time_s[5], t4);
 }
 
-// A cleanly closed file whose duration_s is not finite (damaged, or a foreign
-// writer's) reports the last time stamp recorded, never a NaN duration.
-TEST(SessionTools, ANonFiniteRecordedDurationFallsBackToTheLastTimeStamp) {
+// A cleanly closed file whose duration_s is not a session's length (not
+// finite, negative or beyond kMaxSessionTime_s: damaged, or a foreign
+// writer's) reports the last time stamp recorded, and says so; never a NaN
+// or absurd duration (1e300 was printed as the duration).
+TEST(SessionTools, ARecordedDurationThatIsNotALengthFallsBackToTheLastTimeStamp) {
   TempDir dir;
   const std::string path = dir / "nan-duration.h5";
   write_small_session(path, 5);
   const double last = read_session_rows(path).haptic.back().time_s;
-  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+  EXPECT_TRUE(read_session_info(path).duration_recorded);
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), 1e300,
+                           2 * kMaxSessionTime_s, -1.0}) {
     const hid_t file = testing::open_for_edit(path);
     ASSERT_GE(file, 0);
     h5::write_f64_attribute(file, kAttrDurationS, bad);
     H5Fclose(file);
     const SessionInfo info = read_session_info(path);
     EXPECT_TRUE(info.closed_cleanly);
-    EXPECT_TRUE(std::isfinite(info.duration_s)) << bad;
-    EXPECT_GE(info.duration_s, last) << bad;
+    EXPECT_FALSE(info.duration_recorded) << bad;
+    EXPECT_EQ(info.duration_s, last) << bad;
+    EXPECT_NE(format_session_info(info).find(" s (last time stamp recorded)"), std::string::npos)
+        << bad << "\n"
+        << format_session_info(info);
   }
+}
+
+// Without a recorded duration, info and list report the last time stamp of
+// any group: each is a session time like those replay checks. A last frame
+// time of +inf was skipped (the duration silently the haptic rows'), and a
+// last haptic time of 1e300 s was printed as the duration. Now every reader
+// refuses the file, naming the dataset and row.
+TEST(SessionTools, ALastTimeStampThatIsNotASessionTimeIsRefusedNotTheDuration) {
+  TempDir dir;
+  struct Case {
+    DatasetId id;
+    std::uint64_t row;  // the group's last
+    double value;
+  };
+  const double inf = std::numeric_limits<double>::infinity();
+  int n = 0;
+  for (const Case& c : {Case{kMeshFrameTime, 4, inf}, Case{kMeshFrameTime, 4, 1e300}, Case{kHapticTime, 1499, 1e300},
+                        Case{kSimTime, 39, -inf}, Case{kEventTime, 0, 2 * kMaxSessionTime_s}}) {
+    const std::string path = dir / ("last" + std::to_string(++n) + ".h5");
+    write_small_session(path, 5);
+    {  // not closed cleanly: the duration is the last time stamp
+      const hid_t file = testing::open_for_edit(path);
+      ASSERT_GE(file, 0);
+      h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
+      H5Fclose(file);
+    }
+    testing::overwrite_f64(path, kDatasets[c.id].path, c.row, c.value);
+    const std::string says = std::string(kDatasets[c.id].path) + "[" + std::to_string(c.row) + "] is " +
+                             (std::isinf(c.value) ? "not finite" : std::to_string(c.value) + " s, beyond any session");
+    expect_every_tool_refuses(path, dir, says);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.out;
+    EXPECT_NE(cli.err.find("'" + path + "': " + says), std::string::npos) << cli.err;
+    const SessionListing listing = list_sessions(dir.path());
+    EXPECT_TRUE(listing.sessions.empty()) << "listed with duration " << listing.sessions[0].duration_s;
+    ASSERT_EQ(listing.unreadable.size(), 1u);
+    EXPECT_NE(listing.unreadable[0].reason.find(says), std::string::npos) << listing.unreadable[0].reason;
+    std::filesystem::remove(path);
+  }
+}
+
+// Rows past what a closed session's readers use (past the shortest column
+// of a group, or mesh data in no frame of the index) were ignored without a
+// word. The writer leaves none in a closed file: info now lists them per
+// dataset, and the rows and frames that are read read as before.
+TEST(SessionTools, InfoReportsRowsOfAClosedSessionThatNoReaderUses) {
+  TempDir dir;
+  const std::string path = dir / "trailing.h5";
+  write_small_session(path, 5);
+  const SessionInfo before = read_session_info(path);
+  for (const std::uint64_t n : before.unreferenced_rows) EXPECT_EQ(n, 0u);
+  EXPECT_EQ(format_session_info(before).find("unreferenced"), std::string::npos) << format_session_info(before);
+  const std::vector<std::pair<DatasetId, std::uint64_t>> extra = {{kMeshVertices, 12}, {kMeshVertexLevel, 5},
+                                                                  {kMeshTriangles, 3}, {kMeshTriangleStrain, 3},
+                                                                  {kMeshFrameTime, 1}, {kHapticForce, 2}};
+  {
+    const hid_t file = testing::open_for_edit(path);
+    ASSERT_GE(file, 0);
+    for (const auto& [id, more] : extra) {
+      const hid_t ds = H5Dopen2(file, kDatasets[id].path, H5P_DEFAULT);
+      ASSERT_GE(ds, 0) << kDatasets[id].path;
+      const hsize_t dims[2] = {static_cast<hsize_t>(h5::rows(ds)) + more, static_cast<hsize_t>(kDatasets[id].columns)};
+      ASSERT_GE(H5Dset_extent(ds, dims), 0) << kDatasets[id].path;
+      H5Dclose(ds);
+    }
+    H5Fclose(file);
+  }
+  const SessionInfo info = read_session_info(path);
+  EXPECT_EQ(info.rows, before.rows) << "the rows read are the same";
+  for (std::size_t i = 0; i < kDatasetCount; ++i) {
+    const auto it = std::find_if(extra.begin(), extra.end(), [&](const auto& e) { return e.first == i; });
+    EXPECT_EQ(info.unreferenced_rows[i], it == extra.end() ? 0u : it->second) << kDatasets[i].path;
+  }
+  const auto cli = run(tissue() + " session info " + quote(path), dir);
+  EXPECT_EQ(cli.exit_code, 0) << cli.err;
+  EXPECT_NE(cli.out.find("unreferenced rows"), std::string::npos) << cli.out;
+  for (const auto& [id, more] : extra) {
+    const std::string line = std::string(kDatasets[id].path) + " ";
+    const std::size_t at = cli.out.find("  " + line);
+    ASSERT_NE(at, std::string::npos) << line << "\n" << cli.out;
+    const std::string row = cli.out.substr(at, cli.out.find('\n', at) - at);
+    EXPECT_NE(row.find(" " + std::to_string(more) + (more == 1 ? " row" : " rows")), std::string::npos) << row;
+  }
+  // What is read reads as before.
+  EXPECT_EQ(read_session_rows(path).haptic.size(), before.rows.haptic_rows);
+  EXPECT_EQ(write_xdmf(path, "").frames, 5u);
+
+  // A crashed file's last write is ahead of its group by design: repair
+  // trims it, and nothing is reported as unreferenced before or after.
+  const std::string crashed = dir / "crashed.h5";
+  testing::write_crashed_session(crashed, 300, 3);
+  for (const std::uint64_t n : read_session_info(crashed).unreferenced_rows) EXPECT_EQ(n, 0u);
+  for (const std::uint64_t n : repair_session(crashed).after.unreferenced_rows) EXPECT_EQ(n, 0u);
 }
 
 // `session xdmf` checks frame times as every other frame reader does:
