@@ -1,4 +1,5 @@
 #include "record/session_tools.hpp"
+#include "record/recording_lock.hpp"
 
 #include <sys/stat.h>
 
@@ -393,6 +394,7 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   SessionInfo info;
   info.path = path;
   info.open_for_write_flag = pre.consistency_flags != 0;
+  info.being_recorded = info.open_for_write_flag && being_recorded(path);
   // A root group whose metadata cannot be read (a bad checksum) is damage,
   // not a foreign file without the attribute.
   if (H5Aexists(file, kAttrFormatVersion) < 0)
@@ -628,8 +630,11 @@ std::string format_session_info(const SessionInfo& info) {
       o << "closed cleanly\n";
       break;
     case SessionState::kOpenForWrite:
-      o << "NOT closed cleanly: left by a crash (or still being recorded); run `tissue session repair` once no "
-           "recorder has it open\n";
+      if (info.being_recorded)
+        o << "being recorded (a running recorder holds it; it closes when the recording stops)\n";
+      else
+        o << "NOT closed cleanly: left by a crash (no recorder on this machine holds it); run `tissue session "
+             "repair`\n";
       break;
     case SessionState::kRepaired:
       o << "NOT closed cleanly: left by a crash, repaired " << info.repaired_utc << "\n";
@@ -722,7 +727,7 @@ const char* state_label(SessionState state) {
     case SessionState::kClosedCleanly:
       return "closed cleanly";
     case SessionState::kOpenForWrite:
-      return "OPEN (recording or crashed)";
+      return "OPEN (crashed)";
     case SessionState::kRepaired:
       return "repaired";
     case SessionState::kNotClosed:
@@ -758,23 +763,31 @@ std::string format_session_listing(const SessionListing& listing) {
   for (const SessionInfo& s : listing.sessions) {
     char duration[32];
     std::snprintf(duration, sizeof duration, "%.3f", s.duration_s);
-    row(one_line(std::filesystem::path(s.path).filename().string()), state_label(session_state(s)),
-        one_line(s.start_time_utc), duration, std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames),
-        one_line(s.scene_name));
+    row(one_line(std::filesystem::path(s.path).filename().string()),
+        s.being_recorded ? "being recorded" : state_label(session_state(s)), one_line(s.start_time_utc), duration,
+        std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames), one_line(s.scene_name));
   }
   for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << one_line(u.reason) << "\n";
   for (const std::string& f : listing.unfinished)
     o << "unfinished: " << one_line(f)
       << ": a session being created right now, or left by a recorder that stopped while creating it (not a "
          "session, no data in it; tissued removes it at its next start once that process is gone)\n";
-  if (std::any_of(listing.sessions.begin(), listing.sessions.end(),
-                  [](const SessionInfo& s) { return session_state(s) == SessionState::kOpenForWrite; }))
-    o << "OPEN: still being recorded, or left by a crash: `tissue session repair FILE` once no recorder has it open\n";
+  if (std::any_of(listing.sessions.begin(), listing.sessions.end(), [](const SessionInfo& s) {
+        return session_state(s) == SessionState::kOpenForWrite && !s.being_recorded;
+      }))
+    o << "OPEN (crashed): left open by a recorder that is gone: `tissue session repair FILE`\n";
   return o.str();
 }
 
 RepairReport repair_session(const std::string& path) {
   h5::QuietErrors quiet;
+  // Repair clears the open-for-write flags and trims the columns to a
+  // common length: done to a live recording, it corrupted the file under
+  // the writer.
+  if (being_recorded(path))
+    throw RecordError("cannot repair '" + path +
+                      "': it is being recorded (a running recorder holds it); stop the recording first "
+                      "(`tissue ctl record_stop`): repair is for a session a crash left open");
   RepairReport report;
   const Preamble pre = read_preamble(path);
   {

@@ -34,6 +34,9 @@ struct SessionInfo {
   // (or is still running). Ordinary readers refuse such a file until it is
   // repaired.
   bool open_for_write_flag = false;
+  // A recorder holds the file now (record/recording_lock.hpp): open for
+  // writing because it is being written, not because a crash left it so.
+  bool being_recorded = false;
   std::string repaired_utc;  // set by repair_session
   std::string scene_name, start_time_utc, end_time_utc, host_name, software_version;
   // Clean close: the recorded duration; otherwise (or when the recorded one
@@ -62,7 +65,7 @@ std::string format_session_info(const SessionInfo& info);
 // repair mark.
 enum class SessionState : std::uint8_t {
   kClosedCleanly,
-  kOpenForWrite,  // being recorded, or left by a crash and not yet repaired
+  kOpenForWrite,  // being recorded (SessionInfo::being_recorded), or left by a crash and not yet repaired
   kRepaired,      // left by a crash, repaired
   kNotClosed,     // no clean-close mark, flags clear (e.g. a failed close)
 };

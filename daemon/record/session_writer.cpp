@@ -307,6 +307,10 @@ std::unique_ptr<SessionWriter> SessionWriter::create(const std::string& path, co
     std::filesystem::remove(hidden, ec);
     throw RecordError("cannot create session file '" + path + "': " + e.what());
   }
+  // Marked before it appears, so no reader ever sees it live and unmarked
+  // (`tissue session repair` refuses a marked file). The lock is on the
+  // inode: the rename keeps it.
+  writer->lock_.take(hidden);
   const int moved = publish_without_replacing(hidden, path);
   if (moved != 0) {
     writer.reset();
@@ -586,6 +590,11 @@ void SessionWriter::close(std::optional<double> duration_s) {
   if (closed_) return;
   h5::QuietErrors quiet;
   closed_ = true;
+  // However the close ends, the file is no longer being recorded.
+  struct Unmark {
+    RecordingLock& lock;
+    ~Unmark() { lock.release(); }
+  } unmark{lock_};
   bool ok = !failed();
   if (ok) {
     try {

@@ -23,6 +23,7 @@
 
 #include "record/h5_util.hpp"
 #include "record/record_types.hpp"
+#include "record/recording_lock.hpp"
 #include "record/session_layout.hpp"
 
 namespace tissue::record {
@@ -125,6 +126,7 @@ class SessionWriter {
   std::uint64_t bytes_written_ = 0;
   std::string error_;
   bool closed_ = false;
+  RecordingLock lock_;  // from before the file appears under its name until close()
 
   // Column scratch (reused, so steady state allocates nothing).
   std::vector<double> f64_;

@@ -29,6 +29,7 @@ namespace {
 
 using testing::quote;
 using testing::run;
+using testing::RunResult;
 using testing::TempDir;
 
 void write_small_session(const std::string& path, std::uint64_t frames = 5) {
@@ -955,6 +956,51 @@ TEST(SessionTools, XdmfOfACrashedSessionIsRefusedSayingToRepairItFirst) {
 
 // Repair trims only what a crash left incomplete: every flushed frame keeps
 // all its vertices, levels, triangles and strain values.
+// A live recording and a crashed one both keep the open-for-write flags;
+// repair trimmed and re-flagged a file its recorder was still writing. The
+// writer's mark tells them apart: repair refuses a live one, info and list
+// say it is being recorded, and once closed it is an ordinary session.
+TEST(SessionTools, ALiveRecordingIsNotRepairedAndSaysItIsBeingRecorded) {
+  TempDir dir;
+  const std::string path = dir / "live.h5";
+  auto writer = SessionWriter::create(path, SessionMetadata{});
+  writer->append_mesh_frame(testing::test_frame(0).view());
+  writer->flush();
+  const SessionInfo live = read_session_info(path);
+  EXPECT_TRUE(live.open_for_write_flag);
+  EXPECT_TRUE(live.being_recorded);
+  EXPECT_NE(format_session_info(live).find("being recorded"), std::string::npos) << format_session_info(live);
+  EXPECT_NE(format_session_listing(list_sessions(dir.path())).find("being recorded"), std::string::npos);
+  try {
+    repair_session(path);
+    ADD_FAILURE() << "repaired a session that is being recorded";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find("is being recorded"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+  }
+  const RunResult cli = run(quote(TISSUE_CLI_BINARY) + " session repair " + quote(path), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out << cli.err;
+  EXPECT_NE(cli.err.find("is being recorded"), std::string::npos) << cli.err;
+  // The writer goes on, unharmed, and closes cleanly.
+  writer->append_mesh_frame(testing::test_frame(1).view());
+  writer->close();
+  const SessionInfo closed = read_session_info(path);
+  EXPECT_TRUE(closed.closed_cleanly);
+  EXPECT_FALSE(closed.being_recorded);
+  EXPECT_EQ(closed.rows.mesh_frames, 2u);
+}
+
+// A crashed recorder's mark went with its process: its session says so.
+TEST(SessionTools, ACrashedSessionIsNotMarkedAsBeingRecorded) {
+  TempDir dir;
+  const std::string path = dir / "crashed.h5";
+  testing::write_crashed_session(path, 10, 1);
+  const SessionInfo info = read_session_info(path);
+  EXPECT_TRUE(info.open_for_write_flag);
+  EXPECT_FALSE(info.being_recorded);
+  EXPECT_NE(format_session_info(info).find("left by a crash"), std::string::npos) << format_session_info(info);
+}
+
 TEST(SessionTools, RepairOfACrashedSessionKeepsEveryFlushedFrameWhole) {
   TempDir dir;
   const std::string crashed = dir / "crashed.h5";
