@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <iterator>
 #include <stdexcept>
 
 #include "record/session_writer.hpp"
@@ -58,8 +59,39 @@ Recorder::Recorder(std::unique_ptr<SessionWriter> writer, RecorderOptions option
 
 Recorder::~Recorder() { stop(); }
 
+// Producer side of the closing phase, around one push (check and ring
+// write): raises the ring's busy flag, then reads closing_; clears the flag
+// when the push is over. The recorder thread does the mirror image in
+// close_to_producers(): sets closing_, then reads every busy flag. With all
+// four accesses seq_cst (a store-load pair on each side, as in Dekker's
+// algorithm) at least one side sees the other's store: either this push
+// sees closing_ and is refused (counted), or the recorder sees the flag
+// raised and waits for it to clear. The clearing store (release) follows the
+// ring write, and the recorder reads it (seq_cst, so acquire) before its last
+// drain, so the drain sees the element. The producer pays two stores to its
+// own flag (the seq_cst one is an xchg on x86) and two loads: no lock, no
+// wait, no allocation, no system call.
+class Recorder::PushGuard {
+ public:
+  PushGuard(const Recorder& recorder, PushFlag& flag) noexcept : busy_(flag.busy) {
+    busy_.store(true, std::memory_order_seq_cst);
+    open_ = !recorder.closing_.load(std::memory_order_seq_cst) &&
+            recorder.state_.load(std::memory_order_relaxed) == RecorderState::kRecording;
+  }
+  ~PushGuard() { busy_.store(false, std::memory_order_release); }
+  PushGuard(const PushGuard&) = delete;
+  PushGuard& operator=(const PushGuard&) = delete;
+  // False: recording has stopped, is stopping or has failed; refuse.
+  bool open() const noexcept { return open_; }
+
+ private:
+  std::atomic<bool>& busy_;
+  bool open_ = false;
+};
+
 bool Recorder::push_haptic(const HapticRow& row) noexcept {
-  if (!accepting()) {
+  const PushGuard push(*this, haptic_push_);
+  if (!push.open()) {
     refused_haptic_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
@@ -67,7 +99,8 @@ bool Recorder::push_haptic(const HapticRow& row) noexcept {
 }
 
 bool Recorder::push_sim(const SimRow& row) noexcept {
-  if (!accepting()) {
+  const PushGuard push(*this, sim_push_);
+  if (!push.open()) {
     refused_sim_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
@@ -76,7 +109,12 @@ bool Recorder::push_sim(const SimRow& row) noexcept {
 
 bool Recorder::push_event(EventSource source, const Event& event) noexcept {
   const int s = static_cast<int>(source);
-  if (s < 0 || s >= kEventSourceCount || !accepting()) {
+  if (s < 0 || s >= kEventSourceCount) {
+    refused_events_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  const PushGuard push(*this, event_push_[s]);
+  if (!push.open()) {
     refused_events_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
@@ -90,7 +128,10 @@ bool Recorder::push_mesh_frame(const MeshFrameView& frame) noexcept {
     mesh_frame_drops_.fetch_add(1, std::memory_order_relaxed);
     return false;
   };
-  if (!accepting()) return drop();
+  // Held until the buffer is handed over in ready_frames_ (the recorder's
+  // wait covers the copy).
+  const PushGuard push(*this, frame_push_);
+  if (!push.open()) return drop();
   if (frame.vertices_m.size() > options_.mesh_max_vertices || frame.triangles.size() > options_.mesh_max_triangles) {
     mesh_frames_too_big_.fetch_add(1, std::memory_order_relaxed);
     return drop();
@@ -173,6 +214,54 @@ void Recorder::set_failed(const std::string& message) {
   }
 }
 
+// The recorder thread's side of the closing phase (PushGuard says why it is
+// airtight). After this returns no push can land in a ring or ready_frames_
+// any more, and everything pushed before is visible to this thread, so a
+// drain now is the last one that can find anything. Producers never block
+// inside a push, so the wait lasts at most one push (a few instructions, or
+// one frame copy) unless a producer is preempted mid-push; it must not give
+// up early (a push finishing after it would be lost again), so it backs off
+// to short sleeps instead.
+void Recorder::close_to_producers() noexcept {
+  closing_.store(true, std::memory_order_seq_cst);
+  const auto busy = [](const PushFlag& f) { return f.busy.load(std::memory_order_seq_cst); };
+  const auto any_busy = [&] {
+    if (busy(haptic_push_) || busy(sim_push_) || busy(frame_push_)) return true;
+    return std::any_of(std::begin(event_push_), std::end(event_push_), busy);
+  };
+  for (int round = 0; any_busy(); ++round) {
+    if (round < 100)
+      std::this_thread::yield();
+    else
+      std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
+}
+
+// After a failure, once closed to producers: what was accepted but will
+// never be written (still in the rings, drained but not yet written, frames
+// not yet written) is counted as dropped and the frame buffers are released.
+// Rows of a batch whose write failed part-way are counted too: the file may
+// hold some of them, but none were counted as written.
+void Recorder::count_unwritten_as_drops() {
+  std::uint64_t haptic = pending_haptic_.size(), sim = pending_sim_.size(), events = pending_events_.size();
+  pending_haptic_.clear();
+  pending_sim_.clear();
+  pending_events_.clear();
+  haptic += haptic_ring_.drain([](const HapticRow&) {});
+  sim += sim_ring_.drain([](const SimRow&) {});
+  for (auto& ring : event_rings_) events += ring.drain([](const Event&) {});
+  std::uint64_t frames = 0;
+  std::uint32_t index = 0;
+  while (ready_frames_.try_pop(index)) {
+    free_frames_.try_push(index);
+    ++frames;
+  }
+  refused_haptic_.fetch_add(haptic, std::memory_order_relaxed);
+  refused_sim_.fetch_add(sim, std::memory_order_relaxed);
+  refused_events_.fetch_add(events, std::memory_order_relaxed);
+  mesh_frame_drops_.fetch_add(frames, std::memory_order_relaxed);
+}
+
 void Recorder::check_free_space() {
   if (options_.min_free_bytes == 0) return;
   const auto now = Clock::now();
@@ -253,6 +342,8 @@ void Recorder::run() {
       wake_.wait_for(lock, poll, [&] { return stop_requested_; });
       stopping = stop_requested_;
     }
+    // Before the last drain: nothing may be pushed after it (see PushGuard).
+    if (stopping) close_to_producers();
     try {
       check_free_space();
       drain_and_write(stopping);
@@ -264,6 +355,9 @@ void Recorder::run() {
   }
 
   if (state() == RecorderState::kFailed) {
+    // kFailed already refuses pushes; this waits out those that passed the
+    // check before it, so the count below is the last word.
+    close_to_producers();
     // Record the failure in the file when it still takes writes (e.g. the
     // free-space reserve tripped); a broken file just gets closed.
     try {
@@ -277,10 +371,7 @@ void Recorder::run() {
     } catch (const std::exception&) {
       // Already failed and reported; closing a broken file may fail too.
     }
-    // Producers see kFailed and stop pushing; release what is in the rings.
-    haptic_ring_.drain([](const HapticRow&) {});
-    sim_ring_.drain([](const SimRow&) {});
-    for (auto& ring : event_rings_) ring.drain([](const Event&) {});
+    count_unwritten_as_drops();
     return;
   }
   try {

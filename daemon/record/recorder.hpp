@@ -14,11 +14,23 @@
 // at least every flush_interval_s, so a concurrent SWMR reader sees the
 // session grow and a crash loses at most about one flush interval.
 //
+// Every push is either written or counted as a drop, also when producers
+// keep pushing while the recorder stops or fails (a retired recorder whose
+// sim thread has not let go of it yet): a push that returned true is in the
+// file, unless recording failed (then it is counted as a drop) or the writer
+// refused the frame (mesh_frames_invalid, with a warning event). The recorder
+// thread closes the rings to producers before its last drain: it sets
+// closing_ (pushes are refused and counted from then on) and waits for any
+// push already past that check to finish (each ring's producer flags its
+// push in progress; the wait is a few instructions long, or one frame copy),
+// so nothing can land in a ring after the last drain.
+//
 // Failure (disk full, file too large, I/O error, disk space below the
 // reserve): recording stops, state() becomes kFailed, error() says which file
 // and why, on_error is called once (from the recorder thread) so the daemon
 // can log it and publish it as an event; producers keep running, their pushes
-// become counted drops.
+// become counted drops, and so do the rows, events and frames accepted
+// earlier that were not written.
 //
 // HDF5 is used only from the recorder thread (start() creates the file on the
 // calling thread, before the recorder thread exists).
@@ -97,7 +109,7 @@ class Recorder {
   Recorder(const Recorder&) = delete;
   Recorder& operator=(const Recorder&) = delete;
 
-  // ---- producer side: wait-free, no allocation --------------------------
+  // ---- producer side: wait-free, no allocation, no lock ----------------
   bool push_haptic(const HapticRow& row) noexcept;  // haptic thread only
   bool push_sim(const SimRow& row) noexcept;        // sim thread only
   bool push_event(EventSource source, const Event& event) noexcept;
@@ -115,9 +127,10 @@ class Recorder {
   double session_time_s_now() const noexcept;
 
   // ---- control side -----------------------------------------------------
-  // Drains what was pushed, writes it, flushes and closes the file cleanly
-  // (closed_cleanly = 1). Idempotent. After a failure it only joins the
-  // thread. Never throws: see state() / error().
+  // Refuses further pushes (counted as drops), drains what was pushed,
+  // writes it, flushes and closes the file cleanly (closed_cleanly = 1).
+  // Idempotent. After a failure it only joins the thread. Never throws: see
+  // state() / error().
   void stop();
 
   RecorderState state() const noexcept { return state_.load(std::memory_order_acquire); }
@@ -141,12 +154,24 @@ class Recorder {
   };
   static constexpr std::size_t kMaxFrameBuffers = 16;
 
+  // A producer's push in progress: one flag per ring (one producer each), on
+  // its own cache line. See PushGuard in recorder.cpp.
+  struct alignas(concurrency::kCacheLineBytes) PushFlag {
+    std::atomic<bool> busy{false};
+  };
+  class PushGuard;
+
   Recorder(std::unique_ptr<SessionWriter> writer, RecorderOptions options);
   void run();
   bool drain_and_write(bool force_flush);
   void check_free_space();
   void set_failed(const std::string& message);
-  bool accepting() const noexcept { return state_.load(std::memory_order_relaxed) == RecorderState::kRecording; }
+  void close_to_producers() noexcept;
+  void count_unwritten_as_drops();
+  bool accepting() const noexcept {
+    return !closing_.load(std::memory_order_relaxed) &&
+           state_.load(std::memory_order_relaxed) == RecorderState::kRecording;
+  }
 
   RecorderOptions options_;
   std::unique_ptr<SessionWriter> writer_;  // recorder thread only (after start)
@@ -164,7 +189,13 @@ class Recorder {
   double next_frame_due_s_ = -1e300;  // sim thread only
   std::atomic<std::uint64_t> mesh_frames_too_big_{0};
   std::atomic<std::uint64_t> mesh_frame_drops_{0};
+  // Refused at push, or accepted and then not written because recording
+  // failed.
   std::atomic<std::uint64_t> refused_haptic_{0}, refused_sim_{0}, refused_events_{0};
+  // Closing phase (see the top of this file): closing_ is set once, by the
+  // recorder thread, before its last drain.
+  std::atomic<bool> closing_{false};
+  PushFlag haptic_push_, sim_push_, frame_push_, event_push_[kEventSourceCount];
 
   // Recorder-thread batch buffers (reserved at start).
   std::vector<HapticRow> pending_haptic_;

@@ -204,9 +204,88 @@ TEST(Recorder, PushesAfterStopAreRefusedAndCounted) {
   rec->stop();  // idempotent
 }
 
+// Producers still pushing while the recorder is stopped (a retired recorder
+// whose sim thread has not let go of it yet): every push that returned true
+// is in the file, and every attempt is either written or counted as a drop.
+// Before the closing phase, pushes landing between the final drain and the
+// close were accepted (true), then neither written nor counted.
+TEST(Recorder, PushesRacingStopAreWrittenOrCountedNeverLost) {
+  struct Tally {
+    std::uint64_t attempts = 0, accepted = 0;
+    void count(bool ok) {
+      ++attempts;
+      accepted += ok ? 1 : 0;
+    }
+  };
+  for (int round = 0; round < 3; ++round) {
+    TempDir dir;
+    auto rec = Recorder::start(dir.path(), "s.h5", meta(), fast_options());
+    std::atomic<bool> done{false};
+    Tally haptic, sim, frames, events[kEventSourceCount];
+    const testing::TestFrame frame = testing::test_frame(1);
+    // One thread per ring (single-producer), pushing until told to stop:
+    // through the whole stop() and beyond it.
+    std::thread haptic_thread([&] {
+      for (std::uint64_t i = 0; !done.load(std::memory_order_relaxed); ++i) {
+        haptic.count(rec->push_haptic(testing::haptic_row(i)));
+        if (i % 8 == 0) events[2].count(rec->push_event(EventSource::kHaptic, testing::event_row(i)));
+        std::this_thread::yield();
+      }
+    });
+    std::thread sim_thread([&] {
+      for (std::uint64_t i = 0; !done.load(std::memory_order_relaxed); ++i) {
+        sim.count(rec->push_sim(testing::sim_row(i)));
+        if (i % 4 == 0) frames.count(rec->push_mesh_frame(frame.view()));
+        if (i % 8 == 0) events[1].count(rec->push_event(EventSource::kSim, testing::event_row(i)));
+        std::this_thread::yield();
+      }
+    });
+    std::thread control_thread([&] {
+      for (std::uint64_t i = 0; !done.load(std::memory_order_relaxed); ++i) {
+        events[0].count(rec->push_event(EventSource::kControl, testing::event_row(i)));
+        std::this_thread::yield();
+      }
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(30));
+    rec->stop();
+    // Keep pushing a little after the stop: those are refused and counted.
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    done.store(true);
+    haptic_thread.join();
+    sim_thread.join();
+    control_thread.join();
+
+    ASSERT_EQ(rec->state(), RecorderState::kStopped) << rec->error();
+    const RecorderStats s = rec->stats();
+    std::uint64_t event_attempts = 0, events_accepted = 0;
+    for (const Tally& t : events) {
+      event_attempts += t.attempts;
+      events_accepted += t.accepted;
+    }
+    SCOPED_TRACE("round " + std::to_string(round));
+    EXPECT_GT(haptic.accepted, 0u);
+    EXPECT_GT(frames.accepted, 0u);
+    EXPECT_EQ(s.haptic_rows_written, haptic.accepted) << "accepted haptic rows lost";
+    EXPECT_EQ(s.sim_rows_written, sim.accepted) << "accepted sim rows lost";
+    EXPECT_EQ(s.mesh_frames_written, frames.accepted) << "accepted mesh frames lost";
+    EXPECT_EQ(s.events_written, events_accepted) << "accepted events lost";
+    EXPECT_EQ(s.haptic_rows_written + s.haptic_drops, haptic.attempts);
+    EXPECT_EQ(s.sim_rows_written + s.sim_drops, sim.attempts);
+    EXPECT_EQ(s.mesh_frames_written + s.mesh_frame_drops, frames.attempts);
+    EXPECT_EQ(s.events_written + s.event_drops, event_attempts);
+    const SessionInfo info = read_session_info(dir / "s.h5");
+    EXPECT_TRUE(info.closed_cleanly);
+    EXPECT_EQ(info.rows.haptic_rows, haptic.accepted);
+    EXPECT_EQ(info.rows.sim_rows, sim.accepted);
+    EXPECT_EQ(info.rows.mesh_frames, frames.accepted);
+    EXPECT_EQ(info.rows.events, events_accepted);
+  }
+}
+
 // The free-space reserve trips (here: a reserve no disk has): recording
 // stops with a message naming the file, the callback hears it, the file is
-// closed properly and holds a recording_error event; producers are unharmed.
+// closed properly and holds a recording_error event; producers are unharmed,
+// and every push is written or counted as a drop.
 TEST(Recorder, FreeSpaceReserveStopsRecordingCleanlyAndReports) {
   TempDir dir;
   RecorderOptions o = fast_options();
@@ -230,6 +309,8 @@ TEST(Recorder, FreeSpaceReserveStopsRecordingCleanlyAndReports) {
   EXPECT_NE(rec->error().find(dir / "s.h5"), std::string::npos) << rec->error();
   EXPECT_NE(rec->error().find("disk almost full"), std::string::npos) << rec->error();
   EXPECT_GE(rec->stats().haptic_drops, 1000u);
+  // Rows accepted before the failure and never written are drops too.
+  EXPECT_EQ(rec->stats().haptic_rows_written + rec->stats().haptic_drops, i + 1000);
   const SessionInfo info = read_session_info(dir / "s.h5");
   EXPECT_FALSE(info.open_for_write_flag);
   ASSERT_EQ(info.rows.events, 1u);
