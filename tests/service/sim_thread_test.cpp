@@ -97,10 +97,19 @@ TEST(SimThread, SchedulingIsKnownWhenStartReturns) {
 }
 
 TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {
+  ToolSampleRing samples;
   LocalModelChannel models;
   SimThreadOptions options;
   options.status_every_s = 0.005;
-  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), nullptr, &models, options);
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
+  // The tool hovers over the loaded free end (out of engage distance), so
+  // the patch is the surface that moves from the first steps. With no tick
+  // the tool is parked 1 km up and the patch is the highest triangle: on the
+  // clamped face (velocities exactly zero) while the load bends the beam
+  // down, so nothing moved until the load's release at 1 s of sim time.
+  haptics::ToolSample hover;
+  hover.proxy_position_m = haptics::Vec3(0.09, 0.05, 0.112);
+  ASSERT_TRUE(samples.try_push(hover));
   thread.start();
   ASSERT_TRUE(wait_for([&] { return thread.status().steps > 5; }));
   const auto moving = [&] {
