@@ -441,6 +441,24 @@ TEST_F(TissuedProcess, UnwritableReportExits4NamingThePath) {
   EXPECT_TRUE(contains(p.err, "No such file or directory")) << p.err;  // the errno reason
 }
 
+// A run that stops before it starts (its --record file exists, and sessions
+// are never overwritten) leaves the user's earlier report as it was: the
+// report was opened with fopen("w"), emptying it, then removed.
+TEST_F(TissuedProcess, ARunThatCannotStartKeepsTheEarlierReport) {
+  const fs::path report = dir_ / "old.json", session = dir_ / "existing.h5";
+  std::ofstream(report) << "{\"earlier\": true}\n";
+  std::ofstream(session) << "not to be overwritten";
+  const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.01", "--report", report.string(),
+                         "--record", session.string()});
+  EXPECT_EQ(p.exit_code, 5) << p.err;
+  EXPECT_TRUE(contains(p.err, "already exists")) << p.err;
+  ASSERT_TRUE(fs::exists(report)) << "the earlier report was removed";
+  EXPECT_EQ(read_file(report), "{\"earlier\": true}\n");
+  EXPECT_EQ(read_file(session), "not to be overwritten");
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_NE(e.path().filename().string().front(), '.') << "a temporary file was left behind: " << e.path();
+}
+
 // The report and the session (--record) of a failed run both end with the reason.
 TEST_F(TissuedProcess, RefusedExplicitStepExits3WithTheReasonInTheReport) {
   const fs::path report = dir_ / "r.json", session = dir_ / "failed.h5";
