@@ -596,6 +596,8 @@ int Service::run() {
     systemd_ = std::make_unique<control::SystemdNotifier>();
     if (!systemd_->setup_error().empty())
       std::fprintf(options_.err, "tissued: systemd notifications off: %s\n", systemd_->setup_error().c_str());
+    if (!systemd_->watchdog_error().empty())
+      std::fprintf(options_.err, "tissued: systemd watchdog off: %s\n", systemd_->watchdog_error().c_str());
     watchdog_ = std::make_unique<control::WatchdogFeeder>(*systemd_, heartbeat_);
     start_threads();
     server_ = std::make_unique<control::ControlServer>(io_, control::ServerSettings::from_spec(config_.control), *this);
