@@ -10,21 +10,47 @@
 #include <string>
 
 #include "app/batch_run.hpp"
+#include "record/session_tools.hpp"
 #include "service/service.hpp"
 #include "util/text.hpp"
 
 namespace {
 
+std::string seconds_text(double s) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.15g", s);
+  return buf;
+}
+
 // A finite number of seconds >= 0 (CLI::NonNegativeNumber lets "inf" through
-// and prints DBL_MAX in full when it fails).
-const CLI::Validator kSeconds(
+// and prints DBL_MAX in full when it fails), at most kMaxSessionTime_s (31
+// years; a session holds no later time): the service's --duration timer
+// converts it to nanoseconds, which 1e10 s overflowed (UB; it stopped at once).
+const CLI::Validator kDurationSeconds(
     [](std::string& text) -> std::string {
       const std::optional<double> value = tissue::util::whole_number(text);
-      if (!value || !std::isfinite(*value) || *value < 0.0)
-        return "must be a finite number of seconds >= 0 (got " + text + ")";
+      if (!value || !std::isfinite(*value) || *value < 0.0 || *value > tissue::record::kMaxSessionTime_s)
+        return "must be a finite number of seconds in [0, " + seconds_text(tissue::record::kMaxSessionTime_s) +
+               "] (got " + text + ")";
       return {};
     },
     "SECONDS>=0");
+
+// 0 (quiet) or an interval of at least kMinProgress_s (up to
+// kMaxSessionTime_s): the run counts its lines as sim time / interval in a
+// long long, which --progress 1e-20 overflowed (UB), and a line per step
+// is not progress.
+constexpr double kMinProgress_s = 1e-3;
+const CLI::Validator kProgressSeconds(
+    [](std::string& text) -> std::string {
+      const std::optional<double> value = tissue::util::whole_number(text);
+      if (!value || !std::isfinite(*value) || (*value != 0.0 && *value < kMinProgress_s) ||
+          *value > tissue::record::kMaxSessionTime_s || *value < 0.0)
+        return "must be 0 (quiet) or a number of seconds in [" + seconds_text(kMinProgress_s) + ", " +
+               seconds_text(tissue::record::kMaxSessionTime_s) + "] (got " + text + ")";
+      return {};
+    },
+    "SECONDS");
 
 // A finite number of seconds > 0 (an interval: 0 would record every step
 // at once, and is refused).
@@ -69,7 +95,7 @@ int main(int argc, char** argv) {
     CLI::Option* duration =
         app.add_option("--duration", batch_options.duration_s,
                        "--batch: simulated seconds to run; --config: stop the service after this many wall seconds")
-            ->check(kSeconds);
+            ->check(kDurationSeconds);
     app.add_option("--set", batch_options.overrides,
                    "override a scene value (or, with --config, a daemon value): key.path=value (repeatable)");
     CLI::Option* report =
@@ -87,7 +113,7 @@ int main(int argc, char** argv) {
                                        "--batch: leave wall-clock timing out of the report (bit-identical reruns)");
     CLI::Option* progress = app.add_option("--progress", batch_options.progress_every_s,
                                            "--batch: simulated seconds between live lines on stdout (0: quiet)")
-                                ->check(kSeconds)
+                                ->check(kProgressSeconds)
                                 ->capture_default_str();
 
     try {

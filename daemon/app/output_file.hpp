@@ -1,10 +1,16 @@
 // An output file of a long run (a batch report, a trade study's CSV and SVG)
 // opened before the run, so a path that cannot be written fails before
 // minutes of simulation instead of after them, and written once at the end.
+// util::PendingOutputFile does the writing: until write() the file the user
+// named is untouched (the text goes to a temporary file beside it, renamed
+// over it when complete); a device, a FIFO or /dev/stdout is written in
+// place. A run that ends before write() (a refused --record, an error)
+// leaves the user's earlier file as it was.
 #pragma once
 
-#include <cstdio>
 #include <string>
+
+#include "util/output_file.hpp"
 
 namespace tissue::app {
 
@@ -13,25 +19,22 @@ class OutputFile {
   OutputFile() = default;
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
-  // Closes and deletes a file that was opened and never written.
-  ~OutputFile() { discard(); }
 
-  // Creates (or truncates) `path`. Empty on success, else
+  // Gets ready to write `path`. Empty on success, else
   // "cannot write WHAT PATH: reason" (`what` says which file it is: "report").
   std::string open(const std::string& path, const std::string& what = {});
-  // Writes `text` and closes the file; the same kind of message on failure
-  // (a full disk shows up here, at the flush or the close).
+  // Writes `text` and puts the file in place; the same kind of message on
+  // failure (a full disk shows up here).
   std::string write(const std::string& text);
-  // Closes and deletes the file if it is still open (the run did not get to
-  // write it).
-  void discard();
-  bool is_open() const { return file_ != nullptr; }
+  // Gives up on the file: PATH stays as it was before open() (only the
+  // temporary file goes). The destructor does this too.
+  void discard() { file_.abandon(); }
+  bool is_open() const { return file_.is_open(); }
 
  private:
   std::string name() const;
-  std::string failure(int err) const;
   std::string path_, what_;
-  std::FILE* file_ = nullptr;
+  util::PendingOutputFile file_;
 };
 
 }  // namespace tissue::app

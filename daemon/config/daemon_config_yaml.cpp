@@ -396,6 +396,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (ec) fail(p + ".bind_address", "not an IP address: " + printable(u.bind_address));
     port(u.port, 1, p + ".port", "");
     positive(u.timeout_s, p + ".timeout_s");
+    // The device keeps it in int64 nanoseconds: 1e10 s was out of range.
+    at_most(u.timeout_s, kMaxTimeout_s, p + ".timeout_s", "a lost sender would hold its session that long");
   }
 
   const DaemonConfig& c_;

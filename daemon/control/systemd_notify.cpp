@@ -26,15 +26,30 @@ std::optional<std::uint64_t> parse_u64(const char* text) {
 
 }  // namespace
 
+std::optional<std::chrono::microseconds> parse_watchdog_usec(const char* usec, std::string* problem) {
+  problem->clear();
+  if (usec == nullptr || *usec == '\0') return std::nullopt;
+  const std::optional<std::uint64_t> value = parse_u64(usec);
+  if (!value) {
+    *problem = "WATCHDOG_USEC=" + std::string(usec).substr(0, 40) + " is not a number of microseconds";
+    return std::nullopt;
+  }
+  if (*value == 0) return std::nullopt;
+  if (*value > static_cast<std::uint64_t>(kMaxWatchdogInterval.count())) {
+    *problem = "WATCHDOG_USEC=" + std::to_string(*value) + " is above " + std::to_string(kMaxWatchdogInterval.count()) +
+               " (11.6 days): not a watchdog (check WatchdogSec=)";
+    return std::nullopt;
+  }
+  return std::chrono::microseconds(static_cast<std::chrono::microseconds::rep>(*value));
+}
+
 SystemdNotifier::SystemdNotifier() {
   // The watchdog settings are independent of the notify socket: systemd
   // sets them for Type=notify units with WatchdogSec=.
-  if (const auto usec = parse_u64(std::getenv("WATCHDOG_USEC")); usec && *usec > 0) {
-    const char* pid_text = std::getenv("WATCHDOG_PID");
-    const auto pid = parse_u64(pid_text);
-    const bool ours = pid_text == nullptr || (pid && *pid == static_cast<std::uint64_t>(::getpid()));
-    if (ours) watchdog_ = std::chrono::microseconds(static_cast<std::chrono::microseconds::rep>(*usec));
-  }
+  const char* pid_text = std::getenv("WATCHDOG_PID");
+  const auto pid = parse_u64(pid_text);
+  const bool ours = pid_text == nullptr || (pid && *pid == static_cast<std::uint64_t>(::getpid()));
+  if (ours) watchdog_ = parse_watchdog_usec(std::getenv("WATCHDOG_USEC"), &watchdog_error_);
 
   const char* socket_env = std::getenv("NOTIFY_SOCKET");
   if (socket_env == nullptr || *socket_env == '\0') return;
@@ -51,7 +66,9 @@ SystemdNotifier::SystemdNotifier() {
   const std::size_t length = offsetof(sockaddr_un, sun_path) + name.size() + (name[0] == '/' ? 1 : 0);
   address_.assign(reinterpret_cast<const char*>(&addr), length);
 
-  fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  // Non-blocking: a full queue at systemd's end must not stall the io
+  // thread (a missed WATCHDOG=1 or STATUS= is dropped, not waited for).
+  fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
   if (fd_ < 0) setup_error_ = std::string("cannot create a datagram socket: ") + std::strerror(errno);
 }
 
@@ -64,7 +81,7 @@ bool SystemdNotifier::notify(std::string_view message) const {
   const auto* addr = reinterpret_cast<const sockaddr*>(address_.data());
   const auto length = static_cast<socklen_t>(address_.size());
   for (;;) {
-    const ssize_t sent = ::sendto(fd_, message.data(), message.size(), MSG_NOSIGNAL, addr, length);
+    const ssize_t sent = ::sendto(fd_, message.data(), message.size(), MSG_NOSIGNAL | MSG_DONTWAIT, addr, length);
     if (sent >= 0) return static_cast<std::size_t>(sent) == message.size();
     if (errno != EINTR) return false;
   }
@@ -103,7 +120,8 @@ WatchdogFeeder::WatchdogFeeder(const SystemdNotifier& notifier, const std::atomi
 WatchdogFeeder::WatchdogFeeder(const SystemdNotifier& notifier, const std::atomic<std::uint64_t>& heartbeat,
                                std::optional<std::chrono::microseconds> interval)
     : notifier_(notifier), heartbeat_(heartbeat), last_beat_(heartbeat.load(std::memory_order_relaxed)) {
-  if (interval && interval->count() > 0) period_ = std::chrono::duration_cast<Clock::duration>(*interval) / 2;
+  if (interval && interval->count() > 0 && *interval <= kMaxWatchdogInterval)
+    period_ = std::chrono::duration_cast<Clock::duration>(*interval) / 2;
 }
 
 std::optional<WatchdogFeeder::Clock::duration> WatchdogFeeder::poll_period() const noexcept {

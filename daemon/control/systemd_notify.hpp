@@ -48,13 +48,27 @@ class SystemdNotifier {
 
   // Why $NOTIFY_SOCKET was not usable (empty when it was, or was unset).
   const std::string& setup_error() const noexcept { return setup_error_; }
+  // Why $WATCHDOG_USEC was not used (empty when it was, or was unset, or is
+  // meant for another process): not a number, or above kMaxWatchdogInterval.
+  const std::string& watchdog_error() const noexcept { return watchdog_error_; }
 
  private:
   int fd_ = -1;
   std::string address_;  // sockaddr_un bytes: family + path (abstract: leading NUL)
   std::optional<std::chrono::microseconds> watchdog_;
   std::string setup_error_;
+  std::string watchdog_error_;
 };
+
+// Longer than this (11.6 days) a watchdog interval is a misconfiguration,
+// not a watchdog, and is not used: the feeder works in nanoseconds, which
+// $WATCHDOG_USEC=10000000000000000 overflowed (UB).
+inline constexpr std::chrono::microseconds kMaxWatchdogInterval{1'000'000'000'000};
+
+// The watchdog interval $WATCHDOG_USEC gives (`usec`, the variable's text),
+// or nullopt: unset or 0 (no watchdog), or not usable, said in *problem
+// ("WATCHDOG_USEC=... is not a number of microseconds", "... is above ...").
+std::optional<std::chrono::microseconds> parse_watchdog_usec(const char* usec, std::string* problem);
 
 // Feeds the watchdog from a heartbeat. Call poll(now) from a periodic timer
 // at least every interval/4; it sends WATCHDOG=1 when at least interval/2
@@ -63,8 +77,9 @@ class WatchdogFeeder {
  public:
   using Clock = std::chrono::steady_clock;
 
-  // Interval from the notifier; nullopt disables feeding. `heartbeat` is
-  // read with relaxed loads and must outlive the feeder.
+  // Interval from the notifier; nullopt, <= 0 or above kMaxWatchdogInterval
+  // disables feeding. `heartbeat` is read with relaxed loads and must
+  // outlive the feeder.
   WatchdogFeeder(const SystemdNotifier& notifier, const std::atomic<std::uint64_t>& heartbeat);
   WatchdogFeeder(const SystemdNotifier& notifier, const std::atomic<std::uint64_t>& heartbeat,
                  std::optional<std::chrono::microseconds> interval);

@@ -597,13 +597,16 @@ int Service::run() {
     systemd_ = std::make_unique<control::SystemdNotifier>();
     if (!systemd_->setup_error().empty())
       std::fprintf(options_.err, "tissued: systemd notifications off: %s\n", systemd_->setup_error().c_str());
+    if (!systemd_->watchdog_error().empty())
+      std::fprintf(options_.err, "tissued: systemd watchdog off: %s\n", systemd_->watchdog_error().c_str());
     watchdog_ = std::make_unique<control::WatchdogFeeder>(*systemd_, heartbeat_);
     start_threads();
     server_ = std::make_unique<control::ControlServer>(io_, control::ServerSettings::from_spec(config_.control), *this);
     server_->start();
-    if (!options_.record_name.empty())
+    if (!options_.record_name.empty()) {
+      record::validate_client_session_name(options_.record_name);
       start_recording(options_.record_name);
-    else if (config_.record.auto_start)
+    } else if (config_.record.auto_start)
       start_automatic_recording();
   } catch (const std::exception& e) {
     std::fprintf(options_.err, "tissued: %s\n", e.what());
@@ -765,6 +768,15 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
 }
 
 nlohmann::json Service::record_start(const std::string& name) {
+  // A name that cannot be the client's is refused before anything stops:
+  // an automatic recording goes on.
+  if (!name.empty()) {
+    try {
+      record::validate_client_session_name(name);
+    } catch (const record::RecordError& e) {
+      throw control::ControlError(e.what());
+    }
+  }
   // The daemon's own recording gives way to a client's (the lab's "record
   // this as exp1.h5"); a client's is stopped by a client.
   if (recorder_ && recorder_->state() == record::RecorderState::kRecording) {

@@ -7,9 +7,12 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <climits>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 namespace tissue::util {
@@ -20,22 +23,38 @@ bool all_digits(const std::string& s, std::size_t max_length) {
   return !s.empty() && s.size() <= max_length && s.find_first_not_of("0123456789") == std::string::npos;
 }
 
+// One octet of a dotted IPv4 address: 1 to 3 digits, at most 255, no sign,
+// space or leading zero (inet_aton, which LCM uses, reads "010" as octal 8).
+std::optional<std::uint32_t> octet(std::string_view s) {
+  if (s.empty() || s.size() > 3 || s.find_first_not_of("0123456789") != std::string_view::npos) return std::nullopt;
+  if (s.size() > 1 && s[0] == '0') return std::nullopt;
+  std::uint32_t v = 0;
+  for (const char c : s) v = v * 10 + static_cast<std::uint32_t>(c - '0');
+  if (v > 255) return std::nullopt;
+  return v;
+}
+
 // The multicast group of a udpm:// URL in host byte order; false when the
-// URL does not start with a dotted IPv4 multicast address.
+// URL does not start with a dotted IPv4 multicast address (four octets as
+// above: sscanf's %d accepted "4294967535.255.76.67" as 239.255.76.67, signs
+// and spaces, and overflowed on long numbers).
 bool udpm_group(const std::string& url, std::uint32_t* group) {
   if (url.rfind("udpm://", 0) != 0) return false;
   const std::string rest = url.substr(7);
   const std::string address = rest.substr(0, rest.find('?'));
-  const std::string host = address.substr(0, address.rfind(':'));
-  int octets[4] = {-1, -1, -1, -1};
-  char tail = 0;
-  if (std::sscanf(host.c_str(), "%d.%d.%d.%d%c", &octets[0], &octets[1], &octets[2], &octets[3], &tail) != 4)
-    return false;
-  if (octets[0] < 224 || octets[0] > 239) return false;
-  for (int i = 1; i < 4; ++i)
-    if (octets[i] < 0 || octets[i] > 255) return false;
-  *group = static_cast<std::uint32_t>(octets[0]) << 24 | static_cast<std::uint32_t>(octets[1]) << 16 |
-           static_cast<std::uint32_t>(octets[2]) << 8 | static_cast<std::uint32_t>(octets[3]);
+  const std::string_view host = std::string_view(address).substr(0, address.rfind(':'));
+  std::uint32_t value = 0;
+  std::size_t at = 0;
+  for (int i = 0; i < 4; ++i) {
+    const std::size_t dot = i < 3 ? host.find('.', at) : host.size();
+    if (dot == std::string_view::npos) return false;
+    const std::optional<std::uint32_t> o = octet(host.substr(at, dot - at));
+    if (!o) return false;
+    value = value << 8 | *o;
+    at = dot + 1;
+  }
+  if (value >> 28 != 0xeu) return false;  // 224.0.0.0/4
+  *group = value;
   return true;
 }
 
@@ -103,6 +122,12 @@ std::string lcm_start_failure(const std::string& url) {
   return lcm_start_failure(url, text.str());
 }
 
+int poll_timeout_ms(double timeout_s) {
+  if (!(timeout_s > 0.0)) return 0;
+  const double ms = std::ceil(timeout_s * 1000.0);
+  return ms >= static_cast<double>(INT_MAX) ? INT_MAX : static_cast<int>(ms);
+}
+
 std::string tcpq_server_problem(const std::string& url, double timeout_s) {
   if (url.rfind("tcpq://", 0) != 0) return {};
   const std::string rest = url.substr(7);
@@ -124,7 +149,7 @@ std::string tcpq_server_problem(const std::string& url, double timeout_s) {
   std::snprintf(seconds, sizeof seconds, "%g s", timeout_s);
   const auto wait_for = [&](short events) {
     pollfd p{fd, events, 0};
-    return ::poll(&p, 1, static_cast<int>(timeout_s * 1000.0)) == 1 && (p.revents & events) != 0;
+    return ::poll(&p, 1, poll_timeout_ms(timeout_s)) == 1 && (p.revents & events) != 0;
   };
   if (fd < 0) {
     why = std::string("cannot create a socket: ") + std::strerror(errno);

@@ -37,4 +37,9 @@ std::string lcm_start_failure(const std::string& url);
 // and the protocol version, big-endian (LCM's lcm_tcpq.c).
 std::string tcpq_server_problem(const std::string& url, double timeout_s);
 
+// `timeout_s` as poll(2)'s milliseconds: rounded up (0.0001 s waits 1 ms,
+// not 0), at most INT_MAX (1e7 s overflowed int to a negative timeout, which
+// poll takes as "forever"); 0 for a timeout that is not > 0 (NaN included).
+int poll_timeout_ms(double timeout_s);
+
 }  // namespace tissue::util

@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <climits>
 #include <cstdio>
@@ -54,16 +55,31 @@ bool through_proc(const std::string& path) {
   return false;
 }
 
-std::string write_output_file(const std::string& path, std::string_view text) {
+namespace {
+
+// ".NAME.tmp-PID-N" in `dir`: hidden from listings and globs, unique to this
+// process and call; NAME cut so the whole fits the 255 bytes of a name.
+std::string temporary_name(const std::string& dir, const std::string& name) {
+  static std::atomic<unsigned> counter{0};
+  std::string out = dir;
+  if (!out.empty() && out.back() != '/') out += '/';
+  out.append(".").append(name.substr(0, 200)).append(".tmp-").append(std::to_string(::getpid()));
+  out.append("-").append(std::to_string(counter.fetch_add(1)));
+  return out;
+}
+
+}  // namespace
+
+std::string PendingOutputFile::open(const std::string& path) {
+  abandon();
   struct stat st {};
   const bool exists = ::stat(path.c_str(), &st) == 0;
   if (exists && S_ISDIR(st.st_mode)) return "is a directory";
   if (exists && (!S_ISREG(st.st_mode) || through_proc(path))) {
-    const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | (S_ISREG(st.st_mode) ? O_APPEND : 0));
-    if (fd < 0) return std::strerror(errno);
-    int err = write_all(fd, text);
-    if (::close(fd) != 0 && err == 0) err = errno;
-    return err == 0 ? std::string() : std::string(std::strerror(err));
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | (S_ISREG(st.st_mode) ? O_APPEND : 0));
+    if (fd_ < 0) return std::strerror(errno);
+    target_ = path;
+    return {};
   }
   std::string target = path;
   struct stat link {};
@@ -74,17 +90,61 @@ std::string write_output_file(const std::string& path, std::string_view text) {
       std::free(resolved);
     }
   }
-  const std::string tmp = target + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
-  if (fd < 0) return "cannot create '" + tmp + "': " + std::strerror(errno);
-  int err = write_all(fd, text);
-  if (::close(fd) != 0 && err == 0) err = errno;
-  if (err == 0 && std::rename(tmp.c_str(), target.c_str()) != 0) err = errno;
+  const std::filesystem::path p(target);
+  const std::string dir = p.has_parent_path() ? p.parent_path().string() : std::string(".");
+  // A name another writer (or anyone) took is skipped, never opened.
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    const std::string tmp = temporary_name(p.has_parent_path() ? dir : std::string(), p.filename().string());
+    fd_ = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
+    if (fd_ >= 0) {
+      target_ = target;
+      tmp_ = tmp;
+      return {};
+    }
+    if (errno != EEXIST) break;
+  }
+  return "cannot create a temporary file in '" + dir + "': " + std::strerror(errno);
+}
+
+std::string PendingOutputFile::commit(std::string_view text) {
+  if (fd_ < 0) return "not open";
+  int err = write_all(fd_, text);
+  // On disk before it replaces anything: a crash after the rename must not
+  // leave an empty file where the old one was.
+  if (err == 0 && !tmp_.empty() && ::fsync(fd_) != 0) err = errno;
+  if (::close(fd_) != 0 && err == 0) err = errno;
+  fd_ = -1;
+  if (err == 0 && !tmp_.empty() && std::rename(tmp_.c_str(), target_.c_str()) != 0) err = errno;
   if (err != 0) {
-    ::unlink(tmp.c_str());  // after saving errno: unlink may change it
+    abandon();  // after saving errno: unlink may change it
     return std::strerror(err);
   }
+  if (!tmp_.empty()) {
+    // The rename itself, durable (best effort: some filesystems refuse it).
+    const std::filesystem::path p(target_);
+    const int dir = ::open(p.has_parent_path() ? p.parent_path().c_str() : ".", O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dir >= 0) {
+      ::fsync(dir);
+      ::close(dir);
+    }
+  }
+  tmp_.clear();
+  target_.clear();
   return {};
+}
+
+void PendingOutputFile::abandon() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  if (!tmp_.empty()) ::unlink(tmp_.c_str());
+  tmp_.clear();
+  target_.clear();
+}
+
+std::string write_output_file(const std::string& path, std::string_view text) {
+  PendingOutputFile file;
+  if (std::string why = file.open(path); !why.empty()) return why;
+  return file.commit(text);
 }
 
 bool is_standard_output(const std::string& path) {

@@ -22,6 +22,38 @@ std::optional<double> whole_number(std::string_view text) {
   return v;
 }
 
+std::optional<Utf8Char> decode_utf8(std::string_view text, std::size_t at, std::size_t* bad_byte) {
+  if (bad_byte != nullptr) *bad_byte = at;
+  if (at >= text.size()) return std::nullopt;
+  const auto lead = static_cast<unsigned char>(text[at]);
+  Utf8Char c;
+  if (lead < 0x80) {
+    c = {lead, 1};
+  } else if (lead >= 0xc2 && lead <= 0xdf) {
+    c = {lead & 0x1fu, 2};
+  } else if (lead >= 0xe0 && lead <= 0xef) {
+    c = {lead & 0x0fu, 3};
+  } else if (lead >= 0xf0 && lead <= 0xf4) {
+    c = {lead & 0x07u, 4};
+  } else {
+    return std::nullopt;
+  }
+  if (at + c.length > text.size()) return std::nullopt;
+  for (std::size_t k = 1; k < c.length; ++k) {
+    const auto next = static_cast<unsigned char>(text[at + k]);
+    if ((next & 0xc0u) != 0x80u) {
+      if (bad_byte != nullptr) *bad_byte = at + k;
+      return std::nullopt;
+    }
+    c.code = (c.code << 6) | (next & 0x3fu);
+  }
+  // Overlong forms, UTF-16 surrogates and code points beyond U+10FFFF.
+  if ((c.length == 3 && c.code < 0x800) || (c.length == 4 && (c.code < 0x10000 || c.code > 0x10ffff)) ||
+      (c.code >= 0xd800 && c.code <= 0xdfff))
+    return std::nullopt;
+  return c;
+}
+
 std::string why_not_clean_text(std::string_view text) {
   const auto byte_error = [&](std::size_t at) {
     char buf[64];
@@ -31,42 +63,17 @@ std::string why_not_clean_text(std::string_view text) {
   };
   std::size_t character = 0;
   for (std::size_t i = 0; i < text.size();) {
-    const auto lead = static_cast<unsigned char>(text[i]);
-    std::uint32_t code = 0;
-    std::size_t length = 0;
-    if (lead < 0x80) {
-      code = lead;
-      length = 1;
-    } else if (lead >= 0xc2 && lead <= 0xdf) {
-      code = lead & 0x1fu;
-      length = 2;
-    } else if (lead >= 0xe0 && lead <= 0xef) {
-      code = lead & 0x0fu;
-      length = 3;
-    } else if (lead >= 0xf0 && lead <= 0xf4) {
-      code = lead & 0x07u;
-      length = 4;
-    } else {
-      return byte_error(i);
-    }
-    if (i + length > text.size()) return byte_error(i);
-    for (std::size_t k = 1; k < length; ++k) {
-      const auto next = static_cast<unsigned char>(text[i + k]);
-      if ((next & 0xc0u) != 0x80u) return byte_error(i + k);
-      code = (code << 6) | (next & 0x3fu);
-    }
-    // Overlong forms, UTF-16 surrogates and code points beyond U+10FFFF.
-    if ((length == 3 && code < 0x800) || (length == 4 && (code < 0x10000 || code > 0x10ffff)) ||
-        (code >= 0xd800 && code <= 0xdfff))
-      return byte_error(i);
+    std::size_t bad = i;
+    const std::optional<Utf8Char> c = decode_utf8(text, i, &bad);
+    if (!c) return byte_error(bad);
     ++character;
-    if (code < 0x20 || (code >= 0x7f && code <= 0x9f) || code == 0x2028 || code == 0x2029) {
+    if (c->code < 0x20 || (c->code >= 0x7f && c->code <= 0x9f) || c->code == 0x2028 || c->code == 0x2029) {
       char buf[80];
       std::snprintf(buf, sizeof buf, "character %zu is a control character (U+%04X)", character,
-                    static_cast<unsigned>(code));
+                    static_cast<unsigned>(c->code));
       return buf;
     }
-    i += length;
+    i += c->length;
   }
   return {};
 }

@@ -4,11 +4,27 @@
 // carry escape sequences or line breaks.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
 
 namespace tissue::util {
+
+// One character of UTF-8 text: its code point and how many bytes it takes.
+struct Utf8Char {
+  std::uint32_t code = 0;
+  std::size_t length = 0;
+};
+
+// The character that starts at byte `at` of `text`, or nullopt when the
+// bytes there are not UTF-8 (a stray continuation byte, a sequence cut
+// short, an overlong form, a UTF-16 surrogate, beyond U+10FFFF); then
+// *bad_byte (when given) is the byte to blame: the first that does not
+// continue the sequence, else `at`. The one UTF-8 reader of the checks
+// below and of XML escaping (util/xml.hpp).
+std::optional<Utf8Char> decode_utf8(std::string_view text, std::size_t at, std::size_t* bad_byte = nullptr);
 
 // "" when `text` is valid UTF-8 (no overlong forms, no surrogates, nothing
 // above U+10FFFF) with no control character (C0, DEL, C1) nor line or

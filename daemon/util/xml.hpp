@@ -1,6 +1,5 @@
-// XML text and attribute escaping, shared by the X3D export and the XDMF
-// sidecar writer. Header-only: both libraries use it without linking the
-// simulation library.
+// XML text and attribute escaping, shared by the X3D export, the XDMF
+// sidecar writer and the trade study's SVG plot (all link tissue_util).
 #pragma once
 
 #include <string>
@@ -8,33 +7,15 @@
 
 namespace tissue::util {
 
-// `s` with & < > ' " replaced by their entities: safe in element text and
-// in attributes quoted with either quote.
-inline std::string escape_xml(std::string_view s) {
-  std::string out;
-  out.reserve(s.size());
-  for (const char c : s) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '\'':
-        out += "&apos;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
+// `s` as XML 1.0 character data that is well-formed wherever it goes: in
+// element text and in attributes quoted with either quote.
+// - & < > ' " become their entities;
+// - tab, newline and carriage return become &#9; &#10; &#13; (an attribute
+//   value's parser would turn them into spaces, and a CR would be lost);
+// - what XML 1.0 does not allow at all (the other C0 control characters,
+//   U+FFFE, U+FFFF) and bytes that are not UTF-8 become U+FFFD, one per
+//   offending byte or character.
+// A title taken from a file name ($'a\x01.h5') made ill-formed XML before.
+std::string escape_xml(std::string_view s);
 
 }  // namespace tissue::util

@@ -433,12 +433,62 @@ TEST_F(TissuedProcess, BadCommandLineExits2) {
   EXPECT_TRUE(contains(no_mode.err, "--batch")) << no_mode.err;
 }
 
+// Seconds past what a clock or a counter holds: the service's --duration
+// timer converted 1e10 s to nanoseconds (UB; the service stopped at once),
+// and --progress 1e-20 made the run count lines past a long long. Both are
+// a bad command line naming the option and its range, before anything runs
+// (the config here does not exist: the option is refused before it is read).
+TEST_F(TissuedProcess, SecondsOutOfRangeAreABadCommandLine) {
+  const std::string config = (dir_ / "not-read.yaml").string();
+  for (const char* duration : {"1e10", "1000000001", "1e300"}) {
+    const Process p = run({"--config", config, "--duration", duration});
+    EXPECT_EQ(p.exit_code, 2) << duration;
+    EXPECT_TRUE(contains(p.err, "--duration")) << p.err;
+    EXPECT_TRUE(contains(p.err, "must be a finite number of seconds in [0, 1000000000] (got " + std::string(duration)))
+        << p.err;
+  }
+  // (A scene that does not exist either: were the bound gone, this would
+  // fail on the scene instead of running for 2e9 simulated seconds.)
+  const Process long_batch = run({"--batch", "--scene", (dir_ / "no-scene.yaml").string(), "--duration", "2e9"});
+  EXPECT_EQ(long_batch.exit_code, 2) << long_batch.err;
+  EXPECT_TRUE(contains(long_batch.err, "--duration")) << long_batch.err;
+  for (const char* progress : {"1e-20", "0.0009", "-1", "1e10"}) {
+    const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.01", "--progress", progress});
+    EXPECT_EQ(p.exit_code, 2) << progress << ": " << p.err;
+    EXPECT_TRUE(contains(p.err, "--progress")) << p.err;
+    EXPECT_TRUE(contains(p.err, "must be 0 (quiet) or a number of seconds in [0.001, 1000000000]")) << p.err;
+    EXPECT_EQ(p.out, "") << "nothing ran";
+  }
+  // The bounds themselves are fine.
+  const Process finest = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.01", "--progress", "0.001"});
+  EXPECT_EQ(finest.exit_code, 0) << finest.err;
+  EXPECT_TRUE(contains(finest.out, "done")) << finest.out;
+}
+
 TEST_F(TissuedProcess, UnwritableReportExits4NamingThePath) {
   const std::string path = "/proc/forbidden/report.json";
   const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.01", "--report", path});
   EXPECT_EQ(p.exit_code, 4);
   EXPECT_TRUE(contains(p.err, "cannot write report " + path)) << p.err;
   EXPECT_TRUE(contains(p.err, "No such file or directory")) << p.err;  // the errno reason
+}
+
+// A run that stops before it starts (its --record file exists, and sessions
+// are never overwritten) leaves the user's earlier report as it was: the
+// report was opened with fopen("w"), emptying it, then removed.
+TEST_F(TissuedProcess, ARunThatCannotStartKeepsTheEarlierReport) {
+  const fs::path report = dir_ / "old.json", session = dir_ / "existing.h5";
+  std::ofstream(report) << "{\"earlier\": true}\n";
+  std::ofstream(session) << "not to be overwritten";
+  const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.01", "--report", report.string(),
+                         "--record", session.string()});
+  EXPECT_EQ(p.exit_code, 5) << p.err;
+  EXPECT_TRUE(contains(p.err, "already exists")) << p.err;
+  ASSERT_TRUE(fs::exists(report)) << "the earlier report was removed";
+  EXPECT_EQ(read_file(report), "{\"earlier\": true}\n");
+  EXPECT_EQ(read_file(session), "not to be overwritten");
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_NE(e.path().filename().string().front(), '.') << "a temporary file was left behind: " << e.path();
 }
 
 // The report and the session (--record) of a failed run both end with the reason.

@@ -261,11 +261,16 @@ TEST(DaemonConfigYaml, ValuesThatWouldHangOrOverflowAClockAreRefused) {
   expect_error(edit("rate_hz: 1000", "rate_hz: 1e-300"), "haptics.rate_hz", "must be >= 1");
   expect_error(edit("rate_hz: 1000", "rate_hz: 5e-324"), "haptics.rate_hz", "its clock");
   expect_error(edit("status_interval_s: 1.0", "status_interval_s: 1e308"), "status_interval_s", "must be <= 3600");
+  // The UDP device's timeout in int64 nanoseconds: llround(1e10 * 1e9) was out of range.
+  expect_error(edit("kind: sim", "kind: udp"), "device.udp.timeout_s", "must be <= 60 (got 1e+10)",
+               {"device.udp.timeout_s=1e10"});
+  expect_error(kBase, "device.udp.timeout_s", "must be <= 60", {"device.udp.timeout_s=61"});
   expect_error(kBase, "publish.mesh_rate_hz", "must be in [0.01, 1000] Hz (got 1e-300)",
                {"publish.mesh_rate_hz=1e-300"});
   // The bounds themselves are fine.
   EXPECT_NO_THROW(parse_daemon_config(edit("ramp_out_s: 0.05", "ramp_out_s: 1"), kSource));
   EXPECT_NO_THROW(parse_daemon_config(edit("rate_hz: 1000", "rate_hz: 1"), kSource));
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.udp.timeout_s=60"}));
 }
 
 // record: off by default in code (the shipped config turns it on), a new

@@ -7,10 +7,12 @@
 #include <sys/socket.h>
 #include <sys/time.h>
 #include <sys/un.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
+#include <csignal>
 #include <cstddef>
 #include <cstdlib>
 #include <cstring>
@@ -99,6 +101,67 @@ TEST(SystemdNotify, WatchdogMeantForAnotherProcessIsIgnored) {
     ScopedEnv garbage("WATCHDOG_USEC", "12abc");
     EXPECT_FALSE(SystemdNotifier().watchdog_interval().has_value());
   }
+}
+
+// $WATCHDOG_USEC=10000000000000000 became an interval the feeder converted
+// to nanoseconds, overflowing int64 (UB); a value past 11.6 days is refused
+// as no watchdog, and said, as is one that is not a number.
+TEST(SystemdNotify, AnAbsurdWatchdogIntervalIsNoWatchdogAndSaysSo) {
+  std::string problem;
+  EXPECT_EQ(parse_watchdog_usec("3000000", &problem), 3s);
+  EXPECT_EQ(problem, "");
+  EXPECT_EQ(parse_watchdog_usec("1000000000000", &problem), kMaxWatchdogInterval) << "the bound itself is fine";
+  EXPECT_FALSE(parse_watchdog_usec(nullptr, &problem).has_value());
+  EXPECT_EQ(problem, "");
+  EXPECT_FALSE(parse_watchdog_usec("0", &problem).has_value());
+  EXPECT_EQ(problem, "");
+  for (const char* absurd : {"10000000000000000", "1000000000001", "18446744073709551615"}) {
+    EXPECT_FALSE(parse_watchdog_usec(absurd, &problem).has_value()) << absurd;
+    EXPECT_EQ(problem, "WATCHDOG_USEC=" + std::string(absurd) +
+                           " is above 1000000000000 (11.6 days): not a watchdog (check WatchdogSec=)");
+  }
+  for (const char* garbage : {"12abc", "-5", "99999999999999999999999"}) {
+    EXPECT_FALSE(parse_watchdog_usec(garbage, &problem).has_value()) << garbage;
+    EXPECT_EQ(problem, "WATCHDOG_USEC=" + std::string(garbage) + " is not a number of microseconds");
+  }
+  ScopedEnv w("WATCHDOG_USEC", "10000000000000000");
+  ScopedEnv p("WATCHDOG_PID", nullptr);
+  const SystemdNotifier n;
+  EXPECT_FALSE(n.watchdog_interval().has_value());
+  EXPECT_NE(n.watchdog_error().find("is above"), std::string::npos) << n.watchdog_error();
+  std::atomic<std::uint64_t> heartbeat{0};
+  EXPECT_FALSE(WatchdogFeeder(n, heartbeat).enabled());
+  EXPECT_FALSE(WatchdogFeeder(n, heartbeat, std::chrono::microseconds(10000000000000000)).enabled());
+  EXPECT_TRUE(WatchdogFeeder(n, heartbeat, kMaxWatchdogInterval).enabled());
+}
+
+// The io thread sends these: a manager that stops reading (its queue full)
+// must cost a dropped message, not a blocked thread. Sent from a child
+// process so that a blocking send fails the test instead of hanging it.
+TEST(SystemdNotify, AFullQueueDropsTheMessageInsteadOfBlocking) {
+  TempDir dir;
+  const std::string path = dir / "notify";
+  FakeSystemd systemd(path);  // never read until the end
+  ScopedEnv s("NOTIFY_SOCKET", path.c_str());
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const SystemdNotifier n;
+    int refused = 0;
+    for (int i = 0; i < 100000 && refused == 0; ++i)
+      if (!n.status("a status line that fills the queue")) refused = 1;
+    ::_exit(refused == 1 ? 0 : 2);
+  }
+  int status = 0;
+  pid_t done = 0;
+  for (int i = 0; i < 500 && (done = ::waitpid(child, &status, WNOHANG)) == 0; ++i) ::usleep(10000);
+  if (done == 0) {
+    ::kill(child, SIGKILL);
+    ::waitpid(child, &status, 0);
+    FAIL() << "a send to a full queue blocked for 5 s";
+  }
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "status " << status;
+  EXPECT_TRUE(systemd.receive().has_value()) << "the messages before the queue filled arrived";
 }
 
 TEST(SystemdNotify, FeederFeedsOnlyWhileTheHeartbeatMoves) {

@@ -238,6 +238,37 @@ TEST(SessionWriter, AbandonedCreationsOfGoneProcessesAreRemoved) {
   EXPECT_TRUE(remove_abandoned_creations(dir / "missing").empty());
 }
 
+// record.keep_gb removes old files named like the automatic recordings, so
+// a client may not give such a name: "auto-20000101-000000.h5" from
+// record_start would have been deleted at the next rotation. Any "auto-"
+// name is the daemon's; other names pass as validate_session_name lets them.
+TEST(SessionWriter, AClientNameStartingLikeTheAutomaticRecordingsIsRefused) {
+  TempDir dir;
+  for (const std::string& automatic : {std::string("auto-20000101-000000.h5"), std::string("auto-20261101-010000-2.h5"),
+                                       std::string("auto-notes.h5")}) {
+    try {
+      validate_client_session_name(automatic);
+      ADD_FAILURE() << "accepted '" << automatic << "'";
+    } catch (const RecordError& e) {
+      const std::string why = e.what();
+      EXPECT_NE(why.find("'" + automatic + "' rejected: it starts with 'auto-'"), std::string::npos) << why;
+      EXPECT_NE(why.find("record.keep_gb removes"), std::string::npos) << why;
+    }
+  }
+  // Refused the way validate_session_name refuses, first.
+  try {
+    validate_client_session_name("auto-x/../y.h5");
+    ADD_FAILURE() << "accepted a path";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find("contains '/'"), std::string::npos) << e.what();
+  }
+  for (const char* fine : {"mine.h5", "automatic.h5", "my-auto-20000101-000000.h5", "Auto-1.h5"})
+    EXPECT_NO_THROW(validate_client_session_name(fine)) << fine;
+  // The daemon's own name for an automatic file still records.
+  SessionWriter::open_in(dir.path(), "auto-20000101-000000.h5", test_metadata())->close();
+  EXPECT_TRUE(std::filesystem::exists(dir / "auto-20000101-000000.h5"));
+}
+
 // Oldest first is by the time in the name, and only then by "-K": a
 // second file of an early second goes before the first file of a later one.
 TEST(SessionWriter, AnOlderAutomaticRecordingGoesFirstWhateverItsSuffix) {

@@ -731,6 +731,15 @@ TEST(Service, RecordsOnItsOwnAndRotatesTheFile) {
   EXPECT_EQ(recording["state"], "recording");
   std::this_thread::sleep_for(2500ms);
   EXPECT_GE(session_files(state).size(), 2u) << "rotated at least once in 2.5 s";
+  // A client's name the budget would take for an automatic file's is
+  // refused (record.keep_gb would delete it), and the automatic file goes on.
+  const nlohmann::json automatic_name = client.call("record_start", {{"name", "auto-20000101-000000.h5"}});
+  EXPECT_FALSE(automatic_name["ok"].get<bool>()) << automatic_name.dump();
+  EXPECT_NE(automatic_name.value("error", "").find("starts with 'auto-'"), std::string::npos) << automatic_name.dump();
+  EXPECT_FALSE(std::filesystem::exists(state + "/auto-20000101-000000.h5"));
+  recording = client.call("status")["result"]["recording"];
+  EXPECT_TRUE(recording["automatic"].get<bool>()) << recording.dump();
+  EXPECT_EQ(recording["state"], "recording") << recording.dump();
   // A client's record_start takes over (the automatic file ends), and is
   // neither rotated nor refused as "already recording".
   const nlohmann::json mine = client.call("record_start", {{"name", "mine.h5"}});

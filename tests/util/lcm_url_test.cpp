@@ -7,6 +7,8 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <climits>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <thread>
@@ -66,6 +68,40 @@ TEST(LcmUrl, UdpmUrlProblemsAreNamed) {
   EXPECT_NE(udpm_url_problem("udpm://239.255.76.67:99999").find("port"), std::string::npos);
   EXPECT_NE(udpm_url_problem("udpm://239.255.76.67:7667?ttl=-3").find("ttl"), std::string::npos);
   EXPECT_NE(udpm_url_problem("udpm://239.255.76.67:7667?ttl=256").find("ttl"), std::string::npos);
+}
+
+// The group is four dotted octets of 1 to 3 digits, each at most 255:
+// sscanf's %d took "4294967535" (2^32 + 239, overflowing int: UB) as 239,
+// and signs, spaces and leading zeros (octal to LCM's inet_aton) as well.
+TEST(LcmUrl, TheGroupIsFourPlainOctets) {
+  for (const char* good :
+       {"udpm://239.255.76.67:7667", "udpm://224.0.0.0", "udpm://239.255.255.255:1?ttl=1", "udpm://230.0.10.100:7667"})
+    EXPECT_EQ(udpm_url_problem(good), "") << good;
+  for (const char* bad :
+       {"udpm://4294967535.255.76.67:7667", "udpm://239.4294967551.76.67:7667", "udpm://99999999999.1.1.1",
+        "udpm:// 239.255.76.67:7667", "udpm://+239.255.76.67:7667", "udpm://239.-0.76.67:7667",
+        "udpm://239.255. 76.67:7667", "udpm://239.255.76.067:7667", "udpm://0239.255.76.67:7667",
+        "udpm://239.255.76:7667", "udpm://239.255.76.67.1:7667", "udpm://239..76.67:7667", "udpm://239.255.76.67x:7667",
+        "udpm://239.256.76.67:7667", "udpm://240.0.0.1:7667", "udpm://223.255.255.255:7667", "udpm://:7667"})
+    EXPECT_NE(udpm_url_problem(bad).find("multicast address"), std::string::npos) << bad;
+  // A route check never reads such a group: it is blamed on LCM, not the route.
+  EXPECT_EQ(lcm_start_failure("udpm://4294967535.255.76.67:7667", kLanOnly).find("route"), std::string::npos);
+}
+
+// poll(2) takes int milliseconds: --timeout 1e7 went through
+// static_cast<int>(1e10), negative here, and poll waited forever; 0.0001 s
+// became 0 and did not wait at all.
+TEST(LcmUrl, PollTimeoutsRoundUpAndStayInRange) {
+  EXPECT_EQ(poll_timeout_ms(1.0), 1000);
+  EXPECT_EQ(poll_timeout_ms(0.0001), 1);
+  EXPECT_EQ(poll_timeout_ms(0.0015), 2);
+  EXPECT_EQ(poll_timeout_ms(1e7), INT_MAX);
+  EXPECT_EQ(poll_timeout_ms(1e300), INT_MAX);
+  EXPECT_EQ(poll_timeout_ms(2147483.647), INT_MAX);
+  EXPECT_EQ(poll_timeout_ms(2147483.0), 2147483000);
+  EXPECT_EQ(poll_timeout_ms(0.0), 0);
+  EXPECT_EQ(poll_timeout_ms(-1.0), 0);
+  EXPECT_EQ(poll_timeout_ms(std::nan("")), 0);
 }
 
 // A loopback TCP listener on a port the kernel picks; `answer` (if not

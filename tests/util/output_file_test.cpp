@@ -7,10 +7,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "support/process_support.hpp"
 
@@ -25,6 +28,14 @@ ino_t inode_of(const std::string& path) {
   struct stat st {};
   EXPECT_EQ(::stat(path.c_str(), &st), 0) << path;
   return st.st_ino;
+}
+
+// The names in `dir`, sorted.
+std::vector<std::string> entries(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
 }
 
 bool is_link(const std::string& path) {
@@ -80,6 +91,59 @@ TEST(OutputFile, ARegularFileIsReplacedAndALinkKeepsPointingAtIt) {
   EXPECT_EQ(slurp(file), "newer");
   EXPECT_FALSE(std::ifstream(dir / "latest.x3d.tmp").good());
   EXPECT_FALSE(std::ifstream(dir / "out.x3d.tmp").good());
+  EXPECT_EQ(entries(dir.path()), (std::vector<std::string>{"latest.x3d", "out.x3d"})) << "a temporary file was left";
+}
+
+// The temporary file was always PATH.tmp, opened with O_TRUNC and without
+// O_EXCL / O_NOFOLLOW: the user's own out.x3d.tmp was clobbered, and a link
+// planted there was followed (its target truncated and overwritten). Now
+// the temporary file is a new one of its own; whatever is there stays.
+TEST(OutputFile, TheTemporaryFileIsNeverOneThatWasThere) {
+  TempDir dir;
+  const std::string out = dir / "out.x3d", sentinel = dir / "sentinel.txt", mine = dir / "notes.x3d.tmp";
+  write_text(sentinel, "precious");
+  write_text(mine, "the user's own .tmp");
+  ASSERT_EQ(::symlink(sentinel.c_str(), (out + ".tmp").c_str()), 0);
+  EXPECT_EQ(write_output_file(out, "<X3D/>"), "");
+  EXPECT_EQ(write_output_file(dir / "notes.x3d", "notes"), "");
+  EXPECT_EQ(slurp(out), "<X3D/>");
+  EXPECT_EQ(slurp(sentinel), "precious") << "the link at out.x3d.tmp was followed";
+  EXPECT_TRUE(is_link(out + ".tmp")) << "the link at out.x3d.tmp was replaced";
+  EXPECT_FALSE(is_link(out));
+  EXPECT_EQ(slurp(mine), "the user's own .tmp");
+  EXPECT_EQ(entries(dir.path()),
+            (std::vector<std::string>{"notes.x3d", "notes.x3d.tmp", "out.x3d", "out.x3d.tmp", "sentinel.txt"}));
+}
+
+// Opened, the path is untouched until commit; abandoned, only the
+// temporary file (hidden, beside the path) goes.
+TEST(OutputFile, APendingFileTouchesThePathOnlyAtCommit) {
+  TempDir dir;
+  const std::string out = dir / "report.json";
+  write_text(out, "earlier");
+  {
+    PendingOutputFile file;
+    ASSERT_EQ(file.open(out), "");
+    const std::string tmp = file.temporary_path();
+    EXPECT_EQ(std::filesystem::path(tmp).parent_path(), std::filesystem::path(dir.path()));
+    EXPECT_EQ(std::filesystem::path(tmp).filename().string().rfind(".report.json.tmp-", 0), 0u) << tmp;
+    EXPECT_EQ(slurp(out), "earlier");
+  }
+  EXPECT_EQ(slurp(out), "earlier");
+  EXPECT_EQ(entries(dir.path()), std::vector<std::string>{"report.json"});
+  PendingOutputFile a, b;  // two writers of one path: each its own temporary file
+  ASSERT_EQ(a.open(out), "");
+  ASSERT_EQ(b.open(out), "");
+  EXPECT_NE(a.temporary_path(), b.temporary_path());
+  EXPECT_EQ(a.commit("a"), "");
+  EXPECT_EQ(b.commit("b"), "");
+  EXPECT_EQ(slurp(out), "b");
+  EXPECT_EQ(entries(dir.path()), std::vector<std::string>{"report.json"});
+  EXPECT_NE(a.commit("again"), "") << "not open any more";
+  EXPECT_EQ(PendingOutputFile()
+                .open(dir / "missing/x.json")
+                .find("cannot create a temporary file in '" + dir.path() + "/missing': No such file or directory"),
+            0u);
 }
 
 // The "wrote PATH" line goes to standard error when PATH is where standard
