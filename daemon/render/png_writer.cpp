@@ -5,10 +5,8 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
-#include <memory>
+#include <new>
 #include <string>
-#include <system_error>
 
 #include "util/output_file.hpp"
 
@@ -35,6 +33,19 @@ void on_png_error(png_structp png, png_const_charp message) {
 
 void on_png_warning(png_structp, png_const_charp) {}  // warnings do not fail a write
 
+// libpng's output, into memory: the picture is encoded whole before the file
+// is touched, then written as every output file is (util::PendingOutputFile).
+void on_png_write(png_structp png, png_bytep data, png_size_t length) {
+  auto* out = static_cast<std::string*>(png_get_io_ptr(png));
+  try {
+    out->append(reinterpret_cast<const char*>(data), length);
+  } catch (const std::bad_alloc&) {
+    png_error(png, "out of memory for the encoded picture");  // longjmps: no exception through libpng
+  }
+}
+
+void on_png_flush(png_structp) {}
+
 }  // namespace
 
 void write_png(const Image& image, const std::string& path) {
@@ -47,19 +58,11 @@ void write_png(const Image& image, const std::string& path) {
     throw RenderError("cannot write " + path + ": the image has " + std::to_string(image.rgba.size()) +
                       " bytes of pixels, " + std::to_string(image.width) + " x " + std::to_string(image.height) +
                       " RGBA needs " + std::to_string(expected_bytes));
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
-  if (!file) throw RenderError("cannot write " + path + ": " + std::strerror(errno));
-  // Whatever fails from here on leaves no truncated picture behind. Only a
-  // regular file named directly is removed: the path may be a device such
-  // as /dev/full, a link (remove() would take the link, not its file), or
-  // /dev/stdout redirected to a file (which would take /dev/stdout itself).
-  const auto fail = [&](const std::string& reason) {
-    file.reset();
-    std::error_code ec;
-    if (std::filesystem::is_regular_file(std::filesystem::symlink_status(path, ec)) && !util::through_proc(path))
-      std::filesystem::remove(path, ec);
-    return RenderError("cannot write " + path + ": " + reason);
-  };
+  // Opened first, so a path that cannot be written fails before the work.
+  util::PendingOutputFile file;
+  if (const std::string why = file.open(path); !why.empty()) throw RenderError("cannot write " + path + ": " + why);
+  const auto fail = [&](const std::string& reason) { return RenderError("cannot write " + path + ": " + reason); };
+  std::string encoded;
   // Static storage: written by the error callback between setjmp and
   // longjmp, so it must not be a local (whose value would be indeterminate).
   static thread_local PngFailure failure;
@@ -79,8 +82,7 @@ void write_png(const Image& image, const std::string& path) {
     throw fail(failure.saved_errno != 0 ? std::string(failure.message) + " (" + std::strerror(failure.saved_errno) + ")"
                                         : std::string(failure.message));
   }
-  errno = 0;
-  png_init_io(png, file.get());
+  png_set_write_fn(png, &encoded, &on_png_write, &on_png_flush);
   png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,
                PNG_COLOR_TYPE_RGBA, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_write_info(png, info);
@@ -88,8 +90,7 @@ void write_png(const Image& image, const std::string& path) {
     png_write_row(png, const_cast<png_bytep>(&image.rgba[4 * static_cast<std::size_t>(y) * image.width]));
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
-  if (std::fflush(file.get()) != 0) throw fail(std::strerror(errno));
-  if (std::fclose(file.release()) != 0) throw fail(std::strerror(errno));
+  if (const std::string why = file.commit(encoded); !why.empty()) throw fail(why);
 }
 
 Image read_png(const std::string& path) {

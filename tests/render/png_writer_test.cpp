@@ -222,12 +222,14 @@ Image noise(int width, int height) {
 TEST(PngWriter, WriteErrorsNameTheFileAndTheReason) {
   TempDir dir;
   const std::string missing = dir / "no/such/dir/x.png";
-  EXPECT_EQ(write_error(pattern(2, 2), missing), "cannot write " + missing + ": No such file or directory");
-  EXPECT_EQ(write_error(pattern(2, 2), dir.path()), "cannot write " + dir.path() + ": Is a directory");
+  // The messages of util::PendingOutputFile, the one writer of output files.
+  EXPECT_EQ(write_error(pattern(2, 2), missing), "cannot write " + missing + ": cannot create a temporary file in '" +
+                                                     dir.path() + "/no/such/dir': No such file or directory");
+  EXPECT_EQ(write_error(pattern(2, 2), dir.path()), "cannot write " + dir.path() + ": is a directory");
   // A full disk: a small picture fails when the buffered bytes are flushed,
   // a large one inside libpng, whose message comes with the system's.
   EXPECT_EQ(write_error(pattern(1, 1), "/dev/full"), "cannot write /dev/full: No space left on device");
-  EXPECT_EQ(write_error(noise(512, 512), "/dev/full"), "cannot write /dev/full: Write Error (No space left on device)");
+  EXPECT_EQ(write_error(noise(512, 512), "/dev/full"), "cannot write /dev/full: No space left on device");
 }
 
 // An image whose size and pixels disagree is refused before the file is
@@ -257,25 +259,36 @@ TEST(PngWriter, AnInconsistentImageIsRefusedBeforeTheFileIsTouched) {
 }
 
 // A write that fails part-way (here the file-size limit, as a full disk
-// would) leaves no truncated picture behind. In a child process: the limit
-// and its signal must not reach the rest of the suite.
+// would) leaves no truncated picture behind, and an older picture at the
+// path stays as it was (it was truncated, then removed). In a child
+// process: the limit and its signal must not reach the rest of the suite.
 // Runs in the child: exit 0 when the write failed with the file and the
-// reason named and no file is left.
+// reason named and the path holds what it held before.
 [[noreturn]] void write_beyond_the_file_size_limit(const std::string& path) {
   std::signal(SIGXFSZ, SIG_IGN);
   rlimit limit{};
   limit.rlim_cur = limit.rlim_max = 4096;
   if (setrlimit(RLIMIT_FSIZE, &limit) != 0) std::_Exit(2);
+  const bool existed = std::filesystem::exists(path);
+  const std::string before = existed ? slurp(path) : std::string();
   const std::string error = write_error(noise(256, 256), path);
   const bool named =
       error.rfind("cannot write " + path + ": ", 0) == 0 && error.find("File too large") != std::string::npos;
-  std::_Exit(named && !std::filesystem::exists(path) ? 0 : 1);
+  const bool as_before =
+      existed ? std::filesystem::exists(path) && slurp(path) == before : !std::filesystem::exists(path);
+  const bool no_temporary =
+      std::distance(std::filesystem::directory_iterator(std::filesystem::path(path).parent_path()),
+                    std::filesystem::directory_iterator()) == (existed ? 1 : 0);
+  std::_Exit(named && as_before && no_temporary ? 0 : 1);
 }
 
-TEST(PngWriter, AWriteThatFailsPartWayLeavesNoFile) {
+TEST(PngWriter, AWriteThatFailsPartWayLeavesThePathAsItWas) {
   TempDir dir;
   const std::string path = dir / "cut.png";
   EXPECT_EXIT(write_beyond_the_file_size_limit(path), ::testing::ExitedWithCode(0), "");
+  write_text(path, "an older picture");
+  EXPECT_EXIT(write_beyond_the_file_size_limit(path), ::testing::ExitedWithCode(0), "");
+  EXPECT_EQ(slurp(path), "an older picture");
 }
 
 // ------------------------------------------------------------- reading
