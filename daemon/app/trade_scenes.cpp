@@ -24,7 +24,9 @@ sc::Region box(sc::Vec3 lo, sc::Vec3 hi) {
 void apply_mesh(sc::Scene& s, const MeshChoice& m) {
   s.adaptivity.enabled = m.adaptive;
   s.adaptivity.criterion = sc::RefineCriterion::kStrainEnergy;
-  s.adaptivity.refine_threshold_Pa = m.th_Pa;
+  // A uniform mesh keeps the scene's threshold (unused: adaptivity is off),
+  // which the scene checks hold to > 0; the uniform choices carry none.
+  if (m.adaptive) s.adaptivity.refine_threshold_Pa = m.th_Pa;
   s.adaptivity.min_depth = m.adaptive ? 0 : m.depth;
   s.adaptivity.max_depth = m.adaptive ? m.max_depth : m.depth;
 }

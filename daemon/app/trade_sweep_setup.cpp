@@ -1,5 +1,6 @@
 #include "app/trade_sweep_setup.hpp"
 
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 
@@ -66,6 +67,36 @@ std::vector<double> default_dts_s(const TradeOptions& o, const SweepSetup& s) {
   return {1e-3, 5e-3};
 }
 
+// Every run the sweep would make, checked before the first: its scene as
+// the scene checks say (--dts 1e-300 or 5, or --depths whose uniform levels
+// exceed the mesh budget, ran as zero-step "ok" points or ran out of memory),
+// and its step count (at least one, at most 1e8).
+void check_runs(const SweepSetup& s) {
+  constexpr double kMaxSteps = 1e8;
+  for (const double dt : s.dts_s) {
+    const double steps = std::round(s.duration_s / dt);
+    if (!(steps >= 1.0 && steps <= kMaxSteps))
+      throw std::invalid_argument("--dts " + yaml_util::fmt_num(dt) + ": a run of " + yaml_util::fmt_num(s.duration_s) +
+                                  " s would take " + yaml_util::fmt_num(steps) + " steps (must be 1 to 1e8)");
+    for (const sc::IntegratorKind kind : s.kinds)
+      for (const int md : s.max_depths) {
+        std::vector<MeshChoice> meshes;
+        for (int level = s.base_depth; level <= md; ++level) meshes.push_back({false, level, 0.0, level});
+        for (const double th : s.th_Pa) meshes.push_back({true, 0, th, md});
+        for (const MeshChoice& m : meshes) {
+          try {
+            sc::validate_scene(sweep_scene(s, m, kind, dt));
+          } catch (const sc::SceneError& e) {
+            throw std::invalid_argument(std::string("the sweep's ") + (m.adaptive ? "adaptive" : "uniform") +
+                                        " run at depth " + std::to_string(m.adaptive ? m.max_depth : m.depth) +
+                                        ", dt " + yaml_util::fmt_num(dt) + " s: " + e.reason() + " (" + e.key_path() +
+                                        ")");
+          }
+        }
+      }
+  }
+}
+
 }  // namespace
 
 SweepSetup make_sweep_setup(const TradeOptions& o, const volatile std::sig_atomic_t* stop) {
@@ -86,6 +117,7 @@ SweepSetup make_sweep_setup(const TradeOptions& o, const volatile std::sig_atomi
   s.kinds = integrator_kinds(o);
   s.dts_s = default_dts_s(o, s);
   s.wall_cap_s = o.run_wall_cap_s > 0 ? o.run_wall_cap_s : (o.quick ? 3.0 : 30.0);
+  check_runs(s);
   return s;
 }
 

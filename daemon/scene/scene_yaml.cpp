@@ -31,8 +31,18 @@ using yaml_util::printable;
 
 // Largest scene file we read; anything bigger is not a hand-written scene.
 constexpr std::uintmax_t kMaxSceneFileBytes = 16u << 20;
-// A guard against typos such as cubes: [4000, 4000, 4] allocating gigabytes.
-constexpr long long kMaxTotalCubes = 10'000'000;
+// The most leaf tets a scene may ask for, at the start (cubes x 6 x
+// 2^min_depth) or by refining (adaptivity.max_tets): about 4 GB (~200 bytes a
+// tet with its springs and nodes). A typo such as cubes: [4000, 4000, 4], or
+// max_tets: 2147483647 with a tiny threshold, ran into std::bad_alloc.
+constexpr long long kMaxTets = 20'000'000;
+constexpr long long kMaxTotalCubes = kMaxTets / 6;
+// A cube's mass (density x cube_size³) and its springs' stiffness scale
+// (E x cube_size) must be ordinary doubles with room for refinement (2^-30),
+// squares and sums: a density of 1e308 overflowed the lumped masses to inf,
+// the free nodes stood still (1/inf = 0) and the report's kinetic energy was
+// NaN (written as null) after a run that said it succeeded.
+constexpr double kMinCubeScale = 1e-100, kMaxCubeScale = 1e100;
 constexpr int kMaxDepthLimit = 30;
 constexpr double kMinDt_s = 1e-7;
 constexpr int kMaxSubsteps = 100'000;
@@ -248,6 +258,17 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     const MaterialSpec& m = s_.material;
     positive(m.youngs_modulus_Pa, "material.youngs_modulus_Pa");
     positive(m.density_kg_per_m3, "material.density_kg_per_m3");
+    const auto representable = [&](double value, double given, const char* key, const std::string& what) {
+      if (!(value >= kMinCubeScale && value <= kMaxCubeScale))
+        fail(key, "with object.cube_size_m " + fmt_num(o.cube_size_m) + ", " + what + " would be " + fmt_num(value) +
+                      ", outside [" + fmt_num(kMinCubeScale) + ", " + fmt_num(kMaxCubeScale) +
+                      "]: beyond what the simulation holds in double precision (got " + fmt_num(given) + ")");
+    };
+    const double cube_m3 = o.cube_size_m * o.cube_size_m * o.cube_size_m;
+    representable(m.density_kg_per_m3 * cube_m3, m.density_kg_per_m3, "material.density_kg_per_m3",
+                  "a cube's mass in kg");
+    representable(m.youngs_modulus_Pa * o.cube_size_m, m.youngs_modulus_Pa, "material.youngs_modulus_Pa",
+                  "the cube's spring stiffness scale (E x cube size) in N/m");
     enumerator(static_cast<int>(m.stiffness), 2, "material.stiffness");
     enumerator(static_cast<int>(m.damping), 2, "material.damping");
     non_negative(m.rayleigh_alpha_per_s, "material.rayleigh_alpha_per_s");
@@ -286,11 +307,10 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     // cube and ran out of memory instead of being refused).
     if (a.min_depth <= kMaxDepthLimit) {
       const double tets = starting_tet_count(s_);
-      if (tets > 6.0 * static_cast<double>(kMaxTotalCubes))
+      if (tets > static_cast<double>(kMaxTets))
         fail("adaptivity.min_depth", "the starting mesh would have " + fmt_num(tets) + " tetrahedra (" +
                                          std::to_string(total_cubes_) + " cubes x 6 x 2^" +
-                                         std::to_string(a.min_depth) + "), more than " +
-                                         std::to_string(6 * kMaxTotalCubes));
+                                         std::to_string(a.min_depth) + "), more than " + std::to_string(kMaxTets));
     }
     // Before min <= max: a negative max_depth was reported at min_depth.
     at_least(a.max_depth, 0, "adaptivity.max_depth");
@@ -303,6 +323,9 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     at_least(a.every_steps, 1, "adaptivity.every_steps");
     at_least(a.max_ops_per_step, 1, "adaptivity.max_ops_per_step");
     at_least(a.max_tets, 1, "adaptivity.max_tets");
+    if (a.max_tets > kMaxTets)
+      fail("adaptivity.max_tets",
+           "must be <= " + std::to_string(kMaxTets) + " (about 4 GB of mesh; got " + std::to_string(a.max_tets) + ")");
     at_least(a.min_age_steps, 0, "adaptivity.min_age_steps");
     positive(a.midpoint_tolerance, "adaptivity.midpoint_tolerance");
 

@@ -459,6 +459,13 @@ TEST_F(TissuedProcess, SecondsOutOfRangeAreABadCommandLine) {
     EXPECT_TRUE(contains(p.err, "must be 0 (quiet) or a number of seconds in [0.001, 1000000000]")) << p.err;
     EXPECT_EQ(p.out, "") << "nothing ran";
   }
+  // A run of more steps than a batch run keeps times for (1e8): 1e9 s at the
+  // smallest dt was accepted and grew by 11 MB/s for centuries.
+  const Process endless = run(
+      {"--batch", "--scene", scene_path("beam"), "--duration", "1e9", "--set", "integrator.dt_s=1e-7", "--no-timing"});
+  EXPECT_EQ(endless.exit_code, 2) << endless.err;
+  EXPECT_TRUE(contains(endless.err, "is 1e+16 steps, more than a batch run takes (1e+08)")) << endless.err;
+  EXPECT_EQ(endless.out, "") << "nothing ran";
   // The bounds themselves are fine.
   const Process finest = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.01", "--progress", "0.001"});
   EXPECT_EQ(finest.exit_code, 0) << finest.err;

@@ -375,7 +375,7 @@ TEST(SceneYamlErrors, PhysicallyMeaninglessValues) {
   expect_error(base_with("min_depth: 0", "min_depth: 4"), "adaptivity.min_depth", "must be <= max_depth");
   // The starting mesh is refined to min_depth everywhere: bounded like the cubes.
   expect_error(base_with("min_depth: 0\n  max_depth: 3", "min_depth: 30\n  max_depth: 30"), "adaptivity.min_depth",
-               "the starting mesh would have 412316860416 tetrahedra (64 cubes x 6 x 2^30), more than 60000000");
+               "the starting mesh would have 412316860416 tetrahedra (64 cubes x 6 x 2^30), more than 20000000");
   EXPECT_NO_THROW(parse_scene(base_with("min_depth: 0\n  max_depth: 3", "min_depth: 12\n  max_depth: 12"), "ok.yaml"));
   expect_error(base_with("max_depth: 3", "max_depth: 31"), "adaptivity.max_depth", "<= 30");
   // A negative max_depth was reported at min_depth ("must be <= max_depth (-1) (got 0)").
@@ -797,17 +797,36 @@ TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
   expect_error(base_with("cg_max_iterations: 100", "cg_max_iterations: 0"), "integrator.cg_max_iterations", ">= 1");
   expect_error(kBase + "tool: {engage_distance_m: 0}\n", "tool.engage_distance_m", "must be > 0");
   expect_error(base_with("cubes: [4, 4, 4]", "cubes: [1000, 100, 101]"), "object.cubes", "too many cubes");
+  // Refining is bounded by the same budget as the starting mesh: max_tets
+  // 2147483647 with a tiny threshold reached 6.3M tets and 1.9 GB in 14 steps.
+  expect_error(kBase, "adaptivity.max_tets", "must be <= 20000000 (about 4 GB of mesh; got 2147483647)",
+               {"adaptivity.max_tets=2147483647"});
+  EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml", {"adaptivity.max_tets=20000000"}));
+  // Masses and stiffnesses the simulation cannot hold: a density of 1e308
+  // overflowed the lumped masses, the free nodes stood still and the batch
+  // report's kinetic energy was NaN after a run that exited 0.
+  expect_error(kBase, "material.density_kg_per_m3",
+               "with object.cube_size_m 0.025, a cube's mass in kg would be 1.5625",
+               {"material.density_kg_per_m3=1e308"});
+  expect_error(kBase, "material.density_kg_per_m3", "beyond what the simulation holds in double precision (got 1e+200)",
+               {"material.density_kg_per_m3=1e200", "object.cube_size_m=1e10"});
+  expect_error(kBase, "material.density_kg_per_m3", "a cube's mass in kg would be 1.5625",
+               {"material.density_kg_per_m3=1e-300"});
+  expect_error(kBase, "material.youngs_modulus_Pa", "the cube's spring stiffness scale (E x cube size) in N/m",
+               {"material.youngs_modulus_Pa=1e-300"});
+  EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml",
+                                             {"material.youngs_modulus_Pa=1e12", "material.density_kg_per_m3=2e4"}));
 
   // docs/scene-format.md: dt_s <= 1 s, substep_safety in (0, 1], min_age_steps
-  // and rayleigh_alpha_per_s >= 0, at most 10^7 cubes: the edges themselves are valid.
+  // and rayleigh_alpha_per_s >= 0, at most 3333333 cubes (2e7 tets): the edges themselves are valid.
   const Scene edges = parse_scene_with_overrides(
       kBase, "test.yaml",
-      {"integrator.dt_s=1", "integrator.substep_safety=1", "adaptivity.min_age_steps=0",
-       "object.cubes=[1000, 100, 100]", "object.cube_size_m=0.001", "adaptivity.enabled=false"});
+      {"integrator.dt_s=1", "integrator.substep_safety=1", "adaptivity.min_age_steps=0", "object.cubes=[333, 100, 100]",
+       "object.cube_size_m=0.001", "adaptivity.enabled=false"});
   EXPECT_EQ(edges.integrator.dt_s, 1.0);
   EXPECT_EQ(edges.integrator.substep_safety, 1.0);
   EXPECT_EQ(edges.adaptivity.min_age_steps, 0);
-  EXPECT_EQ(edges.object.cubes, (std::array<int, 3>{1000, 100, 100}));
+  EXPECT_EQ(edges.object.cubes, (std::array<int, 3>{333, 100, 100}));
 }
 
 }  // namespace
