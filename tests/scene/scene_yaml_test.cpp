@@ -466,6 +466,17 @@ TEST(SceneYamlErrors, ValuesThatWouldHangARunAreRefused) {
   for (int i = 0; i < 1001; ++i) many += "  - {name: p" + std::to_string(i) + ", rest_m: [0.05, 0.05, 0.05]}\n";
   std::string text = kBase.substr(0, kBase.find("probes:")) + many;
   expect_error(text, "probes", "too many (1001, at most 1000)");
+  // So are the region lists, each tested against the mesh at every change
+  // (20,000 loads on 20³ cubes took 3 s a step).
+  for (const char* list : {"fixed", "prescribed", "loads"}) {
+    std::string regions = std::string(list) + ":\n";
+    for (int i = 0; i < 1001; ++i)
+      regions += std::string("  - {region: {box: {min_m: [0, 0, 0], max_m: [0.01, 0.01, 0.01]}}") +
+                 (std::string(list) == "fixed" ? "" : ", name: r" + std::to_string(i)) +
+                 (std::string(list) == "prescribed" ? ", displacement_m: [0, 0, 0]" : "") +
+                 (std::string(list) == "loads" ? ", total_force_N: [0, 0, 0]" : "") + "}\n";
+    expect_error(kMinimal + regions, list, "too many (1001, at most 1000)");
+  }
   EXPECT_EQ(parse_scene_with_overrides(kBase, "test.yaml", {"adaptivity.max_tets=5000"}).adaptivity.max_tets, 5000);
   expect_error(kBase, "adaptivity.max_tets", ">= 1", {"adaptivity.max_tets=0"});
 }
