@@ -2,9 +2,7 @@
 
 #include <png.h>
 
-#include <cerrno>
 #include <cstdio>
-#include <cstring>
 #include <new>
 #include <string>
 
@@ -17,16 +15,16 @@ namespace {
 // libpng's largest default width and height (png_set_user_limits).
 constexpr int kMaxSide_px = 1000000;
 
-// Where libpng's error callback leaves its message and errno for the
-// setjmp branch (libpng otherwise prints to stderr and says nothing useful).
+// Where libpng's error callback leaves its message for the setjmp branch
+// (libpng otherwise prints to stderr and says nothing useful). libpng writes
+// to memory only, so its errors are its own: the system's come from the
+// commit, with their errno.
 struct PngFailure {
   char message[200] = "libpng failed";
-  int saved_errno = 0;
 };
 
 void on_png_error(png_structp png, png_const_charp message) {
   auto* failure = static_cast<PngFailure*>(png_get_error_ptr(png));
-  failure->saved_errno = errno;
   std::snprintf(failure->message, sizeof failure->message, "%s", message);
   png_longjmp(png, 1);
 }
@@ -77,10 +75,7 @@ void write_png(const Image& image, const std::string& path) {
   // between here and the end of the writing.
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
-    // A failed write (a full disk) leaves errno; libpng's message alone
-    // would say only "Write Error".
-    throw fail(failure.saved_errno != 0 ? std::string(failure.message) + " (" + std::strerror(failure.saved_errno) + ")"
-                                        : std::string(failure.message));
+    throw fail(failure.message);
   }
   png_set_write_fn(png, &encoded, &on_png_write, &on_png_flush);
   png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,
