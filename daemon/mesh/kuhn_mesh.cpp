@@ -36,6 +36,14 @@ int coarse_log2_for_depth(int max_depth) { return max_depth <= 0 ? 1 : (max_dept
 
 }  // namespace
 
+int max_lattice_depth(std::int64_t largest_cubes) {
+  if (largest_cubes < 1 || largest_cubes > kMaxCubesPerAxis) return -1;
+  // Depths 3K-2 .. 3K need a coarse cube of 2^K lattice units.
+  int k = 1;
+  while ((largest_cubes << (k + 1)) <= kMaxLatticeCoord) ++k;
+  return std::min(60, 3 * k);
+}
+
 std::uint64_t KuhnMesh::next_topology_version() {
   // Atomic only so meshes built on different threads (daemon, tests) never
   // share a number; no other state is shared.
@@ -55,17 +63,15 @@ KuhnMesh::KuhnMesh(const BoxSpec& spec) : spec_(spec) {
   if (spec.max_depth < 0) reject("max_depth = " + std::to_string(spec.max_depth), "must be >= 0");
 
   const std::int64_t largest = std::max({spec.cubes_x, spec.cubes_y, spec.cubes_z});
-  const int k = coarse_log2_for_depth(spec.max_depth);
-  // Largest depth the 21-bit keys allow for this box, for the message.
-  int lattice_limit_k = 1;
-  while ((largest << (lattice_limit_k + 1)) <= kMaxLatticeCoord) ++lattice_limit_k;
-  if ((largest << 1) > kMaxLatticeCoord)
+  const int depth_limit = max_lattice_depth(largest);
+  if (depth_limit < 0)
     reject("cube counts (largest " + std::to_string(largest) + ")",
-           "overflow the 21-bit lattice keys; at most " + std::to_string(kMaxLatticeCoord / 2) + " cubes per axis");
-  if ((largest << k) > kMaxLatticeCoord || spec.max_depth > 60)
+           "overflow the 21-bit lattice keys; at most " + std::to_string(kMaxCubesPerAxis) + " cubes per axis");
+  if (spec.max_depth > depth_limit)
     reject("max_depth = " + std::to_string(spec.max_depth),
            "exceeds what the lattice can hold for " + std::to_string(largest) + " cubes along an axis (at most " +
-               std::to_string(std::min(60, 3 * lattice_limit_k)) + ")");
+               std::to_string(depth_limit) + ")");
+  const int k = coarse_log2_for_depth(spec.max_depth);
 
   domain_.cubes = {spec.cubes_x, spec.cubes_y, spec.cubes_z};
   domain_.coarse_log2 = k;

@@ -37,6 +37,15 @@ struct BoxSpec {
   int max_depth = 9;
 };
 
+// Most cubes along one axis the 21-bit lattice keys hold (at depth 0).
+inline constexpr std::int64_t kMaxCubesPerAxis = kMaxLatticeCoord / 2;
+
+// Deepest BoxSpec::max_depth the lattice keys hold for a box with
+// `largest_cubes` cubes along its longest axis (at most 60); -1 when that
+// count is outside [1, kMaxCubesPerAxis]. Scene checks use it to name their
+// key before a KuhnMesh refuses the box.
+int max_lattice_depth(std::int64_t largest_cubes);
+
 struct Node {
   Vec3i lattice{};              // lattice coordinates
   std::int64_t six_volume = 0;  // Σ 6V of incident leaf tets (lattice units)

@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "mesh/kuhn_mesh.hpp"
 #include "scene/scene_names.hpp"
 #include "scene/yaml_util.hpp"
 #include "util/text.hpp"
@@ -247,6 +248,12 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     long long total = 1;
     for (int a = 0; a < 3; ++a) {
       at_least(o.cubes[a], 1, join_index("object.cubes", a));
+      // The mesh's lattice keys bound each axis (object.cubes: [2000000, 1, 1]
+      // was refused by the mesh without the key's name).
+      if (o.cubes[a] > mesh::kMaxCubesPerAxis)
+        fail(join_index("object.cubes", a), "must be <= " + std::to_string(mesh::kMaxCubesPerAxis) +
+                                                " cubes along one axis, what the mesh's lattice keys hold (got " +
+                                                std::to_string(o.cubes[a]) + ")");
       total *= o.cubes[a];
       if (total > kMaxTotalCubes)
         fail("object.cubes", "too many cubes (more than " + std::to_string(kMaxTotalCubes) + " in total)");
@@ -331,6 +338,19 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (a.min_depth > a.max_depth)
       fail("adaptivity.min_depth",
            "must be <= max_depth (" + std::to_string(a.max_depth) + ") (got " + std::to_string(a.min_depth) + ")");
+    // The mesh is built for the deepest level the scene can reach (min_depth
+    // when adaptivity is off); its lattice keys hold fewer levels the more
+    // cubes there are along an axis.
+    {
+      const long long largest = std::max({o.cubes[0], o.cubes[1], o.cubes[2]});
+      const int depth_limit = mesh::max_lattice_depth(largest);
+      const bool by_max = a.enabled;
+      const int depth = by_max ? a.max_depth : a.min_depth;
+      if (depth > depth_limit)
+        fail(by_max ? "adaptivity.max_depth" : "adaptivity.min_depth",
+             "must be <= " + std::to_string(depth_limit) + " for " + std::to_string(largest) +
+                 " cubes along an axis, what the mesh's lattice keys hold (got " + std::to_string(depth) + ")");
+    }
     at_least(a.every_steps, 1, "adaptivity.every_steps");
     at_least(a.max_ops_per_step, 1, "adaptivity.max_ops_per_step");
     at_least(a.max_tets, 1, "adaptivity.max_tets");

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 #include <random>
 #include <set>
 
@@ -60,6 +61,10 @@ TEST(KuhnMesh, RejectsBadBoxesWithTheFieldName) {
   // 2^18 cubes along x leave room for one level of coarse halving, not three.
   EXPECT_NE(message_of({1 << 18, 1, 1, 0.1, 9}).find("max_depth"), std::string::npos);
   EXPECT_NE(message_of({1 << 20, 1, 1, 0.1, 0}).find("overflow"), std::string::npos);
+  // Depths whose coarse exponent would shift a 64-bit count by 64 or more
+  // (undefined; x86 masked the shift and a second test refused them).
+  EXPECT_NE(message_of({1, 1, 1, 0.1, 1000}).find("max_depth"), std::string::npos);
+  EXPECT_NE(message_of({1, 1, 1, 0.1, std::numeric_limits<int>::max()}).find("max_depth"), std::string::npos);
   // At least nine levels (three full cycles) on a realistic box, and many more on a small one.
   EXPECT_NO_THROW(KuhnMesh({16, 16, 16, 0.01, 30}));
   EXPECT_NO_THROW(KuhnMesh({1, 1, 1, 0.01, 57}));

@@ -481,6 +481,21 @@ TEST(SceneYamlErrors, ValuesThatWouldHangARunAreRefused) {
   expect_error(kBase, "adaptivity.max_tets", ">= 1", {"adaptivity.max_tets=0"});
 }
 
+// What the mesh's 21-bit lattice keys hold is refused at the scene's key; the
+// mesh used to refuse it as "mesh box: cube counts ... overflow".
+TEST(SceneYamlErrors, BoxesTheLatticeCannotHoldNameTheKey) {
+  expect_error("object: {cubes: [1, 2000000, 1], cube_size_m: 0.025}\n", "object.cubes[1]",
+               "must be <= 524287 cubes along one axis");
+  EXPECT_NO_THROW(parse_scene_with_overrides("object: {cubes: [524287, 1, 1], cube_size_m: 0.025}\n", "test.yaml", {}));
+  const std::string deep = "object: {cubes: [10000, 1, 1], cube_size_m: 0.025}\nadaptivity: {enabled: true}\n";
+  expect_error(deep, "adaptivity.max_depth", "must be <= 18 for 10000 cubes along an axis",
+               {"adaptivity.max_depth=19"});
+  EXPECT_EQ(parse_scene_with_overrides(deep, "test.yaml", {"adaptivity.max_depth=18"}).adaptivity.max_depth, 18);
+  // With adaptivity off the mesh is built to min_depth only.
+  EXPECT_NO_THROW(parse_scene_with_overrides("object: {cubes: [10000, 1, 1], cube_size_m: 0.025}\n", "test.yaml",
+                                             {"adaptivity.enabled=false", "adaptivity.max_depth=30"}));
+}
+
 TEST(SceneYamlErrors, MissingObject) {
   expect_error("name: x\n", "object", "missing required");
   expect_error("object: {cubes: [4, 4, 4]}\n", "object.cube_size_m", "missing required");
