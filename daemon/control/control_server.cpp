@@ -141,7 +141,10 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
     socket_.async_read_some(asio::buffer(chunk_), [self](const boost::system::error_code& ec, std::size_t n) {
       self->awaiting_request_ = false;
       self->last_progress = std::chrono::steady_clock::now();
-      if (ec || self->state_->stopped) {
+      // closed_: evicted as idle after this read had already taken a line
+      // (asio reads speculatively when the read starts); the client was told
+      // it was closed, so its request must not run unanswered.
+      if (ec || self->closed_ || self->state_->stopped) {
         self->finish();  // EOF (maybe mid-line: nothing to answer), reset, or stop()
         return;
       }
@@ -201,7 +204,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
     out_ += '\n';
     auto self = this->shared_from_this();
     asio::async_write(socket_, asio::buffer(out_), [self](const boost::system::error_code& ec, std::size_t) {
-      if (ec || self->state_->stopped) {
+      if (ec || self->closed_ || self->state_->stopped) {
         self->finish();
         return;
       }
