@@ -358,9 +358,8 @@ int batch_command(const BatchOptions& options) {
     std::unique_ptr<BatchRecorder> recorder;
     if (!options.record_path.empty()) {
       try {
-        recorder =
-            std::make_unique<BatchRecorder>(options.record_path, *sim, record::metadata_file_text(options.scene_path),
-                                            command_text(options), options.record_frame_interval_s);
+        recorder = std::make_unique<BatchRecorder>(options.record_path, *sim, scene.source_text, command_text(options),
+                                                   options.record_frame_interval_s);
       } catch (const record::RecordError& e) {
         return fail(kExitRecord, e.what());
       }

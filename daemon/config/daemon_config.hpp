@@ -174,6 +174,7 @@ struct RecordSpec {
 
 struct DaemonConfig {
   std::string source;                          // file the config came from (for messages)
+  std::string source_text;                     // its YAML text as read (recordings keep it)
   std::string scene_path;                      // resolved against the config file's directory when relative
   std::string state_dir = "/var/lib/tissued";  // recordings and exports go here only
   DeviceSpec device;

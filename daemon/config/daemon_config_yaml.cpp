@@ -418,6 +418,7 @@ DaemonConfig build(const std::string& text, const std::string& source, const std
   return yaml_util::convert_document<ConfigError>(
       text, source, overrides, kConfigDocument, [&](const YAML::Node& root) {
         DaemonConfig c = Converter(source).config(root);
+        c.source_text = text;
         c.scene_path = resolve(c.scene_path, source);
         c.state_dir = resolve(c.state_dir, source);
         if (!c.device.replay.session.empty()) c.device.replay.session = resolve(c.device.replay.session, source);

@@ -242,13 +242,6 @@ std::vector<std::string> remove_oldest_automatic_recordings(const std::string& d
   return removed;
 }
 
-std::string metadata_file_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 std::string utc_now_iso8601() {
   const auto now = std::chrono::system_clock::now();
   const std::time_t secs = std::chrono::system_clock::to_time_t(now);

@@ -60,10 +60,6 @@ void validate_client_session_name(const std::string& name);
 std::vector<std::string> remove_oldest_automatic_recordings(const std::string& dir, std::uintmax_t keep_bytes,
                                                             const std::string& keep);
 
-// A file's whole text for SessionMetadata (scene_text, config_text); empty
-// when it cannot be read: the session is recorded without it.
-std::string metadata_file_text(const std::string& path);
-
 // Current UTC time as ISO-8601 with milliseconds, e.g. 2024-05-01T12:00:00.123Z.
 std::string utc_now_iso8601();
 

@@ -186,6 +186,10 @@ class SceneModelError : public std::invalid_argument {
 struct Scene {
   std::string source;                  // file the scene came from (for messages)
   std::vector<std::string> overrides;  // the --set texts applied to it, for messages
+  // The YAML text the scene was built from, before the overrides. A running
+  // scene is changed (`set`) and recorded from this text, never from the file
+  // as it may have been edited since.
+  std::string source_text;
   std::string name;
   ObjectSpec object;
   MaterialSpec material;

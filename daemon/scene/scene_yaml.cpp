@@ -508,6 +508,7 @@ Scene build(const std::string& yaml_text, const std::string& source, const std::
                                                    Scene s = Converter(source).scene(root);
                                                    validate_scene(s);
                                                    s.overrides = overrides;
+                                                   s.source_text = yaml_text;
                                                    return s;
                                                  });
 }
@@ -545,6 +546,31 @@ SceneError model_error(const Scene& scene, const SceneModelError& e) {
 
 Scene load_scene_file_with_overrides(const std::string& path, const std::vector<std::string>& overrides) {
   return build(read_file(path), path, overrides);
+}
+
+std::vector<std::string> with_override_replacing(const std::vector<std::string>& overrides, const std::string& added,
+                                                 const std::string& source) {
+  std::string added_path;
+  try {
+    added_path = yaml_util::parse_override(added, source, kSceneDocument).path;
+  } catch (const yaml_util::PathError& e) {
+    throw SceneError(e.source(), e.key_path(), e.reason());
+  }
+  const auto moot = [&](const std::string& text) {
+    std::string path;
+    try {
+      path = yaml_util::parse_override(text, source, kSceneDocument).path;
+    } catch (const yaml_util::PathError&) {
+      return false;  // it was applied before, so it parses; keep it if not
+    }
+    return path.compare(0, added_path.size(), added_path) == 0 &&
+           (path.size() == added_path.size() || path[added_path.size()] == '.' || path[added_path.size()] == '[');
+  };
+  std::vector<std::string> out;
+  for (const std::string& o : overrides)
+    if (!moot(o)) out.push_back(o);
+  out.push_back(added);
+  return out;
 }
 
 }  // namespace tissue::scene

@@ -60,6 +60,14 @@ Scene parse_scene_with_overrides(const std::string& yaml_text, const std::string
                                  const std::vector<std::string>& overrides);
 Scene load_scene_file_with_overrides(const std::string& path, const std::vector<std::string>& overrides);
 
+// `overrides` with `added` appended and the earlier ones it makes moot left
+// out: those whose key path is the same as its (however spelled: probes[02]
+// is probes[2]) or lies inside it. A new value for a whole list must not be
+// followed by an older one for an element the new list may not have. Throws
+// SceneError (source `source`) when `added` is not an override.
+std::vector<std::string> with_override_replacing(const std::vector<std::string>& overrides, const std::string& added,
+                                                 const std::string& source);
+
 // Physical validation of a scene however it was built (the loaders call it).
 // Throws SceneError with source = s.source and YAML-style key paths.
 void validate_scene(const Scene& s);

@@ -371,7 +371,9 @@ YAML::Node set_path(const YAML::Node& node, bool present, const Override& ov, st
                     const std::string& source) {
   if (i == ov.parts.size()) return ov.value;
   const Override::Part& part = ov.parts[i];
-  const std::string shown = "--set " + printable(ov.text);
+  // Overrides come from --set and from the control socket's `set`: the
+  // words name neither.
+  const std::string shown = "the override " + printable(ov.text);
   if (part.is_index) {
     const std::string here = join_index(done, part.index);
     if (!present || !node.IsSequence())
@@ -452,15 +454,15 @@ YAML::Node load_document(const std::string& text, const std::string& source, con
 }
 
 Override parse_override(const std::string& text, const std::string& source, const DocumentKind& doc) {
-  const std::string shown = "--set " + printable(text);
+  const std::string shown = "the override " + printable(text);
   const auto eq = text.find('=');
   if (eq == std::string::npos)
-    throw PathError(source, "", "malformed override " + shown + ": expected key.path=value (no '=' found)");
+    throw PathError(source, "", shown + " is malformed: expected key.path=value (no '=' found)");
   Override ov;
   ov.text = text;
   const std::string key = trim(std::string_view(text).substr(0, eq));
   const auto bad_path = [&](const std::string& why) {
-    return PathError(source, "", "malformed override " + shown + ": bad key path " + printable(key) + ": " + why);
+    return PathError(source, "", shown + " is malformed: bad key path " + printable(key) + ": " + why);
   };
   if (key.empty()) throw bad_path("it is empty");
   std::size_t i = 0;

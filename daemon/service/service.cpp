@@ -191,11 +191,16 @@ void Service::stop_threads() {
   stop_recording();            // after the producers: everything they pushed is written
 }
 
-void Service::start_recording(const std::string& name) {
+void Service::start_recording(const std::string& name) { install_recorder(open_recorder(name)); }
+
+std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name) {
   record::SessionMetadata meta;
   meta.scene_name = scene_.name;
-  meta.scene_text = record::metadata_file_text(scene_path_);
-  meta.config_text = record::metadata_file_text(options_.config_path);
+  // The texts the running scene and config were built from, not the files as
+  // they may be now (edited, gone, or a FIFO that would block this thread);
+  // the overrides in force are the first event's.
+  meta.scene_text = scene_.source_text;
+  meta.config_text = config_.source_text;
   meta.software_version = TISSUE_VERSION;
   record::RecorderOptions options;
   options.on_error = [this](const std::string& message) {
@@ -205,14 +210,33 @@ void Service::start_recording(const std::string& name) {
       std::fflush(options_.err);
     });
   };
-  recorder_ = record::Recorder::start(
+  return record::Recorder::start(
       config_.state_dir,
       name.empty() ? util::free_timestamped_name(config_.state_dir, "session-", ".h5", std::time(nullptr)) : name, meta,
       options);
+}
+
+void Service::install_recorder(std::unique_ptr<record::Recorder> recorder) {
+  recorder_ = std::move(recorder);
   if (sim_ && sim_->set_recorder(recorder_.get())) retired_recorders_.clear();
-  record_event(static_cast<int>(record::EventKind::kSceneLoaded), "recording " + scene_.name + " from " + scene_path_);
+  record_event(static_cast<int>(record::EventKind::kSceneLoaded), recording_started_text());
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
   std::fflush(options_.out);
+}
+
+std::string Service::recording_started_text() const {
+  const auto joined = [](const std::vector<std::string>& list) {
+    std::string out;
+    for (const std::string& o : list) out += (out.empty() ? "" : ", ") + o;
+    return out;
+  };
+  std::string text = "recording " + scene_.name + " from " + scene_path_;
+  // The scene_text attribute is the file before these (the command line's
+  // --set, then the control socket's set).
+  if (!scene_.overrides.empty()) text += " with " + joined(scene_.overrides);
+  if (const std::vector<std::string> config_sets = config_overrides(); !config_sets.empty())
+    text += "; daemon config " + options_.config_path + " with " + joined(config_sets);
+  return text;
 }
 
 void Service::start_automatic_recording() {
@@ -395,6 +419,9 @@ void Service::reload() {
       throw;
     }
     config_.status_interval_s = config.status_interval_s;
+    // Recordings from now on keep the file as read now (a restart-only change
+    // in it is said in a warning event below, and waits for the restart).
+    config_.source_text = config.source_text;
     scene_path_ = config.scene_path;
     base_scene_overrides_ = scene_overrides();
     scene_sets_.clear();
@@ -744,19 +771,20 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
     // file is where daemon settings live.
     throw control::ControlError(
         "'" + key + "' is a daemon setting: edit " + options_.config_path +
-        " and reload (SIGHUP: scene, haptics.*, status_interval_s, max_scene_tets) or restart; set "
+        " and reload (SIGHUP: scene, haptics.*, device.limits.*, status_interval_s, max_scene_tets) or restart; set "
         "changes scene keys only");
-  // One entry per key: a new value replaces the old one.
-  std::vector<std::string> sets;
-  for (const std::string& o : scene_sets_)
-    if (o.compare(0, o.find('='), key) != 0) sets.push_back(o);
-  sets.push_back(override);
-  std::vector<std::string> overrides = base_scene_overrides_;
-  overrides.insert(overrides.end(), sets.begin(), sets.end());
   scene::Scene scene;
+  std::vector<std::string> sets;
   std::string device_problem;
   try {
-    scene = scene::load_scene_file_with_overrides(scene_path_, overrides);
+    // A new value replaces the old one for its key and for every key inside
+    // it (a whole list after one of its elements).
+    sets = scene::with_override_replacing(scene_sets_, override, scene_path_);
+    std::vector<std::string> overrides = base_scene_overrides_;
+    overrides.insert(overrides.end(), sets.begin(), sets.end());
+    // The running scene's own text: the file may have been edited (set would
+    // bring in those edits unsaid) or removed since it was loaded.
+    scene = scene::parse_scene_with_overrides(scene_.source_text, scene_path_, overrides);
     device_problem = apply_scene(std::move(scene));
   } catch (const std::exception& e) {
     throw control::ControlError(e.what());
@@ -779,20 +807,22 @@ nlohmann::json Service::record_start(const std::string& name) {
   }
   // The daemon's own recording gives way to a client's (the lab's "record
   // this as exp1.h5"); a client's is stopped by a client.
-  if (recorder_ && recorder_->state() == record::RecorderState::kRecording) {
-    if (!automatic_recording_)
-      throw control::ControlError("already recording to " + recorder_->path() + "; record_stop first");
-    record_event(static_cast<int>(record::EventKind::kInfo), "record_start " +
-                                                                 (name.empty() ? std::string("(no name)") : name) +
-                                                                 " (control): the automatic recording ends here");
-  }
-  stop_recording();              // a failed earlier recording: close it out
-  automatic_recording_ = false;  // the client's from now on
+  if (recorder_ && recorder_->state() == record::RecorderState::kRecording && !automatic_recording_)
+    throw control::ControlError("already recording to " + recorder_->path() + "; record_stop first");
+  // The new file first: one that cannot be made (the name taken, the disk
+  // full) changes nothing, and an automatic recording goes on.
+  std::unique_ptr<record::Recorder> next;
   try {
-    start_recording(name);
+    next = open_recorder(name);
   } catch (const std::exception& e) {
     throw control::ControlError(e.what());  // names the file and the reason
   }
+  if (recorder_ && recorder_->state() == record::RecorderState::kRecording && automatic_recording_)
+    record_event(static_cast<int>(record::EventKind::kInfo),
+                 "record_start " + next->path() + " (control): the automatic recording ends here");
+  stop_recording();              // a failed earlier recording: close it out
+  automatic_recording_ = false;  // the client's from now on
+  install_recorder(std::move(next));
   return {{"file", recorder_->path()}};
 }
 

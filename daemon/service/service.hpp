@@ -132,6 +132,10 @@ class Service : public control::ControlHandler {
   void arm_watchdog_timer();
   void print_status();
   void start_recording(const std::string& name);  // throws record::RecordError
+  // The two halves of start_recording: a recorder for a new file (throws,
+  // changing nothing), and making it the one the threads record to.
+  std::unique_ptr<record::Recorder> open_recorder(const std::string& name);
+  void install_recorder(std::unique_ptr<record::Recorder> recorder);
   void stop_recording();
   // record.auto_start: a timestamped file, new every record.rotate_s. A
   // file that cannot be created is said and tried again at the next
@@ -141,6 +145,8 @@ class Service : public control::ControlHandler {
   void record_event(int kind, const std::string& text);  // no-op when not recording
   std::vector<std::string> scene_overrides() const;
   std::vector<std::string> config_overrides() const;
+  // The first event of a recording: the scene, its file and the overrides in force.
+  std::string recording_started_text() const;
 
   ServiceOptions options_;
   config::DaemonConfig config_;

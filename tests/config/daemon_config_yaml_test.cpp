@@ -399,7 +399,7 @@ TEST(DaemonConfigYaml, OverridesApplyAndAreBlamedInErrors) {
   expect_error(kBase, "haptics.rate_hz", "must be > 0 (got -1) (set by the override 'haptics.rate_hz=-1')",
                {"haptics.rate_hz=-1"});
   expect_error(kBase, "haptics.rate_hzz", "unknown key", {"haptics.rate_hzz=5"});
-  expect_error(kBase, "", "malformed override", {"haptics.rate_hz"});
+  expect_error(kBase, "", "is malformed", {"haptics.rate_hz"});
   expect_error(kBase, "device.sim.waypoints[5]", "list index out of range", {"device.sim.waypoints[5].time_s=1"});
 }
 

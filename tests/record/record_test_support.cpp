@@ -226,6 +226,15 @@ std::vector<std::string> event_messages(const std::string& path) {
   return out;
 }
 
+std::string root_string_attribute(const std::string& path, const char* name) {
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (file < 0) return {};
+  std::string out;
+  if (!h5::read_string_attribute(file, name, &out)) out.clear();
+  H5Fclose(file);
+  return out;
+}
+
 int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, std::uint64_t frames,
                            std::uint64_t events) {
   int bad = 0;

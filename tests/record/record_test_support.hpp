@@ -78,6 +78,8 @@ std::vector<std::uint8_t> read_u8(hid_t file, const char* path);
 std::vector<std::string> read_messages(hid_t file, const char* path);
 // /events/message of the session at `path`; empty when it cannot be opened.
 std::vector<std::string> event_messages(const std::string& path);
+// A string attribute of a closed file's root ("" when it cannot be read).
+std::string root_string_attribute(const std::string& path, const char* name);
 
 // Checks every row of a session against the generators: haptic rows
 // [0, haptic), sim rows [0, sim), frames [0, frames), events [0, events).

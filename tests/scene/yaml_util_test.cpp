@@ -572,26 +572,26 @@ TEST(YamlUtil, MalformedOverridesSayWhatIsWrongWithThePath) {
   const auto bad = [](const std::string& text, const std::string& reason) {
     expect_path_error([&] { parse_override(text, "f.yaml", kKind); }, "f.yaml", "", reason);
   };
-  bad("a.b", "malformed override --set 'a.b': expected key.path=value (no '=' found)");
-  bad(" =1", "malformed override --set ' =1': bad key path '': it is empty");
-  bad("[0]=1", "malformed override --set '[0]=1': bad key path '[0]': it must start with a key");
-  bad(".a=1", "malformed override --set '.a=1': bad key path '.a': it must start with a key");
-  bad("a[0=1", "malformed override --set 'a[0=1': bad key path 'a[0': missing ']'");
-  bad("a[]=1", "malformed override --set 'a[]=1': bad key path 'a[]': a list index must be a non-negative integer");
+  bad("a.b", "the override 'a.b' is malformed: expected key.path=value (no '=' found)");
+  bad(" =1", "the override ' =1' is malformed: bad key path '': it is empty");
+  bad("[0]=1", "the override '[0]=1' is malformed: bad key path '[0]': it must start with a key");
+  bad(".a=1", "the override '.a=1' is malformed: bad key path '.a': it must start with a key");
+  bad("a[0=1", "the override 'a[0=1' is malformed: bad key path 'a[0': missing ']'");
+  bad("a[]=1", "the override 'a[]=1' is malformed: bad key path 'a[]': a list index must be a non-negative integer");
   bad("a[-1]=1",
-      "malformed override --set 'a[-1]=1': bad key path 'a[-1]': a list index must be a non-negative integer");
+      "the override 'a[-1]=1' is malformed: bad key path 'a[-1]': a list index must be a non-negative integer");
   bad("a[99999999999999999999999]=1",
-      "malformed override --set 'a[99999999999999999999999]=1': bad key path 'a[99999999999999999999999]': list index "
+      "the override 'a[99999999999999999999999]=1' is malformed: bad key path 'a[99999999999999999999999]': list index "
       "out of range");
-  bad("a[0]b=1", "malformed override --set 'a[0]b=1': bad key path 'a[0]b': expected '.' or '[' after ']'");
-  bad("a.$=1", "malformed override --set 'a.$=1': bad key path 'a.$': expected a key name at position 3");
-  bad("a b=1", "malformed override --set 'a b=1': bad key path 'a b': expected a key name at position 2");
-  bad("a.=1", "malformed override --set 'a.=1': bad key path 'a.': expected a key name at position 3");
+  bad("a[0]b=1", "the override 'a[0]b=1' is malformed: bad key path 'a[0]b': expected '.' or '[' after ']'");
+  bad("a.$=1", "the override 'a.$=1' is malformed: bad key path 'a.$': expected a key name at position 3");
+  bad("a b=1", "the override 'a b=1' is malformed: bad key path 'a b': expected a key name at position 2");
+  bad("a.=1", "the override 'a.=1' is malformed: bad key path 'a.': expected a key name at position 3");
   // A value that is not YAML is named under the override's key path.
   expect_reason_has([] { parse_override("a.b=[1", "f.yaml", kKind); }, "f.yaml", "a.b",
-                    "--set 'a.b=[1': the value is not valid YAML: YAML syntax error at line ");
+                    "the override 'a.b=[1': the value is not valid YAML: YAML syntax error at line ");
   expect_reason_has([] { parse_override("a=1\n---\n2", "f.yaml", kKind); }, "f.yaml", "a",
-                    "--set 'a=1\\x0A---\\x0A2': the value is not valid YAML: found a second YAML document");
+                    "the override 'a=1\\x0A---\\x0A2': the value is not valid YAML: found a second YAML document");
 }
 
 std::string dump(const YAML::Node& n) {
@@ -625,14 +625,16 @@ TEST(YamlUtil, ApplyOverrideErrorsNameWhereThePathBreaks) {
                         const std::string& reason) {
     expect_path_error([&] { overridden(text, ov); }, "f.yaml", key_path, reason);
   };
-  fails("{l: [1, 2]}", "l[5]=0", "l[5]", "--set 'l[5]=0': list index out of range (the list has 2 items)");
-  fails("{l: [[1]]}", "l[0][1]=0", "l[0][1]", "--set 'l[0][1]=0': list index out of range (the list has 1 item)");
-  fails("{m: {a: 1}}", "m[0]=0", "m", "--set 'm[0]=0': cannot index a map, it is not a list");
-  fails("{m: {a: 1}}", "nope[0]=0", "nope", "--set 'nope[0]=0': cannot index a missing key, it is not a list");
+  fails("{l: [1, 2]}", "l[5]=0", "l[5]", "the override 'l[5]=0': list index out of range (the list has 2 items)");
+  fails("{l: [[1]]}", "l[0][1]=0", "l[0][1]",
+        "the override 'l[0][1]=0': list index out of range (the list has 1 item)");
+  fails("{m: {a: 1}}", "m[0]=0", "m", "the override 'm[0]=0': cannot index a map, it is not a list");
+  fails("{m: {a: 1}}", "nope[0]=0", "nope", "the override 'nope[0]=0': cannot index a missing key, it is not a list");
   fails("{s: text}", "s.k=0", "s",
-        "--set 's.k=0': cannot set key 'k' inside a line of text (contents not shown), it is not a map");
-  fails("{l: [1]}", "l.k=0", "l", "--set 'l.k=0': cannot set key 'k' inside a list, it is not a map");
-  fails("5", "a=1", "a", "--set 'a=1': cannot set key 'a' inside a line of text (contents not shown), it is not a map");
+        "the override 's.k=0': cannot set key 'k' inside a line of text (contents not shown), it is not a map");
+  fails("{l: [1]}", "l.k=0", "l", "the override 'l.k=0': cannot set key 'k' inside a list, it is not a map");
+  fails("5", "a=1", "a",
+        "the override 'a=1': cannot set key 'a' inside a line of text (contents not shown), it is not a map");
 }
 
 TEST(YamlUtil, LoadWithOverridesAppliesThemInOrder) {
@@ -645,7 +647,7 @@ TEST(YamlUtil, LoadWithOverridesAppliesThemInOrder) {
       [] {
         load_with_overrides("a: 1\n", "f.yaml", {"a=2", "zz"}, kKind);
       },
-      "f.yaml", "", "malformed override --set 'zz'");
+      "f.yaml", "", "the override 'zz' is malformed");
   expect_path_error([] { load_with_overrides("", "f.yaml", {"a=2"}, kKind); }, "f.yaml", "",
                     "empty document: a thing needs a section");
 }
@@ -707,7 +709,7 @@ TEST(YamlUtil, ConvertDocumentRaisesTheLoadersErrorWithTheBlame) {
     ADD_FAILURE() << "no error";
   } catch (const TestError& e) {
     EXPECT_EQ(e.key_path(), "l");
-    EXPECT_EQ(e.reason(), "--set 'l[3]=1': cannot index a missing key, it is not a list");
+    EXPECT_EQ(e.reason(), "the override 'l[3]=1': cannot index a missing key, it is not a list");
   }
   // A yaml-cpp exception never escapes as itself.
   try {

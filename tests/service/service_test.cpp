@@ -78,7 +78,12 @@ struct Running {
     thread = std::thread([this] { exit_code = service->run(); });
   }
   ~Running() {
-    if (thread.joinable()) thread.join();
+    // A test that ends early (a failed ASSERT) has not shut the service down:
+    // without this its join waited for ever.
+    if (thread.joinable()) {
+      service->shutdown();
+      thread.join();
+    }
     std::fclose(out);
     std::fclose(err);
   }
@@ -302,6 +307,14 @@ TEST(Service, SceneChangesUnderLoadKeepServing) {
             std::string::npos)
       << bad.dump();
   EXPECT_EQ(bad["error"].get<std::string>().find("--set"), std::string::npos) << bad.dump();
+  // So are overrides that cannot be applied to the document at all.
+  for (const auto& [key, value] : std::vector<std::pair<std::string, nlohmann::json>>{
+           {"material.youngs_modulus_Pa.x", 1}, {"probes[9].name", "a"}, {"material[0]", 1}}) {
+    const nlohmann::json r = client.call("set", {{"key", key}, {"value", value}});
+    EXPECT_FALSE(r["ok"].get<bool>()) << r.dump();
+    EXPECT_NE(r["error"].get<std::string>().find("the override '" + key + "="), std::string::npos) << r.dump();
+    EXPECT_EQ(r["error"].get<std::string>().find("--set"), std::string::npos) << r.dump();
+  }
   const nlohmann::json missing = client.call("load_scene", {{"path", dir / "missing.yaml"}});
   EXPECT_FALSE(missing["ok"].get<bool>());
   EXPECT_NE(missing["error"].get<std::string>().find("missing.yaml"), std::string::npos) << missing.dump();
@@ -331,6 +344,20 @@ TEST(Service, SetChangesTheRunningSceneAndLoadSceneTakesTheFileAsWritten) {
   EXPECT_TRUE(client.call("set", {{"key", "probes[1].name"}, {"value", "centre2"}})["ok"].get<bool>());
   EXPECT_TRUE(client.call("set", {{"key", "name"}, {"value", "renamed again"}})["ok"].get<bool>());
   EXPECT_EQ(client.call("status")["result"]["scene"]["name"], "renamed again");
+  // A whole list replaces what was set inside it: the file has 2 probes, and
+  // probes[2].name kept after a list of one was applied to that one-item list
+  // ("list index out of range") until the scene was loaded again.
+  const nlohmann::json three = client.call(
+      "set", {{"key", "probes"}, {"value", nlohmann::json::parse(R"([{"name": "a", "rest_m": [0.1, 0.05, 0.0]},
+                                                  {"name": "b", "rest_m": [0.1, 0.05, 0.05]},
+                                                  {"name": "c", "rest_m": [0.05, 0.05, 0.05]}])")}});
+  EXPECT_TRUE(three["ok"].get<bool>()) << three.dump();
+  EXPECT_TRUE(client.call("set", {{"key", "probes[02].name"}, {"value", "z"}})["ok"].get<bool>());
+  const nlohmann::json one = client.call(
+      "set", {{"key", "probes"}, {"value", nlohmann::json::parse(R"([{"name": "a", "rest_m": [0.1, 0.05, 0.05]}])")}});
+  EXPECT_TRUE(one["ok"].get<bool>()) << one.dump();
+  EXPECT_TRUE(client.call("set", {{"key", "probes[0].name"}, {"value", "only"}})["ok"].get<bool>())
+      << "an element's value after its list's applies";
 
   // beam.yaml has one probe and no tool: the cantilever's sets do not follow.
   const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("beam.yaml")}});
@@ -346,8 +373,50 @@ TEST(Service, SetChangesTheRunningSceneAndLoadSceneTakesTheFileAsWritten) {
                                                         (dir / "tissued.yaml")),
             std::string::npos)
       << daemon_key.dump();
+  // A reload applies new force limits: the refusal says so.
+  const nlohmann::json limits = client.call("set", {{"key", "device.limits.max_force_N"}, {"value", 5}});
+  EXPECT_FALSE(limits["ok"].get<bool>());
+  EXPECT_NE(limits["error"].get<std::string>().find("reload (SIGHUP: scene, haptics.*, device.limits.*,"),
+            std::string::npos)
+      << limits.dump();
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// `set` changes the running scene, whatever became of its file since it was
+// loaded (it used to read the file again: an edit came in unsaid, a removed
+// file failed), and a recording keeps the scene it ran: the text it was built
+// from, and the overrides in force in its first event.
+TEST(Service, SetChangesTheSceneAsLoadedAndRecordingsSayWhatWasSet) {
+  TempDir dir;
+  const std::string scene = dir / "scene.yaml";
+  std::filesystem::copy_file(scene_file("cantilever.yaml"), scene);
+  const std::string as_loaded = file_text(scene);
+  Running run(write_config(dir, scene));
+  ControlClient client = connect(dir / "ctl.sock");
+  {
+    std::ofstream edit(scene, std::ios::app);
+    edit << "\nname: edited on disk\n";  // a second `name`: a duplicate key, an error if read
+  }
+  const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 8e4}});
+  ASSERT_TRUE(set["ok"].get<bool>()) << set.dump();
+  EXPECT_EQ(client.call("status")["result"]["scene"]["name"], "cantilever");
+  std::filesystem::remove(scene);
+  const nlohmann::json gone = client.call("set", {{"key", "integrator.dt_s"}, {"value", 0.002}});
+  EXPECT_TRUE(gone["ok"].get<bool>()) << gone.dump();
+
+  ASSERT_TRUE(client.call("record_start", {{"name", "s.h5"}})["ok"].get<bool>());
+  ASSERT_TRUE(client.call("record_stop")["ok"].get<bool>());
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+  const std::string file = dir / "s.h5";
+  EXPECT_EQ(record::testing::root_string_attribute(file, "scene_text"), as_loaded);
+  EXPECT_EQ(record::testing::root_string_attribute(file, "config_text"), file_text(dir / "tissued.yaml"));
+  const std::vector<std::string> events = record::testing::event_messages(file);
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events[0],
+            "recording cantilever from " + scene + " with material.youngs_modulus_Pa=80000.0, integrator.dt_s=0.002")
+      << events[0];
 }
 
 // A scene past max_scene_tets is refused before it is built (6e6 tets took
@@ -750,6 +819,18 @@ TEST(Service, RecordsOnItsOwnAndRotatesTheFile) {
   recording = client.call("status")["result"]["recording"];
   EXPECT_TRUE(recording["automatic"].get<bool>()) << recording.dump();
   EXPECT_EQ(recording["state"], "recording") << recording.dump();
+  // A client's record_start that cannot make its file changes nothing: the
+  // automatic recording went (stopped before the new file failed) and never
+  // came back.
+  std::ofstream(state + "/taken.h5") << "a file already there";
+  const nlohmann::json taken = client.call("record_start", {{"name", "taken.h5"}});
+  EXPECT_FALSE(taken["ok"].get<bool>()) << taken.dump();
+  recording = client.call("status")["result"]["recording"];
+  ASSERT_TRUE(recording.is_object()) << recording.dump();
+  EXPECT_TRUE(recording["automatic"].get<bool>()) << recording.dump();
+  EXPECT_EQ(recording["state"], "recording") << recording.dump();
+  EXPECT_EQ(file_text(state + "/taken.h5"), "a file already there");
+  std::filesystem::remove(state + "/taken.h5");  // not a session: the files are read below
   // A client's record_start takes over (the automatic file ends), and is
   // neither rotated nor refused as "already recording".
   const nlohmann::json mine = client.call("record_start", {{"name", "mine.h5"}});
