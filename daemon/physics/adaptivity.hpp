@@ -63,8 +63,12 @@ class Adaptivity {
   Vec3 frozen_centre_m_ = Vec3::Zero();
   double frozen_radius_m_ = 0.0;
   double youngs_modulus_Pa_ = 0.0;
-  std::vector<double> edge_strain_;                        // per edge: l / L − 1
-  std::vector<double> node_max_;                           // per node: max measure of incident tets
+  std::vector<double> edge_strain_;  // per edge: l / L − 1
+  // Per node slot: max measure of its incident tets at the start of the
+  // pass, or kUnmeasured (below every measure, which is >= 0) for a slot
+  // that held no live node then.
+  static constexpr double kUnmeasured = -1.0;
+  std::vector<double> node_max_;
   std::vector<std::pair<double, mesh::Key>> refine_;       // (−measure, diamond)
   std::vector<std::tuple<int, double, mesh::Key>> merge_;  // (−depth, measure, diamond)
 };

@@ -206,6 +206,32 @@ TEST(Adaptivity, ADiamondMergesOnlyOnceMinAgeStepsHavePassed) {
   EXPECT_FALSE(body.mesh().is_split(d));
 }
 
+// min_age_steps 0: a diamond split by a pass is not merged by the same pass.
+// The split merged first frees a node slot; the pass's first split reuses it.
+// (Its per-node measure, taken before the splits, was the free slot's 0, so
+// the new node looked relaxed and was merged at once, every pass, while its
+// tets stayed above Th.)
+TEST(Adaptivity, APassNeverMergesADiamondItSplitEvenAtMinAgeZero) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.min_age_steps = 0;
+  const double eps = 1e-3;
+  s.adaptivity.refine_threshold_Pa = 0.5 * 3.0 * s.material.youngs_modulus_Pa * eps * eps;
+  Body body(s);
+  const mesh::Key freed = split_a_cube_diagonal(body);
+  body.merge(freed);
+  ASSERT_EQ(body.mesh().node_count() + 1, body.mesh().node_capacity()) << "the merge must leave a free node slot";
+  std::set<mesh::Key> cube_diagonals;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) { cube_diagonals.insert(body.mesh().diamond_of(t)); });
+  ASSERT_EQ(cube_diagonals.size(), 8u);
+  body.step_index = 1000;
+  dilate(body, eps);  // every tet at 3 E eps^2 = 2 Th
+  Adaptivity adaptivity(s.adaptivity);
+  const AdaptStats stats = adaptivity.adapt(body);
+  EXPECT_EQ(stats.splits, 8);
+  EXPECT_EQ(stats.merges, 0);
+  for (const mesh::Key d : cube_diagonals) EXPECT_TRUE(body.mesh().is_split(d));
+}
+
 // Hysteresis, midpoint: a node further than midpoint_tolerance · L from its
 // edge's midpoint stays (merging it would visibly move the surface).
 TEST(Adaptivity, ADiamondMergesOnlyWhenItsNodeIsNearItsEdgesMidpoint) {
