@@ -123,6 +123,34 @@ void Body::classify_node(NodeId n) {
   }
 }
 
+namespace {
+
+// The fraction of its displacement a prescribed region's drivers hold it at
+// at time t_s: its profile from the first step on; before any step (t_s <= 0)
+// the body is where it started, at rest.
+double driven_fraction(const scene::TimeProfile& profile, double t_s) { return t_s > 0.0 ? profile.at(t_s) : 0.0; }
+
+}  // namespace
+
+void Body::place_kinematic_node(NodeId n) {
+  // The edge's midpoint is off the target wherever the region is not a plane
+  // (a box or sphere around a deformed region): the next step's driver
+  // velocity (target − x) / dt snapped the node back, a spring jump and
+  // kinetic energy booked to nobody.
+  if (kind[n] == NodeKind::kFixed) {
+    x_m[n] = rest_m[n];
+    v_m_per_s[n].setZero();
+  } else if (kind[n] == NodeKind::kPrescribed) {
+    const scene::PrescribedSpec& p = scene_.prescribed[static_cast<std::size_t>(prescribed_index[n])];
+    const Vec3 d(p.displacement_m[0], p.displacement_m[1], p.displacement_m[2]);
+    const double dt_s = scene_.integrator.dt_s;
+    const double now = driven_fraction(p.profile, time_s), before = driven_fraction(p.profile, time_s - dt_s);
+    x_m[n] = rest_m[n] + now * d;
+    // The velocity the drivers gave the region's nodes over the last step.
+    v_m_per_s[n] = (now - before) / dt_s * d;
+  }
+}
+
 std::array<double, 6> Body::tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const {
   // Lattice coordinates of a node stay readable after it dies (merge removes
   // its node last, and no mesh operation re-adds a node it removed), so this
@@ -224,6 +252,7 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
         v_m_per_s[z] = 0.5 * (v_m_per_s[a] + v_m_per_s[b]);
         mass_kg[z] = 0.0;
         classify_node(z);
+        place_kinematic_node(z);
         changed_step[z] = step_index;
         touch_node(z);
         break;

@@ -375,7 +375,10 @@ TEST(Body, MergeConservesMomentumAndNeverAddsKineticEnergy) {
   EXPECT_GT(merges, 20);
 }
 
-TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
+// A new free node sits at its edge's midpoint; a new node in the fixed face
+// is fixed and sits at rest (the ends here are off rest, so the midpoint is
+// not).
+TEST(Body, NewNodesInAFixedRegionAreFixedAtRestAndFreeOnesAtTheEdgeMidpoint) {
   scene::Scene s = testing::cantilever_scene();
   Body body(s);
   std::mt19937 rng(2);
@@ -390,7 +393,13 @@ TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
     const Vec3 mid = 0.5 * (body.x_m[body.mesh().edge(body.mesh().find_edge(d)).a] +
                             body.x_m[body.mesh().edge(body.mesh().find_edge(d)).b]);
     body.split(d);
-    EXPECT_LT((body.x_m[body.mesh().find_node(d)] - mid).norm(), 1e-15);
+    const NodeId z = body.mesh().find_node(d);
+    if (body.kind[z] == NodeKind::kFixed) {
+      EXPECT_EQ(body.x_m[z], body.rest_m[z]);
+      EXPECT_EQ(body.v_m_per_s[z], Vec3::Zero());
+    } else {
+      EXPECT_LT((body.x_m[z] - mid).norm(), 1e-15);
+    }
   }
   int fixed = 0;
   body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
@@ -402,6 +411,52 @@ TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
     }
   });
   EXPECT_GT(fixed, 25);
+}
+
+// A split edge from a node inside a fixed or prescribed box to a displaced
+// free node: the new node is in the box, so it goes where the drivers hold
+// the box's nodes, not to the edge's midpoint (rest + u/2, from where the next
+// step's driver velocity snapped it back: a spring jump and the kinetic
+// energy of (u/2)/dt booked to nobody). The corner cube's diagonal runs from
+// a = (0, 0, 0), in the box, to b = (h, h, h), h = 0.05 m.
+TEST(Body, ANewKinematicNodeStartsOnItsTargetNotAtItsEdgesMidpoint) {
+  const Vec3 u(0.004, 0.004, 0.004);  // b's displacement
+  const Vec3 push(0.0, 0.0, 0.001);   // the prescribed box's displacement
+  for (const bool prescribed : {false, true}) {
+    SCOPED_TRACE(prescribed ? "prescribed box" : "fixed box");
+    scene::Scene s = adaptive_cube();
+    const scene::Region corner = scene::Region::box({0, 0, 0}, {0.03, 0.03, 0.03});
+    scene::TimeProfile ramp;
+    ramp.ramp_s = 0.1;
+    if (prescribed)
+      s.prescribed.push_back({"push", corner, {push.x(), push.y(), push.z()}, ramp});
+    else
+      s.fixed.push_back({corner});
+    Body body(s);
+    body.time_s = 0.05;  // half way up the ramp
+    NodeId a = mesh::kInvalidId, b = mesh::kInvalidId;
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (body.rest_m[n].isZero(0.0)) a = n;
+      if ((body.rest_m[n] - Vec3(0.05, 0.05, 0.05)).isZero(1e-12)) b = n;
+    });
+    ASSERT_NE(a, mesh::kInvalidId);
+    ASSERT_NE(b, mesh::kInvalidId);
+    body.x_m[b] += u;
+    body.v_m_per_s[b] = Vec3(1.0, 2.0, 3.0);
+    const mesh::Key d = mesh::edge_key(body.mesh().node(a).lattice, body.mesh().node(b).lattice);
+    ASSERT_EQ(body.split(d), 1);
+    const NodeId z = body.mesh().find_node(d);
+    ASSERT_EQ(body.kind[z], prescribed ? NodeKind::kPrescribed : NodeKind::kFixed);
+    ASSERT_EQ(body.kind[b], NodeKind::kFree);
+    if (prescribed) {
+      // rest + profile(0.05 s) d, moving at the ramp's d / 0.1 s.
+      EXPECT_LT((body.x_m[z] - (body.rest_m[z] + 0.5 * push)).norm(), 1e-15);
+      EXPECT_LT((body.v_m_per_s[z] - push / 0.1).norm(), 1e-9);
+    } else {
+      EXPECT_EQ(body.x_m[z], body.rest_m[z]);
+      EXPECT_EQ(body.v_m_per_s[z], Vec3::Zero());
+    }
+  }
 }
 
 // docs/scene-format.md: nodes in a fixed region never move. A node in a
