@@ -347,17 +347,25 @@ void KuhnMesh::unlink_tet(TetId id, MeshChangeLog* log) {
   if (log) log->events.push_back({MeshEvent::Kind::kTetRemoved, t.depth, id, t.v, t.e});
 }
 
-void KuhnMesh::merge(Key diamond, MeshChangeLog* log) {
-  const NodeId z = node_index_.find(diamond);
-  if (z == util::KeyIndexMap::kNotFound)
-    throw std::invalid_argument(describe_key(diamond) + " cannot merge: it is not split");
+void KuhnMesh::require_can_merge(Key diamond) const {
+  // The key first: a coarse grid vertex is "split" (its node exists) but no
+  // diamond, and has no edge to merge into.
   const DiamondInfo info = diamond_info(diamond);
+  if (!is_split(diamond)) throw std::invalid_argument(describe_key(diamond) + " cannot merge: it is not split");
   std::array<Key, 8> children{};
   const int child_count = diamond_children(domain_, info, &children);
   for (int i = 0; i < child_count; ++i)
     if (is_split(children[i]))
       throw std::invalid_argument(describe_key(diamond) + " cannot merge: its child " + describe_key(children[i]) +
                                   " is split (merge finer diamonds first)");
+}
+
+void KuhnMesh::merge(Key diamond, MeshChangeLog* log) {
+  require_can_merge(diamond);
+  const NodeId z = node_index_.find(diamond);
+  const DiamondInfo info = diamond_info(diamond);
+  std::array<Key, 8> children{};
+  const int child_count = diamond_children(domain_, info, &children);
   topology_version_ = next_topology_version();
 
   // The tets around z are exactly the children of the diamond's tets; they

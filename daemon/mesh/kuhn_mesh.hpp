@@ -129,6 +129,9 @@ class KuhnMesh {
   bool can_split(Key diamond) const;
   // True when split and none of its child diamonds is split.
   bool can_merge(Key diamond) const;
+  // Throws std::invalid_argument saying why when !can_merge(diamond): not a
+  // diamond of this box, not split, or a child diamond split. Changes nothing.
+  void require_can_merge(Key diamond) const;
   // Depth of a diamond's tets; throws std::invalid_argument if `diamond` is
   // not a diamond of this box.
   DiamondInfo diamond_info(Key diamond) const;

@@ -203,14 +203,26 @@ void Body::rebuild_parameters() {
 
 int Body::split(mesh::Key diamond) {
   log_.clear();
-  const int n = mesh_.split(diamond, &log_);
+  int n = 0;
+  try {
+    n = mesh_.split(diamond, &log_);
+  } catch (...) {
+    // A bad key throws before the mesh changes (empty log); should the mesh
+    // fail part way, the arrays still follow what it did.
+    if (!log_.events.empty()) apply_log(log_);
+    throw;
+  }
   apply_log(log_);
   return n;
 }
 
 void Body::merge(mesh::Key diamond) {
+  // Validated before any velocity changes: a coarse grid vertex's node has no
+  // edge ends (kInvalidId indexed the arrays), and momentum handed to the ends
+  // of a diamond the mesh then refused was momentum made from nothing.
+  mesh_.require_can_merge(diamond);
   const NodeId z = mesh_.find_node(diamond);
-  if (z != mesh::kInvalidId && kind[z] == NodeKind::kFree) {
+  if (kind[z] == NodeKind::kFree) {
     // Half of the vanishing node's momentum to each end of its edge: momentum
     // is conserved and kinetic energy can only drop.
     const NodeId ends[2] = {mesh_.node(z).edge_a, mesh_.node(z).edge_b};

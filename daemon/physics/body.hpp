@@ -39,7 +39,9 @@ class Body {
   // fixed or prescribed one its target (place_kinematic_node); a merged node
   // gives half its momentum to each end of its edge (kinetic energy can only
   // drop). The elastic energy does change with the springs (SimCounters::
-  // adaptation_energy_J). Returns diamonds split / 1 for merge.
+  // adaptation_energy_J). Returns diamonds split / 1 for merge. A key the
+  // mesh refuses (KuhnMesh::split, require_can_merge) throws
+  // std::invalid_argument with the body unchanged.
   int split(mesh::Key diamond);
   void merge(mesh::Key diamond);
 

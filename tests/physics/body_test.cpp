@@ -459,6 +459,56 @@ TEST(Body, ANewKinematicNodeStartsOnItsTargetNotAtItsEdgesMidpoint) {
   }
 }
 
+// A key the mesh refuses changes nothing, velocities included: a coarse grid
+// vertex (its node has no edge: merge read kind[kInvalidId] and could write
+// v_m_per_s[kInvalidId]), a split diamond with a split child (its ends got the
+// node's momentum, then the mesh refused), the map's empty marker ~0, and a
+// valid diamond with bit 63 set (split split its parents and then failed with
+// a logic_error, the body's arrays never told).
+TEST(Body, ABadKeyThrowsInvalidArgumentAndChangesNothing) {
+  Body body(adaptive_cube());
+  const mesh::KuhnMesh& m = body.mesh();
+  const std::int64_t H = m.domain().coarse_cube();
+  const mesh::Key cube = mesh::vertex_key({H / 2, H / 2, H / 2});
+  ASSERT_EQ(body.split(cube), 1);
+  ASSERT_EQ(body.split(mesh::vertex_key({0, H / 2, H / 2})), 1);  // a child of `cube`
+  std::mt19937 rng(4);
+  randomise_state(body, rng);
+  // The face between the cubes at x = 0 and x = H: its parent in the second cube is unsplit.
+  const mesh::Key next_face = mesh::vertex_key({H, H / 2, H / 2});
+  ASSERT_TRUE(m.can_split(next_face));
+  ASSERT_FALSE(m.is_split(mesh::vertex_key({H + H / 2, H / 2, H / 2})));
+  const mesh::Key top_bit = mesh::Key{1} << 63;
+  struct Case {
+    const char* what;
+    mesh::Key key;
+    bool merge;
+  };
+  const Case cases[] = {
+      {"merge a coarse grid vertex", mesh::vertex_key({H, 0, 0}), true},
+      {"merge a diamond with a split child", cube, true},
+      {"merge ~0", ~mesh::Key{0}, true},
+      {"split ~0", ~mesh::Key{0}, false},
+      {"merge bit 63 + a split diamond", top_bit | cube, true},
+      {"split bit 63 + a diamond with an unsplit parent", top_bit | next_face, false},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    const std::vector<Vec3> v0 = body.v_m_per_s, x0 = body.x_m;
+    const Vec3 p0 = body.momentum_kg_m_per_s();
+    const std::size_t tets0 = m.tet_count(), nodes0 = m.node_count();
+    if (c.merge)
+      EXPECT_THROW(body.merge(c.key), std::invalid_argument);
+    else
+      EXPECT_THROW(body.split(c.key), std::invalid_argument);
+    EXPECT_EQ(body.v_m_per_s, v0);
+    EXPECT_EQ(body.x_m, x0);
+    EXPECT_EQ(body.momentum_kg_m_per_s(), p0);
+    EXPECT_EQ(m.tet_count(), tets0);
+    EXPECT_EQ(m.node_count(), nodes0);
+  }
+}
+
 // docs/scene-format.md: nodes in a fixed region never move. A node in a
 // fixed and a prescribed region at once is fixed; the rest of the
 // prescribed region is prescribed.
