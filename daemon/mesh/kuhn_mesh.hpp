@@ -142,6 +142,12 @@ class KuhnMesh {
   // tets are at max depth. Events are appended to `log` if non-null.
   int split(Key diamond, MeshChangeLog* log = nullptr);
 
+  // The leaf tets split(diamond) would bisect, each once, into `tets`: the
+  // diamond's own and those of every unsplit ancestor its closure splits
+  // (tets the closure creates on the way lie inside these). Empty when it
+  // cannot split. `pending` is scratch (reused: no allocation once grown).
+  void closure_tets(Key diamond, std::vector<TetId>& tets, std::vector<Key>& pending) const;
+
   // Merges a split diamond whose children are all unsplit. Throws
   // std::invalid_argument otherwise.
   void merge(Key diamond, MeshChangeLog* log = nullptr);

@@ -27,6 +27,17 @@ double Adaptivity::measure_from_edges(const mesh::Tet& tet) const {
   return spec_.criterion == scene::RefineCriterion::kStretch ? worst : 0.5 * youngs_modulus_Pa_ * sum;
 }
 
+bool Adaptivity::closure_touches_frozen(const Body& body, mesh::Key diamond) {
+  // Not the wanted tet alone: the split bisects every tet of the diamond and
+  // its closure every tet of each unsplit ancestor, coarser tets that can
+  // reach into the sphere from outside it.
+  body.mesh().closure_tets(diamond, closure_tets_, closure_keys_);
+  for (const TetId t : closure_tets_)
+    for (const NodeId n : body.mesh().tet(t).v)
+      if (is_frozen(body.x_m[n])) return true;
+  return false;
+}
+
 AdaptStats Adaptivity::adapt(Body& body) {
   AdaptStats stats;
   const mesh::KuhnMesh& mesh = body.mesh();
@@ -68,6 +79,7 @@ AdaptStats Adaptivity::adapt(Body& body) {
     }
     const mesh::Key d = refine_[i].second;
     if (!mesh.can_split(d)) continue;  // split already (closure of an earlier one) or at max depth
+    if (frozen_ && closure_touches_frozen(body, d)) continue;
     const int n = body.split(d);
     stats.splits += n;
     budget -= n;
