@@ -2,6 +2,9 @@
 
 #include <chrono>
 #include <cstdio>
+#include <stdexcept>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "app/trade_format.hpp"
@@ -9,6 +12,7 @@
 #include "app/trade_scenes.hpp"
 #include "physics/boundary.hpp"
 #include "physics/forces.hpp"
+#include "scene/scene_yaml.hpp"
 
 namespace tissue::app {
 
@@ -39,11 +43,40 @@ double force_residual_N(const ph::Simulation& sim) {
   return std::sqrt(sum2);
 }
 
-StaticResult solve_static(sc::Scene s, long max_steps, double tol_rel) {
+namespace {
+
+// `s` with the integrator solve_static steps it with.
+sc::Scene as_static(sc::Scene s) {
   s.integrator.kind = sc::IntegratorKind::kImplicit;
   s.integrator.dt_s = 0.05;
   s.integrator.cg_max_iterations = 2000;
   s.integrator.cg_tolerance = 1e-10;
+  return s;
+}
+
+// The beam of the table's row for `law` at uniform `depth` (bending load).
+sc::Scene beam_at_depth(sc::StiffnessLaw law, int depth) {
+  sc::Scene s = performance_beam({false, depth, 0.0, depth}, sc::IntegratorKind::kImplicit, 0.05, 0.0);
+  s.material.stiffness = law;
+  return s;
+}
+
+}  // namespace
+
+void check_beam_depth(int max_depth) {
+  for (int d = 0; d <= max_depth; ++d)
+    for (const auto law : {sc::StiffnessLaw::kIsotropic, sc::StiffnessLaw::kPaper}) {
+      try {
+        sc::validate_scene(as_static(beam_at_depth(law, d)));
+      } catch (const sc::SceneError& e) {
+        throw std::invalid_argument("--beam-depth " + std::to_string(max_depth) + ": the uniform beam at depth " +
+                                    std::to_string(d) + ": " + e.reason() + " (" + e.key_path() + ")");
+      }
+    }
+}
+
+StaticResult solve_static(sc::Scene s, long max_steps, double tol_rel) {
+  s = as_static(std::move(s));
   StaticResult r;
   const auto t0 = Clock::now();
   ph::Simulation sim(s);
@@ -84,8 +117,7 @@ const char* law_name(sc::StiffnessLaw law) { return law == sc::StiffnessLaw::kIs
 LawResults solve_law(sc::StiffnessLaw law, int max_depth, long max_steps, double tol_rel) {
   LawResults out;
   for (int d = 0; d <= max_depth; ++d) {
-    sc::Scene s = performance_beam({false, d, 0.0, d}, sc::IntegratorKind::kImplicit, 0.05, 0.0);
-    s.material.stiffness = law;
+    sc::Scene s = beam_at_depth(law, d);
     out.bend.push_back(solve_static(s, max_steps, tol_rel));
     s.loads[0].total_force_N = {0.05, 0.0, 0.0};
     out.axial.push_back(solve_static(s, max_steps, tol_rel));

@@ -42,6 +42,12 @@ double force_residual_N(const physics::Simulation& sim);
 // 10 steps, at most max_steps; probe 0 is the tip centre, 1 the bottom edge.
 StaticResult solve_static(scene::Scene s, long max_steps, double tol_rel);
 
+// Throws std::invalid_argument naming --beam-depth when the beam at a depth
+// up to max_depth is one the scene checks refuse: 8 x 2 x 2 cubes hold 192 ·
+// 2^depth tets, so depth 17 (2.5e7) passes the mesh budget and 20 asked for
+// ~40 GB. The table's runs are checked before the first.
+void check_beam_depth(int max_depth);
+
 // Prints the table: per law and uniform depth 0..--beam-depth, the bending
 // tip against theory and the finest depth, and an axial check.
 void run_beam_theory(const TradeOptions& o);

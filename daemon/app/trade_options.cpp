@@ -6,6 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "app/trade_beam_theory.hpp"
 #include "scene/scene_names.hpp"
 #include "util/output_file.hpp"
 #include "util/text.hpp"
@@ -145,6 +146,7 @@ void check_together(const TradeOptions& o) {
                                 "': the plot would replace the table");
   if (o.metric != "rms" && o.metric != "max" && o.metric != "tip" && o.metric != "path")
     throw std::invalid_argument("--metric must be rms, max, tip or path");
+  if (o.beam_max_depth >= 0) check_beam_depth(o.beam_max_depth);
 }
 
 }  // namespace
@@ -182,7 +184,8 @@ void print_trade_usage(const std::string& program, std::FILE* to) {
       "          a scene file: its own)\n"
       "         [--explicit-precision double|float]   (the explicit rung's arithmetic, default double;\n"
       "          a scene file: its own)\n"
-      "  beam-theory: [--beam-depth D]\n"
+      "  beam-theory: [--beam-depth D]   (uniform depths 0..D, each a scene the scene checks accept:\n"
+      "          at most 16, 192 x 2^16 tetrahedra)\n"
       "no mode flag: all three modes (with --scene-file: the sweep)\n"
       "--quick: shorter runs and fewer points everywhere (the defaults in brackets below)\n"
       "--scene: cantilever (the paper's, 5 N tip load), beam (PERFORMANCE.md's 0.4 m beam, 8x2x2 cubes),\n"

@@ -175,6 +175,30 @@ int KuhnMesh::split(Key diamond, MeshChangeLog* log) {
   return split_recursive(diamond, info, log);
 }
 
+void KuhnMesh::closure_tets(Key diamond, std::vector<TetId>& tets, std::vector<Key>& pending) const {
+  tets.clear();
+  pending.clear();
+  if (!can_split(diamond)) return;
+  // Breadth-first over the unsplit ancestors; `pending` is also the visited
+  // list (a diamond is reached through up to four children).
+  pending.push_back(diamond);
+  for (std::size_t i = 0; i < pending.size(); ++i) {
+    const Key key = pending[i];
+    // A diamond's tets exist once the parent each comes from is split: some
+    // may exist while another parent is unsplit, so the walk goes on up.
+    const EdgeId e = edge_index_.find(key);
+    if (e != util::KeyIndexMap::kNotFound)
+      for (TetId t = edges_[e].diamond_head; t != kInvalidId; t = tets_[t].next_in_diamond) tets.push_back(t);
+    DiamondInfo info;
+    classify_diamond(domain_, key, &info, nullptr);
+    std::array<Key, 4> parents{};
+    const int parent_count = diamond_parents(domain_, info, &parents);
+    for (int j = 0; j < parent_count; ++j)
+      if (!is_split(parents[j]) && std::find(pending.begin(), pending.end(), parents[j]) == pending.end())
+        pending.push_back(parents[j]);
+  }
+}
+
 int KuhnMesh::split_recursive(Key diamond, const DiamondInfo& info, MeshChangeLog* log) {
   int splits = 0;
   // Closure: a diamond's tets exist only once all its parents are split.
@@ -347,17 +371,25 @@ void KuhnMesh::unlink_tet(TetId id, MeshChangeLog* log) {
   if (log) log->events.push_back({MeshEvent::Kind::kTetRemoved, t.depth, id, t.v, t.e});
 }
 
-void KuhnMesh::merge(Key diamond, MeshChangeLog* log) {
-  const NodeId z = node_index_.find(diamond);
-  if (z == util::KeyIndexMap::kNotFound)
-    throw std::invalid_argument(describe_key(diamond) + " cannot merge: it is not split");
+void KuhnMesh::require_can_merge(Key diamond) const {
+  // The key first: a coarse grid vertex is "split" (its node exists) but no
+  // diamond, and has no edge to merge into.
   const DiamondInfo info = diamond_info(diamond);
+  if (!is_split(diamond)) throw std::invalid_argument(describe_key(diamond) + " cannot merge: it is not split");
   std::array<Key, 8> children{};
   const int child_count = diamond_children(domain_, info, &children);
   for (int i = 0; i < child_count; ++i)
     if (is_split(children[i]))
       throw std::invalid_argument(describe_key(diamond) + " cannot merge: its child " + describe_key(children[i]) +
                                   " is split (merge finer diamonds first)");
+}
+
+void KuhnMesh::merge(Key diamond, MeshChangeLog* log) {
+  require_can_merge(diamond);
+  const NodeId z = node_index_.find(diamond);
+  const DiamondInfo info = diamond_info(diamond);
+  std::array<Key, 8> children{};
+  const int child_count = diamond_children(domain_, info, &children);
   topology_version_ = next_topology_version();
 
   // The tets around z are exactly the children of the diamond's tets; they

@@ -129,6 +129,9 @@ class KuhnMesh {
   bool can_split(Key diamond) const;
   // True when split and none of its child diamonds is split.
   bool can_merge(Key diamond) const;
+  // Throws std::invalid_argument saying why when !can_merge(diamond): not a
+  // diamond of this box, not split, or a child diamond split. Changes nothing.
+  void require_can_merge(Key diamond) const;
   // Depth of a diamond's tets; throws std::invalid_argument if `diamond` is
   // not a diamond of this box.
   DiamondInfo diamond_info(Key diamond) const;
@@ -138,6 +141,12 @@ class KuhnMesh {
   // std::invalid_argument when the key is not a diamond of this box or its
   // tets are at max depth. Events are appended to `log` if non-null.
   int split(Key diamond, MeshChangeLog* log = nullptr);
+
+  // The leaf tets split(diamond) would bisect, each once, into `tets`: the
+  // diamond's own and those of every unsplit ancestor its closure splits
+  // (tets the closure creates on the way lie inside these). Empty when it
+  // cannot split. `pending` is scratch (reused: no allocation once grown).
+  void closure_tets(Key diamond, std::vector<TetId>& tets, std::vector<Key>& pending) const;
 
   // Merges a split diamond whose children are all unsplit. Throws
   // std::invalid_argument otherwise.

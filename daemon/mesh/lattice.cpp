@@ -18,6 +18,12 @@ Vec3i offset(const Vec3i& c, int axis, std::int64_t delta) {
 }  // namespace
 
 bool classify_diamond(const LatticeDomain& domain, Key key, DiamondInfo* info, std::string* why) {
+  // unpack_doubled reads the low 63 bits only: a key with bit 63 set would
+  // name the diamond of its low bits, which the mesh stores under the other key.
+  if (key >> (3 * kKeyBitsPerAxis) != 0) {
+    if (why) *why = "key has bits set above the 63 bits of packed coordinates";
+    return false;
+  }
   const Vec3i doubled = unpack_doubled(key);
   Vec3i c{};
   for (int a = 0; a < 3; ++a) {

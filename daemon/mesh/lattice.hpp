@@ -74,7 +74,8 @@ struct LatticeDomain {
 
 // Classifies the doubled-coordinate key of a would-be diamond. Returns false
 // (with `why` filled) when the key is not a diamond of this domain's
-// hierarchy: off the lattice, outside the box, or a coarse grid vertex.
+// hierarchy: not a packed key (bits above the 63 of the coordinates), off
+// the lattice, outside the box, or a coarse grid vertex.
 bool classify_diamond(const LatticeDomain& domain, Key key, DiamondInfo* info, std::string* why);
 
 // Parent diamonds (keys) inside the domain; they must be split before this

@@ -27,6 +27,17 @@ double Adaptivity::measure_from_edges(const mesh::Tet& tet) const {
   return spec_.criterion == scene::RefineCriterion::kStretch ? worst : 0.5 * youngs_modulus_Pa_ * sum;
 }
 
+bool Adaptivity::closure_touches_frozen(const Body& body, mesh::Key diamond) {
+  // Not the wanted tet alone: the split bisects every tet of the diamond and
+  // its closure every tet of each unsplit ancestor, coarser tets that can
+  // reach into the sphere from outside it.
+  body.mesh().closure_tets(diamond, closure_tets_, closure_keys_);
+  for (const TetId t : closure_tets_)
+    for (const NodeId n : body.mesh().tet(t).v)
+      if (is_frozen(body.x_m[n])) return true;
+  return false;
+}
+
 AdaptStats Adaptivity::adapt(Body& body) {
   AdaptStats stats;
   const mesh::KuhnMesh& mesh = body.mesh();
@@ -42,7 +53,9 @@ AdaptStats Adaptivity::adapt(Body& body) {
     energy_J += 0.5 * body.stiffness_N_per_m[e] * stretch_m * stretch_m;
   });
   stats.elastic_energy_before_J = energy_J;
-  node_max_.assign(body.x_m.size(), 0.0);
+  // kUnmeasured stays on the slots no tet touches now (free slots): a split
+  // below may reuse one, and its node must not look relaxed to the merges.
+  node_max_.assign(body.x_m.size(), kUnmeasured);
   refine_.clear();
   mesh.for_each_tet([&](TetId t, const mesh::Tet& tet) {
     const double m = measure_from_edges(tet);
@@ -66,19 +79,23 @@ AdaptStats Adaptivity::adapt(Body& body) {
     }
     const mesh::Key d = refine_[i].second;
     if (!mesh.can_split(d)) continue;  // split already (closure of an earlier one) or at max depth
+    if (frozen_ && closure_touches_frozen(body, d)) continue;
     const int n = body.split(d);
     stats.splits += n;
     budget -= n;
   }
 
-  // Simplify the relaxed regions, finest diamonds first. Nodes created in
-  // this pass are too young to merge, so refine and merge never fight.
+  // Simplify the relaxed regions, finest diamonds first. Only nodes measured
+  // above merge: a node this pass created (in a new slot, or in a freed one
+  // whose entry is kUnmeasured) is never merged, whatever min_age_steps, so
+  // refine and merge never fight. (With min_age_steps 0 a split landing in a
+  // freed slot was merged in the same pass, every pass.)
   merge_.clear();
   const double tol = spec_.midpoint_tolerance;
   mesh.for_each_node([&](NodeId z, const mesh::Node& node) {
     if (node.edge_a == mesh::kInvalidId || node.depth < spec_.min_depth) return;
     if (body.step_index - body.changed_step[z] < spec_.min_age_steps) return;
-    if (z >= node_max_.size() || node_max_[z] >= merge_below) return;
+    if (z >= node_max_.size() || node_max_[z] == kUnmeasured || node_max_[z] >= merge_below) return;
     if (is_frozen(body.x_m[z])) return;
     const Vec3 mid = 0.5 * (body.x_m[node.edge_a] + body.x_m[node.edge_b]);
     const double length = (body.rest_m[node.edge_b] - body.rest_m[node.edge_a]).norm();

@@ -41,7 +41,8 @@ class Adaptivity {
 
   // While a tool presses the object the mesh under it must not change (the
   // haptic loop renders against that patch): tets with a vertex, and nodes,
-  // currently within radius_m of centre_m are neither refined nor merged.
+  // currently within radius_m of centre_m are neither refined nor merged. A
+  // split whose closure would bisect such a tet is skipped.
   void freeze_sphere(const Vec3& centre_m, double radius_m) {
     frozen_ = true;
     frozen_centre_m_ = centre_m;
@@ -54,6 +55,10 @@ class Adaptivity {
   // per incident tet: ~5x fewer).
   double measure_from_edges(const mesh::Tet& tet) const;
 
+  // True when a tet split(diamond) would bisect, closure included, has a
+  // frozen vertex.
+  bool closure_touches_frozen(const Body& body, mesh::Key diamond);
+
   bool is_frozen(const Vec3& x_m) const {
     return frozen_ && (x_m - frozen_centre_m_).squaredNorm() <= frozen_radius_m_ * frozen_radius_m_;
   }
@@ -63,10 +68,16 @@ class Adaptivity {
   Vec3 frozen_centre_m_ = Vec3::Zero();
   double frozen_radius_m_ = 0.0;
   double youngs_modulus_Pa_ = 0.0;
-  std::vector<double> edge_strain_;                        // per edge: l / L − 1
-  std::vector<double> node_max_;                           // per node: max measure of incident tets
+  std::vector<double> edge_strain_;  // per edge: l / L − 1
+  // Per node slot: max measure of its incident tets at the start of the
+  // pass, or kUnmeasured (below every measure, which is >= 0) for a slot
+  // that held no live node then.
+  static constexpr double kUnmeasured = -1.0;
+  std::vector<double> node_max_;
   std::vector<std::pair<double, mesh::Key>> refine_;       // (−measure, diamond)
   std::vector<std::tuple<int, double, mesh::Key>> merge_;  // (−depth, measure, diamond)
+  std::vector<TetId> closure_tets_;                        // scratch of closure_touches_frozen
+  std::vector<mesh::Key> closure_keys_;
 };
 
 }  // namespace tissue::physics

@@ -123,6 +123,34 @@ void Body::classify_node(NodeId n) {
   }
 }
 
+namespace {
+
+// The fraction of its displacement a prescribed region's drivers hold it at
+// at time t_s: its profile from the first step on; before any step (t_s <= 0)
+// the body is where it started, at rest.
+double driven_fraction(const scene::TimeProfile& profile, double t_s) { return t_s > 0.0 ? profile.at(t_s) : 0.0; }
+
+}  // namespace
+
+void Body::place_kinematic_node(NodeId n) {
+  // The edge's midpoint is off the target wherever the region is not a plane
+  // (a box or sphere around a deformed region): the next step's driver
+  // velocity (target − x) / dt snapped the node back, a spring jump and
+  // kinetic energy booked to nobody.
+  if (kind[n] == NodeKind::kFixed) {
+    x_m[n] = rest_m[n];
+    v_m_per_s[n].setZero();
+  } else if (kind[n] == NodeKind::kPrescribed) {
+    const scene::PrescribedSpec& p = scene_.prescribed[static_cast<std::size_t>(prescribed_index[n])];
+    const Vec3 d(p.displacement_m[0], p.displacement_m[1], p.displacement_m[2]);
+    const double dt_s = scene_.integrator.dt_s;
+    const double now = driven_fraction(p.profile, time_s), before = driven_fraction(p.profile, time_s - dt_s);
+    x_m[n] = rest_m[n] + now * d;
+    // The velocity the drivers gave the region's nodes over the last step.
+    v_m_per_s[n] = (now - before) / dt_s * d;
+  }
+}
+
 std::array<double, 6> Body::tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const {
   // Lattice coordinates of a node stay readable after it dies (merge removes
   // its node last, and no mesh operation re-adds a node it removed), so this
@@ -175,14 +203,26 @@ void Body::rebuild_parameters() {
 
 int Body::split(mesh::Key diamond) {
   log_.clear();
-  const int n = mesh_.split(diamond, &log_);
+  int n = 0;
+  try {
+    n = mesh_.split(diamond, &log_);
+  } catch (...) {
+    // A bad key throws before the mesh changes (empty log); should the mesh
+    // fail part way, the arrays still follow what it did.
+    if (!log_.events.empty()) apply_log(log_);
+    throw;
+  }
   apply_log(log_);
   return n;
 }
 
 void Body::merge(mesh::Key diamond) {
+  // Validated before any velocity changes: a coarse grid vertex's node has no
+  // edge ends (kInvalidId indexed the arrays), and momentum handed to the ends
+  // of a diamond the mesh then refused was momentum made from nothing.
+  mesh_.require_can_merge(diamond);
   const NodeId z = mesh_.find_node(diamond);
-  if (z != mesh::kInvalidId && kind[z] == NodeKind::kFree) {
+  if (kind[z] == NodeKind::kFree) {
     // Half of the vanishing node's momentum to each end of its edge: momentum
     // is conserved and kinetic energy can only drop.
     const NodeId ends[2] = {mesh_.node(z).edge_a, mesh_.node(z).edge_b};
@@ -224,6 +264,7 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
         v_m_per_s[z] = 0.5 * (v_m_per_s[a] + v_m_per_s[b]);
         mass_kg[z] = 0.0;
         classify_node(z);
+        place_kinematic_node(z);
         changed_step[z] = step_index;
         touch_node(z);
         break;

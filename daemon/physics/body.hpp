@@ -34,11 +34,14 @@ class Body {
   const scene::Scene& scene() const { return scene_; }
 
   // Splits / merges one diamond (closure included for split) and carries the
-  // state across: a new node takes its edge's mean position and velocity (a
-  // split adds no momentum or kinetic energy); a merged node gives half its
-  // momentum to each end of its edge (kinetic energy can only drop). The
-  // elastic energy does change with the springs (SimCounters::
-  // adaptation_energy_J). Returns diamonds split / 1 for merge.
+  // state across: a new free node takes its edge's mean position and velocity
+  // (a split adds no momentum or kinetic energy to the free nodes), a new
+  // fixed or prescribed one its target (place_kinematic_node); a merged node
+  // gives half its momentum to each end of its edge (kinetic energy can only
+  // drop). The elastic energy does change with the springs (SimCounters::
+  // adaptation_energy_J). Returns diamonds split / 1 for merge. A key the
+  // mesh refuses (KuhnMesh::split, require_can_merge) throws
+  // std::invalid_argument with the body unchanged.
   int split(mesh::Key diamond);
   void merge(mesh::Key diamond);
 
@@ -61,6 +64,10 @@ class Body {
 
   // Step counter the adaptivity stamps new nodes with.
   std::int64_t step_index = 0;
+  // Time of the state [s] (the simulation sets it with step_index): a fixed
+  // or prescribed node a split creates is put where the drivers hold the
+  // nodes of its region at this time, not at its edge's midpoint.
+  double time_s = 0.0;
 
   // Recomputes every mass, spring and damper from the mesh alone. The
   // incremental updates must agree with it (a test checks that).
@@ -88,6 +95,9 @@ class Body {
   // or load region that holds no node of the starting mesh.
   void require_every_region_selects_a_node() const;
   void classify_node(NodeId n);
+  // Puts a fixed or prescribed node on its target at time_s, moving as the
+  // drivers move the other nodes of its region; leaves a free node alone.
+  void place_kinematic_node(NodeId n);
   void refresh_edge(EdgeId e);
 
   scene::Scene scene_;

@@ -34,7 +34,8 @@ bool KeyIndexMap::insert(std::uint64_t key, std::uint32_t value) {
 }
 
 bool KeyIndexMap::erase(std::uint64_t key) {
-  if (size_ == 0) return false;
+  // kEmptyKey would "find" an empty slot and count an entry gone.
+  if (size_ == 0 || key == kEmptyKey) return false;
   std::size_t slot = home(key);
   for (;; slot = (slot + 1) & mask_) {
     if (slots_[slot].key == key) break;

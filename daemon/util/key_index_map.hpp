@@ -21,9 +21,10 @@ class KeyIndexMap {
 
   explicit KeyIndexMap(std::size_t expected_entries = 0) { reserve(expected_entries); }
 
-  // Returns the value stored for `key`, or kNotFound.
+  // Returns the value stored for `key`, or kNotFound (always for kEmptyKey,
+  // which no entry can hold: it would match the first empty slot).
   std::uint32_t find(std::uint64_t key) const {
-    if (size_ == 0) return kNotFound;
+    if (size_ == 0 || key == kEmptyKey) return kNotFound;
     for (std::size_t slot = home(key);; slot = (slot + 1) & mask_) {
       const Slot& s = slots_[slot];
       if (s.key == key) return s.value;
@@ -37,7 +38,7 @@ class KeyIndexMap {
   // Throws std::invalid_argument for the reserved key kEmptyKey.
   bool insert(std::uint64_t key, std::uint32_t value);
 
-  // Removes key. Returns false if it was absent.
+  // Removes key. Returns false if it was absent (always for kEmptyKey).
   bool erase(std::uint64_t key);
 
   void reserve(std::size_t entries);

@@ -76,6 +76,13 @@ TEST(TradeOptions, EachErrorNamesTheOptionOrTheConflict) {
   EXPECT_EQ(parse_error({"--table1", "--svg", "p.svg"}), "--csv and --svg are the sweep's files: add --sweep");
   EXPECT_EQ(parse_error({"--sweep", "--csv", "x", "--svg", "x"}),
             "--csv and --svg name the same file 'x': the plot would replace the table");
+  // The beam-theory table runs every uniform depth up to --beam-depth, each
+  // checked as a scene first: depth 17 is 192 x 2^17 = 2.5e7 tets, over the
+  // mesh budget (it was accepted, and 20 would have asked for ~40 GB).
+  EXPECT_EQ(parse_error({"--beam-theory", "--beam-depth", "17"}),
+            "--beam-depth 17: the uniform beam at depth 17: the starting mesh would have 25165824 tetrahedra (32 "
+            "cubes x 6 x 2^17), more than 20000000 (adaptivity.min_depth)");
+  EXPECT_EQ(parse_error({"--beam-theory", "--beam-depth", "16"}), "");
   // With the sweep in the defaulted modes, its files are fine.
   EXPECT_EQ(parse_error({"--csv", "t.csv", "--svg", "p.svg"}), "");
 }

@@ -194,6 +194,18 @@ TEST(KuhnMesh, SplitAndMergeRejectBadRequestsClearly) {
   EXPECT_THROW(mesh.split(vertex_key({H, H, H})), std::invalid_argument);
   EXPECT_THROW(mesh.split(vertex_key({5 * H, H / 2, H / 2})), std::invalid_argument);
   EXPECT_THROW(mesh.split(pack_doubled({1, 2, 2})), std::invalid_argument);
+  // A face diamond with bit 63 set: split its parents, then failed to find
+  // its edge under the other key (std::logic_error, the parents left split).
+  EXPECT_THROW(mesh.split((Key{1} << 63) | vertex_key({H, H / 2, H / 2})), std::invalid_argument);
+  EXPECT_EQ(mesh.tet_count(), 8u * 6u);
+  // A coarse grid vertex has a node but is no diamond: refused as such.
+  try {
+    mesh.merge(vertex_key({H, 0, 0}));
+    FAIL() << "merge of a coarse grid vertex must throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("coarse grid vertex"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(mesh.require_can_merge(~Key{0}), std::invalid_argument);
   const Key cube = vertex_key({H / 2, H / 2, H / 2});
   try {
     mesh.merge(cube);

@@ -57,6 +57,10 @@ TEST(Lattice, ClassifiesPhasesSizesAndDepths) {
   EXPECT_NE(why.find("outside"), std::string::npos);
   EXPECT_FALSE(classify_diamond(dom, pack_doubled({25, 24, 24}), &info, &why));  // off lattice
   EXPECT_NE(why.find("lattice"), std::string::npos);
+  // Bit 63 is no coordinate's: such a key is not the diamond of its low bits.
+  EXPECT_FALSE(classify_diamond(dom, (Key{1} << 63) | vertex_key({12, 12, 12}), &info, &why));
+  EXPECT_NE(why.find("bits"), std::string::npos);
+  EXPECT_FALSE(classify_diamond(dom, ~Key{0}, &info, &why));
 }
 
 TEST(Lattice, ParentsAndChildrenFollowTheHierarchyAndTheBoundary) {

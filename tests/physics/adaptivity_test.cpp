@@ -9,6 +9,7 @@
 #include <optional>
 #include <set>
 #include <utility>
+#include <vector>
 
 #include "physics/forces.hpp"
 #include "physics/physics_test_support.hpp"
@@ -206,6 +207,32 @@ TEST(Adaptivity, ADiamondMergesOnlyOnceMinAgeStepsHavePassed) {
   EXPECT_FALSE(body.mesh().is_split(d));
 }
 
+// min_age_steps 0: a diamond split by a pass is not merged by the same pass.
+// The split merged first frees a node slot; the pass's first split reuses it.
+// (Its per-node measure, taken before the splits, was the free slot's 0, so
+// the new node looked relaxed and was merged at once, every pass, while its
+// tets stayed above Th.)
+TEST(Adaptivity, APassNeverMergesADiamondItSplitEvenAtMinAgeZero) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.min_age_steps = 0;
+  const double eps = 1e-3;
+  s.adaptivity.refine_threshold_Pa = 0.5 * 3.0 * s.material.youngs_modulus_Pa * eps * eps;
+  Body body(s);
+  const mesh::Key freed = split_a_cube_diagonal(body);
+  body.merge(freed);
+  ASSERT_EQ(body.mesh().node_count() + 1, body.mesh().node_capacity()) << "the merge must leave a free node slot";
+  std::set<mesh::Key> cube_diagonals;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) { cube_diagonals.insert(body.mesh().diamond_of(t)); });
+  ASSERT_EQ(cube_diagonals.size(), 8u);
+  body.step_index = 1000;
+  dilate(body, eps);  // every tet at 3 E eps^2 = 2 Th
+  Adaptivity adaptivity(s.adaptivity);
+  const AdaptStats stats = adaptivity.adapt(body);
+  EXPECT_EQ(stats.splits, 8);
+  EXPECT_EQ(stats.merges, 0);
+  for (const mesh::Key d : cube_diagonals) EXPECT_TRUE(body.mesh().is_split(d));
+}
+
 // Hysteresis, midpoint: a node further than midpoint_tolerance · L from its
 // edge's midpoint stays (merging it would visibly move the surface).
 TEST(Adaptivity, ADiamondMergesOnlyWhenItsNodeIsNearItsEdgesMidpoint) {
@@ -374,6 +401,46 @@ TEST(Adaptivity, AFrozenNodeIsNotMerged) {
   adaptivity.unfreeze();
   EXPECT_EQ(adaptivity.adapt(body).merges, 1);
   EXPECT_FALSE(body.mesh().is_split(d));
+}
+
+// The freeze covers what a split's closure changes, not only the wanted
+// tet: the face diamond between the cubes at x = 0 and x = H is strained
+// (its node-side tets lie around the displaced centre of cube 0, far from
+// the sphere), but splitting it first splits the diagonal of cube 1, whose
+// tets all reach the corner at x = 2H inside the sphere. That split is
+// skipped; the faces whose closure stays clear of the sphere still split.
+TEST(Adaptivity, ASplitWhoseClosureReachesTheFrozenSphereIsSkipped) {
+  scene::Scene s = relaxed_cube_scene();
+  s.adaptivity.refine_threshold_Pa = 1e-6;
+  Body body(s);
+  const mesh::KuhnMesh& m = body.mesh();
+  const std::int64_t H = m.domain().coarse_cube();
+  const mesh::Key cube0 = mesh::vertex_key({H / 2, H / 2, H / 2});
+  const mesh::Key cube1 = mesh::vertex_key({3 * H / 2, H / 2, H / 2});
+  const mesh::Key shared_face = mesh::vertex_key({H, H / 2, H / 2});
+  const mesh::Key boundary_face = mesh::vertex_key({0, H / 2, H / 2});
+  ASSERT_EQ(body.split(cube0), 1);
+  body.x_m[m.find_node(cube0)] += Vec3(1e-3, 2e-3, 3e-3);
+  // Cube 1's diagonal ends on x = H and x = 2H; the sphere is around the
+  // second end, 0.1 cube wide.
+  const mesh::Edge& diagonal1 = m.edge(m.find_edge(cube1));
+  const NodeId far_end = body.rest_m[diagonal1.a].x() > body.rest_m[diagonal1.b].x() ? diagonal1.a : diagonal1.b;
+  const double cube_m = s.object.cube_size_m;
+  ASSERT_NEAR(body.rest_m[far_end].x(), 2 * cube_m, 1e-12);
+  Adaptivity adaptivity(s.adaptivity);
+  adaptivity.freeze_sphere(body.x_m[far_end], 0.1 * cube_m);
+  std::vector<mesh::Key> wanted;  // the strained tets' diamonds: none has a vertex in the sphere
+  m.for_each_tet([&](TetId t, const mesh::Tet& tet) {
+    if (adaptivity.measure(body, t) <= adaptivity.refine_threshold()) return;
+    for (const NodeId n : tet.v) ASSERT_GT((body.x_m[n] - body.x_m[far_end]).norm(), 0.1 * cube_m);
+    wanted.push_back(m.diamond_of(t));
+  });
+  ASSERT_NE(std::find(wanted.begin(), wanted.end(), shared_face), wanted.end());
+  ASSERT_NE(std::find(wanted.begin(), wanted.end(), boundary_face), wanted.end());
+  EXPECT_GT(adaptivity.adapt(body).splits, 0);
+  EXPECT_TRUE(m.is_split(boundary_face));
+  EXPECT_FALSE(m.is_split(shared_face));
+  EXPECT_FALSE(m.is_split(cube1)) << "the closure split a tet with a vertex in the frozen sphere";
 }
 
 // docs/scene-format.md: `stretch` refines when any l/L or L/l exceeds

@@ -375,7 +375,10 @@ TEST(Body, MergeConservesMomentumAndNeverAddsKineticEnergy) {
   EXPECT_GT(merges, 20);
 }
 
-TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
+// A new free node sits at its edge's midpoint; a new node in the fixed face
+// is fixed and sits at rest (the ends here are off rest, so the midpoint is
+// not).
+TEST(Body, NewNodesInAFixedRegionAreFixedAtRestAndFreeOnesAtTheEdgeMidpoint) {
   scene::Scene s = testing::cantilever_scene();
   Body body(s);
   std::mt19937 rng(2);
@@ -390,7 +393,13 @@ TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
     const Vec3 mid = 0.5 * (body.x_m[body.mesh().edge(body.mesh().find_edge(d)).a] +
                             body.x_m[body.mesh().edge(body.mesh().find_edge(d)).b]);
     body.split(d);
-    EXPECT_LT((body.x_m[body.mesh().find_node(d)] - mid).norm(), 1e-15);
+    const NodeId z = body.mesh().find_node(d);
+    if (body.kind[z] == NodeKind::kFixed) {
+      EXPECT_EQ(body.x_m[z], body.rest_m[z]);
+      EXPECT_EQ(body.v_m_per_s[z], Vec3::Zero());
+    } else {
+      EXPECT_LT((body.x_m[z] - mid).norm(), 1e-15);
+    }
   }
   int fixed = 0;
   body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
@@ -402,6 +411,102 @@ TEST(Body, NewNodesInAFixedRegionAreFixedAndSitAtTheEdgeMidpoint) {
     }
   });
   EXPECT_GT(fixed, 25);
+}
+
+// A split edge from a node inside a fixed or prescribed box to a displaced
+// free node: the new node is in the box, so it goes where the drivers hold
+// the box's nodes, not to the edge's midpoint (rest + u/2, from where the next
+// step's driver velocity snapped it back: a spring jump and the kinetic
+// energy of (u/2)/dt booked to nobody). The corner cube's diagonal runs from
+// a = (0, 0, 0), in the box, to b = (h, h, h), h = 0.05 m.
+TEST(Body, ANewKinematicNodeStartsOnItsTargetNotAtItsEdgesMidpoint) {
+  const Vec3 u(0.004, 0.004, 0.004);  // b's displacement
+  const Vec3 push(0.0, 0.0, 0.001);   // the prescribed box's displacement
+  for (const bool prescribed : {false, true}) {
+    SCOPED_TRACE(prescribed ? "prescribed box" : "fixed box");
+    scene::Scene s = adaptive_cube();
+    const scene::Region corner = scene::Region::box({0, 0, 0}, {0.03, 0.03, 0.03});
+    scene::TimeProfile ramp;
+    ramp.ramp_s = 0.1;
+    if (prescribed)
+      s.prescribed.push_back({"push", corner, {push.x(), push.y(), push.z()}, ramp});
+    else
+      s.fixed.push_back({corner});
+    Body body(s);
+    body.time_s = 0.05;  // half way up the ramp
+    NodeId a = mesh::kInvalidId, b = mesh::kInvalidId;
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (body.rest_m[n].isZero(0.0)) a = n;
+      if ((body.rest_m[n] - Vec3(0.05, 0.05, 0.05)).isZero(1e-12)) b = n;
+    });
+    ASSERT_NE(a, mesh::kInvalidId);
+    ASSERT_NE(b, mesh::kInvalidId);
+    body.x_m[b] += u;
+    body.v_m_per_s[b] = Vec3(1.0, 2.0, 3.0);
+    const mesh::Key d = mesh::edge_key(body.mesh().node(a).lattice, body.mesh().node(b).lattice);
+    ASSERT_EQ(body.split(d), 1);
+    const NodeId z = body.mesh().find_node(d);
+    ASSERT_EQ(body.kind[z], prescribed ? NodeKind::kPrescribed : NodeKind::kFixed);
+    ASSERT_EQ(body.kind[b], NodeKind::kFree);
+    if (prescribed) {
+      // rest + profile(0.05 s) d, moving at the ramp's d / 0.1 s.
+      EXPECT_LT((body.x_m[z] - (body.rest_m[z] + 0.5 * push)).norm(), 1e-15);
+      EXPECT_LT((body.v_m_per_s[z] - push / 0.1).norm(), 1e-9);
+    } else {
+      EXPECT_EQ(body.x_m[z], body.rest_m[z]);
+      EXPECT_EQ(body.v_m_per_s[z], Vec3::Zero());
+    }
+  }
+}
+
+// A key the mesh refuses changes nothing, velocities included: a coarse grid
+// vertex (its node has no edge: merge read kind[kInvalidId] and could write
+// v_m_per_s[kInvalidId]), a split diamond with a split child (its ends got the
+// node's momentum, then the mesh refused), the map's empty marker ~0, and a
+// valid diamond with bit 63 set (split split its parents and then failed with
+// a logic_error, the body's arrays never told).
+TEST(Body, ABadKeyThrowsInvalidArgumentAndChangesNothing) {
+  Body body(adaptive_cube());
+  const mesh::KuhnMesh& m = body.mesh();
+  const std::int64_t H = m.domain().coarse_cube();
+  const mesh::Key cube = mesh::vertex_key({H / 2, H / 2, H / 2});
+  ASSERT_EQ(body.split(cube), 1);
+  ASSERT_EQ(body.split(mesh::vertex_key({0, H / 2, H / 2})), 1);  // a child of `cube`
+  std::mt19937 rng(4);
+  randomise_state(body, rng);
+  // The face between the cubes at x = 0 and x = H: its parent in the second cube is unsplit.
+  const mesh::Key next_face = mesh::vertex_key({H, H / 2, H / 2});
+  ASSERT_TRUE(m.can_split(next_face));
+  ASSERT_FALSE(m.is_split(mesh::vertex_key({H + H / 2, H / 2, H / 2})));
+  const mesh::Key top_bit = mesh::Key{1} << 63;
+  struct Case {
+    const char* what;
+    mesh::Key key;
+    bool merge;
+  };
+  const Case cases[] = {
+      {"merge a coarse grid vertex", mesh::vertex_key({H, 0, 0}), true},
+      {"merge a diamond with a split child", cube, true},
+      {"merge ~0", ~mesh::Key{0}, true},
+      {"split ~0", ~mesh::Key{0}, false},
+      {"merge bit 63 + a split diamond", top_bit | cube, true},
+      {"split bit 63 + a diamond with an unsplit parent", top_bit | next_face, false},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    const std::vector<Vec3> v0 = body.v_m_per_s, x0 = body.x_m;
+    const Vec3 p0 = body.momentum_kg_m_per_s();
+    const std::size_t tets0 = m.tet_count(), nodes0 = m.node_count();
+    if (c.merge)
+      EXPECT_THROW(body.merge(c.key), std::invalid_argument);
+    else
+      EXPECT_THROW(body.split(c.key), std::invalid_argument);
+    EXPECT_EQ(body.v_m_per_s, v0);
+    EXPECT_EQ(body.x_m, x0);
+    EXPECT_EQ(body.momentum_kg_m_per_s(), p0);
+    EXPECT_EQ(m.tet_count(), tets0);
+    EXPECT_EQ(m.node_count(), nodes0);
+  }
 }
 
 // docs/scene-format.md: nodes in a fixed region never move. A node in a

@@ -52,6 +52,20 @@ TEST(KeyIndexMap, RejectsTheReservedKeyAndHandlesEmpty) {
   EXPECT_FALSE(map.contains(0));
 }
 
+// The empty marker is no key: find and erase on a map with entries (so
+// with empty slots) must not take an empty slot for it. find returned the
+// slot's stale value and erase counted an entry gone.
+TEST(KeyIndexMap, TheEmptyMarkerIsNeverFoundNorErased) {
+  KeyIndexMap map;
+  for (std::uint64_t k = 0; k < 10; ++k) ASSERT_TRUE(map.insert(k, static_cast<std::uint32_t>(k)));
+  ASSERT_GT(map.slot_count(), map.size());
+  EXPECT_EQ(map.find(KeyIndexMap::kEmptyKey), KeyIndexMap::kNotFound);
+  EXPECT_FALSE(map.contains(KeyIndexMap::kEmptyKey));
+  EXPECT_FALSE(map.erase(KeyIndexMap::kEmptyKey));
+  EXPECT_EQ(map.size(), 10u);
+  for (std::uint64_t k = 0; k < 10; ++k) EXPECT_EQ(map.find(k), k);
+}
+
 TEST(KeyIndexMap, StaysUnderThreeQuartersLoad) {
   KeyIndexMap map;
   for (std::uint32_t i = 0; i < 100000; ++i) map.insert(std::uint64_t{i} * 2654435761u, i);
