@@ -148,10 +148,17 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
     std::cout << "  LCM " << lcm->url() << ": " << lcm->counts().meshes << " meshes, " << lcm->counts().haptic_states
               << " haptic states, " << lcm->counts().stats << " stats sent, " << lcm->counts().failures
               << " failures\n";
-  if (dds)
+  if (dds) {
     std::cout << "  DDS domain " << o.dds.domain_id << " topics " << o.dds.topic_prefix << "*: " << dds->counts().meshes
               << " meshes, " << dds->counts().haptic_states << " haptic states, " << dds->counts().stats
-              << " stats sent, " << dds->counts().failures << " failures\n";
+              << " stats sent, " << dds->counts().failures << " failures";
+    // The publisher does not send a mesh larger than max_mesh_bytes and only
+    // counts it as a failure: the likeliest reason, said here.
+    if (dds->counts().failures > 0)
+      std::cout << " (a mesh over --dds-max-mesh-bytes " << o.dds.max_mesh_bytes
+                << " serialized is not sent and counts as one)";
+    std::cout << "\n";
+  }
   return kExitOk;
 }
 
