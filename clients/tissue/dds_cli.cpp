@@ -10,6 +10,7 @@ transport::DdsOptions DdsCliOptions::options() const {
   d.domain_id = domain_id;
   d.topic_prefix = topic_prefix;
   d.loopback_only = !remote;
+  d.max_mesh_bytes = max_mesh_bytes;
   return d;
 }
 
@@ -21,6 +22,13 @@ CLI::Option* add_dds_options(CLI::App* cmd, DdsCliOptions& o, const std::string&
       ->capture_default_str()
       ->needs(dds);
   cmd->add_option("--dds-prefix", o.topic_prefix, "DDS topic prefix (publish.dds.topic_prefix)")
+      ->capture_default_str()
+      ->needs(dds);
+  // The range of publish.dds.max_mesh_bytes (docs/daemon-config.md).
+  cmd->add_option("--dds-max-mesh-bytes", o.max_mesh_bytes,
+                  "Largest serialized mesh sent or expected, bytes, 65536 to 1073741824 (publish.dds.max_mesh_bytes)")
+      ->transform(decimal_integer())
+      ->check(CLI::Range(std::size_t{64} << 10, std::size_t{1} << 30))
       ->capture_default_str()
       ->needs(dds);
   cmd->add_flag("--dds-remote", o.remote,

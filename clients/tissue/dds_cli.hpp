@@ -1,8 +1,10 @@
 // The DDS options every client that talks DDS takes (`--dds`, `--dds-domain`,
-// `--dds-prefix`, `--dds-remote`), named and defaulted like the daemon's
-// publish.dds.* keys, and their conversion to transport options.
+// `--dds-prefix`, `--dds-remote`, `--dds-max-mesh-bytes`), named, defaulted
+// and bounded like the daemon's publish.dds.* keys, and their conversion to
+// transport options.
 #pragma once
 
+#include <cstddef>
 #include <string>
 
 #include "config/daemon_config.hpp"
@@ -20,6 +22,9 @@ struct DdsCliOptions {
   int domain_id = config::DdsPublishSpec{}.domain_id;
   std::string topic_prefix = config::DdsPublishSpec{}.topic_prefix;
   bool remote = false;  // --dds-remote: every interface, not this host only
+  // --dds-max-mesh-bytes: a publisher does not send larger serialized meshes
+  // (counted as failures); a subscriber sizes its receive buffer from it.
+  std::size_t max_mesh_bytes = config::DdsPublishSpec{}.max_mesh_bytes;
 
   // For a publisher (session replay) or a subscriber (live sources) alike.
   transport::DdsOptions options() const;

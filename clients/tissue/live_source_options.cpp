@@ -10,6 +10,24 @@
 
 namespace tissue::cli {
 
+namespace {
+// Live frames are held in memory until the window ends (and stop at
+// x3d::kLiveFrameBudgetBytes); an hour is more than any export of them
+// needs, and longer takes are what recording a session is for.
+constexpr double kMaxLiveSeconds = 3600.0;
+
+CLI::Validator at_most_an_hour() {
+  return CLI::Validator(
+      [](std::string& v) -> std::string {
+        double x = 0.0;
+        if (std::string why = detail::whole_number(v, &x); !why.empty()) return why;
+        if (x <= kMaxLiveSeconds) return {};
+        return v + " is more than 3600: live frames are held in memory; record a session for longer takes";
+      },
+      "S <= 3600");
+}
+}  // namespace
+
 void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* session, CLI::Option* many) {
   o.lcm_option = cmd->add_option("--lcm", o.lcm_url,
                                  "Live frames from LCM (channel TISSUE_SURFACE_MESH) at URL instead of a session")
@@ -18,8 +36,11 @@ void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* s
                      ->check(lcm_url());
   o.dds_option = add_dds_options(cmd, o.dds, "Live frames from Fast DDS (topic <prefix>surface_mesh)");
   CLI::Option* seconds =
-      cmd->add_option("--seconds", o.seconds, "Live: collect frames for S seconds (wall) after the first one")
+      cmd->add_option("--seconds", o.seconds,
+                      "Live: collect frames for S seconds (wall, at most 3600) after the first one, or until they "
+                      "hold 1 GiB")
           ->check(finite_positive())
+          ->check(at_most_an_hour())
           ->capture_default_str();
   if (many) seconds->needs(many);
   CLI::Option* timeout = cmd->add_option("--timeout", o.timeout_s, "Live: wait at most S seconds for the first frame")

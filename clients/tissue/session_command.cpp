@@ -62,6 +62,20 @@ void install_stop_handlers() {
   sigaction(SIGTERM, &sa, nullptr);
 }
 
+// --speed within replay::kMinSpeed..kMaxSpeed: 1e-300 waited for ever for
+// the second item.
+CLI::Validator replay_speed() {
+  static_assert(replay::kMinSpeed == 1e-3 && replay::kMaxSpeed == 1e6, "the message below names the bounds");
+  return CLI::Validator(
+      [](std::string& v) -> std::string {
+        double x = 0.0;
+        if (std::string why = detail::whole_number(v, &x); !why.empty()) return why;
+        if (x >= replay::kMinSpeed && x <= replay::kMaxSpeed) return {};
+        return v + " is outside 0.001 to 1000000 (session seconds per wall second)";
+      },
+      "X in [0.001, 1e6]");
+}
+
 std::string fixed(double v, int digits) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.*f", digits, v);
@@ -134,10 +148,17 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
     std::cout << "  LCM " << lcm->url() << ": " << lcm->counts().meshes << " meshes, " << lcm->counts().haptic_states
               << " haptic states, " << lcm->counts().stats << " stats sent, " << lcm->counts().failures
               << " failures\n";
-  if (dds)
+  if (dds) {
     std::cout << "  DDS domain " << o.dds.domain_id << " topics " << o.dds.topic_prefix << "*: " << dds->counts().meshes
               << " meshes, " << dds->counts().haptic_states << " haptic states, " << dds->counts().stats
-              << " stats sent, " << dds->counts().failures << " failures\n";
+              << " stats sent, " << dds->counts().failures << " failures";
+    // The publisher does not send a mesh larger than max_mesh_bytes and only
+    // counts it as a failure: the likeliest reason, said here.
+    if (dds->counts().failures > 0)
+      std::cout << " (a mesh over --dds-max-mesh-bytes " << o.dds.max_mesh_bytes
+                << " serialized is not sent and counts as one)";
+    std::cout << "\n";
+  }
   return kExitOk;
 }
 
@@ -201,8 +222,9 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str()
       ->needs(dds);
-  cmd->add_option("--speed", r.replay.speed, "Session seconds per wall second (2: twice as fast)")
+  cmd->add_option("--speed", r.replay.speed, "Session seconds per wall second (2: twice as fast), 0.001 to 1e6")
       ->check(finite_positive())
+      ->check(replay_speed())
       ->capture_default_str();
   cmd->add_option("--from", r.replay.timeline.from_s, "Start at this session time (s)")->check(finite_number());
   cmd->add_option("--to", r.replay.timeline.to_s, "End at this session time (s)")->check(finite_number());

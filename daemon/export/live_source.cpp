@@ -1,7 +1,9 @@
 #include "export/live_source.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <iterator>
 #include <stdexcept>
 
 namespace tissue::x3d {
@@ -16,7 +18,23 @@ std::string fmt_s(double s) {
   std::snprintf(buf, sizeof buf, "%g", s);
   return buf;
 }
+
+// "1 GiB", "1.5 MiB", "300 bytes": the budget as a person reads it.
+std::string fmt_bytes(std::size_t n) {
+  constexpr const char* kUnits[] = {"bytes", "KiB", "MiB", "GiB", "TiB"};
+  double v = static_cast<double>(n);
+  std::size_t u = 0;
+  while (v >= 1024.0 && u + 1 < std::size(kUnits)) v /= 1024.0, ++u;
+  return fmt_s(v) + " " + kUnits[u];
+}
 }  // namespace
+
+std::size_t frame_bytes(const SurfaceFrame& f) {
+  return f.vertices_m.size() * sizeof(f.vertices_m[0]) + f.triangles.size() * sizeof(f.triangles[0]) +
+         f.vertex_level.size() * sizeof(f.vertex_level[0]) +
+         f.vertex_strain_energy_Pa.size() * sizeof(f.vertex_strain_energy_Pa[0]) +
+         f.triangle_strain_energy_J_per_m3.size() * sizeof(f.triangle_strain_energy_J_per_m3[0]);
+}
 
 LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const LiveCollectOptions& o,
                                  const std::atomic<bool>* stop)
@@ -26,6 +44,7 @@ LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const Li
   constexpr double kPoll_s = 0.1;
   const auto start = Clock::now();
   Clock::time_point first{};
+  std::size_t kept_bytes = 0;
   for (;;) {
     if (stopped()) break;
     if (frames_.empty()) {
@@ -43,7 +62,17 @@ LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const Li
       ++dropped_backwards_;
       continue;
     }
+    // Sizes only: a frame count or a time window alone does not bound the
+    // memory (a large surface at 30 Hz for --seconds 600 was ~50 GB).
+    const std::size_t bytes = frame_bytes(*f);
+    if (!frames_.empty() && bytes > o.max_bytes - std::min(kept_bytes, o.max_bytes)) {
+      budget_note_ = "collection stopped after " + std::to_string(frames_.size()) + " frames (" +
+                     fmt_s(seconds_since(first)) + " s of the " + fmt_s(o.window_s) +
+                     " s window): the next would take the frames kept past " + fmt_bytes(o.max_bytes);
+      break;
+    }
     if (frames_.empty()) first = Clock::now();
+    kept_bytes += bytes;
     frames_.push_back(std::move(*f));
   }
   if (frames_.empty() && !stopped()) {
@@ -62,6 +91,15 @@ SurfaceFrame LiveFrameSource::read_frame(std::size_t k) {
     throw std::out_of_range("frame " + std::to_string(k) + " of " + name_ + " does not exist (" +
                             std::to_string(frames_.size()) + " frames)");
   return frames_[k];
+}
+
+std::string LiveFrameSource::dropped_note() const {
+  std::string note;
+  if (dropped_backwards_ > 0)
+    note = std::to_string(dropped_backwards_) +
+           " frames dropped: their time was before the last frame kept (the daemon reset or a replay looped)";
+  if (!budget_note_.empty()) note += (note.empty() ? "" : "; ") + budget_note_;
+  return note;
 }
 
 bool LiveFrameSource::has_strain() const {

@@ -21,19 +21,31 @@ class NoLiveFrameError : public SourceError {
   using SourceError::SourceError;
 };
 
+// Collected frames are held in memory until the window ends: a 50k-vertex
+// surface at 30 Hz is ~80 MB a second, and an export then makes a text copy
+// 2-3 times that size. This much frame data (1 GiB) stops a collection.
+constexpr std::size_t kLiveFrameBudgetBytes = std::size_t{1} << 30;
+
 struct LiveCollectOptions {
   double first_timeout_s = 10.0;  // wait this long (wall) for the first frame
   double window_s = 0.0;          // then keep collecting this long (wall); 0: the first frame only
   std::size_t max_frames = 0;     // stop once this many are collected; 0: no limit
+  // Stop before a frame whose data (frame_bytes) would take the frames kept
+  // past this many bytes. The first frame is always kept.
+  std::size_t max_bytes = kLiveFrameBudgetBytes;
 };
+
+// The bytes a collected frame holds: its vertices, triangles, levels and
+// strain values.
+std::size_t frame_bytes(const SurfaceFrame& frame);
 
 class LiveFrameSource final : public FrameSource {
  public:
   // Collects from `subscriber` (blocking). Frames without triangles (an
   // empty scene) are not kept; a frame whose time goes backwards (the daemon
   // reset, a replay looped) is dropped, so frames stay in time order. Stops
-  // early when `stop` is set. Throws NoLiveFrameError when no frame arrives
-  // within first_timeout_s.
+  // early when `stop` is set, or at options.max_bytes (dropped_note says so).
+  // Throws NoLiveFrameError when no frame arrives within first_timeout_s.
   LiveFrameSource(transport::MeshSubscriber& subscriber, const LiveCollectOptions& options,
                   const std::atomic<bool>* stop = nullptr);
 
@@ -51,19 +63,19 @@ class LiveFrameSource final : public FrameSource {
                              "foreign publisher?)";
   }
 
-  std::string dropped_note() const override {
-    if (dropped_backwards_ == 0) return {};
-    return std::to_string(dropped_backwards_) +
-           " frames dropped: their time was before the last frame kept (the daemon reset or a replay looped)";
-  }
+  // Frames that went back in time, and a collection cut short by max_bytes.
+  std::string dropped_note() const override;
 
   std::size_t skipped_empty() const { return skipped_empty_; }
   std::size_t dropped_backwards() const { return dropped_backwards_; }
+  // Whether collection stopped at options.max_bytes before the window ended.
+  bool stopped_at_budget() const { return !budget_note_.empty(); }
 
  private:
   std::string name_;
   std::vector<SurfaceFrame> frames_;
   std::size_t skipped_empty_ = 0, dropped_backwards_ = 0;
+  std::string budget_note_;  // "" unless max_bytes stopped the collection
 };
 
 }  // namespace tissue::x3d

@@ -1,4 +1,5 @@
 #include "export/x3d.hpp"
+#include "export/frame_source.hpp"  // frame_time_text
 #include "util/xml.hpp"
 
 #include <algorithm>
@@ -55,6 +56,13 @@ void put_colour(std::string& out, float v) {
   char buf[32];
   const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 4);
   out.append(buf, r.ptr);
+}
+
+// For messages: 6 significant digits ("1.5e+308").
+std::string short_number(double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 6);
+  return std::string(buf, r.ptr);
 }
 
 void put(std::string& out, std::uint64_t v) {
@@ -156,17 +164,32 @@ void header(std::string& x, const X3dOptions& options, const StrainRange& range,
 }
 
 // Navigation scaled to the object: X3D's defaults assume a human-sized
-// world (near plane at 0.125 m would clip a 5 cm specimen away).
-void camera(std::string& x, const Bounds& b, const X3dOptions& options) {
-  std::array<double, 3> centre{};
-  double radius_m = 0.0;
+// world (near plane at 0.125 m would clip a 5 cm specimen away). `what`
+// names the frame(s) for an error.
+void camera(std::string& x, const Bounds& b, const X3dOptions& options, const std::string& what) {
+  // Halves first, so no sum or difference overflows (lo + hi for x = 1e308
+  // and 1.5e308 was inf), and the radius from the largest half span times
+  // the length of the spans in its units: squared spans overflowed above
+  // ~1.3e154 m and underflowed below ~1e-154 m.
+  std::array<double, 3> centre{}, half_span{};
   for (int a = 0; a < 3; ++a) {
-    centre[a] = 0.5 * (b.lo[a] + b.hi[a]);
-    radius_m += (b.hi[a] - b.lo[a]) * (b.hi[a] - b.lo[a]);
+    centre[a] = b.lo[a] / 2 + b.hi[a] / 2;
+    half_span[a] = b.hi[a] / 2 - b.lo[a] / 2;
   }
-  radius_m = 0.5 * std::sqrt(radius_m);
-  if (!(radius_m > 0.0) || !std::isfinite(radius_m)) radius_m = 0.01;  // all vertices coincide
+  const double largest = std::max({half_span[0], half_span[1], half_span[2]});
+  double radius_m = 0.01;  // all vertices coincide: any small sphere
+  if (largest > 0.0) {
+    double unit = 0.0;
+    for (int a = 0; a < 3; ++a) unit += (half_span[a] / largest) * (half_span[a] / largest);
+    radius_m = largest * std::sqrt(unit);
+  }
   const double distance_m = 1.1 * radius_m / std::sin(0.5 * kFieldOfView_rad);
+  // A viewpoint must be a finite SFVec3f: coordinates near the double's limit
+  // leave no room for one outside the object.
+  if (!std::isfinite(radius_m) || !std::isfinite(centre[2] + distance_m))
+    throw X3dInputError(what + ": no viewpoint outside the surface is a finite position (its bounds reach " +
+                        short_number(std::max({-b.lo[0], -b.lo[1], -b.lo[2], b.hi[0], b.hi[1], b.hi[2]})) +
+                        " m from the origin)");
   x += "    <WorldInfo title='" + util::escape_xml(options.title) + "' info='" +
        mf_string_item("units: metres; exported by tissued") + "'/>\n";
   x += "    <NavigationInfo type='\"EXAMINE\" \"ANY\"' avatarSize='";
@@ -365,7 +388,7 @@ std::string x3d_snapshot(const SurfaceFrame& frame, const X3dOptions& options) {
   what += " s: " + std::to_string(frame.vertices_m.size()) + " vertices, " + std::to_string(frame.triangles.size()) +
           " triangles";
   header(x, options, range, false, what);
-  camera(x, b, options);
+  camera(x, b, options, "frame" + describe_time(frame));
   shape(x, frame, options, range, "SurfaceCoordinates", "    ");
   footer(x);
   return x;
@@ -405,8 +428,13 @@ std::string x3d_animation(const std::vector<SurfaceFrame>& frames, const X3dOpti
   }
   const double t0_s = frames.front().time_s;
   const double window_s = frames.back().time_s - t0_s;
-  if (!(window_s > 0.0) || !std::isfinite(window_s))
-    throw X3dInputError("frames span no time (first and last at t=" + std::to_string(t0_s) +
+  const std::string all_frames = "frames 0 to " + std::to_string(frames.size() - 1);
+  // Each time is finite, the difference need not be (-1e308 to 1e308).
+  if (!std::isfinite(window_s))
+    throw X3dInputError(all_frames + " span more time than a number holds (t=" + frame_time_text(t0_s) + " s to " +
+                        frame_time_text(frames.back().time_s) + " s)");
+  if (!(window_s > 0.0))
+    throw X3dInputError("frames span no time (first and last at t=" + frame_time_text(t0_s) +
                         " s): an animation needs a window longer than 0 s");
   const auto fraction = [&](const SurfaceFrame& f) { return std::clamp((f.time_s - t0_s) / window_s, 0.0, 1.0); };
 
@@ -426,7 +454,7 @@ std::string x3d_animation(const std::vector<SurfaceFrame>& frames, const X3dOpti
   put(what, window_s);
   what += " s";
   header(x, options, range, runs.size() > 1, what);
-  camera(x, b, options);
+  camera(x, b, options, all_frames);
   x += "    <TimeSensor DEF='Clock' cycleInterval='";
   put(x, window_s);
   x += "' loop='true'/>\n";

@@ -61,7 +61,12 @@ void draw_number(Image& img, int x, int y, int value, int scale) {
 
 std::array<std::uint8_t, 3> to_bytes(const std::array<float, 3>& c, double shade) {
   std::array<std::uint8_t, 3> out{};
-  for (int i = 0; i < 3; ++i) out[i] = static_cast<std::uint8_t>(std::clamp(c[i] * shade, 0.0, 1.0) * 255.0 + 0.5);
+  for (int i = 0; i < 3; ++i) {
+    // NaN through std::clamp stays NaN, and NaN to an integer is undefined:
+    // full brightness is the one safe value (the callers never give NaN).
+    const double v = c[i] * shade;
+    out[i] = static_cast<std::uint8_t>((std::isnan(v) ? 1.0 : std::clamp(v, 0.0, 1.0)) * 255.0 + 0.5);
+  }
   return out;
 }
 
@@ -153,9 +158,20 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
   const V3 centre{lo[0] / 2 + hi[0] / 2, lo[1] / 2 + hi[1] / 2, lo[2] / 2 + hi[2] / 2};
   const V3 half_span{hi[0] / 2 - lo[0] / 2, hi[1] / 2 - lo[1] / 2, hi[2] / 2 - lo[2] / 2};
   const double largest = std::max({half_span[0], half_span[1], half_span[2]});
-  const V3 unit_span{half_span[0] / largest, half_span[1] / largest, half_span[2] / largest};
-  // All vertices at one point: any scale draws it.
-  const double radius_m = largest > 0.0 ? largest * std::sqrt(dot(unit_span, unit_span)) : 1.0;
+  // The bounding radius is largest_m · unit_radius (unit_radius in [1, √3]);
+  // not multiplied out, which overflows when every axis spans more than
+  // ~1.04e308. All vertices at one point: any scale draws it.
+  const double largest_m = largest > 0.0 ? largest : 1.0;
+  const V3 unit_span{half_span[0] / largest_m, half_span[1] / largest_m, half_span[2] / largest_m};
+  const double unit_radius = largest > 0.0 ? std::sqrt(dot(unit_span, unit_span)) : 1.0;
+  // A vertex relative to the centre, in bounding radii: within ±1, and floats
+  // keep the detail of an object of any size wherever it sits. (p - centre
+  // cannot overflow: it is at most the half span, and the halves are exact.)
+  const auto in_radii = [&](const V3& p) {
+    V3 r;
+    for (int k = 0; k < 3; ++k) r[k] = (p[k] - centre[k]) / largest_m / unit_radius;
+    return r;
+  };
   const double radius = 1.0;  // of the drawing
   const double az = o.azimuth_deg * M_PI / 180.0, el = o.elevation_deg * M_PI / 180.0;
   const V3 eye_dir{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};  // towards the camera
@@ -203,14 +219,14 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
       // A constant field has no range: the low end of the ramp, as in X3D.
       base = x3d::strain_colour(span > 0.0 ? (mean - range[0]) / span : 0.0);
     }
+    const std::array<V3, 3> drawn{in_radii(a), in_radii(b), in_radii(c)};
     // A head light: faces turned to the camera are bright, grazing ones dim.
-    const auto in_radii = [&](const V3& v) { return V3{v[0] / radius_m, v[1] / radius_m, v[2] / radius_m}; };
-    const double facing = std::abs(dot(normalized(cross(in_radii(sub(b, a)), in_radii(sub(c, a)))), eye_dir));
+    // The normal from the drawn positions (within ±1): from metres, an edge
+    // of 2e308 m overflowed to inf and the facing was NaN.
+    const double facing = std::abs(dot(normalized(cross(sub(drawn[1], drawn[0]), sub(drawn[2], drawn[0]))), eye_dir));
     const auto colour = to_bytes(base, 0.35 + 0.65 * facing);
-    for (const V3* p : {&a, &b, &c}) {
-      // Relative to the centre, in bounding radii: floats keep the detail of
-      // an object of any size wherever it sits.
-      for (int k = 0; k < 3; ++k) positions.push_back(static_cast<float>(((*p)[k] - centre[k]) / radius_m));
+    for (const V3& p : drawn) {
+      for (int k = 0; k < 3; ++k) positions.push_back(static_cast<float>(p[k]));
       colours.insert(colours.end(), colour.begin(), colour.end());
     }
   }

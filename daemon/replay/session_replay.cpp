@@ -3,12 +3,22 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <thread>
 
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 
 namespace tissue::replay {
+
+namespace {
+// A number as people write it: "1e-300", "0.001", "1e+06".
+std::string fmt(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+}  // namespace
 
 SessionRows read_session_rows(const std::string& path) {
   try {
@@ -141,23 +151,29 @@ bool SteadyReplayClock::wait_until(double t_s, const std::atomic<bool>& stop) {
 
 ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, const ReplayOptions& o,
                              ReplaySink& sink, ReplayClock& clock, const std::atomic<bool>& stop) {
-  if (!(o.speed > 0.0) || !std::isfinite(o.speed))
-    throw ReplayError("speed " + std::to_string(o.speed) + ": must be a finite number > 0");
+  // Outside the bounds a replay either waits for ever (1e-300: the second
+  // item is due in 1e299 s) or is no pace at all, everything at once.
+  if (!(o.speed >= kMinSpeed && o.speed <= kMaxSpeed))
+    throw ReplayError("speed " + fmt(o.speed) + ": must be a number from " + fmt(kMinSpeed) + " to " + fmt(kMaxSpeed));
   std::vector<double> frame_t(frames.frame_count()), haptic_t(rows.haptic.size()), sim_t(rows.sim.size());
   for (std::size_t k = 0; k < frame_t.size(); ++k) frame_t[k] = frames.frame_time_s(k);
   for (std::size_t i = 0; i < haptic_t.size(); ++i) haptic_t[i] = rows.haptic[i].time_s;
   for (std::size_t i = 0; i < sim_t.size(); ++i) sim_t[i] = rows.sim[i].time_s;
   const std::vector<TimelineItem> items = build_timeline(frame_t, haptic_t, sim_t, o.timeline);
   if (items.empty()) throw ReplayError(frames.name() + ": nothing to replay (no frame or row in the window)");
-  if (o.loop && !(items.back().time_s > items.front().time_s))
-    throw ReplayError(frames.name() + ": --loop needs a window that spans some time (all items are at " +
-                      std::to_string(items.front().time_s) + " s)");
+  const double t0_s = items.front().time_s;
+  const double span_s = items.back().time_s - t0_s;
+  // A pass shorter than the clock's rounding (items 1e-12 s apart, a steady
+  // clock at 1e5 s) left the next pass's due time where it was: every later
+  // item was already due, and the loop published as fast as it could for ever.
+  const double pass_wall_s = span_s / o.speed;
+  if (o.loop && !(pass_wall_s >= kMinLoopPass_s))
+    throw ReplayError(frames.name() + ": --loop needs a pass of at least 1 ms of wall time: the window spans " +
+                      fmt(span_s) + " s of session time, " + fmt(pass_wall_s) + " s at speed " + fmt(o.speed));
 
   constexpr double kLate_s = 0.01;
   ReplaySummary sum;
   const double start_wall_s = clock.now_s();
-  double pass_wall_s = start_wall_s;  // when the current pass's first item is due
-  const double t0_s = items.front().time_s;
   std::uint64_t sequence = 0;
   for (;;) {
     for (const TimelineItem& item : items) {
@@ -165,7 +181,10 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
       // should come out of the wait, not delay the send.
       std::optional<service::MeshSnapshot> snapshot;
       if (item.kind == StreamKind::kMesh) snapshot = to_snapshot(frames.read_frame(item.index), ++sequence);
-      const double due_s = pass_wall_s + (item.time_s - t0_s) / o.speed;
+      // From the start, not summed pass by pass: a sum drops a pass shorter
+      // than the clock's rounding (and drifts over many passes).
+      const double due_s =
+          start_wall_s + static_cast<double>(sum.passes) * pass_wall_s + (item.time_s - t0_s) / o.speed;
       if (!clock.wait_until(due_s, stop)) {
         sum.stopped = true;
         return sum;
@@ -188,14 +207,13 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
           break;
       }
       sum.wall_s = clock.now_s() - start_wall_s;
-      sum.session_span_s = (item.time_s - t0_s) + sum.passes * (items.back().time_s - t0_s);
+      sum.session_span_s = (item.time_s - t0_s) + static_cast<double>(sum.passes) * span_s;
     }
     ++sum.passes;
     if (!o.loop || stop.load(std::memory_order_relaxed)) {
       sum.stopped = stop.load(std::memory_order_relaxed) && o.loop;
       return sum;
     }
-    pass_wall_s += (items.back().time_s - t0_s) / o.speed;
   }
 }
 

@@ -123,11 +123,19 @@ class SteadyReplayClock final : public ReplayClock {
   bool wait_until(double t_s, const std::atomic<bool>& stop) override;
 };
 
+// Speeds a replay accepts: below, a recording's next item can be due after
+// longer than anyone waits; above, there is no pace left to keep.
+constexpr double kMinSpeed = 1e-3, kMaxSpeed = 1e6;
+// A looped pass must last this much wall time (span / speed): shorter ones
+// publish as fast as the transport takes them, for ever.
+constexpr double kMinLoopPass_s = 1e-3;
+
 struct ReplayOptions {
-  double speed = 1.0;  // session seconds per wall second, > 0
+  double speed = 1.0;  // session seconds per wall second, kMinSpeed to kMaxSpeed
   TimelineOptions timeline;
   // Start over after the last item, for ever (until stop). The next pass
-  // starts as soon as the previous one has ended.
+  // starts as soon as the previous one has ended. The window's span / speed
+  // must be at least kMinLoopPass_s.
   bool loop = false;
 };
 
@@ -147,7 +155,8 @@ struct ReplaySummary {
 };
 
 // The items of build_timeline(options.timeline) from `frames` and `rows`,
-// item i due at start + (time_s[i] - time_s[0]) / speed on `clock`. Mesh
+// item i of pass p (from 0) due at start + (p · span + time_s[i] - time_s[0])
+// / speed on `clock`, span the last item's time minus the first's. Mesh
 // frames are read from the source before their due time, so reading does not
 // delay sending. Mesh snapshots get sequences 1, 2, … over all passes.
 // Returns when done or as soon as `stop` is set. Throws ReplayError for bad

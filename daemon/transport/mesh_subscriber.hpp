@@ -54,8 +54,8 @@ class MeshRejected : public std::runtime_error {
 // unless: time finite; 3 coordinates per vertex, all finite; levels one per
 // vertex (or none); 3 indices per triangle, each in [0, vertex count);
 // strain one per triangle (or none). Strain becomes per-vertex
-// (x3d::vertex_strain_from_triangles); non-finite strain values leave the
-// frame without strain (the geometry is still good).
+// (x3d::vertex_strain_from_triangles); non-finite or negative strain values
+// leave the frame without strain (the geometry is still good).
 x3d::SurfaceFrame frame_from_mesh_arrays(double time_s, std::span<const float> vertex_m,
                                          std::span<const std::uint8_t> vertex_level,
                                          std::span<const std::int32_t> triangle_vertex,

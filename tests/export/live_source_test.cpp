@@ -97,6 +97,66 @@ TEST(LiveFrameSource, StrainIsReportedOnlyWhenEveryFrameHasIt) {
   EXPECT_NE(message.find("use --colour level"), std::string::npos) << message;
 }
 
+// A publisher that never pauses: frame k at k / 30 s, every call. After
+// `limit` frames it asks the collection to stop (as Ctrl-C would), so a
+// collection that ignores its byte budget ends rather than hangs.
+class EndlessSubscriber final : public transport::MeshSubscriber {
+ public:
+  EndlessSubscriber(std::size_t limit, std::atomic<bool>* stop) : limit_(limit), stop_(stop) {}
+  std::string name() const override { return "endless topic"; }
+  std::optional<SurfaceFrame> next_frame(double) override {
+    if (sent_ == limit_) {
+      *stop_ = true;
+      return std::nullopt;
+    }
+    return testing::box_frame(static_cast<double>(sent_++) / 30.0, {0, 0, 0}, {1, 1, 1});
+  }
+  const transport::MeshReceiveCounts& counts() const override { return counts_; }
+  std::size_t sent() const { return sent_; }
+
+ private:
+  std::size_t limit_, sent_ = 0;
+  std::atomic<bool>* stop_;
+  transport::MeshReceiveCounts counts_;
+};
+
+// --animate --seconds 600 against a large surface at 30 Hz kept every frame
+// (tens of GB): the window alone bounded nothing.
+TEST(LiveFrameSource, CollectionStopsAtTheByteBudgetAndSaysSo) {
+  const std::size_t one = frame_bytes(testing::box_frame(0.0, {0, 0, 0}, {1, 1, 1}));
+  ASSERT_EQ(one, 8 * 24 + 12 * 12 + 8 + 8 * 4u) << "8 vertices, 12 triangles, 8 levels, 8 strain values";
+  std::atomic<bool> stop{false};
+  EndlessSubscriber sub(100, &stop);
+  LiveCollectOptions o;
+  o.window_s = 1e9;
+  o.max_bytes = 3 * one + one / 2;
+  const LiveFrameSource src(sub, o, &stop);
+  EXPECT_EQ(src.frame_count(), 3u);
+  EXPECT_TRUE(src.stopped_at_budget());
+  EXPECT_FALSE(stop) << "the budget ended the collection, not the stop request";
+  EXPECT_EQ(sub.sent(), 4u) << "the frame over the budget was received, not kept, and nothing after it";
+  const std::string note = src.dropped_note();
+  EXPECT_EQ(note.rfind("collection stopped after 3 frames (", 0), 0u) << note;
+  EXPECT_NE(note.find(" s of the 1e+09 s window): the next would take the frames kept past 1.28516 KiB"),
+            std::string::npos)
+      << note;
+  // The first frame is kept whatever its size: a snapshot of a large surface works.
+  std::atomic<bool> stop2{false};
+  EndlessSubscriber sub2(100, &stop2);
+  o.max_bytes = one / 2;
+  const LiveFrameSource first_only(sub2, o, &stop2);
+  EXPECT_EQ(first_only.frame_count(), 1u);
+  EXPECT_TRUE(first_only.stopped_at_budget());
+  // Within the budget nothing is said.
+  std::atomic<bool> stop3{false};
+  EndlessSubscriber sub3(5, &stop3);
+  o.max_bytes = 5 * one;
+  const LiveFrameSource all(sub3, o, &stop3);
+  EXPECT_EQ(all.frame_count(), 5u);
+  EXPECT_FALSE(all.stopped_at_budget());
+  EXPECT_EQ(all.dropped_note(), "");
+}
+
 TEST(LiveFrameSource, NothingWithinTheTimeoutIsANamedError) {
   ScriptedSubscriber sub({empty_frame(0.1)});
   sub.counts_.rejected = 2;

@@ -225,6 +225,10 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2(live + " --timeout inf", "--timeout: inf must be a finite number > 0");
   expect_2(live + " --timeout 0", "--timeout: 0 must be a finite number > 0");
   expect_2(live + " --animate --seconds nan", "--seconds: nan must be a finite number > 0");
+  // A window of any length kept every frame in memory: bounded to an hour
+  // (it waited out --timeout and exited 4 for want of a publisher).
+  expect_2(live + " --timeout 0.1 --animate --seconds 3601",
+           "--seconds: 3601 is more than 3600: live frames are held in memory");
   expect_2(live + " --timeout 5s", "--timeout: '5s' is not a number");
   expect_2("-o " + quote(dir_ / "o.x3d"), "--session is required");
   expect_2("--session " + quote(session_), "--output is required");

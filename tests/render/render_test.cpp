@@ -95,6 +95,40 @@ TEST(Render, APictureDoesNotDependOnTheObjectsScaleOrPlace) {
   }
 }
 
+// Coordinates near the double's limit draw as the same shape at unit size.
+// A triangle with an edge of 2e308 m had an infinite normal, a NaN shade and
+// a NaN converted to a colour byte (undefined; black on x86); a tetrahedron
+// spanning 3e308 m on every axis had an infinite bounding radius and drew
+// nothing.
+TEST(Render, SurfacesSpanningTheWholeDoubleRangeDrawAsAtUnitSize) {
+  const RenderOptions o = top_view(false);
+  x3d::SurfaceFrame triangle;
+  triangle.vertices_m = {{-1, 0, 0}, {1, 0, 0}, {0, 1, 1}};
+  triangle.triangles = {{0, 1, 2}};
+  x3d::SurfaceFrame tetra;
+  tetra.vertices_m = {{-1.5, -1.5, -1.5}, {1.5, -1.5, -1.5}, {-1.5, 1.5, -1.5}, {-1.5, -1.5, 1.5}};
+  tetra.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  for (const x3d::SurfaceFrame* unit : {&triangle, &tetra}) {
+    SCOPED_TRACE(::testing::Message() << unit->vertices_m.size() << " vertices");
+    x3d::SurfaceFrame huge = *unit;
+    for (auto& v : huge.vertices_m)
+      for (double& x : v) x *= 1e308;
+    const Image reference = render_frame(*unit, o);
+    const Image img = render_frame(huge, o);
+    int differing = 0, covered = 0, black = 0;
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        differing += img.pixel(x, y) != reference.pixel(x, y) ? 1 : 0;
+        covered += is_background(img, x, y) ? 0 : 1;
+        const auto p = img.pixel(x, y);
+        black += p[0] == 0 && p[1] == 0 && p[2] == 0 ? 1 : 0;
+      }
+    EXPECT_GT(covered, img.width * img.height / 20);  // not blank
+    EXPECT_EQ(black, 0);
+    EXPECT_LT(differing, img.width * img.height / 200) << differing << " pixels differ";
+  }
+}
+
 // The camera turns smoothly over the poles: one degree of elevation moves
 // few pixels (81° to 82° turned the picture by ~60°), and the azimuth still
 // turns the view from straight above (it froze from 82° on).
