@@ -2,9 +2,10 @@
 """Live statistics from a running tissued, over LCM: the template to copy.
 
 Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
-writes an SVG of tets and real-time factor over time when it stops. Mesh and
-haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see
-proto/README.md for every field.
+writes an SVG of tets and real-time factor over time when it stops: after
+--seconds, or on SIGINT (Ctrl-C) or SIGTERM. Mesh and haptic messages are
+counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see proto/README.md for
+every field.
 
   python3 clients/python/tissue_subscriber.py --seconds 10 --plot stats.svg
 
@@ -14,15 +15,21 @@ points elsewhere). The daemon publishes when its config says
 `publish: {lcm: {enabled: true}}`.
 A message that does not decode (another publisher on the channel, a damaged
 datagram) is counted and dropped; non-finite statistics are printed but left
-out of the plot.
+out of the plot. The plot keeps at most --plot-points points per line (every other
+one is dropped when full, so a long run is evenly thinned, not cut).
+The plot is written to a hidden temporary file beside it and renamed over it,
+so a failed write leaves an earlier plot as it was.
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
-2 bad arguments or missing modules.
+2 bad arguments or missing modules, 3 statistics arrived but the plot could
+not be written.
 """
 import argparse
 import math
 import os
 import select
+import signal
 import sys
+import tempfile
 import time
 
 DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
@@ -42,10 +49,45 @@ def find_types(explicit):
     return None
 
 
+def plot_path_error(path):
+    """Why an SVG cannot be written at path, or None: checked before listening,
+    so a typo does not cost the whole run."""
+    if os.path.isdir(path):
+        return "is a directory"
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        return f"directory {directory} does not exist" if not os.path.exists(directory) \
+            else f"{directory} is not a directory"
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return f"directory {directory} is not writable"
+    return None
+
+
+class Thinned:
+    """At most `limit` points of a stream, evenly spaced: point i is kept while
+    i is a multiple of the stride, and the stride doubles (every other kept
+    point dropped) whenever the list would exceed the limit. Memory stays
+    bounded however long the run."""
+
+    def __init__(self, limit):
+        self.limit, self.stride, self.seen, self.points = limit, 1, 0, []
+
+    def add(self, point):
+        if self.seen % self.stride == 0:
+            self.points.append(point)
+            if len(self.points) > self.limit:
+                self.points = self.points[::2]
+                self.stride *= 2
+        self.seen += 1
+
+
 def write_svg(path, samples):
-    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib."""
+    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib.
+    Written to a temporary file in the same directory, synced, then renamed
+    over `path`: a failure (full disk, file size limit) leaves an existing
+    plot intact and no temporary file. False when there is nothing to plot;
+    OSError when writing fails."""
     width, height, pad = 640, 400, 50
-    samples = [s for s in samples if all(math.isfinite(v) for v in s)]  # a NaN would break the polyline
     if not samples:
         return False
     t = [s[0] for s in samples]
@@ -66,9 +108,28 @@ def write_svg(path, samples):
         out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
     out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.2f} .. {t1:.2f} s</text>')
     out.append("</svg>")
-    with open(path, "w") as f:
-        f.write("\n".join(out) + "\n")
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write("\n".join(out) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp makes it 0600; a plot is an ordinary file
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
     return True
+
+
+def current_umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def main():
@@ -77,10 +138,20 @@ def main():
     ap.add_argument("--types", help="directory holding the generated 'tissue' Python package")
     ap.add_argument("--seconds", type=float, default=10.0, help="how long to listen")
     ap.add_argument("--plot", help="write an SVG of the statistics here when done")
+    ap.add_argument("--plot-points", type=int, default=10000,
+                    help="at most this many points per plotted line (default: %(default)s)")
     args = ap.parse_args()
     if not args.seconds > 0:
         print("tissue_subscriber: --seconds must be > 0", file=sys.stderr)
         return 2
+    if args.plot_points < 2:
+        print(f"tissue_subscriber: --plot-points {args.plot_points}: must be at least 2", file=sys.stderr)
+        return 2
+    if args.plot is not None:
+        why = plot_path_error(args.plot) if args.plot else "is empty"
+        if why:
+            print(f"tissue_subscriber: --plot {args.plot}: {why}", file=sys.stderr)
+            return 2
     try:
         import lcm
     except ImportError:
@@ -98,7 +169,9 @@ def main():
     except (IOError, RuntimeError) as e:
         print(f"tissue_subscriber: cannot listen at {args.url}: {e}", file=sys.stderr)
         return 2
-    samples, counts = [], {"mesh": 0, "haptic": 0}
+    # Only what the plot needs is kept, and at most --plot-points of it.
+    plot = Thinned(args.plot_points) if args.plot else None
+    counts = {"stats": 0, "mesh": 0, "haptic": 0}
     undecodable = {}
 
     def decoded(kind, channel, data):
@@ -116,7 +189,10 @@ def main():
         m = decoded(sim_stats, channel, data)
         if m is None:
             return
-        samples.append((m.time_s, m.tet_count, m.real_time_factor))
+        counts["stats"] += 1
+        sample = (m.time_s, m.tet_count, m.real_time_factor)
+        if plot is not None and all(math.isfinite(v) for v in sample):  # a NaN would break the polyline
+            plot.add(sample)
         print(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
               f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
               f"E {m.kinetic_energy_J + m.elastic_energy_J:.3e} J  "
@@ -133,22 +209,37 @@ def main():
     lc.subscribe("TISSUE_SIM_STATS", on_stats)
     lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
     lc.subscribe("TISSUE_HAPTIC_STATE", on_haptic)
+    # SIGINT and SIGTERM end the listening early; the summary and the plot
+    # still follow. (A SIGINT the parent ignores, as a shell does for a
+    # background job, stays ignored.)
+    stop = []
+
+    def on_signal(signum, frame):
+        stop.append(signum)
+
+    signal.signal(signal.SIGTERM, on_signal)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, on_signal)
     end = time.monotonic() + args.seconds
-    while (left := end - time.monotonic()) > 0:
+    while not stop and (left := end - time.monotonic()) > 0:
         ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))
-        if ready:
+        if ready and not stop:
             lc.handle()
     for channel, n in sorted(undecodable.items()):
         print(f"tissue_subscriber: {n} undecodable message(s) dropped on {channel}", file=sys.stderr)
-    if args.plot and samples:
-        if write_svg(args.plot, samples):
-            print(f"wrote {args.plot}")
-        else:
-            print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
-    if not samples:
+    if not counts["stats"]:
         print(f"tissue_subscriber: no sim_stats at {args.url} in {args.seconds:g} s (is publish.lcm.enabled on?)",
               file=sys.stderr)
         return 1
+    if plot is not None:
+        try:
+            if write_svg(args.plot, plot.points):
+                print(f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)")
+            else:
+                print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
+        except OSError as e:
+            print(f"tissue_subscriber: cannot write {args.plot}: {e.strerror or e}", file=sys.stderr)
+            return 3
     return 0
 
 

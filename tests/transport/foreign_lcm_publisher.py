@@ -1,8 +1,12 @@
 #!/usr/bin/env python3
 """A foreign publisher for python_subscriber_test.sh (inside its private network
-namespace only): after 1 s, one datagram on TISSUE_SURFACE_MESH that is not a
+namespace only). Args: PYTHON_TYPES_DIR [MODE]
+
+once (the default): after 1 s, one datagram on TISSUE_SURFACE_MESH that is not a
 surface_mesh, and one sim_stats with a NaN real-time factor.
-Args: PYTHON_TYPES_DIR"""
+
+stream: sim_stats with time_s = i ms and tet_count = i, about 5000 a second,
+until killed (at most 120 s)."""
 import sys
 import time
 
@@ -11,7 +15,22 @@ import lcm
 sys.path.insert(0, sys.argv[1])
 from tissue import sim_stats  # noqa: E402  (the generated types are found through argv)
 
+mode = sys.argv[2] if len(sys.argv) > 2 else "once"
 lc = lcm.LCM("udpm://239.255.76.67:7667?ttl=0")
+
+
+if mode == "stream":
+    m = sim_stats()
+    m.real_time_factor = 1.0
+    i, end = 0, time.monotonic() + 120.0
+    while time.monotonic() < end:
+        for _ in range(10):
+            m.time_s, m.tet_count = i * 1e-3, i
+            lc.publish("TISSUE_SIM_STATS", m.encode())
+            i += 1
+        time.sleep(0.002)  # a pace the subscriber keeps up with, not a wait for anything
+    sys.exit(0)
+
 time.sleep(1.0)
 lc.publish("TISSUE_SURFACE_MESH", b"not a surface mesh")
 m = sim_stats()
