@@ -14,8 +14,11 @@ lcm-gen writes at build time (build/release/proto/generated/python; --types
 points elsewhere). The daemon publishes when its config says
 `publish: {lcm: {enabled: true}}`.
 A message that does not decode (another publisher on the channel, a damaged
-datagram) is counted and dropped; non-finite statistics are printed but left
-out of the plot. The plot keeps at most --plot-points points per line (every other
+datagram) is counted and dropped; so is a surface_mesh that decodes but is
+not a usable mesh (the checks of the C++ subscriber: 3 coordinates per
+vertex, 3 indices per triangle each naming a vertex, finite coordinates and
+time, no bytes left over). Non-finite statistics are printed but left out of
+the plot. The plot keeps at most --plot-points points per line (every other
 one is dropped when full, so a long run is evenly thinned, not cut).
 The plot is written to a hidden temporary file beside it and renamed over it,
 so a failed write leaves an earlier plot as it was.
@@ -24,6 +27,7 @@ Exit codes: 0 received at least one sim_stats message, 1 none arrived,
 not be written.
 """
 import argparse
+import io
 import math
 import os
 import select
@@ -132,6 +136,37 @@ def current_umask():
     return mask
 
 
+def mesh_error(m, left_bytes):
+    """Why the decoded surface_mesh `m`, followed by `left_bytes` undecoded
+    bytes, is not a usable mesh: (reason, text), or None. The rules of the
+    C++ subscriber (daemon/transport/lcm_subscriber.cpp lcm_mesh_layout_error,
+    mesh_subscriber.cpp frame_from_mesh_arrays), with its reason names:
+    lcm-gen's Python decoder reads each array by its own count field and
+    ignores what follows, so decoding alone checks neither the 3·V / 3·T
+    rules, the indices, the values nor trailing bytes."""
+    if left_bytes:
+        return "size", f"{left_bytes} byte(s) after the message"
+    nv, nt = m.vertex_count, m.triangle_count
+    if nv < 0 or m.vertex_coordinate_count != 3 * nv:
+        return "size", (f"vertex_count {nv} with vertex_coordinate_count {m.vertex_coordinate_count} "
+                        "(must be 3 · vertex_count)")
+    if nt < 0 or m.triangle_index_count != 3 * nt:
+        return "size", (f"triangle_count {nt} with triangle_index_count {m.triangle_index_count} "
+                        "(must be 3 · triangle_count)")
+    if not math.isfinite(m.time_s):
+        return "non_finite", "time_s is not finite"
+    # One sum instead of a call per value: float32 values cannot overflow a
+    # double sum, so it is finite exactly when every coordinate is.
+    if not math.isfinite(sum(m.vertex_m)):
+        i = next(k for k, x in enumerate(m.vertex_m) if not math.isfinite(x)) // 3
+        return "non_finite", f"vertex {i} has a non-finite coordinate"
+    tv = m.triangle_vertex
+    if tv and (min(tv) < 0 or max(tv) >= nv):
+        k = next(k for k, v in enumerate(tv) if not 0 <= v < nv)
+        return "index", f"triangle {k // 3} uses vertex {tv[k]} of {nv}"
+    return None
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--url", default=DEFAULT_URL, help="LCM URL (default: %(default)s)")
@@ -172,21 +207,24 @@ def main():
     # Only what the plot needs is kept, and at most --plot-points of it.
     plot = Thinned(args.plot_points) if args.plot else None
     counts = {"stats": 0, "mesh": 0, "haptic": 0}
-    undecodable = {}
+    undecodable, bad_meshes = {}, {}
 
     def decoded(kind, channel, data):
-        """The message, or None (counted; the first one per channel said) when it does not decode."""
+        """(the message, how many bytes followed it), or (None, 0) when it does
+        not decode (counted; the first one per channel said)."""
+        buf = io.BytesIO(data)
         try:
-            return kind.decode(data)
+            m = kind.decode(buf)
         except Exception as e:  # LCM's decoders raise ValueError, struct.error, ...
             undecodable[channel] = undecodable.get(channel, 0) + 1
             if undecodable[channel] == 1:
                 print(f"tissue_subscriber: dropped a {len(data)}-byte message on {channel} that is not a "
                       f"{kind.__name__}: {e}", file=sys.stderr)
-            return None
+            return None, 0
+        return m, len(data) - buf.tell()
 
     def on_stats(channel, data):
-        m = decoded(sim_stats, channel, data)
+        m, _ = decoded(sim_stats, channel, data)
         if m is None:
             return
         counts["stats"] += 1
@@ -199,11 +237,21 @@ def main():
               f"(meshes {counts['mesh']}, haptic states {counts['haptic']})", flush=True)
 
     def on_mesh(channel, data):
-        if decoded(surface_mesh, channel, data) is not None:  # decoding proves the message is whole
+        m, left_bytes = decoded(surface_mesh, channel, data)
+        if m is None:
+            return
+        error = mesh_error(m, left_bytes)
+        if error is None:
             counts["mesh"] += 1
+            return
+        reason, text = error
+        bad_meshes[reason] = bad_meshes.get(reason, 0) + 1
+        if bad_meshes[reason] == 1:
+            print(f"tissue_subscriber: dropped a malformed surface_mesh on {channel} ({reason}): {text}",
+                  file=sys.stderr)
 
     def on_haptic(channel, data):
-        if decoded(haptic_state, channel, data) is not None:
+        if decoded(haptic_state, channel, data)[0] is not None:
             counts["haptic"] += 1
 
     lc.subscribe("TISSUE_SIM_STATS", on_stats)
@@ -227,6 +275,10 @@ def main():
             lc.handle()
     for channel, n in sorted(undecodable.items()):
         print(f"tissue_subscriber: {n} undecodable message(s) dropped on {channel}", file=sys.stderr)
+    if bad_meshes:
+        reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(bad_meshes.items()))
+        print(f"tissue_subscriber: {sum(bad_meshes.values())} malformed surface_mesh message(s) dropped ({reasons})",
+              file=sys.stderr)
     if not counts["stats"]:
         print(f"tissue_subscriber: no sim_stats at {args.url} in {args.seconds:g} s (is publish.lcm.enabled on?)",
               file=sys.stderr)

@@ -20,9 +20,9 @@ trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; rm -rf "$work"' EXIT
   --set publish.lcm.enabled=true --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
 daemon=$!
 # A foreign publisher on the same channels (this private namespace): one
-# datagram that is not a mesh, and statistics with a NaN real-time factor.
-# The subscriber drops the first (saying so), prints the second and keeps it
-# out of the plot.
+# datagram that is not a mesh, five meshes that decode but are malformed,
+# and statistics with a NaN real-time factor. The subscriber drops the
+# first six (saying so), prints the last and keeps it out of the plot.
 python3 "$here/foreign_lcm_publisher.py" "$types" &
 foreign=$!
 python3 "$subscriber" --types "$types" --seconds 3 --plot "$work/stats.svg" >"$work/sub.log" 2>"$work/sub.err"
@@ -31,6 +31,12 @@ wait "$daemon"
 grep -q 'dropped a 18-byte message on TISSUE_SURFACE_MESH that is not a surface_mesh' "$work/sub.err" ||
   { echo "the foreign message was not reported"; cat "$work/sub.err"; exit 1; }
 grep -q '1 undecodable message(s) dropped on TISSUE_SURFACE_MESH' "$work/sub.err" || { cat "$work/sub.err"; exit 1; }
+# Decoding alone accepted these (it reads each array by its own count and
+# ignores trailing bytes): the C++ subscriber's checks drop them.
+grep -q '5 malformed surface_mesh message(s) dropped (index 2, non_finite 1, size 2)' "$work/sub.err" ||
+  { echo "the malformed meshes were not dropped"; cat "$work/sub.err"; exit 1; }
+grep -q 'dropped a malformed surface_mesh on TISSUE_SURFACE_MESH (index): triangle 0 uses vertex -1 of 3' \
+  "$work/sub.err" || { cat "$work/sub.err"; exit 1; }
 grep -q 'rtf   nan' "$work/sub.log" || { echo "the NaN statistics were not printed"; cat "$work/sub.log"; exit 1; }
 if grep -qi 'nan' "$work/stats.svg"; then echo "NaN in the plot"; exit 1; fi
 lines="$(grep -c '^t ' "$work/sub.log")"
