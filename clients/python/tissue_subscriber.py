@@ -2,9 +2,10 @@
 """Live statistics from a running tissued, over LCM: the template to copy.
 
 Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
-writes an SVG of tets and real-time factor over time when it stops. Mesh and
-haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see
-proto/README.md for every field.
+writes an SVG of tets and real-time factor over time when it stops: after
+--seconds, or on SIGINT (Ctrl-C) or SIGTERM. Mesh and haptic messages are
+counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see proto/README.md for
+every field.
 
   python3 clients/python/tissue_subscriber.py --seconds 10 --plot stats.svg
 
@@ -13,16 +14,26 @@ lcm-gen writes at build time (build/release/proto/generated/python; --types
 points elsewhere). The daemon publishes when its config says
 `publish: {lcm: {enabled: true}}`.
 A message that does not decode (another publisher on the channel, a damaged
-datagram) is counted and dropped; non-finite statistics are printed but left
-out of the plot.
+datagram) is counted and dropped; so is a surface_mesh that decodes but is
+not a usable mesh (the checks of the C++ subscriber: 3 coordinates per
+vertex, 3 indices per triangle each naming a vertex, finite coordinates and
+time, no bytes left over). Non-finite statistics are printed but left out of
+the plot. The plot keeps at most --plot-points points per line (every other
+one is dropped when full, so a long run is evenly thinned, not cut).
+The plot is written to a hidden temporary file beside it and renamed over it,
+so a failed write leaves an earlier plot as it was.
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
-2 bad arguments or missing modules.
+2 bad arguments or missing modules, 3 statistics arrived but the plot could
+not be written.
 """
 import argparse
+import io
 import math
 import os
 import select
+import signal
 import sys
+import tempfile
 import time
 
 DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
@@ -42,10 +53,45 @@ def find_types(explicit):
     return None
 
 
+def plot_path_error(path):
+    """Why an SVG cannot be written at path, or None: checked before listening,
+    so a typo does not cost the whole run."""
+    if os.path.isdir(path):
+        return "is a directory"
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        return f"directory {directory} does not exist" if not os.path.exists(directory) \
+            else f"{directory} is not a directory"
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return f"directory {directory} is not writable"
+    return None
+
+
+class Thinned:
+    """At most `limit` points of a stream, evenly spaced: point i is kept while
+    i is a multiple of the stride, and the stride doubles (every other kept
+    point dropped) whenever the list would exceed the limit. Memory stays
+    bounded however long the run."""
+
+    def __init__(self, limit):
+        self.limit, self.stride, self.seen, self.points = limit, 1, 0, []
+
+    def add(self, point):
+        if self.seen % self.stride == 0:
+            self.points.append(point)
+            if len(self.points) > self.limit:
+                self.points = self.points[::2]
+                self.stride *= 2
+        self.seen += 1
+
+
 def write_svg(path, samples):
-    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib."""
+    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib.
+    Written to a temporary file in the same directory, synced, then renamed
+    over `path`: a failure (full disk, file size limit) leaves an existing
+    plot intact and no temporary file. False when there is nothing to plot;
+    OSError when writing fails."""
     width, height, pad = 640, 400, 50
-    samples = [s for s in samples if all(math.isfinite(v) for v in s)]  # a NaN would break the polyline
     if not samples:
         return False
     t = [s[0] for s in samples]
@@ -66,9 +112,59 @@ def write_svg(path, samples):
         out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
     out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.2f} .. {t1:.2f} s</text>')
     out.append("</svg>")
-    with open(path, "w") as f:
-        f.write("\n".join(out) + "\n")
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write("\n".join(out) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp makes it 0600; a plot is an ordinary file
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
     return True
+
+
+def current_umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def mesh_error(m, left_bytes):
+    """Why the decoded surface_mesh `m`, followed by `left_bytes` undecoded
+    bytes, is not a usable mesh: (reason, text), or None. The rules of the
+    C++ subscriber (daemon/transport/lcm_subscriber.cpp lcm_mesh_layout_error,
+    mesh_subscriber.cpp frame_from_mesh_arrays), with its reason names:
+    lcm-gen's Python decoder reads each array by its own count field and
+    ignores what follows, so decoding alone checks neither the 3·V / 3·T
+    rules, the indices, the values nor trailing bytes."""
+    if left_bytes:
+        return "size", f"{left_bytes} byte(s) after the message"
+    nv, nt = m.vertex_count, m.triangle_count
+    if nv < 0 or m.vertex_coordinate_count != 3 * nv:
+        return "size", (f"vertex_count {nv} with vertex_coordinate_count {m.vertex_coordinate_count} "
+                        "(must be 3 · vertex_count)")
+    if nt < 0 or m.triangle_index_count != 3 * nt:
+        return "size", (f"triangle_count {nt} with triangle_index_count {m.triangle_index_count} "
+                        "(must be 3 · triangle_count)")
+    if not math.isfinite(m.time_s):
+        return "non_finite", "time_s is not finite"
+    # One sum instead of a call per value: float32 values cannot overflow a
+    # double sum, so it is finite exactly when every coordinate is.
+    if not math.isfinite(sum(m.vertex_m)):
+        i = next(k for k, x in enumerate(m.vertex_m) if not math.isfinite(x)) // 3
+        return "non_finite", f"vertex {i} has a non-finite coordinate"
+    tv = m.triangle_vertex
+    if tv and (min(tv) < 0 or max(tv) >= nv):
+        k = next(k for k, v in enumerate(tv) if not 0 <= v < nv)
+        return "index", f"triangle {k // 3} uses vertex {tv[k]} of {nv}"
+    return None
 
 
 def main():
@@ -77,10 +173,20 @@ def main():
     ap.add_argument("--types", help="directory holding the generated 'tissue' Python package")
     ap.add_argument("--seconds", type=float, default=10.0, help="how long to listen")
     ap.add_argument("--plot", help="write an SVG of the statistics here when done")
+    ap.add_argument("--plot-points", type=int, default=10000,
+                    help="at most this many points per plotted line (default: %(default)s)")
     args = ap.parse_args()
     if not args.seconds > 0:
         print("tissue_subscriber: --seconds must be > 0", file=sys.stderr)
         return 2
+    if args.plot_points < 2:
+        print(f"tissue_subscriber: --plot-points {args.plot_points}: must be at least 2", file=sys.stderr)
+        return 2
+    if args.plot is not None:
+        why = plot_path_error(args.plot) if args.plot else "is empty"
+        if why:
+            print(f"tissue_subscriber: --plot {args.plot}: {why}", file=sys.stderr)
+            return 2
     try:
         import lcm
     except ImportError:
@@ -98,57 +204,94 @@ def main():
     except (IOError, RuntimeError) as e:
         print(f"tissue_subscriber: cannot listen at {args.url}: {e}", file=sys.stderr)
         return 2
-    samples, counts = [], {"mesh": 0, "haptic": 0}
-    undecodable = {}
+    # Only what the plot needs is kept, and at most --plot-points of it.
+    plot = Thinned(args.plot_points) if args.plot else None
+    counts = {"stats": 0, "mesh": 0, "haptic": 0}
+    undecodable, bad_meshes = {}, {}
 
     def decoded(kind, channel, data):
-        """The message, or None (counted; the first one per channel said) when it does not decode."""
+        """(the message, how many bytes followed it), or (None, 0) when it does
+        not decode (counted; the first one per channel said)."""
+        buf = io.BytesIO(data)
         try:
-            return kind.decode(data)
+            m = kind.decode(buf)
         except Exception as e:  # LCM's decoders raise ValueError, struct.error, ...
             undecodable[channel] = undecodable.get(channel, 0) + 1
             if undecodable[channel] == 1:
                 print(f"tissue_subscriber: dropped a {len(data)}-byte message on {channel} that is not a "
                       f"{kind.__name__}: {e}", file=sys.stderr)
-            return None
+            return None, 0
+        return m, len(data) - buf.tell()
 
     def on_stats(channel, data):
-        m = decoded(sim_stats, channel, data)
+        m, _ = decoded(sim_stats, channel, data)
         if m is None:
             return
-        samples.append((m.time_s, m.tet_count, m.real_time_factor))
+        counts["stats"] += 1
+        sample = (m.time_s, m.tet_count, m.real_time_factor)
+        if plot is not None and all(math.isfinite(v) for v in sample):  # a NaN would break the polyline
+            plot.add(sample)
         print(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
               f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
               f"E {m.kinetic_energy_J + m.elastic_energy_J:.3e} J  "
               f"(meshes {counts['mesh']}, haptic states {counts['haptic']})", flush=True)
 
     def on_mesh(channel, data):
-        if decoded(surface_mesh, channel, data) is not None:  # decoding proves the message is whole
+        m, left_bytes = decoded(surface_mesh, channel, data)
+        if m is None:
+            return
+        error = mesh_error(m, left_bytes)
+        if error is None:
             counts["mesh"] += 1
+            return
+        reason, text = error
+        bad_meshes[reason] = bad_meshes.get(reason, 0) + 1
+        if bad_meshes[reason] == 1:
+            print(f"tissue_subscriber: dropped a malformed surface_mesh on {channel} ({reason}): {text}",
+                  file=sys.stderr)
 
     def on_haptic(channel, data):
-        if decoded(haptic_state, channel, data) is not None:
+        if decoded(haptic_state, channel, data)[0] is not None:
             counts["haptic"] += 1
 
     lc.subscribe("TISSUE_SIM_STATS", on_stats)
     lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
     lc.subscribe("TISSUE_HAPTIC_STATE", on_haptic)
+    # SIGINT and SIGTERM end the listening early; the summary and the plot
+    # still follow. (A SIGINT the parent ignores, as a shell does for a
+    # background job, stays ignored.)
+    stop = []
+
+    def on_signal(signum, frame):
+        stop.append(signum)
+
+    signal.signal(signal.SIGTERM, on_signal)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, on_signal)
     end = time.monotonic() + args.seconds
-    while (left := end - time.monotonic()) > 0:
+    while not stop and (left := end - time.monotonic()) > 0:
         ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))
-        if ready:
+        if ready and not stop:
             lc.handle()
     for channel, n in sorted(undecodable.items()):
         print(f"tissue_subscriber: {n} undecodable message(s) dropped on {channel}", file=sys.stderr)
-    if args.plot and samples:
-        if write_svg(args.plot, samples):
-            print(f"wrote {args.plot}")
-        else:
-            print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
-    if not samples:
+    if bad_meshes:
+        reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(bad_meshes.items()))
+        print(f"tissue_subscriber: {sum(bad_meshes.values())} malformed surface_mesh message(s) dropped ({reasons})",
+              file=sys.stderr)
+    if not counts["stats"]:
         print(f"tissue_subscriber: no sim_stats at {args.url} in {args.seconds:g} s (is publish.lcm.enabled on?)",
               file=sys.stderr)
         return 1
+    if plot is not None:
+        try:
+            if write_svg(args.plot, plot.points):
+                print(f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)")
+            else:
+                print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
+        except OSError as e:
+            print(f"tissue_subscriber: cannot write {args.plot}: {e.strerror or e}", file=sys.stderr)
+            return 3
     return 0
 
 

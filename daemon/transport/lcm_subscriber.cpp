@@ -62,7 +62,9 @@ LcmMeshSubscriber::LcmMeshSubscriber(const std::string& url) : url_(url), lcm_(s
   // A tcpq:// provider that could not connect still reports good() but has
   // no socket: waiting on it aborted the process (FD_SET of -1).
   if (!lcm_->good() || lcm_->getFileno() < 0) throw std::runtime_error("LCM: " + util::lcm_start_failure(url));
-  lcm_->subscribeFunction(kSurfaceMeshChannel, &handle, this);
+  // (The provider's receive side is up, checked above: the subscription
+  // cannot fail for want of it.)
+  lcm_->subscribeFunction(kSurfaceMeshChannel, &handle, this)->setQueueCapacity(static_cast<int>(kLcmQueueMessages));
 }
 
 LcmMeshSubscriber::~LcmMeshSubscriber() = default;
@@ -95,6 +97,17 @@ void LcmMeshSubscriber::on_message(const void* data, std::size_t size) {
 std::optional<x3d::SurfaceFrame> LcmMeshSubscriber::next_frame(double timeout_s) {
   const auto deadline =
       Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout_s));
+  // LCM dispatches one message per handle call: without this, only the
+  // message that ended the wait reached pending_, so the queue never held
+  // more than one frame, a slow reader got the oldest frames LCM had kept
+  // and the newer ones were dropped by LCM, uncounted. Taking everything LCM
+  // holds first lets the queue keep the newest and count what it drops.
+  // Bounded: a publisher faster than this loop must not keep it here.
+  for (std::size_t i = 0; i < kLcmQueueMessages; ++i) {
+    const int handled = lcm_->handleTimeout(0);
+    if (handled < 0) throw std::runtime_error(name() + ": LCM stopped receiving");
+    if (handled == 0) break;
+  }
   while (pending_.empty()) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
     if (left <= 0) break;

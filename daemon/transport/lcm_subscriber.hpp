@@ -44,7 +44,15 @@ class LcmMeshSubscriber final : public MeshSubscriber {
   const MeshReceiveCounts& counts() const override { return counts_; }
 
   // Frames kept between next_frame() calls; older ones are dropped (overflow).
+  // Each next_frame() first takes every message LCM has received since the
+  // last call, so the queue holds the newest of them.
   static constexpr std::size_t kMaxPending = 64;
+  // Messages LCM's own receive thread holds for us between next_frame()
+  // calls (LCM's default is 30). LCM drops the NEWEST beyond this, uncounted,
+  // so it is larger than kMaxPending: a reader that falls up to this many
+  // messages behind still gets the newest kMaxPending. A bound, because each
+  // may be a multi-megabyte mesh.
+  static constexpr std::size_t kLcmQueueMessages = 2 * kMaxPending;
 
   // One received message (called by LCM's handler; public for tests that
   // feed bytes without a network).

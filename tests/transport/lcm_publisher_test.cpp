@@ -4,11 +4,15 @@
 
 #include <chrono>
 #include <cstdlib>
+#include <fstream>
 #include <lcm/lcm-cpp.hpp>
 #include <optional>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include "transport/lcm_messages.hpp"
+#include "transport/lcm_subscriber.hpp"
 #include "transport/transport_test_support.hpp"
 
 namespace tissue::transport {
@@ -170,6 +174,83 @@ TEST(LcmPublisherNetns, LargeMeshReachesTwoSubscribers) {
   expect_mesh_equals(*a.mesh, big);
   expect_mesh_equals(*b.mesh, big);
   EXPECT_EQ(a.stats, 1);
+}
+
+void count_message(const lcm::ReceiveBuffer*, const std::string&, std::size_t* n) { ++*n; }
+
+// The port of a udpm:// URL ("udpm://GROUP:PORT?options").
+unsigned long udpm_port(const std::string& url) {
+  const std::size_t end = url.find('?');
+  const std::size_t colon = url.rfind(':', end);
+  return std::stoul(url.substr(colon + 1, end == std::string::npos ? std::string::npos : end - colon - 1));
+}
+
+// True when no UDP socket on `port` in this (private) network namespace holds
+// an unread datagram (/proc/net/udp's rx_queue): every LCM receive thread
+// listening there has taken what was sent.
+bool udp_port_drained(unsigned long port) {
+  std::ifstream in("/proc/net/udp");
+  std::string line;
+  std::getline(in, line);  // the header
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::string slot, local, remote, state, queues;
+    fields >> slot >> local >> remote >> state >> queues;  // queues: "tx:rx" in hex
+    if (std::stoul(local.substr(local.rfind(':') + 1), nullptr, 16) != port) continue;
+    if (std::stoul(queues.substr(queues.find(':') + 1), nullptr, 16) != 0) return false;
+  }
+  return true;
+}
+
+// A mesh reader that falls behind gets the newest frames and counts the older
+// ones it missed, over a real provider. Before, LcmMeshSubscriber ran one LCM
+// handle call per wait, which dispatches one message: its queue never held
+// more than one frame, overflow stayed 0 and a slow reader got the oldest
+// frames (LCM itself drops the newest once its own queue is full). Found by
+// the review of the LCM subscriber; the memq:// test of the queue
+// (mesh_subscriber_test.cpp) feeds on_message() directly and could not see it.
+TEST(LcmPublisherNetns, ASlowMeshReaderGetsTheNewestFramesAndCountsTheOlder) {
+  const char* url = std::getenv("TISSUE_TEST_LCM_URL");
+  if (!url) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  LcmMeshSubscriber sub(url);
+  // Reads as the meshes come: once it has them all, they have reached every
+  // socket on the group (a loss on loopback fails here, not later).
+  lcm::LCM witness(url);
+  ASSERT_TRUE(witness.good());
+  std::size_t witnessed = 0;
+  witness.subscribeFunction(kSurfaceMeshChannel, &count_message, &witnessed)->setQueueCapacity(0);
+  LcmPublisher publisher(url);
+  constexpr std::size_t kSent = LcmMeshSubscriber::kMaxPending + 5;
+  for (std::size_t i = 0; i < kSent; ++i) {
+    service::MeshSnapshot s = strip(1);  // ~200 bytes: one datagram each
+    s.sequence = i + 1;
+    s.sim_time_s = static_cast<double>(i);
+    publisher.publish_mesh(s);
+  }
+  ASSERT_EQ(publisher.counts().meshes, kSent);
+  for (int i = 0; i < 100 && witnessed < kSent; ++i) witness.handleTimeout(100);
+  ASSERT_EQ(witnessed, kSent);
+  // ... and once the sockets are empty, the subscriber's LCM receive thread has
+  // read them all (it holds at most the last one, not yet queued), so the
+  // reader is now behind by at least kSent - 1 messages. (Without this wait
+  // the receive thread lagged the witness in about 1 run in 20 at load 8.)
+  const unsigned long port = udpm_port(url);
+  for (int i = 0; i < 100 && !udp_port_drained(port); ++i) witness.handleTimeout(10);
+  ASSERT_TRUE(udp_port_drained(port)) << "datagrams still unread on port " << port << " after 1 s";
+
+  std::vector<double> times;
+  while (const auto f = sub.next_frame(sub.counts().received < kSent ? 5.0 : 0.0)) times.push_back(f->time_s);
+  const MeshReceiveCounts& c = sub.counts();
+  EXPECT_EQ(c.received, kSent);
+  EXPECT_EQ(c.accepted, kSent);
+  // 5; 4 when the last message was still between the socket and LCM's queue
+  // at the first read (it then joins the 63 left, with no overflow).
+  EXPECT_GE(c.overflow, 4u);
+  EXPECT_LE(c.overflow, 5u);
+  ASSERT_EQ(times.size() + c.overflow, kSent);
+  // The frames read are the newest, in order: the dropped ones are the oldest.
+  for (std::size_t k = 0; k < times.size(); ++k)
+    EXPECT_EQ(times[k], static_cast<double>(c.overflow + k)) << "frame " << k << " of " << times.size();
 }
 
 }  // namespace

@@ -1,32 +1,42 @@
 #!/bin/sh
 # End to end in a private network namespace (run through in_netns.sh): the
 # daemon publishes over LCM, the Python template subscriber prints stats
-# and writes its SVG plot. Args: TISSUED_BINARY SOURCE_DIR PYTHON_TYPES_DIR
+# and writes its SVG plot; then, against foreign_lcm_publisher.py alone, the
+# --plot errors, a plot that cannot be written, the plot's point bound and
+# stopping on a signal. Args: TISSUED_BINARY SOURCE_DIR PYTHON_TYPES_DIR
 set -eu
 tissued="$1"; src="$2"; types="$3"
+here="$(dirname "$0")"
+subscriber="$src/clients/python/tissue_subscriber.py"
 if ! python3 -c 'import lcm' 2>/dev/null; then
   echo "python_subscriber_test: python3 has no 'lcm' module (scripts/install-deps.sh installs it); skipped" >&2
   exit 77
 fi
 work="$(mktemp -d)"
-trap 'rm -rf "$work"' EXIT
+stream=""
+trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; rm -rf "$work"' EXIT
 "$tissued" --config "$src/config/tissued.yaml" --duration 4 \
   --set "control.unix_socket_path=$work/c.sock" --set "state_dir=$work" \
   --set publish.lcm.enabled=true --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
 daemon=$!
 # A foreign publisher on the same channels (this private namespace): one
-# datagram that is not a mesh, and statistics with a NaN real-time factor.
-# The subscriber drops the first (saying so), prints the second and keeps it
-# out of the plot.
-python3 "$(dirname "$0")/foreign_lcm_publisher.py" "$types" &
+# datagram that is not a mesh, five meshes that decode but are malformed,
+# and statistics with a NaN real-time factor. The subscriber drops the
+# first six (saying so), prints the last and keeps it out of the plot.
+python3 "$here/foreign_lcm_publisher.py" "$types" &
 foreign=$!
-python3 "$src/clients/python/tissue_subscriber.py" --types "$types" --seconds 3 --plot "$work/stats.svg" \
-  >"$work/sub.log" 2>"$work/sub.err"
+python3 "$subscriber" --types "$types" --seconds 3 --plot "$work/stats.svg" >"$work/sub.log" 2>"$work/sub.err"
 wait "$foreign"
 wait "$daemon"
 grep -q 'dropped a 18-byte message on TISSUE_SURFACE_MESH that is not a surface_mesh' "$work/sub.err" ||
   { echo "the foreign message was not reported"; cat "$work/sub.err"; exit 1; }
 grep -q '1 undecodable message(s) dropped on TISSUE_SURFACE_MESH' "$work/sub.err" || { cat "$work/sub.err"; exit 1; }
+# Decoding alone accepted these (it reads each array by its own count and
+# ignores trailing bytes): the C++ subscriber's checks drop them.
+grep -q '5 malformed surface_mesh message(s) dropped (index 2, non_finite 1, size 2)' "$work/sub.err" ||
+  { echo "the malformed meshes were not dropped"; cat "$work/sub.err"; exit 1; }
+grep -q 'dropped a malformed surface_mesh on TISSUE_SURFACE_MESH (index): triangle 0 uses vertex -1 of 3' \
+  "$work/sub.err" || { cat "$work/sub.err"; exit 1; }
 grep -q 'rtf   nan' "$work/sub.log" || { echo "the NaN statistics were not printed"; cat "$work/sub.log"; exit 1; }
 if grep -qi 'nan' "$work/stats.svg"; then echo "NaN in the plot"; exit 1; fi
 lines="$(grep -c '^t ' "$work/sub.log")"
@@ -35,3 +45,75 @@ echo "subscriber printed $lines stats lines"
 grep -q '<polyline' "$work/stats.svg" || { echo "no plot"; exit 1; }
 # Meshes and haptic states arrived and decoded.
 grep '^t ' "$work/sub.log" | tail -1 | grep -q 'meshes [1-9][0-9]*, haptic states [1-9]' || { tail -3 "$work/sub.log"; exit 1; }
+
+fail() { echo "python_subscriber_test: $*"; exit 1; }
+no_traceback() { if grep -q Traceback "$1"; then cat "$1"; fail "a traceback in $1"; fi; }
+
+# --plot is checked before listening: a missing directory or a directory is
+# a bad argument (2), named with the reason, without a traceback.
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --plot "$work/nodir/s.svg" >"$work/nodir.log" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/nodir.log"; fail "--plot in a missing directory: exit $rc, expected 2"; }
+grep -q -- "--plot $work/nodir/s.svg: directory $work/nodir does not exist" "$work/nodir.log" ||
+  { cat "$work/nodir.log"; fail "--plot in a missing directory: no reason"; }
+no_traceback "$work/nodir.log"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --plot "$work" >"$work/isdir.log" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/isdir.log"; fail "--plot at a directory: exit $rc, expected 2"; }
+grep -q -- "--plot $work: is a directory" "$work/isdir.log" || { cat "$work/isdir.log"; fail "--plot at a directory"; }
+
+# The rest listens to a stream of statistics from the foreign publisher.
+python3 "$here/foreign_lcm_publisher.py" "$types" stream &
+stream=$!
+
+# SIGTERM stops the subscriber early, and the plot is still written (this
+# also waits until the stream flows).
+python3 "$subscriber" --types "$types" --seconds 300 --plot "$work/term.svg" >"$work/term.log" 2>"$work/term.err" &
+term=$!
+polls=0
+until grep -q '^t ' "$work/term.log"; do
+  polls=$((polls + 1))
+  [ "$polls" -le 600 ] || { kill "$term"; fail "no statistics in 60 s"; }
+  sleep 0.1
+done
+kill -TERM "$term"
+rc=0
+wait "$term" || rc=$?
+[ "$rc" -eq 0 ] || { cat "$work/term.err"; fail "stopped by SIGTERM: exit $rc, expected 0"; }
+grep -q '<polyline' "$work/term.svg" || fail "no plot after SIGTERM"
+
+# A plot that cannot be written (file size limit): exit 3 with the reason,
+# the earlier plot unchanged, no temporary file left. stdout goes to
+# /dev/null, which the limit does not cover.
+printf 'an earlier plot\n' >"$work/keep.svg"
+rc=0
+(ulimit -f 1 && exec python3 "$subscriber" --types "$types" --seconds 2 --plot "$work/keep.svg" \
+  >/dev/null 2>"$work/keep.err") || rc=$?
+[ "$rc" -eq 3 ] || { cat "$work/keep.err"; fail "an unwritable plot: exit $rc, expected 3"; }
+grep -q "cannot write $work/keep.svg: File too large" "$work/keep.err" || { cat "$work/keep.err"; fail "no reason"; }
+no_traceback "$work/keep.err"
+[ "$(cat "$work/keep.svg")" = "an earlier plot" ] || fail "the earlier plot was changed: $(head -c 200 "$work/keep.svg")"
+if ls -A "$work" | grep -q '^\.keep\.svg\..*\.tmp$'; then ls -A "$work"; fail "a temporary plot was left"; fi
+
+# More statistics than the plot keeps, then Ctrl-C: the plot is still written,
+# with at most 10000 points per line (thinned evenly: at least half of them).
+# SIGINT's default action is restored for this background job (sh ignores it).
+env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 300 --plot "$work/many.svg" \
+  >"$work/many.log" 2>"$work/many.err" &
+many=$!
+polls=0
+until [ "$(grep -c '^t ' "$work/many.log")" -gt 10000 ]; do
+  polls=$((polls + 1))
+  [ "$polls" -le 1200 ] || { kill "$many"; fail "fewer than 10001 statistics in 120 s"; }
+  sleep 0.1
+done
+kill -INT "$many"
+rc=0
+wait "$many" || rc=$?
+[ "$rc" -eq 0 ] || { cat "$work/many.err"; fail "stopped by SIGINT: exit $rc, expected 0"; }
+no_traceback "$work/many.err"
+received="$(grep -c '^t ' "$work/many.log")"
+points="$(sed -n 's/.*<polyline points="\([^"]*\)".*/\1/p' "$work/many.svg" | head -1 | wc -w)"
+echo "the plot of $received statistics holds $points points"
+[ "$points" -le 10000 ] && [ "$points" -ge 5000 ] || fail "$points points for $received statistics"
+grep -q "^wrote $work/many.svg ($points of $received points)" "$work/many.log" || { tail -2 "$work/many.log"; fail "no summary"; }
