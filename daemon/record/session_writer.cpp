@@ -20,6 +20,7 @@
 #include <system_error>
 #include <tuple>
 
+#include "util/output_file.hpp"
 #include "util/text.hpp"
 #include "util/timestamped_name.hpp"
 
@@ -150,24 +151,6 @@ std::string hidden_path_for(const std::string& path) {
       .append("-")
       .append(std::to_string(counter.fetch_add(1)));
   return (p.parent_path() / name).string();
-}
-
-// Renames `from` to `to` unless `to` exists (atomically: no check-then-act
-// window). Returns 0 or the errno. Filesystems without RENAME_NOREPLACE get a
-// hard link, which is just as exclusive, and the unlink of the old name;
-// those without hard links either (FAT and exFAT sticks) a check, then a
-// plain rename: two recorders starting the same name in the same instant
-// there could replace one another's file.
-int publish_without_replacing(const std::string& from, const std::string& to) {
-  if (::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE) == 0) return 0;
-  if (errno != EINVAL && errno != ENOSYS) return errno;
-  if (::link(from.c_str(), to.c_str()) == 0) {
-    ::unlink(from.c_str());
-    return 0;
-  }
-  if (errno != EPERM && errno != EOPNOTSUPP) return errno;
-  if (::access(to.c_str(), F_OK) == 0) return EEXIST;
-  return ::rename(from.c_str(), to.c_str()) == 0 ? 0 : errno;
 }
 
 }  // namespace
@@ -311,7 +294,7 @@ std::unique_ptr<SessionWriter> SessionWriter::create(const std::string& path, co
   // (`tissue session repair` refuses a marked file). The lock is on the
   // inode: the rename keeps it.
   writer->lock_.take(hidden);
-  const int moved = publish_without_replacing(hidden, path);
+  const int moved = util::rename_without_replacing(hidden, path);
   if (moved != 0) {
     writer.reset();
     std::filesystem::remove(hidden, ec);

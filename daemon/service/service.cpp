@@ -856,18 +856,17 @@ nlohmann::json Service::export_x3d(const std::string& name) {
   x3d::X3dOptions options;
   options.title = scene_.name + " at t = " + std::to_string(snap.sim_time_s) + " s";
   const std::filesystem::path path = std::filesystem::path(config_.state_dir) / file_name;
-  // O_EXCL: "never overwritten" holds even against a file (or a link)
-  // made between a check and the open; a failed write leaves no part file.
+  // Written whole to a hidden temporary file, synced, then given its name
+  // only if nothing has it by then: "never overwritten" holds even against a
+  // file (or a link) made meanwhile, and a failed write or a crash (a kill,
+  // the watchdog, power) leaves no part file under the name.
   const std::string text = x3d::x3d_snapshot(frame, options);
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0 && errno == EEXIST) throw control::ControlError(path.string() + " exists; files are never overwritten");
-  if (fd < 0) throw control::ControlError("cannot create " + path.string() + ": " + std::strerror(errno));
-  int err = util::write_all(fd, text);
-  if (::close(fd) != 0 && err == 0) err = errno;
-  if (err != 0) {
-    ::unlink(path.c_str());
-    throw control::ControlError("cannot write " + path.string() + ": " + std::strerror(err));
-  }
+  util::PendingOutputFile file;
+  std::string why = file.open_new(path.string());
+  if (why.empty()) why = file.commit(text);
+  if (why == util::PendingOutputFile::kAlreadyExists)
+    throw control::ControlError(path.string() + " exists; files are never overwritten");
+  if (!why.empty()) throw control::ControlError("cannot write " + path.string() + ": " + why);
   return {{"file", path.string()}, {"sim_time_s", snap.sim_time_s}, {"triangles", snap.triangles.size()}};
 }
 

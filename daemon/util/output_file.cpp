@@ -70,8 +70,27 @@ std::string temporary_name(const std::string& dir, const std::string& name) {
 
 }  // namespace
 
+// Renames `from` to `to` unless `to` exists (atomically: no check-then-act
+// window). Returns 0 or the errno. Filesystems without RENAME_NOREPLACE get a
+// hard link, which is just as exclusive, and the unlink of the old name;
+// those without hard links either (FAT and exFAT sticks) a check, then a
+// plain rename: two writers publishing the same name in the same instant
+// there could replace one another's file.
+int rename_without_replacing(const std::string& from, const std::string& to) {
+  if (::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE) == 0) return 0;
+  if (errno != EINVAL && errno != ENOSYS) return errno;
+  if (::link(from.c_str(), to.c_str()) == 0) {
+    ::unlink(from.c_str());
+    return 0;
+  }
+  if (errno != EPERM && errno != EOPNOTSUPP) return errno;
+  if (::access(to.c_str(), F_OK) == 0) return EEXIST;
+  return ::rename(from.c_str(), to.c_str()) == 0 ? 0 : errno;
+}
+
 std::string PendingOutputFile::open(const std::string& path) {
   abandon();
+  replace_ = true;
   struct stat st {};
   const bool exists = ::stat(path.c_str(), &st) == 0;
   if (exists && S_ISDIR(st.st_mode)) return "is a directory";
@@ -90,6 +109,25 @@ std::string PendingOutputFile::open(const std::string& path) {
       std::free(resolved);
     }
   }
+  std::string why = open_temporary(target);
+  // The replacement keeps the replaced file's permissions (a report the user
+  // made private stays private; the new file had 0666 minus the umask).
+  if (why.empty() && exists && ::fchmod(fd_, st.st_mode & 07777) != 0) {
+    why = std::string("cannot give the temporary file the permissions of the one it replaces: ") + std::strerror(errno);
+    abandon();
+  }
+  return why;
+}
+
+std::string PendingOutputFile::open_new(const std::string& path) {
+  abandon();
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) == 0) return std::string(kAlreadyExists);
+  replace_ = false;
+  return open_temporary(path);
+}
+
+std::string PendingOutputFile::open_temporary(const std::string& target) {
   const std::filesystem::path p(target);
   const std::string dir = p.has_parent_path() ? p.parent_path().string() : std::string(".");
   // A name another writer (or anyone) took is skipped, never opened.
@@ -114,10 +152,15 @@ std::string PendingOutputFile::commit(std::string_view text) {
   if (err == 0 && !tmp_.empty() && ::fsync(fd_) != 0) err = errno;
   if (::close(fd_) != 0 && err == 0) err = errno;
   fd_ = -1;
-  if (err == 0 && !tmp_.empty() && std::rename(tmp_.c_str(), target_.c_str()) != 0) err = errno;
+  if (err == 0 && !tmp_.empty()) {
+    if (replace_)
+      err = std::rename(tmp_.c_str(), target_.c_str()) == 0 ? 0 : errno;
+    else
+      err = rename_without_replacing(tmp_, target_);
+  }
   if (err != 0) {
     abandon();  // after saving errno: unlink may change it
-    return std::strerror(err);
+    return !replace_ && err == EEXIST ? std::string(kAlreadyExists) : std::string(std::strerror(err));
   }
   if (!tmp_.empty()) {
     // The rename itself, durable (best effort: some filesystems refuse it).

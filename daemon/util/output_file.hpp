@@ -59,6 +59,13 @@ class PendingOutputFile {
   // said, e.g. "Permission denied", or "is a directory"), for the caller to
   // put after the path in its own message.
   std::string open(const std::string& path);
+  // As open(), for a file that must be new (the daemon's exports: files are
+  // never overwritten): kAlreadyExists when PATH exists, and commit() puts it
+  // in place only while PATH does not exist (rename_without_replacing), else
+  // returns kAlreadyExists and removes its temporary file. Always written to
+  // a temporary file first, so a crash mid-write leaves no part file at PATH.
+  std::string open_new(const std::string& path);
+  static constexpr std::string_view kAlreadyExists = "it already exists";
   // Writes all of `text`, syncs it and puts it in place; "" or the reason.
   // Closed afterwards either way.
   std::string commit(std::string_view text);
@@ -69,9 +76,16 @@ class PendingOutputFile {
   const std::string& temporary_path() const { return tmp_; }
 
  private:
+  std::string open_temporary(const std::string& target);
+
   std::string target_, tmp_;
   int fd_ = -1;
+  bool replace_ = true;
 };
+
+// rename(from, to) that fails with EEXIST instead of replacing `to`; 0 or the
+// errno. The session writer publishes new recordings with it.
+int rename_without_replacing(const std::string& from, const std::string& to);
 
 // Writes `text` to `path` as PendingOutputFile does. Returns "" on success,
 // else the reason, for the caller to put after the path in its own message.

@@ -146,6 +146,54 @@ TEST(OutputFile, APendingFileTouchesThePathOnlyAtCommit) {
             0u);
 }
 
+// A replaced file keeps its permissions: the temporary file was made 0666
+// minus the umask, so a report the user had made private became readable.
+TEST(OutputFile, AReplacedFileKeepsItsPermissions) {
+  TempDir dir;
+  const std::string out = dir / "report.json";
+  write_text(out, "earlier");
+  ASSERT_EQ(::chmod(out.c_str(), 0600), 0);
+  EXPECT_EQ(write_output_file(out, "later"), "");
+  EXPECT_EQ(slurp(out), "later");
+  struct stat st {};
+  ASSERT_EQ(::stat(out.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 07777, 0600u);
+  ASSERT_EQ(::chmod(out.c_str(), 0751), 0);
+  EXPECT_EQ(write_output_file(out, "again"), "");
+  ASSERT_EQ(::stat(out.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 07777, 0751u);
+}
+
+// open_new: the daemon's exports are never overwritten, and are written whole
+// under a temporary name first (the service used to write into the final
+// name, so a kill mid-write left a part file that looked complete).
+TEST(OutputFile, ANewFileIsNeverPutOverOneThatAppearedAndNoPartIsLeft) {
+  TempDir dir;
+  const std::string out = dir / "surface.x3d";
+  {
+    PendingOutputFile file;
+    ASSERT_EQ(file.open_new(out), "");
+    EXPECT_FALSE(std::filesystem::exists(out)) << "nothing under the name before the commit";
+    EXPECT_EQ(file.commit("<X3D/>"), "");
+  }
+  EXPECT_EQ(slurp(out), "<X3D/>");
+  EXPECT_EQ(PendingOutputFile().open_new(out), PendingOutputFile::kAlreadyExists);
+  // A dangling link is a name taken, not a way to write elsewhere.
+  ASSERT_EQ(::symlink((dir / "elsewhere.x3d").c_str(), (dir / "link.x3d").c_str()), 0);
+  EXPECT_EQ(PendingOutputFile().open_new(dir / "link.x3d"), PendingOutputFile::kAlreadyExists);
+  // A file made between the open and the commit stays as it is.
+  const std::string raced = dir / "raced.x3d";
+  {
+    PendingOutputFile file;
+    ASSERT_EQ(file.open_new(raced), "");
+    write_text(raced, "theirs");
+    EXPECT_EQ(file.commit("mine"), PendingOutputFile::kAlreadyExists);
+  }
+  EXPECT_EQ(slurp(raced), "theirs");
+  EXPECT_EQ(entries(dir.path()), (std::vector<std::string>{"link.x3d", "raced.x3d", "surface.x3d"}));
+  EXPECT_FALSE(std::filesystem::exists(dir / "elsewhere.x3d"));
+}
+
 // The "wrote PATH" line goes to standard error when PATH is where standard
 // output goes, so it never lands inside the output.
 TEST(OutputFile, TheSummaryAvoidsAnOutputThatIsStandardOutput) {
