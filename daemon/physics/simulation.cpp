@@ -41,13 +41,17 @@ void Simulation::book_mesh_change(double energy_before_J) {
 StepResult Simulation::step() {
   StepResult result;
   const double dt = scene().integrator.dt_s;
-  const double t_next = time_s_ + dt;
+  // The step count times dt, not a running sum: a sum drifts (0.1 summed
+  // eight times is 0.7999999999999999), so a profile edge at an exact step
+  // time would be crossed a step late. Refused steps do not count.
+  const double t_next = static_cast<double>(counters_.steps + 1) * dt;
 
   if (kinematic_version_ != body_.parameters_version()) {
     kinematic_nodes(body_, kinematic_);
     kinematic_version_ = body_.parameters_version();
     loaded_before_.reserve(body_.x_m.size());  // no allocation in the steps until the next mesh change
     list_driven_springs();
+    kinematic_v_before_.resize(kinematic_.size());  // a mesh change's allocation, not a step's
   }
   // The energy the step starts from, for the implicit rung's guard: taken
   // before the drivers set this step's velocities, as the cached value from
@@ -57,6 +61,9 @@ StepResult Simulation::step() {
   // A driver also gives its node the velocity of the track (kinematic nodes
   // keep their mass): that kinetic energy is its work too.
   const double driven_kinetic_before_J = prescribed_kinetic_energy_J();
+  // Kept so that a refused or rejected step leaves the drivers' velocities
+  // as they were ("on failure nothing changes").
+  for (std::size_t i = 0; i < kinematic_.size(); ++i) kinematic_v_before_[i] = body_.v_m_per_s[kinematic_[i]];
   set_kinematic_velocities(body_, kinematic_, t_next, dt);
   for (std::size_t i = 0; i < prescribed_.size(); ++i) prescribed_before_m_[i] = body_.x_m[prescribed_[i]];
   loads_.external_forces(body_, t_next, f_ext_N_);
@@ -78,7 +85,8 @@ StepResult Simulation::step() {
     result.ok = false;
     result.error = out.error;
     ++counters_.rejected_steps;
-    energy_known_ = false;  // the drivers' velocities were set for a step that did not happen
+    for (std::size_t i = 0; i < kinematic_.size(); ++i) body_.v_m_per_s[kinematic_[i]] = kinematic_v_before_[i];
+    energy_known_ = false;  // taken again from the restored state, to be safe
     return result;
   }
   if (limits_energy_) limit_energy(energy_before_J, driven_kinetic_before_J);

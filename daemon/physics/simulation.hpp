@@ -190,6 +190,7 @@ class Simulation {
   std::vector<NodeId> prescribed_;                      // the prescribed nodes of kinematic_
   std::vector<DrivenSpring> driven_springs_;            // springs with a prescribed end
   std::vector<Vec3> prescribed_before_m_;               // x of prescribed_[i] before the step
+  std::vector<Vec3> kinematic_v_before_;                // v of kinematic_[i] before the step, restored on failure
   std::uint64_t kinematic_version_ = 0;                 // body parameters_version the list is for
   SimCounters counters_;
   double time_s_ = 0.0;

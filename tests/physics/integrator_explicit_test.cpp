@@ -99,6 +99,18 @@ TEST(ExplicitIntegrator, RefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
   EXPECT_EQ(sim.body().x_m, x_before);
   EXPECT_EQ(sim.time_s(), 0.0);
   EXPECT_EQ(sim.counters().rejected_steps, 1);
+  // A driver's velocity is part of the state too: a refused step leaves the
+  // prescribed nodes at rest (not at the 0.2 m/s of the step that did not
+  // happen), and the body that never moved has no kinetic energy.
+  scene::Scene pushed = s;
+  scene::PrescribedSpec push{"push", testing::box({0.4, 0, 0}, {0.4, 0.1, 0.1}), {0, 0, -0.002}, {}};
+  push.profile.ramp_s = 0.0;
+  pushed.prescribed.push_back(push);
+  Simulation pushed_sim(pushed);
+  const auto v_before = pushed_sim.body().v_m_per_s;
+  ASSERT_FALSE(pushed_sim.step().ok);
+  EXPECT_EQ(pushed_sim.body().v_m_per_s, v_before);
+  EXPECT_EQ(pushed_sim.kinetic_energy_J(), 0.0);
   // The beam's dampers (Rayleigh beta = 0.01 s) set its sub-step: the message
   // says so and names the key; without them it does not.
   EXPECT_NE(r.error.find("spring dampers cut the stable sub-step"), std::string::npos) << r.error;

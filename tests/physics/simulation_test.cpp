@@ -187,6 +187,24 @@ TEST(Simulation, WorkOfAConstantLoadIsTheLoadTimesTheDisplacement) {
   }
 }
 
+// Time is the step count times dt, not a running sum (0.1 summed eight
+// times is 0.7999999999999999): a load released at 0.8 s acts in the first
+// seven 0.1 s steps only, and the clock reads 0.8 after eight.
+TEST(Simulation, AProfileEdgeAtAStepTimeIsCrossedAtThatStep) {
+  scene::Scene s = beam_scene(0.05);
+  s.integrator.kind = scene::IntegratorKind::kImplicit;
+  s.integrator.dt_s = 0.1;
+  s.loads[0].profile.release_s = 0.8;
+  Simulation sim(s);
+  for (int i = 0; i < 7; ++i) ASSERT_TRUE(sim.step().ok);
+  const double work_after_7_J = sim.counters().external_work_J;
+  EXPECT_GT(work_after_7_J, 0.0);
+  ASSERT_TRUE(sim.step().ok);
+  EXPECT_EQ(sim.time_s(), 0.8);
+  EXPECT_EQ(sim.body().time_s, 0.8);
+  EXPECT_EQ(sim.counters().external_work_J, work_after_7_J);  // the 8th step: released, no work
+}
+
 // Every mesh change books exactly the energy it made: a split or merge from
 // outside (split_diamond, merge_diamond) and the adaptation pass of a step
 // (against a twin whose pass is paused: same step, no pass).
