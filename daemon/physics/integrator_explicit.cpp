@@ -575,7 +575,10 @@ std::string too_many_substeps(double dt_s, double needed, double limit_s, const 
 }  // namespace
 
 int ExplicitIntegrator::verified_substeps(double dt_s, double end_displacement_ratio) const {
-  const double limit = kVerifiedSafetyPerSafety * spec_.substep_safety * stable_step_at(end_displacement_ratio).dt_s;
+  // Capped: with substep_safety above 16/19 the ratio alone would take
+  // sub-steps longer than the stable bound itself.
+  const double fraction = std::min(kVerifiedSafetyPerSafety * spec_.substep_safety, kVerifiedSafetyMax);
+  const double limit = fraction * stable_step_at(end_displacement_ratio).dt_s;
   const double needed = std::ceil(dt_s / limit);
   return needed <= spec_.max_substeps ? std::max(1, static_cast<int>(needed)) : spec_.max_substeps + 1;
 }

@@ -284,7 +284,7 @@ class ExplicitIntegrator final : public Integrator {
   // deformed_frequency2_bound_per_s2): the largest relative displacement r
   // of a spring's ends, measured on the last state, gives a bound on the
   // deformed stiffness; if substep_safety × kVerifiedSafetyPerSafety (0.95 by
-  // default) of the stable step under that bound needs fewer sub-steps, the
+  // default, and at most kVerifiedSafetyMax) of the stable step under that bound needs fewer sub-steps, the
   // step runs with them and r is measured again near its end (on the offset
   // layout at the last sub-step's forces, inside that force pass; on the
   // gathered streams on the state reached, in a pass of its own); the step
@@ -296,6 +296,7 @@ class ExplicitIntegrator final : public Integrator {
   // one; without shortening, r is measured every kRemeasureSteps steps to
   // see whether it would.
   static constexpr double kVerifiedSafetyPerSafety = 19.0 / 16.0;  // 0.8 -> 0.95
+  static constexpr double kVerifiedSafetyMax = 0.95;               // never nearer the stable bound than this
   static constexpr int kRemeasureSteps = 64;
   // r of the last state measured; steps taken with fewer sub-steps, and
   // steps run again. For tests and the benchmark.
