@@ -44,6 +44,15 @@ constexpr long long kMaxTotalCubes = kMaxTets / 6;
 // the free nodes stood still (1/inf = 0) and the report's kinetic energy was
 // NaN (written as null) after a run that said it succeeded.
 constexpr double kMinCubeScale = 1e-100, kMaxCubeScale = 1e100;
+// The float explicit rung keeps lengths, masses, 1/mass and stiffnesses in
+// float: E = 1e48 Pa with density 1e48 passed the double range above, 1/m
+// rounded to 0.0f and every free node froze (taken for kinematic) while the
+// steps said ok. Each must lie in this range from the starting cube to the
+// finest leaf (2^-max_depth), leaving ~1e8 of float's normal range
+// (1.2e-38 .. 3.4e38) for products such as k x u; lengths are squared, so
+// they keep to its square root.
+constexpr double kMinFloatScale = 1e-30, kMaxFloatScale = 1e30;
+constexpr double kMinFloatLength_m = 1e-15, kMaxFloatLength_m = 1e15;
 constexpr int kMaxDepthLimit = 30;
 constexpr double kMinDt_s = 1e-7;
 constexpr int kMaxSubsteps = 100'000;
@@ -378,6 +387,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
       fail("integrator.substep_safety", "must be in (0, 1] (got " + fmt_num(g.substep_safety) + ")");
     open_unit(g.cg_tolerance, "integrator.cg_tolerance");
     at_least(g.cg_max_iterations, 1, "integrator.cg_max_iterations");
+    if (g.kind == IntegratorKind::kExplicit && g.explicit_precision == ExplicitPrecision::kFloat) float_range();
 
     for (std::size_t i = 0; i < s_.probes.size(); ++i) {
       const ProbeSpec& p = s_.probes[i];
@@ -405,6 +415,39 @@ class Validator : private yaml_util::ValueChecks<Validator> {
   }
 
  private:
+  // explicit_precision float: the quantities the float rung holds, at the
+  // starting cube and at the finest leaf, within float's range (see
+  // kMinFloatScale). Runs after the material, object and adaptivity checks.
+  void float_range() const {
+    const ObjectSpec& o = s_.object;
+    const MaterialSpec& m = s_.material;
+    const double leaf = std::exp2(-static_cast<double>(std::max(s_.adaptivity.min_depth, s_.adaptivity.max_depth)));
+    const double mass_kg = m.density_kg_per_m3 * o.cube_size_m * o.cube_size_m * o.cube_size_m;
+    const double gravity =
+        std::sqrt(s_.gravity_m_per_s2[0] * s_.gravity_m_per_s2[0] + s_.gravity_m_per_s2[1] * s_.gravity_m_per_s2[1] +
+                  s_.gravity_m_per_s2[2] * s_.gravity_m_per_s2[2]);
+    const auto in_float = [&](double largest, double smallest, double lo, double hi, const std::string& what) {
+      if (largest <= hi && smallest >= lo) return;
+      fail("integrator.explicit_precision",
+           "float cannot hold " + what + ": from " + fmt_num(smallest) + " to " + fmt_num(largest) +
+               " (finest leaf to starting cube, adaptivity depth up to " +
+               std::to_string(std::max(s_.adaptivity.min_depth, s_.adaptivity.max_depth)) + "), outside [" +
+               fmt_num(lo) + ", " + fmt_num(hi) + "]; use explicit_precision double or other units");
+    };
+    in_float(o.cube_size_m, o.cube_size_m * leaf, kMinFloatLength_m, kMaxFloatLength_m,
+             "the spring lengths in m (object.cube_size_m)");
+    in_float(m.youngs_modulus_Pa * o.cube_size_m, m.youngs_modulus_Pa * o.cube_size_m * leaf, kMinFloatScale,
+             kMaxFloatScale, "the spring stiffnesses in N/m (material.youngs_modulus_Pa x object.cube_size_m)");
+    const double leaf_mass_kg = mass_kg * leaf * leaf * leaf;
+    in_float(mass_kg, leaf_mass_kg, kMinFloatScale, kMaxFloatScale,
+             "the node masses in kg (material.density_kg_per_m3 x object.cube_size_m^3)");
+    in_float(1.0 / leaf_mass_kg, 1.0 / mass_kg, kMinFloatScale, kMaxFloatScale,
+             "the inverse node masses in 1/kg (material.density_kg_per_m3 x object.cube_size_m^3)");
+    if (gravity > 0.0)
+      in_float(gravity * mass_kg, gravity * leaf_mass_kg, kMinFloatScale, kMaxFloatScale,
+               "the gravity forces in N (gravity_m_per_s2 x a node's mass)");
+  }
+
   [[noreturn]] void fail(const std::string& path, const std::string& reason) const {
     throw SceneError(s_.source, path, reason);
   }

@@ -313,6 +313,29 @@ TEST(SceneYamlErrors, MessageFormatIsSourceKeyPathReason) {
   }
 }
 
+// The float explicit rung holds 1/mass and stiffness in float: a material
+// within double's range but beyond float's is refused there (it froze every
+// free node, 1/m rounding to 0.0f, while the steps said ok), and accepted in
+// double or by the other integrators.
+TEST(SceneYamlErrors, FloatExplicitPrecisionRefusesQuantitiesBeyondFloat) {
+  const auto scene_with = [](const std::string& integrator, const std::string& modulus, const std::string& density) {
+    std::string yaml = base_with("kind: implicit", integrator);
+    yaml.replace(yaml.find("youngs_modulus_Pa: 5.0e4"), 24, "youngs_modulus_Pa: " + modulus);
+    yaml.replace(yaml.find("density_kg_per_m3: 100"), 22, "density_kg_per_m3: " + density);
+    return yaml;
+  };
+  const std::string in_float = "kind: explicit\n  explicit_precision: float";
+  const std::string in_double = "kind: explicit\n  explicit_precision: double";
+  const std::string what = expect_error(scene_with(in_float, "1e48", "1e48"), "integrator.explicit_precision", "float");
+  EXPECT_NE(what.find("N/m"), std::string::npos) << what;  // names the quantity out of range
+  EXPECT_NO_THROW(parse_scene(scene_with(in_double, "1e48", "1e48"), "test.yaml"));
+  EXPECT_NO_THROW(parse_scene(scene_with("kind: implicit", "1e48", "1e48"), "test.yaml"));
+  // The mass alone: 1/m would round to 0.0f.
+  const std::string mass = expect_error(scene_with(in_float, "5.0e4", "1e48"), "integrator.explicit_precision", "kg");
+  EXPECT_NE(mass.find("masses"), std::string::npos) << mass;
+  EXPECT_NO_THROW(parse_scene(scene_with(in_float, "5.0e4", "100"), "test.yaml"));  // an ordinary scene
+}
+
 TEST(SceneYamlErrors, UnknownTopLevelKey) {
   const std::string what = expect_error(kBase + "colour: red\n", "colour", "unknown key");
   EXPECT_NE(what.find("allowed keys: name, object, material"), std::string::npos) << what;
