@@ -291,6 +291,47 @@ TEST(HapticLoop, InvalidModelsAreDroppedAndCounted) {
   EXPECT_EQ(st.model_version, 0u);
 }
 
+// Found by the review: a patch with finite but 1e80 m coordinates was
+// accepted and put a NaN proxy into the tool samples. It is now rejected like
+// a NaN one: the loop goes stale and ramps its force out, and no sample
+// carries a non-finite number.
+TEST(HapticLoop, AModelWithHugeCoordinatesIsRejectedAndTheForceRampsOut) {
+  Rig rig;
+  rig.build();
+  // Pressed 2 mm in above the huge triangle's interior (where its arithmetic overflows).
+  const LocalModel patch = test::make_flat_patch();
+  rig.device.position_m = Vec3(0.01, 0.005, 0.002);
+  rig.publish(patch);
+  rig.tick();
+  rig.device.position_m = Vec3(0.01, 0.005, -0.002);
+  for (int i = 0; i < 700; ++i) {
+    rig.publish(patch);
+    rig.tick();
+  }
+  ASSERT_GT(rig.device.last_force_N.norm(), 0.5);
+  LocalModel huge;
+  huge.vertex_count = 3;
+  huge.triangle_count = 1;
+  huge.vertex_m[1] = Vec3(1e80, 0.0, 0.0);
+  huge.vertex_m[2] = Vec3(0.5e80, 1e80, 0.0);
+  huge.triangle[0] = {0, 1, 2};
+  rig.drain();
+  rig.publish(huge);
+  rig.tick();
+  EXPECT_EQ(rig.loop->stats().rejected_models, 1u);
+  for (int i = 0; i < 1000 && !rig.device.last_force_N.isZero(0.0); ++i) rig.tick();
+  EXPECT_TRUE(rig.device.last_force_N.isZero(0.0));
+  EXPECT_GE(rig.loop->stats().stale_model_trips, 1u);
+  ToolSample s;
+  int samples = 0;
+  while (rig.samples->try_pop(s)) {
+    ++samples;
+    EXPECT_TRUE(s.proxy_position_m.allFinite()) << s.proxy_position_m.transpose();
+    for (double w : s.contact_weight) EXPECT_TRUE(std::isfinite(w));
+  }
+  EXPECT_GT(samples, 0);
+}
+
 TEST(HapticLoop, FrameTransformMapsPositionsAndForcesInOnePlace) {
   Rig rig;
   rig.device_spec.offset_m = {0.0, 0.0, 0.1};
