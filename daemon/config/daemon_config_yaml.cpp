@@ -266,10 +266,18 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     non_negative(h.coupling_damping_N_s_per_m, "haptics.coupling_damping_N_s_per_m");
     non_negative(h.crossfade_s, "haptics.crossfade_s");
     // The safety clamp would silently cut a stiffer coupling: say so instead.
-    if (d.kind != DeviceSpec::Kind::kNone && h.coupling_stiffness_N_per_m > d.limits.max_stiffness_N_per_m)
+    // The limit is on what the hand feels: positions map in and forces map
+    // out times device.scale, so the device sees the coupling times scale².
+    const double scale2 = d.scale * d.scale;
+    if (d.kind != DeviceSpec::Kind::kNone && h.coupling_stiffness_N_per_m * scale2 > d.limits.max_stiffness_N_per_m) {
+      const std::string per_scale = scale2 == 1.0 ? ""
+                                                  : " / device.scale^2 (" + fmt_num(scale2) +
+                                                        ") = " + fmt_num(d.limits.max_stiffness_N_per_m / scale2) +
+                                                        ", as the hand feels the coupling times scale^2";
       fail("haptics.coupling_stiffness_N_per_m", "must be <= device.limits.max_stiffness_N_per_m (" +
-                                                     fmt_num(d.limits.max_stiffness_N_per_m) + ") (got " +
-                                                     fmt_num(h.coupling_stiffness_N_per_m) + ")");
+                                                     fmt_num(d.limits.max_stiffness_N_per_m) + ")" + per_scale +
+                                                     " (got " + fmt_num(h.coupling_stiffness_N_per_m) + ")");
+    }
 
     const RealtimeSpec& r = c_.realtime;
     priority(r.haptic_priority, "realtime.haptic_priority");

@@ -308,6 +308,11 @@ TEST(DaemonConfigYaml, PortsPrioritiesAndControlLimits) {
                "control.unix_socket_path", "too long for a Unix socket");
   expect_error(edit("coupling_stiffness_N_per_m: 400", "coupling_stiffness_N_per_m: 5000"),
                "haptics.coupling_stiffness_N_per_m", "must be <= device.limits.max_stiffness_N_per_m (1000)");
+  // The hand feels the coupling times device.scale^2 (found by the review of
+  // the haptics: scale 2 made 400 N/m feel like 1600 N/m under a 1000 N/m limit).
+  expect_error(kBase, "haptics.coupling_stiffness_N_per_m",
+               "must be <= device.limits.max_stiffness_N_per_m (1000) / device.scale^2 (4) = 250", {"device.scale=2"});
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.scale=2", "haptics.coupling_stiffness_N_per_m=250"}));
   expect_error(edit("status_interval_s: 1.0", "status_interval_s: 0"), "status_interval_s", "must be > 0");
   // "" and null both switch the Unix socket off.
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "\"\""), kSource).control.unix_socket_path, "");
