@@ -355,6 +355,14 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     at_most(l.ramp_in_s, kMaxRamp_s, p + ".ramp_in_s", "a ramp longer than that is not a ramp");
     at_most(l.ramp_out_s, kMaxRampOut_s, p + ".ramp_out_s",
             "a stop waits for it on the thread that feeds the watchdog");
+    // A stop also waits for the rate limit to bring the force to exactly 0:
+    // up to max_force_N / max_force_rate_N_per_s. At 0.5 N/s a 3 N hold took
+    // 6 s, past the watchdog, whatever ramp_out_s said.
+    if (l.max_force_N / l.max_force_rate_N_per_s > kMaxRampOut_s)
+      fail(p + ".max_force_rate_N_per_s",
+           "must be >= max_force_N / " + fmt_num(kMaxRampOut_s) + " s (" + fmt_num(l.max_force_N / kMaxRampOut_s) +
+               " N/s): a stop waits for the force to reach 0 on the thread that feeds the watchdog (got " +
+               fmt_num(l.max_force_rate_N_per_s) + ")");
     positive(l.stale_model_s, p + ".stale_model_s");
     positive(l.device_timeout_s, p + ".device_timeout_s");
     at_most(l.stale_model_s, kMaxTimeout_s, p + ".stale_model_s", "a hand would feel a frozen model that long");

@@ -267,8 +267,13 @@ TEST(DaemonConfigYaml, ValuesThatWouldHangOrOverflowAClockAreRefused) {
   expect_error(kBase, "device.udp.timeout_s", "must be <= 60", {"device.udp.timeout_s=61"});
   expect_error(kBase, "publish.mesh_rate_hz", "must be in [0.01, 1000] Hz (got 1e-300)",
                {"publish.mesh_rate_hz=1e-300"});
+  // A stop waits for the rate-limited force to reach 0 (found by the review
+  // of the haptics: 3 N at 0.5 N/s held a stop for 6 s, past the watchdog).
+  expect_error(edit("max_force_rate_N_per_s: 300", "max_force_rate_N_per_s: 0.5"),
+               "device.limits.max_force_rate_N_per_s", "must be >= max_force_N / 1 s (3 N/s)");
   // The bounds themselves are fine.
   EXPECT_NO_THROW(parse_daemon_config(edit("ramp_out_s: 0.05", "ramp_out_s: 1"), kSource));
+  EXPECT_NO_THROW(parse_daemon_config(edit("max_force_rate_N_per_s: 300", "max_force_rate_N_per_s: 3"), kSource));
   EXPECT_NO_THROW(parse_daemon_config(edit("rate_hz: 1000", "rate_hz: 1"), kSource));
   EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.udp.timeout_s=60"}));
 }
