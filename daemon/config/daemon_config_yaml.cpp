@@ -266,10 +266,18 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     non_negative(h.coupling_damping_N_s_per_m, "haptics.coupling_damping_N_s_per_m");
     non_negative(h.crossfade_s, "haptics.crossfade_s");
     // The safety clamp would silently cut a stiffer coupling: say so instead.
-    if (d.kind != DeviceSpec::Kind::kNone && h.coupling_stiffness_N_per_m > d.limits.max_stiffness_N_per_m)
+    // The limit is on what the hand feels: positions map in and forces map
+    // out times device.scale, so the device sees the coupling times scale².
+    const double scale2 = d.scale * d.scale;
+    if (d.kind != DeviceSpec::Kind::kNone && h.coupling_stiffness_N_per_m * scale2 > d.limits.max_stiffness_N_per_m) {
+      const std::string per_scale = scale2 == 1.0 ? ""
+                                                  : " / device.scale^2 (" + fmt_num(scale2) +
+                                                        ") = " + fmt_num(d.limits.max_stiffness_N_per_m / scale2) +
+                                                        ", as the hand feels the coupling times scale^2";
       fail("haptics.coupling_stiffness_N_per_m", "must be <= device.limits.max_stiffness_N_per_m (" +
-                                                     fmt_num(d.limits.max_stiffness_N_per_m) + ") (got " +
-                                                     fmt_num(h.coupling_stiffness_N_per_m) + ")");
+                                                     fmt_num(d.limits.max_stiffness_N_per_m) + ")" + per_scale +
+                                                     " (got " + fmt_num(h.coupling_stiffness_N_per_m) + ")");
+    }
 
     const RealtimeSpec& r = c_.realtime;
     priority(r.haptic_priority, "realtime.haptic_priority");
@@ -347,6 +355,14 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     at_most(l.ramp_in_s, kMaxRamp_s, p + ".ramp_in_s", "a ramp longer than that is not a ramp");
     at_most(l.ramp_out_s, kMaxRampOut_s, p + ".ramp_out_s",
             "a stop waits for it on the thread that feeds the watchdog");
+    // A stop also waits for the rate limit to bring the force to exactly 0:
+    // up to max_force_N / max_force_rate_N_per_s. At 0.5 N/s a 3 N hold took
+    // 6 s, past the watchdog, whatever ramp_out_s said.
+    if (l.max_force_N / l.max_force_rate_N_per_s > kMaxRampOut_s)
+      fail(p + ".max_force_rate_N_per_s",
+           "must be >= max_force_N / " + fmt_num(kMaxRampOut_s) + " s (" + fmt_num(l.max_force_N / kMaxRampOut_s) +
+               " N/s): a stop waits for the force to reach 0 on the thread that feeds the watchdog (got " +
+               fmt_num(l.max_force_rate_N_per_s) + ")");
     positive(l.stale_model_s, p + ".stale_model_s");
     positive(l.device_timeout_s, p + ".device_timeout_s");
     at_most(l.stale_model_s, kMaxTimeout_s, p + ".stale_model_s", "a hand would feel a frozen model that long");

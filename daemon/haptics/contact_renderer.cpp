@@ -22,6 +22,15 @@ constexpr double kDegenerateArea2_m4 = 1e-30;
 // behind the surface did not meet it; it is left free, as one that starts
 // inside.
 constexpr double kCaptureDepth_m = 0.005;
+// A patch vertex, its velocity and the contact reference are bounded, not just
+// finite: the closest-point and normal arithmetic takes products of squared
+// coordinates, and 1e80 m made them inf - inf = NaN, which became a NaN proxy
+// and NaN contact weights in the tool samples (and an unreadable recording).
+// 1000 km and 1000 km/s are far beyond any tissue model, and even extrapolated
+// over the longest allowed horizon (stale_model_s <= 60 s) the squares stay
+// far below the double range.
+constexpr double kMaxModelCoordinate_m = 1e6;
+constexpr double kMaxModelSpeed_m_per_s = 1e6;
 
 double angle_between(const Vec3& u, const Vec3& v) { return std::atan2(u.cross(v).norm(), u.dot(v)); }
 
@@ -31,12 +40,18 @@ bool local_model_is_valid(const LocalModel& m) noexcept {
   if (m.vertex_count < 0 || m.vertex_count > LocalModel::kMaxPatchVertices) return false;
   if (m.triangle_count < 0 || m.triangle_count > LocalModel::kMaxPatchTriangles) return false;
   if (!std::isfinite(m.sim_time_s)) return false;
+  // Every coefficient compared on its own: a comparison with NaN is false, so
+  // NaN and infinity are refused too (maxCoeff() may skip a NaN).
+  const auto bounded = [](const Vec3& v, double bound) { return (v.array().abs() <= bound).all(); };
   for (int i = 0; i < m.vertex_count; ++i)
-    if (!m.vertex_m[i].allFinite() || !m.vertex_velocity_m_per_s[i].allFinite()) return false;
+    if (!bounded(m.vertex_m[i], kMaxModelCoordinate_m) ||
+        !bounded(m.vertex_velocity_m_per_s[i], kMaxModelSpeed_m_per_s))
+      return false;
   for (int t = 0; t < m.triangle_count; ++t)
     for (std::int32_t v : m.triangle[t])
       if (v < 0 || v >= m.vertex_count) return false;
-  return m.position_ref_m.allFinite() && m.force_ref_N.allFinite() && m.contact_stiffness_N_per_m.allFinite();
+  return bounded(m.position_ref_m, kMaxModelCoordinate_m) && m.force_ref_N.allFinite() &&
+         m.contact_stiffness_N_per_m.allFinite();
 }
 
 ContactRenderer::ContactRenderer(const RenderParams& params) : params_(params) {}
@@ -84,7 +99,8 @@ void ContactRenderer::extrapolate(std::int64_t now_ns) noexcept {
     const auto& tri = model_->triangle[t];
     const Vec3 n = (vertex_m_[tri[1]] - vertex_m_[tri[0]]).cross(vertex_m_[tri[2]] - vertex_m_[tri[0]]);
     const double area2 = n.squaredNorm();
-    degenerate_[t] = !(area2 > kDegenerateArea2_m4);
+    // An overflowed (inf) or NaN area has no usable normal either.
+    degenerate_[t] = !(area2 > kDegenerateArea2_m4 && std::isfinite(area2));
     normal_[t] = degenerate_[t] ? Vec3::Zero() : Vec3(n / std::sqrt(area2));
   }
 }
@@ -134,7 +150,7 @@ ContactRenderer::Closest ContactRenderer::closest_facing(const Vec3& device_m, c
     if (filter && normal_[t].dot(reference_m - a) < -kBehindTolerance_m) continue;  // faces away from the contact
     const TriangleClosest c = closest_point_on_triangle(device_m, a, vertex_m_[tri[1]], vertex_m_[tri[2]]);
     const double d2 = (device_m - c.point_m).squaredNorm();
-    if (d2 >= best.distance2) continue;
+    if (!(d2 < best.distance2)) continue;  // a NaN distance (overflowed arithmetic) is never the closest
     best.triangle = t;
     best.distance2 = d2;
     best.point = c.point_m;
@@ -244,8 +260,8 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
   Vec3 n = Vec3::Zero();
   if (touching_) {
     c = closest_facing(device_m, reference_m, true);
-    if (c.triangle < 0) {
-      touching_ = false;
+    if (c.triangle < 0 || !c.point.allFinite()) {
+      touching_ = false;  // a non-finite point must not become the proxy
     } else {
       n = pseudo_normal(c);
       if (n.dot(device_m - c.point) > 0.0) touching_ = false;  // the device is back outside

@@ -72,7 +72,9 @@ struct RenderOutput {
 };
 
 // A model the renderer may bind: counts in range, triangle indices valid,
-// every number finite. The haptic loop drops models that fail this.
+// every number finite, vertex and reference coordinates within 1e6 m and
+// vertex speeds within 1e6 m/s (so the geometry's products cannot overflow). The haptic loop drops models that fail
+// this.
 bool local_model_is_valid(const LocalModel& model) noexcept;
 
 class ContactRenderer {

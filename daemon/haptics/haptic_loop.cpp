@@ -15,7 +15,12 @@ inline void bump(std::atomic<std::uint64_t>& counter) noexcept {
 RenderParams render_params_for(const config::DeviceSpec& device, const config::HapticSpec& haptic,
                                const HapticLoopOptions& options) {
   RenderParams p;
-  const double max_stiffness_N_per_m = std::max(0.0, device.limits.max_stiffness_N_per_m);
+  // The limit is on the device: positions map in and forces map out times
+  // scale, so a scene-frame stiffness k reaches the hand as scale² k. Clamped
+  // in the scene frame alone, scale 2 let the hand feel 1600 N/m of a 1000
+  // N/m limit.
+  const double scale = std::isfinite(device.scale) && device.scale > 0.0 ? device.scale : 1.0;
+  const double max_stiffness_N_per_m = std::max(0.0, device.limits.max_stiffness_N_per_m) / (scale * scale);
   // The coupling spring is the stiffest thing the user can feel: clamp it to the device.
   p.coupling_stiffness_N_per_m = std::clamp(haptic.coupling_stiffness_N_per_m, 0.0, max_stiffness_N_per_m);
   p.coupling_damping_N_s_per_m = std::max(0.0, haptic.coupling_damping_N_s_per_m);

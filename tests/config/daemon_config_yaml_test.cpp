@@ -267,8 +267,13 @@ TEST(DaemonConfigYaml, ValuesThatWouldHangOrOverflowAClockAreRefused) {
   expect_error(kBase, "device.udp.timeout_s", "must be <= 60", {"device.udp.timeout_s=61"});
   expect_error(kBase, "publish.mesh_rate_hz", "must be in [0.01, 1000] Hz (got 1e-300)",
                {"publish.mesh_rate_hz=1e-300"});
+  // A stop waits for the rate-limited force to reach 0 (found by the review
+  // of the haptics: 3 N at 0.5 N/s held a stop for 6 s, past the watchdog).
+  expect_error(edit("max_force_rate_N_per_s: 300", "max_force_rate_N_per_s: 0.5"),
+               "device.limits.max_force_rate_N_per_s", "must be >= max_force_N / 1 s (3 N/s)");
   // The bounds themselves are fine.
   EXPECT_NO_THROW(parse_daemon_config(edit("ramp_out_s: 0.05", "ramp_out_s: 1"), kSource));
+  EXPECT_NO_THROW(parse_daemon_config(edit("max_force_rate_N_per_s: 300", "max_force_rate_N_per_s: 3"), kSource));
   EXPECT_NO_THROW(parse_daemon_config(edit("rate_hz: 1000", "rate_hz: 1"), kSource));
   EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.udp.timeout_s=60"}));
 }
@@ -308,6 +313,11 @@ TEST(DaemonConfigYaml, PortsPrioritiesAndControlLimits) {
                "control.unix_socket_path", "too long for a Unix socket");
   expect_error(edit("coupling_stiffness_N_per_m: 400", "coupling_stiffness_N_per_m: 5000"),
                "haptics.coupling_stiffness_N_per_m", "must be <= device.limits.max_stiffness_N_per_m (1000)");
+  // The hand feels the coupling times device.scale^2 (found by the review of
+  // the haptics: scale 2 made 400 N/m feel like 1600 N/m under a 1000 N/m limit).
+  expect_error(kBase, "haptics.coupling_stiffness_N_per_m",
+               "must be <= device.limits.max_stiffness_N_per_m (1000) / device.scale^2 (4) = 250", {"device.scale=2"});
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.scale=2", "haptics.coupling_stiffness_N_per_m=250"}));
   expect_error(edit("status_interval_s: 1.0", "status_interval_s: 0"), "status_interval_s", "must be > 0");
   // "" and null both switch the Unix socket off.
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "\"\""), kSource).control.unix_socket_path, "");

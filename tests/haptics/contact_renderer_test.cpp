@@ -370,5 +370,52 @@ TEST(ContactRenderer, ClampsContactStiffnessAndRejectsInvalidModels) {
   EXPECT_FALSE(local_model_is_valid(bad));
 }
 
+// One triangle with finite but huge corners: a = 0, b = (L, 0, 0),
+// c = (L/2, L, 0). Its closest-point and normal arithmetic overflows for a
+// tool above its interior near a, e.g. at x = 10 mm, y = 5 mm.
+LocalModel huge_triangle(double l_m) {
+  LocalModel m;
+  m.version = 2;
+  m.vertex_count = 3;
+  m.triangle_count = 1;
+  m.vertex_m[1] = Vec3(l_m, 0.0, 0.0);
+  m.vertex_m[2] = Vec3(0.5 * l_m, l_m, 0.0);
+  m.triangle[0] = {0, 1, 2};
+  return m;
+}
+
+// Found by the review: a 1e80 m triangle passed the finite-only check, the
+// renderer's inf - inf made a NaN closest point that it kept as the contact
+// point, and the NaN proxy and weights went into the tool samples, where the
+// recording could no longer be read back.
+TEST(ContactRenderer, AModelWithHugeCoordinatesIsRejectedAndNeverMakesANaNProxy) {
+  EXPECT_FALSE(local_model_is_valid(huge_triangle(1e80)));
+  LocalModel velocity = test::make_flat_patch();
+  velocity.vertex_velocity_m_per_s[0].z() = 1e80;
+  EXPECT_FALSE(local_model_is_valid(velocity));
+  LocalModel reference = test::make_flat_patch();
+  reference.position_ref_m.x() = -1e80;
+  EXPECT_FALSE(local_model_is_valid(reference));
+  EXPECT_TRUE(local_model_is_valid(huge_triangle(1e3)));  // a large but sane patch is fine
+
+  // Should one reach the renderer anyway, it is dropped as no contact.
+  const LocalModel patch = test::make_flat_patch();
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  r.render(kMs, Vec3(0.01, 0.005, 0.001), Vec3::Zero());
+  ASSERT_TRUE(r.render(2 * kMs, Vec3(0.01, 0.005, -0.002), Vec3::Zero()).contact);
+  const LocalModel huge = huge_triangle(1e80);
+  ContactRenderer next(params());
+  next.set_model(&huge);
+  next.carry_state_from(r);
+  for (int k = 3; k < 6; ++k) {
+    const RenderOutput out = next.render(k * kMs, Vec3(0.01, 0.005, -0.002), Vec3::Zero());
+    EXPECT_TRUE(out.proxy_m.allFinite()) << out.proxy_m.transpose();
+    EXPECT_TRUE(out.force_on_device_N.allFinite()) << out.force_on_device_N.transpose();
+    for (double w : out.contact_weight) EXPECT_TRUE(std::isfinite(w));
+    EXPECT_FALSE(out.contact);
+  }
+}
+
 }  // namespace
 }  // namespace tissue::haptics

@@ -291,11 +291,55 @@ TEST(HapticLoop, InvalidModelsAreDroppedAndCounted) {
   EXPECT_EQ(st.model_version, 0u);
 }
 
+// Found by the review: a patch with finite but 1e80 m coordinates was
+// accepted and put a NaN proxy into the tool samples. It is now rejected like
+// a NaN one: the loop goes stale and ramps its force out, and no sample
+// carries a non-finite number.
+TEST(HapticLoop, AModelWithHugeCoordinatesIsRejectedAndTheForceRampsOut) {
+  Rig rig;
+  rig.build();
+  // Pressed 2 mm in above the huge triangle's interior (where its arithmetic overflows).
+  const LocalModel patch = test::make_flat_patch();
+  rig.device.position_m = Vec3(0.01, 0.005, 0.002);
+  rig.publish(patch);
+  rig.tick();
+  rig.device.position_m = Vec3(0.01, 0.005, -0.002);
+  for (int i = 0; i < 700; ++i) {
+    rig.publish(patch);
+    rig.tick();
+  }
+  ASSERT_GT(rig.device.last_force_N.norm(), 0.5);
+  LocalModel huge;
+  huge.vertex_count = 3;
+  huge.triangle_count = 1;
+  huge.vertex_m[1] = Vec3(1e80, 0.0, 0.0);
+  huge.vertex_m[2] = Vec3(0.5e80, 1e80, 0.0);
+  huge.triangle[0] = {0, 1, 2};
+  rig.drain();
+  rig.publish(huge);
+  rig.tick();
+  EXPECT_EQ(rig.loop->stats().rejected_models, 1u);
+  for (int i = 0; i < 1000 && !rig.device.last_force_N.isZero(0.0); ++i) rig.tick();
+  EXPECT_TRUE(rig.device.last_force_N.isZero(0.0));
+  EXPECT_GE(rig.loop->stats().stale_model_trips, 1u);
+  ToolSample s;
+  int samples = 0;
+  while (rig.samples->try_pop(s)) {
+    ++samples;
+    EXPECT_TRUE(s.proxy_position_m.allFinite()) << s.proxy_position_m.transpose();
+    for (double w : s.contact_weight) EXPECT_TRUE(std::isfinite(w));
+  }
+  EXPECT_GT(samples, 0);
+}
+
 TEST(HapticLoop, FrameTransformMapsPositionsAndForcesInOnePlace) {
   Rig rig;
   rig.device_spec.offset_m = {0.0, 0.0, 0.1};
   rig.device_spec.scale = 2.0;
   rig.device_spec.limits.stale_model_s = 10.0;
+  // The hand feels 400 N/m * 2^2 = 1600 N/m: allowed here, so the coupling
+  // is not clamped (the next test shows the clamp).
+  rig.device_spec.limits.max_stiffness_N_per_m = 1600.0;
   rig.build();
   // Device z = -0.051 -> scene z = 0.1 + 2 * (-0.051) = -0.002.
   const LocalModel m = test::make_flat_patch();
@@ -308,6 +352,32 @@ TEST(HapticLoop, FrameTransformMapsPositionsAndForcesInOnePlace) {
   EXPECT_NEAR(s.device_position_m.z(), -0.002, 1e-12);
   EXPECT_NEAR(s.force_on_device_N.z(), 0.8, 1e-9);      // scene frame: 400 N/m * 2 mm
   EXPECT_NEAR(rig.device.last_force_N.z(), 1.6, 1e-9);  // device frame: power-consistent, x scale
+}
+
+// Found by the review of the haptics: device.limits.max_stiffness_N_per_m was
+// applied in the scene frame, so with scale 2 the hand felt 1600 N/m (1.6 N
+// for 1 mm of device travel) against a 1000 N/m limit.
+TEST(HapticLoop, TheStiffnessLimitHoldsInTheDeviceFrameWhateverTheScale) {
+  Rig rig;
+  rig.device_spec.offset_m = {0.0, 0.0, 0.1};
+  rig.device_spec.scale = 2.0;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.device_spec.limits.max_stiffness_N_per_m = 1000.0;
+  rig.haptic_spec.coupling_stiffness_N_per_m = 400.0;  // 1600 N/m at the hand: over the limit
+  rig.build();
+  const LocalModel m = test::make_flat_patch();  // rigid: the hand feels the coupling
+  rig.device.position_m = Vec3(0, 0, -0.049);    // the surface is at device z = -0.05
+  rig.publish(m);
+  rig.tick();
+  rig.device.position_m = Vec3(0, 0, -0.051);  // 1 mm of device travel into it
+  for (int i = 0; i < 700; ++i) {
+    rig.publish(m);
+    rig.tick();
+  }
+  ASSERT_TRUE(rig.loop->stats().contact);
+  const double device_stiffness_N_per_m = rig.device.last_force_N.z() / 0.001;
+  EXPECT_GT(device_stiffness_N_per_m, 0.0);
+  EXPECT_LE(device_stiffness_N_per_m, 1000.0 + 1e-6);
 }
 
 // A simulated hand presses a stiff-but-linear model, holds, and lets go.
