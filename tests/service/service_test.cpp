@@ -546,7 +546,7 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_force_N"], 3.0);
   std::ofstream(config, std::ios::app) << "publish: {stats_rate_hz: 7}\n";
   std::string text = file_text(config);
-  text.replace(text.find("device:\n"), 8, "device:\n  limits: {max_force_N: 1.25}\n  scale: 2\n");
+  text.replace(text.find("device:\n"), 8, "device:\n  limits: {max_force_N: 1.25}\n  scale: 1.5\n");
   std::ofstream(config) << text;
   ASSERT_EQ(::raise(SIGHUP), 0);
   ASSERT_TRUE(written_within_5_s(run.err, ": a restart applies them; until then the old values stay in use"))
