@@ -38,6 +38,18 @@ bool Adaptivity::closure_touches_frozen(const Body& body, mesh::Key diamond) {
   return false;
 }
 
+bool Adaptivity::merge_touches_frozen(const Body& body, NodeId z) const {
+  // The merge replaces every tet around z, and their vertices are exactly z
+  // and the nodes joined to it by an edge: a node just outside the sphere
+  // can have tets reaching into it.
+  if (is_frozen(body.x_m[z])) return true;
+  bool touches = false;
+  body.mesh().for_each_edge_at_node(z, [&](EdgeId, const mesh::Edge& edge) {
+    touches = touches || is_frozen(body.x_m[edge.a == z ? edge.b : edge.a]);
+  });
+  return touches;
+}
+
 AdaptStats Adaptivity::adapt(Body& body) {
   AdaptStats stats;
   const mesh::KuhnMesh& mesh = body.mesh();
@@ -96,7 +108,7 @@ AdaptStats Adaptivity::adapt(Body& body) {
     if (node.edge_a == mesh::kInvalidId || node.depth < spec_.min_depth) return;
     if (body.step_index - body.changed_step[z] < spec_.min_age_steps) return;
     if (z >= node_max_.size() || node_max_[z] == kUnmeasured || node_max_[z] >= merge_below) return;
-    if (is_frozen(body.x_m[z])) return;
+    if (frozen_ && merge_touches_frozen(body, z)) return;
     const Vec3 mid = 0.5 * (body.x_m[node.edge_a] + body.x_m[node.edge_b]);
     const double length = (body.rest_m[node.edge_b] - body.rest_m[node.edge_a]).norm();
     if ((body.x_m[z] - mid).norm() >= tol * length) return;

@@ -42,7 +42,8 @@ class Adaptivity {
   // While a tool presses the object the mesh under it must not change (the
   // haptic loop renders against that patch): tets with a vertex, and nodes,
   // currently within radius_m of centre_m are neither refined nor merged. A
-  // split whose closure would bisect such a tet is skipped.
+  // split whose closure would bisect such a tet, and a merge that would
+  // replace one, are skipped.
   void freeze_sphere(const Vec3& centre_m, double radius_m) {
     frozen_ = true;
     frozen_centre_m_ = centre_m;
@@ -58,6 +59,8 @@ class Adaptivity {
   // True when a tet split(diamond) would bisect, closure included, has a
   // frozen vertex.
   bool closure_touches_frozen(const Body& body, mesh::Key diamond);
+  // True when a tet merging node z would replace has a frozen vertex.
+  bool merge_touches_frozen(const Body& body, NodeId z) const;
 
   bool is_frozen(const Vec3& x_m) const {
     return frozen_ && (x_m - frozen_centre_m_).squaredNorm() <= frozen_radius_m_ * frozen_radius_m_;

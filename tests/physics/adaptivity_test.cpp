@@ -403,6 +403,34 @@ TEST(Adaptivity, AFrozenNodeIsNotMerged) {
   EXPECT_FALSE(body.mesh().is_split(d));
 }
 
+// A merge changes every tet around its node, so a node outside the sphere
+// whose tets reach into it stays too: here the sphere holds one end of the
+// split cube diagonal (a cube corner) and not the node at its midpoint.
+TEST(Adaptivity, AMergeWhoseTetsReachTheFrozenSphereIsSkipped) {
+  scene::Scene s = relaxed_cube_scene();
+  Body body(s);
+  const mesh::Key d = split_a_cube_diagonal(body);
+  body.step_index = 1000;
+  const mesh::KuhnMesh& m = body.mesh();
+  const NodeId z = m.find_node(d);
+  const NodeId corner = m.node(z).edge_a;
+  const double radius_m = 0.1 * (body.x_m[z] - body.x_m[corner]).norm();
+  Adaptivity adaptivity(s.adaptivity);
+  adaptivity.freeze_sphere(body.x_m[corner], radius_m);
+  int tets_reaching_in = 0;  // the tets the merge would replace, with the corner as a vertex
+  m.for_each_tet([&](TetId, const mesh::Tet& tet) {
+    const bool has_z = std::find(tet.v.begin(), tet.v.end(), z) != tet.v.end();
+    const bool has_corner = std::find(tet.v.begin(), tet.v.end(), corner) != tet.v.end();
+    tets_reaching_in += has_z && has_corner;
+  });
+  ASSERT_GT(tets_reaching_in, 0);
+  EXPECT_EQ(adaptivity.adapt(body).merges, 0) << "the merge replaced tets with a vertex in the frozen sphere";
+  EXPECT_TRUE(m.is_split(d));
+  adaptivity.unfreeze();
+  EXPECT_EQ(adaptivity.adapt(body).merges, 1);
+  EXPECT_FALSE(m.is_split(d));
+}
+
 // The freeze covers what a split's closure changes, not only the wanted
 // tet: the face diamond between the cubes at x = 0 and x = H is strained
 // (its node-side tets lie around the displaced centre of cube 0, far from
