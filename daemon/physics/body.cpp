@@ -144,7 +144,8 @@ void Body::place_kinematic_node(NodeId n) {
     const scene::PrescribedSpec& p = scene_.prescribed[static_cast<std::size_t>(prescribed_index[n])];
     const Vec3 d(p.displacement_m[0], p.displacement_m[1], p.displacement_m[2]);
     const double dt_s = scene_.integrator.dt_s;
-    const double now = driven_fraction(p.profile, time_s), before = driven_fraction(p.profile, time_s - dt_s);
+    const double now_s = time_s();
+    const double now = driven_fraction(p.profile, now_s), before = driven_fraction(p.profile, now_s - dt_s);
     x_m[n] = rest_m[n] + now * d;
     // The velocity the drivers gave the region's nodes over the last step.
     v_m_per_s[n] = (now - before) / dt_s * d;

@@ -62,12 +62,13 @@ class Body {
   std::vector<double> stiffness_N_per_m;
   std::vector<double> damping_N_s_per_m;
 
-  // Step counter the adaptivity stamps new nodes with.
+  // Steps taken (the simulation sets it): the adaptivity stamps new nodes
+  // with it, and it gives the state's time.
   std::int64_t step_index = 0;
-  // Time of the state [s] (the simulation sets it with step_index): a fixed
-  // or prescribed node a split creates is put where the drivers hold the
-  // nodes of its region at this time, not at its edge's midpoint.
-  double time_s = 0.0;
+  // Time of the state [s], step_index × dt as the simulation counts it: a
+  // fixed or prescribed node a split creates is put where the drivers hold
+  // the nodes of its region at this time, not at its edge's midpoint.
+  double time_s() const { return static_cast<double>(step_index) * scene_.integrator.dt_s; }
 
   // Recomputes every mass, spring and damper from the mesh alone. The
   // incremental updates must agree with it (a test checks that).

@@ -106,7 +106,6 @@ StepResult Simulation::step() {
   time_s_ = t_next;
   ++counters_.steps;
   body_.step_index = counters_.steps;
-  body_.time_s = time_s_;
 
   if (adaptivity_ && !adaptation_paused_ && counters_.steps % scene().adaptivity.every_steps == 0) {
     // The pass measures the elastic energy before it changes anything; the

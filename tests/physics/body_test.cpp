@@ -433,7 +433,8 @@ TEST(Body, ANewKinematicNodeStartsOnItsTargetNotAtItsEdgesMidpoint) {
     else
       s.fixed.push_back({corner});
     Body body(s);
-    body.time_s = 0.05;  // half way up the ramp
+    body.step_index = static_cast<std::int64_t>(std::lround(0.05 / s.integrator.dt_s));  // half way up the ramp
+    ASSERT_DOUBLE_EQ(body.time_s(), 0.05);
     NodeId a = mesh::kInvalidId, b = mesh::kInvalidId;
     body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
       if (body.rest_m[n].isZero(0.0)) a = n;

@@ -201,7 +201,7 @@ TEST(Simulation, AProfileEdgeAtAStepTimeIsCrossedAtThatStep) {
   EXPECT_GT(work_after_7_J, 0.0);
   ASSERT_TRUE(sim.step().ok);
   EXPECT_EQ(sim.time_s(), 0.8);
-  EXPECT_EQ(sim.body().time_s, 0.8);
+  EXPECT_EQ(sim.body().time_s(), 0.8);
   EXPECT_EQ(sim.counters().external_work_J, work_after_7_J);  // the 8th step: released, no work
 }
 
