@@ -606,8 +606,7 @@ std::vector<std::string> with_override_replacing(const std::vector<std::string>&
     } catch (const yaml_util::PathError&) {
       return false;  // it was applied before, so it parses; keep it if not
     }
-    return path.compare(0, added_path.size(), added_path) == 0 &&
-           (path.size() == added_path.size() || path[added_path.size()] == '.' || path[added_path.size()] == '[');
+    return yaml_util::path_within(path, added_path);
   };
   std::vector<std::string> out;
   for (const std::string& o : overrides)

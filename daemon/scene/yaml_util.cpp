@@ -410,15 +410,14 @@ YAML::Node set_path(const YAML::Node& node, bool present, const Override& ov, st
 }
 
 // a and b name the same node, or one lies inside the other.
-bool paths_related(const std::string& a, const std::string& b) {
-  if (a.empty() || b.empty()) return false;
-  const std::string& s = a.size() <= b.size() ? a : b;
-  const std::string& l = a.size() <= b.size() ? b : a;
-  if (l.compare(0, s.size(), s) != 0) return false;
-  return l.size() == s.size() || l[s.size()] == '.' || l[s.size()] == '[';
-}
+bool paths_related(const std::string& a, const std::string& b) { return path_within(a, b) || path_within(b, a); }
 
 }  // namespace
+
+bool path_within(const std::string& inner, const std::string& outer) {
+  if (inner.empty() || outer.empty() || inner.compare(0, outer.size(), outer) != 0) return false;
+  return inner.size() == outer.size() || inner[outer.size()] == '.' || inner[outer.size()] == '[';
+}
 
 // Not YAML::LoadAll: in yaml-cpp 0.7 it never returns for some malformed
 // input (e.g. "!x\n,"), appending empty documents until memory runs out

@@ -207,6 +207,9 @@ struct Override {
 };
 
 Override parse_override(const std::string& text, const std::string& source, const DocumentKind& doc);
+// Canonical key path `inner` names the node `outer` names or one inside it
+// ("a.b[2].c" lies within "a.b"; "a.bc" does not). An empty path names nothing.
+bool path_within(const std::string& inner, const std::string& outer);
 // A copy of `root` with the override applied (missing maps on the path are
 // created; list indices must exist).
 YAML::Node apply_override(const YAML::Node& root, const Override& ov, const std::string& source);

@@ -652,6 +652,17 @@ TEST(YamlUtil, LoadWithOverridesAppliesThemInOrder) {
                     "empty document: a thing needs a section");
 }
 
+TEST(YamlUtil, PathWithinMeansTheSameNodeOrOneInsideIt) {
+  EXPECT_TRUE(path_within("a.b", "a.b"));
+  EXPECT_TRUE(path_within("a.b.c", "a.b"));
+  EXPECT_TRUE(path_within("a.b[2].c", "a.b"));
+  EXPECT_FALSE(path_within("a.b", "a.b.c"));  // one direction only: the outer one contains
+  EXPECT_FALSE(path_within("a.bc", "a.b"));   // a longer key, not a child
+  EXPECT_FALSE(path_within("l[01]", "l[0]"));
+  EXPECT_FALSE(path_within("", "a"));
+  EXPECT_FALSE(path_within("a", ""));
+}
+
 TEST(YamlUtil, BlameOverrideNamesTheLatestRelatedOverride) {
   const Document d = load_with_overrides("l: [0]", "f.yaml", {"a.b=1", "l[0]=2", "a.b=3", "x=4"}, kKind);
   const auto& ovs = d.overrides;
