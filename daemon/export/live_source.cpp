@@ -75,9 +75,10 @@ LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const Li
     kept_bytes += bytes;
     frames_.push_back(std::move(*f));
   }
+  receive_counts_ = subscriber.counts();
   if (frames_.empty() && !stopped()) {
     std::string why = "no surface_mesh on " + name_ + " within " + fmt_s(o.first_timeout_s) + " s";
-    const transport::MeshReceiveCounts& c = subscriber.counts();
+    const transport::MeshReceiveCounts& c = receive_counts_;
     if (c.rejected > 0)
       why += " (" + std::to_string(c.rejected) + " malformed messages dropped, the last: " + c.last_rejection + ")";
     else if (skipped_empty_ > 0)
@@ -99,6 +100,16 @@ std::string LiveFrameSource::dropped_note() const {
     note = std::to_string(dropped_backwards_) +
            " frames dropped: their time was before the last frame kept (the daemon reset or a replay looped)";
   if (!budget_note_.empty()) note += (note.empty() ? "" : "; ") + budget_note_;
+  // What the transport lost or refused while collecting: a gap in the
+  // frames a user sees must not go unexplained.
+  const transport::MeshReceiveCounts& c = receive_counts_;
+  const auto add = [&](const std::string& part) { note += (note.empty() ? "" : "; ") + part; };
+  if (c.missed > 0)
+    add(std::to_string(c.missed) +
+        " messages the publisher sent never arrived (gaps in its sequence numbers: lost on the network, or this "
+        "reader fell behind)");
+  if (c.overflow > 0) add(std::to_string(c.overflow) + " frames dropped: this reader fell behind");
+  if (c.rejected > 0) add(std::to_string(c.rejected) + " malformed messages dropped, the last: " + c.last_rejection);
   return note;
 }
 

@@ -63,7 +63,8 @@ class LiveFrameSource final : public FrameSource {
                              "foreign publisher?)";
   }
 
-  // Frames that went back in time, and a collection cut short by max_bytes.
+  // Frames that went back in time, a collection cut short by max_bytes, and
+  // what the subscriber counted lost, dropped or malformed meanwhile.
   std::string dropped_note() const override;
 
   std::size_t skipped_empty() const { return skipped_empty_; }
@@ -75,7 +76,8 @@ class LiveFrameSource final : public FrameSource {
   std::string name_;
   std::vector<SurfaceFrame> frames_;
   std::size_t skipped_empty_ = 0, dropped_backwards_ = 0;
-  std::string budget_note_;  // "" unless max_bytes stopped the collection
+  std::string budget_note_;                      // "" unless max_bytes stopped the collection
+  transport::MeshReceiveCounts receive_counts_;  // the subscriber's, when collection ended
 };
 
 }  // namespace tissue::x3d

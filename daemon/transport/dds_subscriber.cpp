@@ -121,6 +121,7 @@ std::optional<x3d::SurfaceFrame> DdsMeshSubscriber::next_frame(double timeout_s)
       if (!info.valid_data) continue;  // a disposal or unregistration, not a mesh
       ++counts_.received;
       const ::tissue::surface_mesh& m = impl_->sample;
+      count_sequence(counts_, m.sequence_number());
       try {
         x3d::SurfaceFrame f = frame_from_mesh_arrays(m.time_s(), m.vertex_m(), m.vertex_refinement_level(),
                                                      m.triangle_vertex(), m.triangle_strain_energy_density_J_per_m3());

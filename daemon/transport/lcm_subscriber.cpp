@@ -79,6 +79,7 @@ void LcmMeshSubscriber::on_message(const void* data, std::size_t size) {
     if (const std::string why = lcm_mesh_layout_error(data, size); !why.empty()) throw MeshRejected("size", why);
     tissue_lcm::tissue::surface_mesh m;
     if (m.decode(data, 0, static_cast<int>(size)) < 0) throw MeshRejected("decode", "LCM decode failed");
+    count_sequence(counts_, m.sequence_number);
     x3d::SurfaceFrame f = frame_from_mesh_arrays(
         m.time_s, m.vertex_m,
         {reinterpret_cast<const std::uint8_t*>(m.vertex_refinement_level.data()), m.vertex_refinement_level.size()},

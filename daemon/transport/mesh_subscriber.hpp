@@ -18,10 +18,17 @@ namespace tissue::transport {
 
 // Messages seen on the mesh channel/topic and what became of them.
 struct MeshReceiveCounts {
-  std::uint64_t received = 0;                               // messages delivered by the transport
-  std::uint64_t accepted = 0;                               // valid frames handed out or queued
-  std::uint64_t rejected = 0;                               // malformed: dropped (by reason below)
-  std::uint64_t overflow = 0;                               // valid, but dropped because the caller did not keep up
+  std::uint64_t received = 0;  // messages delivered by the transport
+  std::uint64_t accepted = 0;  // valid frames handed out or queued
+  std::uint64_t rejected = 0;  // malformed: dropped (by reason below)
+  std::uint64_t overflow = 0;  // valid, but dropped because the caller did not keep up
+  // Messages that never reached us: the gaps in the publisher's sequence
+  // numbers (proto/README.md), lost on the network or dropped by the
+  // transport's own bounded queue (LCM's, DDS's history) before the
+  // subscriber saw them. A sequence that does not increase starts a new run
+  // (the publisher restarted, or another one joined): no gap is counted.
+  std::uint64_t missed = 0;
+  std::optional<std::int64_t> last_sequence;                // of the newest decoded message
   std::map<std::string, std::uint64_t> rejected_by_reason;  // reason category -> count
   std::string last_rejection;                               // full message of the newest rejection
 };
@@ -60,6 +67,15 @@ x3d::SurfaceFrame frame_from_mesh_arrays(double time_s, std::span<const float> v
                                          std::span<const std::uint8_t> vertex_level,
                                          std::span<const std::int32_t> triangle_vertex,
                                          std::span<const float> triangle_strain);
+
+// Counts the gap before a decoded message's sequence number (shared
+// bookkeeping of both subscribers). Unsigned arithmetic: any two int64
+// values from the wire give a defined count.
+inline void count_sequence(MeshReceiveCounts& c, std::int64_t sequence) {
+  if (c.last_sequence && sequence > *c.last_sequence)
+    c.missed += static_cast<std::uint64_t>(sequence) - static_cast<std::uint64_t>(*c.last_sequence) - 1;
+  c.last_sequence = sequence;
+}
 
 // Counts a rejection (shared bookkeeping of both subscribers).
 inline void count_rejection(MeshReceiveCounts& c, const MeshRejected& e) {

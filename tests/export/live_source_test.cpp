@@ -73,6 +73,25 @@ TEST(LiveFrameSource, WindowCollectsInTimeOrderDroppingFramesThatGoBack) {
   EXPECT_EQ(frames_in_window(src, 1.2, 2.0), (std::vector<std::size_t>{1, 2}));
 }
 
+// What the transport lost, dropped or refused while collecting is said
+// beside the frames, so a gap in an animation is explained.
+TEST(LiveFrameSource, TheNoteSaysWhatTheSubscriberLostDroppedOrRefused) {
+  ScriptedSubscriber sub({testing::box_frame(1.0, {0, 0, 0}, {1, 1, 1}), testing::tetra_frame(2.0, 1.0)});
+  sub.counts_.missed = 3;
+  sub.counts_.overflow = 2;
+  sub.counts_.rejected = 1;
+  sub.counts_.last_rejection = "triangle 1 uses vertex 9 of 4";
+  LiveCollectOptions o;
+  o.window_s = 10.0;
+  o.max_frames = 2;  // ends the window as soon as both are in
+  LiveFrameSource src(sub, o);
+  ASSERT_EQ(src.frame_count(), 2u);
+  EXPECT_EQ(src.dropped_note(),
+            "3 messages the publisher sent never arrived (gaps in its sequence numbers: lost on the network, or this "
+            "reader fell behind); 2 frames dropped: this reader fell behind; 1 malformed messages dropped, the last: "
+            "triangle 1 uses vertex 9 of 4");
+}
+
 TEST(LiveFrameSource, StrainIsReportedOnlyWhenEveryFrameHasIt) {
   SurfaceFrame a = testing::box_frame(1.0, {0, 0, 0}, {1, 1, 1});
   a.vertex_strain_energy_Pa.assign(a.vertices_m.size(), 1.0f);

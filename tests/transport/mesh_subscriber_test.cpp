@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -88,8 +89,27 @@ TEST(MeshDecode, MissingOrNonFiniteStrainLeavesOnlyTheStrainOut) {
   EXPECT_TRUE(a.frame().vertex_level.empty());
 }
 
+// Gaps in the publisher's sequence numbers are the messages that never
+// arrived; a sequence that does not increase starts a new run.
+TEST(MeshReceiveCounts, SequenceGapsCountTheMessagesThatNeverArrived) {
+  MeshReceiveCounts c;
+  for (const std::int64_t s : {5, 6, 9, 10}) count_sequence(c, s);  // 7 and 8 lost
+  EXPECT_EQ(c.missed, 2u);
+  count_sequence(c, 1);  // the publisher restarted
+  count_sequence(c, 2);
+  count_sequence(c, 2);  // a duplicate
+  EXPECT_EQ(c.missed, 2u);
+  count_sequence(c, 4);
+  EXPECT_EQ(c.missed, 3u);
+  // Hostile extremes give a defined count (unsigned arithmetic), never UB.
+  MeshReceiveCounts e;
+  count_sequence(e, std::numeric_limits<std::int64_t>::min());
+  count_sequence(e, std::numeric_limits<std::int64_t>::max());
+  EXPECT_EQ(e.missed, std::numeric_limits<std::uint64_t>::max() - 1);
+}
+
 // An encoded surface_mesh from the daemon's own encoder.
-std::vector<std::uint8_t> encoded_mesh(int quads, double time_s = 1.25) {
+std::vector<std::uint8_t> encoded_mesh(int quads, double time_s = 1.25, std::int64_t sequence = 1) {
   service::MeshSnapshot s;
   s.sequence = 1;
   s.sim_time_s = time_s;
@@ -103,7 +123,7 @@ std::vector<std::uint8_t> encoded_mesh(int quads, double time_s = 1.25) {
     s.triangles.push_back({2 * i, 2 * i + 2, 2 * i + 3});
     s.triangles.push_back({2 * i, 2 * i + 3, 2 * i + 1});
   }
-  return testing::lcm_encoded(s);
+  return testing::lcm_encoded(s, sequence);
 }
 
 using testing::put_be32;
@@ -189,6 +209,24 @@ TEST(LcmMeshSubscriber, KeepsTheNewestFramesWhenTheReaderFallsBehind) {
   while (const auto f = sub.next_frame(0.0)) times.push_back(f->time_s);
   ASSERT_EQ(times.size(), LcmMeshSubscriber::kMaxPending);
   for (std::size_t k = 0; k < times.size(); ++k) EXPECT_EQ(times[k], static_cast<double>(k + 5)) << k;
+}
+
+// The LCM subscriber counts the gaps of every decoded message, the ones
+// whose content it then refuses included (they did arrive).
+TEST(LcmMeshSubscriber, CountsTheMessagesThatNeverArrived) {
+  LcmMeshSubscriber sub("memq://");
+  for (const std::int64_t s : {1, 2, 6, 7}) {
+    const std::vector<std::uint8_t> m = encoded_mesh(2, static_cast<double>(s), s);
+    sub.on_message(m.data(), m.size());
+  }
+  EXPECT_EQ(sub.counts().missed, 3u);
+  std::vector<std::uint8_t> bad = encoded_mesh(2, 8.0, 8);
+  put_be32(bad, 8 + 8 + 8 + 8 + 4 * 18 + 6 + 8, 99);  // the first triangle index: past the 6 vertices
+  sub.on_message(bad.data(), bad.size());
+  const std::vector<std::uint8_t> next = encoded_mesh(2, 9.0, 9);
+  sub.on_message(next.data(), next.size());
+  EXPECT_EQ(sub.counts().rejected, 1u);
+  EXPECT_EQ(sub.counts().missed, 3u) << "a refused message arrived: it is not missed";
 }
 
 TEST(LcmMeshSubscriber, ABadUrlIsAnErrorNamingIt) {

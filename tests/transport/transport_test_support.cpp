@@ -30,9 +30,9 @@ service::MeshSnapshot bent_strip(int quads, float strain_base) {
   return s;
 }
 
-std::vector<std::uint8_t> lcm_encoded(const service::MeshSnapshot& s) {
+std::vector<std::uint8_t> lcm_encoded(const service::MeshSnapshot& s, std::int64_t sequence) {
   tissue_lcm::tissue::surface_mesh m;
-  to_message(s, 1, &m);
+  to_message(s, sequence, &m);
   std::vector<std::uint8_t> bytes(static_cast<std::size_t>(m.getEncodedSize()));
   EXPECT_EQ(m.encode(bytes.data(), 0, static_cast<int>(bytes.size())), static_cast<int>(bytes.size()));
   return bytes;

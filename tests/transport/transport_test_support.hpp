@@ -17,8 +17,8 @@ namespace tissue::transport::testing {
 // dropped value shows.
 service::MeshSnapshot bent_strip(int quads, float strain_base = 0.5f);
 
-// `s` as the daemon's LCM encoder writes it (sequence number 1).
-std::vector<std::uint8_t> lcm_encoded(const service::MeshSnapshot& s);
+// `s` as the daemon's LCM encoder writes it.
+std::vector<std::uint8_t> lcm_encoded(const service::MeshSnapshot& s, std::int64_t sequence = 1);
 
 // Expects `f` (a message decoded as a subscriber does) to carry exactly the
 // snapshot's time, vertices, triangles, levels and strain.
