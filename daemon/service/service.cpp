@@ -11,6 +11,7 @@
 #include <ctime>
 #include <exception>
 #include <filesystem>
+#include <optional>
 #include <stdexcept>
 
 #include "config/daemon_config_yaml.hpp"
@@ -178,14 +179,12 @@ void Service::start_threads() {
   sim_ = std::make_unique<SimThread>(std::make_unique<SimRunner>(scene_), samples_.get(), models_.get(),
                                      sim_options(config_));
   sim_->start();
-  if (scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone)
-    haptics_ = HapticSide::start(config_, *samples_, *models_, options_.out);
+  if (scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone) start_haptic_side();
 }
 
 void Service::stop_threads() {
   // Forces first: the haptic side ramps to zero before anything else stops.
-  if (haptics_) haptics_->stop();
-  haptics_.reset();
+  stop_haptic_side();
   if (sim_) sim_->stop();
   retired_recorders_.clear();  // the sim thread has joined: nothing holds them
   stop_recording();            // after the producers: everything they pushed is written
@@ -217,8 +216,8 @@ std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name
 }
 
 void Service::install_recorder(std::unique_ptr<record::Recorder> recorder) {
-  recorder_ = std::move(recorder);
-  if (sim_ && sim_->set_recorder(recorder_.get())) retired_recorders_.clear();
+  // Straight from the old file (if any) to the new one: no row in neither.
+  hand_over_recorder(sim_.get(), recorder_, std::move(recorder), retired_recorders_);
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), recording_started_text());
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
   std::fflush(options_.out);
@@ -236,6 +235,11 @@ std::string Service::recording_started_text() const {
   if (!scene_.overrides.empty()) text += " with " + joined(scene_.overrides);
   if (const std::vector<std::string> config_sets = config_overrides(); !config_sets.empty())
     text += "; daemon config " + options_.config_path + " with " + joined(config_sets);
+  // config_text is the file as last (re)loaded; what in it a reload could
+  // not apply still runs with the old values (the motor scale, say).
+  if (!waiting_for_restart_.empty())
+    text += "; " + joined(waiting_for_restart_) +
+            " in config_text are not in use until a restart (the values before the reload run)";
   return text;
 }
 
@@ -246,9 +250,7 @@ void Service::start_automatic_recording() {
     start_recording(
         util::free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5", std::time(nullptr)));
     // The oldest automatic files go once they hold more than keep_gb, this
-    // one counted; said on stdout and in the new file's events. (Rows that
-    // arrive between the old file's close and this one's start, a few ms,
-    // are in neither.)
+    // one counted; said on stdout and in the new file's events.
     if (config_.record.keep_gb > 0.0)
       for (const std::string& gone : record::remove_oldest_automatic_recordings(
                config_.state_dir, static_cast<std::uintmax_t>(config_.record.keep_gb * 1e9), recorder_->path())) {
@@ -258,7 +260,10 @@ void Service::start_automatic_recording() {
         record_event(static_cast<int>(record::EventKind::kInfo), what);
       }
   } catch (const std::exception& e) {
-    std::fprintf(options_.err, "tissued: automatic recording: %s; serving without it, trying again in %s s\n", e.what(),
+    // A rotation whose new file cannot be made keeps the old one going.
+    const bool going_on = recorder_ && recorder_->state() == record::RecorderState::kRecording;
+    std::fprintf(options_.err, "tissued: automatic recording: %s; %s, trying again in %s s\n", e.what(),
+                 going_on ? ("the recording goes on in " + recorder_->path()).c_str() : "serving without it",
                  yaml_util::fmt_num(config_.record.rotate_s).c_str());
     std::fflush(options_.err);
   }
@@ -271,20 +276,13 @@ void Service::rotate_automatic_recording() {
   record_event(static_cast<int>(record::EventKind::kInfo), "record.rotate_s (" +
                                                                yaml_util::fmt_num(config_.record.rotate_s) +
                                                                " s) reached: the recording goes on in a new file");
-  stop_recording();
-  start_automatic_recording();
+  start_automatic_recording();  // the new file takes over from this one
 }
 
 void Service::stop_recording() {
   if (!recorder_) return;
-  const bool released = !sim_ || sim_->set_recorder(nullptr);
-  recorder_->stop();  // closes the file; later pushes from a stalled sim thread are refused
-  if (released) {
-    recorder_.reset();
-    retired_recorders_.clear();
-  } else {
-    retired_recorders_.push_back(std::move(recorder_));
-  }
+  // Closes the file; later pushes from a stalled sim thread are refused.
+  hand_over_recorder(sim_.get(), recorder_, nullptr, retired_recorders_);
 }
 
 void Service::record_event(int kind, const std::string& text) {
@@ -306,16 +304,12 @@ std::string Service::apply_scene(scene::Scene scene, bool restart_haptics) {
   scene_ = std::move(scene);
   sim_->replace_runner(std::move(runner));
   const bool want_haptics = scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone;
-  if (restart_haptics && haptics_) {  // ramps the force out first
-    haptics_->stop();
-    haptics_.reset();
-  }
-  if (had_tool && !want_haptics && haptics_) {
-    haptics_->stop();
-    haptics_.reset();
+  if (restart_haptics) stop_haptic_side();
+  if (had_tool && !want_haptics) {
+    stop_haptic_side();
   } else if (want_haptics && !haptics_) {
     try {
-      haptics_ = HapticSide::start(config_, *samples_, *models_, options_.out);
+      start_haptic_side();
     } catch (const std::exception& e) {
       // Said, not thrown: the sim thread already runs the new scene, and a
       // caller told "failed" would keep the old scene's path and overrides.
@@ -393,6 +387,20 @@ void Service::reload() {
     // itself, sockets, publishing, state_dir and threads need a restart:
     // said below, never silently kept. Nothing changes unless the new scene
     // is running: a failed reload keeps it all.
+    {
+      // The file's haptics and limits run with the device settings in use,
+      // which only a restart changes (a scale the file changes too is not
+      // the one the hand feels the coupling through until then).
+      config::DaemonConfig effective = config_;
+      effective.haptics = config.haptics;
+      effective.device.limits = config.device.limits;
+      try {
+        config::validate_daemon_config(effective);
+      } catch (const config::ConfigError& e) {
+        throw std::runtime_error(std::string(e.what()) + " (with device.scale " +
+                                 yaml_util::fmt_num(config_.device.scale) + ", in use until a restart)");
+      }
+    }
     const config::HapticSpec old_haptics = config_.haptics;
     const config::ForceLimits old_limits = config_.device.limits;
     const bool haptics_changed = !(config.haptics == old_haptics) || !(config.device.limits == old_limits);
@@ -418,7 +426,10 @@ void Service::reload() {
       config_.max_scene_tets = old_max_scene_tets;
       throw;
     }
-    config_.status_interval_s = config.status_interval_s;
+    if (config.status_interval_s != config_.status_interval_s) {
+      config_.status_interval_s = config.status_interval_s;
+      arm_status_timer();  // now, not after the old interval (up to an hour) has run out
+    }
     // Recordings from now on keep the file as read now (a restart-only change
     // in it is said in a warning event below, and waits for the restart).
     config_.source_text = config.source_text;
@@ -426,12 +437,13 @@ void Service::reload() {
     base_scene_overrides_ = scene_overrides();
     scene_sets_.clear();
     std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
-                 haptics_changed ? " (haptic settings changed: the haptic thread restarted)" : "");
+                 haptics_changed && haptics_ ? " (haptic settings changed: the haptic thread restarted)" : "");
     record_event(static_cast<int>(record::EventKind::kSceneLoaded),
                  "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
                      (applied.empty() ? "" : "; changed: " + applied));
     (void)with_device_warning({}, device_problem);  // said on stderr and recorded; a signal has no reply
     const std::vector<std::string> kept = restart_only_changes(config_, config);
+    waiting_for_restart_ = kept;
     if (!kept.empty()) {
       std::string list;
       for (const std::string& k : kept) list += (list.empty() ? "" : ", ") + k;
@@ -515,7 +527,10 @@ void Service::start_publishing() {
   std::fprintf(options_.out, "tissued: mesh %g Hz, haptic state %g Hz, stats %g Hz\n", pub.mesh_rate_hz,
                pub.haptic_rate_hz, pub.stats_rate_hz);
   arm_publish_timer(mesh_timer_, pub.mesh_rate_hz, &Service::publish_mesh);
-  if (haptics_) arm_publish_timer(haptic_timer_, pub.haptic_rate_hz, &Service::publish_haptic);
+  // Armed whether or not a haptic side runs now: a later load_scene, set or
+  // reset may start one (and stop it again); publish_haptic skips the ticks
+  // without one rather than publish a stopped loop's last state.
+  arm_publish_timer(haptic_timer_, pub.haptic_rate_hz, &Service::publish_haptic);
   arm_publish_timer(stats_timer_, pub.stats_rate_hz, &Service::publish_stats);
 }
 
@@ -536,6 +551,7 @@ void Service::publish_mesh() {
   if (dds_) dds_->publish_mesh(s);
 }
 void Service::publish_haptic() {
+  if (!haptics_) return;
   const SimStatus s = sim_->status();
   if (lcm_) lcm_->publish_haptic(s);
   if (dds_) dds_->publish_haptic(s);
@@ -556,24 +572,20 @@ void Service::note_failing_steps() {
 
 void Service::note_safety_trips() {
   if (!haptics_) return;
-  const haptics::HapticStats h = haptics_->stats();
-  if (haptics_.get() != trips_side_ || h.safety_trips < trips_seen_) {
-    trips_side_ = haptics_.get();
-    trips_seen_ = stale_trips_seen_ = lost_trips_seen_ = 0;
-  }
-  if (h.safety_trips > trips_seen_) {
-    const std::uint64_t stale = h.stale_model_trips - stale_trips_seen_, lost = h.device_lost_trips - lost_trips_seen_;
-    const std::uint64_t all = h.safety_trips - trips_seen_;
-    std::string why;
-    if (stale > 0) why += std::to_string(stale) + " stale model";
-    if (lost > 0) why += (why.empty() ? "" : ", ") + std::to_string(lost) + " device lost";
-    if (all > stale + lost) why += (why.empty() ? "" : ", ") + std::to_string(all - stale - lost) + " other";
-    record_event(static_cast<int>(record::EventKind::kWarning),
-                 "haptic safety tripped (" + why + "): the force ramped to zero, and back in once clear");
-  }
-  trips_seen_ = h.safety_trips;
-  stale_trips_seen_ = h.stale_model_trips;
-  lost_trips_seen_ = h.device_lost_trips;
+  if (const std::optional<std::string> text = safety_trips_.update(haptics_->stats(), haptic_side_number_))
+    record_event(static_cast<int>(record::EventKind::kWarning), *text);
+}
+
+void Service::start_haptic_side() {
+  haptics_ = HapticSide::start(config_, *samples_, *models_, options_.out);
+  ++haptic_side_number_;
+}
+
+void Service::stop_haptic_side() {
+  if (!haptics_) return;
+  note_safety_trips();  // the trips since the last status tick, before the counts go
+  haptics_->stop();     // ramps the force out first
+  haptics_.reset();
 }
 
 void Service::arm_status_timer() {
@@ -703,17 +715,19 @@ nlohmann::json Service::status() {
   if (recorder_) {
     const record::RecorderStats r = recorder_->stats();
     const record::RecorderState state = recorder_->state();
-    j["recording"] = {{"file", recorder_->path()},
-                      {"state", state == record::RecorderState::kRecording ? "recording"
-                                : state == record::RecorderState::kFailed  ? "failed"
-                                                                           : "stopped"},
-                      {"error", recorder_->error()},
-                      {"haptic_rows", r.haptic_rows_written},
-                      {"sim_rows", r.sim_rows_written},
-                      {"mesh_frames", r.mesh_frames_written},
-                      {"drops", r.haptic_drops + r.sim_drops + r.mesh_frame_drops + r.event_drops},
-                      {"bytes", r.bytes_written},
-                      {"automatic", automatic_recording_}};
+    j["recording"] = {
+        {"file", recorder_->path()},
+        {"state", state == record::RecorderState::kRecording ? "recording"
+                  : state == record::RecorderState::kFailed  ? "failed"
+                                                             : "stopped"},
+        {"error", recorder_->error()},
+        {"haptic_rows", r.haptic_rows_written},
+        {"sim_rows", r.sim_rows_written},
+        {"mesh_frames", r.mesh_frames_written},
+        // Refused frames (each with a warning event) are not in the file either.
+        {"drops", r.haptic_drops + r.sim_drops + r.mesh_frame_drops + r.mesh_frames_invalid + r.event_drops},
+        {"bytes", r.bytes_written},
+        {"automatic", automatic_recording_}};
   } else {
     j["recording"] = nullptr;
   }
@@ -820,9 +834,8 @@ nlohmann::json Service::record_start(const std::string& name) {
   if (recorder_ && recorder_->state() == record::RecorderState::kRecording && automatic_recording_)
     record_event(static_cast<int>(record::EventKind::kInfo),
                  "record_start " + next->path() + " (control): the automatic recording ends here");
-  stop_recording();              // a failed earlier recording: close it out
-  automatic_recording_ = false;  // the client's from now on
-  install_recorder(std::move(next));
+  automatic_recording_ = false;       // the client's from now on
+  install_recorder(std::move(next));  // closes the automatic or a failed earlier one
   return {{"file", recorder_->path()}};
 }
 

@@ -24,6 +24,7 @@
 #include "control/control_protocol.hpp"
 #include "scene/scene.hpp"
 #include "service/failing_steps.hpp"
+#include "service/safety_trips.hpp"
 #include "service/sim_thread.hpp"
 
 namespace tissue::record {
@@ -129,6 +130,10 @@ class Service : public control::ControlHandler {
   // scene's first step fails.
   void require_steppable(const scene::Scene& scene) const;
   void arm_status_timer();
+  // The haptic side comes and goes only through these: each start numbers
+  // the side, each stop first records the trips since the last status tick.
+  void start_haptic_side();
+  void stop_haptic_side();
   void arm_watchdog_timer();
   void print_status();
   void start_recording(const std::string& name);  // throws record::RecordError
@@ -158,6 +163,9 @@ class Service : public control::ControlHandler {
   // `set` over the socket since: one per key (a new value replaces the old),
   // dropped when another scene is loaded or on SIGHUP (files as written).
   std::vector<std::string> scene_sets_;
+  // The settings the last reload found changed and could not apply
+  // (restart_only_changes): recordings' first event names them.
+  std::vector<std::string> waiting_for_restart_;
 
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
@@ -168,10 +176,10 @@ class Service : public control::ControlHandler {
   std::unique_ptr<LocalModelChannel> models_;  // sim -> haptic
   std::unique_ptr<SimThread> sim_;
   std::unique_ptr<HapticSide> haptics_;  // null without device or tool
-  // Trip counts note_safety_trips last saw, and of which haptic side (a
-  // restarted side counts from zero).
-  const HapticSide* trips_side_ = nullptr;
-  std::uint64_t trips_seen_ = 0, stale_trips_seen_ = 0, lost_trips_seen_ = 0;
+  // Numbers the haptic sides started (SafetyTrips tells a restarted side,
+  // which counts from zero, by it); what note_safety_trips last saw.
+  std::uint64_t haptic_side_number_ = 0;
+  SafetyTrips safety_trips_;
   FailingSteps failing_steps_;  // what note_failing_steps says, and when
   std::unique_ptr<control::ControlServer> server_;
   std::unique_ptr<control::SystemdNotifier> systemd_;

@@ -354,4 +354,19 @@ void SimThread::run(std::promise<void>& scheduled) {
   publish_status(now_ns());
 }
 
+void hand_over_recorder(SimThread* sim, std::unique_ptr<record::Recorder>& current,
+                        std::unique_ptr<record::Recorder> next,
+                        std::vector<std::unique_ptr<record::Recorder>>& retired) {
+  // The new one in first, then the old one out: the thread takes the new
+  // pointer at its next iteration, and rows drained until then still go to
+  // the old one, which is stopped only after the thread let go of it.
+  std::unique_ptr<record::Recorder> old = std::move(current);
+  current = std::move(next);
+  const bool released = !sim || sim->set_recorder(current.get());
+  if (released) retired.clear();  // no older one is held either
+  if (!old) return;
+  old->stop();
+  if (!released) retired.push_back(std::move(old));
+}
+
 }  // namespace tissue::service

@@ -217,4 +217,15 @@ class SimThread {
 // steady_clock now in nanoseconds (the clock every timestamp here uses).
 std::int64_t now_ns();
 
+// Makes `next` (null: none) the recorder `sim` writes to in place of
+// `current`, then stops the old one. The thread switches between two of its
+// iterations, so every row it produces goes to one file or the other: a
+// rotation or a record_start leaves no gap. An old recorder the thread has
+// not let go of within the hand-over wait (a stalled thread) is stopped and
+// kept in `retired` until a later hand-over, or the thread's stop, releases
+// it. A null `sim` holds no recorder. Io thread only.
+void hand_over_recorder(SimThread* sim, std::unique_ptr<record::Recorder>& current,
+                        std::unique_ptr<record::Recorder> next,
+                        std::vector<std::unique_ptr<record::Recorder>>& retired);
+
 }  // namespace tissue::service

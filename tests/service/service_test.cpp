@@ -555,8 +555,18 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
       << file_text(run.err);
   EXPECT_NE(file_text(run.out).find("haptic thread restarted"), std::string::npos) << file_text(run.out);
   EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_force_N"], 1.25);
+  // A recording started after the reload keeps the file as reloaded in its
+  // config_text, and its first event says which of it is not in use yet
+  // (the motor scale that converts its forces, here).
+  ASSERT_TRUE(client.call("record_stop")["ok"].get<bool>());
+  ASSERT_TRUE(client.call("record_start", {{"name", "after.h5"}})["ok"].get<bool>());
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
+  const std::vector<std::string> after = record::testing::event_messages(dir / "after.h5");
+  ASSERT_FALSE(after.empty());
+  EXPECT_NE(after.front().find("; device.offset_m/scale, publish in config_text are not in use until a restart"),
+            std::string::npos)
+      << after.front();
   // The recording says what the reload changed and what it could not.
   const std::vector<std::string> events = record::testing::event_messages(dir / "reload.h5");
   const auto has = [&](const std::string& part) {
@@ -565,6 +575,71 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   EXPECT_TRUE(has("reloaded (SIGHUP): scene cantilever from ")) << events.size() << " events";
   EXPECT_TRUE(has("; changed: device.limits")) << events.size() << " events";
   EXPECT_TRUE(has("reload: device.offset_m/scale, publish changed in ")) << events.size() << " events";
+}
+
+// A reload whose haptics or limits are valid only with a device setting it
+// cannot apply (device.scale waits for a restart) is refused: the coupling
+// the hand feels is 400 N/m x the running scale^2 (2.25) = 900 N/m, over the
+// new 500 N/m limit, and the safety clamp would have cut it silently.
+TEST(Service, AReloadIsCheckedWithTheDeviceSettingsInUse) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"));
+  std::string text = file_text(config);
+  text.replace(text.find("device:\n"), 8, "device:\n  scale: 1.5\n");
+  std::ofstream(config) << text;
+  Running run(config);
+  ControlClient client = connect(dir / "ctl.sock");
+  EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_stiffness_N_per_m"], 1000.0);
+  text.replace(text.find("  scale: 1.5\n"), 13, "  scale: 1.0\n  limits: {max_stiffness_N_per_m: 500}\n");
+  std::ofstream(config) << text;
+  ASSERT_EQ(::raise(SIGHUP), 0);
+  ASSERT_TRUE(written_within_5_s(run.err, "reload failed")) << "the reload did not fail: " << file_text(run.err);
+  EXPECT_NE(file_text(run.err).find("haptics.coupling_stiffness_N_per_m"), std::string::npos) << file_text(run.err);
+  EXPECT_NE(file_text(run.err).find("with device.scale 1.5, in use until a restart"), std::string::npos)
+      << file_text(run.err);
+  EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_stiffness_N_per_m"], 1000.0);
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// A reload's new status_interval_s applies at once, not after the old
+// interval (here an hour) has run out.
+TEST(Service, AReloadedStatusIntervalAppliesAtOnce) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("beam.yaml"));
+  std::string text = file_text(config);
+  text.replace(text.find("status_interval_s: 0.1"), 22, "status_interval_s: 3600");
+  std::ofstream(config) << text;
+  Running run(config);
+  ControlClient client = connect(dir / "ctl.sock");
+  EXPECT_EQ(file_text(run.out).find("| nodes "), std::string::npos) << "a status line before the hour";
+  text.replace(text.find("status_interval_s: 3600"), 23, "status_interval_s: 0.1");
+  std::ofstream(config) << text;
+  ASSERT_EQ(::raise(SIGHUP), 0);
+  EXPECT_TRUE(written_within_5_s(run.out, "| nodes ")) << file_text(run.out);
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// haptic_state is published while a haptic side runs, also one a later
+// load_scene started (the timer was armed only for a side there at startup).
+TEST(Service, AHapticSideStartedLaterPublishesItsState) {
+  TempDir dir;
+  const std::string config = write_config(dir, scene_file("beam.yaml"));  // no tool: no haptic side
+  std::ofstream(config, std::ios::app) << "publish: {lcm: {enabled: true, url: \"memq://\"}, haptic_rate_hz: 100}\n";
+  Running run(config);
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(client.call("status")["result"]["haptics"].is_null());
+  const nlohmann::json load = client.call("load_scene", {{"path", scene_file("cantilever.yaml")}});
+  ASSERT_TRUE(load["ok"].get<bool>()) << load.dump();
+  bool published = false;
+  for (int i = 0; i < 500 && !published; ++i) {
+    published = client.call("status")["result"]["publishing"]["lcm"]["haptic_states"].get<std::uint64_t>() > 0;
+    if (!published) std::this_thread::sleep_for(10ms);
+  }
+  EXPECT_TRUE(published) << client.call("status")["result"]["publishing"].dump();
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
 }
 
 TEST(Service, RestartOnlyChangesAreListedInAFixedOrder) {

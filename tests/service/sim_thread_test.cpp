@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -15,6 +16,7 @@
 #include "haptics/sim_device.hpp"
 #include "physics/physics_test_support.hpp"
 #include "record/recorder.hpp"
+#include "record/session_tools.hpp"
 
 namespace tissue::service {
 namespace {
@@ -449,6 +451,56 @@ TEST(SimThread, RecorderHandOverReportsAStalledSimThread) {
     EXPECT_TRUE(thread.set_recorder(nullptr, 10.0));  // the stall ends, the thread lets go
     thread.stop();
     EXPECT_TRUE(thread.set_recorder(nullptr, 0.0));  // a stopped thread holds nothing
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// A hand-over from one recorder to the next (a rotation, a record_start)
+// loses no row: tool samples numbered 0, 1, 2, … (in device x) pushed
+// without pause through the switch all land in one file or the other, each
+// once. (Stopping the old recorder before the new one was in, the samples
+// the sim thread drained in between were in neither file.)
+TEST(SimThread, AHandOverBetweenRecordersLosesNoRow) {
+  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  {
+    ToolSampleRing samples;
+    LocalModelChannel models;
+    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, SimThreadOptions{});
+    thread.start();
+    std::unique_ptr<record::Recorder> current;
+    std::vector<std::unique_ptr<record::Recorder>> retired;
+    hand_over_recorder(&thread, current, record::Recorder::start(dir, "a.h5", record::SessionMetadata{}), retired);
+    std::atomic<bool> stop_pushing{false};
+    std::atomic<int> pushed{0};
+    std::thread producer([&] {
+      haptics::ToolSample s;
+      for (int k = 0; !stop_pushing.load(); ++k) {
+        s.time_ns = now_ns();
+        s.device_position_m = haptics::Vec3(k, 0.0, 0.0);
+        while (!samples.try_push(s)) std::this_thread::yield();  // never dropped at the ring
+        pushed.store(k + 1);
+        std::this_thread::sleep_for(200us);
+      }
+    });
+    ASSERT_TRUE(wait_for([&] { return pushed.load() >= 200; }));
+    hand_over_recorder(&thread, current, record::Recorder::start(dir, "b.h5", record::SessionMetadata{}), retired);
+    const int at_hand_over = pushed.load();
+    ASSERT_TRUE(wait_for([&] { return pushed.load() >= at_hand_over + 200; }));
+    stop_pushing.store(true);
+    producer.join();
+    ASSERT_TRUE(wait_for([&] { return samples.size() == 0; }));
+    hand_over_recorder(&thread, current, nullptr, retired);  // after the thread took the last samples
+    thread.stop();
+    EXPECT_TRUE(retired.empty());
+    std::vector<int> seen;
+    for (const char* name : {"a.h5", "b.h5"})
+      for (const auto& p : record::read_haptic_track(dir + "/" + name).device_position_m)
+        seen.push_back(static_cast<int>(p[0]));
+    std::sort(seen.begin(), seen.end());
+    ASSERT_EQ(seen.size(), static_cast<std::size_t>(pushed.load())) << "rows lost (or doubled) at the hand-over";
+    for (int k = 0; k < pushed.load(); ++k) ASSERT_EQ(seen[static_cast<std::size_t>(k)], k);
   }
   std::filesystem::remove_all(dir);
 }
