@@ -781,6 +781,10 @@ std::string format_session_listing(const SessionListing& listing) {
 
 RepairReport repair_session(const std::string& path) {
   h5::QuietErrors quiet;
+  // The file's type and signature first: read_preamble refuses anything but
+  // a regular file before opening it (opening a FIFO blocks until a writer
+  // comes).
+  const Preamble pre = read_preamble(path);
   // Repair clears the open-for-write flags and trims the columns to a
   // common length: done to a live recording, it corrupted the file under
   // the writer.
@@ -789,7 +793,6 @@ RepairReport repair_session(const std::string& path) {
                       "': it is being recorded (a running recorder holds it); stop the recording first "
                       "(`tissue ctl record_stop`): repair is for a session a crash left open");
   RepairReport report;
-  const Preamble pre = read_preamble(path);
   {
     Handle file = open_for_reading(path, pre);
     const SessionInfo before = info_of(file.get(), path, pre);
