@@ -360,14 +360,20 @@ void Recorder::run() {
     close_to_producers();
     // Record the failure in the file when it still takes writes (e.g. the
     // free-space reserve tripped); a broken file just gets closed.
-    try {
-      if (!writer_->failed()) {
+    if (!writer_->failed()) {
+      try {
         const Event e = Event::make(session_time_s_now(), EventKind::kRecordingError, error());
         writer_->append_events({&e, 1});
-        writer_->close();
-      } else {
-        writer_->close();
+      } catch (const std::exception&) {
+        // Already failed and reported; the close below is still due.
       }
+    }
+    // Whatever happened above: the close releases the recording lock and the
+    // HDF5 handles. Skipped after a failed event write, they stayed until the
+    // Recorder was destroyed, and `tissue session repair` refused the file
+    // as "being recorded" meanwhile.
+    try {
+      writer_->close();
     } catch (const std::exception&) {
       // Already failed and reported; closing a broken file may fail too.
     }
