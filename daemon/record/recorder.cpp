@@ -262,19 +262,18 @@ void Recorder::count_unwritten_as_drops() {
   mesh_frame_drops_.fetch_add(frames, std::memory_order_relaxed);
 }
 
-void Recorder::check_free_space() {
-  if (options_.min_free_bytes == 0) return;
+std::string Recorder::free_space_shortfall() {
+  if (options_.min_free_bytes == 0) return {};
   const auto now = Clock::now();
-  if (now < next_space_check_) return;
+  if (now < next_space_check_) return {};
   next_space_check_ = now + std::chrono::seconds(1);
   struct statvfs fs {};
   const std::string dir = std::filesystem::path(path_).parent_path().string();
-  if (::statvfs(dir.empty() ? "." : dir.c_str(), &fs) != 0) return;
+  if (::statvfs(dir.empty() ? "." : dir.c_str(), &fs) != 0) return {};
   const std::uint64_t free_bytes = static_cast<std::uint64_t>(fs.f_bavail) * fs.f_frsize;
-  if (free_bytes < options_.min_free_bytes)
-    throw RecordError("session file '" + path_ + "': disk almost full (" + std::to_string(free_bytes >> 20) +
-                      " MiB free, reserve " + std::to_string(options_.min_free_bytes >> 20) +
-                      " MiB): recording stopped and the file closed");
+  if (free_bytes >= options_.min_free_bytes) return {};
+  return "session file '" + path_ + "': disk almost full (" + std::to_string(free_bytes >> 20) + " MiB free, reserve " +
+         std::to_string(options_.min_free_bytes >> 20) + " MiB): recording stopped and the file closed";
 }
 
 // Returns false once recording has failed. Mesh frames are written as soon as
@@ -336,16 +335,24 @@ bool Recorder::drain_and_write(bool force_flush) {
 void Recorder::run() {
   const auto poll = seconds(options_.poll_interval_s);
   bool stopping = false;
+  // The free-space reserve's message once it trips. The writer is healthy
+  // then, so it is a controlled stop: everything accepted goes into the file
+  // (it used to be thrown away as drops), then the recording_error event,
+  // then the clean close; only then does the state say kFailed.
+  std::string reserve_tripped;
   while (true) {
     {
       std::unique_lock lock(mutex_);
       wake_.wait_for(lock, poll, [&] { return stop_requested_; });
       stopping = stop_requested_;
     }
+    if (!stopping) {
+      reserve_tripped = free_space_shortfall();
+      stopping = !reserve_tripped.empty();
+    }
     // Before the last drain: nothing may be pushed after it (see PushGuard).
     if (stopping) close_to_producers();
     try {
-      check_free_space();
       drain_and_write(stopping);
     } catch (const std::exception& e) {
       set_failed(e.what());
@@ -358,8 +365,8 @@ void Recorder::run() {
     // kFailed already refuses pushes; this waits out those that passed the
     // check before it, so the count below is the last word.
     close_to_producers();
-    // Record the failure in the file when it still takes writes (e.g. the
-    // free-space reserve tripped); a broken file just gets closed.
+    // Record the failure in the file when it still takes writes; a broken
+    // file just gets closed.
     if (!writer_->failed()) {
       try {
         const Event e = Event::make(session_time_s_now(), EventKind::kRecordingError, error());
@@ -380,12 +387,31 @@ void Recorder::run() {
     count_unwritten_as_drops();
     return;
   }
+  // Every row accepted is in the file now (the last drain flushed it).
+  std::string close_error;
+  std::uint64_t last_events = 0;
+  if (!reserve_tripped.empty()) {
+    try {
+      const Event e = Event::make(session_time_s_now(), EventKind::kRecordingError, reserve_tripped);
+      writer_->append_events({&e, 1});
+      last_events = 1;
+    } catch (const std::exception& e) {
+      close_error = e.what();
+    }
+  }
+  // Tried whatever happened above: it releases the recording lock.
   try {
     writer_->close();
-    state_.store(RecorderState::kStopped, std::memory_order_release);
+    if (close_error.empty()) events_written_.fetch_add(last_events, std::memory_order_relaxed);
   } catch (const std::exception& e) {
-    set_failed(e.what());
+    if (close_error.empty()) close_error = e.what();
   }
+  if (!reserve_tripped.empty())
+    set_failed(close_error.empty() ? reserve_tripped : reserve_tripped + "; then " + close_error);
+  else if (!close_error.empty())
+    set_failed(close_error);
+  else
+    state_.store(RecorderState::kStopped, std::memory_order_release);
 }
 
 void Recorder::stop() {
