@@ -239,7 +239,8 @@ void Recorder::close_to_producers() noexcept {
 
 // After a failure, once closed to producers: what was accepted but will
 // never be written (still in the rings, drained but not yet written, frames
-// not yet written) is counted as dropped and the frame buffers are released.
+// not yet written or appended but not flushed) is counted as dropped and the
+// frame buffers are released.
 // Rows of a batch whose write failed part-way are counted too: the file may
 // hold some of them, but none were counted as written.
 void Recorder::count_unwritten_as_drops() {
@@ -250,7 +251,9 @@ void Recorder::count_unwritten_as_drops() {
   haptic += haptic_ring_.drain([](const HapticRow&) {});
   sim += sim_ring_.drain([](const SimRow&) {});
   for (auto& ring : event_rings_) events += ring.drain([](const Event&) {});
-  std::uint64_t frames = 0;
+  // Frames appended since the last successful flush are not in the file.
+  std::uint64_t frames = frames_unflushed_;
+  frames_unflushed_ = 0;
   std::uint32_t index = 0;
   while (ready_frames_.try_pop(index)) {
     free_frames_.try_push(index);
@@ -278,7 +281,8 @@ std::string Recorder::free_space_shortfall() {
 
 // Returns false once recording has failed. Mesh frames are written as soon as
 // they are drained (their buffers go straight back to the sim thread); rows
-// are batched and written with the flush.
+// are batched and written with the flush. Frames, like rows, count as
+// written once a flush after them succeeds.
 bool Recorder::drain_and_write(bool force_flush) {
   haptic_ring_.drain([&](const HapticRow& r) { pending_haptic_.push_back(r); });
   sim_ring_.drain([&](const SimRow& r) { pending_sim_.push_back(r); });
@@ -297,11 +301,19 @@ bool Recorder::drain_and_write(bool force_flush) {
         view.triangle_strain_energy_J_per_m3 = {b.triangle_strain_energy_J_per_m3.data(), b.triangle_count};
       try {
         writer_->append_mesh_frame(view);
-        frames_written_.fetch_add(1, std::memory_order_relaxed);
+        // Written once the flush that follows succeeds, like the rows.
+        ++frames_unflushed_;
       } catch (const std::invalid_argument& e) {
         frames_invalid_.fetch_add(1, std::memory_order_relaxed);
         pending_events_.push_back(
             Event::make(b.time_s, EventKind::kWarning, std::string("mesh frame not recorded: ") + e.what()));
+      } catch (...) {
+        // The writer failed on this frame: it is a drop, and its buffer
+        // goes back before recording fails (count_unwritten_as_drops sees
+        // only the frames still waiting).
+        mesh_frame_drops_.fetch_add(1, std::memory_order_relaxed);
+        free_frames_.try_push(index);
+        throw;
       }
     } else {
       frames_invalid_.fetch_add(1, std::memory_order_relaxed);
@@ -323,6 +335,8 @@ bool Recorder::drain_and_write(bool force_flush) {
   haptic_written_.fetch_add(pending_haptic_.size(), std::memory_order_relaxed);
   sim_written_.fetch_add(pending_sim_.size(), std::memory_order_relaxed);
   events_written_.fetch_add(pending_events_.size(), std::memory_order_relaxed);
+  frames_written_.fetch_add(frames_unflushed_, std::memory_order_relaxed);
+  frames_unflushed_ = 0;
   bytes_written_.store(writer_->bytes_written(), std::memory_order_relaxed);
   flushes_.fetch_add(1, std::memory_order_relaxed);
   pending_haptic_.clear();

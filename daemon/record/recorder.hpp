@@ -91,7 +91,7 @@ struct RecorderStats {
   std::uint64_t haptic_rows_written = 0, sim_rows_written = 0, mesh_frames_written = 0, events_written = 0;
   std::uint64_t haptic_drops = 0, sim_drops = 0, mesh_frame_drops = 0, event_drops = 0;
   std::uint64_t mesh_frames_too_big = 0;  // refused at push: over the buffer capacity (also in drops)
-  std::uint64_t mesh_frames_invalid = 0;  // refused by the writer: bad indices / levels
+  std::uint64_t mesh_frames_invalid = 0;  // refused by the writer: bad indices, levels, strain, coordinates
   std::uint64_t bytes_written = 0;        // payload bytes handed to HDF5
   std::uint64_t flushes = 0;
 };
@@ -208,6 +208,9 @@ class Recorder {
   std::vector<HapticRow> pending_haptic_;
   std::vector<SimRow> pending_sim_;
   std::vector<Event> pending_events_;
+  // Frames appended to the file since the last successful flush: written
+  // after the next one, dropped if recording fails first.
+  std::uint64_t frames_unflushed_ = 0;
   std::chrono::steady_clock::time_point next_flush_;
   std::chrono::steady_clock::time_point next_space_check_;
 
