@@ -239,7 +239,8 @@ void Recorder::close_to_producers() noexcept {
 
 // After a failure, once closed to producers: what was accepted but will
 // never be written (still in the rings, drained but not yet written, frames
-// not yet written) is counted as dropped and the frame buffers are released.
+// not yet written or appended but not flushed) is counted as dropped and the
+// frame buffers are released.
 // Rows of a batch whose write failed part-way are counted too: the file may
 // hold some of them, but none were counted as written.
 void Recorder::count_unwritten_as_drops() {
@@ -250,7 +251,9 @@ void Recorder::count_unwritten_as_drops() {
   haptic += haptic_ring_.drain([](const HapticRow&) {});
   sim += sim_ring_.drain([](const SimRow&) {});
   for (auto& ring : event_rings_) events += ring.drain([](const Event&) {});
-  std::uint64_t frames = 0;
+  // Frames appended since the last successful flush are not in the file.
+  std::uint64_t frames = frames_unflushed_;
+  frames_unflushed_ = 0;
   std::uint32_t index = 0;
   while (ready_frames_.try_pop(index)) {
     free_frames_.try_push(index);
@@ -262,24 +265,24 @@ void Recorder::count_unwritten_as_drops() {
   mesh_frame_drops_.fetch_add(frames, std::memory_order_relaxed);
 }
 
-void Recorder::check_free_space() {
-  if (options_.min_free_bytes == 0) return;
+std::string Recorder::free_space_shortfall() {
+  if (options_.min_free_bytes == 0) return {};
   const auto now = Clock::now();
-  if (now < next_space_check_) return;
+  if (now < next_space_check_) return {};
   next_space_check_ = now + std::chrono::seconds(1);
   struct statvfs fs {};
   const std::string dir = std::filesystem::path(path_).parent_path().string();
-  if (::statvfs(dir.empty() ? "." : dir.c_str(), &fs) != 0) return;
+  if (::statvfs(dir.empty() ? "." : dir.c_str(), &fs) != 0) return {};
   const std::uint64_t free_bytes = static_cast<std::uint64_t>(fs.f_bavail) * fs.f_frsize;
-  if (free_bytes < options_.min_free_bytes)
-    throw RecordError("session file '" + path_ + "': disk almost full (" + std::to_string(free_bytes >> 20) +
-                      " MiB free, reserve " + std::to_string(options_.min_free_bytes >> 20) +
-                      " MiB): recording stopped and the file closed");
+  if (free_bytes >= options_.min_free_bytes) return {};
+  return "session file '" + path_ + "': disk almost full (" + std::to_string(free_bytes >> 20) + " MiB free, reserve " +
+         std::to_string(options_.min_free_bytes >> 20) + " MiB): recording stopped and the file closed";
 }
 
 // Returns false once recording has failed. Mesh frames are written as soon as
 // they are drained (their buffers go straight back to the sim thread); rows
-// are batched and written with the flush.
+// are batched and written with the flush. Frames, like rows, count as
+// written once a flush after them succeeds.
 bool Recorder::drain_and_write(bool force_flush) {
   haptic_ring_.drain([&](const HapticRow& r) { pending_haptic_.push_back(r); });
   sim_ring_.drain([&](const SimRow& r) { pending_sim_.push_back(r); });
@@ -298,11 +301,19 @@ bool Recorder::drain_and_write(bool force_flush) {
         view.triangle_strain_energy_J_per_m3 = {b.triangle_strain_energy_J_per_m3.data(), b.triangle_count};
       try {
         writer_->append_mesh_frame(view);
-        frames_written_.fetch_add(1, std::memory_order_relaxed);
+        // Written once the flush that follows succeeds, like the rows.
+        ++frames_unflushed_;
       } catch (const std::invalid_argument& e) {
         frames_invalid_.fetch_add(1, std::memory_order_relaxed);
         pending_events_.push_back(
             Event::make(b.time_s, EventKind::kWarning, std::string("mesh frame not recorded: ") + e.what()));
+      } catch (...) {
+        // The writer failed on this frame: it is a drop, and its buffer
+        // goes back before recording fails (count_unwritten_as_drops sees
+        // only the frames still waiting).
+        mesh_frame_drops_.fetch_add(1, std::memory_order_relaxed);
+        free_frames_.try_push(index);
+        throw;
       }
     } else {
       frames_invalid_.fetch_add(1, std::memory_order_relaxed);
@@ -324,6 +335,8 @@ bool Recorder::drain_and_write(bool force_flush) {
   haptic_written_.fetch_add(pending_haptic_.size(), std::memory_order_relaxed);
   sim_written_.fetch_add(pending_sim_.size(), std::memory_order_relaxed);
   events_written_.fetch_add(pending_events_.size(), std::memory_order_relaxed);
+  frames_written_.fetch_add(frames_unflushed_, std::memory_order_relaxed);
+  frames_unflushed_ = 0;
   bytes_written_.store(writer_->bytes_written(), std::memory_order_relaxed);
   flushes_.fetch_add(1, std::memory_order_relaxed);
   pending_haptic_.clear();
@@ -336,16 +349,24 @@ bool Recorder::drain_and_write(bool force_flush) {
 void Recorder::run() {
   const auto poll = seconds(options_.poll_interval_s);
   bool stopping = false;
+  // The free-space reserve's message once it trips. The writer is healthy
+  // then, so it is a controlled stop: everything accepted goes into the file
+  // (it used to be thrown away as drops), then the recording_error event,
+  // then the clean close; only then does the state say kFailed.
+  std::string reserve_tripped;
   while (true) {
     {
       std::unique_lock lock(mutex_);
       wake_.wait_for(lock, poll, [&] { return stop_requested_; });
       stopping = stop_requested_;
     }
+    if (!stopping) {
+      reserve_tripped = free_space_shortfall();
+      stopping = !reserve_tripped.empty();
+    }
     // Before the last drain: nothing may be pushed after it (see PushGuard).
     if (stopping) close_to_producers();
     try {
-      check_free_space();
       drain_and_write(stopping);
     } catch (const std::exception& e) {
       set_failed(e.what());
@@ -358,28 +379,53 @@ void Recorder::run() {
     // kFailed already refuses pushes; this waits out those that passed the
     // check before it, so the count below is the last word.
     close_to_producers();
-    // Record the failure in the file when it still takes writes (e.g. the
-    // free-space reserve tripped); a broken file just gets closed.
-    try {
-      if (!writer_->failed()) {
+    // Record the failure in the file when it still takes writes; a broken
+    // file just gets closed.
+    if (!writer_->failed()) {
+      try {
         const Event e = Event::make(session_time_s_now(), EventKind::kRecordingError, error());
         writer_->append_events({&e, 1});
-        writer_->close();
-      } else {
-        writer_->close();
+      } catch (const std::exception&) {
+        // Already failed and reported; the close below is still due.
       }
+    }
+    // Whatever happened above: the close releases the recording lock and the
+    // HDF5 handles. Skipped after a failed event write, they stayed until the
+    // Recorder was destroyed, and `tissue session repair` refused the file
+    // as "being recorded" meanwhile.
+    try {
+      writer_->close();
     } catch (const std::exception&) {
       // Already failed and reported; closing a broken file may fail too.
     }
     count_unwritten_as_drops();
     return;
   }
+  // Every row accepted is in the file now (the last drain flushed it).
+  std::string close_error;
+  std::uint64_t last_events = 0;
+  if (!reserve_tripped.empty()) {
+    try {
+      const Event e = Event::make(session_time_s_now(), EventKind::kRecordingError, reserve_tripped);
+      writer_->append_events({&e, 1});
+      last_events = 1;
+    } catch (const std::exception& e) {
+      close_error = e.what();
+    }
+  }
+  // Tried whatever happened above: it releases the recording lock.
   try {
     writer_->close();
-    state_.store(RecorderState::kStopped, std::memory_order_release);
+    if (close_error.empty()) events_written_.fetch_add(last_events, std::memory_order_relaxed);
   } catch (const std::exception& e) {
-    set_failed(e.what());
+    if (close_error.empty()) close_error = e.what();
   }
+  if (!reserve_tripped.empty())
+    set_failed(close_error.empty() ? reserve_tripped : reserve_tripped + "; then " + close_error);
+  else if (!close_error.empty())
+    set_failed(close_error);
+  else
+    state_.store(RecorderState::kStopped, std::memory_order_release);
 }
 
 void Recorder::stop() {

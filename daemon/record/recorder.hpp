@@ -28,9 +28,12 @@
 // Failure (disk full, file too large, I/O error, disk space below the
 // reserve): recording stops, state() becomes kFailed, error() says which file
 // and why, on_error is called once (from the recorder thread) so the daemon
-// can log it and publish it as an event; producers keep running, their pushes
-// become counted drops, and so do the rows, events and frames accepted
-// earlier that were not written.
+// can log it and publish it as an event; producers keep running, and their
+// pushes become counted drops. After a write failure so do the rows, events
+// and frames accepted earlier that were not written. The free-space reserve
+// is a controlled stop instead (the file still takes writes): closed to
+// producers, everything accepted written, a recording_error event, a clean
+// close, and only then kFailed.
 //
 // HDF5 is used only from the recorder thread (start() creates the file on the
 // calling thread, before the recorder thread exists).
@@ -67,8 +70,10 @@ struct RecorderOptions {
   std::size_t mesh_max_vertices = 100'000;
   std::size_t mesh_max_triangles = 200'000;
   std::size_t mesh_frame_buffers = 4;  // 2..16
-  // Stop recording (cleanly closed) when the file system has less free space
-  // than this, rather than writing until ENOSPC. 0 disables the check.
+  // Stop recording (everything accepted written, then a recording_error
+  // event and a clean close; state kFailed with the reason) when the file
+  // system has less free space than this, rather than writing until ENOSPC.
+  // 0 disables the check.
   std::uint64_t min_free_bytes = 64ull << 20;
   // Called once from the recorder thread when recording fails (message =
   // error()). Must not block for long.
@@ -86,7 +91,7 @@ struct RecorderStats {
   std::uint64_t haptic_rows_written = 0, sim_rows_written = 0, mesh_frames_written = 0, events_written = 0;
   std::uint64_t haptic_drops = 0, sim_drops = 0, mesh_frame_drops = 0, event_drops = 0;
   std::uint64_t mesh_frames_too_big = 0;  // refused at push: over the buffer capacity (also in drops)
-  std::uint64_t mesh_frames_invalid = 0;  // refused by the writer: bad indices / levels
+  std::uint64_t mesh_frames_invalid = 0;  // refused by the writer: bad indices, levels, strain, coordinates
   std::uint64_t bytes_written = 0;        // payload bytes handed to HDF5
   std::uint64_t flushes = 0;
 };
@@ -164,7 +169,9 @@ class Recorder {
   Recorder(std::unique_ptr<SessionWriter> writer, RecorderOptions options);
   void run();
   bool drain_and_write(bool force_flush);
-  void check_free_space();
+  // "" or why recording stops: less free space than min_free_bytes (checked
+  // at most once a second).
+  std::string free_space_shortfall();
   void set_failed(const std::string& message);
   void close_to_producers() noexcept;
   void count_unwritten_as_drops();
@@ -201,6 +208,9 @@ class Recorder {
   std::vector<HapticRow> pending_haptic_;
   std::vector<SimRow> pending_sim_;
   std::vector<Event> pending_events_;
+  // Frames appended to the file since the last successful flush: written
+  // after the next one, dropped if recording fails first.
+  std::uint64_t frames_unflushed_ = 0;
   std::chrono::steady_clock::time_point next_flush_;
   std::chrono::steady_clock::time_point next_space_check_;
 

@@ -1,6 +1,7 @@
 #include "record/recording_lock.hpp"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace tissue::record {
@@ -37,8 +38,18 @@ void RecordingLock::release() noexcept {
 }
 
 bool being_recorded(const std::string& path) noexcept {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  // Only a regular file can be a session. A plain open of a FIFO blocks
+  // until a writer comes (`tissue session repair` on one hung for good), and
+  // opening a device can have effects of its own: look before opening, and
+  // open without blocking in case the name is swapped in between.
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) return false;
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
   if (fd < 0) return false;
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return false;
+  }
   // Would a write lock be refused? Only by a reader's lock: a recorder's.
   struct flock lock = whole_file(F_WRLCK);
   const bool held = ::fcntl(fd, F_OFD_GETLK, &lock) == 0 && lock.l_type != F_UNLCK;

@@ -34,7 +34,8 @@ class RecordingLock {
 };
 
 // True when some process's RecordingLock holds `path` (false when the file
-// cannot be opened or the file system does not support the lock).
+// cannot be opened, is not a regular file, or the file system does not
+// support the lock). Never blocks: a FIFO or device is not opened.
 bool being_recorded(const std::string& path) noexcept;
 
 }  // namespace tissue::record

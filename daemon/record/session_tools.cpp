@@ -12,13 +12,16 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <optional>
 #include <sstream>
+#include <string_view>
 #include <type_traits>
 
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
 #include "util/output_file.hpp"
+#include "util/text.hpp"
 #include "util/xml.hpp"
 
 namespace tissue::record {
@@ -29,6 +32,32 @@ using h5::Handle;
 
 [[noreturn]] void bad_file(const std::string& path, const std::string& what) {
   throw RecordError("'" + path + "': " + what);
+}
+
+// A string from a session file or a directory, as `info` and `list` print
+// it. The file may hold anything (a foreign writer, an edit, damage): printed
+// raw, an escape sequence drove the terminal and a line break forged a line
+// of the report ("\nstate: closed cleanly"). Clean text (util/text.hpp's
+// rule) stays as it is; each byte of a control character or of what is not
+// UTF-8 shows as \xNN.
+std::string shown(std::string_view text) {
+  if (util::why_not_clean_text(text).empty()) return std::string(text);
+  std::string out;
+  for (std::size_t i = 0; i < text.size();) {
+    const std::optional<util::Utf8Char> c = util::decode_utf8(text, i);
+    const std::size_t length = c ? c->length : 1;
+    if (c && util::why_not_clean_text(text.substr(i, length)).empty()) {
+      out.append(text.substr(i, length));
+    } else {
+      for (std::size_t k = i; k < i + length; ++k) {
+        char hex[8];
+        std::snprintf(hex, sizeof hex, "\\x%02X", static_cast<unsigned>(static_cast<unsigned char>(text[k])));
+        out += hex;
+      }
+    }
+    i += length;
+  }
+  return out;
 }
 
 // What the first bytes say, before HDF5 is asked anything: foreign, empty
@@ -623,7 +652,7 @@ HapticTrack read_haptic_track(const std::string& path) {
 
 std::string format_session_info(const SessionInfo& info) {
   std::ostringstream o;
-  o << "file:             " << info.path << "\n";
+  o << "file:             " << shown(info.path) << "\n";
   o << "state:            ";
   switch (session_state(info)) {
     case SessionState::kClosedCleanly:
@@ -637,20 +666,20 @@ std::string format_session_info(const SessionInfo& info) {
              "repair`\n";
       break;
     case SessionState::kRepaired:
-      o << "NOT closed cleanly: left by a crash, repaired " << info.repaired_utc << "\n";
+      o << "NOT closed cleanly: left by a crash, repaired " << shown(info.repaired_utc) << "\n";
       break;
     case SessionState::kNotClosed:
       o << "NOT closed cleanly (the clean-close mark is missing)\n";
       break;
   }
-  o << "scene:            " << (info.scene_name.empty() ? "(none)" : info.scene_name) << "\n";
-  o << "start time (UTC): " << info.start_time_utc << "\n";
-  if (!info.end_time_utc.empty()) o << "end time (UTC):   " << info.end_time_utc << "\n";
+  o << "scene:            " << (info.scene_name.empty() ? "(none)" : shown(info.scene_name)) << "\n";
+  o << "start time (UTC): " << shown(info.start_time_utc) << "\n";
+  if (!info.end_time_utc.empty()) o << "end time (UTC):   " << shown(info.end_time_utc) << "\n";
   char duration[64];
   std::snprintf(duration, sizeof duration, "%.3f s", info.duration_s);
   o << "duration:         " << duration << (info.duration_recorded ? "" : " (last time stamp recorded)") << "\n";
-  o << "host:             " << info.host_name << "\n";
-  o << "software version: " << info.software_version << "\n";
+  o << "host:             " << shown(info.host_name) << "\n";
+  o << "software version: " << shown(info.software_version) << "\n";
   o << "format version:   " << info.format_version << "\n";
   o << "rows:\n";
   o << "  /haptic         " << info.rows.haptic_rows << " ticks\n";
@@ -736,20 +765,12 @@ const char* state_label(SessionState state) {
   return "NOT closed cleanly";
 }
 
-// One table cell: a name from a file or a scene may hold anything, and a
-// line break in it would start a false row.
-std::string one_line(std::string text) {
-  for (char& c : text)
-    if (c == '\n' || c == '\r' || c == '\t') c = ' ';
-  return text;
-}
-
 }  // namespace
 
 std::string format_session_listing(const SessionListing& listing) {
   std::ostringstream o;
-  o << listing.sessions.size() << " session" << (listing.sessions.size() == 1 ? "" : "s") << " in " << listing.dir
-    << "\n";
+  o << listing.sessions.size() << " session" << (listing.sessions.size() == 1 ? "" : "s") << " in "
+    << shown(listing.dir) << "\n";
   // Left-aligned text columns, right-aligned numbers; a long name widens its
   // row rather than being cut.
   const auto row = [&o](const std::string& file, const std::string& state, const std::string& start,
@@ -763,13 +784,13 @@ std::string format_session_listing(const SessionListing& listing) {
   for (const SessionInfo& s : listing.sessions) {
     char duration[32];
     std::snprintf(duration, sizeof duration, "%.3f", s.duration_s);
-    row(one_line(std::filesystem::path(s.path).filename().string()),
-        s.being_recorded ? "being recorded" : state_label(session_state(s)), one_line(s.start_time_utc), duration,
-        std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames), one_line(s.scene_name));
+    row(shown(std::filesystem::path(s.path).filename().string()),
+        s.being_recorded ? "being recorded" : state_label(session_state(s)), shown(s.start_time_utc), duration,
+        std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames), shown(s.scene_name));
   }
-  for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << one_line(u.reason) << "\n";
+  for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << shown(u.reason) << "\n";
   for (const std::string& f : listing.unfinished)
-    o << "unfinished: " << one_line(f)
+    o << "unfinished: " << shown(f)
       << ": a session being created right now, or left by a recorder that stopped while creating it (not a "
          "session, no data in it; tissued removes it at its next start once that process is gone)\n";
   if (std::any_of(listing.sessions.begin(), listing.sessions.end(), [](const SessionInfo& s) {
@@ -781,6 +802,10 @@ std::string format_session_listing(const SessionListing& listing) {
 
 RepairReport repair_session(const std::string& path) {
   h5::QuietErrors quiet;
+  // The file's type and signature first: read_preamble refuses anything but
+  // a regular file before opening it (opening a FIFO blocks until a writer
+  // comes).
+  const Preamble pre = read_preamble(path);
   // Repair clears the open-for-write flags and trims the columns to a
   // common length: done to a live recording, it corrupted the file under
   // the writer.
@@ -789,7 +814,6 @@ RepairReport repair_session(const std::string& path) {
                       "': it is being recorded (a running recorder holds it); stop the recording first "
                       "(`tissue ctl record_stop`): repair is for a session a crash left open");
   RepairReport report;
-  const Preamble pre = read_preamble(path);
   {
     Handle file = open_for_reading(path, pre);
     const SessionInfo before = info_of(file.get(), path, pre);

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
@@ -519,7 +520,21 @@ void SessionWriter::append_mesh_frame(const MeshFrameView& frame) {
     }
   vertices_f32_.resize(nv);
   for (std::size_t v = 0; v < nv; ++v)
-    for (int k = 0; k < 3; ++k) vertices_f32_[v][k] = static_cast<float>(frame.vertices_m[v][k]);
+    for (int k = 0; k < 3; ++k) {
+      // The file stores float32: a larger coordinate became inf, silently
+      // (and converting it is undefined behaviour), and a NaN one a vertex
+      // no viewer can place.
+      const double x = frame.vertices_m[v][k];
+      if (!(std::fabs(x) <= static_cast<double>(std::numeric_limits<float>::max()))) {
+        char what[200];
+        std::snprintf(what, sizeof what,
+                      "mesh frame vertex %zu coordinate %d (%c) is %g m: must be finite and within float32 range "
+                      "(|x| <= %g m, as the file stores vertices)",
+                      v, k, "xyz"[k], x, static_cast<double>(std::numeric_limits<float>::max()));
+        throw std::invalid_argument(what);
+      }
+      vertices_f32_[v][k] = static_cast<float>(x);
+    }
   const std::uint8_t* levels = frame.vertex_level.data();
   if (frame.vertex_level.empty()) {
     u8_.assign(nv, 0);

@@ -85,9 +85,10 @@ class SessionWriter {
   void append_sim(std::span<const SimRow> rows);
   void append_events(std::span<const Event> events);
   // Throws std::invalid_argument (file untouched) when a triangle index is
-  // out of range, the level or strain count does not match, a strain value
-  // is negative or not finite, or the frame is too big for int32 indices;
-  // RecordError on I/O failure.
+  // out of range, a vertex coordinate is not finite or beyond float32 range,
+  // the level or strain count does not match, a strain value is negative or
+  // not finite, or the frame is too big for int32 indices; RecordError on
+  // I/O failure.
   void append_mesh_frame(const MeshFrameView& frame);
 
   // H5Dflush on every dataset that grew since the last flush (data columns

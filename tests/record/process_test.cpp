@@ -303,6 +303,7 @@ TEST(RecordProcess, FileSizeLimitStopsRecordingWithAClearErrorAndNoCrash) {
   EXPECT_NE(out.find("pushes_after_failure 3"), std::string::npos) << out;  // >= 300 ticks after the failure
 
   // Whatever state the file is in, the tools answer without crashing.
+  bool repaired = false;
   for (const char* tool : {"info", "repair", "info"}) {
     const auto r = run(quote(TISSUE_CLI_BINARY) + " session " + tool + " " + quote(path), dir);
     EXPECT_TRUE(r.exit_code == 0 || r.exit_code == 1) << tool << ": " << r.exit_code << r.err;
@@ -310,7 +311,25 @@ TEST(RecordProcess, FileSizeLimitStopsRecordingWithAClearErrorAndNoCrash) {
     if (r.exit_code == 1) {
       EXPECT_NE(r.err.find(path), std::string::npos) << r.err;
     }
+    if (std::string(tool) == "repair") repaired = r.exit_code == 0;
   }
+
+  // Every frame offered is counted once: written (flushed to the file), a
+  // drop, or invalid. A frame used to count as written once appended, before
+  // the flush that could still fail, and a frame whose append failed was
+  // counted nowhere.
+  unsigned long long offered = 0, written = 0, dropped = 0, invalid = 0;
+  const auto frames_at = out.find("frames offered ");
+  ASSERT_NE(frames_at, std::string::npos) << out;
+  ASSERT_EQ(std::sscanf(out.c_str() + frames_at, "frames offered %llu written %llu dropped %llu invalid %llu", &offered,
+                        &written, &dropped, &invalid),
+            4)
+      << out;
+  EXPECT_EQ(written + dropped + invalid, offered) << out;
+  EXPECT_EQ(invalid, 0u) << out;
+  // What counts as written is in the file, as a crash would leave it.
+  ASSERT_TRUE(repaired) << "the repair failed: cannot check the written frames";
+  EXPECT_GE(read_session_info(path).rows.mesh_frames, written) << out;
 }
 
 TEST(RecordProcess, UnwritableStateDirectoryIsAClearError) {

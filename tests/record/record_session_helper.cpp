@@ -35,11 +35,13 @@ namespace {
 
 // Pushes like the daemon's threads would, in one loop: a haptic row per
 // millisecond, a sim row every 20, a mesh frame every 100, an event every 500.
-// Returns the number of haptic rows pushed.
-std::uint64_t produce(Recorder& r, double seconds, bool stop_on_failure, std::uint64_t* pushed_after_failure) {
+// Returns the number of haptic rows pushed; *frames_offered (when given):
+// how many mesh frames were offered to push_mesh_frame, accepted or not.
+std::uint64_t produce(Recorder& r, double seconds, bool stop_on_failure, std::uint64_t* pushed_after_failure,
+                      std::uint64_t* frames_offered = nullptr) {
   // Indices advance only on accepted pushes, so the file holds rows 0..n-1
   // of each generator with no gaps.
-  std::uint64_t i = 0, sim = 0, frame = 0, event = 0, last_flushes = 0, after = 0;
+  std::uint64_t i = 0, sim = 0, frame = 0, event = 0, last_flushes = 0, after = 0, offered = 0;
   const auto start = Clock::now();
   auto next = start;
   for (std::uint64_t tick = 0; std::chrono::duration<double>(Clock::now() - start).count() < seconds; ++tick) {
@@ -47,6 +49,7 @@ std::uint64_t produce(Recorder& r, double seconds, bool stop_on_failure, std::ui
     if (tick % 20 == 0 && r.push_sim(testing::sim_row(sim))) ++sim;
     if (tick % 100 == 0) {
       const testing::TestFrame f = testing::test_frame(frame);  // allocation here is the test's, not the recorder's
+      ++offered;
       if (r.push_mesh_frame(f.view())) ++frame;
     }
     if (tick % 500 == 0 && r.push_event(EventSource::kControl, testing::event_row(event))) ++event;
@@ -66,6 +69,7 @@ std::uint64_t produce(Recorder& r, double seconds, bool stop_on_failure, std::ui
     std::this_thread::sleep_until(next);
   }
   if (pushed_after_failure) *pushed_after_failure = after;
+  if (frames_offered) *frames_offered = offered;
   return i;
 }
 
@@ -120,14 +124,18 @@ int main(int argc, char** argv) {
     RecorderOptions o = options();
     o.on_error = [&](const std::string& m) { callback_message = m; };
     auto r = Recorder::start(dir, name, meta, o);
-    std::uint64_t after = 0;
-    produce(*r, 20.0, true, &after);
+    std::uint64_t after = 0, frames_offered = 0;
+    produce(*r, 20.0, true, &after, &frames_offered);
     const RecorderState state = r->state();
-    const RecorderStats s = r->stats();
-    r->stop();  // must not crash or hang on a broken file
+    r->stop();                           // must not crash or hang on a broken file
+    const RecorderStats s = r->stats();  // after the stop: the last word
     std::printf("state %d\nerror %s\ncallback %s\npushes_after_failure %llu\nhaptic_drops %llu\n",
                 static_cast<int>(state), r->error().c_str(), callback_message.c_str(),
                 static_cast<unsigned long long>(after), static_cast<unsigned long long>(s.haptic_drops));
+    std::printf("frames offered %llu written %llu dropped %llu invalid %llu\n",
+                static_cast<unsigned long long>(frames_offered), static_cast<unsigned long long>(s.mesh_frames_written),
+                static_cast<unsigned long long>(s.mesh_frame_drops),
+                static_cast<unsigned long long>(s.mesh_frames_invalid));
     return state == RecorderState::kFailed ? 0 : 3;
   }
 

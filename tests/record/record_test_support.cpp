@@ -1,9 +1,13 @@
 #include "record_test_support.hpp"
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -13,6 +17,7 @@
 #include <random>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 #include "record/h5_util.hpp"
 #include "record/session_layout.hpp"
@@ -165,7 +170,39 @@ std::vector<std::string> bad_session_files(const TempDir& dir) {
   files.push_back(dir / "foreign.h5");
   files.push_back(dir / "does_not_exist.h5");
   files.push_back(dir.path());  // a directory
+  // Opening it blocks until a writer comes: a tool that opens before it
+  // checks the file type hangs (opens_fifo_for_reading catches that).
+  const std::string fifo = dir / "fifo.h5";
+  if (::mkfifo(fifo.c_str(), 0600) != 0) ADD_FAILURE() << "mkfifo " << fifo << ": " << std::strerror(errno);
+  files.push_back(fifo);
   return files;
+}
+
+bool opens_fifo_for_reading(const std::string& fifo, const std::function<void()>& call) {
+  std::atomic<bool> done{false};
+  std::exception_ptr thrown;
+  std::thread caller([&] {
+    try {
+      call();
+    } catch (...) {
+      thrown = std::current_exception();
+    }
+    done.store(true);
+  });
+  bool opened = false;
+  // Ends once the call does: an open for writing succeeds only while a
+  // reader has the FIFO open, and it releases a reader blocked in open().
+  while (!done.load()) {
+    const int fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd >= 0) {
+      opened = true;
+      ::close(fd);
+    }
+    std::this_thread::yield();
+  }
+  caller.join();
+  if (thrown) std::rethrow_exception(thrown);
+  return opened;
 }
 
 namespace {

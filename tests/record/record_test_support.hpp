@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -64,8 +65,16 @@ void write_crashed_session(const std::string& path, std::uint64_t haptic_rows, s
 // the file: empty, text, random bytes, an HDF5 signature then noise, a good
 // session truncated at several points (inside the signature, the superblock,
 // the metadata and the data), an HDF5 file that is not a session, a missing
-// file and a directory. Written into `dir`.
+// file, a directory and a FIFO. Written into `dir`.
 std::vector<std::string> bad_session_files(const TempDir& dir);
+
+// Runs `call` (rethrowing what it throws) and says whether it opened the
+// FIFO `fifo` for reading. A plain open of a FIFO blocks until a writer
+// comes, so a tool that opens one hangs for good; here a watcher opens the
+// FIFO for writing (without blocking) whenever a reader has it open, which
+// lets such an open return: the call always ends, and the test fails
+// instead of hanging.
+bool opens_fifo_for_reading(const std::string& fifo, const std::function<void()>& call);
 
 // Whole dataset, flattened, through the C API. `swmr` opens with
 // H5F_ACC_SWMR_READ. Fails the current test (and returns empty) on error.

@@ -10,6 +10,7 @@
 #include <limits>
 #include <thread>
 
+#include "record/recording_lock.hpp"
 #include "record/session_tools.hpp"
 #include "record_test_support.hpp"
 
@@ -285,10 +286,16 @@ TEST(Recorder, PushesRacingStopAreWrittenOrCountedNeverLost) {
 // The free-space reserve trips (here: a reserve no disk has): recording
 // stops with a message naming the file, the callback hears it, the file is
 // closed properly and holds a recording_error event; producers are unharmed,
-// and every push is written or counted as a drop.
+// and every push is written or counted as a drop. The writer is healthy, so
+// the reserve is a controlled stop: the rows accepted before it go into the
+// file (they were thrown away as drops, though the file still took writes).
 TEST(Recorder, FreeSpaceReserveStopsRecordingCleanlyAndReports) {
   TempDir dir;
   RecorderOptions o = fast_options();
+  // The first poll checks the free space: a second after start, so the
+  // pushes below come before it (and before any flush).
+  o.flush_interval_s = 1.0;
+  o.poll_interval_s = 1.0;
   o.min_free_bytes = std::uint64_t{1} << 62;
   std::atomic<int> calls{0};
   std::string heard;
@@ -297,26 +304,33 @@ TEST(Recorder, FreeSpaceReserveStopsRecordingCleanlyAndReports) {
     calls.fetch_add(1);
   };
   auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  std::uint64_t i = 0;
+  std::uint64_t accepted = 0;
+  for (int k = 0; k < 100; ++k) accepted += rec->push_haptic(testing::haptic_row(accepted));
+  ASSERT_GT(accepted, 0u) << "the reserve tripped before the first push: nothing to check";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
   while (rec->state() == RecorderState::kRecording && std::chrono::steady_clock::now() < deadline)
-    rec->push_haptic(testing::haptic_row(i++));
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   ASSERT_EQ(rec->state(), RecorderState::kFailed);
+  // Failed means closed: nothing holds the file any more.
+  EXPECT_FALSE(being_recorded(dir / "s.h5"));
   for (int k = 0; k < 1000; ++k) EXPECT_FALSE(rec->push_haptic(testing::haptic_row(k)));
   rec->stop();
   EXPECT_EQ(calls.load(), 1);
   EXPECT_EQ(heard, rec->error());
   EXPECT_NE(rec->error().find(dir / "s.h5"), std::string::npos) << rec->error();
   EXPECT_NE(rec->error().find("disk almost full"), std::string::npos) << rec->error();
-  EXPECT_GE(rec->stats().haptic_drops, 1000u);
-  // Rows accepted before the failure and never written are drops too.
-  EXPECT_EQ(rec->stats().haptic_rows_written + rec->stats().haptic_drops, i + 1000);
+  EXPECT_EQ(rec->stats().haptic_rows_written, accepted);
+  EXPECT_EQ(rec->stats().haptic_drops, 1000u + (100u - accepted));
   const SessionInfo info = read_session_info(dir / "s.h5");
   EXPECT_FALSE(info.open_for_write_flag);
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.rows.haptic_rows, accepted);
   ASSERT_EQ(info.rows.events, 1u);
   const hid_t file = H5Fopen((dir / "s.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
   ASSERT_GE(file, 0);
   EXPECT_EQ(testing::read_i32(file, "/events/kind").at(0), static_cast<int>(EventKind::kRecordingError));
+  const std::vector<double> times = testing::read_f64(file, "/haptic/time_s");
+  for (std::size_t r = 0; r < times.size(); ++r) EXPECT_EQ(times[r], testing::haptic_row(r).time_s) << r;
   H5Fclose(file);
 }
 

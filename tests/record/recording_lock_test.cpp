@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
+#include <cerrno>
+#include <cstring>
 #include <fstream>
 
 #include "record_test_support.hpp"
@@ -38,6 +42,18 @@ TEST(RecordingLock, AMissingFileIsNeitherTakenNorRecorded) {
   EXPECT_FALSE(lock.take(dir / "missing.h5"));
   EXPECT_FALSE(lock.held());
   EXPECT_FALSE(being_recorded(dir / "missing.h5"));
+}
+
+// A FIFO is no session: a plain open of one blocks until a writer comes, and
+// `tissue session repair` on one hung for good in this check.
+TEST(RecordingLock, AFifoIsNotRecordedAndNotOpened) {
+  TempDir dir;
+  const std::string fifo = dir / "fifo.h5";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0) << std::strerror(errno);
+  bool recorded = true;
+  EXPECT_FALSE(testing::opens_fifo_for_reading(fifo, [&] { recorded = being_recorded(fifo); }))
+      << "being_recorded opened the FIFO (it blocks there until a writer comes)";
+  EXPECT_FALSE(recorded);
 }
 
 }  // namespace

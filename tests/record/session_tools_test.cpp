@@ -10,7 +10,9 @@
 #include <array>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
+#include <sstream>
 
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -23,6 +25,7 @@
 #include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
 #include "record_test_support.hpp"
+#include "util/text.hpp"
 
 namespace tissue::record {
 namespace {
@@ -40,22 +43,37 @@ void write_small_session(const std::string& path, std::uint64_t frames = 5) {
 
 std::string tissue() { return quote(TISSUE_CLI_BINARY); }
 
+bool is_fifo(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && S_ISFIFO(st.st_mode);
+}
+
+// Runs `call`; on a FIFO, also fails the test if it opened it (a plain open
+// blocks until a writer comes: `tissue session repair` on one hung for good).
+void guarding_fifo(const std::string& path, const std::string& what, const std::function<void()>& call) {
+  if (!is_fifo(path)) return call();
+  EXPECT_FALSE(testing::opens_fifo_for_reading(path, call))
+      << what << " opened the FIFO " << path << " (it blocks there until a writer comes)";
+}
+
 // Every library tool and reader refuses `path` with a RecordError naming the
 // file (and `also`, e.g. the damaged dataset, when given); xdmf writes nothing.
 void expect_every_tool_refuses(const std::string& path, const TempDir& dir, const std::string& also = "") {
   SCOPED_TRACE(path);
   for (int tool = 0; tool < 5; ++tool) {
-    try {
-      if (tool == 0) read_session_info(path);
-      if (tool == 1) repair_session(path);
-      if (tool == 2) write_xdmf(path, dir / "out.xdmf");
-      if (tool == 3) read_session_rows(path);
-      if (tool == 4) read_haptic_track(path);
-      ADD_FAILURE() << "tool " << tool << " accepted " << path;
-    } catch (const RecordError& e) {
-      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << "tool " << tool << ": " << e.what();
-      EXPECT_NE(std::string(e.what()).find(also), std::string::npos) << "tool " << tool << ": " << e.what();
-    }
+    guarding_fifo(path, "tool " + std::to_string(tool), [&] {
+      try {
+        if (tool == 0) read_session_info(path);
+        if (tool == 1) repair_session(path);
+        if (tool == 2) write_xdmf(path, dir / "out.xdmf");
+        if (tool == 3) read_session_rows(path);
+        if (tool == 4) read_haptic_track(path);
+        ADD_FAILURE() << "tool " << tool << " accepted " << path;
+      } catch (const RecordError& e) {
+        EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << "tool " << tool << ": " << e.what();
+        EXPECT_NE(std::string(e.what()).find(also), std::string::npos) << "tool " << tool << ": " << e.what();
+      }
+    });
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "out.xdmf"));
 }
@@ -71,7 +89,9 @@ TEST(SessionTools, BadFilesMakeTheCliExitOneWithItsOwnMessage) {
   for (const std::string& path : testing::bad_session_files(dir)) {
     for (const char* tool : {"info", "repair", "xdmf"}) {
       SCOPED_TRACE(std::string(tool) + " " + path);
-      const auto r = run(tissue() + " session " + tool + " " + quote(path), scratch);
+      RunResult r;
+      guarding_fifo(path, std::string("tissue session ") + tool,
+                    [&] { r = run(tissue() + " session " + tool + " " + quote(path), scratch); });
       EXPECT_EQ(r.exit_code, 1) << r.err;
       EXPECT_NE(r.err.find(path), std::string::npos) << r.err;
       EXPECT_EQ(r.err.find("HDF5-DIAG"), std::string::npos) << "HDF5's error stack leaked:\n" << r.err;
@@ -169,7 +189,7 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
   EXPECT_NE(r.out.find("5 sessions in " + d), std::string::npos) << r.out;
   // The long, two-line scene name stays whole, on its session's row.
   EXPECT_NE(r.out.find("e.h5 "), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find(std::string(600, 'x') + " row\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(std::string(600, 'x') + "\\x0Arow\n"), std::string::npos) << r.out;
   EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1 + 1 + 5 + 1 + 1 + 1)
       << "title, header, 5 sessions, 1 unreadable, 1 unfinished, the OPEN hint\n"
       << r.out;
@@ -182,6 +202,87 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
   const auto missing = run(tissue() + " session list " + quote(dir / "missing"), dir);
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.err.find(dir / "missing"), std::string::npos) << missing.err;
+}
+
+// Lines of `text` that are not clean text (a control character, or bytes
+// that are not UTF-8), each with the reason.
+std::string unclean_lines(const std::string& text) {
+  std::string bad;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);)
+    if (const std::string why = util::why_not_clean_text(line); !why.empty()) bad += why + ": " + line + "\n";
+  return bad;
+}
+
+std::size_t lines_starting_with(const std::string& text, const std::string& start) {
+  std::size_t n = 0;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) n += line.rfind(start, 0) == 0;
+  return n;
+}
+
+// A session file may hold anything in its strings (a foreign writer, an
+// edit, damage), and a directory any file name: `info` and `list` printed
+// them raw, so an escape sequence reached the terminal and a line break
+// forged a line of the report. Every such byte now shows as \xNN; clean
+// UTF-8 (the ü) stays as it is.
+TEST(SessionTools, InfoAndListShowControlCharactersFromTheFileAsEscapes) {
+  TempDir dir;
+  const std::string d = dir / "state";
+  std::filesystem::create_directories(d);
+  SessionMetadata meta;
+  meta.scene_name = "probe\x1b]0;owned\x07\nstate:            closed cleanly";
+  meta.host_name = "lab\x1b[2Jhost";
+  meta.software_version = "1.0\r\xc2\x9b";  // CR, then C1 CSI as UTF-8
+  meta.start_time_utc = "2026-11-27T10:00:00Z\x1b[1A";
+  const std::string path = d + "/run\x1b[31m\xffü.h5";  // ESC, a byte that is not UTF-8, clean UTF-8
+  {
+    auto w = SessionWriter::create(dir / "s.h5", meta);
+    w->append_haptic(std::vector<HapticRow>{testing::haptic_row(0), testing::haptic_row(1)});
+    w->close();
+  }
+  {
+    // Repaired (not closed cleanly, flags clear), so repaired_utc is shown too.
+    const hid_t file = testing::open_for_edit(dir / "s.h5");
+    ASSERT_GE(file, 0);
+    for (const char* name : {kAttrClosedCleanly, kAttrEndTime}) EXPECT_GE(H5Adelete(file, name), 0) << name;
+    h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
+    h5::write_string_attribute(file, kAttrEndTime, "\x1b[8mend");
+    h5::write_string_attribute(file, kAttrRepairedTime,
+                               "2026-11-27\x9b"
+                               "2J");  // a lone C1 byte
+    H5Fclose(file);
+  }
+  std::filesystem::rename(dir / "s.h5", path);
+  testing::write_bytes(d + "/empty\x1b[5m.h5", "");
+  std::ofstream(d + "/.x.h5" + kCreatingInfix + "1-0\x1b[7m").flush();
+
+  const std::string info = format_session_info(read_session_info(path));
+  EXPECT_EQ(unclean_lines(info), "") << info;
+  EXPECT_EQ(lines_starting_with(info, "state:"), 1u) << info;
+  for (const char* expected : {"file:             " /* path follows */, "run\\x1B[31m\\xFFü.h5\n",
+                               "scene:            probe\\x1B]0;owned\\x07\\x0Astate:            closed cleanly\n",
+                               "host:             lab\\x1B[2Jhost\n", "software version: 1.0\\x0D\\xC2\\x9B\n",
+                               "start time (UTC): 2026-11-27T10:00:00Z\\x1B[1A\n", "end time (UTC):   \\x1B[8mend\n",
+                               "repaired 2026-11-27\\x9B2J\n"})
+    EXPECT_NE(info.find(expected), std::string::npos) << expected << "\n" << info;
+
+  const std::string list = format_session_listing(list_sessions(d));
+  EXPECT_EQ(unclean_lines(list), "") << list;
+  EXPECT_EQ(std::count(list.begin(), list.end(), '\n'), 1 + 1 + 1 + 1 + 1)
+      << "title, header, 1 session, 1 unreadable, 1 unfinished\n"
+      << list;
+  for (const char* expected : {"run\\x1B[31m\\xFFü.h5 ", "2026-11-27T10:00:00Z\\x1B[1A ",
+                               "probe\\x1B]0;owned\\x07\\x0Astate:", "empty\\x1B[5m.h5", "1-0\\x1B[7m"})
+    EXPECT_NE(list.find(expected), std::string::npos) << expected << "\n" << list;
+
+  // The CLI prints what the library formats: nothing raw reaches the terminal.
+  const auto cli_info = run(tissue() + " session info " + quote(path), dir);
+  EXPECT_EQ(cli_info.exit_code, 0) << cli_info.err;
+  EXPECT_EQ(cli_info.out, info);
+  const auto cli_list = run(tissue() + " session list " + quote(d), dir);
+  EXPECT_EQ(cli_list.exit_code, 0) << cli_list.err;
+  EXPECT_EQ(unclean_lines(cli_list.out), "") << cli_list.out;
 }
 
 TEST(SessionTools, CliBadArgumentsExitTwo) {

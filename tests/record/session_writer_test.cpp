@@ -327,6 +327,20 @@ TEST(SessionWriter, InvalidMeshFramesAreRefusedWithoutTouchingTheFile) {
     bad_strain.triangle_strain_energy_J_per_m3[2] = e;
     EXPECT_THROW(w->append_mesh_frame(bad_strain.view()), std::invalid_argument) << e;
   }
+  // Vertices are stored as float32: a coordinate beyond its range became
+  // inf in the file, silently (and the double-to-float conversion of such a
+  // value is undefined behaviour).
+  for (const double x :
+       {1e39, -1e39, std::numeric_limits<double>::quiet_NaN(), -std::numeric_limits<double>::infinity()}) {
+    testing::TestFrame bad_vertex = testing::test_frame(0);
+    bad_vertex.vertices_m[3][1] = x;
+    try {
+      w->append_mesh_frame(bad_vertex.view());
+      ADD_FAILURE() << "stored vertex coordinate " << x;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("vertex 3 coordinate 1"), std::string::npos) << e.what();
+    }
+  }
   w->append_mesh_frame(testing::test_frame(0).view());
   w->close();
   const hid_t file = H5Fopen((dir / "s.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
