@@ -167,8 +167,7 @@ void write_files(const TradeOptions& o, const SweepSetup& s, const std::vector<S
 
 }  // namespace
 
-SweepEnd run_sweep(const TradeOptions& o, OutputFile& csv, OutputFile& svg, const volatile std::sig_atomic_t* stop) {
-  const SweepSetup s = make_sweep_setup(o, stop);
+SweepEnd run_sweep(const TradeOptions& o, const SweepSetup& s, OutputFile& csv, OutputFile& svg) {
   print_sweep_header(o, s);
   const auto sweep0 = Clock::now();
   std::vector<SweepPoint> points = run_grid(s);
