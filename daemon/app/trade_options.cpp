@@ -1,8 +1,10 @@
 #include "app/trade_options.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -122,6 +124,22 @@ bool read_choice(const std::string& a, const NextValue& value, TradeOptions& o) 
   return true;
 }
 
+// The options only the sweep reads: Table 1 and beam theory run their
+// built-in scenes with --quick alone (--csv and --svg have their own message).
+const std::set<std::string> kSweepOnly = {"--scene",
+                                          "--scene-file",
+                                          "--set",
+                                          "--metric",
+                                          "--th",
+                                          "--depths",
+                                          "--integrators",
+                                          "--dts",
+                                          "--duration",
+                                          "--run-cap",
+                                          "--clock",
+                                          "--preconditioner",
+                                          "--explicit-precision"};
+
 // No mode flag: all three modes, but a scene file is for the sweep.
 void default_modes(TradeOptions& o) {
   if (o.table1 || o.sweep || o.beam_theory) return;
@@ -132,10 +150,25 @@ void default_modes(TradeOptions& o) {
 }
 
 // What no single option shows wrong: names out of their lists, options for
-// a mode or a file that is not asked for, both files at one path.
-void check_together(const TradeOptions& o) {
+// a mode or a file that is not asked for (`given`: the options on the
+// command line, in order), both files at one path.
+void check_together(const TradeOptions& o, const std::vector<std::string>& given) {
   if (o.sweep_scene != "cantilever" && o.sweep_scene != "beam" && o.sweep_scene != "beam-r")
     throw std::invalid_argument("--scene must be cantilever, beam or beam-r");
+  // Without --sweep these were silently ignored: `--table1 --scene-file
+  // mine.yaml` ran Table 1 on the built-in cantilever, never opening the file.
+  for (const std::string& option : given) {
+    if (!o.sweep && kSweepOnly.count(option))
+      throw std::invalid_argument(option +
+                                  " is the sweep's option (Table 1 and beam theory do not read it): add --sweep");
+    if (!o.beam_theory && option == "--beam-depth")
+      throw std::invalid_argument("--beam-depth is the beam-theory table's option: add --beam-theory");
+  }
+  const auto is_given = [&](const char* option) {
+    return std::find(given.begin(), given.end(), option) != given.end();
+  };
+  if (is_given("--scene") && is_given("--scene-file"))
+    throw std::invalid_argument("--scene and --scene-file both name the sweep's scene: give one");
   if (!o.scene_overrides.empty() && o.scene_file.empty())
     throw std::invalid_argument("--set applies to --scene-file; the built-in scenes take none");
   if (!o.sweep && (!o.csv_path.empty() || !o.svg_path.empty()))
@@ -153,6 +186,7 @@ void check_together(const TradeOptions& o) {
 
 TradeOptions parse_trade_options(const std::vector<std::string>& args) {
   TradeOptions o;
+  std::vector<std::string> given;  // the options read, for check_together
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
     const NextValue value = [&]() -> std::string {
@@ -165,9 +199,10 @@ TradeOptions parse_trade_options(const std::vector<std::string>& args) {
     }
     if (!read_mode_or_name(a, value, o) && !read_numbers(a, value, o) && !read_choice(a, value, o))
       throw std::invalid_argument("unknown argument " + a);
+    given.push_back(a);
   }
   default_modes(o);
-  check_together(o);
+  check_together(o, given);
   return o;
 }
 
@@ -186,7 +221,8 @@ void print_trade_usage(const std::string& program, std::FILE* to) {
       "          a scene file: its own)\n"
       "  beam-theory: [--beam-depth D]   (uniform depths 0..D, each a scene the scene checks accept:\n"
       "          at most 16, 192 x 2^16 tetrahedra)\n"
-      "no mode flag: all three modes (with --scene-file: the sweep)\n"
+      "no mode flag: all three modes (with --scene-file: the sweep); the sweep's options need the sweep,\n"
+      "  --beam-depth the beam theory; --scene and --scene-file exclude each other\n"
       "--quick: shorter runs and fewer points everywhere (the defaults in brackets below)\n"
       "--scene: cantilever (the paper's, 5 N tip load), beam (PERFORMANCE.md's 0.4 m beam, 8x2x2 cubes),\n"
       "  beam-r (the same beam as 12x3x3 cubes, whose uniform depths 0, 3, 6, 9 are PERFORMANCE.md's R1..R4)\n"

@@ -50,7 +50,8 @@ void write_title_and_legend(std::ostream& o, const SweepSetup& s, const std::str
     << " s: adaptive points below the uniform curve = adaptivity pays</text>\n";
   const double lx = 10, ly = kTitleH + 10;
   o << "<rect x=\"" << lx << "\" y=\"" << ly - 6 << "\" width=\"10\" height=\"10\" fill=\"black\"/><text x=\""
-    << lx + 14 << "\" y=\"" << ly + 3 << "\">uniform levels L0..L(max-1) (line)</text>\n";
+    << lx + 14 << "\" y=\"" << ly + 3 << "\">uniform levels " << level_name(s.base_depth)
+    << "..L(max-1) (line)</text>\n";  // from the scene's adaptivity.min_depth
   o << "<line x1=\"" << lx + 230 << "\" y1=\"" << ly - 6 << "\" x2=\"" << lx + 230 << "\" y2=\"" << ly + 6
     << "\" stroke=\"gray\" stroke-dasharray=\"4,3\" stroke-width=\"1.5\"/><text x=\"" << lx + 236 << "\" y=\"" << ly + 3
     << "\">uniform reference at max depth (error 0 by definition): its cost</text>\n";

@@ -51,7 +51,9 @@
 #include <chrono>
 #include <cstdio>
 #include <exception>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "app/output_file.hpp"
@@ -60,6 +62,7 @@
 #include "app/trade_options.hpp"
 #include "app/trade_run.hpp"
 #include "app/trade_sweep.hpp"
+#include "app/trade_sweep_setup.hpp"
 #include "app/trade_table1.hpp"
 
 namespace tissue::app {
@@ -91,9 +94,10 @@ int sweep_exit(const std::string& program, const TradeOptions& o, const SweepEnd
   return kTradeExitOk;
 }
 
-// Runs the modes `o` asks for in order (Table 1, beam theory, sweep) into
-// the opened files; returns the exit code.
-int run_modes(const std::string& program, const TradeOptions& o, OutputFile& csv, OutputFile& svg) {
+// Runs the modes `o` asks for in order (Table 1, beam theory, the sweep
+// `sweep` if asked for) into the opened files; returns the exit code.
+int run_modes(const std::string& program, const TradeOptions& o, std::optional<SweepSetup> sweep, OutputFile& csv,
+              OutputFile& svg) {
   const auto t0 = Clock::now();
   if (o.table1) {
     const auto t = Clock::now();
@@ -105,11 +109,12 @@ int run_modes(const std::string& program, const TradeOptions& o, OutputFile& csv
     run_beam_theory(o);
     std::printf("\n(beam-theory wall time %.1f s)\n", seconds_between(t, Clock::now()));
   }
-  if (o.sweep) {
+  if (sweep) {
     // Ctrl-C (or SIGTERM) during the sweep, which can take hours, ends it
     // after the step in progress and keeps what it measured.
     const StopOnSignals stop;
-    if (const int code = sweep_exit(program, o, run_sweep(o, csv, svg, stop.flag())); code != kTradeExitOk) return code;
+    sweep->stop = stop.flag();
+    if (const int code = sweep_exit(program, o, run_sweep(o, *sweep, csv, svg)); code != kTradeExitOk) return code;
   }
   std::printf("\ntotal wall time %.1f s\n", seconds_between(t0, Clock::now()));
   return kTradeExitOk;
@@ -131,8 +136,11 @@ int run_trade_study(const std::string& program, const std::vector<std::string>& 
     return kTradeExitOk;
   }
   try {
-    // The sweep's files are opened before anything runs: a path that cannot
-    // be written fails now, not after an hour of runs.
+    // The sweep's setup (its scene file, integrators, depths, every run's
+    // scene) and files before anything runs: a bad one fails now, not after
+    // Table 1 and beam theory (minutes) or an hour of runs.
+    std::optional<SweepSetup> sweep;
+    if (o.sweep) sweep = make_sweep_setup(o, nullptr);  // the stop flag is set when the sweep starts
     OutputFile csv, svg;
     if (!o.csv_path.empty())
       if (const std::string why = csv.open(o.csv_path, "--csv"); !why.empty())
@@ -140,7 +148,7 @@ int run_trade_study(const std::string& program, const std::vector<std::string>& 
     if (!o.svg_path.empty())
       if (const std::string why = svg.open(o.svg_path, "--svg"); !why.empty())
         return fail(program, kTradeExitOutput, why);
-    return run_modes(program, o, csv, svg);
+    return run_modes(program, o, std::move(sweep), csv, svg);
   } catch (const OutputError& e) {
     return fail(program, kTradeExitOutput, e.what());
   } catch (const std::exception& e) {

@@ -42,8 +42,8 @@ void record_mesh(const ph::Simulation& sim, SweepPoint& p) {
 }
 
 // One run of the sweep: mesh `m`, integrator `kind`, step dt for the
-// setup's duration, recording the tip's path after every step and, if the
-// run finished, its end state for the errors.
+// setup's duration, recording the tip's path (a bounded sample of the steps:
+// is_path_sample) and, if the run finished, its end state for the errors.
 SweepPoint run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKind kind, double dt) {
   SweepPoint p;
   p.st.cost_uses_cpu = s.cost_uses_cpu;
@@ -56,14 +56,19 @@ SweepPoint run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKin
   ph::Simulation sim(sweep_scene(s, m, kind, dt));
   const long steps = std::lround(s.duration_s / dt);
   const bool has_tip = sim.probe_count() > 0;
+  long steps_done = 0;
   advance(
       sim, steps, p.st, s.wall_cap_s,
       [&](const ph::Simulation&) {
-        if (!has_tip) return;
+        if (!has_tip || !is_path_sample(++steps_done, steps)) return;
         p.tip_t_s.push_back(sim.time_s());
         p.tip_path_m.push_back(sim.probe_displacement_m(0));
       },
       s.stop);
+  if (!p.st.ok || p.st.capped) {  // no path error for these (set_path_errors): free the path now
+    std::vector<double>().swap(p.tip_t_s);
+    std::vector<Vec3>().swap(p.tip_path_m);
+  }
   record_mesh(sim, p);
   if (p.st.ok && !p.st.capped) {
     // The first probe is the tip (a scene file without probes has no tip error).
@@ -167,8 +172,7 @@ void write_files(const TradeOptions& o, const SweepSetup& s, const std::vector<S
 
 }  // namespace
 
-SweepEnd run_sweep(const TradeOptions& o, OutputFile& csv, OutputFile& svg, const volatile std::sig_atomic_t* stop) {
-  const SweepSetup s = make_sweep_setup(o, stop);
+SweepEnd run_sweep(const TradeOptions& o, const SweepSetup& s, OutputFile& csv, OutputFile& svg) {
   print_sweep_header(o, s);
   const auto sweep0 = Clock::now();
   std::vector<SweepPoint> points = run_grid(s);

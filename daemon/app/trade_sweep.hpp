@@ -8,11 +8,11 @@
 // then not run, nor adaptive runs whose reference did not finish.
 #pragma once
 
-#include <csignal>
 #include <stdexcept>
 
 #include "app/output_file.hpp"
 #include "app/trade_options.hpp"
+#include "app/trade_sweep_setup.hpp"
 
 namespace tissue::app {
 
@@ -28,10 +28,11 @@ struct SweepEnd {
   bool any_figures = false;
 };
 
-// Runs the sweep, prints its tables and writes `csv` / `svg` (those opened).
-// A signal in `stop` ends it early; the tables and files then hold the runs
-// done. Throws std::invalid_argument for a setup that cannot run
-// (make_sweep_setup) and OutputError for a file that cannot be written.
-SweepEnd run_sweep(const TradeOptions& o, OutputFile& csv, OutputFile& svg, const volatile std::sig_atomic_t* stop);
+// Runs the sweep `s` (make_sweep_setup, made before any mode runs so that a
+// setup that cannot run fails at once), prints its tables and writes `csv` /
+// `svg` (those opened). A signal in s.stop ends it early; the tables and
+// files then hold the runs done. Throws OutputError for a file that cannot
+// be written.
+SweepEnd run_sweep(const TradeOptions& o, const SweepSetup& s, OutputFile& csv, OutputFile& svg);
 
 }  // namespace tissue::app

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <sstream>
+#include <string>
 
 #include "app/trade_format.hpp"
 
@@ -24,13 +25,18 @@ const char* const kCsvHeader =
     "max_err_rel,unlocated,mean_solver_iterations,max_substeps,last_mesh_change_s,deepest_level,tets_at_deepest,"
     "unconverged_steps,tip_path_err_rel,path_truth\n";
 
+// The cap reads the cost's clock (--clock): say which.
+std::string capped_message(const RunStats& st) {
+  return std::string("stopped by the per-run cap on ") + (st.cost_uses_cpu ? "thread CPU" : "wall") + " time";
+}
+
 void write_row(std::ostream& f, const std::string& scene, const SweepPoint& p,
                const std::map<int, std::string>& truth) {
   f << csv_quote(scene) << ',' << p.integrator << ',' << p.dt_s << ',' << p.max_depth << ','
     << (p.adaptive ? "adaptive" : "uniform") << ',' << (p.adaptive ? std::string() : std::to_string(p.level)) << ','
     << csv_num(p.th_Pa) << ',' << p.status() << ','
-    << csv_quote(p.st.ok ? (p.st.capped ? "stopped by the per-run wall cap" : "") : p.st.error) << ',' << p.st.steps
-    << ',' << csv_num(p.st.sim_s) << ',' << csv_num(p.st.wall_s) << ',' << csv_num(p.st.cpu_s) << ','
+    << csv_quote(p.st.ok ? (p.st.capped ? capped_message(p.st) : "") : p.st.error) << ',' << p.st.steps << ','
+    << csv_num(p.st.sim_s) << ',' << csv_num(p.st.wall_s) << ',' << csv_num(p.st.cpu_s) << ','
     << csv_num(p.st.wall_cost()) << ',' << csv_num(p.st.cpu_cost()) << ',' << p.nodes << ',' << p.tets << ','
     << p.springs << ',' << p.peak_nodes << ',' << p.peak_tets << ',' << p.splits << ',' << p.merges << ','
     << (p.captured ? csv_num(p.tip[2]) : "") << ',' << csv_num(p.tip_err) << ',' << csv_num(p.rms_err) << ','

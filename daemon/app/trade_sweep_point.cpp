@@ -15,6 +15,10 @@ std::string SweepPoint::status() const {
   return "ok";
 }
 
+long path_stride(long steps) { return steps <= kMaxPathSamples ? 1 : (steps + kMaxPathSamples - 1) / kMaxPathSamples; }
+
+bool is_path_sample(long step, long steps) { return step % path_stride(steps) == 0 || step == steps; }
+
 SweepPoint not_run_point(scene::IntegratorKind kind, double dt_s, const std::string& reason) {
   SweepPoint p;
   p.integrator = integrator_name(kind);

@@ -21,7 +21,9 @@ void print_sweep_header(const TradeOptions& o, const SweepSetup& s) {
   for (double t : s.th_Pa) std::printf(" %g", t);
   std::printf("; max depths:");
   for (int d : s.max_depths) std::printf(" %d", d);
-  std::printf("; per-run wall cap %.0f s (a capped run still gives its cost, not its error).\n\n", s.wall_cap_s);
+  // %g: a cap of 0.4 s printed as "0" with %.0f; the clock is the one the cap reads.
+  std::printf("; per-run cap %g s of %s time (a capped run still gives its cost, not its error).\n\n", s.wall_cap_s,
+              s.cost_uses_cpu ? "thread CPU" : "wall");
 }
 
 namespace {
@@ -89,16 +91,31 @@ void print_refusals(const std::vector<SweepPoint>& points) {
   }
 }
 
+namespace {
+
+// Whether uniform point `q` is on p's uniform curve (uniform_curve).
+bool on_uniform_curve(const SweepPoint& q, const SweepPoint& p, const std::string& metric) {
+  const bool against_truth = metric == "path";
+  return !q.adaptive && q.integrator == p.integrator && q.dt_s == p.dt_s && q.max_depth == p.max_depth &&
+         (q.level < q.max_depth || against_truth) && std::isfinite(metric_of(q, metric)) && metric_of(q, metric) > 0 &&
+         std::isfinite(q.st.cost());
+}
+
+}  // namespace
+
 LogCurve uniform_curve(const std::vector<SweepPoint>& points, const SweepPoint& p, const std::string& metric) {
   LogCurve curve;
-  const bool against_truth = metric == "path";
   for (const auto& q : points)
-    if (!q.adaptive && q.integrator == p.integrator && q.dt_s == p.dt_s && q.max_depth == p.max_depth &&
-        (q.level < q.max_depth || against_truth) && std::isfinite(metric_of(q, metric)) && metric_of(q, metric) > 0 &&
-        std::isfinite(q.st.cost()))
-      curve.emplace_back(std::log10(q.st.cost()), std::log10(metric_of(q, metric)));
+    if (on_uniform_curve(q, p, metric)) curve.emplace_back(std::log10(q.st.cost()), std::log10(metric_of(q, metric)));
   std::sort(curve.begin(), curve.end());
   return curve;
+}
+
+int cheapest_uniform_level(const std::vector<SweepPoint>& points, const SweepPoint& p, const std::string& metric) {
+  const SweepPoint* cheapest = nullptr;
+  for (const auto& q : points)
+    if (on_uniform_curve(q, p, metric) && (!cheapest || q.st.cost() < cheapest->st.cost())) cheapest = &q;
+  return cheapest ? cheapest->level : -1;
 }
 
 double reference_cost(const std::vector<SweepPoint>& points, const SweepPoint& p) {
@@ -110,13 +127,14 @@ double reference_cost(const std::vector<SweepPoint>& points, const SweepPoint& p
   return ref_cost;
 }
 
-CurveVerdict compare_with_uniform_curve(double cost, double error, const LogCurve& curve, double ref_cost) {
+CurveVerdict compare_with_uniform_curve(double cost, double error, const LogCurve& curve, double ref_cost,
+                                        int cheapest_level) {
   CurveVerdict v{"n/a", "no uniform curve"};
   if (curve.size() < 2) return v;
   const double lc = std::log10(cost);
   if (lc < curve.front().first) {
     v.uniform_error = "—";
-    v.verdict = "cheaper than L0";
+    v.verdict = "cheaper than " + level_name(cheapest_level);
     if (std::log10(error) < curve.front().second) v.verdict += ", and more accurate: below";
   } else if (lc > curve.back().first) {
     v.uniform_error = "—";
@@ -153,8 +171,8 @@ void print_verdicts(const std::vector<SweepPoint>& points, const std::string& me
     if (!p.adaptive) continue;
     const double e = metric_of(p, metric), c = p.st.cost();
     if (!(std::isfinite(e) && std::isfinite(c))) continue;
-    const CurveVerdict v =
-        compare_with_uniform_curve(c, e, uniform_curve(points, p, metric), reference_cost(points, p));
+    const CurveVerdict v = compare_with_uniform_curve(c, e, uniform_curve(points, p, metric), reference_cost(points, p),
+                                                      cheapest_uniform_level(points, p, metric));
     std::printf("| %s | %g | %d | %g | %.3g | %s | %s | %s |\n", p.integrator.c_str(), p.dt_s * 1e3, p.max_depth,
                 p.th_Pa, c, percent_text(e).c_str(), v.uniform_error.c_str(), v.verdict.c_str());
   }

@@ -31,17 +31,23 @@ using LogCurve = std::vector<std::pair<double, double>>;
 // path metric the reference too (its path error is against the truth run).
 LogCurve uniform_curve(const std::vector<SweepPoint>& points, const SweepPoint& p, const std::string& metric);
 
+// The level of the cheapest point on p's uniform curve: the lowest uniform
+// level, adaptivity.min_depth, unless that one has no error; -1 without a curve.
+int cheapest_uniform_level(const std::vector<SweepPoint>& points, const SweepPoint& p, const std::string& metric);
+
 // The cost of p's reference run (the uniform level at its max depth); NaN if
 // that run failed or is not there.
 double reference_cost(const std::vector<SweepPoint>& points, const SweepPoint& p);
 
 // An adaptive point of cost `cost` and error `error` against the uniform
 // curve interpolated (log-log) at that cost: the uniform error there
-// ("n/a" without a curve of 2 points, "—" outside it) and the verdict.
+// ("n/a" without a curve of 2 points, "—" outside it) and the verdict
+// (naming `cheapest_level`, the curve's cheapest point, when it costs less).
 struct CurveVerdict {
   std::string uniform_error, verdict;
 };
-CurveVerdict compare_with_uniform_curve(double cost, double error, const LogCurve& curve, double ref_cost);
+CurveVerdict compare_with_uniform_curve(double cost, double error, const LogCurve& curve, double ref_cost,
+                                        int cheapest_level);
 
 // The adaptive points' verdicts against their uniform curves, `metric` errors.
 void print_verdicts(const std::vector<SweepPoint>& points, const std::string& metric);

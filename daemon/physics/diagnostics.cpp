@@ -1,6 +1,7 @@
 #include "physics/diagnostics.hpp"
 
 #include <algorithm>
+#include <string>
 
 #include "physics/forces.hpp"
 #include "physics/integrator.hpp"
@@ -44,6 +45,17 @@ EnergyAudit audit_steps(Simulation& sim, int steps) {
   }
   audit.inverted_tets = inverted_tet_count(sim.body());
   return audit;
+}
+
+AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit_rung) {
+  if (audit.nonfinite || audit.worst_excess > slack) return AuditOutcome::kFailed;
+  if (!audit.refused) return AuditOutcome::kOk;
+  // Every integrator rejects a non-finite step and keeps the old state: a
+  // blow-up arrives here as a refusal, never as a non-finite state. The
+  // explicit rung's refusals above its cap name the key (the step needs more
+  // sub-steps, or a collapsing spring no stable sub-step within it).
+  const bool above_cap = audit.error.find("integrator.max_substeps") != std::string::npos;
+  return explicit_rung && above_cap ? AuditOutcome::kRefusedAboveMaxSubsteps : AuditOutcome::kFailed;
 }
 
 }  // namespace tissue::physics

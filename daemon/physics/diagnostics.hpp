@@ -43,4 +43,13 @@ struct EnergyAudit {
 // Steps `sim` up to `steps` times and audits every step.
 EnergyAudit audit_steps(Simulation& sim, int steps);
 
+// How an audited run of the stability matrix ends (bench/stability_matrix
+// and its CI subset, tests/physics/stability_test.cpp, both judge by this).
+enum class AuditOutcome {
+  kOk,                       // every step taken, finite, within the slack
+  kRefusedAboveMaxSubsteps,  // the explicit rung refused a step needing more than integrator.max_substeps
+  kFailed,                   // anything else
+};
+AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit_rung);
+
 }  // namespace tissue::physics

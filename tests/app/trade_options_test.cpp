@@ -39,13 +39,17 @@ TEST(TradeOptions, NoModeFlagRunsAllThreeButASceneFileOnlyTheSweep) {
 }
 
 TEST(TradeOptions, ListsAndNumbersAreReadWhole) {
-  const TradeOptions o = parse_trade_options({"--sweep",    "--th",          "2,20.5",
-                                              "--depths",   "3,6",           "--dts",
-                                              "0.001",      "--integrators", "implicit,explicit",
-                                              "--duration", "0.25",          "--beam-depth",
-                                              "0",          "--clock",       "cpu",
-                                              "--set",      "a.b=1",         "--set",
-                                              "c=2",        "--scene-file",  "s.yaml"});
+  const TradeOptions o = parse_trade_options({"--sweep",       "--beam-theory",
+                                              "--th",          "2,20.5",
+                                              "--depths",      "3,6",
+                                              "--dts",         "0.001",
+                                              "--integrators", "implicit,explicit",
+                                              "--duration",    "0.25",
+                                              "--beam-depth",  "0",
+                                              "--clock",       "cpu",
+                                              "--set",         "a.b=1",
+                                              "--set",         "c=2",
+                                              "--scene-file",  "s.yaml"});
   EXPECT_EQ(o.th_Pa, (std::vector<double>{2.0, 20.5}));
   EXPECT_EQ(o.max_depths, (std::vector<int>{3, 6}));
   EXPECT_EQ(o.dts_s, (std::vector<double>{0.001}));
@@ -85,6 +89,34 @@ TEST(TradeOptions, EachErrorNamesTheOptionOrTheConflict) {
   EXPECT_EQ(parse_error({"--beam-theory", "--beam-depth", "16"}), "");
   // With the sweep in the defaulted modes, its files are fine.
   EXPECT_EQ(parse_error({"--csv", "t.csv", "--svg", "p.svg"}), "");
+  // Table 1 and beam theory run their built-in scenes with --quick alone: an
+  // option of the sweep without --sweep was silently ignored (Table 1 ran on
+  // the built-in cantilever, never opening --scene-file).
+  EXPECT_EQ(parse_error({"--table1", "--scene-file", "mine.yaml", "--set", "a=1"}),
+            "--scene-file is the sweep's option (Table 1 and beam theory do not read it): add --sweep");
+  for (const std::vector<std::string> option : {std::vector<std::string>{"--scene", "beam"},
+                                                {"--th", "20"},
+                                                {"--depths", "3"},
+                                                {"--integrators", "implicit"},
+                                                {"--dts", "0.001"},
+                                                {"--duration", "0.2"},
+                                                {"--run-cap", "5"},
+                                                {"--clock", "wall"},
+                                                {"--metric", "rms"},
+                                                {"--preconditioner", "jacobi"},
+                                                {"--explicit-precision", "float"}}) {
+    std::vector<std::string> args = {"--beam-theory", "--quick"};
+    args.insert(args.end(), option.begin(), option.end());
+    EXPECT_EQ(parse_error(args),
+              option[0] + " is the sweep's option (Table 1 and beam theory do not read it): add --sweep");
+  }
+  EXPECT_EQ(parse_error({"--sweep", "--table1", "--th", "20", "--clock", "cpu"}), "") << "with --sweep they are read";
+  // Only the beam-theory table reads --beam-depth.
+  EXPECT_EQ(parse_error({"--sweep", "--beam-depth", "3"}),
+            "--beam-depth is the beam-theory table's option: add --beam-theory");
+  // The sweep runs one scene: a built-in one or a file, not both.
+  EXPECT_EQ(parse_error({"--sweep", "--scene", "beam", "--scene-file", "mine.yaml"}),
+            "--scene and --scene-file both name the sweep's scene: give one");
 }
 
 }  // namespace

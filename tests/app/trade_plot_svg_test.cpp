@@ -116,6 +116,20 @@ TEST(TradePlotSvg, TheSvgPlacesEachMarkOnTheLogLogPanel) {
   EXPECT_EQ(count(svg, "text-anchor=\"end\">1e"), 4u);      // ...and error decades -3..0 the y axis
 }
 
+// The legend names the uniform levels the sweep ran: from the scene's
+// adaptivity.min_depth (it said L0 whatever the lowest level was).
+TEST(TradePlotSvg, TheLegendNamesTheLowestUniformLevel) {
+  SweepSetup s;
+  s.kinds = {sc::IntegratorKind::kImplicit};
+  s.dts_s = {1e-3};
+  s.max_depths = {4};
+  EXPECT_NE(svg_text(s, {}, "rms").find(">uniform levels L0..L(max-1) (line)</text>"), std::string::npos);
+  s.base_depth = 2;
+  const std::string svg = svg_text(s, {}, "rms");
+  EXPECT_NE(svg.find(">uniform levels L2..L(max-1) (line)</text>"), std::string::npos) << svg;
+  EXPECT_EQ(svg.find("L0"), std::string::npos) << svg;
+}
+
 TEST(TradePlotSvg, OnePanelPerIntegratorRowAndDtAndDepthColumn) {
   SweepSetup s;
   s.kinds = {sc::IntegratorKind::kImplicit, sc::IntegratorKind::kExplicit};

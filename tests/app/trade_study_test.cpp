@@ -277,6 +277,22 @@ TEST(TradeStudy, BadNumbersAreUsageErrorsNamingTheOption) {
   }
 }
 
+// The sweep's setup (integrators, scene file, depths, every run's scene) is
+// checked before any mode runs: a bad integrator name waited through Table 1
+// (minutes) before exit 2.
+TEST(TradeStudy, ABadSweepSetupFailsBeforeTable1Runs) {
+  TempDir dir;
+  const RunResult r = run(kTrade + " --table1 --sweep --quick --integrators bogus", dir);
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("unknown integrator bogus"), std::string::npos) << r.err;
+  EXPECT_EQ(r.out.find("## Table 1"), std::string::npos) << "nothing ran: " << r.out;
+  // A scene file that does not load, likewise (its name in the message).
+  const RunResult f = run(kTrade + " --table1 --sweep --quick --scene-file " + quote(dir / "absent.yaml"), dir);
+  EXPECT_EQ(f.exit_code, 2) << f.err;
+  EXPECT_NE(f.err.find(dir / "absent.yaml"), std::string::npos) << f.err;
+  EXPECT_EQ(f.out.find("## Table 1"), std::string::npos) << "nothing ran: " << f.out;
+}
+
 // The sweep's files are created before any run: a path that cannot be
 // written is exit 4 naming it, with nothing run; and they belong to the sweep.
 TEST(TradeStudy, AnUnwritableOutputFailsBeforeAnyRun) {

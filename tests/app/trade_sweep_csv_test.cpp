@@ -56,10 +56,24 @@ TEST(TradeSweepCsv, OneRowPerPointWithAsManyFieldsAsTheHeader) {
   EXPECT_EQ(fields(lines[1]), fields(lines[0]));
   EXPECT_EQ(fields(lines[2]), fields(lines[0]));
   EXPECT_EQ(lines[1].rfind("\"plain\",implicit,0.001,2,uniform,2,,ok,\"\",", 0), 0u) << lines[1];
-  EXPECT_EQ(lines[2].rfind("\"plain\",implicit,0.001,2,adaptive,,20,capped,\"stopped by the per-run wall cap\",", 0),
-            0u)
+  EXPECT_EQ(
+      lines[2].rfind("\"plain\",implicit,0.001,2,adaptive,,20,capped,\"stopped by the per-run cap on wall time\",", 0),
+      0u)
       << lines[2];
   EXPECT_NE(lines[2].find(",\"explicit at dt 1 ms, uniform L2\""), std::string::npos);
+}
+
+// Under --clock cpu the cap is on thread CPU time, and the message says so
+// (it said "wall cap" whichever clock the cap read).
+TEST(TradeSweepCsv, ACappedRunNamesTheClockItsCapRead) {
+  SweepPoint capped;
+  capped.integrator = "implicit";
+  capped.st.capped = true;
+  EXPECT_NE(csv_text("plain", {capped}, {}).find(",capped,\"stopped by the per-run cap on wall time\","),
+            std::string::npos);
+  capped.st.cost_uses_cpu = true;
+  const std::string text = csv_text("plain", {capped}, {});
+  EXPECT_NE(text.find(",capped,\"stopped by the per-run cap on thread CPU time\","), std::string::npos) << text;
 }
 
 }  // namespace

@@ -104,5 +104,31 @@ TEST(TradeSweepPoint, TheTruthIsExplicitAtTheSmallestStep) {
   EXPECT_TRUE(std::isnan(points[3].path_err)) << "a capped run has no path error";
 }
 
+// The tip path's samples are bounded whatever the step count (1e8 steps,
+// the most the setup allows, kept 1e8 samples: 3.2 GB a run): every step up
+// to kMaxPathSamples, then a uniform grid ending at the last step.
+TEST(TradeSweepPoint, TheTipPathKeepsABoundedUniformSampleOfTheSteps) {
+  for (const long steps : {1L, 500L, kMaxPathSamples, kMaxPathSamples + 1, 123457L, 100000000L}) {
+    SCOPED_TRACE(steps);
+    long samples = 0, last = 0, gap = 0;
+    bool uniform = true;
+    for (long step = 1; step <= steps; ++step) {
+      if (!is_path_sample(step, steps)) continue;
+      if (step != steps && gap != 0 && step - last != gap) uniform = false;  // the last may come early
+      if (step != steps) gap = step - last;
+      last = step;
+      ++samples;
+    }
+    EXPECT_LE(samples, kMaxPathSamples + 1);
+    EXPECT_EQ(last, steps) << "the end state is always a sample";
+    EXPECT_TRUE(uniform);
+    if (steps <= kMaxPathSamples) {
+      EXPECT_EQ(samples, steps) << "every step, as before";
+    } else {
+      EXPECT_GE(samples, kMaxPathSamples / 2) << "no coarser than it needs to be";
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tissue::app

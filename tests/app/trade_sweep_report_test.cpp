@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 #include <vector>
 
 namespace tissue::app {
@@ -16,33 +17,33 @@ const LogCurve kCurve = {{0.0, -1.0}, {1.0, -2.0}};
 
 TEST(TradeSweepReport, InsideTheCurveTheUniformErrorIsInterpolatedLogLog) {
   // At cost 10^0.5 the line gives 10^-1.5 = 3.16 %; 0.1 % is 10^1.5 = 32x less.
-  const CurveVerdict below = compare_with_uniform_curve(std::pow(10.0, 0.5), 1e-3, kCurve, 100.0);
+  const CurveVerdict below = compare_with_uniform_curve(std::pow(10.0, 0.5), 1e-3, kCurve, 100.0, 0);
   EXPECT_EQ(below.uniform_error, "3.16 %");
   EXPECT_EQ(below.verdict, "below (32x less error)");
   // A quarter of the way along (cost 10^0.25) the line gives 10^-1.25 =
   // 5.62 %, and 10 % is 10^0.25 = 1.8x more.
-  const CurveVerdict above = compare_with_uniform_curve(std::pow(10.0, 0.25), 0.1, kCurve, 100.0);
+  const CurveVerdict above = compare_with_uniform_curve(std::pow(10.0, 0.25), 0.1, kCurve, 100.0, 0);
   EXPECT_EQ(above.uniform_error, "5.62 %");
   EXPECT_EQ(above.verdict, "above (1.8x more error)");
 }
 
 TEST(TradeSweepReport, OutsideTheCurveTheVerdictSaysWhere) {
-  const CurveVerdict cheap = compare_with_uniform_curve(0.1, 0.01, kCurve, 100.0);
+  const CurveVerdict cheap = compare_with_uniform_curve(0.1, 0.01, kCurve, 100.0, 0);
   EXPECT_EQ(cheap.uniform_error, "—");
   EXPECT_EQ(cheap.verdict, "cheaper than L0, and more accurate: below");
-  EXPECT_EQ(compare_with_uniform_curve(0.1, 0.5, kCurve, 100.0).verdict, "cheaper than L0");
+  EXPECT_EQ(compare_with_uniform_curve(0.1, 0.5, kCurve, 100.0, 0).verdict, "cheaper than L0");
   // Costlier than L1 but cheaper than the reference (100 s/s)...
-  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, 100.0).verdict,
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, 100.0, 0).verdict,
             "below (between L(max-1) and the reference in cost)");
-  EXPECT_EQ(compare_with_uniform_curve(20.0, 0.05, kCurve, 100.0).verdict,
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 0.05, kCurve, 100.0, 0).verdict,
             "above (costlier and less accurate than L(max-1))");
   // ...or not: then accuracy does not redeem it, nor does an unknown reference cost.
-  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, 15.0).verdict, "costs more than the reference itself");
-  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, NAN).verdict, "costs more than the reference itself");
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, 15.0, 0).verdict, "costs more than the reference itself");
+  EXPECT_EQ(compare_with_uniform_curve(20.0, 1e-3, kCurve, NAN, 0).verdict, "costs more than the reference itself");
 }
 
 TEST(TradeSweepReport, OnePointIsNoCurve) {
-  const CurveVerdict v = compare_with_uniform_curve(1.0, 0.01, {{0.0, -1.0}}, 100.0);
+  const CurveVerdict v = compare_with_uniform_curve(1.0, 0.01, {{0.0, -1.0}}, 100.0, 0);
   EXPECT_EQ(v.uniform_error, "n/a");
   EXPECT_EQ(v.verdict, "no uniform curve");
 }
@@ -77,6 +78,42 @@ TEST(TradeSweepReport, TheCurveIsTheSameSettingsLevelsBelowTheReference) {
   // The path error is against the truth run: the reference is on that curve.
   EXPECT_EQ(uniform_curve(points, adaptive, "path").size(), 3u);
   EXPECT_EQ(reference_cost(points, adaptive), 100.0);
+}
+
+// With adaptivity.min_depth 2 the uniform levels start at L2: a point
+// cheaper than all of them is cheaper than L2 (the verdict said L0).
+TEST(TradeSweepReport, CheaperThanTheCurveNamesItsCoarsestLevel) {
+  SweepPoint adaptive = uniform_point(0, 0.1, 0.5);
+  adaptive.adaptive = true;
+  adaptive.max_depth = 4;
+  std::vector<SweepPoint> points = {uniform_point(2, 1.0, 0.1), uniform_point(3, 10.0, 0.01),
+                                    uniform_point(4, 100.0, 0.0), adaptive};
+  for (SweepPoint& p : points) p.max_depth = 4;
+  ::testing::internal::CaptureStdout();
+  print_verdicts(points, "rms");
+  const std::string out = ::testing::internal::GetCapturedStdout();
+  EXPECT_NE(out.find("| cheaper than L2 |"), std::string::npos) << out;
+  EXPECT_EQ(out.find("L0"), std::string::npos) << out;
+  EXPECT_EQ(cheapest_uniform_level(points, adaptive, "rms"), 2);
+  EXPECT_EQ(compare_with_uniform_curve(0.1, 0.5, kCurve, 100.0, 2).verdict, "cheaper than L2");
+}
+
+// The header gives the cap as set (0.4 s printed as 0) and the clock it reads.
+TEST(TradeSweepReport, TheHeaderGivesTheRunCapAndItsClock) {
+  TradeOptions o;
+  SweepSetup s;
+  s.scene = "cantilever";
+  s.duration_s = 0.2;
+  s.wall_cap_s = 0.4;
+  ::testing::internal::CaptureStdout();
+  print_sweep_header(o, s);
+  std::string out = ::testing::internal::GetCapturedStdout();
+  EXPECT_NE(out.find("; per-run cap 0.4 s of wall time ("), std::string::npos) << out;
+  s.cost_uses_cpu = true;
+  ::testing::internal::CaptureStdout();
+  print_sweep_header(o, s);
+  out = ::testing::internal::GetCapturedStdout();
+  EXPECT_NE(out.find("; per-run cap 0.4 s of thread CPU time ("), std::string::npos) << out;
 }
 
 }  // namespace

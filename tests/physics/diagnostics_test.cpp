@@ -110,6 +110,46 @@ TEST(Diagnostics, ARefusedStepEndsTheAuditWithItsReason) {
   EXPECT_FALSE(audit.nonfinite);
 }
 
+// The stability matrix's verdict: a refusal is the explicit rung's
+// documented limit only when that rung refused above integrator.max_substeps.
+// Every integrator rejects a non-finite step and keeps the old state, so a
+// blow-up reaches the audit as a refusal, never as a non-finite state: it was
+// counted "refused (explicit above max_substeps)" and the matrix exited 0.
+TEST(Diagnostics, OnlyTheExplicitRungsRefusalAboveMaxSubstepsIsNotAFailure) {
+  EnergyAudit clean;
+  clean.steps_taken = 10;
+  EXPECT_EQ(audit_outcome(clean, 1e-6, false), AuditOutcome::kOk);
+  EnergyAudit growth = clean;
+  growth.worst_excess = 0.1;
+  EXPECT_EQ(audit_outcome(growth, 0.05, true), AuditOutcome::kFailed);
+  EXPECT_EQ(audit_outcome(growth, 0.2, true), AuditOutcome::kOk);
+  EnergyAudit nonfinite = clean;
+  nonfinite.nonfinite = true;
+  EXPECT_EQ(audit_outcome(nonfinite, 1e9, true), AuditOutcome::kFailed);
+
+  // The refusal the explicit rung really gives above its cap.
+  scene::Scene s = testing::free_cube_scene(2, 1);
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.material.youngs_modulus_Pa = 1e9;
+  s.integrator.max_substeps = 1;
+  Simulation sim(s);
+  const EnergyAudit above_cap = audit_steps(sim, 10);
+  ASSERT_TRUE(above_cap.refused);
+  EXPECT_EQ(audit_outcome(above_cap, 0.05, true), AuditOutcome::kRefusedAboveMaxSubsteps) << above_cap.error;
+  EXPECT_EQ(audit_outcome(above_cap, 1e-6, false), AuditOutcome::kFailed) << "only the explicit rung may refuse";
+
+  // A rejected blow-up, whichever rung: a failure.
+  for (const char* rejected : {"explicit integrator: state became non-finite; step rejected, previous state kept",
+                               "implicit integrator: state became non-finite; step rejected, previous state kept",
+                               "projective integrator: factorisation of the global system failed"}) {
+    EnergyAudit refused = clean;
+    refused.refused = true;
+    refused.error = rejected;
+    EXPECT_EQ(audit_outcome(refused, 0.05, true), AuditOutcome::kFailed) << rejected;
+    EXPECT_EQ(audit_outcome(refused, 1e-6, false), AuditOutcome::kFailed) << rejected;
+  }
+}
+
 // The count is taken at the end: a corner of a very soft cube is driven
 // across the plane x = y of its opposite face in one tet (see forces_test),
 // inverting that tet during the audit.
