@@ -95,7 +95,7 @@ bool read_numbers(const std::string& a, const NextValue& value, TradeOptions& o)
   } else if (a == "--duration") {
     o.sweep_duration_s = positive_number("--duration", value());
   } else if (a == "--run-cap") {
-    o.run_wall_cap_s = positive_number("--run-cap", value());
+    o.run_cap_s = positive_number("--run-cap", value());
   } else if (a == "--beam-depth") {
     o.beam_max_depth = depth("--beam-depth", value());
   } else {

@@ -22,7 +22,7 @@ struct TradeOptions {
   std::vector<std::string> integrators;  // empty: all three
   std::vector<double> dts_s;             // empty: {1 ms, 5 ms}
   double sweep_duration_s = 0.0;         // 0: the scene's default
-  double run_wall_cap_s = 0.0;           // 0: default (quick 3 s, full 30 s)
+  double run_cap_s = 0.0;                // 0: default (quick 3 s, full 30 s)
   int beam_max_depth = -1;               // -1: 6 (quick: 4)
   bool cpu_clock = false;                // --clock cpu: verdicts and plot use thread CPU time
   bool help = false;                     // -h / --help: print the usage, run nothing

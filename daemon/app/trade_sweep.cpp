@@ -58,7 +58,7 @@ SweepPoint run_point(const SweepSetup& s, const MeshChoice& m, sc::IntegratorKin
   const bool has_tip = sim.probe_count() > 0;
   long steps_done = 0;
   advance(
-      sim, steps, p.st, s.wall_cap_s,
+      sim, steps, p.st, s.run_cap_s,
       [&](const ph::Simulation&) {
         if (!has_tip || !is_path_sample(++steps_done, steps)) return;
         p.tip_t_s.push_back(sim.time_s());

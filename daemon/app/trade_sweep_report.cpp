@@ -22,7 +22,7 @@ void print_sweep_header(const TradeOptions& o, const SweepSetup& s) {
   std::printf("; max depths:");
   for (int d : s.max_depths) std::printf(" %d", d);
   // %g: a cap of 0.4 s printed as "0" with %.0f; the clock is the one the cap reads.
-  std::printf("; per-run cap %g s of %s time (a capped run still gives its cost, not its error).\n\n", s.wall_cap_s,
+  std::printf("; per-run cap %g s of %s time (a capped run still gives its cost, not its error).\n\n", s.run_cap_s,
               s.cost_uses_cpu ? "thread CPU" : "wall");
 }
 

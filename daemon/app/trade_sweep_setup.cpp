@@ -116,7 +116,7 @@ SweepSetup make_sweep_setup(const TradeOptions& o, const volatile std::sig_atomi
   s.max_depths = checked_max_depths(o, s);
   s.kinds = integrator_kinds(o);
   s.dts_s = default_dts_s(o, s);
-  s.wall_cap_s = o.run_wall_cap_s > 0 ? o.run_wall_cap_s : (o.quick ? 3.0 : 30.0);
+  s.run_cap_s = o.run_cap_s > 0 ? o.run_cap_s : (o.quick ? 3.0 : 30.0);
   check_runs(s);
   return s;
 }

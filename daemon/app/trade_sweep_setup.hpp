@@ -31,7 +31,7 @@ struct SweepSetup {
   std::vector<int> max_depths;
   std::vector<scene::IntegratorKind> kinds;
   std::vector<double> dts_s;
-  double wall_cap_s = 0.0;
+  double run_cap_s = 0.0;      // per run, on the cost clock (wall, or thread CPU time with --clock cpu)
   bool cost_uses_cpu = false;  // --clock cpu: costs, the cap and the plot's axis in thread CPU time
   // Read before every step: a signal number there ends the sweep (the run in
   // progress is marked interrupted, the rest are not run).

@@ -37,7 +37,10 @@ struct EnergyAudit {
   bool nonfinite = false;         // a non-finite state was seen (never after a step that reported ok)
   double worst_excess = 0.0;      // max over steps of E / (E0 + W_ext + E_adapt) − 1
   std::size_t inverted_tets = 0;  // at the end
-  bool passed(double slack) const { return !nonfinite && worst_excess <= slack; }
+  // The energy half of a verdict: finite, and never above E0 + W_ext +
+  // E_adapt by more than `slack`. A refused run can be within it; whether
+  // the refusal is harmless is audit_outcome's call.
+  bool within_energy_bound(double slack) const { return !nonfinite && worst_excess <= slack; }
 };
 
 // Steps `sim` up to `steps` times and audits every step.

@@ -104,7 +104,7 @@ TEST(TradeSweepReport, TheHeaderGivesTheRunCapAndItsClock) {
   SweepSetup s;
   s.scene = "cantilever";
   s.duration_s = 0.2;
-  s.wall_cap_s = 0.4;
+  s.run_cap_s = 0.4;
   ::testing::internal::CaptureStdout();
   print_sweep_header(o, s);
   std::string out = ::testing::internal::GetCapturedStdout();

@@ -17,16 +17,16 @@ using testing::total_energy_J;
 
 TEST(Diagnostics, PassedNeedsFiniteStatesAndAnExcessWithinTheSlack) {
   EnergyAudit audit;
-  EXPECT_TRUE(audit.passed(0.0));
+  EXPECT_TRUE(audit.within_energy_bound(0.0));
   audit.worst_excess = 0.1;
-  EXPECT_TRUE(audit.passed(0.1));
-  EXPECT_TRUE(audit.passed(0.2));
-  EXPECT_FALSE(audit.passed(0.05));
+  EXPECT_TRUE(audit.within_energy_bound(0.1));
+  EXPECT_TRUE(audit.within_energy_bound(0.2));
+  EXPECT_FALSE(audit.within_energy_bound(0.05));
   audit.nonfinite = true;
-  EXPECT_FALSE(audit.passed(1e9));
+  EXPECT_FALSE(audit.within_energy_bound(1e9));
   audit.nonfinite = false;
   audit.refused = true;  // the explicit rung may refuse a step it cannot take: not a failure
-  EXPECT_TRUE(audit.passed(0.2));
+  EXPECT_TRUE(audit.within_energy_bound(0.2));
 }
 
 // Damped free vibration of a jiggled free cube: every step is taken, none
@@ -45,7 +45,7 @@ TEST(Diagnostics, DampedFreeVibrationPassesEveryStep) {
   EXPECT_GE(audit.worst_excess, 0.0);
   EXPECT_LE(audit.worst_excess, 1e-6);
   EXPECT_EQ(audit.inverted_tets, 0u);
-  EXPECT_TRUE(audit.passed(1e-6));
+  EXPECT_TRUE(audit.within_energy_bound(1e-6));
   EXPECT_LT(total_energy_J(sim), e0);
 }
 
@@ -86,8 +86,8 @@ TEST(Diagnostics, ExcessIsMeasuredFromTheEnergyAndWorkAtTheAuditsStart) {
   const EnergyAudit audit = audit_steps(audited, 30);
   EXPECT_EQ(audit.steps_taken, 30);
   EXPECT_NEAR(audit.worst_excess, expected, 1e-9 * expected);
-  EXPECT_FALSE(audit.passed(0.5 * expected));
-  EXPECT_TRUE(audit.passed(2.0 * expected));
+  EXPECT_FALSE(audit.within_energy_bound(0.5 * expected));
+  EXPECT_TRUE(audit.within_energy_bound(2.0 * expected));
 }
 
 // A step the explicit rung refuses ends the audit at once: nothing taken,
