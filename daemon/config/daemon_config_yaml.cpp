@@ -248,6 +248,15 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     limits(d.limits, "device.limits");
     sim(d.sim, "device.sim", d.kind == DeviceSpec::Kind::kSim);
     udp(d.udp, "device.udp");
+    // The bridge drops a sender silent for udp.timeout_s; shorter than the
+    // loop's device_timeout_s, a slow device's every pose started a new
+    // session (no sequence order, any address could take over) while the
+    // loop still rendered and sent forces to it.
+    if (d.kind == DeviceSpec::Kind::kUdp && d.udp.timeout_s < d.limits.device_timeout_s)
+      fail("device.udp.timeout_s", "must be >= device.limits.device_timeout_s (" + fmt_num(d.limits.device_timeout_s) +
+                                       "): the bridge would drop the sender while the haptic loop still takes it as "
+                                       "present; raise both for a slow device (got " +
+                                       fmt_num(d.udp.timeout_s) + ")");
     if (!(d.replay.speed > 0.0 && d.replay.speed <= kMaxReplaySpeed))
       fail("device.replay.speed",
            "must be in (0, " + fmt_num(kMaxReplaySpeed) + "] (got " + fmt_num(d.replay.speed) + ")");

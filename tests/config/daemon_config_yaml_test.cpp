@@ -265,6 +265,14 @@ TEST(DaemonConfigYaml, ValuesThatWouldHangOrOverflowAClockAreRefused) {
   expect_error(edit("kind: sim", "kind: udp"), "device.udp.timeout_s", "must be <= 60 (got 1e+10)",
                {"device.udp.timeout_s=1e10"});
   expect_error(kBase, "device.udp.timeout_s", "must be <= 60", {"device.udp.timeout_s=61"});
+  // The bridge's session must outlast the loop's device timeout: a 10 Hz
+  // device with device_timeout_s raised as the docs advise, and the bridge's
+  // 50 ms left alone, started a new session at every pose.
+  expect_error(edit("kind: sim", "kind: udp"), "device.udp.timeout_s",
+               "must be >= device.limits.device_timeout_s (0.15)", {"device.limits.device_timeout_s=0.15"});
+  EXPECT_NO_THROW(parse_daemon_config(edit("kind: sim", "kind: udp"), kSource,
+                                      {"device.limits.device_timeout_s=0.15", "device.udp.timeout_s=0.15"}));
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.limits.device_timeout_s=0.15"}));  // not the bridge
   expect_error(kBase, "publish.mesh_rate_hz", "must be in [0.01, 1000] Hz (got 1e-300)",
                {"publish.mesh_rate_hz=1e-300"});
   // A stop waits for the rate-limited force to reach 0 (found by the review
