@@ -19,6 +19,7 @@
 #include "tissue/dds_cli.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
+#include "util/lcm_url.hpp"
 #include "util/output_file.hpp"
 
 namespace tissue::cli {
@@ -26,6 +27,8 @@ namespace tissue::cli {
 namespace {
 
 constexpr int kExitBadFile = 1;  // same value as kExitDaemonError: "the thing you asked about is broken"
+// How long `replay --lcm tcpq://…` waits for the server's greeting.
+constexpr double kLcmServerWait_s = 10.0;
 
 // `replay`: where to publish and how fast.
 struct ReplayCommandOptions {
@@ -111,7 +114,13 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
   std::unique_ptr<transport::LcmPublisher> lcm;
   std::unique_ptr<transport::DdsPublisher> dds;
   try {
-    if (o.lcm_url) lcm = std::make_unique<transport::LcmPublisher>(*o.lcm_url);
+    if (o.lcm_url) {
+      // LCM waits for a tcpq:// server's greeting without a time limit: a
+      // port that accepts and says nothing hung the replay for ever.
+      if (const std::string why = util::tcpq_server_problem(*o.lcm_url, kLcmServerWait_s); !why.empty())
+        throw std::runtime_error(why);
+      lcm = std::make_unique<transport::LcmPublisher>(*o.lcm_url);
+    }
     if (o.dds.enabled) dds = std::make_unique<transport::DdsPublisher>(o.dds.options());
   } catch (const std::runtime_error& e) {
     std::cerr << "tissue session replay: " << e.what() << "\n";

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <stdexcept>
@@ -16,6 +17,7 @@
 #include "physics/forces.hpp"
 #include "record/record_types.hpp"
 #include "scene/scene_yaml.hpp"
+#include "util/output_file.hpp"
 
 namespace tissue::app {
 
@@ -347,6 +349,24 @@ int batch_command(const BatchOptions& options) {
       return fail(kExitUsage, scene.source + ": " + e.what());
     }
 
+    // The report replaces its path when the run ends: it must be neither the
+    // scene it ran nor the session it recorded (written beside it, then
+    // renamed over it: the session was gone and the run said "done").
+    if (!options.report_path.empty()) {
+      const auto same_path = [](const std::string& a, const std::string& b) {
+        std::error_code ec_a, ec_b;
+        const std::filesystem::path pa = std::filesystem::weakly_canonical(a, ec_a);
+        const std::filesystem::path pb = std::filesystem::weakly_canonical(b, ec_b);
+        return util::same_file(a, b) || (!ec_a && !ec_b && pa == pb) || a == b;
+      };
+      if (same_path(options.report_path, options.scene_path))
+        return fail(kExitUsage,
+                    "--report " + options.report_path + " is the scene file (--scene): the report would replace it");
+      if (!options.record_path.empty() && same_path(options.report_path, options.record_path))
+        return fail(kExitUsage,
+                    "--report " + options.report_path + " is the session file (--record): the report would replace it");
+    }
+
     OutputFile file;
     if (!options.report_path.empty()) {
       const std::string why = file.open(options.report_path, "report");
@@ -366,6 +386,9 @@ int batch_command(const BatchOptions& options) {
     }
 
     const bool talk = options.progress_every_s > 0.0;
+    // `--report /dev/stdout` prints the report alone: the live lines and the
+    // closing line go to stderr then.
+    std::FILE* const talk_to = util::is_standard_output(options.report_path) ? stderr : stdout;
     // A recording that stops mid-run (disk full, a file-size limit) is said
     // at once: the run goes on, and a long run should not hide it to the end.
     bool told = false;
@@ -380,7 +403,7 @@ int batch_command(const BatchOptions& options) {
     // run ends it there; one after it (while writing) changes nothing.
     const StopOnSignals stop;
     const nlohmann::json report =
-        run_batch(*sim, options, talk ? stdout : nullptr,
+        run_batch(*sim, options, talk ? talk_to : nullptr,
                   recorder ? record_step : std::function<void(const physics::Simulation&, double)>(), stop.flag());
     const nlohmann::json& result = report["result"];
     const std::string interrupted_by =
@@ -428,19 +451,20 @@ int batch_command(const BatchOptions& options) {
     if (!record_error.empty()) return fail(kExitRecord, record_error);
     warn_of_health(scene, sim->counters(), result);
     if (talk) {
-      std::printf("done: %.6g s simulated in %lld steps", sim->time_s(), static_cast<long long>(sim->counters().steps));
+      std::fprintf(talk_to, "done: %.6g s simulated in %lld steps", sim->time_s(),
+                   static_cast<long long>(sim->counters().steps));
       if (report.contains("timing")) {
         const auto& timing = report["timing"];
-        std::printf(", %.3f s wall", timing["wall_s"].get<double>());
+        std::fprintf(talk_to, ", %.3f s wall", timing["wall_s"].get<double>());
         if (!timing["real_time_factor"].is_null())
-          std::printf(" (%.2fx real time)", timing["real_time_factor"].get<double>());
+          std::fprintf(talk_to, " (%.2fx real time)", timing["real_time_factor"].get<double>());
       }
-      if (!options.report_path.empty()) std::printf("; report %s", options.report_path.c_str());
+      if (!options.report_path.empty()) std::fprintf(talk_to, "; report %s", options.report_path.c_str());
       if (recorder)
-        std::printf("; session %s (%llu mesh frames)", recorder->path().c_str(),
-                    static_cast<unsigned long long>(recorder->mesh_frames()));
-      std::printf("\n");
-      std::fflush(stdout);
+        std::fprintf(talk_to, "; session %s (%llu mesh frames)", recorder->path().c_str(),
+                     static_cast<unsigned long long>(recorder->mesh_frames()));
+      std::fprintf(talk_to, "\n");
+      std::fflush(talk_to);
     }
     return kExitOk;
   } catch (const std::exception& e) {

@@ -101,9 +101,10 @@ int main(int argc, char** argv) {
     CLI::Option* report =
         app.add_option("--report", batch_options.report_path, "--batch: write the JSON report to this file");
     std::string record_name;
-    app.add_option("--record", record_name,
-                   "--config: record the session from the start to this file name in the config's state_dir; "
-                   "--batch: record the run to this file (path); never overwrites (HDF5, see docs/session-format.md)");
+    CLI::Option* record = app.add_option(
+        "--record", record_name,
+        "--config: record the session from the start to this file name in the config's state_dir; "
+        "--batch: record the run to this file (path); never overwrites (HDF5, see docs/session-format.md)");
     CLI::Option* record_interval =
         app.add_option("--record-interval", batch_options.record_frame_interval_s,
                        "--batch --record: simulated seconds between recorded surface frames (default 1/30)")
@@ -124,6 +125,14 @@ int main(int argc, char** argv) {
       return tissue::app::kExitUsage;
     }
 
+    // An empty name (an unset shell variable) would record or report
+    // nothing and say nothing.
+    for (const CLI::Option* named : {report, record})
+      if (named->count() > 0 && named->as<std::string>().empty()) {
+        std::fprintf(stderr, "tissued: %s needs a file name (got an empty one; see --help)\n",
+                     named->get_name().c_str());
+        return tissue::app::kExitUsage;
+      }
     if (batch && !config_path.empty()) {
       std::fprintf(stderr, "tissued: --batch and --config are two different modes; give one (see --help)\n");
       return tissue::app::kExitUsage;

@@ -730,6 +730,48 @@ TEST_F(TissuedProcess, RecordNeverOverwritesAndAnUnwritablePathExits5BeforeTheRu
   EXPECT_TRUE(contains(missing.err, nowhere)) << missing.err;
 }
 
+// The report replaces its path when the run ends, so it may be neither the
+// scene nor the session (in any spelling): the JSON took the session's name
+// and the run said "done". Refused before anything runs.
+TEST_F(TissuedProcess, AReportThatWouldReplaceTheSceneOrTheSessionIsRefused) {
+  const fs::path scene = dir_ / "beam.yaml";
+  fs::copy_file(scene_path("beam"), scene);
+  const std::string scene_text = read_file(scene);
+  const Process over_scene = run(
+      {"--batch", "--scene", scene.string(), "--duration", "0.05", "--report", (dir_ / "." / "beam.yaml").string()});
+  EXPECT_EQ(over_scene.exit_code, 2) << over_scene.err;
+  EXPECT_TRUE(contains(over_scene.err, "is the scene file (--scene)")) << over_scene.err;
+  EXPECT_EQ(read_file(scene), scene_text);
+  const fs::path session = dir_ / "run.h5";
+  for (const std::string& report : {session.string(), (dir_ / "." / "run.h5").string()}) {
+    const Process over_session = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.05", "--record",
+                                      session.string(), "--report", report});
+    EXPECT_EQ(over_session.exit_code, 2) << report << ": " << over_session.err;
+    EXPECT_TRUE(contains(over_session.err, "is the session file (--record)")) << over_session.err;
+    EXPECT_FALSE(fs::exists(session)) << "nothing ran";
+  }
+}
+
+// `--report /dev/stdout` prints the report alone: the live lines and the
+// closing line go to stderr (they were around the JSON on stdout).
+TEST_F(TissuedProcess, AReportToStandardOutputIsTheReportAlone) {
+  const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.2", "--report", "/dev/stdout"});
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  EXPECT_NO_THROW((void)json::parse(p.out)) << p.out;
+  EXPECT_TRUE(contains(p.err, "t    0.100 s")) << p.err;
+  EXPECT_TRUE(contains(p.err, "done: ")) << p.err;
+}
+
+// An empty file name (an unset shell variable) is a usage error, not a run
+// that records or reports nothing and says nothing.
+TEST_F(TissuedProcess, AnEmptyReportOrRecordNameIsAUsageError) {
+  for (const char* option : {"--report", "--record"}) {
+    const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.05", option, ""});
+    EXPECT_EQ(p.exit_code, 2) << option << ": " << p.err;
+    EXPECT_TRUE(contains(p.err, std::string(option) + " needs a file name")) << p.err;
+  }
+}
+
 // Under a file-size limit the session write fails (EFBIG) instead of
 // killing tissued (SIGXFSZ): the run goes on, the report is written, the
 // recording error is named and the exit code says the session is incomplete.

@@ -19,6 +19,7 @@
 
 #include "record_test_support.hpp"
 #include "replay_test_support.hpp"
+#include "support/loopback_listener.hpp"
 #include "transport/lcm_messages.hpp"
 
 namespace tissue::replay {
@@ -480,6 +481,20 @@ TEST(ReplayCli, ReplaysEverythingAndPrintsTheSummary) {
   EXPECT_NE(r.out.find("LCM memq://: 45 meshes, 150 haptic states, 8 stats sent, 0 failures"), std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("(asked 8.000x)"), std::string::npos) << r.out;
+}
+
+// A tcpq:// server that accepts and never greets (a web server, a typo'd
+// port) is exit 3 within the greeting wait (10 s), not a hang: LCM's own
+// client waits for the greeting without a limit. Bounded by timeout(1).
+TEST(ReplayCli, ASilentTcpqServerIsACannotConnectExitNotAHang) {
+  TempDir dir;
+  const std::string path = testing::write_session(dir / "s.h5", 3);
+  tissue::testing::LoopbackListener silent("");
+  ASSERT_TRUE(silent.ok());
+  const RunResult r =
+      record::testing::run("timeout 60 " + tissue() + " session replay " + quote(path) + " --lcm " + silent.url(), dir);
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find(silent.url()), std::string::npos) << r.err;
 }
 
 TEST(ReplayCli, BadFilesExitOneWithOneLineNamingTheFile) {
