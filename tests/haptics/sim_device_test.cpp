@@ -46,6 +46,21 @@ TEST(SimDevice, LoopRepeatsTheTimeline) {
   EXPECT_TRUE(d.target_m(4.25).isApprox(d.target_m(0.25), 1e-12));
 }
 
+// docs/daemon-config.md: a looping timeline whose first waypoint is after 0
+// repeats from the first waypoint to the last (period last - first); the
+// first position is held before the first time on the first pass only.
+TEST(SimDevice, ALoopStartingAfterZeroRepeatsFromTheFirstWaypoint) {
+  config::SimDeviceSpec s;
+  s.mode = config::SimDeviceSpec::Mode::kTrajectory;
+  s.waypoints = {{1.0, {0.0, 0.0, 0.0}}, {3.0, {0.02, 0.0, 0.0}}};
+  s.loop = true;
+  SimDevice d(s);
+  ASSERT_TRUE(d.start(nullptr));
+  EXPECT_TRUE(d.target_m(0.5).isApprox(Vec3(0.0, 0.0, 0.0), 1e-12));  // held before the first time
+  EXPECT_TRUE(d.target_m(3.5).isApprox(d.target_m(1.5), 1e-12));      // period 2 s, not 3 s
+  EXPECT_NEAR(d.target_m(3.5).x(), 0.005, 1e-12);
+}
+
 TEST(SimDevice, HandSettlesOnTargetAndYieldsToTheRenderedForce) {
   config::SimDeviceSpec s;
   s.mode = config::SimDeviceSpec::Mode::kHand;
