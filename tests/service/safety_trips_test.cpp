@@ -15,16 +15,17 @@ haptics::HapticStats trips(std::uint64_t all, std::uint64_t stale, std::uint64_t
   return h;
 }
 
+// The event text for trips of `kinds` ("1 stale model, 2 other").
+std::string said(const std::string& kinds) {
+  return "haptic safety tripped (" + kinds + "): the force ramped to zero, and back in once clear";
+}
+
 TEST(SafetyTrips, EachRiseIsSaidOnceWithItsKinds) {
   SafetyTrips t;
   EXPECT_FALSE(t.update(trips(0, 0, 0), 1));
-  EXPECT_EQ(t.update(trips(1, 1, 0), 1),
-            "haptic safety tripped (1 stale model): the force ramped to zero, and back "
-            "in once clear");
+  EXPECT_EQ(t.update(trips(1, 1, 0), 1), said("1 stale model"));
   EXPECT_FALSE(t.update(trips(1, 1, 0), 1));  // nothing new
-  EXPECT_EQ(t.update(trips(4, 2, 1), 1),
-            "haptic safety tripped (1 stale model, 1 device lost, 1 other): the force "
-            "ramped to zero, and back in once clear");
+  EXPECT_EQ(t.update(trips(4, 2, 1), 1), said("1 stale model, 1 device lost, 1 other"));
 }
 
 // A restarted side counts from zero: its trips are its own, whatever the
@@ -34,14 +35,10 @@ TEST(SafetyTrips, EachRiseIsSaidOnceWithItsKinds) {
 TEST(SafetyTrips, ARestartedSideCountsFromZero) {
   SafetyTrips t;
   ASSERT_TRUE(t.update(trips(1, 1, 0), 1));
-  EXPECT_EQ(t.update(trips(1, 0, 1), 2),
-            "haptic safety tripped (1 device lost): the force ramped to zero, and back in "
-            "once clear");
+  EXPECT_EQ(t.update(trips(1, 0, 1), 2), said("1 device lost"));
   SafetyTrips u;
   ASSERT_TRUE(u.update(trips(3, 3, 0), 1));
-  EXPECT_EQ(u.update(trips(5, 0, 2), 2),
-            "haptic safety tripped (2 device lost, 3 other): the force ramped to zero, "
-            "and back in once clear");
+  EXPECT_EQ(u.update(trips(5, 0, 2), 2), said("2 device lost, 3 other"));
 }
 
 // A kind's counter read behind the total (relaxed reads, one by one) never

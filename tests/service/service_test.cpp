@@ -190,6 +190,16 @@ std::string file_text(const std::string& path) {
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
 
+// Rewrites the file at `path` with its first `from` replaced by `to` (the
+// tests edit a config, then reload or start on it).
+void edit_file(const std::string& path, const std::string& from, const std::string& to) {
+  std::string text = file_text(path);
+  const std::size_t at = text.find(from);
+  ASSERT_NE(at, std::string::npos) << "'" << from << "' not in " << path;
+  text.replace(at, from.size(), to);
+  std::ofstream(path) << text;
+}
+
 // Whether the service wrote `text` to `f` within 5 s (it reloads on its own thread).
 bool written_within_5_s(std::FILE* f, const std::string& text) {
   for (int i = 0; i < 500; ++i) {
@@ -545,9 +555,7 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   ControlClient client = connect(dir / "ctl.sock");
   EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_force_N"], 3.0);
   std::ofstream(config, std::ios::app) << "publish: {stats_rate_hz: 7}\n";
-  std::string text = file_text(config);
-  text.replace(text.find("device:\n"), 8, "device:\n  limits: {max_force_N: 1.25}\n  scale: 1.5\n");
-  std::ofstream(config) << text;
+  edit_file(config, "device:\n", "device:\n  limits: {max_force_N: 1.25}\n  scale: 1.5\n");
   ASSERT_EQ(::raise(SIGHUP), 0);
   ASSERT_TRUE(written_within_5_s(run.err, ": a restart applies them; until then the old values stay in use"))
       << file_text(run.err);
@@ -584,14 +592,11 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
 TEST(Service, AReloadIsCheckedWithTheDeviceSettingsInUse) {
   TempDir dir;
   const std::string config = write_config(dir, scene_file("cantilever.yaml"));
-  std::string text = file_text(config);
-  text.replace(text.find("device:\n"), 8, "device:\n  scale: 1.5\n");
-  std::ofstream(config) << text;
+  edit_file(config, "device:\n", "device:\n  scale: 1.5\n");
   Running run(config);
   ControlClient client = connect(dir / "ctl.sock");
   EXPECT_EQ(client.call("status")["result"]["haptics"]["limits"]["max_stiffness_N_per_m"], 1000.0);
-  text.replace(text.find("  scale: 1.5\n"), 13, "  scale: 1.0\n  limits: {max_stiffness_N_per_m: 500}\n");
-  std::ofstream(config) << text;
+  edit_file(config, "  scale: 1.5\n", "  scale: 1.0\n  limits: {max_stiffness_N_per_m: 500}\n");
   ASSERT_EQ(::raise(SIGHUP), 0);
   ASSERT_TRUE(written_within_5_s(run.err, "reload failed")) << "the reload did not fail: " << file_text(run.err);
   EXPECT_NE(file_text(run.err).find("haptics.coupling_stiffness_N_per_m"), std::string::npos) << file_text(run.err);
@@ -607,14 +612,11 @@ TEST(Service, AReloadIsCheckedWithTheDeviceSettingsInUse) {
 TEST(Service, AReloadedStatusIntervalAppliesAtOnce) {
   TempDir dir;
   const std::string config = write_config(dir, scene_file("beam.yaml"));
-  std::string text = file_text(config);
-  text.replace(text.find("status_interval_s: 0.1"), 22, "status_interval_s: 3600");
-  std::ofstream(config) << text;
+  edit_file(config, "status_interval_s: 0.1", "status_interval_s: 3600");
   Running run(config);
   ControlClient client = connect(dir / "ctl.sock");
   EXPECT_EQ(file_text(run.out).find("| nodes "), std::string::npos) << "a status line before the hour";
-  text.replace(text.find("status_interval_s: 3600"), 23, "status_interval_s: 0.1");
-  std::ofstream(config) << text;
+  edit_file(config, "status_interval_s: 3600", "status_interval_s: 0.1");
   ASSERT_EQ(::raise(SIGHUP), 0);
   EXPECT_TRUE(written_within_5_s(run.out, "| nodes ")) << file_text(run.out);
   client.call("shutdown");
@@ -755,9 +757,7 @@ TEST(Service, RecordsASessionOnRequest) {
 TEST(Service, HapticSafetyTripsAreRecordedAsEvents) {
   TempDir dir;
   const std::string config = write_config(dir, scene_file("cantilever.yaml"));
-  std::string text = file_text(config);
-  text.replace(text.find("device:\n"), 8, "device:\n  limits: {stale_model_s: 0.0002}\n");
-  std::ofstream(config) << text;
+  edit_file(config, "device:\n", "device:\n  limits: {stale_model_s: 0.0002}\n");
   {
     Running run(config, 0.0, {}, "trips.h5");
     ControlClient client = connect(dir / "ctl.sock");
