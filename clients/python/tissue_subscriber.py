@@ -85,6 +85,15 @@ class Thinned:
         self.seen += 1
 
 
+def fraction(x, lo, hi):
+    """Where x lies between lo and hi, 0 .. 1 (0 when they are equal). Halves
+    first: hi - lo of two finite doubles can overflow to inf (times of -1e308
+    and 1e308 from a foreign publisher), and inf / inf is NaN; half of each
+    cannot."""
+    span = hi / 2 - lo / 2
+    return (x / 2 - lo / 2) / span if span > 0 else 0.0
+
+
 def write_svg(path, samples):
     """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib.
     Written to a temporary file in the same directory, synced, then renamed
@@ -97,20 +106,19 @@ def write_svg(path, samples):
     t = [s[0] for s in samples]
     series = [("tets", [s[1] for s in samples], "#1f77b4"), ("real-time factor", [s[2] for s in samples], "#d62728")]
     t0, t1 = min(t), max(t)
-    span = (t1 - t0) or 1.0
     panel_h = (height - 3 * pad) / 2
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}">',
            f'<rect width="{width}" height="{height}" fill="white"/>']
     for i, (name, values, colour) in enumerate(series):
         top = pad + i * (panel_h + pad)
         lo, hi = min(values), max(values)
-        rng = (hi - lo) or 1.0
-        points = " ".join(f"{pad + (x - t0) / span * (width - 2 * pad):.1f},{top + panel_h - (v - lo) / rng * panel_h:.1f}"
+        points = " ".join(f"{pad + fraction(x, t0, t1) * (width - 2 * pad):.1f},"
+                          f"{top + panel_h - fraction(v, lo, hi) * panel_h:.1f}"
                           for x, v in zip(t, values))
         out.append(f'<rect x="{pad}" y="{top}" width="{width - 2 * pad}" height="{panel_h}" fill="none" stroke="#888"/>')
         out.append(f'<polyline points="{points}" fill="none" stroke="{colour}" stroke-width="1.5"/>')
         out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
-    out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.2f} .. {t1:.2f} s</text>')
+    out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.6g} .. {t1:.6g} s</text>')
     out.append("</svg>")
     directory = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".", suffix=".tmp")
