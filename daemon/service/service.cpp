@@ -22,6 +22,7 @@
 #include "record/session_writer.hpp"
 #include "scene/scene_yaml.hpp"
 #include "service/haptic_side.hpp"
+#include "service/publish_schedule.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 #include "util/output_file.hpp"
@@ -30,16 +31,6 @@
 namespace tissue::service {
 
 namespace {
-
-SimThreadOptions sim_options(const config::DaemonConfig& c) {
-  SimThreadOptions o;
-  o.priority = c.realtime.sched_fifo ? c.realtime.sim_priority : 0;
-  // Status feeds the haptic_state messages too: refresh it at their rate.
-  o.status_every_s = 1.0 / std::max(c.publish.haptic_rate_hz, 20.0);
-  // Energies are only read by sim_stats and `status`: sum them at the stats rate.
-  o.energy_every_s = 1.0 / std::max(c.publish.stats_rate_hz, 1.0);
-  return o;
-}
 
 nlohmann::json status_json(const SimStatus& s) {
   return {{"sim_time_s", s.sim_time_s},
@@ -177,7 +168,7 @@ void Service::start_threads() {
   samples_ = std::make_unique<ToolSampleRing>();
   models_ = std::make_unique<LocalModelChannel>();
   sim_ = std::make_unique<SimThread>(std::make_unique<SimRunner>(scene_), samples_.get(), models_.get(),
-                                     sim_options(config_));
+                                     sim_thread_options(config_));
   sim_->start();
   if (scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone) start_haptic_side();
 }
@@ -535,8 +526,9 @@ void Service::start_publishing() {
 }
 
 void Service::arm_publish_timer(boost::asio::steady_timer& timer, double rate_hz, void (Service::*publish)()) {
-  timer.expires_after(
-      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / rate_hz)));
+  timer.expires_at(next_publish_time(
+      timer.expiry(), std::chrono::steady_clock::now(),
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / rate_hz))));
   timer.async_wait([this, &timer, rate_hz, publish](const boost::system::error_code& ec) {
     if (ec || stopping_) return;
     (this->*publish)();
