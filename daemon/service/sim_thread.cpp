@@ -229,6 +229,7 @@ void SimThread::publish_status(std::int64_t t_ns) {
   s.force_on_device_N = {last_tick_.force_on_device_N.x(), last_tick_.force_on_device_N.y(),
                          last_tick_.force_on_device_N.z()};
   s.tool_contact = last_tick_.contact;
+  s.tick_model_version = last_tick_.model_version;
   std::snprintf(s.last_error, sizeof s.last_error, "%s", halted_ ? halt_reason_ : last_error_.c_str());
   status_.publish();
   step_ms_max_ = 0.0;

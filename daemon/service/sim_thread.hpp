@@ -71,8 +71,12 @@ struct SimStatus {
   std::uint64_t samples = 0;
   bool tool_pushing = false;
   std::array<double, 3> tool_force_N{};
-  // The newest haptic tick the sim thread drained (scene frame).
+  // The newest haptic tick the sim thread drained (scene frame), and the
+  // LocalModel version it rendered against (not model_version, the newest
+  // the sim published: a loop holding on to an older model, one it refused
+  // or has not picked up yet, shows as this one falling behind).
   std::array<double, 3> device_position_m{}, proxy_position_m{}, force_on_device_N{};
+  std::uint64_t tick_model_version = 0;
   bool tool_contact = false;
   char last_error[256] = {};  // the newest failed step's reason (NUL-terminated)
 };

@@ -56,7 +56,7 @@ void to_dds(const service::MeshSnapshot& s, std::int64_t sequence, ::tissue::sur
   m.proxy_position_m(s.proxy_position_m);
   m.force_N(s.force_on_device_N);
   m.in_contact(s.tool_contact);
-  m.local_model_version(static_cast<std::int64_t>(s.model_version));
+  m.local_model_version(static_cast<std::int64_t>(s.tick_model_version));
   return m;
 }
 

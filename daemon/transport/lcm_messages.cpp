@@ -58,7 +58,7 @@ tissue_lcm::tissue::haptic_state haptic_message(const service::SimStatus& s, std
     m.force_N[a] = s.force_on_device_N[a];
   }
   m.in_contact = s.tool_contact;
-  m.local_model_version = static_cast<std::int64_t>(s.model_version);
+  m.local_model_version = static_cast<std::int64_t>(s.tick_model_version);
   return m;
 }
 

@@ -17,6 +17,8 @@
 #include "physics/physics_test_support.hpp"
 #include "record/recorder.hpp"
 #include "record/session_tools.hpp"
+#include "transport/dds_messages.hpp"
+#include "transport/lcm_messages.hpp"
 
 namespace tissue::service {
 namespace {
@@ -96,6 +98,28 @@ TEST(SimThread, SchedulingIsKnownWhenStartReturns) {
     thread.stop();
     EXPECT_EQ(scheduling.rfind("SCHED_", 0), 0u) << "'" << scheduling << "'";
   }
+}
+
+// haptic_state's local_model_version is the model the loop rendered
+// against, taken from its tick: a loop still on version 1 while the sim has
+// published newer ones shows 1 (a stale loop's version stops increasing).
+TEST(SimThread, StatusCarriesTheModelVersionTheTickRenderedAgainst) {
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThreadOptions options;
+  options.status_every_s = 0.005;
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
+  haptics::ToolSample hover;
+  hover.proxy_position_m = haptics::Vec3(0.09, 0.05, 0.112);
+  hover.model_version = 1;
+  ASSERT_TRUE(samples.try_push(hover));
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return thread.status().samples >= 1 && thread.status().model_version > 3; }));
+  const SimStatus status = thread.status();
+  thread.stop();
+  EXPECT_EQ(status.tick_model_version, 1u);
+  EXPECT_EQ(transport::haptic_message(status, 1).local_model_version, 1);
+  EXPECT_EQ(transport::to_dds_haptic(status, 1).local_model_version(), 1);
 }
 
 TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {

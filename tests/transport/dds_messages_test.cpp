@@ -101,7 +101,8 @@ TEST(DdsMessages, HapticStateCarriesEveryAxisAndTheContactFlagBothWays) {
   st.proxy_position_m = {0.021, -0.022, 0.023};
   st.force_on_device_N = {-0.31, 0.32, -0.33};
   st.tool_contact = false;
-  st.model_version = (std::uint64_t{1} << 40) + 3;
+  st.model_version = (std::uint64_t{1} << 40) + 9;  // the sim's newest: not what the loop rendered
+  st.tick_model_version = (std::uint64_t{1} << 40) + 3;
   const ::tissue::haptic_state m = to_dds_haptic(st, 13);
   EXPECT_EQ(m.time_s(), 3.125);
   EXPECT_EQ(m.sequence_number(), 13);

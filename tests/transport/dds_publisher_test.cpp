@@ -124,7 +124,8 @@ service::SimStatus sample_status() {
   st.proxy_position_m = {0.1, 0.2, 0.25};
   st.force_on_device_N = {0, 0, 0.7};
   st.tool_contact = true;
-  st.model_version = 99;
+  st.model_version = 100;
+  st.tick_model_version = 99;
   return st;
 }
 

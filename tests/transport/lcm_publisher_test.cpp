@@ -97,7 +97,8 @@ TEST(LcmMessages, StatusBecomesStatsAndHapticState) {
   st.device_position_m = {0.1, 0.2, 0.3};
   st.force_on_device_N = {0, 0, 0.7};
   st.tool_contact = true;
-  st.model_version = 99;
+  st.model_version = 100;
+  st.tick_model_version = 99;
   const auto stats = to_message(st, 3);
   EXPECT_EQ(stats.node_count, 610);
   EXPECT_EQ(stats.tet_count, 2560);
