@@ -330,10 +330,17 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (pub.dds.max_mesh_bytes < (std::size_t{64} << 10) || pub.dds.max_mesh_bytes > (std::size_t{1} << 30))
       fail("publish.dds.max_mesh_bytes",
            "must be in [64 KiB, 1 GiB] (got " + std::to_string(pub.dds.max_mesh_bytes) + ")");
-    if (pub.lcm.url.rfind("udpm://", 0) != 0 && pub.lcm.url.rfind("memq://", 0) != 0 &&
-        pub.lcm.url.rfind("file://", 0) != 0)
+    // No file:// log: LCM opens one for reading unless ?mode=w (every publish
+    // then fails silently), and with it truncates the file named (a session
+    // in state_dir) and writes past the recorder's free-space reserve.
+    if (pub.lcm.url.rfind("file://", 0) == 0)
       fail("publish.lcm.url",
-           "must be an LCM provider URL: udpm://GROUP:PORT?ttl=N, memq:// or file://PATH (got '" + pub.lcm.url + "')");
+           "file:// logs are not written by the daemon: record a session instead (record_start, "
+           "record.auto_start), which keeps the meshes, haptic ticks and statistics (got '" +
+               pub.lcm.url + "')");
+    if (pub.lcm.url.rfind("udpm://", 0) != 0 && pub.lcm.url.rfind("memq://", 0) != 0)
+      fail("publish.lcm.url",
+           "must be an LCM provider URL: udpm://GROUP:PORT?ttl=N or memq:// (got '" + pub.lcm.url + "')");
     if (const std::string why = util::udpm_url_problem(pub.lcm.url); !why.empty())
       fail("publish.lcm.url", why + " (got '" + pub.lcm.url + "')");
   }

@@ -123,7 +123,7 @@ TEST(DaemonConfigYaml, LcmUrlsAreCheckedBeforeTheDaemonOpensThem) {
   };
   for (const std::string ok :
        {"udpm://239.255.76.67:7667?ttl=0", "udpm://239.255.76.67:7667?ttl=1&recv_buf_size=8388608",
-        "udpm://239.255.76.67", "udpm://224.0.0.1:1?ttl=255", "memq://", "file:///tmp/x.log"})
+        "udpm://239.255.76.67", "udpm://224.0.0.1:1?ttl=255", "memq://"})
     EXPECT_NO_THROW(parse_daemon_config(with_url(ok), "x.yaml")) << ok;
   expect_error(with_url("udpm://239.255.76.67:99999"), "publish.lcm.url", "the port must be in [1, 65535]");
   expect_error(with_url("udpm://239.255.76.67:0"), "publish.lcm.url", "the port must be in [1, 65535]");
@@ -134,6 +134,11 @@ TEST(DaemonConfigYaml, LcmUrlsAreCheckedBeforeTheDaemonOpensThem) {
   expect_error(with_url("udpm://10.0.0.1:7667"), "publish.lcm.url", "IPv4 multicast address");
   expect_error(with_url("udpm://lab-host:7667"), "publish.lcm.url", "IPv4 multicast address");
   expect_error(with_url("bogus://x"), "publish.lcm.url", "must be an LCM provider URL");
+  // An LCM log file: without mode=w LCM opens it for reading and every
+  // publish fails silently; with it, fopen("wb") truncates whatever is there
+  // (a session in state_dir) and the log grows past every disk check.
+  for (const std::string log : {"file:///tmp/x.log", "file:///var/lib/tissued/x.log?mode=w"})
+    expect_error(with_url(log), "publish.lcm.url", "file:// logs are not written by the daemon");
 }
 
 TEST(DaemonConfigYaml, MinimalConfigTakesTheDocumentedDefaults) {
