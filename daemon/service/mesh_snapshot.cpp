@@ -1,5 +1,7 @@
 #include "service/mesh_snapshot.hpp"
 
+#include <algorithm>
+
 #include "mesh/mesh_change.hpp"
 #include "physics/forces.hpp"
 
@@ -37,6 +39,17 @@ void index_surface_tets(const physics::Body& body, SnapshotScratch* scratch) {
   for (const SnapshotScratch::SurfaceTet& entry : scratch->tets) scratch->slot_of_tet[entry.tet] = kNoSlot;
 }
 
+// Each surface vertex's level: the deepest tet behind a triangle at it.
+void surface_vertex_levels(const mesh::KuhnMesh& mesh, SnapshotScratch* scratch) {
+  const mesh::SurfaceMesh& surface = scratch->surface;
+  scratch->vertex_level.assign(surface.vertex_nodes.size(), 0);
+  for (std::size_t t = 0; t < surface.triangles.size(); ++t) {
+    const std::uint8_t depth = mesh.tet(surface.triangle_tet[t]).depth;
+    for (const std::uint32_t v : surface.triangles[t])
+      scratch->vertex_level[v] = std::max(scratch->vertex_level[v], depth);
+  }
+}
+
 }  // namespace
 
 void build_mesh_snapshot(const physics::Simulation& sim, SnapshotScratch* scratch, MeshSnapshot* out) {
@@ -45,6 +58,7 @@ void build_mesh_snapshot(const physics::Simulation& sim, SnapshotScratch* scratc
   if (scratch->topology_version != mesh.topology_version()) {
     mesh::extract_surface(mesh, &scratch->surface);
     index_surface_tets(body, scratch);
+    surface_vertex_levels(mesh, scratch);
     scratch->topology_version = mesh.topology_version();
     ++scratch->extractions;
   }
@@ -53,11 +67,10 @@ void build_mesh_snapshot(const physics::Simulation& sim, SnapshotScratch* scratc
   out->sim_time_s = sim.time_s();
   // resize / assign keep capacity: steady sizes allocate nothing.
   out->vertices_m.resize(n);
-  out->vertex_level.resize(n);
+  out->vertex_level.assign(scratch->vertex_level.begin(), scratch->vertex_level.end());
   for (std::size_t i = 0; i < n; ++i) {
     const physics::Vec3& x = body.x_m[surface.vertex_nodes[i]];
     out->vertices_m[i] = {x.x(), x.y(), x.z()};
-    out->vertex_level[i] = mesh.node(surface.vertex_nodes[i]).depth;
   }
   out->triangles.assign(surface.triangles.begin(), surface.triangles.end());
   const double youngs_modulus_Pa = sim.scene().material.youngs_modulus_Pa;

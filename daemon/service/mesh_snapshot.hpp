@@ -17,7 +17,11 @@ struct MeshSnapshot {
   double sim_time_s = 0.0;
   std::vector<std::array<double, 3>> vertices_m;
   std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise seen from outside
-  std::vector<std::uint8_t> vertex_level;               // bisection depth of the node (0: lattice node)
+  // Per vertex, the bisection depth of the finest surface tet at it (0: the
+  // starting Kuhn tets), so a colouring shows where the mesh is refined; the
+  // depth of the diamond that made the node would show a lattice corner
+  // inside a refined region as 0.
+  std::vector<std::uint8_t> vertex_level;
   // Strain-energy density of the leaf tet behind each triangle, J/m^3 (= Pa),
   // one per triangle; empty when not computed.
   std::vector<float> triangle_strain_energy_J_per_m3;
@@ -44,6 +48,7 @@ struct SnapshotScratch {
   std::vector<std::uint32_t> triangle_slot;  // triangle -> index into tets
   std::vector<float> tet_strain_J_per_m3;    // per snapshot, per entry of tets
   std::vector<std::uint32_t> slot_of_tet;    // tet id -> slot while indexing; all "none" between
+  std::vector<std::uint8_t> vertex_level;    // per surface vertex (MeshSnapshot::vertex_level), per topology
 };
 
 // Fills `out` (all but `sequence`) from the simulation's current state.

@@ -24,7 +24,16 @@ void expect_matches_current_state(const physics::Simulation& sim, const MeshSnap
   for (std::size_t i = 0; i < fresh.vertex_nodes.size(); ++i) {
     const physics::Vec3& x = sim.body().x_m[fresh.vertex_nodes[i]];
     EXPECT_EQ(snap.vertices_m[i], (std::array<double, 3>{x.x(), x.y(), x.z()})) << "vertex " << i;
-    EXPECT_EQ(snap.vertex_level[i], sim.body().mesh().node(fresh.vertex_nodes[i]).depth);
+  }
+  // Each vertex's level is the deepest tet behind a triangle at it, found
+  // here per vertex from scratch.
+  for (std::size_t i = 0; i < fresh.vertex_nodes.size(); ++i) {
+    int deepest = -1;
+    for (std::size_t t = 0; t < fresh.triangles.size(); ++t)
+      for (const std::uint32_t v : fresh.triangles[t])
+        if (v == i) deepest = std::max<int>(deepest, sim.body().mesh().tet(fresh.triangle_tet[t]).depth);
+    ASSERT_GE(deepest, 0) << "vertex " << i << " is on no triangle";
+    EXPECT_EQ(snap.vertex_level[i], deepest) << "vertex " << i;
   }
   ASSERT_EQ(snap.triangle_strain_energy_J_per_m3.size(), fresh.triangles.size());
   for (std::size_t t = 0; t < fresh.triangles.size(); ++t)
@@ -43,6 +52,13 @@ TEST(MeshSnapshot, HoldsTheSurfacePositionsLevelsAndStrainOfTheCurrentState) {
   float peak = 0.0f;
   for (const float e : snap.triangle_strain_energy_J_per_m3) peak = std::max(peak, e);
   EXPECT_GT(peak, 0.0f);  // the loaded cantilever is strained
+  // The load refined the surface: a node of the starting lattice there shows
+  // the depth of the tets around it, not 0 (the colouring's point).
+  bool refined_lattice_node = false;
+  for (std::size_t i = 0; i < snap.vertex_level.size(); ++i)
+    if (sim.body().mesh().node(scratch.surface.vertex_nodes[i]).edge_a == mesh::kInvalidId && snap.vertex_level[i] > 0)
+      refined_lattice_node = true;
+  EXPECT_TRUE(refined_lattice_node);
 }
 
 // Extraction walks every leaf tet; it runs again only after the topology
