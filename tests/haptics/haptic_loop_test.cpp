@@ -332,21 +332,30 @@ TEST(HapticLoop, AModelWithHugeCoordinatesIsRejectedAndTheForceRampsOut) {
   EXPECT_GT(samples, 0);
 }
 
-TEST(HapticLoop, FrameTransformMapsPositionsAndForcesInOnePlace) {
-  Rig rig;
+// The scale-2 rigs: device offset (0, 0, 0.1) m and scale 2, so the flat
+// patch (scene z = 0) is at device z = -0.05. Builds the rig with the limits
+// and coupling the caller set, touches the patch from device z = -0.049 and
+// moves the device 1 mm into it (z = -0.051, scene z = 0.1 + 2 * (-0.051) =
+// -0.002); the caller ticks on. Returns the patch.
+LocalModel build_scale_2_rig_pressed_1_mm(Rig& rig) {
   rig.device_spec.offset_m = {0.0, 0.0, 0.1};
   rig.device_spec.scale = 2.0;
   rig.device_spec.limits.stale_model_s = 10.0;
-  // The hand feels 400 N/m * 2^2 = 1600 N/m: allowed here, so the coupling
-  // is not clamped (the next test shows the clamp).
-  rig.device_spec.limits.max_stiffness_N_per_m = 1600.0;
   rig.build();
-  // Device z = -0.051 -> scene z = 0.1 + 2 * (-0.051) = -0.002.
   const LocalModel m = test::make_flat_patch();
   rig.device.position_m = Vec3(0, 0, -0.049);
   rig.publish(m);
   rig.tick();
   rig.device.position_m = Vec3(0, 0, -0.051);
+  return m;
+}
+
+TEST(HapticLoop, FrameTransformMapsPositionsAndForcesInOnePlace) {
+  Rig rig;
+  // The hand feels 400 N/m * 2^2 = 1600 N/m: allowed here, so the coupling
+  // is not clamped (the next test shows the clamp).
+  rig.device_spec.limits.max_stiffness_N_per_m = 1600.0;
+  build_scale_2_rig_pressed_1_mm(rig);
   for (int i = 0; i < 700; ++i) rig.tick();
   const ToolSample& s = rig.loop->last_sample();
   EXPECT_NEAR(s.device_position_m.z(), -0.002, 1e-12);
@@ -359,17 +368,10 @@ TEST(HapticLoop, FrameTransformMapsPositionsAndForcesInOnePlace) {
 // for 1 mm of device travel) against a 1000 N/m limit.
 TEST(HapticLoop, TheStiffnessLimitHoldsInTheDeviceFrameWhateverTheScale) {
   Rig rig;
-  rig.device_spec.offset_m = {0.0, 0.0, 0.1};
-  rig.device_spec.scale = 2.0;
-  rig.device_spec.limits.stale_model_s = 10.0;
   rig.device_spec.limits.max_stiffness_N_per_m = 1000.0;
   rig.haptic_spec.coupling_stiffness_N_per_m = 400.0;  // 1600 N/m at the hand: over the limit
-  rig.build();
-  const LocalModel m = test::make_flat_patch();  // rigid: the hand feels the coupling
-  rig.device.position_m = Vec3(0, 0, -0.049);    // the surface is at device z = -0.05
-  rig.publish(m);
-  rig.tick();
-  rig.device.position_m = Vec3(0, 0, -0.051);  // 1 mm of device travel into it
+  // Rigid: the hand feels the coupling, over 1 mm of device travel.
+  const LocalModel m = build_scale_2_rig_pressed_1_mm(rig);
   for (int i = 0; i < 700; ++i) {
     rig.publish(m);
     rig.tick();

@@ -1,19 +1,24 @@
 // Live sources end to end, inside a private network namespace with a private
 // /dev/shm (the ReplayNetns ctest entry): `tissue session replay` publishes a
 // recorded session over LCM or DDS, and `tissue x3d --lcm`, `tissue render
-// --dds` (and the in-process DdsMeshSubscriber) consume it. Skipped outside
-// that entry (TISSUE_TEST_LCM_URL / TISSUE_TEST_DDS_DOMAIN unset).
+// --dds` (and the in-process DdsMeshSubscriber) consume it; --dds-max-mesh-bytes
+// keeps larger meshes off DDS. Skipped outside that entry
+// (TISSUE_TEST_LCM_URL / TISSUE_TEST_DDS_DOMAIN unset).
 #include <gtest/gtest.h>
 #include <signal.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "export/export_test_support.hpp"
+#include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 #include "replay_test_support.hpp"
 #include "transport/dds_subscriber.hpp"
@@ -78,6 +83,55 @@ bool is_recorded_vertex_count(std::size_t n) {
   for (std::uint64_t k = 0; k < kFrames; ++k)
     if (record::testing::test_frame(k).vertices_m.size() == n) return true;
   return false;
+}
+
+// The session of the --dds-max-mesh-bytes cases: frames k = 0 .. 14 at k / 30
+// s, alternately small and large (the last one small, so a subscriber knows
+// when it has seen everything); haptic and sim rows as write_session's.
+constexpr std::uint64_t kLimitFrames = 15;
+constexpr std::uint64_t kLimitLargeFrames = kLimitFrames / 2;  // the odd ones
+bool is_large_frame(std::uint64_t k) { return k % 2 == 1; }
+
+// Even k: test_frame(k) (at most 16 vertices, under 1 KB serialized). Odd k:
+// a strip of 2000 + k quads, 4002 + 2k vertices and 4000 + 2k triangles with
+// strain, about 116 KB serialized: over the 64 KiB minimum limit, under 256
+// KiB. The vertex count tells the two kinds apart.
+record::testing::TestFrame limit_frame(std::uint64_t k) {
+  record::testing::TestFrame f = record::testing::test_frame(k);
+  if (!is_large_frame(k)) return f;
+  f.vertices_m.clear();
+  f.vertex_level.clear();
+  f.triangles.clear();
+  f.triangle_strain_energy_J_per_m3.clear();
+  const std::uint32_t quads = 2000 + static_cast<std::uint32_t>(k);
+  for (std::uint32_t q = 0; q <= quads; ++q)
+    for (std::uint32_t row = 0; row < 2; ++row) {
+      f.vertices_m.push_back({0.001 * q, 0.25 * row, 0.0625 * static_cast<double>(k)});
+      f.vertex_level.push_back(static_cast<std::uint8_t>(q % 7));
+    }
+  for (std::uint32_t q = 0; q < quads; ++q) {
+    const std::uint32_t a = 2 * q, b = 2 * q + 1, c = 2 * q + 2, d = 2 * q + 3;
+    f.triangles.push_back({a, c, b});
+    f.triangles.push_back({b, c, d});
+  }
+  f.triangle_strain_energy_J_per_m3.assign(f.triangles.size(), 1.5f);
+  return f;
+}
+
+std::string write_limit_session(const std::string& path) {
+  record::SessionMetadata m;
+  m.scene_name = "mesh limit test";
+  m.software_version = "test";
+  auto w = record::SessionWriter::create(path, m);
+  std::vector<record::HapticRow> haptic;
+  for (std::uint64_t i = 0; i < kLimitFrames * 1000 / 30; ++i) haptic.push_back(record::testing::haptic_row(i));
+  w->append_haptic(haptic);
+  std::vector<record::SimRow> sim;
+  for (std::uint64_t i = 0; i < kLimitFrames * 50 / 30; ++i) sim.push_back(record::testing::sim_row(i));
+  w->append_sim(sim);
+  for (std::uint64_t k = 0; k < kLimitFrames; ++k) w->append_mesh_frame(limit_frame(k).view());
+  w->close();
+  return path;
 }
 
 class LiveNetns : public ::testing::Test {
@@ -179,6 +233,93 @@ TEST_F(LiveNetns, DdsReplayDeliversTheFramesInOrderAtThePace) {
   const double wall_s = got.back().wall_s - got.front().wall_s;
   EXPECT_GT(wall_s / recorded_s, 0.8) << wall_s;
   EXPECT_LT(wall_s / recorded_s, 1.5) << wall_s;
+}
+
+// What a subscriber (the project's DdsMeshSubscriber, expecting meshes up to
+// its default 8 MiB: only the publisher's limit applies) gets from `tissue
+// session replay` of write_limit_session with --dds-max-mesh-bytes.
+struct LimitedReplay {
+  RunResult result;
+  std::vector<std::uint64_t> frames;  // k of each frame received, in arrival order
+  std::vector<std::size_t> vertices;  // its vertex count
+  std::optional<std::int64_t> last_sequence;
+  std::uint64_t rejected = 0;
+};
+
+TEST_F(LiveNetns, DdsMaxMeshBytesKeepsLargerFramesOffTheWireAndTheSummarySaysWhy) {
+  const std::string session = write_limit_session(dir_ / "limit.h5");
+  const double last_time_s = limit_frame(kLimitFrames - 1).time_s;
+  const auto replay_with_limit = [&](std::size_t limit_bytes) {
+    transport::DdsOptions o;
+    o.domain_id = std::atoi(domain_.c_str());
+    transport::DdsMeshSubscriber sub(o);
+    LimitedReplay got;
+    std::atomic<bool> done{false};
+    std::thread replay([&] {
+      got.result = cli("session replay " + quote(session) + " " + dds() + " --dds-wait 5 --dds-max-mesh-bytes " +
+                       std::to_string(limit_bytes));
+      done = true;
+    });
+    // Until the replay has ended and its last (small) frame has arrived, or
+    // nothing more came within 1 s of the end.
+    for (bool last = false; !done || !last;) {
+      if (auto f = sub.next_frame(done ? 1.0 : 0.1)) {
+        got.frames.push_back(static_cast<std::uint64_t>(std::llround(f->time_s * 30.0)));
+        got.vertices.push_back(f->vertices_m.size());
+        last = f->time_s == last_time_s;
+      } else if (done) {
+        break;
+      }
+    }
+    replay.join();
+    got.last_sequence = sub.counts().last_sequence;
+    got.rejected = sub.counts().rejected;
+    return got;
+  };
+  const auto dds_line = [&](std::uint64_t meshes, std::uint64_t failures) {
+    // 500 haptic rows at 1 kHz -> 50 at 100 Hz; 25 sim rows at 50 Hz -> 3 at 5 Hz.
+    return "  DDS domain " + domain_ + " topics tissue/*: " + std::to_string(meshes) + " meshes, 50 haptic states, " +
+           "3 stats sent, " + std::to_string(failures) + " failures";
+  };
+  const std::string why = " (a mesh over --dds-max-mesh-bytes 65536 serialized is not sent and counts as one)";
+  {
+    SCOPED_TRACE("--dds-max-mesh-bytes 65536: the large frames are over it");
+    const LimitedReplay got = replay_with_limit(std::size_t{64} << 10);
+    ASSERT_EQ(got.result.exit_code, 0) << got.result.err;
+    EXPECT_NE(got.result.out.find(dds_line(kLimitFrames - kLimitLargeFrames, kLimitLargeFrames) + why + "\n"),
+              std::string::npos)
+        << got.result.out;
+    for (std::size_t i = 0; i < got.frames.size(); ++i) {
+      ASSERT_LT(got.frames[i], kLimitFrames);
+      EXPECT_FALSE(is_large_frame(got.frames[i]))
+          << "frame " << got.frames[i] << " (" << got.vertices[i] << " vertices) is over the limit and was delivered";
+      EXPECT_EQ(got.vertices[i], limit_frame(got.frames[i]).vertices_m.size()) << "frame " << got.frames[i];
+    }
+    // The small frames do go out (reliable, keep-last 8): the last one, and
+    // the sequence numbers count only what was sent.
+    ASSERT_FALSE(got.frames.empty()) << got.result.out;
+    EXPECT_EQ(got.frames.back(), kLimitFrames - 1) << got.result.out;
+    EXPECT_EQ(got.last_sequence, static_cast<std::int64_t>(kLimitFrames - kLimitLargeFrames));
+    EXPECT_EQ(got.rejected, 0u);
+  }
+  {
+    SCOPED_TRACE("--dds-max-mesh-bytes 262144: every frame is under it");
+    const LimitedReplay got = replay_with_limit(std::size_t{256} << 10);
+    ASSERT_EQ(got.result.exit_code, 0) << got.result.err;
+    EXPECT_NE(got.result.out.find(dds_line(kLimitFrames, 0) + "\n"), std::string::npos) << got.result.out;
+    EXPECT_EQ(got.result.out.find("(a mesh over"), std::string::npos) << got.result.out;
+    std::size_t large = 0;
+    for (std::size_t i = 0; i < got.frames.size(); ++i) {
+      ASSERT_LT(got.frames[i], kLimitFrames);
+      EXPECT_EQ(got.vertices[i], limit_frame(got.frames[i]).vertices_m.size()) << "frame " << got.frames[i];
+      if (is_large_frame(got.frames[i])) ++large;
+    }
+    EXPECT_GE(large, 1u) << "no frame over 64 KiB delivered under a 256 KiB limit";
+    ASSERT_FALSE(got.frames.empty()) << got.result.out;
+    EXPECT_EQ(got.frames.back(), kLimitFrames - 1) << got.result.out;
+    EXPECT_EQ(got.last_sequence, static_cast<std::int64_t>(kLimitFrames));
+    EXPECT_EQ(got.rejected, 0u);
+  }
 }
 
 TEST_F(LiveNetns, NothingPublishedIsATimeoutWithItsOwnExitCode) {
