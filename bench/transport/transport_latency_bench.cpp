@@ -30,10 +30,12 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -216,10 +218,20 @@ Result two_processes(const std::string& kind, const Options& o, service::MeshSna
   int to_parent[2];
   if (::pipe(to_parent) != 0) {
     r.ok = false;
-    r.error = "pipe failed";
+    r.error = std::string("pipe failed: ") + std::strerror(errno);
     return r;
   }
   const pid_t child = ::fork();
+  if (child < 0) {
+    // No child to signal or reap: kill(-1, SIGTERM) below would signal every
+    // process this user may signal.
+    const int fork_errno = errno;
+    ::close(to_parent[0]);
+    ::close(to_parent[1]);
+    r.ok = false;
+    r.error = std::string("fork failed: ") + std::strerror(fork_errno);
+    return r;
+  }
   if (child == 0) {  // subscriber process: reports (id, receipt time) per frame
     ::close(to_parent[0]);
     try {
@@ -261,6 +273,7 @@ Result two_processes(const std::string& kind, const Options& o, service::MeshSna
     r.ok = false;
     r.error = e.what();
   }
+  // child > 0 here (a failed fork returned above).
   ::kill(child, SIGTERM);
   ::waitpid(child, nullptr, 0);
   ::close(to_parent[0]);
