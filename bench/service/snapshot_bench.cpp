@@ -1,7 +1,7 @@
 // snapshot_bench: what handing a surface snapshot off costs the sim thread,
 // next to what a step costs it (issue 5: target <= 2 % of a step).
 //
-//   build/dev/bench/service/snapshot_bench [--steps N] [--scene FILE]   (N: 3 to 10000, default 30)
+//   build/dev/bench/snapshot_bench [--steps N] [--scene FILE]   (N: 3 to 10000, default 30)
 //
 // For the shipped cantilever (the daemon's default scene) and the same
 // 0.1 m object at finer uniform lattices (up to a flat slab whose surface has

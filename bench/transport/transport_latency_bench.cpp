@@ -12,12 +12,13 @@
 // and of the publish call alone, and the message size.
 //
 // Loopback only. LCM multicast needs a route and DDS discovery multicasts, so
-// run it in a private network namespace (root, or user namespaces), with a
-// private /dev/shm for Fast DDS's shared memory:
+// run it in a private network namespace with a private /dev/shm for Fast
+// DDS's shared memory. -r (a new user namespace, the caller root in it) is
+// what lets a user who is not root create both and mount the tmpfs:
 //
-//   unshare -n -m sh -c 'mount -t tmpfs -o size=512m bench_shm /dev/shm &&
+//   unshare -rn -m sh -c 'mount -t tmpfs -o size=512m bench_shm /dev/shm &&
 //     ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo &&
-//     build/h2/bench/transport/transport_latency_bench --samples 200'
+//     build/dev/bench/transport/transport_latency_bench --samples 200'
 //
 // Options: --samples N (200), --warmup N (10), --triangles T (100000),
 // --transport lcm|dds|both, --processes 1|2|both,
