@@ -7,11 +7,12 @@
 // a deforming grid surface of about T triangles (default 100k). Prints write
 // throughput (file bytes / s), file growth per minute, what was written and
 // every drop. The file goes to DIR (default $TMPDIR or /tmp) and is removed
-// unless --keep.
+// unless --keep. --seconds is 0.1 to 86400, --triangles 2 to 10,000,000.
 #include <sys/stat.h>
 #include <time.h>
 
 #include <atomic>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -20,6 +21,7 @@
 #include <filesystem>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include "record/recorder.hpp"
@@ -40,6 +42,25 @@ std::int64_t now_ns() {
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
+// `text` as a T within [min, max], the whole of it (from_chars: no sign on an
+// unsigned, no leading space, no trailing characters). Otherwise prints why,
+// naming `option`, and returns false: atof/strtoull read "1e6" as 1, wrapped
+// "-1" to 2^64 - 1 and let "inf" through to a double -> int64 conversion.
+template <typename T>
+bool parse_option(const char* option, const char* text, T min, T max, T* out) {
+  T value{};
+  const char* end = text + std::strlen(text);
+  const auto [stop, error] = std::from_chars(text, end, value);
+  if (error != std::errc{} || stop != end || !std::isfinite(static_cast<double>(value)) || value < min || value > max) {
+    std::fprintf(stderr, "record_bench: %s must be a %s from %.10g to %.10g (got '%s')\n", option,
+                 std::is_integral_v<T> ? "whole number" : "number", static_cast<double>(min), static_cast<double>(max),
+                 text);
+    return false;
+  }
+  *out = value;
+  return true;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -50,11 +71,13 @@ int main(int argc, char** argv) {
   bool keep = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--seconds" && i + 1 < argc)
-      seconds = std::atof(argv[++i]);
-    else if (a == "--triangles" && i + 1 < argc)
-      triangles_wanted = std::strtoull(argv[++i], nullptr, 10);
-    else if (a == "--dir" && i + 1 < argc)
+    if (a == "--seconds" && i + 1 < argc) {
+      // At most a day: seconds x 1e9 stays a small int64 of nanoseconds.
+      if (!parse_option("--seconds", argv[++i], 0.1, 86400.0, &seconds)) return 2;
+    } else if (a == "--triangles" && i + 1 < argc) {
+      // The transport bench's bound: a few hundred MB per frame buffer.
+      if (!parse_option<std::size_t>("--triangles", argv[++i], 2, 10'000'000, &triangles_wanted)) return 2;
+    } else if (a == "--dir" && i + 1 < argc)
       dir = argv[++i];
     else if (a == "--keep")
       keep = true;
@@ -62,10 +85,6 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: %s [--seconds N] [--triangles T] [--dir DIR] [--keep]\n", argv[0]);
       return 2;
     }
-  }
-  if (!(seconds > 0.0)) {
-    std::fprintf(stderr, "record_bench: --seconds must be > 0\n");
-    return 2;
   }
 
   // An n x n grid of quads, two triangles each.

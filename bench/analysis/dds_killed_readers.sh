@@ -11,7 +11,8 @@
 #
 # Runs itself in a private network namespace with a private /dev/shm (no
 # traffic leaves loopback, no segment is left on the host). About 25 s when
-# it passes, 50 s when it fails. Prints RESULT ok=N fail=M; exits 1 on a fail.
+# it passes, 50 s when it fails. Prints RESULT ok=N fail=M; exits 1 on a fail,
+# 2 (with the daemon's output, no RESULT line) when the daemon did not start.
 # Measured 2026-11-27 with today's daemon: readers of the day before (shared
 # memory) 4 of 4 runs failed (with 0 kills 3 of 3 checks passed); readers on
 # UDP only, 1 of 1 passed (and 0 of 10 failed in the diagnosis's own runs).
@@ -33,8 +34,20 @@ domain=61
   --set "state_dir=$run/state" --set record.auto_start=false --set publish.dds.enabled=true \
   --set "publish.dds.domain_id=$domain" > "$run/daemon.out" 2>&1 &
 daemon=$!
-for _ in $(seq 100); do [ -S "$run/ctl.sock" ] && break; sleep 0.1; done
+for _ in $(seq 100); do
+  [ -S "$run/ctl.sock" ] && break
+  kill -0 "$daemon" 2> /dev/null || break # exited: no socket is coming
+  sleep 0.1
+done
 sleep 1
+# Without a daemon every check below times out and the run ends in the
+# regression's own signature, RESULT ok=0 fail=3, while the EXIT trap
+# deletes the log that says why.
+if [ ! -S "$run/ctl.sock" ] || ! kill -0 "$daemon" 2> /dev/null; then
+  echo "daemon did not start:" >&2
+  cat "$run/daemon.out" >&2
+  exit 2
+fi
 delays=(0.4 0.5 0.6 0.7 0.45 0.55 0.65 0.75)
 for n in $(seq "$kills"); do
   "$tissue" x3d --dds --dds-domain "$domain" --animate --seconds 5 --timeout 8 -o "$run/k$n.x3d" > /dev/null 2>&1 &

@@ -1,6 +1,6 @@
 // render_bench: time per frame of `tissue render` (OSMesa, llvmpipe), issue 5.
 //
-//   build/dev/bench/render/render_bench [--benchmark_filter=...]
+//   build/dev/bench/render_bench [--benchmark_filter=...]
 //
 // Surfaces are real Kuhn-mesh surfaces (a flat box, one corner refined, so
 // several levels show) of about 1k, 10k and 100k triangles, drawn at

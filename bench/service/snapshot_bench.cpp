@@ -1,7 +1,7 @@
 // snapshot_bench: what handing a surface snapshot off costs the sim thread,
 // next to what a step costs it (issue 5: target <= 2 % of a step).
 //
-//   build/dev/bench/service/snapshot_bench [--steps N] [--scene FILE]
+//   build/dev/bench/snapshot_bench [--steps N] [--scene FILE]   (N: 3 to 10000, default 30)
 //
 // For the shipped cantilever (the daemon's default scene) and the same
 // 0.1 m object at finer uniform lattices (up to a flat slab whose surface has
@@ -16,8 +16,11 @@
 #include <time.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <exception>
 #include <string>
 #include <vector>
 
@@ -73,22 +76,8 @@ void run(const Case& c, int steps) {
               100.0 * handoff / step, 100.0 * extract / step, 100.0 * handoff / (steps_per_snapshot * step));
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  int steps = 30;
-  std::string scene_path = std::string(TISSUE_SOURCE_DIR) + "/config/scenes/cantilever.yaml";
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--steps" && i + 1 < argc)
-      steps = std::max(3, std::atoi(argv[++i]));
-    else if (a == "--scene" && i + 1 < argc)
-      scene_path = argv[++i];
-    else {
-      std::fprintf(stderr, "usage: %s [--steps N] [--scene FILE]\n", argv[0]);
-      return 2;
-    }
-  }
+// The shipped scene at `scene_path` and its finer variants, one row each.
+void run_cases(const std::string& scene_path, int steps) {
   const tissue::scene::Scene base = tissue::scene::load_scene_file(scene_path);
   std::vector<Case> cases{{"scene as shipped", base}};
   // The same object at finer uniform lattices: no adaptivity, so the
@@ -113,5 +102,41 @@ int main(int argc, char** argv) {
   std::printf("%-22s %7s %8s %9s %9s %10s %9s %9s %10s\n", "case", "tets", "tris", "step ms", "hand ms", "extract ms",
               "hand/step", "extr/step", "share@30Hz");
   for (const Case& c : cases) run(c, steps);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // At least 3 measured steps for a median; at most 10000, which is hours for
+  // the largest case already (and keeps steps + 3 far from overflowing).
+  constexpr int kMinSteps = 3, kMaxSteps = 10000;
+  int steps = 30;
+  std::string scene_path = std::string(TISSUE_SOURCE_DIR) + "/config/scenes/cantilever.yaml";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--steps" && i + 1 < argc) {
+      // The whole argument: atoi read "abc" as 0 (then 3, silently) and
+      // overflowed on the loop bound for 2147483647.
+      const char* text = argv[++i];
+      const char* end = text + std::strlen(text);
+      const auto [stop, error] = std::from_chars(text, end, steps);
+      if (error != std::errc{} || stop != end || steps < kMinSteps || steps > kMaxSteps) {
+        std::fprintf(stderr, "snapshot_bench: --steps must be a whole number from %d to %d (got '%s')\n", kMinSteps,
+                     kMaxSteps, text);
+        return 2;
+      }
+    } else if (a == "--scene" && i + 1 < argc)
+      scene_path = argv[++i];
+    else {
+      std::fprintf(stderr, "usage: %s [--steps N] [--scene FILE]\n", argv[0]);
+      return 2;
+    }
+  }
+  try {
+    run_cases(scene_path, steps);
+  } catch (const std::exception& e) {  // a SceneError names the file and what is wrong in it
+    std::fprintf(stderr, "snapshot_bench: %s\n", e.what());
+    return 1;
+  }
   return 0;
 }

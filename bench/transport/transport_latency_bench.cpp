@@ -12,16 +12,20 @@
 // and of the publish call alone, and the message size.
 //
 // Loopback only. LCM multicast needs a route and DDS discovery multicasts, so
-// run it in a private network namespace (root, or user namespaces), with a
-// private /dev/shm for Fast DDS's shared memory:
+// run it in a private network namespace with a private /dev/shm for Fast
+// DDS's shared memory. -r (a new user namespace, the caller root in it) is
+// what lets a user who is not root create both and mount the tmpfs:
 //
-//   unshare -n -m sh -c 'mount -t tmpfs -o size=512m bench_shm /dev/shm &&
+//   unshare -rn -m sh -c 'mount -t tmpfs -o size=512m bench_shm /dev/shm &&
 //     ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo &&
-//     build/h2/bench/transport/transport_latency_bench --samples 200'
+//     build/dev/bench/transport/transport_latency_bench --samples 200'
 //
 // Options: --samples N (200), --warmup N (10), --triangles T (100000),
 // --transport lcm|dds|both, --processes 1|2|both,
-// --lcm-url URL (udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608), --dds-domain N (42).
+// --lcm-url URL (udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608), --dds-domain N (42),
+// --dds-max-mesh-bytes B (default: room for the mesh sent, at least the daemon's 8 MiB).
+// A publish_mesh() that fails ends its row with the reason; a latency column
+// with no sample (every mesh lost) prints "-".
 #include <poll.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -30,10 +34,12 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -62,6 +68,11 @@ struct Options {
   std::string transport = "both", processes = "both";
   std::string lcm_url = transport::kLcmSubscribeUrl;
   int dds_domain = 42;
+  // Publisher and subscriber both: the publisher refuses a serialized mesh
+  // above it and sizes its shared-memory segment from it. 0 until main()
+  // sizes it for the mesh (the daemon's fixed 8 MiB default made every
+  // publish of a mesh over ~370k triangles fail).
+  std::size_t dds_max_mesh_bytes = 0;
 };
 
 // A flat n x n grid of quads (two triangles each): ~triangles/2 vertices,
@@ -90,6 +101,7 @@ std::unique_ptr<transport::MeshSubscriber> make_subscriber(const std::string& ki
   if (kind == "lcm") return std::make_unique<transport::LcmMeshSubscriber>(o.lcm_url);
   transport::DdsOptions d;
   d.domain_id = o.dds_domain;
+  d.max_mesh_bytes = o.dds_max_mesh_bytes;
   return std::make_unique<transport::DdsMeshSubscriber>(d);
 }
 
@@ -97,17 +109,28 @@ std::unique_ptr<transport::MeshSubscriber> make_subscriber(const std::string& ki
 struct Publisher {
   std::unique_ptr<transport::LcmPublisher> lcm;
   std::unique_ptr<transport::DdsPublisher> dds;
-  Publisher(const std::string& kind, const Options& o) {
+  std::size_t dds_max_mesh_bytes = 0;
+  Publisher(const std::string& kind, const Options& o) : dds_max_mesh_bytes(o.dds_max_mesh_bytes) {
     if (kind == "lcm") {
       lcm = std::make_unique<transport::LcmPublisher>(o.lcm_url);
     } else {
       transport::DdsOptions d;
       d.domain_id = o.dds_domain;
+      d.max_mesh_bytes = o.dds_max_mesh_bytes;
       dds = std::make_unique<transport::DdsPublisher>(d);
     }
   }
   void publish(const service::MeshSnapshot& s) { lcm ? lcm->publish_mesh(s) : dds->publish_mesh(s); }
   std::uint64_t failures() const { return lcm ? lcm->counts().failures : dds->counts().failures; }
+  // Why a publish of a `message_bytes` message failed: the publishers only
+  // count failures, so this tells apart what the bench can tell apart.
+  std::string failure_reason(std::size_t message_bytes) const {
+    if (lcm) return "lcm_publish of " + std::to_string(message_bytes) + " bytes failed (see LCM's message above)";
+    if (message_bytes > dds_max_mesh_bytes)
+      return "the serialized mesh (" + std::to_string(message_bytes) + " bytes) is over max_mesh_bytes (" +
+             std::to_string(dds_max_mesh_bytes) + ", --dds-max-mesh-bytes)";
+    return "DataWriter::write of " + std::to_string(message_bytes) + " bytes failed (see Fast DDS's log above)";
+  }
   bool wait_for_reader(double timeout_s) const {
     if (lcm) return true;  // no discovery
     const double until = now_s() + timeout_s;
@@ -161,15 +184,24 @@ struct Result {
 };
 
 // Publishes warmup + samples meshes one at a time; `received` waits for the
-// receipt time of mesh `id`.
+// receipt time of mesh `id`. Stops at the first failed publish: every later
+// one would fail the same way, and each would wait out its receipt timeout.
 template <typename WaitFn>
-void run_samples(Publisher& pub, service::MeshSnapshot& mesh, const Options& o, WaitFn received, Result* r) {
+void run_samples(Publisher& pub, service::MeshSnapshot& mesh, std::size_t message_bytes, const Options& o,
+                 WaitFn received, Result* r) {
   for (int i = 1; i <= o.warmup + o.samples; ++i) {
     mesh.sequence = static_cast<std::uint64_t>(i);
     mesh.sim_time_s = i;  // the id the subscriber reports back
+    const std::uint64_t failures_before = pub.failures();
     const double t0 = now_s();
     pub.publish(mesh);
     const double t1 = now_s();
+    if (pub.failures() != failures_before) {
+      r->ok = false;
+      r->error = "publish_mesh() of mesh " + std::to_string(i) + " (" + (i <= o.warmup ? "warm-up" : "sample") +
+                 ") failed: " + pub.failure_reason(message_bytes);
+      break;
+    }
     const std::optional<double> t2 = received(i);
     if (i <= o.warmup) continue;
     if (!t2) {
@@ -183,7 +215,7 @@ void run_samples(Publisher& pub, service::MeshSnapshot& mesh, const Options& o, 
   r->failures = pub.failures();
 }
 
-Result one_process(const std::string& kind, const Options& o, service::MeshSnapshot mesh) {
+Result one_process(const std::string& kind, const Options& o, service::MeshSnapshot mesh, std::size_t bytes) {
   Result r;
   try {
     auto sub = make_subscriber(kind, o);
@@ -196,7 +228,7 @@ Result one_process(const std::string& kind, const Options& o, service::MeshSnaps
         if (auto f = sub->next_frame(0.1)) receipts.put(std::llround(f->time_s), now_s());
     });
     run_samples(
-        pub, mesh, o, [&](std::int64_t id) { return receipts.wait(id, 2.0); }, &r);
+        pub, mesh, bytes, o, [&](std::int64_t id) { return receipts.wait(id, 2.0); }, &r);
     done = true;
     reader.join();
   } catch (const std::exception& e) {
@@ -211,15 +243,25 @@ struct Receipt {
   double t_s;
 };
 
-Result two_processes(const std::string& kind, const Options& o, service::MeshSnapshot mesh) {
+Result two_processes(const std::string& kind, const Options& o, service::MeshSnapshot mesh, std::size_t bytes) {
   Result r;
   int to_parent[2];
   if (::pipe(to_parent) != 0) {
     r.ok = false;
-    r.error = "pipe failed";
+    r.error = std::string("pipe failed: ") + std::strerror(errno);
     return r;
   }
   const pid_t child = ::fork();
+  if (child < 0) {
+    // No child to signal or reap: kill(-1, SIGTERM) below would signal every
+    // process this user may signal.
+    const int fork_errno = errno;
+    ::close(to_parent[0]);
+    ::close(to_parent[1]);
+    r.ok = false;
+    r.error = std::string("fork failed: ") + std::strerror(fork_errno);
+    return r;
+  }
   if (child == 0) {  // subscriber process: reports (id, receipt time) per frame
     ::close(to_parent[0]);
     try {
@@ -249,7 +291,7 @@ Result two_processes(const std::string& kind, const Options& o, service::MeshSna
     Publisher pub(kind, o);
     if (!pub.wait_for_reader(10.0)) throw std::runtime_error("no DDS reader matched within 10 s");
     run_samples(
-        pub, mesh, o,
+        pub, mesh, bytes, o,
         [&](std::int64_t id) -> std::optional<double> {
           const double until = now_s() + 2.0;
           while (now_s() < until)
@@ -261,17 +303,22 @@ Result two_processes(const std::string& kind, const Options& o, service::MeshSna
     r.ok = false;
     r.error = e.what();
   }
+  // child > 0 here (a failed fork returned above).
   ::kill(child, SIGTERM);
   ::waitpid(child, nullptr, 0);
   ::close(to_parent[0]);
   return r;
 }
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
+// The p-quantile of `v` in milliseconds, "-" when there is no sample (every
+// mesh lost): a 0.00 there read as a measured latency.
+std::string percentile_ms(std::vector<double> v, double p) {
+  if (v.empty()) return "-";
   std::sort(v.begin(), v.end());
   const std::size_t i = static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size()))) - 1;
-  return v[std::min(i, v.size() - 1)];
+  char text[32];
+  std::snprintf(text, sizeof text, "%.2f", 1e3 * v[std::min(i, v.size() - 1)]);
+  return text;
 }
 
 void print(const std::string& kind, int processes, std::size_t bytes, const Result& r) {
@@ -280,11 +327,10 @@ void print(const std::string& kind, int processes, std::size_t bytes, const Resu
     std::printf("%-4s %d proc  error: %s\n", label, processes, r.error.c_str());
     return;
   }
-  const auto ms = [](double s) { return 1e3 * s; };
-  std::printf("%-4s %d proc  %9.2f MB %6zu %9.2f %8.2f %8.2f   %8.2f %8.2f   %4d %4llu\n", label, processes,
-              bytes / 1e6, r.latency_s.size(), ms(percentile(r.latency_s, 0.5)), ms(percentile(r.latency_s, 0.99)),
-              ms(percentile(r.latency_s, 1.0)), ms(percentile(r.publish_s, 0.5)), ms(percentile(r.publish_s, 0.99)),
-              r.lost, static_cast<unsigned long long>(r.failures));
+  std::printf("%-4s %d proc  %9.2f MB %6zu %9s %8s %8s   %8s %8s   %4d %4llu\n", label, processes, bytes / 1e6,
+              r.latency_s.size(), percentile_ms(r.latency_s, 0.5).c_str(), percentile_ms(r.latency_s, 0.99).c_str(),
+              percentile_ms(r.latency_s, 1.0).c_str(), percentile_ms(r.publish_s, 0.5).c_str(),
+              percentile_ms(r.publish_s, 0.99).c_str(), r.lost, static_cast<unsigned long long>(r.failures));
 }
 
 }  // namespace
@@ -299,11 +345,23 @@ int main(int argc, char** argv) {
   app.add_option("--processes", o.processes)->check(CLI::IsMember({"1", "2", "both"}));
   app.add_option("--lcm-url", o.lcm_url);
   app.add_option("--dds-domain", o.dds_domain)->check(CLI::Range(0, 232));
-  CLI11_PARSE(app, argc, argv);
+  // The daemon's own bounds for publish.dds.max_mesh_bytes.
+  app.add_option("--dds-max-mesh-bytes", o.dds_max_mesh_bytes,
+                 "DDS max_mesh_bytes (default: room for the mesh sent, at least the daemon's 8 MiB)")
+      ->check(CLI::Range(std::size_t{64} << 10, std::size_t{1} << 30));
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help prints and succeeds; every other parse problem is a usage error.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
 
   const service::MeshSnapshot mesh = grid_mesh(o.triangles);
-  std::printf("mesh: %zu vertices, %zu triangles; %d samples after %d warm-up, one mesh in flight\n",
-              mesh.vertices_m.size(), mesh.triangles.size(), o.samples, o.warmup);
+  const std::size_t dds_bytes = message_bytes("dds", mesh);
+  if (o.dds_max_mesh_bytes == 0) o.dds_max_mesh_bytes = std::max(transport::DdsOptions{}.max_mesh_bytes, dds_bytes);
+  std::printf(
+      "mesh: %zu vertices, %zu triangles; %d samples after %d warm-up, one mesh in flight; DDS max_mesh_bytes %zu\n",
+      mesh.vertices_m.size(), mesh.triangles.size(), o.samples, o.warmup, o.dds_max_mesh_bytes);
   std::printf(
       "latency = publish_mesh() called -> subscriber holds the decoded, validated frame;\n"
       "pub. = the publish_mesh() call alone (encode + send)\n\n");
@@ -312,12 +370,12 @@ int main(int argc, char** argv) {
   std::printf("%-11s %12s %6s %9s %8s %8s   %8s %8s\n", "", "", "", "ms", "ms", "ms", "ms", "ms");
   for (const std::string kind : {"lcm", "dds"}) {
     if (o.transport != "both" && o.transport != kind) continue;
-    const std::size_t bytes = message_bytes(kind, mesh);
+    const std::size_t bytes = kind == "dds" ? dds_bytes : message_bytes(kind, mesh);
     // The two-process case goes first: it forks, and a child must not
     // inherit middleware threads (LCM's end with its objects; Fast DDS's
     // factory starts on first use, after the last fork).
-    if (o.processes != "1") print(kind, 2, bytes, two_processes(kind, o, mesh));
-    if (o.processes != "2") print(kind, 1, bytes, one_process(kind, o, mesh));
+    if (o.processes != "1") print(kind, 2, bytes, two_processes(kind, o, mesh, bytes));
+    if (o.processes != "2") print(kind, 1, bytes, one_process(kind, o, mesh, bytes));
   }
   return 0;
 }
