@@ -420,5 +420,38 @@ INSTANTIATE_TEST_SUITE_P(Recorder, RecorderAppendThrows,
                                                                          : std::string("MeshFrame");
                          });
 
+// A failed recording closes its file (the recording lock and the HDF5
+// handles go) when the recorder thread stops, also when the recording_error
+// event cannot be written into it: the event and the close are tried
+// separately. Here the writer stays healthy (an exception that is no I/O
+// error, as std::bad_alloc from a scratch column would be), so after the
+// failed row write the recorder does try the event, and that write fails
+// too. The close used to be skipped then, and the file stayed "being
+// recorded" until the Recorder was destroyed.
+TEST(Recorder, AFailedRecordingClosesItsFileAlsoWhenTheErrorEventCannotBeWritten) {
+  TempDir dir;
+  RecorderOptions o = fast_options();
+  std::atomic<int> event_writes{0};
+  o.write_fault_for_testing = [&](const char* dataset) {
+    const std::string_view d = dataset;
+    if (d == "/events/kind") event_writes.fetch_add(1);
+    if (d == "/haptic/device_position_m" || d == "/events/kind") throw std::runtime_error("injected failure");
+  };
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  ASSERT_TRUE(being_recorded(dir / "s.h5")) << "no recording lock on this file system: nothing to check";
+  for (int k = 0; k < 20; ++k) rec->push_haptic(testing::haptic_row(k));
+  rec->stop();
+  ASSERT_EQ(rec->state(), RecorderState::kFailed);
+  EXPECT_NE(rec->error().find("injected failure"), std::string::npos) << rec->error();
+  ASSERT_EQ(event_writes.load(), 1) << "the recording_error event was not tried: the test misses its path";
+  // The Recorder still exists: only the close can have released the file.
+  EXPECT_FALSE(being_recorded(dir / "s.h5")) << "the failed recording still holds its file after the stop";
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.rows.haptic_rows, 0u);
+  EXPECT_EQ(info.rows.events, 0u);
+  EXPECT_EQ(rec->stats().haptic_drops, 20u);
+}
+
 }  // namespace
 }  // namespace tissue::record
