@@ -34,6 +34,7 @@ std::unique_ptr<Recorder> Recorder::start(const std::string& state_dir, const st
   if (options.mesh_frame_buffers < 2 || options.mesh_frame_buffers > kMaxFrameBuffers)
     throw RecordError("recorder: mesh_frame_buffers must be in [2, 16]");
   auto writer = SessionWriter::open_in(state_dir, name, metadata);
+  if (options.write_fault_for_testing) writer->set_write_fault_for_testing(options.write_fault_for_testing);
   auto recorder = std::unique_ptr<Recorder>(new Recorder(std::move(writer), std::move(options)));
   recorder->thread_ = std::thread([r = recorder.get()] { r->run(); });
   return recorder;

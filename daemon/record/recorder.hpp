@@ -78,6 +78,10 @@ struct RecorderOptions {
   // Called once from the recorder thread when recording fails (message =
   // error()). Must not block for long.
   std::function<void(const std::string& message)> on_error;
+  // Test seam (never set in the daemon): given to the session's writer, see
+  // SessionWriter::set_write_fault_for_testing. Called on the recorder
+  // thread only.
+  std::function<void(const char* dataset_path)> write_fault_for_testing;
 };
 
 enum class RecorderState : int { kRecording, kFailed, kStopped };

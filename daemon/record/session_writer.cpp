@@ -400,6 +400,13 @@ void SessionWriter::append(DatasetId id, const void* data, std::uint64_t rows) {
   const hid_t ds = datasets_[id].get();
   const int rank = spec.columns == 1 ? 1 : 2;
   const hsize_t cols = static_cast<hsize_t>(spec.columns);
+  if (write_fault_) {
+    try {
+      write_fault_(spec.path);
+    } catch (const RecordError& e) {
+      fail(std::string("cannot write ") + spec.path + ": " + e.what());
+    }
+  }
   const hsize_t new_dims[2] = {rows_[id] + rows, cols};
   if (H5Dset_extent(ds, new_dims) < 0) fail(std::string("cannot extend ") + spec.path);
   h5::Handle file_space(H5Dget_space(ds));

@@ -14,6 +14,7 @@
 #include <array>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -110,6 +111,16 @@ class SessionWriter {
   std::array<std::uint64_t, 4> group_rows() const;
   std::uint64_t bytes_written() const { return bytes_written_; }
 
+  // Test seam (never set in the daemon): called before each dataset write
+  // with the dataset's path, so a test can make an append fail at one
+  // dataset, which real faults do not reliably do (HDF5 buffers appends in
+  // its caches; a full disk shows at the flush). A RecordError thrown from
+  // it is taken as an I/O error of that write (the writer fails, as on a
+  // full disk); any other exception comes out of the append unchanged, the
+  // writer still healthy (as std::bad_alloc from a scratch column would).
+  using WriteFault = std::function<void(const char* dataset_path)>;
+  void set_write_fault_for_testing(WriteFault fault) { write_fault_ = std::move(fault); }
+
  private:
   static std::unique_ptr<SessionWriter> finish_create(const std::string& path, const SessionMetadata& metadata,
                                                       h5::Handle file);
@@ -129,7 +140,8 @@ class SessionWriter {
   std::uint64_t bytes_written_ = 0;
   std::string error_;
   bool closed_ = false;
-  RecordingLock lock_;  // from before the file appears under its name until close()
+  RecordingLock lock_;      // from before the file appears under its name until close()
+  WriteFault write_fault_;  // see set_write_fault_for_testing
 
   // Column scratch (reused, so steady state allocates nothing).
   std::vector<double> f64_;

@@ -5,10 +5,16 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <filesystem>
+#include <functional>
 #include <limits>
+#include <stdexcept>
+#include <string>
+#include <string_view>
 #include <thread>
+#include <vector>
 
 #include "record/recording_lock.hpp"
 #include "record/session_tools.hpp"
@@ -332,6 +338,119 @@ TEST(Recorder, FreeSpaceReserveStopsRecordingCleanlyAndReports) {
   const std::vector<double> times = testing::read_f64(file, "/haptic/time_s");
   for (std::size_t r = 0; r < times.size(); ++r) EXPECT_EQ(times[r], testing::haptic_row(r).time_s) << r;
   H5Fclose(file);
+}
+
+// An append of rows, events or a mesh frame that throws an I/O error
+// (injected at one dataset: HDF5 buffers real appends, so a full disk shows
+// at the flush, which RecordProcess.FileSizeLimitStops... covers) fails the
+// recording as a failed flush does: the error names the file and the
+// dataset, on_error hears it once, nothing counts as written, every row,
+// event and frame pushed is a drop (the frame whose own append threw
+// counted once), no recording_error event goes into the broken file, and the
+// file is closed: no longer being recorded.
+class RecorderAppendThrows : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(RecorderAppendThrows, RecordingFailsEveryPushIsADropAndTheFileIsClosed) {
+  TempDir dir;
+  const std::string failing = GetParam();
+  RecorderOptions o = fast_options();
+  o.write_fault_for_testing = [failing](const char* dataset) {
+    if (dataset == failing) throw RecordError("injected write error");
+  };
+  std::atomic<int> calls{0};
+  std::string heard;
+  o.on_error = [&](const std::string& m) {
+    heard = m;
+    calls.fetch_add(1);
+  };
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  // The failing kind is pushed first, so no write that comes before it can
+  // succeed, whenever the recorder thread polls or flushes (frames are
+  // appended at each poll, before the rows' flush). Refused pushes (once the
+  // recording has failed) are drops too: every push ends up as one.
+  constexpr std::uint64_t kHaptic = 50, kSim = 10, kEvents = 5, kFrames = 2;
+  std::vector<std::function<void()>> pushes = {
+      [&] {
+        for (std::uint64_t k = 0; k < kHaptic; ++k) rec->push_haptic(testing::haptic_row(k));
+        for (std::uint64_t k = 0; k < kSim; ++k) rec->push_sim(testing::sim_row(k));
+      },
+      [&] {
+        for (std::uint64_t k = 0; k < kEvents; ++k) rec->push_event(EventSource::kControl, testing::event_row(k));
+      },
+      [&] {
+        for (std::uint64_t k = 0; k < kFrames; ++k) rec->push_mesh_frame(testing::test_frame(k).view());
+      },
+  };
+  const std::size_t first = failing.rfind("/haptic/", 0) == 0 ? 0 : failing.rfind("/events/", 0) == 0 ? 1 : 2;
+  std::rotate(pushes.begin(), pushes.begin() + static_cast<std::ptrdiff_t>(first), pushes.end());
+  for (const auto& push : pushes) push();
+  rec->stop();
+
+  ASSERT_EQ(rec->state(), RecorderState::kFailed);
+  EXPECT_NE(rec->error().find(dir / "s.h5"), std::string::npos) << rec->error();
+  EXPECT_NE(rec->error().find(std::string("cannot write ") + failing), std::string::npos) << rec->error();
+  EXPECT_EQ(calls.load(), 1);
+  EXPECT_EQ(heard, rec->error());
+  const RecorderStats s = rec->stats();
+  EXPECT_EQ(s.haptic_rows_written, 0u);
+  EXPECT_EQ(s.sim_rows_written, 0u);
+  EXPECT_EQ(s.events_written, 0u);
+  EXPECT_EQ(s.mesh_frames_written, 0u);
+  EXPECT_EQ(s.mesh_frames_invalid, 0u);
+  EXPECT_EQ(s.haptic_drops, kHaptic);
+  EXPECT_EQ(s.sim_drops, kSim);
+  EXPECT_EQ(s.event_drops, kEvents);
+  EXPECT_EQ(s.mesh_frame_drops, kFrames);
+  EXPECT_FALSE(being_recorded(dir / "s.h5")) << "the failed recording still holds its file";
+  // The file stays as of its last successful flush (none here), like after
+  // a crash: no rows, and no recording_error event.
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_FALSE(info.closed_cleanly);
+  EXPECT_EQ(info.rows.haptic_rows, 0u);
+  EXPECT_EQ(info.rows.mesh_frames, 0u);
+  EXPECT_EQ(info.rows.events, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Recorder, RecorderAppendThrows,
+                         ::testing::Values("/haptic/device_position_m", "/events/kind", "/mesh/vertices_m"),
+                         [](const ::testing::TestParamInfo<const char*>& p) {
+                           const std::string dataset = p.param;
+                           return dataset == "/haptic/device_position_m" ? std::string("HapticRows")
+                                  : dataset == "/events/kind"            ? std::string("Events")
+                                                                         : std::string("MeshFrame");
+                         });
+
+// A failed recording closes its file (the recording lock and the HDF5
+// handles go) when the recorder thread stops, also when the recording_error
+// event cannot be written into it: the event and the close are tried
+// separately. Here the writer stays healthy (an exception that is no I/O
+// error, as std::bad_alloc from a scratch column would be), so after the
+// failed row write the recorder does try the event, and that write fails
+// too. The close used to be skipped then, and the file stayed "being
+// recorded" until the Recorder was destroyed.
+TEST(Recorder, AFailedRecordingClosesItsFileAlsoWhenTheErrorEventCannotBeWritten) {
+  TempDir dir;
+  RecorderOptions o = fast_options();
+  std::atomic<int> event_writes{0};
+  o.write_fault_for_testing = [&](const char* dataset) {
+    const std::string_view d = dataset;
+    if (d == "/events/kind") event_writes.fetch_add(1);
+    if (d == "/haptic/device_position_m" || d == "/events/kind") throw std::runtime_error("injected failure");
+  };
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  ASSERT_TRUE(being_recorded(dir / "s.h5")) << "no recording lock on this file system: nothing to check";
+  for (int k = 0; k < 20; ++k) rec->push_haptic(testing::haptic_row(k));
+  rec->stop();
+  ASSERT_EQ(rec->state(), RecorderState::kFailed);
+  EXPECT_NE(rec->error().find("injected failure"), std::string::npos) << rec->error();
+  ASSERT_EQ(event_writes.load(), 1) << "the recording_error event was not tried: the test misses its path";
+  // The Recorder still exists: only the close can have released the file.
+  EXPECT_FALSE(being_recorded(dir / "s.h5")) << "the failed recording still holds its file after the stop";
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_TRUE(info.closed_cleanly);
+  EXPECT_EQ(info.rows.haptic_rows, 0u);
+  EXPECT_EQ(info.rows.events, 0u);
+  EXPECT_EQ(rec->stats().haptic_drops, 20u);
 }
 
 }  // namespace

@@ -18,6 +18,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <thread>
 
@@ -772,6 +773,77 @@ TEST(Service, HapticSafetyTripsAreRecordedAsEvents) {
     return m.rfind("haptic safety tripped (", 0) == 0 && m.find(" stale model") != std::string::npos;
   });
   EXPECT_NE(trip, events.end()) << "no trip event among " << events.size() << " events";
+}
+
+// Trips are told per haptic side by the side's number, never its address:
+// a side started where the last one was freed looked like the same side,
+// and its counts were taken as the old side's. A UDP device nobody sends to
+// is lost from the first tick, so every side trips exactly once for it. The
+// first side's model may go stale only at its first tick (stale_model_s 60:
+// at most one trip); the reload makes the model stale after 0.2 ms and
+// restarts the side, which then has more trips in all than the first side
+// could have, and the same single device-lost trip. Taken for the old side,
+// that trip was nothing new and went unsaid. With status lines an hour
+// apart, the trips are looked at only when a side stops.
+TEST(Service, ARestartedHapticSideHasItsOwnTripsRecorded) {
+  TempDir dir;
+  const int holder = ::socket(AF_INET, SOCK_DGRAM, 0);
+  ASSERT_GE(holder, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(holder, reinterpret_cast<const sockaddr*>(&address), sizeof address), 0);
+  socklen_t length = sizeof address;
+  ASSERT_EQ(::getsockname(holder, reinterpret_cast<sockaddr*>(&address), &length), 0);
+  const int port = ntohs(address.sin_port);
+  ::close(holder);  // free for the device: a port the system had free a moment ago
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"), "udp");
+  edit_file(config, "status_interval_s: 0.1", "status_interval_s: 3600");
+  edit_file(config, "  sim:\n", "  udp: {port: " + std::to_string(port) + "}\n  limits: {stale_model_s: 60}\n  sim:\n");
+  // A count in the status's haptics (0 while there is no haptic side).
+  const auto count = [](const nlohmann::json& haptics, const char* key) {
+    return haptics.is_object() ? haptics.value(key, std::uint64_t{0}) : std::uint64_t{0};
+  };
+  // The status's haptics once `done` holds for them (or after 10 s).
+  const auto haptics_once = [](ControlClient& client, const std::function<bool(const nlohmann::json&)>& done) {
+    nlohmann::json haptics;
+    for (const auto end = std::chrono::steady_clock::now() + 10s; std::chrono::steady_clock::now() < end;) {
+      haptics = client.call("status")["result"]["haptics"];
+      if (done(haptics)) break;
+      std::this_thread::sleep_for(10ms);
+    }
+    return haptics;
+  };
+  {
+    Running run(config, 0.0, {}, "trips.h5");
+    ControlClient client = connect(dir / "ctl.sock");
+    const nlohmann::json first =
+        haptics_once(client, [&](const nlohmann::json& h) { return count(h, "device_lost_trips") >= 1; });
+    // EXPECT, not ASSERT, until the shutdown: a service left running hangs the test.
+    EXPECT_EQ(count(first, "device_lost_trips"), 1u) << first.dump();
+    EXPECT_LE(count(first, "safety_trips"), 2u) << first.dump();
+    edit_file(config, "stale_model_s: 60", "stale_model_s: 0.0002");
+    EXPECT_EQ(::raise(SIGHUP), 0);
+    EXPECT_TRUE(written_within_5_s(run.out, "haptic thread restarted")) << file_text(run.err);
+    const nlohmann::json second = haptics_once(client, [&](const nlohmann::json& h) {
+      return count(h, "device_lost_trips") >= 1 && count(h, "safety_trips") >= 3;
+    });
+    EXPECT_EQ(count(second, "device_lost_trips"), 1u) << second.dump();
+    EXPECT_GE(count(second, "safety_trips"), 3u) << second.dump();
+    client.call("shutdown");
+    EXPECT_EQ(run.wait(), kServiceOk);
+  }
+  std::vector<std::string> trips;
+  for (const std::string& m : record::testing::event_messages(dir / "trips.h5"))
+    if (m.rfind("haptic safety tripped (", 0) == 0) trips.push_back(m);
+  const auto device_lost_once = [](const std::string& m) {
+    return m.find("(1 device lost") != std::string::npos || m.find(", 1 device lost") != std::string::npos;
+  };
+  std::string said;
+  for (const std::string& m : trips) said += "\n  " + m;
+  ASSERT_EQ(trips.size(), 2u) << "one look per side, at its stop:" << said;
+  EXPECT_TRUE(device_lost_once(trips[0])) << said;
+  EXPECT_TRUE(device_lost_once(trips[1])) << "the restarted side's trip went unsaid:" << said;
 }
 
 // A `set` whose scene cannot take its first step is refused with the step's
