@@ -1,6 +1,7 @@
 #include "transport/dds_subscriber.hpp"
 
 #include <fastcdr/exceptions/Exception.h>
+#include <fastdds/rtps/common/InstanceHandle.h>
 #include <fastdds/rtps/common/SerializedPayload.h>
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
@@ -34,6 +35,10 @@ extern "C" __attribute__((weak)) const char* __asan_default_options() { return "
 #endif
 
 namespace dds = eprosima::fastdds::dds;
+
+// A publication handle is the writer's 16-byte GUID.
+static_assert(std::tuple_size_v<eprosima::fastrtps::rtps::KeyHash_t> ==
+              std::tuple_size_v<PublisherSequences::PublisherId>);
 
 bool SurfaceMeshReaderType::deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) {
   last_call_refused_ = false;
@@ -156,7 +161,10 @@ std::optional<x3d::SurfaceFrame> DdsMeshSubscriber::next_frame(double timeout_s)
       if (impl_->reader_type().last_call_refused()) continue;
       ++counts_.received;
       const ::tissue::surface_mesh& m = impl_->sample;
-      count_sequence(counts_, m.sequence_number());
+      PublisherSequences::PublisherId writer;
+      const eprosima::fastrtps::rtps::octet* handle = info.publication_handle.value;
+      std::copy(handle, handle + writer.size(), writer.begin());
+      sequences_.count(counts_, writer, m.sequence_number());
       try {
         x3d::SurfaceFrame f = frame_from_mesh_arrays(m.time_s(), m.vertex_m(), m.vertex_refinement_level(),
                                                      m.triangle_vertex(), m.triangle_strain_energy_density_J_per_m3());

@@ -59,6 +59,7 @@ class DdsMeshSubscriber final : public MeshSubscriber {
   DdsOptions options_;
   MeshReceiveCounts counts_;
   std::uint64_t refusals_counted_ = 0;  // of the reader type's refused(), already in counts_
+  PublisherSequences sequences_;        // gaps counted per writer
   struct Impl;
   // Counts the payloads the reader type refused since the last call as
   // received and rejected ("decode").
