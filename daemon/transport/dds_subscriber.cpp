@@ -1,5 +1,8 @@
 #include "transport/dds_subscriber.hpp"
 
+#include <fastcdr/exceptions/Exception.h>
+#include <fastdds/rtps/common/InstanceHandle.h>
+#include <fastdds/rtps/common/SerializedPayload.h>
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <algorithm>
@@ -16,7 +19,6 @@
 #include <limits>
 #include <stdexcept>
 
-#include "tissue_dds/surface_meshPubSubTypes.h"
 #include "transport/dds_messages.hpp"
 #include "transport/dds_publisher.hpp"
 
@@ -34,10 +36,35 @@ extern "C" __attribute__((weak)) const char* __asan_default_options() { return "
 
 namespace dds = eprosima::fastdds::dds;
 
+// A publication handle is the writer's 16-byte GUID.
+static_assert(std::tuple_size_v<eprosima::fastrtps::rtps::KeyHash_t> ==
+              std::tuple_size_v<PublisherSequences::PublisherId>);
+
+bool SurfaceMeshReaderType::deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) {
+  last_call_refused_ = false;
+  const auto refuse = [&](const char* why) {
+    ++refused_;
+    last_call_refused_ = true;
+    last_refusal_ = "DDS sample of " + std::to_string(payload->length) + " bytes not decodable: " + why;
+    return false;
+  };
+  try {
+    // false: the generated code caught a NotEnoughMemoryException.
+    if (!surface_meshPubSubType::deserialize(payload, data)) return refuse("it ends inside the mesh");
+    return true;
+  } catch (const eprosima::fastcdr::exception::Exception& e) {
+    return refuse(e.what());  // BadParamException: not a plain CDR encapsulation
+  } catch (const std::exception& e) {
+    return refuse(e.what());
+  }
+}
+
 struct DdsMeshSubscriber::Impl {
   dds::DomainParticipant* participant = nullptr;
   dds::Subscriber* subscriber = nullptr;
-  dds::TypeSupport type{new ::tissue::surface_meshPubSubType()};
+  dds::TypeSupport type{new SurfaceMeshReaderType()};
+  // What `type` holds (the participant keeps a copy of the same pointer).
+  const SurfaceMeshReaderType& reader_type() const { return static_cast<const SurfaceMeshReaderType&>(*type); }
   dds::Topic* topic = nullptr;
   dds::DataReader* reader = nullptr;
   ::tissue::surface_mesh sample;  // reused storage
@@ -111,6 +138,14 @@ std::string DdsMeshSubscriber::name() const {
          ")";
 }
 
+void DdsMeshSubscriber::count_refusals() {
+  const SurfaceMeshReaderType& t = impl_->reader_type();
+  for (; refusals_counted_ < t.refused(); ++refusals_counted_) {
+    ++counts_.received;
+    count_rejection(counts_, MeshRejected("decode", t.last_refusal()));
+  }
+}
+
 std::optional<x3d::SurfaceFrame> DdsMeshSubscriber::next_frame(double timeout_s) {
   using Clock = std::chrono::steady_clock;
   const auto deadline =
@@ -118,10 +153,18 @@ std::optional<x3d::SurfaceFrame> DdsMeshSubscriber::next_frame(double timeout_s)
   for (;;) {
     dds::SampleInfo info;
     while (impl_->reader->take_next_sample(&impl_->sample, &info) == ReturnCode_t::RETCODE_OK) {
+      count_refusals();
       if (!info.valid_data) continue;  // a disposal or unregistration, not a mesh
+      // Fast DDS 2.9 skips a sample it could not decode and hands out the
+      // next one; should a take ever return the refused one instead, its
+      // storage holds no mesh (counted as refused above).
+      if (impl_->reader_type().last_call_refused()) continue;
       ++counts_.received;
       const ::tissue::surface_mesh& m = impl_->sample;
-      count_sequence(counts_, m.sequence_number());
+      PublisherSequences::PublisherId writer;
+      const eprosima::fastrtps::rtps::octet* handle = info.publication_handle.value;
+      std::copy(handle, handle + writer.size(), writer.begin());
+      sequences_.count(counts_, writer, m.sequence_number());
       try {
         x3d::SurfaceFrame f = frame_from_mesh_arrays(m.time_s(), m.vertex_m(), m.vertex_refinement_level(),
                                                      m.triangle_vertex(), m.triangle_strain_energy_density_J_per_m3());
@@ -131,6 +174,7 @@ std::optional<x3d::SurfaceFrame> DdsMeshSubscriber::next_frame(double timeout_s)
         count_rejection(counts_, e);
       }
     }
+    count_refusals();  // refused samples a take skipped before finding none
     const auto left = deadline - Clock::now();
     if (left <= Clock::duration::zero()) return std::nullopt;
     // Wakes on a new sample; at most 100 ms at a time.

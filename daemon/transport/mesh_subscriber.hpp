@@ -5,12 +5,16 @@
 // library uses it without linking the transports.
 #pragma once
 
+#include <algorithm>
+#include <array>
+#include <cstddef>
 #include <cstdint>
 #include <map>
 #include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "export/x3d.hpp"
 
@@ -25,8 +29,11 @@ struct MeshReceiveCounts {
   // Messages that never reached us: the gaps in the publisher's sequence
   // numbers (proto/README.md), lost on the network or dropped by the
   // transport's own bounded queue (LCM's, DDS's history) before the
-  // subscriber saw them. A sequence that does not increase starts a new run
-  // (the publisher restarted, or another one joined): no gap is counted.
+  // subscriber saw them, and messages refused before their number was read.
+  // A number that does not increase starts a new run (the publisher
+  // restarted): no gap is counted. DDS names each sample's writer, so each
+  // writer has its own run (PublisherSequences); LCM does not, so two
+  // publishers on one channel at once count as gaps (count_sequence).
   std::uint64_t missed = 0;
   std::optional<std::int64_t> last_sequence;                // of the newest decoded message
   std::map<std::string, std::uint64_t> rejected_by_reason;  // reason category -> count
@@ -68,14 +75,60 @@ x3d::SurfaceFrame frame_from_mesh_arrays(double time_s, std::span<const float> v
                                          std::span<const std::int32_t> triangle_vertex,
                                          std::span<const float> triangle_strain);
 
-// Counts the gap before a decoded message's sequence number (shared
-// bookkeeping of both subscribers). Unsigned arithmetic: any two int64
+// The numbers between a run's last sequence number and the next one: 0
+// unless it increases by more than one. Unsigned arithmetic: any two int64
 // values from the wire give a defined count.
+inline std::uint64_t sequence_gap(std::int64_t last, std::int64_t next) {
+  return next > last ? static_cast<std::uint64_t>(next) - static_cast<std::uint64_t>(last) - 1 : 0;
+}
+
+// Counts the gap before a decoded message's sequence number when the
+// transport does not say who sent it (LCM): every message on the channel is
+// one run. So two publishers on one channel at once (the daemon near 10000,
+// a replay at 1, 2, ...) count the distance between them at every switch
+// from the lower numbers to the higher; a switch down starts a new run.
 inline void count_sequence(MeshReceiveCounts& c, std::int64_t sequence) {
-  if (c.last_sequence && sequence > *c.last_sequence)
-    c.missed += static_cast<std::uint64_t>(sequence) - static_cast<std::uint64_t>(*c.last_sequence) - 1;
+  if (c.last_sequence) c.missed += sequence_gap(*c.last_sequence, sequence);
   c.last_sequence = sequence;
 }
+
+// Counts the gap before a decoded message's sequence number in the run of
+// the publisher that sent it, for a transport that names it (DDS: the
+// writer's GUID, SampleInfo::publication_handle): the daemon and a replay
+// interleaved on one topic count only their own gaps. Remembers the
+// kMaxPublishers heard most recently (a bound: the ids come from the
+// wire); a message from one more forgets the one heard longest ago, whose
+// next message, should it come back, starts a new run without a gap.
+class PublisherSequences {
+ public:
+  using PublisherId = std::array<std::uint8_t, 16>;
+  static constexpr std::size_t kMaxPublishers = 16;
+
+  void count(MeshReceiveCounts& c, const PublisherId& publisher, std::int64_t sequence) {
+    auto run = std::find_if(runs_.begin(), runs_.end(), [&](const Run& r) { return r.publisher == publisher; });
+    if (run != runs_.end()) {
+      c.missed += sequence_gap(run->last_sequence, sequence);
+    } else if (runs_.size() < kMaxPublishers) {
+      run = runs_.insert(runs_.end(), Run{publisher, sequence, 0});
+    } else {
+      run = std::min_element(runs_.begin(), runs_.end(),
+                             [](const Run& a, const Run& b) { return a.last_heard < b.last_heard; });
+      run->publisher = publisher;
+    }
+    run->last_sequence = sequence;
+    run->last_heard = ++heard_;
+    c.last_sequence = sequence;
+  }
+
+ private:
+  struct Run {
+    PublisherId publisher;
+    std::int64_t last_sequence;
+    std::uint64_t last_heard;  // heard_ when its last message came
+  };
+  std::vector<Run> runs_;
+  std::uint64_t heard_ = 0;  // messages counted: 64 bits never wrap
+};
 
 // Counts a rejection (shared bookkeeping of both subscribers).
 inline void count_rejection(MeshReceiveCounts& c, const MeshRejected& e) {

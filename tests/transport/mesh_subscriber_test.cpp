@@ -108,6 +108,67 @@ TEST(MeshReceiveCounts, SequenceGapsCountTheMessagesThatNeverArrived) {
   EXPECT_EQ(e.missed, std::numeric_limits<std::uint64_t>::max() - 1);
 }
 
+// LCM does not say who sent a message: two publishers on one channel at
+// once are one run, and every switch up counts the distance between them
+// (what docs/replay-and-live.md says an LCM reader counts).
+TEST(MeshReceiveCounts, WithoutPublisherIdentityInterleavedPublishersCountAsGaps) {
+  MeshReceiveCounts c;
+  for (const std::int64_t s : {10000, 1, 10001, 2}) count_sequence(c, s);
+  EXPECT_EQ(c.missed, 9999u);  // 2 .. 10000 between 1 and 10001; each switch down restarts
+}
+
+PublisherSequences::PublisherId publisher(int k) {
+  PublisherSequences::PublisherId id{};
+  id[0] = 0x01;  // as a GUID prefix would
+  id[15] = static_cast<std::uint8_t>(k);
+  return id;
+}
+
+// DDS names each sample's writer: the daemon (at 10000, ...) and a replay
+// (1, 2, ...) interleaved on one topic count no gaps between each other,
+// and each one's own gaps and restarts count as for a lone publisher.
+TEST(MeshReceiveCounts, EachPublishersGapsAreCountedInItsOwnRun) {
+  const PublisherSequences::PublisherId daemon = publisher(1), replay = publisher(2);
+  MeshReceiveCounts c;
+  PublisherSequences runs;
+  for (std::int64_t k = 0; k < 5; ++k) {
+    runs.count(c, daemon, 10000 + k);
+    runs.count(c, replay, 1 + k);
+  }
+  EXPECT_EQ(c.missed, 0u);
+  EXPECT_EQ(c.last_sequence, 5);
+  runs.count(c, daemon, 10007);  // 10005 and 10006 lost
+  runs.count(c, replay, 6);
+  EXPECT_EQ(c.missed, 2u);
+  runs.count(c, replay, 1);  // the replay looped: a new run
+  runs.count(c, daemon, 10008);
+  runs.count(c, replay, 3);  // 2 lost
+  EXPECT_EQ(c.missed, 3u);
+  // Hostile extremes in one publisher's run: a defined count, never UB.
+  runs.count(c, publisher(3), std::numeric_limits<std::int64_t>::min());
+  runs.count(c, publisher(3), std::numeric_limits<std::int64_t>::max());
+  EXPECT_EQ(c.missed, 3u + (std::numeric_limits<std::uint64_t>::max() - 1));
+}
+
+// At most kMaxPublishers runs are kept: one more publisher forgets the one
+// heard longest ago, whose return starts a new run (its gap is not
+// counted); the others keep theirs.
+TEST(MeshReceiveCounts, BeyondTheTrackedPublishersTheOneHeardLongestAgoIsForgotten) {
+  constexpr int kMax = static_cast<int>(PublisherSequences::kMaxPublishers);
+  MeshReceiveCounts c;
+  PublisherSequences runs;
+  for (int k = 0; k < kMax; ++k) runs.count(c, publisher(k), 100 * k);
+  runs.count(c, publisher(0), 1);     // heard again (restarted): now publisher 1 is the oldest
+  runs.count(c, publisher(kMax), 5);  // one too many: publisher 1 is forgotten
+  EXPECT_EQ(c.missed, 0u);
+  runs.count(c, publisher(1), 110);  // back: a new run, 101 .. 109 not counted (forgets publisher 2)
+  EXPECT_EQ(c.missed, 0u);
+  runs.count(c, publisher(3), 303);  // still tracked: 301 and 302 lost
+  runs.count(c, publisher(kMax), 6);
+  runs.count(c, publisher(0), 2);
+  EXPECT_EQ(c.missed, 2u);
+}
+
 // An encoded surface_mesh from the daemon's own encoder.
 std::vector<std::uint8_t> encoded_mesh(int quads, double time_s = 1.25, std::int64_t sequence = 1) {
   service::MeshSnapshot s;
