@@ -161,11 +161,11 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
     std::cout << "  DDS domain " << o.dds.domain_id << " topics " << o.dds.topic_prefix << "*: " << dds->counts().meshes
               << " meshes, " << dds->counts().haptic_states << " haptic states, " << dds->counts().stats
               << " stats sent, " << dds->counts().failures << " failures";
-    // The publisher does not send a mesh larger than max_mesh_bytes and only
-    // counts it as a failure: the likeliest reason, said here.
-    if (dds->counts().failures > 0)
-      std::cout << " (a mesh over --dds-max-mesh-bytes " << o.dds.max_mesh_bytes
-                << " serialized is not sent and counts as one)";
+    // The publisher does not send a mesh larger than max_mesh_bytes and
+    // counts it as a failure: said when that is what happened.
+    if (dds->counts().oversize_meshes > 0)
+      std::cout << " (" << dds->counts().oversize_meshes << " of them meshes over --dds-max-mesh-bytes "
+                << o.dds.max_mesh_bytes << " serialized, not sent)";
     std::cout << "\n";
   }
   return kExitOk;

@@ -540,7 +540,11 @@ void Service::arm_publish_timer(boost::asio::steady_timer& timer, double rate_hz
 void Service::publish_mesh() {
   const MeshSnapshot& s = sim_->snapshot();
   if (lcm_) lcm_->publish_mesh(s);
-  if (dds_) dds_->publish_mesh(s);
+  if (dds_) {
+    const std::uint64_t oversize_before = dds_->counts().oversize_meshes, sent_before = dds_->counts().meshes;
+    dds_->publish_mesh(s);
+    note_dds_oversize(oversize_before, sent_before);
+  }
 }
 void Service::publish_haptic() {
   if (!haptics_) return;
@@ -552,6 +556,24 @@ void Service::publish_stats() {
   const SimStatus s = sim_->status();
   if (lcm_) lcm_->publish_stats(s);
   if (dds_) dds_->publish_stats(s);
+}
+
+// A mesh over publish.dds.max_mesh_bytes is not sent: DDS subscribers keep
+// the last one that fitted. Said once when meshes start being held back
+// (and again if they do after some went out), not once per mesh.
+void Service::note_dds_oversize(std::uint64_t oversize_before, std::uint64_t sent_before) {
+  const transport::DdsPublishCounts& c = dds_->counts();
+  if (c.meshes > sent_before) dds_oversize_said_ = false;
+  if (c.oversize_meshes == oversize_before || dds_oversize_said_) return;
+  dds_oversize_said_ = true;
+  const std::string text = "DDS: a surface mesh of " + std::to_string(c.last_oversize_bytes) +
+                           " bytes serialized is over publish.dds.max_mesh_bytes (" +
+                           std::to_string(dds_->options().max_mesh_bytes) +
+                           ") and was not sent; DDS subscribers keep the last mesh that fitted until one fits again "
+                           "(raise publish.dds.max_mesh_bytes, and the subscribers' --dds-max-mesh-bytes)";
+  std::fprintf(options_.err, "tissued: %s\n", text.c_str());
+  std::fflush(options_.err);
+  record_event(static_cast<int>(record::EventKind::kWarning), text);
 }
 
 void Service::note_failing_steps() {
@@ -702,7 +724,8 @@ nlohmann::json Service::status() {
                                                    {"meshes", dds_->counts().meshes},
                                                    {"haptic_states", dds_->counts().haptic_states},
                                                    {"stats", dds_->counts().stats},
-                                                   {"failures", dds_->counts().failures}}
+                                                   {"failures", dds_->counts().failures},
+                                                   {"oversize_meshes", dds_->counts().oversize_meshes}}
                                   : nlohmann::json(nullptr)}};
   if (recorder_) {
     const record::RecorderStats r = recorder_->stats();

@@ -117,6 +117,7 @@ class Service : public control::ControlHandler {
   // Re-arms `timer` every 1/rate_hz seconds on the io thread, calling `publish`.
   void arm_publish_timer(boost::asio::steady_timer& timer, double rate_hz, void (Service::*publish)());
   void publish_mesh();
+  void note_dds_oversize(std::uint64_t oversize_before, std::uint64_t sent_before);
   void publish_haptic();
   void publish_stats();
   // Records a warning event when the haptic safety tripped since the last
@@ -180,7 +181,8 @@ class Service : public control::ControlHandler {
   // which counts from zero, by it); what note_safety_trips last saw.
   std::uint64_t haptic_side_number_ = 0;
   SafetyTrips safety_trips_;
-  FailingSteps failing_steps_;  // what note_failing_steps says, and when
+  FailingSteps failing_steps_;      // what note_failing_steps says, and when
+  bool dds_oversize_said_ = false;  // note_dds_oversize: said since the last mesh that went out
   std::unique_ptr<control::ControlServer> server_;
   std::unique_ptr<control::SystemdNotifier> systemd_;
   std::unique_ptr<control::WatchdogFeeder> watchdog_;

@@ -16,7 +16,7 @@ struct DdsOptions {
   // false: UDPv4 on every interface too (a peer on another host).
   bool loopback_only = true;
   // Sizes the shared-memory segment; the publisher does not send larger
-  // serialized meshes (counted as failures).
+  // serialized meshes (counted as failures, and as oversize_meshes).
   std::size_t max_mesh_bytes = 8u << 20;
 };
 

@@ -157,6 +157,8 @@ void DdsPublisher::publish_mesh(const service::MeshSnapshot& snapshot) {
   const std::size_t bytes = ::tissue::surface_mesh::getCdrSerializedSize(impl_->mesh) + 4;
   if (bytes > options_.max_mesh_bytes) {
     ++counts_.failures;
+    ++counts_.oversize_meshes;
+    counts_.last_oversize_bytes = bytes;
     return;
   }
   ++mesh_seq_;

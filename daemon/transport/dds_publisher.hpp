@@ -45,6 +45,10 @@ namespace tissue::transport {
 
 struct DdsPublishCounts {
   std::uint64_t meshes = 0, haptic_states = 0, stats = 0, failures = 0;
+  // Of the failures, meshes not sent because their serialized message was
+  // over DdsOptions::max_mesh_bytes, and the size of the newest one (bytes).
+  std::uint64_t oversize_meshes = 0;
+  std::size_t last_oversize_bytes = 0;
 };
 
 // Readers matched right now, per topic (diagnostics, tests).

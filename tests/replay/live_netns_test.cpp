@@ -281,7 +281,8 @@ TEST_F(LiveNetns, DdsMaxMeshBytesKeepsLargerFramesOffTheWireAndTheSummarySaysWhy
     return "  DDS domain " + domain_ + " topics tissue/*: " + std::to_string(meshes) + " meshes, 50 haptic states, " +
            "3 stats sent, " + std::to_string(failures) + " failures";
   };
-  const std::string why = " (a mesh over --dds-max-mesh-bytes 65536 serialized is not sent and counts as one)";
+  const std::string why = " (" + std::to_string(kLimitLargeFrames) +
+                          " of them meshes over --dds-max-mesh-bytes 65536 serialized, not sent)";
   {
     SCOPED_TRACE("--dds-max-mesh-bytes 65536: the large frames are over it");
     const LimitedReplay got = replay_with_limit(std::size_t{64} << 10);

@@ -89,4 +89,5 @@ m2="$(status_field publishing.lcm.meshes)"; d2="$(status_field publishing.dds.me
 [ "$d2" -gt "$d1" ] || fail "DDS meshes stopped after the kill ($d1 -> $d2)"
 [ "$(status_field publishing.lcm.failures)" = 0 ] || fail "LCM publish failures"
 [ "$(status_field publishing.dds.failures)" = 0 ] || fail "DDS publish failures"
+[ "$(status_field publishing.dds.oversize_meshes)" = 0 ] || fail "DDS meshes held back under the default limit"
 echo "daemon_live_test: 4 subscribers got the 2+ MB surface, one killed mid-stream; LCM meshes $m1 -> $m2, DDS $d1 -> $d2"
