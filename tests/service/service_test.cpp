@@ -202,6 +202,24 @@ void edit_file(const std::string& path, const std::string& from, const std::stri
 }
 
 // Whether the service wrote `text` to `f` within 5 s (it reloads on its own thread).
+// A UDP socket bound to a free loopback port (its number in *port), or -1:
+// the port a test's UDP device is kept from, or given once closed.
+int bound_loopback_udp_socket(int* port) {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+  if (fd < 0) return -1;
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof address;
+  if (::bind(fd, reinterpret_cast<const sockaddr*>(&address), sizeof address) != 0 ||
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  *port = ntohs(address.sin_port);
+  return fd;
+}
+
 bool written_within_5_s(std::FILE* f, const std::string& text) {
   for (int i = 0; i < 500; ++i) {
     std::fflush(f);
@@ -486,15 +504,9 @@ TEST(Service, AScenePastMaxSceneTetsIsRefusedBeforeItIsBuilt) {
 // scene was already gone. The next load tries the device again.
 TEST(Service, ALoadWhoseDeviceCannotStartRunsTheSceneAndWarns) {
   TempDir dir;
-  const int holder = ::socket(AF_INET, SOCK_DGRAM, 0);
+  int port = 0;
+  const int holder = bound_loopback_udp_socket(&port);
   ASSERT_GE(holder, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::bind(holder, reinterpret_cast<const sockaddr*>(&address), sizeof address), 0);
-  socklen_t length = sizeof address;
-  ASSERT_EQ(::getsockname(holder, reinterpret_cast<sockaddr*>(&address), &length), 0);
-  const int port = ntohs(address.sin_port);
   std::string config_text = file_text(write_config(dir, scene_file("beam.yaml"), "udp"));  // beam: no tool
   config_text.replace(config_text.find("  sim:\n"), 7, "  udp: {port: " + std::to_string(port) + "}\n  sim:\n");
   std::ofstream(dir / "tissued.yaml") << config_text;
@@ -787,15 +799,9 @@ TEST(Service, HapticSafetyTripsAreRecordedAsEvents) {
 // apart, the trips are looked at only when a side stops.
 TEST(Service, ARestartedHapticSideHasItsOwnTripsRecorded) {
   TempDir dir;
-  const int holder = ::socket(AF_INET, SOCK_DGRAM, 0);
+  int port = 0;
+  const int holder = bound_loopback_udp_socket(&port);
   ASSERT_GE(holder, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::bind(holder, reinterpret_cast<const sockaddr*>(&address), sizeof address), 0);
-  socklen_t length = sizeof address;
-  ASSERT_EQ(::getsockname(holder, reinterpret_cast<sockaddr*>(&address), &length), 0);
-  const int port = ntohs(address.sin_port);
   ::close(holder);  // free for the device: a port the system had free a moment ago
   const std::string config = write_config(dir, scene_file("cantilever.yaml"), "udp");
   edit_file(config, "status_interval_s: 0.1", "status_interval_s: 3600");

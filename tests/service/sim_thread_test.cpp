@@ -100,17 +100,28 @@ TEST(SimThread, SchedulingIsKnownWhenStartReturns) {
   }
 }
 
+SimThreadOptions fast_status() {
+  SimThreadOptions options;
+  options.status_every_s = 0.005;
+  return options;
+}
+
+// A tick with the tool over the cantilever's loaded free end, out of engage
+// distance.
+haptics::ToolSample hovering_over_the_free_end() {
+  haptics::ToolSample hover;
+  hover.proxy_position_m = haptics::Vec3(0.09, 0.05, 0.112);
+  return hover;
+}
+
 // haptic_state's local_model_version is the model the loop rendered
 // against, taken from its tick: a loop still on version 1 while the sim has
 // published newer ones shows 1 (a stale loop's version stops increasing).
 TEST(SimThread, StatusCarriesTheModelVersionTheTickRenderedAgainst) {
   ToolSampleRing samples;
   LocalModelChannel models;
-  SimThreadOptions options;
-  options.status_every_s = 0.005;
-  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
-  haptics::ToolSample hover;
-  hover.proxy_position_m = haptics::Vec3(0.09, 0.05, 0.112);
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
+  haptics::ToolSample hover = hovering_over_the_free_end();
   hover.model_version = 1;
   ASSERT_TRUE(samples.try_push(hover));
   thread.start();
@@ -125,17 +136,13 @@ TEST(SimThread, StatusCarriesTheModelVersionTheTickRenderedAgainst) {
 TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {
   ToolSampleRing samples;
   LocalModelChannel models;
-  SimThreadOptions options;
-  options.status_every_s = 0.005;
-  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
-  // The tool hovers over the loaded free end (out of engage distance), so
-  // the patch is the surface that moves from the first steps. With no tick
-  // the tool is parked 1 km up and the patch is the highest triangle: on the
-  // clamped face (velocities exactly zero) while the load bends the beam
-  // down, so nothing moved until the load's release at 1 s of sim time.
-  haptics::ToolSample hover;
-  hover.proxy_position_m = haptics::Vec3(0.09, 0.05, 0.112);
-  ASSERT_TRUE(samples.try_push(hover));
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
+  // The tool hovers over the loaded free end, so the patch is the surface
+  // that moves from the first steps. With no tick the tool is parked 1 km up
+  // and the patch is the highest triangle: on the clamped face (velocities
+  // exactly zero) while the load bends the beam down, so nothing moved until
+  // the load's release at 1 s of sim time.
+  ASSERT_TRUE(samples.try_push(hovering_over_the_free_end()));
   thread.start();
   ASSERT_TRUE(wait_for([&] { return thread.status().steps > 5; }));
   const auto moving = [&] {

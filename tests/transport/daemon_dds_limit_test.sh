@@ -38,13 +38,7 @@ YAML
   --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
 daemon=$!
 
-status_field() {
-  "$tissue" ctl --socket "$work/c.sock" status 2>/dev/null |
-    python3 -c 'import json,sys
-v=json.load(sys.stdin)
-for k in sys.argv[1].split("."): v=v[k]
-print(v)' "$1" 2>/dev/null || echo -1
-}
+. "$(dirname "$0")/daemon_status.sh"  # status_field
 i=0
 until [ "$(status_field publishing.dds.oversize_meshes)" -ge 3 ] 2>/dev/null; do
   i=$((i + 1)); [ "$i" -le 300 ] || fail "no oversize mesh counted within 30 s"

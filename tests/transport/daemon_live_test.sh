@@ -42,14 +42,7 @@ lcm_url='udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216'
   --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
 daemon=$!
 
-# One field of `tissue ctl status`, e.g. publishing.lcm.meshes.
-status_field() {
-  "$tissue" ctl --socket "$work/c.sock" status 2>/dev/null |
-    python3 -c 'import json,sys
-v=json.load(sys.stdin)
-for k in sys.argv[1].split("."): v=v[k]
-print(v)' "$1" 2>/dev/null || echo -1
-}
+. "$(dirname "$0")/daemon_status.sh"  # status_field
 i=0
 until [ "$(status_field publishing.lcm.meshes)" -ge 1 ] 2>/dev/null; do
   i=$((i + 1)); [ "$i" -le 300 ] || fail "the daemon published no mesh within 30 s"
