@@ -299,9 +299,13 @@ Figures measure_pipeline(double seconds, const config::RealtimeSpec& realtime, s
   f.control = haptics::summarize(thread.lateness(), thread.control(), 0);
   count_stalls(thread, f);
   const haptics::HapticStats st = loop.stats();
-  std::printf("  (pipeline: %llu ticks, %llu model updates, %llu sim steps, rtf %.2f, %zu tets, ring drops %llu)\n",
+  // The sim thread measures its real-time factor over whole seconds: a
+  // shorter run has none ("-", not the unmeasured NaN).
+  char rtf[32] = "-";
+  if (status.real_time_factor_measured) std::snprintf(rtf, sizeof rtf, "%.2f", status.real_time_factor);
+  std::printf("  (pipeline: %llu ticks, %llu model updates, %llu sim steps, rtf %s, %zu tets, ring drops %llu)\n",
               static_cast<unsigned long long>(st.ticks), static_cast<unsigned long long>(st.model_updates),
-              static_cast<unsigned long long>(status.steps), status.real_time_factor, status.tets,
+              static_cast<unsigned long long>(status.steps), rtf, status.tets,
               static_cast<unsigned long long>(st.ring_drops));
   return f;
 }
