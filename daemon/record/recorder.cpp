@@ -369,8 +369,13 @@ void Recorder::run() {
     if (stopping) close_to_producers();
     try {
       drain_and_write(stopping);
+    } catch (const RecordError& e) {
+      set_failed(e.what());  // names the file and what failed in it
+      break;
     } catch (const std::exception& e) {
-      set_failed(e.what());
+      // Not the writer's own error (std::bad_alloc, ...): its text alone
+      // would not say which recording stopped.
+      set_failed("recording '" + path_ + "' stopped: " + e.what());
       break;
     }
     if (stopping) break;

@@ -443,6 +443,8 @@ TEST(Recorder, AFailedRecordingClosesItsFileAlsoWhenTheErrorEventCannotBeWritten
   rec->stop();
   ASSERT_EQ(rec->state(), RecorderState::kFailed);
   EXPECT_NE(rec->error().find("injected failure"), std::string::npos) << rec->error();
+  // Not the writer's own error: the recorder names the file.
+  EXPECT_NE(rec->error().find(dir / "s.h5"), std::string::npos) << rec->error();
   ASSERT_EQ(event_writes.load(), 1) << "the recording_error event was not tried: the test misses its path";
   // The Recorder still exists: only the close can have released the file.
   EXPECT_FALSE(being_recorded(dir / "s.h5")) << "the failed recording still holds its file after the stop";
