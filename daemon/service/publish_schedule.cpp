@@ -12,10 +12,15 @@ SimThreadOptions sim_thread_options(const config::DaemonConfig& c) {
   // Energies are only read by sim_stats and `status`: sum them at the stats rate.
   o.energy_every_s = 1.0 / std::max(c.publish.stats_rate_hz, 1.0);
   // Snapshots feed export_x3d as well, so never below 30 Hz; faster only for
-  // a publisher that sends them faster (building one costs the sim thread).
+  // a publisher (building one costs the sim thread), twice its rate.
   const bool publishing = c.publish.lcm.enabled || c.publish.dds.enabled;
-  o.snapshot_every_s = 1.0 / std::max(publishing ? c.publish.mesh_rate_hz : 0.0, 30.0);
+  o.snapshot_every_s = 1.0 / std::max(publishing ? 2.0 * c.publish.mesh_rate_hz : 0.0, 30.0);
   return o;
+}
+
+std::int64_t next_snapshot_due_ns(std::int64_t due_ns, std::int64_t now_ns, std::int64_t period_ns) {
+  const std::int64_t next = due_ns + period_ns;
+  return next + period_ns < now_ns ? now_ns + period_ns : next;
 }
 
 std::chrono::steady_clock::time_point next_publish_time(std::chrono::steady_clock::time_point previous,

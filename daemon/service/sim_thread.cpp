@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "record/recorder.hpp"
+#include "service/publish_schedule.hpp"
 
 namespace tissue::service {
 
@@ -121,7 +122,9 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
   frame.triangle_strain_energy_J_per_m3 = snap.triangle_strain_energy_J_per_m3;
   recorder.push_mesh_frame(frame);  // copies: the snapshot is published after this
   snapshots_.publish();
-  last_snapshot_ns_ = t_ns;
+  // A recording frame is a snapshot too: it takes the due one's place.
+  if (t_ns >= next_snapshot_ns_)
+    next_snapshot_ns_ = next_snapshot_due_ns(next_snapshot_ns_, t_ns, snapshot_period_ns());
 }
 
 void SimThread::halt(const char* what) noexcept {
@@ -316,10 +319,10 @@ void SimThread::run(std::promise<void>& scheduled) {
       step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
       if (!halted_) publish_model(t1, rebuilt);
       if (recorder) record(*recorder, t1);
-      if (!halted_ && t1 - last_snapshot_ns_ >= static_cast<std::int64_t>(options_.snapshot_every_s * 1e9)) {
+      if (!halted_ && t1 >= next_snapshot_ns_) {
         build_snapshot();
         snapshots_.publish();
-        last_snapshot_ns_ = t1;
+        next_snapshot_ns_ = next_snapshot_due_ns(next_snapshot_ns_, t1, snapshot_period_ns());
       }
     } catch (const std::exception& e) {
       halt(e.what());

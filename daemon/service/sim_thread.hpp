@@ -215,7 +215,8 @@ class SimThread {
   // the surface grows.
   SnapshotScratch snapshot_scratch_;
   std::uint64_t snapshot_sequence_ = 0;
-  std::int64_t last_snapshot_ns_ = 0;
+  std::int64_t next_snapshot_ns_ = 0;  // due time on the snapshot grid (next_snapshot_due_ns)
+  std::int64_t snapshot_period_ns() const { return static_cast<std::int64_t>(options_.snapshot_every_s * 1e9); }
 };
 
 // steady_clock now in nanoseconds (the clock every timestamp here uses).
