@@ -289,6 +289,19 @@ TEST(Recorder, PushesRacingStopAreWrittenOrCountedNeverLost) {
   }
 }
 
+// What a recording's on_error said: how often, and the last message (read
+// after stop(), which joins the recorder thread that calls it).
+struct ErrorsHeard {
+  std::atomic<int> calls{0};
+  std::string last;
+  std::function<void(const std::string&)> callback() {
+    return [this](const std::string& m) {
+      last = m;
+      calls.fetch_add(1);
+    };
+  }
+};
+
 // The free-space reserve trips (here: a reserve no disk has): recording
 // stops with a message naming the file, the callback hears it, the file is
 // closed properly and holds a recording_error event; producers are unharmed,
@@ -303,12 +316,8 @@ TEST(Recorder, FreeSpaceReserveStopsRecordingCleanlyAndReports) {
   o.flush_interval_s = 1.0;
   o.poll_interval_s = 1.0;
   o.min_free_bytes = std::uint64_t{1} << 62;
-  std::atomic<int> calls{0};
-  std::string heard;
-  o.on_error = [&](const std::string& m) {
-    heard = m;
-    calls.fetch_add(1);
-  };
+  ErrorsHeard errors;
+  o.on_error = errors.callback();
   auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
   std::uint64_t accepted = 0;
   for (int k = 0; k < 100; ++k) accepted += rec->push_haptic(testing::haptic_row(accepted));
@@ -321,8 +330,8 @@ TEST(Recorder, FreeSpaceReserveStopsRecordingCleanlyAndReports) {
   EXPECT_FALSE(being_recorded(dir / "s.h5"));
   for (int k = 0; k < 1000; ++k) EXPECT_FALSE(rec->push_haptic(testing::haptic_row(k)));
   rec->stop();
-  EXPECT_EQ(calls.load(), 1);
-  EXPECT_EQ(heard, rec->error());
+  EXPECT_EQ(errors.calls.load(), 1);
+  EXPECT_EQ(errors.last, rec->error());
   EXPECT_NE(rec->error().find(dir / "s.h5"), std::string::npos) << rec->error();
   EXPECT_NE(rec->error().find("disk almost full"), std::string::npos) << rec->error();
   EXPECT_EQ(rec->stats().haptic_rows_written, accepted);
@@ -357,12 +366,8 @@ TEST_P(RecorderAppendThrows, RecordingFailsEveryPushIsADropAndTheFileIsClosed) {
   o.write_fault_for_testing = [failing](const char* dataset) {
     if (dataset == failing) throw RecordError("injected write error");
   };
-  std::atomic<int> calls{0};
-  std::string heard;
-  o.on_error = [&](const std::string& m) {
-    heard = m;
-    calls.fetch_add(1);
-  };
+  ErrorsHeard errors;
+  o.on_error = errors.callback();
   auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
   // The failing kind is pushed first, so no write that comes before it can
   // succeed, whenever the recorder thread polls or flushes (frames are
@@ -389,8 +394,8 @@ TEST_P(RecorderAppendThrows, RecordingFailsEveryPushIsADropAndTheFileIsClosed) {
   ASSERT_EQ(rec->state(), RecorderState::kFailed);
   EXPECT_NE(rec->error().find(dir / "s.h5"), std::string::npos) << rec->error();
   EXPECT_NE(rec->error().find(std::string("cannot write ") + failing), std::string::npos) << rec->error();
-  EXPECT_EQ(calls.load(), 1);
-  EXPECT_EQ(heard, rec->error());
+  EXPECT_EQ(errors.calls.load(), 1);
+  EXPECT_EQ(errors.last, rec->error());
   const RecorderStats s = rec->stats();
   EXPECT_EQ(s.haptic_rows_written, 0u);
   EXPECT_EQ(s.sim_rows_written, 0u);

@@ -13,32 +13,10 @@ cleanup() { [ -n "$daemon" ] && kill "$daemon" 2>/dev/null; rm -rf "$work"; }
 trap cleanup EXIT
 fail() { echo "daemon_dds_limit_test: $*" >&2; cat "$work/daemon.log" >&2 2>/dev/null || true; exit 1; }
 
-# 40 x 40 x 2 cubes at rest: ~13,000 surface triangles, ~200 KB serialized.
-cat >"$work/slab.yaml" <<YAML
-name: slab
-object:
-  cubes: [40, 40, 2]
-  cube_size_m: 0.004
-material:
-  youngs_modulus_Pa: 5.0e4
-  density_kg_per_m3: 100
-gravity_m_per_s2: [0, 0, 0]
-fixed:
-  - region: {box: {min_m: [0, 0, 0], max_m: [0, 0.16, 0.008]}}
-adaptivity:
-  enabled: false
-integrator:
-  kind: implicit
-  dt_s: 0.001
-YAML
-
-"$tissued" --config "$(dirname "$0")/../../config/tissued.yaml" --duration 60 \
-  --set "scene=$work/slab.yaml" --set "control.unix_socket_path=$work/c.sock" --set "state_dir=$work" \
-  --set publish.dds.enabled=true --set publish.dds.domain_id=29 --set publish.dds.max_mesh_bytes=65536 \
-  --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
-daemon=$!
-
-. "$(dirname "$0")/daemon_status.sh"  # status_field
+. "$(dirname "$0")/daemon_test_support.sh"  # write_slab_scene, start_daemon, status_field
+# 40 x 40 x 2 cubes: 7,040 surface triangles, a DDS message of 158,516 bytes.
+write_slab_scene 40 0.004
+start_daemon --set publish.dds.enabled=true --set publish.dds.domain_id=29 --set publish.dds.max_mesh_bytes=65536
 i=0
 until [ "$(status_field publishing.dds.oversize_meshes)" -ge 3 ] 2>/dev/null; do
   i=$((i + 1)); [ "$i" -le 300 ] || fail "no oversize mesh counted within 30 s"

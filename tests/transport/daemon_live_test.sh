@@ -14,35 +14,11 @@ cleanup() { [ -n "$daemon" ] && kill "$daemon" 2>/dev/null; rm -rf "$work"; }
 trap cleanup EXIT
 fail() { echo "daemon_live_test: $*" >&2; cat "$work"/*.log >&2 2>/dev/null || true; exit 1; }
 
-# At rest (no load, no gravity): the implicit solve converges at once, so the
-# big mesh costs the sim thread little and snapshots keep coming.
-cat >"$work/slab.yaml" <<EOF
-name: slab
-object:
-  cubes: [160, 160, 2]
-  cube_size_m: 0.001
-material:
-  youngs_modulus_Pa: 5.0e4
-  density_kg_per_m3: 100
-gravity_m_per_s2: [0, 0, 0]
-fixed:
-  - region: {box: {min_m: [0, 0, 0], max_m: [0, 0.16, 0.002]}}
-adaptivity:
-  enabled: false
-integrator:
-  kind: implicit
-  dt_s: 0.001
-EOF
-
+. "$(dirname "$0")/daemon_test_support.sh"  # write_slab_scene, start_daemon, status_field
+write_slab_scene 160 0.001
 lcm_url='udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216'
-"$tissued" --config "$(dirname "$0")/../../config/tissued.yaml" --duration 60 \
-  --set "scene=$work/slab.yaml" --set "control.unix_socket_path=$work/c.sock" --set "state_dir=$work" \
-  --set publish.lcm.enabled=true --set "publish.lcm.url=$lcm_url" \
-  --set publish.dds.enabled=true --set publish.dds.domain_id=23 \
-  --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
-daemon=$!
-
-. "$(dirname "$0")/daemon_status.sh"  # status_field
+start_daemon --set publish.lcm.enabled=true --set "publish.lcm.url=$lcm_url" \
+  --set publish.dds.enabled=true --set publish.dds.domain_id=23
 i=0
 until [ "$(status_field publishing.lcm.meshes)" -ge 1 ] 2>/dev/null; do
   i=$((i + 1)); [ "$i" -le 300 ] || fail "the daemon published no mesh within 30 s"
