@@ -89,6 +89,30 @@ TEST(ReplayTimeline, BadOptionsAreErrors) {
   EXPECT_THROW(build_timeline({0.0}, {}, {}, o), ReplayError);
 }
 
+// The refusal shows the options as given: two ends that differ never read
+// the same ("--from 0.000000 --to 0.000000" said %f), a huge one is not 300
+// digits long.
+TEST(ReplayTimeline, ARefusedWindowOrRateShowsTheNumbersAsGiven) {
+  const auto message = [](const TimelineOptions& o) {
+    try {
+      build_timeline({0.0}, {}, {}, o);
+    } catch (const ReplayError& e) {
+      return std::string(e.what());
+    }
+    ADD_FAILURE() << "accepted";
+    return std::string();
+  };
+  TimelineOptions o;
+  o.from_s = 1e-7;
+  o.to_s = 0.0;
+  EXPECT_NE(message(o).find("window --from 1e-07 --to 0:"), std::string::npos) << message(o);
+  o.from_s = 1e300;
+  EXPECT_NE(message(o).find("window --from 1e+300 --to 0:"), std::string::npos) << message(o);
+  o = {};
+  o.haptic_rate_hz = -1e-9;
+  EXPECT_NE(message(o).find("haptic rate -1e-09 Hz"), std::string::npos) << message(o);
+}
+
 // The window is inclusive at both ends, so one instant (from == to) is a
 // window too: it holds the items at exactly that time.
 TEST(ReplayTimeline, AWindowOfOneInstantHoldsTheItemsAtThatTime) {
