@@ -128,10 +128,10 @@ void validate_session_name(const std::string& name, const std::string& what) {
   if (name.size() > kMaxSessionNameBytes) bad("it is longer than " + std::to_string(kMaxSessionNameBytes) + " bytes");
 }
 
-void validate_client_session_name(const std::string& name) {
-  validate_session_name(name);
+void validate_client_session_name(const std::string& name, const std::string& what) {
+  validate_session_name(name, what);
   if (name.rfind(kAutomaticPrefix, 0) == 0)
-    throw RecordError("session name '" + name + "' rejected: it starts with '" + std::string(kAutomaticPrefix) +
+    throw RecordError(what + " name '" + name + "' rejected: it starts with '" + std::string(kAutomaticPrefix) +
                       "', the daemon's automatic recordings, which record.keep_gb removes (choose another name)");
 }
 

@@ -51,8 +51,9 @@ inline constexpr std::string_view kAutomaticPrefix = "auto-";
 // validate_session_name, and not a name starting with kAutomaticPrefix:
 // those are the daemon's own, and record.keep_gb removes the old ones, so a
 // client's "auto-20000101-000000.h5" would be deleted as automatic. For the
-// names a client gives (record_start, --record in service mode).
-void validate_client_session_name(const std::string& name);
+// names a client gives (record_start, --record in service mode, export_x3d:
+// an export named like a recording would be deleted as one too).
+void validate_client_session_name(const std::string& name, const std::string& what = "session");
 // Removes the oldest automatic recordings in `dir` (regular files named
 // kAutomaticPrefix + "YYYYmmdd-HHMMSS[-K].h5", oldest first by that time,
 // then K) until those left hold at most `keep_bytes` together, never `keep`

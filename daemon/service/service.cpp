@@ -867,9 +867,11 @@ nlohmann::json Service::record_stop() {
 nlohmann::json Service::export_x3d(const std::string& name) {
   const std::string file_name =
       name.empty() ? util::free_timestamped_name(config_.state_dir, "surface-", ".x3d", std::time(nullptr)) : name;
-  // Same rule as recordings: a plain file name inside the state directory.
+  // Same rule as a client's recordings: a plain file name inside the state
+  // directory, not named like an automatic recording (record.keep_gb would
+  // remove it as one).
   try {
-    record::validate_session_name(file_name, "export");
+    record::validate_client_session_name(file_name, "export");
   } catch (const std::exception& e) {
     // No "export_x3d:" prefix: tissue ctl puts the command's name before it.
     throw control::ControlError(std::string(e.what()) + "; files go to state_dir " + config_.state_dir);

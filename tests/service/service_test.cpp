@@ -1155,6 +1155,15 @@ TEST(Service, ExportsTheCurrentSurfaceAsX3d) {
   EXPECT_EQ(up["error"].get<std::string>().rfind("export name '../up.x3d' rejected: it contains '/'", 0), 0u)
       << up.dump();
   EXPECT_NE(up["error"].get<std::string>().find("(an export is a plain file name"), std::string::npos) << up.dump();
+  // Named like an automatic recording, record.keep_gb would delete it as the
+  // oldest one: refused, as record_start refuses such names.
+  const nlohmann::json automatic = client.call("export_x3d", {{"name", "auto-20200101-000000.h5"}});
+  EXPECT_FALSE(automatic["ok"].get<bool>()) << automatic.dump();
+  EXPECT_EQ(automatic["error"].get<std::string>().rfind(
+                "export name 'auto-20200101-000000.h5' rejected: it starts with 'auto-'", 0),
+            0u)
+      << automatic.dump();
+  EXPECT_FALSE(std::filesystem::exists(dir / "auto-20200101-000000.h5"));
   const nlohmann::json unnamed = client.call("export_x3d");
   ASSERT_TRUE(unnamed["ok"].get<bool>()) << unnamed.dump();
   EXPECT_TRUE(std::filesystem::exists(unnamed["result"]["file"].get<std::string>()));
