@@ -58,7 +58,11 @@ FieldError compare_displacement_fields(const DisplacementField& ref, const Displ
   const double cell = std::max(std::cbrt(std::max(extent.prod(), 1e-30) / static_cast<double>(n)), 1e-12);
   std::array<int, 3> dims{};
   for (int a = 0; a < 3; ++a) dims[a] = static_cast<int>(extent[a] / cell) + 1;
-  const auto bin_of = [&](int a, double x) { return std::clamp(static_cast<int>((x - lo[a]) / cell), 0, dims[a] - 1); };
+  // Clamped as a double, then converted: a tet of `test` may reach more bins
+  // past the reference than an int holds (converting those is undefined).
+  const auto bin_of = [&](int a, double x) {
+    return static_cast<int>(std::clamp((x - lo[a]) / cell, 0.0, static_cast<double>(dims[a] - 1)));
+  };
   const auto bin_index = [&](int i, int j, int k) { return (static_cast<std::size_t>(k) * dims[1] + j) * dims[0] + i; };
   std::vector<std::vector<int>> bins(static_cast<std::size_t>(dims[0]) * dims[1] * dims[2]);
   for (std::size_t i = 0; i < n; ++i)

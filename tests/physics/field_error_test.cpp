@@ -140,6 +140,33 @@ TEST(FieldError, NodesOutsideTheOtherMeshAreCountedAsUnlocated) {
   EXPECT_LT(e.rms_rel, 1e-12);
 }
 
+// A tet of the other mesh reaching far past the reference (more bins away
+// than an int holds) still finds the reference nodes inside it: its bin
+// range is clamped before it becomes an int (the conversion of 1.6e12 bins
+// was undefined, and on x86 gave INT_MIN, bin 0, so only the first bin's
+// nodes were found).
+TEST(FieldError, AHugeTetOfTheOtherMeshFindsTheNodesInside) {
+  DisplacementField reference;
+  const Vec3 u(0.0, 0.0, 0.01);  // the same everywhere: interpolation is exact
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) {
+        reference.rest_m.push_back(0.5 * Vec3(i, j, k));
+        reference.u_m.push_back(u);
+        reference.free.push_back(1);
+      }
+  DisplacementField huge;
+  huge.rest_m = {Vec3(-1e12, -1e12, -1e12), Vec3(1e13, -1e12, -1e12), Vec3(-1e12, 1e13, -1e12),
+                 Vec3(-1e12, -1e12, 1e13)};
+  huge.u_m.assign(4, u);
+  huge.free.assign(4, 1);
+  huge.tets = {{0, 1, 2, 3}};
+  const FieldError e = compare_displacement_fields(reference, huge);
+  EXPECT_EQ(e.unlocated, 0u);
+  EXPECT_EQ(e.compared, reference.rest_m.size());
+  EXPECT_LT(e.max_rel, 1e-9);
+}
+
 TEST(FieldError, NothingToCompareGivesNaNNotZero) {
   const DisplacementField still =
       capture_displacement_field(displaced_beam(0, [](const Vec3&) { return Vec3::Zero(); }));
