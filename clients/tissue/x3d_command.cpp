@@ -48,6 +48,15 @@ std::string fmt(double v) {
   return std::string(buf, r.ptr);
 }
 
+// The window options as the user gave them, for messages: "--from 0.5 --to
+// 2", "--to 2", or "(all frames)" when neither was given.
+std::string given_window_text(const X3dCommandOptions& o) {
+  std::string text;
+  if (o.from_s) text = "--from " + fmt(*o.from_s);
+  if (o.to_s) text += (text.empty() ? "" : " ") + std::string("--to ") + fmt(*o.to_s);
+  return text.empty() ? "(all frames)" : text;
+}
+
 // Regular files via a temporary and a rename (a failed export never leaves a
 // truncated OUT behind); devices and FIFOs in place (util::write_output_file).
 void write_file(const std::string& path, const std::string& text) {
@@ -107,6 +116,12 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
                        (t0 == t1 ? ": the window has no length; an animation needs at least 2 frames"
                                  : ": the window is empty (--from is after --to)"));
   std::vector<std::size_t> picked = x3d::frames_in_window(source, t0, t1);
+  // Every frame of the window is held at once: refused before reading when
+  // the source's index says they do not fit (an hour of a large surface is
+  // hundreds of GB, and ended in std::bad_alloc or the OOM killer).
+  if (const std::string over = x3d::frame_budget_problem(source, picked, x3d::kExportFrameBudgetBytes); !over.empty())
+    throw BadArguments("--animate " + given_window_text(o) + ": " + over +
+                       "; choose a shorter window with --from/--to");
   std::vector<x3d::SurfaceFrame> frames;
   std::size_t skipped_empty = 0;
   for (const std::size_t k : picked) {

@@ -11,6 +11,8 @@
 #include "export/export_test_support.hpp"
 #include "export/frame_source.hpp"
 #include "export/x3d.hpp"
+#include "record/record_test_support.hpp"
+#include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
 
 namespace tissue::x3d {
@@ -197,6 +199,72 @@ TEST_F(X3dCli, ImpossibleStoredFramesExitOneNamingFrameAndField) {
   r = x3d("--session " + quote(session_) + " --frame 1 -o " + quote(out));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("/mesh/triangles row 15 (frame 1) holds the negative index -4"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// Sets the row count of a closed session's (chunked, unlimited) dataset;
+// rows past the written ones read as 0 and take no space in the file.
+void set_rows(const std::string& path, const char* dataset, hsize_t rows) {
+  const hid_t file = record::testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t d = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(d, 0) << dataset;
+  const hid_t space = H5Dget_space(d);
+  hsize_t dims[2] = {0, 0};
+  H5Sget_simple_extent_dims(space, dims, nullptr);
+  dims[0] = rows;
+  EXPECT_GE(H5Dset_extent(d, dims), 0) << dataset;
+  H5Sclose(space);
+  H5Dclose(d);
+  H5Fclose(file);
+}
+
+// Overwrites every row of a closed session's one-column uint64 dataset.
+void write_column(const std::string& path, const char* dataset, const std::vector<std::uint64_t>& values) {
+  const hid_t file = record::testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t d = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(d, 0) << dataset;
+  EXPECT_GE(H5Dwrite(d, H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), 0) << dataset;
+  H5Dclose(d);
+  H5Fclose(file);
+}
+
+// --animate without --from/--to kept every frame of the session in memory:
+// an hour of a 50k-vertex surface at 30 Hz is hundreds of GB (bad_alloc or
+// the OOM killer). Its window is refused from the session's index, before a
+// frame is read, past the budget live collection has (1 GiB). The session
+// claims 45 frames of 2^20 vertices (~29 MB each, 1.2 GiB in all) in rows
+// HDF5 does not store.
+TEST_F(X3dCli, AnAnimationTooLargeToHoldIsRefusedBeforeReadingAFrame) {
+  using record::kDatasets;
+  constexpr std::uint64_t kFrames = 45, kVertices = std::uint64_t{1} << 20;
+  std::vector<SurfaceFrame> frames;
+  for (std::uint64_t k = 0; k < kFrames; ++k)
+    frames.push_back(testing::box_frame(static_cast<double>(k), {0, 0, 0}, {0.125, 0.0625, 0.03125}));
+  const std::string big = write_session(dir_, "big.h5", frames);
+  std::vector<std::uint64_t> offsets, counts(kFrames, kVertices);
+  for (std::uint64_t k = 0; k < kFrames; ++k) offsets.push_back(k * kVertices);
+  set_rows(big, kDatasets[record::kMeshVertices].path, kFrames * kVertices);
+  set_rows(big, kDatasets[record::kMeshVertexLevel].path, kFrames * kVertices);
+  write_column(big, kDatasets[record::kMeshVertexOffset].path, offsets);
+  write_column(big, kDatasets[record::kMeshVertexCount].path, counts);
+  // Reading a frame fails (exit 1): the session reader refuses rows past
+  // what the file can hold, so an export without the check stops at frame 0
+  // instead of holding 1.2 GiB here.
+  const std::string out = dir_ / "big.x3d";
+  const auto expect_refused = [&](const std::string& window, const std::string& said) {
+    const RunResult r = x3d("--session " + quote(big) + " --animate " + window + " -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 2) << window << "\n" << r.err;
+    EXPECT_NE(r.err.find("tissue x3d: --animate " + said), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(" GiB of frame data, more than the 1 GiB an export may hold; choose a shorter window "
+                         "with --from/--to"),
+              std::string::npos)
+        << r.err;
+  };
+  expect_refused("", "(all frames): 45 frames of '" + big + "' (t=0 s to 44 s) hold 1.2");
+  expect_refused("--from 0 --to 40", "--from 0 --to 40: 41 frames of '" + big + "' (t=0 s to 40 s) hold ");
+  expect_refused("--to 40", "--to 40: 41 frames of '" + big + "' (t=0 s to 40 s) hold ");
   EXPECT_FALSE(std::filesystem::exists(out));
 }
 
