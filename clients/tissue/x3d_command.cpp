@@ -78,7 +78,7 @@ std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o
     const auto at = x3d::frame_at_time(source, *o.time_s);
     if (!at)
       throw BadArguments("--time " + fmt(*o.time_s) + ": " + source.name() + " has no frame that early (first at " +
-                         fmt(source.frame_time_s(0)) + " s)");
+                         x3d::frame_time_text(source.frame_time_s(0)) + " s)");
     k = *at;
   }
   x3d::SurfaceFrame frame = source.read_frame(k);
@@ -141,9 +141,14 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
     }
     frames.push_back(std::move(f));
   }
+  // The ends as the user wrote them, or the frame times they default to.
+  const auto end_text = [](const std::optional<double>& given_s, double t_s) {
+    return given_s ? fmt(*given_s) : x3d::frame_time_text(t_s);
+  };
   if (frames.size() < 2)
     throw BadArguments("--animate: " + source.name() + " has " + std::to_string(frames.size()) +
-                       " non-empty frames between " + fmt(t0) + " s and " + fmt(t1) + " s; an animation needs 2");
+                       " non-empty frames between " + end_text(o.from_s, t0) + " s and " + end_text(o.to_s, t1) +
+                       " s; an animation needs 2");
   try {
     std::string text = x3d::x3d_animation(frames, xo);
     const std::size_t runs = x3d::animation_runs(frames, xo).size();

@@ -303,6 +303,29 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
 }
 
+// Frame times in messages have 9 significant digits, as docs/x3d-export.md
+// says ("t=1.5 s"): times summed from steps are a hair off (0.1 + 0.2 is
+// 0.30000000000000004), and the messages said every digit of it.
+TEST_F(X3dCli, FrameTimesInMessagesHaveNineSignificantDigits) {
+  const double t0_s = 0.1 + 0.2, t1_s = t0_s + 0.3;  // 0.30000000000000004, 0.6000000000000001
+  SurfaceFrame degenerate = testing::box_frame(t1_s, {0, 0, 0}, {0.125, 0.0625, 0.03125});
+  degenerate.triangles[0] = {2, 2, 3};
+  const std::string summed = write_session(dir_, "summed.h5",
+                                           {testing::box_frame(t0_s, {0, 0, 0}, {0.125, 0.0625, 0.03125}), degenerate,
+                                            testing::box_frame(t1_s + 0.2, {0, 0, 0}, {0.125, 0.0625, 0.03125})});
+  const std::string s = "--session " + quote(summed) + " -o " + quote(dir_ / "o.x3d");
+  const auto expect_said = [&](const std::string& args, int exit_code, const std::string& fragment) {
+    const RunResult r = x3d(s + " " + args);
+    EXPECT_EQ(r.exit_code, exit_code) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.find("0000000"), std::string::npos) << args << "\n" << r.err;
+  };
+  expect_said("--frame 1", 1, "frame 1 (t=0.6 s): triangles[0] repeats a vertex (2 2 3): degenerate");
+  expect_said("--time 0.1", 2, "--time 0.1: '" + summed + "' has no frame that early (first at 0.3 s)");
+  expect_said("--animate --to 0.4", 2, "has 1 non-empty frames between 0.3 s and 0.4 s; an animation needs 2");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
+}
+
 // Frames all at one time (a paused daemon's stream, recorded or live) cannot
 // animate: the source's fault, said of the source (exit 1), not of
 // --from/--to, which the user never gave (it said "--from 0 --to 0", exit 2).

@@ -390,6 +390,21 @@ TEST(X3dAnimation, BadFrameSequencesAreRejected) {
   } catch (const X3dInputError& e) {
     EXPECT_NE(std::string(e.what()).find("frame 1 (t=0.5 s): time_s goes backwards"), std::string::npos) << e.what();
   }
+  // Times are said to 9 digits; two that differ only past them, with every
+  // digit (both "t=0.3 s" would not say what went backwards).
+  SurfaceFrame summed = a, rounded = a;
+  summed.time_s = 0.1 + 0.2;  // 0.30000000000000004
+  rounded.time_s = 0.3;
+  try {
+    x3d_animation({summed, rounded}, X3dOptions{});
+    ADD_FAILURE() << "backwards time accepted";
+  } catch (const X3dInputError& e) {
+    EXPECT_NE(std::string(e.what()).find(
+                  "frame 1 (t=0.3 s): time_s goes backwards (frame 0 (t=0.30000000000000004 s)); frames must be in "
+                  "time order"),
+              std::string::npos)
+        << e.what();
+  }
   b.time_s = 1.0;
   try {
     x3d_animation({a, b}, X3dOptions{});
