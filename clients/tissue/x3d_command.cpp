@@ -111,10 +111,22 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
     throw x3d::SourceError(source.name() + ": its " + std::to_string(n) +
                            " frames are all at t=" + x3d::frame_time_text(t0) +
                            " s (a paused simulation sends the same time); an animation needs frames at 2 times");
-  if (!(t0 < t1))
-    throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) +
-                       (t0 == t1 ? ": the window has no length; an animation needs at least 2 frames"
-                                 : ": the window is empty (--from is after --to)"));
+  // Said with the options the user gave: the other end is the source's
+  // first or last frame ("--to 0.05" said "--from 0.1 --to 0.05").
+  if (!(t0 < t1)) {
+    const bool no_length = t0 == t1;
+    if (o.from_s && o.to_s)
+      throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) +
+                         (no_length ? ": the window has no length; an animation needs at least 2 frames"
+                                    : ": the window is empty (--from is after --to)"));
+    if (o.to_s)
+      throw BadArguments("--to " + fmt(t1) +
+                         (no_length ? " is the time of the first frame" : " is before the first frame") +
+                         " (t=" + x3d::frame_time_text(t0) + " s): an animation needs at least 2 frames");
+    throw BadArguments("--from " + fmt(t0) +
+                       (no_length ? " is the time of the last frame" : " is after the last frame") +
+                       " (t=" + x3d::frame_time_text(t1) + " s): an animation needs at least 2 frames");
+  }
   std::vector<std::size_t> picked = x3d::frames_in_window(source, t0, t1);
   // Every frame of the window is held at once: refused before reading when
   // the source's index says they do not fit (an hour of a large surface is

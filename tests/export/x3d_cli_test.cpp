@@ -284,6 +284,21 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2(s + " --animate --from 2 --to 3", "0 non-empty frames between 2 s and 3 s");
   expect_2(s + " --animate --from 1 --to 0.5", "the window is empty (--from is after --to)");
   expect_2(s + " --animate --from 0.5 --to 0.5", "the window has no length; an animation needs at least 2 frames");
+  // One end given: the message has only that option, the other end is the
+  // session's (it said "--from 0.25 --to 0.1" to a user who gave no --from).
+  const auto expect_only = [&](const std::string& given, const std::string& absent, const std::string& said) {
+    const RunResult r = x3d(s + " --animate " + given);
+    EXPECT_EQ(r.exit_code, 2) << given << "\n" << r.err;
+    EXPECT_NE(r.err.find("tissue x3d: " + said), std::string::npos) << given << "\n" << r.err;
+    EXPECT_EQ(r.err.find(absent), std::string::npos) << given << "\n" << r.err;
+  };
+  expect_only("--to 0.1", "--from",
+              "--to 0.1 is before the first frame (t=0.25 s): an animation needs at least 2 frames");
+  expect_only("--to 0.25", "--from",
+              "--to 0.25 is the time of the first frame (t=0.25 s): an animation needs at least 2 frames");
+  expect_only("--from 2", "--to", "--from 2 is after the last frame (t=1.25 s): an animation needs at least 2 frames");
+  expect_only("--from 1.25", "--to",
+              "--from 1.25 is the time of the last frame (t=1.25 s): an animation needs at least 2 frames");
   expect_2(s + " --colour purple", "purple");
   expect_2(s + " --colour strain", "stores no strain energy (session format version 1, or recorded without it)");
   // Live waits: NaN passed CLI11's PositiveNumber and waited forever (no
