@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <charconv>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -37,6 +38,14 @@ struct RenderCommandOptions {
   std::string out;
   LiveSourceOptions live;
 };
+
+// A number the user gave, as the shortest text that reads back as it:
+// "0.1", not "0.10000000000000001" (x3d's messages say them the same way).
+std::string given_number_text(double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
 
 // OUT for frame i of a sequence: "%04d" in OUT is replaced, else -0000 goes
 // before the extension.
@@ -86,7 +95,8 @@ int run_render(RenderCommandOptions o) {
     } else if (o.time_s) {
       const auto at = x3d::frame_at_time(*source, *o.time_s);
       if (!at) {
-        std::cerr << "tissue render: --time " << *o.time_s << ": no frame that early\n";
+        std::cerr << "tissue render: --time " << given_number_text(*o.time_s) << ": " << source->name()
+                  << " has no frame that early (first at " << x3d::frame_time_text(source->frame_time_s(0)) << " s)\n";
         return kExitBadArguments;
       }
       frames = {*at};
@@ -122,6 +132,9 @@ int run_render(RenderCommandOptions o) {
     render::Renderer renderer;  // one context for the whole sequence
     for (std::size_t i = 0; i < frames.size(); ++i) {
       const x3d::SurfaceFrame frame = source->read_frame(frames[i]);
+      // Checked here first so a bad frame is named by its number (the
+      // renderer, given a frame alone, can say only "frame").
+      x3d::validate_frame(frame, o.image.colour == x3d::ColourMode::kStrain, "frame " + std::to_string(frames[i]));
       const std::string path = o.sequence ? numbered(o.out, i) : o.out;
       // write_png truncates PATH: were it the session, the recording would be gone.
       if (!o.live.live() && util::same_file(path, o.session)) {

@@ -48,6 +48,15 @@ std::string fmt(double v) {
   return std::string(buf, r.ptr);
 }
 
+// The window options as the user gave them, for messages: "--from 0.5 --to
+// 2", "--to 2", or "(all frames)" when neither was given.
+std::string given_window_text(const X3dCommandOptions& o) {
+  std::string text;
+  if (o.from_s) text = "--from " + fmt(*o.from_s);
+  if (o.to_s) text += (text.empty() ? "" : " ") + std::string("--to ") + fmt(*o.to_s);
+  return text.empty() ? "(all frames)" : text;
+}
+
 // Regular files via a temporary and a rename (a failed export never leaves a
 // truncated OUT behind); devices and FIFOs in place (util::write_output_file).
 void write_file(const std::string& path, const std::string& text) {
@@ -69,7 +78,7 @@ std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o
     const auto at = x3d::frame_at_time(source, *o.time_s);
     if (!at)
       throw BadArguments("--time " + fmt(*o.time_s) + ": " + source.name() + " has no frame that early (first at " +
-                         fmt(source.frame_time_s(0)) + " s)");
+                         x3d::frame_time_text(source.frame_time_s(0)) + " s)");
     k = *at;
   }
   x3d::SurfaceFrame frame = source.read_frame(k);
@@ -102,11 +111,29 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
     throw x3d::SourceError(source.name() + ": its " + std::to_string(n) +
                            " frames are all at t=" + x3d::frame_time_text(t0) +
                            " s (a paused simulation sends the same time); an animation needs frames at 2 times");
-  if (!(t0 < t1))
-    throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) +
-                       (t0 == t1 ? ": the window has no length; an animation needs at least 2 frames"
-                                 : ": the window is empty (--from is after --to)"));
+  // Said with the options the user gave: the other end is the source's
+  // first or last frame ("--to 0.05" said "--from 0.1 --to 0.05").
+  if (!(t0 < t1)) {
+    const bool no_length = t0 == t1;
+    if (o.from_s && o.to_s)
+      throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) +
+                         (no_length ? ": the window has no length; an animation needs at least 2 frames"
+                                    : ": the window is empty (--from is after --to)"));
+    if (o.to_s)
+      throw BadArguments("--to " + fmt(t1) +
+                         (no_length ? " is the time of the first frame" : " is before the first frame") +
+                         " (t=" + x3d::frame_time_text(t0) + " s): an animation needs at least 2 frames");
+    throw BadArguments("--from " + fmt(t0) +
+                       (no_length ? " is the time of the last frame" : " is after the last frame") +
+                       " (t=" + x3d::frame_time_text(t1) + " s): an animation needs at least 2 frames");
+  }
   std::vector<std::size_t> picked = x3d::frames_in_window(source, t0, t1);
+  // Every frame of the window is held at once: refused before reading when
+  // the source's index says they do not fit (an hour of a large surface is
+  // hundreds of GB, and ended in std::bad_alloc or the OOM killer).
+  if (const std::string over = x3d::frame_budget_problem(source, picked, x3d::kExportFrameBudgetBytes); !over.empty())
+    throw BadArguments("--animate " + given_window_text(o) + ": " + over +
+                       "; choose a shorter window with --from/--to");
   std::vector<x3d::SurfaceFrame> frames;
   std::size_t skipped_empty = 0;
   for (const std::size_t k : picked) {
@@ -126,9 +153,14 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
     }
     frames.push_back(std::move(f));
   }
+  // The ends as the user wrote them, or the frame times they default to.
+  const auto end_text = [](const std::optional<double>& given_s, double t_s) {
+    return given_s ? fmt(*given_s) : x3d::frame_time_text(t_s);
+  };
   if (frames.size() < 2)
     throw BadArguments("--animate: " + source.name() + " has " + std::to_string(frames.size()) +
-                       " non-empty frames between " + fmt(t0) + " s and " + fmt(t1) + " s; an animation needs 2");
+                       " non-empty frames between " + end_text(o.from_s, t0) + " s and " + end_text(o.to_s, t1) +
+                       " s; an animation needs 2");
   try {
     std::string text = x3d::x3d_animation(frames, xo);
     const std::size_t runs = x3d::animation_runs(frames, xo).size();

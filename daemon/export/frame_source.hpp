@@ -21,6 +21,13 @@ class SourceError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The bytes a frame's data takes in memory: its vertices, triangles, levels
+// and strain values.
+std::size_t frame_bytes(const SurfaceFrame& frame);
+
+// "1 GiB", "1.5 MiB", "300 bytes": a size as a person reads it.
+std::string byte_size_text(std::size_t bytes);
+
 class FrameSource {
  public:
   virtual ~FrameSource() = default;
@@ -33,6 +40,12 @@ class FrameSource {
   // Frame k. Throws SourceError on I/O failure or impossible stored data
   // (e.g. negative indices); std::out_of_range when k >= frame_count().
   virtual SurfaceFrame read_frame(std::size_t k) = 0;
+  // The bytes frame k takes in memory once read (frame_bytes of
+  // read_frame(k)), so a caller can refuse a selection too large to hold
+  // before reading it. This default reads the frame; a source that knows
+  // the sizes from an index (a session) answers without reading, at most
+  // what the frame turns out to hold.
+  virtual std::size_t frame_data_bytes(std::size_t k) { return frame_bytes(read_frame(k)); }
   // Whether frames carry vertex_strain_energy_Pa.
   virtual bool has_strain() const = 0;
   // Why has_strain() is false, in this source's terms, after name(): a
@@ -64,6 +77,18 @@ std::string frame_time_text(double t_s);
 
 // The frames whose times are in the window [t0, t1] (time_in_window), in order.
 std::vector<std::size_t> frames_in_window(const FrameSource& source, double t0_s, double t1_s);
+
+// Frame data an export may hold in memory at once (x3d --animate keeps every
+// frame of its window, then makes a text 2-3 times their size): the same
+// 1 GiB that stops a live collection (kLiveFrameBudgetBytes). A whole
+// session, an hour of a 50k-vertex surface at 30 Hz, is hundreds of GB.
+inline constexpr std::size_t kExportFrameBudgetBytes = std::size_t{1} << 30;
+
+// Why frames `picked` of `source` (in time order) cannot all be held in
+// memory: "3600 frames of 'S.h5' (t=0 s to 120 s) hold 87.2 GiB of frame
+// data, more than the 1 GiB an export may hold"; "" when their data
+// (frame_data_bytes, summed) is at most `max_bytes`.
+std::string frame_budget_problem(FrameSource& source, const std::vector<std::size_t>& picked, std::size_t max_bytes);
 
 // Opens a session file (docs/session-format.md), including one still being
 // recorded or left by a crash (SWMR read). Throws SourceError naming the file.

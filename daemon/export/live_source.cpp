@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <iterator>
 #include <stdexcept>
 
 namespace tissue::x3d {
@@ -19,22 +18,7 @@ std::string fmt_s(double s) {
   return buf;
 }
 
-// "1 GiB", "1.5 MiB", "300 bytes": the budget as a person reads it.
-std::string fmt_bytes(std::size_t n) {
-  constexpr const char* kUnits[] = {"bytes", "KiB", "MiB", "GiB", "TiB"};
-  double v = static_cast<double>(n);
-  std::size_t u = 0;
-  while (v >= 1024.0 && u + 1 < std::size(kUnits)) v /= 1024.0, ++u;
-  return fmt_s(v) + " " + kUnits[u];
-}
 }  // namespace
-
-std::size_t frame_bytes(const SurfaceFrame& f) {
-  return f.vertices_m.size() * sizeof(f.vertices_m[0]) + f.triangles.size() * sizeof(f.triangles[0]) +
-         f.vertex_level.size() * sizeof(f.vertex_level[0]) +
-         f.vertex_strain_energy_Pa.size() * sizeof(f.vertex_strain_energy_Pa[0]) +
-         f.triangle_strain_energy_J_per_m3.size() * sizeof(f.triangle_strain_energy_J_per_m3[0]);
-}
 
 LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const LiveCollectOptions& o,
                                  const std::atomic<bool>* stop)
@@ -68,7 +52,7 @@ LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const Li
     if (!frames_.empty() && bytes > o.max_bytes - std::min(kept_bytes, o.max_bytes)) {
       budget_note_ = "collection stopped after " + std::to_string(frames_.size()) + " frames (" +
                      fmt_s(seconds_since(first)) + " s of the " + fmt_s(o.window_s) +
-                     " s window): the next would take the frames kept past " + fmt_bytes(o.max_bytes);
+                     " s window): the next would take the frames kept past " + byte_size_text(o.max_bytes);
       break;
     }
     if (frames_.empty()) first = Clock::now();

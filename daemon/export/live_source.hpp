@@ -24,7 +24,7 @@ class NoLiveFrameError : public SourceError {
 // Collected frames are held in memory until the window ends: a 50k-vertex
 // surface at 30 Hz is ~80 MB a second, and an export then makes a text copy
 // 2-3 times that size. This much frame data (1 GiB) stops a collection.
-constexpr std::size_t kLiveFrameBudgetBytes = std::size_t{1} << 30;
+constexpr std::size_t kLiveFrameBudgetBytes = kExportFrameBudgetBytes;
 
 struct LiveCollectOptions {
   double first_timeout_s = 10.0;  // wait this long (wall) for the first frame
@@ -34,10 +34,6 @@ struct LiveCollectOptions {
   // past this many bytes. The first frame is always kept.
   std::size_t max_bytes = kLiveFrameBudgetBytes;
 };
-
-// The bytes a collected frame holds: its vertices, triangles, levels and
-// strain values.
-std::size_t frame_bytes(const SurfaceFrame& frame);
 
 class LiveFrameSource final : public FrameSource {
  public:
@@ -53,6 +49,7 @@ class LiveFrameSource final : public FrameSource {
   std::size_t frame_count() const override { return frames_.size(); }
   double frame_time_s(std::size_t k) const override { return frames_.at(k).time_s; }
   SurfaceFrame read_frame(std::size_t k) override;
+  std::size_t frame_data_bytes(std::size_t k) override { return frame_bytes(frames_.at(k)); }
   // True when every collected frame carries strain.
   bool has_strain() const override;
   // The subscriber keeps a frame whose strain is missing or not finite and

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
+#include <iterator>
 #include <limits>
 
 #include "export/frame_source.hpp"
@@ -67,6 +69,28 @@ class SessionFrameSource final : public FrameSource {
   bool has_strain() const override { return has_strain_; }
   std::string why_no_strain() const override {
     return "stores no strain energy (session format version 1, or recorded without it)";
+  }
+
+  // From the index: what read_frame(k) fills. Strain is counted whenever
+  // the file has the dataset and the frame has triangles, so a frame
+  // recorded without it (NaN, not returned) is counted high, never low.
+  std::size_t frame_data_bytes(std::size_t k) override {
+    if (k >= frames_)
+      throw std::out_of_range("frame " + std::to_string(k) + " of " + name() + " does not exist (" +
+                              std::to_string(frames_) + " frames)");
+    SurfaceFrame one;  // element sizes as frame_bytes counts them
+    std::uint64_t per_vertex = sizeof(one.vertices_m[0]) + sizeof(one.vertex_level[0]);
+    std::uint64_t per_triangle = sizeof(one.triangles[0]);
+    if (file_has_strain_ && triangle_count_[k] > 0) {
+      per_vertex += sizeof(one.vertex_strain_energy_Pa[0]);
+      per_triangle += sizeof(one.triangle_strain_energy_J_per_m3[0]);
+    }
+    // Counts are below 2^63 rows (HDF5 extents), but their product with the
+    // element size need not fit: saturate rather than wrap to a small size.
+    const std::uint64_t max = std::numeric_limits<std::size_t>::max();
+    const auto times = [&](std::uint64_t count, std::uint64_t size) { return count > max / size ? max : count * size; };
+    const std::uint64_t v = times(vertex_count_[k], per_vertex), t = times(triangle_count_[k], per_triangle);
+    return static_cast<std::size_t>(v > max - t ? max : v + t);
   }
 
   SurfaceFrame read_frame(std::size_t k) override {
@@ -162,6 +186,39 @@ class SessionFrameSource final : public FrameSource {
 };
 
 }  // namespace
+
+std::size_t frame_bytes(const SurfaceFrame& f) {
+  return f.vertices_m.size() * sizeof(f.vertices_m[0]) + f.triangles.size() * sizeof(f.triangles[0]) +
+         f.vertex_level.size() * sizeof(f.vertex_level[0]) +
+         f.vertex_strain_energy_Pa.size() * sizeof(f.vertex_strain_energy_Pa[0]) +
+         f.triangle_strain_energy_J_per_m3.size() * sizeof(f.triangle_strain_energy_J_per_m3[0]);
+}
+
+std::string byte_size_text(std::size_t bytes) {
+  constexpr const char* kUnits[] = {"bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"};
+  double v = static_cast<double>(bytes);
+  std::size_t u = 0;
+  while (v >= 1024.0 && u + 1 < std::size(kUnits)) v /= 1024.0, ++u;
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%g %s", v, kUnits[u]);
+  return buf;
+}
+
+std::string frame_budget_problem(FrameSource& source, const std::vector<std::size_t>& picked, std::size_t max_bytes) {
+  // The whole sum, saturating, so the message says how far over it is (a
+  // session answers from its index: nothing is read).
+  std::size_t total = 0;
+  for (const std::size_t k : picked) {
+    const std::size_t bytes = source.frame_data_bytes(k);
+    total = bytes > std::numeric_limits<std::size_t>::max() - total ? std::numeric_limits<std::size_t>::max()
+                                                                    : total + bytes;
+  }
+  if (total <= max_bytes) return {};
+  return std::to_string(picked.size()) + " frames of " + source.name() +
+         " (t=" + frame_time_text(source.frame_time_s(picked.front())) + " s to " +
+         frame_time_text(source.frame_time_s(picked.back())) + " s) hold " + byte_size_text(total) +
+         " of frame data, more than the " + byte_size_text(max_bytes) + " an export may hold";
+}
 
 std::string no_strain_message(const FrameSource& source) {
   return "--colour strain: " + source.name() + " " + source.why_no_strain() + "; use --colour level";

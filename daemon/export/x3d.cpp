@@ -83,11 +83,9 @@ std::string mf_string_item(std::string_view s) {
   return util::escape_xml(q);
 }
 
-std::string describe_time(const SurfaceFrame& f) {
-  std::string s = " (t=";
-  put(s, f.time_s);
-  return s + " s)";
-}
+// For messages, to 9 digits as both clients say frame times: "(t=0.3 s)",
+// not the accumulated "(t=0.30000000000000004 s)".
+std::string describe_time(const SurfaceFrame& f) { return " (t=" + frame_time_text(f.time_s) + " s)"; }
 
 struct Bounds {
   std::array<double, 3> lo{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
@@ -420,9 +418,17 @@ std::string x3d_animation(const std::vector<SurfaceFrame>& frames, const X3dOpti
   Bounds b;
   for (std::size_t k = 0; k < frames.size(); ++k) {
     validate_frame(frames[k], strain, frame_label(k));
-    if (k > 0 && frames[k].time_s < frames[k - 1].time_s)
-      throw X3dInputError(frame_label(k) + describe_time(frames[k]) + ": time_s goes backwards (" + frame_label(k - 1) +
-                          describe_time(frames[k - 1]) + "); frames must be in time order");
+    if (k > 0 && frames[k].time_s < frames[k - 1].time_s) {
+      std::string now = describe_time(frames[k]), before = describe_time(frames[k - 1]);
+      // Times that differ only past 9 digits would read the same: in full.
+      if (now == before) {
+        now = " (t=", before = " (t=";
+        put(now, frames[k].time_s), put(before, frames[k - 1].time_s);
+        now += " s)", before += " s)";
+      }
+      throw X3dInputError(frame_label(k) + now + ": time_s goes backwards (" + frame_label(k - 1) + before +
+                          "); frames must be in time order");
+    }
     all.push_back(&frames[k]);
     b.add(frames[k]);
   }

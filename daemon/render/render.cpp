@@ -173,7 +173,11 @@ Image Renderer::render(const x3d::SurfaceFrame& frame, const RenderOptions& o) {
     return r;
   };
   const double radius = 1.0;  // of the drawing
-  const double az = o.azimuth_deg * M_PI / 180.0, el = o.elevation_deg * M_PI / 180.0;
+  // Whole turns taken off first (exactly: fmod is exact): an angle past
+  // ~1.03e306 degrees overflowed to inf in radians, and its NaN cosine made
+  // a blank picture with no error.
+  const auto radians = [](double degrees) { return std::fmod(degrees, 360.0) * M_PI / 180.0; };
+  const double az = radians(o.azimuth_deg), el = radians(o.elevation_deg);
   const V3 eye_dir{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};  // towards the camera
   // Right is horizontal and follows the azimuth at every elevation, up to
   // straight down or up: an up hint switched near the poles turned the

@@ -32,8 +32,9 @@ struct Image {
 
 struct RenderOptions {
   int width_px = 800, height_px = 600;
-  // Camera direction: azimuth about +z from +x, elevation above the xy plane.
-  // The view is orthographic and fits the frame's bounding sphere.
+  // Camera direction: azimuth about +z from +x, elevation above the xy plane;
+  // any finite angle, taken modulo 360 degrees. The view is orthographic and
+  // fits the frame's bounding sphere.
   double azimuth_deg = -60.0, elevation_deg = 30.0;
   bool legend = true;  // level swatches with their numbers (strain: the ramp), bottom left
   std::array<std::uint8_t, 3> background{255, 255, 255};

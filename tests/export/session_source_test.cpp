@@ -361,6 +361,52 @@ TEST(SessionSource, ASessionWhoseFramesHaveNoTrianglesOpensAndReads) {
   EXPECT_TRUE(f1.triangles.empty());
 }
 
+// An export refuses a window too large to hold before reading it, so the
+// session's sizes come from its index: what read_frame then holds, or more
+// (a version-2 frame recorded without strain is counted with it).
+TEST(SessionSource, FrameDataBytesFromTheIndexAreWhatReadFrameHolds) {
+  TempDir dir;
+  for (const bool strain : {true, false}) {
+    SCOPED_TRACE(strain ? "with strain" : "recorded without strain");
+    const std::string path = write_frames(dir / (strain ? "s.h5" : "n.h5"), 4, strain);
+    auto source = open_session_source(path);
+    for (std::size_t k = 0; k < 4; ++k) {
+      const SurfaceFrame f = source->read_frame(k);
+      const std::size_t strain_bytes = strain ? 0 : 4 * (f.vertices_m.size() + f.triangles.size());
+      EXPECT_EQ(source->frame_data_bytes(k), frame_bytes(f) + strain_bytes) << "frame " << k;
+    }
+    EXPECT_THROW(source->frame_data_bytes(4), std::out_of_range);
+  }
+  const std::string v1 = write_frames(dir / "v1.h5", 2, false);
+  rt::make_version_1(v1);
+  auto source = open_session_source(v1);
+  for (std::size_t k = 0; k < 2; ++k) EXPECT_EQ(source->frame_data_bytes(k), frame_bytes(source->read_frame(k)));
+}
+
+// The budget is a parameter, so a small one stands in for the 1 GiB.
+TEST(SessionSource, FrameBudgetProblemSaysWhatTheFramesHoldAndTheLimit) {
+  TempDir dir;
+  const std::string path = write_frames(dir / "s.h5", 4);
+  auto source = open_session_source(path);
+  const std::vector<std::size_t> picked{1, 2, 3};
+  std::size_t total = 0;
+  for (const std::size_t k : picked) total += frame_bytes(source->read_frame(k));
+  EXPECT_EQ(frame_budget_problem(*source, picked, total), "");
+  EXPECT_EQ(frame_budget_problem(*source, {}, 0), "");
+  EXPECT_EQ(frame_budget_problem(*source, picked, total - 1),
+            "3 frames of '" + path + "' (t=" + frame_time_text(rt::test_frame(1).time_s) + " s to " +
+                frame_time_text(rt::test_frame(3).time_s) + " s) hold " + byte_size_text(total) +
+                " of frame data, more than the " + byte_size_text(total - 1) + " an export may hold");
+}
+
+TEST(ByteSizeText, BinaryUnitsAsAPersonReadsThem) {
+  EXPECT_EQ(byte_size_text(0), "0 bytes");
+  EXPECT_EQ(byte_size_text(1023), "1023 bytes");
+  EXPECT_EQ(byte_size_text(1536), "1.5 KiB");
+  EXPECT_EQ(byte_size_text(kExportFrameBudgetBytes), "1 GiB");
+  EXPECT_EQ(byte_size_text(std::numeric_limits<std::size_t>::max()), "16 EiB");
+}
+
 // SWMR read: a session whose writer died without closing it (the superblock
 // still says "open for writing") reads up to its last flush.
 TEST(SessionSource, ASessionLeftByACrashReadsAsFarAsItWasFlushed) {

@@ -11,6 +11,8 @@
 #include "export/export_test_support.hpp"
 #include "export/frame_source.hpp"
 #include "export/x3d.hpp"
+#include "record/record_test_support.hpp"
+#include "record/session_layout.hpp"
 #include "record/session_writer.hpp"
 
 namespace tissue::x3d {
@@ -200,6 +202,72 @@ TEST_F(X3dCli, ImpossibleStoredFramesExitOneNamingFrameAndField) {
   EXPECT_FALSE(std::filesystem::exists(out));
 }
 
+// Sets the row count of a closed session's (chunked, unlimited) dataset;
+// rows past the written ones read as 0 and take no space in the file.
+void set_rows(const std::string& path, const char* dataset, hsize_t rows) {
+  const hid_t file = record::testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t d = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(d, 0) << dataset;
+  const hid_t space = H5Dget_space(d);
+  hsize_t dims[2] = {0, 0};
+  H5Sget_simple_extent_dims(space, dims, nullptr);
+  dims[0] = rows;
+  EXPECT_GE(H5Dset_extent(d, dims), 0) << dataset;
+  H5Sclose(space);
+  H5Dclose(d);
+  H5Fclose(file);
+}
+
+// Overwrites every row of a closed session's one-column uint64 dataset.
+void write_column(const std::string& path, const char* dataset, const std::vector<std::uint64_t>& values) {
+  const hid_t file = record::testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t d = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(d, 0) << dataset;
+  EXPECT_GE(H5Dwrite(d, H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), 0) << dataset;
+  H5Dclose(d);
+  H5Fclose(file);
+}
+
+// --animate without --from/--to kept every frame of the session in memory:
+// an hour of a 50k-vertex surface at 30 Hz is hundreds of GB (bad_alloc or
+// the OOM killer). Its window is refused from the session's index, before a
+// frame is read, past the budget live collection has (1 GiB). The session
+// claims 45 frames of 2^20 vertices (~29 MB each, 1.2 GiB in all) in rows
+// HDF5 does not store.
+TEST_F(X3dCli, AnAnimationTooLargeToHoldIsRefusedBeforeReadingAFrame) {
+  using record::kDatasets;
+  constexpr std::uint64_t kFrames = 45, kVertices = std::uint64_t{1} << 20;
+  std::vector<SurfaceFrame> frames;
+  for (std::uint64_t k = 0; k < kFrames; ++k)
+    frames.push_back(testing::box_frame(static_cast<double>(k), {0, 0, 0}, {0.125, 0.0625, 0.03125}));
+  const std::string big = write_session(dir_, "big.h5", frames);
+  std::vector<std::uint64_t> offsets, counts(kFrames, kVertices);
+  for (std::uint64_t k = 0; k < kFrames; ++k) offsets.push_back(k * kVertices);
+  set_rows(big, kDatasets[record::kMeshVertices].path, kFrames * kVertices);
+  set_rows(big, kDatasets[record::kMeshVertexLevel].path, kFrames * kVertices);
+  write_column(big, kDatasets[record::kMeshVertexOffset].path, offsets);
+  write_column(big, kDatasets[record::kMeshVertexCount].path, counts);
+  // Reading a frame fails (exit 1): the session reader refuses rows past
+  // what the file can hold, so an export without the check stops at frame 0
+  // instead of holding 1.2 GiB here.
+  const std::string out = dir_ / "big.x3d";
+  const auto expect_refused = [&](const std::string& window, const std::string& said) {
+    const RunResult r = x3d("--session " + quote(big) + " --animate " + window + " -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 2) << window << "\n" << r.err;
+    EXPECT_NE(r.err.find("tissue x3d: --animate " + said), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(" GiB of frame data, more than the 1 GiB an export may hold; choose a shorter window "
+                         "with --from/--to"),
+              std::string::npos)
+        << r.err;
+  };
+  expect_refused("", "(all frames): 45 frames of '" + big + "' (t=0 s to 44 s) hold 1.2");
+  expect_refused("--from 0 --to 40", "--from 0 --to 40: 41 frames of '" + big + "' (t=0 s to 40 s) hold ");
+  expect_refused("--to 40", "--to 40: 41 frames of '" + big + "' (t=0 s to 40 s) hold ");
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
 TEST_F(X3dCli, BadArgumentsExitTwo) {
   const std::string s = "--session " + quote(session_) + " -o " + quote(dir_ / "o.x3d");
   const auto expect_2 = [&](const std::string& args, const std::string& fragment) {
@@ -216,6 +284,21 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2(s + " --animate --from 2 --to 3", "0 non-empty frames between 2 s and 3 s");
   expect_2(s + " --animate --from 1 --to 0.5", "the window is empty (--from is after --to)");
   expect_2(s + " --animate --from 0.5 --to 0.5", "the window has no length; an animation needs at least 2 frames");
+  // One end given: the message has only that option, the other end is the
+  // session's (it said "--from 0.25 --to 0.1" to a user who gave no --from).
+  const auto expect_only = [&](const std::string& given, const std::string& absent, const std::string& said) {
+    const RunResult r = x3d(s + " --animate " + given);
+    EXPECT_EQ(r.exit_code, 2) << given << "\n" << r.err;
+    EXPECT_NE(r.err.find("tissue x3d: " + said), std::string::npos) << given << "\n" << r.err;
+    EXPECT_EQ(r.err.find(absent), std::string::npos) << given << "\n" << r.err;
+  };
+  expect_only("--to 0.1", "--from",
+              "--to 0.1 is before the first frame (t=0.25 s): an animation needs at least 2 frames");
+  expect_only("--to 0.25", "--from",
+              "--to 0.25 is the time of the first frame (t=0.25 s): an animation needs at least 2 frames");
+  expect_only("--from 2", "--to", "--from 2 is after the last frame (t=1.25 s): an animation needs at least 2 frames");
+  expect_only("--from 1.25", "--to",
+              "--from 1.25 is the time of the last frame (t=1.25 s): an animation needs at least 2 frames");
   expect_2(s + " --colour purple", "purple");
   expect_2(s + " --colour strain", "stores no strain energy (session format version 1, or recorded without it)");
   // Live waits: NaN passed CLI11's PositiveNumber and waited forever (no
@@ -232,6 +315,29 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2(live + " --timeout 5s", "--timeout: '5s' is not a number");
   expect_2("-o " + quote(dir_ / "o.x3d"), "--session is required");
   expect_2("--session " + quote(session_), "--output is required");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
+}
+
+// Frame times in messages have 9 significant digits, as docs/x3d-export.md
+// says ("t=1.5 s"): times summed from steps are a hair off (0.1 + 0.2 is
+// 0.30000000000000004), and the messages said every digit of it.
+TEST_F(X3dCli, FrameTimesInMessagesHaveNineSignificantDigits) {
+  const double t0_s = 0.1 + 0.2, t1_s = t0_s + 0.3;  // 0.30000000000000004, 0.6000000000000001
+  SurfaceFrame degenerate = testing::box_frame(t1_s, {0, 0, 0}, {0.125, 0.0625, 0.03125});
+  degenerate.triangles[0] = {2, 2, 3};
+  const std::string summed = write_session(dir_, "summed.h5",
+                                           {testing::box_frame(t0_s, {0, 0, 0}, {0.125, 0.0625, 0.03125}), degenerate,
+                                            testing::box_frame(t1_s + 0.2, {0, 0, 0}, {0.125, 0.0625, 0.03125})});
+  const std::string s = "--session " + quote(summed) + " -o " + quote(dir_ / "o.x3d");
+  const auto expect_said = [&](const std::string& args, int exit_code, const std::string& fragment) {
+    const RunResult r = x3d(s + " " + args);
+    EXPECT_EQ(r.exit_code, exit_code) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.find("0000000"), std::string::npos) << args << "\n" << r.err;
+  };
+  expect_said("--frame 1", 1, "frame 1 (t=0.6 s): triangles[0] repeats a vertex (2 2 3): degenerate");
+  expect_said("--time 0.1", 2, "--time 0.1: '" + summed + "' has no frame that early (first at 0.3 s)");
+  expect_said("--animate --to 0.4", 2, "has 1 non-empty frames between 0.3 s and 0.4 s; an animation needs 2");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
 }
 

@@ -193,6 +193,22 @@ TEST(X3dSnapshot, StrainColoursUseTheRampAndRecordTheRange) {
   const std::vector<double> flat = numbers(attribute(x3d_snapshot(at_rest, o), "Color", "color"));
   ASSERT_EQ(flat.size(), 24u);
   for (std::size_t i = 0; i < flat.size(); ++i) EXPECT_NEAR(flat[i], strain_colour(0.0)[i % 3], 1e-3) << i;
+  // ... and its recorded range is that one value, not the data's min..max
+  // (docs/x3d-export.md says so): here a spread of 1e-20 Pa above 2e-20.
+  for (std::size_t i = 0; i < at_rest.vertex_strain_energy_Pa.size(); ++i)
+    at_rest.vertex_strain_energy_Pa[i] = static_cast<float>(2e-20 + 1e-20 * static_cast<double>(i) / 7.0);
+  const float lowest = at_rest.vertex_strain_energy_Pa[0];
+  const std::string rest_xml = x3d_snapshot(at_rest, o);
+  EXPECT_EQ(numbers(attribute(rest_xml, "MetadataDouble", "value")),
+            (std::vector<double>{static_cast<double>(lowest), static_cast<double>(lowest)}));
+  for (const char* end : {"min", "max"}) {
+    const std::string tag = std::string("<meta name='tissue.strain_energy_") + end + "_Pa' content='";
+    const std::size_t at = rest_xml.find(tag);
+    ASSERT_NE(at, std::string::npos) << end;
+    EXPECT_EQ(numbers(rest_xml.substr(at + tag.size(), rest_xml.find('\'', at + tag.size()) - at - tag.size())),
+              (std::vector<double>{static_cast<double>(lowest)}))
+        << end;
+  }
   // The ramp is monotonic in brightness (viridis).
   double last = -1.0;
   for (int i = 0; i <= 20; ++i) {
@@ -373,6 +389,21 @@ TEST(X3dAnimation, BadFrameSequencesAreRejected) {
     ADD_FAILURE() << "backwards time accepted";
   } catch (const X3dInputError& e) {
     EXPECT_NE(std::string(e.what()).find("frame 1 (t=0.5 s): time_s goes backwards"), std::string::npos) << e.what();
+  }
+  // Times are said to 9 digits; two that differ only past them, with every
+  // digit (both "t=0.3 s" would not say what went backwards).
+  SurfaceFrame summed = a, rounded = a;
+  summed.time_s = 0.1 + 0.2;  // 0.30000000000000004
+  rounded.time_s = 0.3;
+  try {
+    x3d_animation({summed, rounded}, X3dOptions{});
+    ADD_FAILURE() << "backwards time accepted";
+  } catch (const X3dInputError& e) {
+    EXPECT_NE(std::string(e.what()).find(
+                  "frame 1 (t=0.3 s): time_s goes backwards (frame 0 (t=0.30000000000000004 s)); frames must be in "
+                  "time order"),
+              std::string::npos)
+        << e.what();
   }
   b.time_s = 1.0;
   try {

@@ -118,6 +118,37 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   EXPECT_NE(unwritable.err.find("/nonexistent-dir/x.png"), std::string::npos) << unwritable.err;
 }
 
+// Errors about a frame name it by its number and say its time to 9
+// digits; a --time before the first frame names the file and that frame's
+// time (as tissue x3d does). They said "frame (t=0.30000000000000004 s)"
+// and "--time -1: no frame that early".
+TEST(RenderCli, ErrorsNameTheFrameTheFileAndTimesToNineDigits) {
+  TempDir dir;
+  const std::string session = dir / "summed.h5";
+  const double t0_s = 0.1 + 0.2, t1_s = t0_s + 0.3;  // 0.30000000000000004, 0.6000000000000001
+  {
+    auto writer = record::SessionWriter::create(session, record::SessionMetadata{});
+    const x3d::SurfaceFrame empty;
+    writer->append_mesh_frame(record::MeshFrameView{t0_s, empty.vertices_m, empty.triangles, empty.vertex_level, {}});
+    x3d::SurfaceFrame degenerate = x3d::testing::box_frame(t1_s, {0, 0, 0}, {0.1, 0.05, 0.02});
+    degenerate.triangles[0] = {2, 2, 3};
+    writer->append_mesh_frame(
+        record::MeshFrameView{t1_s, degenerate.vertices_m, degenerate.triangles, degenerate.vertex_level, {}});
+    writer->close();
+  }
+  const auto expect_said = [&](const std::string& args, int exit_code, const std::string& fragment) {
+    const RunResult r = render(dir, "--session " + quote(session) + " " + args + " -o " + quote(dir / "x.png"));
+    EXPECT_EQ(r.exit_code, exit_code) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << args << "\n" << r.err;
+    EXPECT_EQ(r.err.find("0000000"), std::string::npos) << args << "\n" << r.err;
+  };
+  expect_said("--frame 0", 1, session + ": frame 0 (t=0.3 s): vertices_m is empty: nothing to draw");
+  expect_said("--frame 1", 1, session + ": frame 1 (t=0.6 s): triangles[0] repeats a vertex (2 2 3): degenerate");
+  expect_said("", 1, "frame 1 (t=0.6 s): triangles[0] repeats a vertex");
+  expect_said("--time -1", 2, "--time -1: '" + session + "' has no frame that early (first at 0.3 s)");
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.png"));
+}
+
 // -o /dev/stdout with standard output redirected to a file (as run() does):
 // the picture alone goes there, the "wrote" line to standard error. (Spelled
 // /dev/fd/1: had a regression renamed over it, /dev/stdout stays intact.)

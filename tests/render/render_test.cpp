@@ -161,6 +161,36 @@ TEST(Render, TheViewChangesSmoothlyWithElevationAndAzimuthTurnsItFromAbove) {
   EXPECT_GT(differing(along_x, along_y), along_x.width * along_x.height / 10);
 }
 
+// Angles are taken modulo a full turn before they become radians:
+// --azimuth 1e308 overflowed to inf radians, the view matrix was NaN and
+// the picture blank (exit 0, nothing said).
+TEST(Render, HugeCameraAnglesDrawAsTheirRemainderOfAFullTurn) {
+  const x3d::SurfaceFrame box = box_surface(false);
+  const auto covered = [](const Image& img) {
+    int n = 0;
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) n += is_background(img, x, y) ? 0 : 1;
+    return n;
+  };
+  for (const double angle_deg : {1e308, -1e308, 1e20, 3630.0, -7170.0}) {
+    SCOPED_TRACE(::testing::Message() << "angle " << angle_deg);
+    RenderOptions huge = top_view(false), reduced = top_view(false);
+    huge.azimuth_deg = angle_deg;
+    reduced.azimuth_deg = std::fmod(angle_deg, 360.0);
+    huge.elevation_deg = reduced.elevation_deg = 30.0;
+    const Image by_azimuth = render_frame(box, huge);
+    EXPECT_GT(covered(by_azimuth), by_azimuth.width * by_azimuth.height / 100);
+    EXPECT_EQ(by_azimuth.rgba, render_frame(box, reduced).rgba);
+    // The library takes any finite elevation (the CLI: -90 to 90).
+    huge.azimuth_deg = reduced.azimuth_deg = -60.0;
+    huge.elevation_deg = angle_deg;
+    reduced.elevation_deg = std::fmod(angle_deg, 360.0);
+    const Image by_elevation = render_frame(box, huge);
+    EXPECT_GT(covered(by_elevation), by_elevation.width * by_elevation.height / 100);
+    EXPECT_EQ(by_elevation.rgba, render_frame(box, reduced).rgba);
+  }
+}
+
 // Refinement shows: the refined corner is drawn in another palette colour
 // than the coarse rest, and the legend lists both levels.
 TEST(Render, RefinedRegionChangesColour) {
