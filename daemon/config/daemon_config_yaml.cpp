@@ -42,6 +42,7 @@ constexpr double kMaxRamp_s = 10.0;
 // wait would get the daemon killed by its own safety fade.
 constexpr double kMaxRampOut_s = 1.0;
 constexpr double kMaxTimeout_s = 60.0;
+constexpr double kMaxCrossfade_s = 1.0;
 constexpr double kMaxStatusInterval_s = 3600.0;
 // record.rotate_s: a week at most (files of a few GB at 1 kHz haptic rows).
 constexpr double kMinRotate_s = 1.0;
@@ -274,6 +275,11 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     positive(h.coupling_stiffness_N_per_m, "haptics.coupling_stiffness_N_per_m");
     non_negative(h.coupling_damping_N_s_per_m, "haptics.coupling_damping_N_s_per_m");
     non_negative(h.crossfade_s, "haptics.crossfade_s");
+    // Every model the sim publishes (one a step) restarts the fade from the
+    // force rendered, so the force follows the sim about crossfade_s late:
+    // 10 s rendered models seconds old.
+    at_most(h.crossfade_s, kMaxCrossfade_s, "haptics.crossfade_s",
+            "the hand would feel the sim's force that late (every new model restarts the fade)");
     // The safety clamp would silently cut a stiffer coupling: say so instead.
     // The limit is on what the hand feels: positions map in and forces map
     // out times device.scale, so the device sees the coupling times scale².

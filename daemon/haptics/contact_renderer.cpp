@@ -76,6 +76,7 @@ void ContactRenderer::carry_state_from(const ContactRenderer& other) noexcept {
   initialised_ = other.initialised_;
   touching_ = other.touching_;
   outside_ = other.outside_;
+  clear_ = other.clear_;
   proxy_m_ = other.proxy_m_;
   surface_point_m_ = other.surface_point_m_;
   contact_triangle_ = -1;
@@ -85,6 +86,7 @@ void ContactRenderer::reset() noexcept {
   initialised_ = false;
   touching_ = false;
   outside_ = false;
+  clear_ = false;
   contact_triangle_ = -1;
 }
 
@@ -193,6 +195,21 @@ Vec3 ContactRenderer::surface_velocity(const Closest& c) const noexcept {
          c.weight[2] * model_->vertex_velocity_m_per_s[tri[2]];
 }
 
+bool ContactRenderer::compliant_proxy(const Vec3& device_m, const Vec3& c, const Vec3& n,
+                                      Vec3* proxy_m) const noexcept {
+  if (!model_->in_contact) return false;
+  const double k_v = params_.coupling_stiffness_N_per_m;
+  const Mat3 tangential = Mat3::Identity() - n * n.transpose();
+  const Vec3 x0 = model_->position_ref_m + tangential * (c - model_->position_ref_m);
+  const Mat3& K = contact_stiffness_N_per_m_;
+  const Mat3 A = k_v * Mat3::Identity() + K;  // SPD: k_v > 0, K PSD
+  const Vec3 p = A.inverse() * (k_v * device_m + K * x0 - model_->force_ref_N);
+  const Vec3 force_on_object_N = k_v * (device_m - p);
+  if (!(p.allFinite() && n.dot(force_on_object_N) < 0.0)) return false;  // must push into the object (n is outward)
+  *proxy_m = p;
+  return true;
+}
+
 RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
                                      const Vec3& device_velocity_m_per_s) noexcept {
   RenderOutput out;
@@ -212,6 +229,7 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     touching_ = false;
     outside_ = false;
     proxy_m_ = device_m;
+    clear_ = false;
   }
 
   // The device's signed height above the patch (along the pseudo-normal at
@@ -229,6 +247,7 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
   };
 
   Vec3 reference_m = Vec3::Zero();
+  bool in_reach = false;  // free, within reach of the deformed object (set below)
   if (!touching_) {
     touching_ = find_entry(proxy_m_, device_m, &reference_m);
     if (!touching_ && outside_) {
@@ -247,6 +266,22 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
         reference_m = nearest.point;
       }
     }
+    if (!touching_ && model_->in_contact) {
+      // In front of a deformed patch, below where its linearised force
+      // reaches zero (the release rule below, run backwards): the object is
+      // met there, where its force is still zero, not on the patch, where it
+      // would start at k_v f0 / (k_v + k). Only coming from clear of that
+      // region, as the segment test needs a crossing: a device that starts
+      // inside it feels no sudden force.
+      const double h_m = device_height_m();
+      Vec3 unused_proxy_m;
+      in_reach = h_m >= 0.0 && h_m <= kMaxHeldHeight_m &&
+                 compliant_proxy(device_m, nearest.point, pseudo_normal(nearest), &unused_proxy_m);
+      if (in_reach && clear_) {
+        touching_ = true;
+        reference_m = nearest.point;
+      }
+    }
   } else if (contact_triangle_ >= 0) {
     const auto& tri = model_->triangle[contact_triangle_];
     reference_m = contact_weight_[0] * vertex_m_[tri[0]] + contact_weight_[1] * vertex_m_[tri[1]] +
@@ -258,13 +293,20 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
 
   Closest c;
   Vec3 n = Vec3::Zero();
+  Vec3 compliant_proxy_m = Vec3::Zero();
+  bool compliant = false;
   if (touching_) {
     c = closest_facing(device_m, reference_m, true);
     if (c.triangle < 0 || !c.point.allFinite()) {
       touching_ = false;  // a non-finite point must not become the proxy
     } else {
       n = pseudo_normal(c);
-      if (n.dot(device_m - c.point) > 0.0) touching_ = false;  // the device is back outside
+      compliant = compliant_proxy(device_m, c.point, n, &compliant_proxy_m);
+      // Back outside the patch. A deformed object still pushing holds the
+      // contact until its force reaches zero (top of the header), so the
+      // force does not drop by k_v f0 / (k_v + k) at the patch.
+      const double height_m = n.dot(device_m - c.point);
+      if (height_m > 0.0 && !(compliant && height_m <= kMaxHeldHeight_m)) touching_ = false;
     }
   }
 
@@ -276,6 +318,7 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     proxy_m_ = device_m;
     out.proxy_m = device_m;
     outside_ = device_height_m() > 0.0;  // NaN (no triangle): not known to be outside
+    clear_ = outside_ && !in_reach;
     return out;
   }
   outside_ = false;
@@ -286,19 +329,8 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
   proxy_m_ = c.point;
 
   const double k_v = params_.coupling_stiffness_N_per_m;
-  Vec3 proxy = c.point;
-  if (model_->in_contact) {
-    const Mat3 tangential = Mat3::Identity() - n * n.transpose();
-    const Vec3 x0 = model_->position_ref_m + tangential * (c.point - model_->position_ref_m);
-    const Mat3& K = contact_stiffness_N_per_m_;
-    const Mat3 A = k_v * Mat3::Identity() + K;  // SPD: k_v > 0, K PSD
-    const Vec3 p = A.inverse() * (k_v * device_m + K * x0 - model_->force_ref_N);
-    const Vec3 force_on_object_N = k_v * (device_m - p);
-    if (p.allFinite() && n.dot(force_on_object_N) < 0.0) {  // pushes into the object (n is outward)
-      proxy = p;
-      out.compliant = true;
-    }
-  }
+  const Vec3 proxy = compliant ? compliant_proxy_m : c.point;
+  out.compliant = compliant;
 
   Vec3 force_N = k_v * (proxy - device_m);
   const Vec3 relative_velocity = device_velocity_m_per_s - surface_velocity(c);

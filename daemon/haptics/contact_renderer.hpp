@@ -14,10 +14,12 @@
 //     searched only over triangles whose front side faces the previous contact
 //     point (so the proxy cannot jump to the far side of a thin object), with
 //     faces, edges and vertices handled by the closest-point regions. Contact
-//     ends when the device is on the outer side of that feature, judged with
-//     the angle-weighted pseudo-normal (Baerentzen & Aanaes 2005), which is
-//     well defined on edges and vertices too. Past the patch border the proxy
-//     stays on the border edge (the sim re-centres the patch on the tool).
+//     with a rigid patch ends when the device is on the outer side of that
+//     feature, judged with the angle-weighted pseudo-normal (Baerentzen &
+//     Aanaes 2005), which is well defined on edges and vertices too (a
+//     deformed patch holds it a little longer, see below). Past the patch
+//     border the proxy stays on the border edge (the sim re-centres the patch
+//     on the tool).
 //
 // Deformable object (LocalModel::in_contact): the patch is the surface as the
 // sim last left it under force_ref; pushing harder displaces the contact point
@@ -34,6 +36,17 @@
 // every step anyway). The contact is unilateral: if the solved proxy would
 // PULL on the object (n . f >= 0, n outward), the object is not being pushed
 // and the proxy falls back to the surface point c.
+//
+// Release from a deformed patch: under F0 the patch is pressed in, and the
+// object's own surface (where f = 0) lies about K_c^-1 F0 above it; there the
+// solve still pushes k_v f0 / (k_v + k) with the device on the patch (f0 =
+// -n . F0). So the contact is held above the patch for as long as the solve
+// pushes (n . f < 0) and ends where that force reaches zero; the force is
+// continuous through the patch and at the release. A free device that was
+// clear of that region at the last tick and is inside it now meets the
+// object there, so the way back in is the same. Both are limited to
+// kMaxHeldHeight_m above the patch: a K_c near zero (an eigenvalue clamped
+// to 0, an object with no fixed node) would put that surface metres away.
 //
 // Force on the device (scene frame, before safety):
 //       F = k_v (p - x_dev) - b_v (n . (v_dev - v_surface)) n
@@ -79,6 +92,12 @@ bool local_model_is_valid(const LocalModel& model) noexcept;
 
 class ContactRenderer {
  public:
+  // A deformed patch holds the contact at most this far above it (see the
+  // top of the file): an object as soft as 150 N/m, pressed with the default
+  // 3 N force limit, is still let go where its force reaches zero; a K_c
+  // near zero would hold the contact metres above the patch.
+  static constexpr double kMaxHeldHeight_m = 0.02;
+
   explicit ContactRenderer(const RenderParams& params = {});
 
   // Binds a validated model (nullptr: no model, render zero force). The model
@@ -112,6 +131,10 @@ class ContactRenderer {
   Closest closest_facing(const Vec3& device_m, const Vec3& reference_m, bool filter) const noexcept;
   Vec3 pseudo_normal(const Closest& c) const noexcept;
   Vec3 surface_velocity(const Closest& c) const noexcept;
+  // The deformable proxy (top of the file) for contact point c, normal n:
+  // true, with *proxy_m, when the model is in contact and the solve pushes
+  // into the object.
+  bool compliant_proxy(const Vec3& device_m, const Vec3& c, const Vec3& n, Vec3* proxy_m) const noexcept;
 
   RenderParams params_;
   const LocalModel* model_ = nullptr;
@@ -131,6 +154,9 @@ class ContactRenderer {
   // Free, with the device in front of the patch at the last tick: a surface
   // that has it just behind at this tick met it (render).
   bool outside_ = false;
+  // Free, in front of the patch and out of reach of the deformed object at
+  // the last tick: a device within its reach now has come back to it.
+  bool clear_ = false;
   Vec3 proxy_m_ = Vec3::Zero();
   Vec3 surface_point_m_ = Vec3::Zero();  // last geometric contact point c
   int contact_triangle_ = -1;            // in the bound model; -1 after a model switch

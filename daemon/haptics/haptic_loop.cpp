@@ -183,6 +183,13 @@ void HapticLoop::tick(std::int64_t now_ns) noexcept {
       if (!fade_offset_N_.allFinite()) fade_offset_N_.setZero();
       fade_start_ns_ = now_ns;
     }
+    // The fade smooths a model switch under the hand in contact. A free hand
+    // must feel nothing: the sample says no contact and the sim gets no
+    // reaction, so a leftover offset would push it with a force nothing
+    // answers (a 1 N update just before lifting off pushed the free hand with
+    // 0.4 N). The contact force itself reaches zero at the release, and the
+    // device's rate limit smooths what the offset still held.
+    if (!render.contact) fade_offset_N_.setZero();
     force_scene_N = render.force_on_device_N + remaining(now_ns) * fade_offset_N_;
   }
 

@@ -15,7 +15,8 @@
 // model update changes the force per tick by at most offset * dt / crossfade_s
 // (plus the user's own motion). Overlapping updates (the sim publishes every
 // step) restart the fade from the force actually rendered, so it stays
-// continuous.
+// continuous. The offset applies only while the active model's render is in
+// contact: it is dropped when the hand is free (no contact, no force).
 //
 // Device input: a sample is rejected (and counted) when it is non-finite,
 // farther than workspace_radius_m from the device origin, or implies a speed

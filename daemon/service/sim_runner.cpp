@@ -9,12 +9,15 @@ SimRunner::SimRunner(const scene::Scene& scene) : sim_(std::make_unique<physics:
 
 void SimRunner::apply_tool(std::span<const haptics::ToolSample> samples, RunnerStep* out) {
   physics::Vec3 force_sum = physics::Vec3::Zero();
+  int ticks = 0;  // the trusted ticks covering the step, touching or not
   int contacts = 0;
   const haptics::ToolSample* newest_contact = nullptr;
   for (const haptics::ToolSample& s : samples) {
     if (!s.proxy_position_m.allFinite()) continue;  // never trust another thread's numbers blindly
     query_.tool_m = s.proxy_position_m;
-    if (!s.contact || !s.force_on_object_N.allFinite()) continue;
+    if (s.contact && !s.force_on_object_N.allFinite()) continue;
+    ++ticks;
+    if (!s.contact) continue;
     force_sum += s.force_on_object_N;
     ++contacts;
     newest_contact = &s;
@@ -31,8 +34,10 @@ void SimRunner::apply_tool(std::span<const haptics::ToolSample> samples, RunnerS
     out->tool_pushing = sim_->tool_force_N().squaredNorm() > 0.0;
     return;
   }
-  // The mean of the ticks is the impulse-consistent force over the step.
-  const physics::Vec3 mean_N = force_sum / contacts;
+  // The mean over all the ticks, those off the object counting as zero, is
+  // the impulse-consistent force over the step: one touching tick of five
+  // gives a fifth of its force, not all of it for the whole step.
+  const physics::Vec3 mean_N = force_sum / ticks;
   query_.contact_node = newest_contact->contact_node;
   query_.contact_weight = newest_contact->contact_weight;
   out->tool_pushing = sim_->set_tool_force(query_.contact_node, query_.contact_weight, mean_N);

@@ -2,7 +2,8 @@
 // directly; service/sim_thread runs it paced to the wall clock):
 //   tool samples from the haptic loop -> tool force on the mesh (equal and
 //   opposite to what the user felt, averaged over the samples since the last
-//   step) -> freeze adaptivity under an engaged tool -> Simulation::step()
+//   step, those off the object counting as zero) -> freeze adaptivity under
+//   an engaged tool -> Simulation::step()
 //   -> rebuild the LocalModel around the tool.
 // A scene without a tool runs none of the tool code (no samples expected, no
 // local model built).

@@ -263,6 +263,10 @@ TEST(DaemonConfigYaml, ValuesThatWouldHangOrOverflowAClockAreRefused) {
   expect_error(edit("stale_model_s: 0.1", "stale_model_s: 1e300"), "device.limits.stale_model_s", "must be <= 60");
   expect_error(edit("device_timeout_s: 0.01", "device_timeout_s: 61"), "device.limits.device_timeout_s",
                "must be <= 60");
+  // Found by the review of the haptic proxy path: crossfade_s had no upper
+  // bound, and the fade lags the force behind the sim by about that long.
+  expect_error(edit("crossfade_s: 0.01", "crossfade_s: 100"), "haptics.crossfade_s",
+               "must be <= 1 (got 100): the hand would feel the sim's force that late");
   expect_error(edit("rate_hz: 1000", "rate_hz: 1e-300"), "haptics.rate_hz", "must be >= 1");
   expect_error(edit("rate_hz: 1000", "rate_hz: 5e-324"), "haptics.rate_hz", "its clock");
   expect_error(edit("status_interval_s: 1.0", "status_interval_s: 1e308"), "status_interval_s", "must be <= 3600");

@@ -4,7 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
+#include <utility>
+#include <vector>
 
 namespace tissue::haptics {
 namespace {
@@ -63,6 +66,50 @@ TEST(ClosestPointOnTriangle, NamesTheRegionItLiesIn) {
   const TriangleClosest ac_edge = closest_point_on_triangle(Vec3(-1, 0.5, 0), a, b, c);
   EXPECT_EQ(ac_edge.feature_a, 0);
   EXPECT_EQ(ac_edge.feature_b, 2);
+}
+
+// Found by the review of the haptic proxy path: a triangle with two corners
+// at one point divided 0 by 0 (v = d1 / (d1 - d3)) and gave a NaN point and
+// NaN weights. A triangle with no area is its edges: the closest point is
+// the closest on them, with weights >= 0 that sum to 1.
+TEST(ClosestPointOnTriangle, TrianglesWithNoAreaGiveTheClosestPointOnTheirEdges) {
+  const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0), mid(0.5, 0, 0), far(2, 0, 0);
+  struct Case {
+    Vec3 a, b, c;
+  };
+  const std::vector<Case> degenerate{
+      {a, a, c},   {a, c, a},   {c, a, a},      // two corners at one point
+      {a, a, a},                                // all three
+      {a, mid, b}, {a, b, mid}, {mid, far, a},  // on a line
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-2.0, 2.0);
+  for (std::size_t k = 0; k < degenerate.size(); ++k) {
+    const Case& t = degenerate[k];
+    for (int trial = 0; trial < 200; ++trial) {
+      const Vec3 p(u(rng), u(rng), u(rng));
+      const TriangleClosest cp = closest_point_on_triangle(p, t.a, t.b, t.c);
+      ASSERT_TRUE(cp.point_m.allFinite()) << "case " << k << " p " << p.transpose();
+      double sum = 0.0;
+      for (double w : cp.weight) {
+        ASSERT_TRUE(std::isfinite(w)) << "case " << k;
+        EXPECT_GE(w, 0.0) << "case " << k;
+        sum += w;
+      }
+      EXPECT_NEAR(sum, 1.0, 1e-12) << "case " << k;
+      EXPECT_LT((cp.weight[0] * t.a + cp.weight[1] * t.b + cp.weight[2] * t.c - cp.point_m).norm(), 1e-12);
+      // No point of the three edges is closer.
+      const double d = (cp.point_m - p).norm();
+      for (const auto& [from, to] : {std::pair{t.a, t.b}, std::pair{t.a, t.c}, std::pair{t.b, t.c}})
+        for (int i = 0; i <= 100; ++i) EXPECT_GE((from + (to - from) * (i / 100.0) - p).norm(), d - 1e-12);
+    }
+  }
+  // The first one the review found: a = b, the tool above the middle of edge ac.
+  const TriangleClosest cp = closest_point_on_triangle(Vec3(0.3, 0.5, 1.0), a, a, c);
+  EXPECT_TRUE(cp.point_m.isApprox(Vec3(0, 0.5, 0), 1e-15)) << cp.point_m.transpose();
+  EXPECT_EQ(cp.weight[1], 0.0);
+  EXPECT_NEAR(cp.weight[0], 0.5, 1e-15);
+  EXPECT_NEAR(cp.weight[2], 0.5, 1e-15);
 }
 
 }  // namespace

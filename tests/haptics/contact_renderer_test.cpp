@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -179,6 +180,89 @@ TEST(ContactRenderer, DeformableContactWithReferenceForceBalancesCouplingAndObje
   const Vec3 object_N = force_ref_N + 900.0 * out.proxy_m;
   EXPECT_TRUE(coupling_N.isApprox(object_N, 1e-12));
   EXPECT_TRUE(out.force_on_device_N.isApprox(-coupling_N, 1e-12));
+}
+
+// Found by the review of the haptic proxy path. With a reference force the
+// patch is the surface the sim holds pressed in under F0; the object's own
+// surface, where the linearised force f(x) = F0 + K_c (x - x0) is zero, lies
+// f0 / k above it. Contact ended on the patch, where the series solve still
+// pushed k_v f0 / (k_v + k) (0.246 N here): a 2 um move across the patch
+// dropped the force by that much, and moving back in raised it as suddenly.
+TEST(ContactRenderer, DeformableContactForceIsContinuousAcrossThePatchAndEndsWhereItReachesZero) {
+  const double k_object_N_per_m = 900.0;
+  const double f0_N = 0.8;
+  LocalModel patch = test::make_flat_patch();
+  test::set_linear_contact(patch, k_object_N_per_m, Vec3(0.0, 0.0, -f0_N), Vec3::Zero());
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0, 0, 0.002), Vec3::Zero()).contact);
+  ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0, 0, -0.003), Vec3::Zero()).contact);
+
+  // The stiffest thing the hand can feel is the coupling spring (the series
+  // stiffness k_v k / (k_v + k) is below it): over 2 um the force may change
+  // by at most k_v * 2 um.
+  const RenderOutput below = r.render(now_ns += kMs, Vec3(0, 0, -1e-6), Vec3::Zero());
+  const RenderOutput above = r.render(now_ns += kMs, Vec3(0, 0, 1e-6), Vec3::Zero());
+  EXPECT_LE((above.force_on_device_N - below.force_on_device_N).norm(), kCouplingStiffness_N_per_m * 2e-6 + 1e-12)
+      << "below the patch " << below.force_on_device_N.transpose() << ", above it "
+      << above.force_on_device_N.transpose();
+  EXPECT_TRUE(above.contact);
+  EXPECT_TRUE(above.compliant);
+
+  // Up through the object's rest surface and back down in 10 um steps: the
+  // force follows the series spring to zero at z = f0 / k (0.89 mm), is zero
+  // and free above it, and the way back in meets the same curve.
+  const double rest_height_m = f0_N / k_object_N_per_m;
+  const double step_m = 1e-5;
+  const auto expected_N = [&](double z_m) {
+    return std::max(0.0, kCouplingStiffness_N_per_m * (f0_N - k_object_N_per_m * z_m) /
+                             (kCouplingStiffness_N_per_m + k_object_N_per_m));
+  };
+  Vec3 previous_N = above.force_on_device_N;
+  const auto check = [&](const Vec3& device, const RenderOutput& out) {
+    EXPECT_LE((out.force_on_device_N - previous_N).norm(), kCouplingStiffness_N_per_m * step_m + 1e-12)
+        << "at z " << device.z();
+    previous_N = out.force_on_device_N;
+    EXPECT_NEAR(out.force_on_device_N.z(), expected_N(device.z()), 1e-9) << "at z " << device.z();
+    if (device.z() < rest_height_m - 1e-9) {
+      EXPECT_TRUE(out.contact) << "at z " << device.z();
+    }
+    if (device.z() > rest_height_m + 1e-9) {
+      EXPECT_FALSE(out.contact) << "at z " << device.z();
+      EXPECT_EQ(out.force_on_device_N, Vec3::Zero()) << "at z " << device.z();
+    }
+  };
+  sweep(r, now_ns, Vec3(0, 0, 1e-6), Vec3(0, 0, 0.002), 200, check);
+  EXPECT_FALSE(r.touching());
+  sweep(r, now_ns, Vec3(0, 0, 0.002), Vec3(0, 0, -0.001), 300, check);
+  EXPECT_TRUE(r.touching());
+}
+
+// A contact stiffness near zero (a K_c eigenvalue clamped to 0, or an object
+// with no fixed node, whose K_c is its regularising mass term) puts the
+// linearised rest surface metres above the patch; the contact is held no
+// higher than ContactRenderer::kMaxHeldHeight_m above it.
+TEST(ContactRenderer, ANearlyZeroContactStiffnessDoesNotHoldTheContactFarAboveThePatch) {
+  LocalModel patch = test::make_flat_patch();
+  test::set_linear_contact(patch, 1e-3, Vec3(0.0, 0.0, -0.5), Vec3::Zero());
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  r.render(now_ns += kMs, Vec3(0, 0, 0.05), Vec3::Zero());
+  ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0, 0, -0.0005), Vec3::Zero()).contact);
+  // 1 mm steps that never land on the limit itself.
+  sweep(r, now_ns, Vec3(0, 0, -0.0005), Vec3(0, 0, 0.0395), 40, [](const Vec3& device, const RenderOutput& out) {
+    if (device.z() <= ContactRenderer::kMaxHeldHeight_m) {
+      EXPECT_TRUE(out.contact) << "at z " << device.z();
+    } else {
+      EXPECT_FALSE(out.contact) << "at z " << device.z();
+    }
+  });
+  // Nor is a tool coming down caught there: it meets the contact again at that height.
+  sweep(r, now_ns, Vec3(0, 0, 0.0395), Vec3(0, 0, 0.0005), 39, [](const Vec3& device, const RenderOutput& out) {
+    EXPECT_EQ(out.contact, device.z() <= ContactRenderer::kMaxHeldHeight_m) << "at z " << device.z();
+  });
 }
 
 TEST(ContactRenderer, ConcaveValleyEdgeHoldsTheProxyAndUsesThePseudoNormal) {

@@ -116,6 +116,39 @@ TEST(HapticLoop, OverlappingModelUpdatesKeepTheForceContinuous) {
   }
 }
 
+// Found by the review of the haptic proxy path: the fade offset of a model
+// switch was added whether or not the tool touched anything, so a hand that
+// lifted off right after a 1 N update was pushed by the leftover 0.4 N while
+// its samples said no contact (and the sim got no reaction).
+TEST(HapticLoop, AFreeHandFeelsNoCrossFadeOffset) {
+  Rig rig;
+  rig.device_spec.limits.max_force_rate_N_per_s = 1e9;  // isolate the cross-fade
+  rig.device_spec.limits.ramp_in_s = 0.01;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.haptic_spec.crossfade_s = 0.01;
+  rig.haptic_spec.coupling_damping_N_s_per_m = 0.0;
+  rig.build();
+  LocalModel before = test::make_flat_patch();
+  test::set_linear_contact(before, 600.0);
+  press(rig, before, 100);
+  ASSERT_NEAR(rig.device.last_force_N.z(), 0.48, 1e-9);
+  LocalModel after = before;
+  after.force_ref_N = Vec3(0, 0, -1.0);  // the new model's force is 0.4 N higher
+  rig.publish(after);
+  rig.tick();
+  ASSERT_TRUE(rig.loop->last_sample().contact);
+  // Lifted clear in one tick (4.5 mm, within max_speed_m_per_s * 1 ms), well
+  // above where the new model's force reaches zero (1 N / 600 N/m = 1.7 mm),
+  // while the fade has most of its 10 ms to go.
+  rig.device.position_m = Vec3(0, 0, 0.0025);
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 f = rig.tick();
+    EXPECT_FALSE(rig.loop->last_sample().contact) << "tick " << i;
+    EXPECT_EQ(f, Vec3::Zero()) << "tick " << i;
+    EXPECT_EQ(rig.loop->last_sample().force_on_device_N, Vec3::Zero()) << "tick " << i;
+  }
+}
+
 TEST(HapticLoop, StaleModelRampsTheForceToZeroWithinRampOut) {
   Rig rig;
   rig.build();

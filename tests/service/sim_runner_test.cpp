@@ -70,6 +70,30 @@ TEST(SimRunner, AppliesTheMeanContactForceAndThePushedPointMoves) {
   EXPECT_LT(model.position_ref_m.z(), start.z() - 1e-3);  // pushed in by more than a millimetre
 }
 
+// Found by the review of the haptic proxy path: the force was the mean of
+// the touching ticks only, so one touching tick among four applied its whole
+// force for the whole step, four times its impulse. The contact point is
+// still the newest touching tick's.
+TEST(SimRunner, TicksOffTheObjectCountAsZeroInTheStepsMeanForce) {
+  SimRunner runner(cantilever_with_tool());
+  haptics::LocalModel model;
+  const haptics::ToolSample above = hover(Vec3(0.05, 0.05, 0.101));
+  ASSERT_TRUE(runner.step(std::span(&above, 1), &model).model_built);
+  const haptics::ToolSample pressing = press(model, Vec3(0, 0, -4.0));
+  const std::vector<haptics::ToolSample> ticks{pressing, above, above, above};
+  const RunnerStep r = runner.step(ticks, &model);
+  ASSERT_TRUE(r.ok);
+  EXPECT_TRUE(r.tool_pushing);
+  EXPECT_EQ(r.samples_used, 4);
+  EXPECT_EQ(runner.simulation().tool_force_N(), Vec3(0, 0, -1.0));
+  EXPECT_TRUE(model.in_contact);
+  EXPECT_EQ(model.force_ref_N, Vec3(0, 0, -1.0));
+  Vec3 pressed_point = Vec3::Zero();
+  for (int k = 0; k < 3; ++k)
+    pressed_point += pressing.contact_weight[k] * runner.simulation().body().x_m[pressing.contact_node[k]];
+  EXPECT_TRUE(model.position_ref_m.isApprox(pressed_point, 1e-12));
+}
+
 TEST(SimRunner, NonFiniteSamplesAreIgnoredAndReleaseClearsTheForce) {
   SimRunner runner(cantilever_with_tool());
   haptics::LocalModel model;
