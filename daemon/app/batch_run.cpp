@@ -139,7 +139,8 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
   std::size_t inverted_peak = physics::inverted_tet_count(sim.body());
   double inverted_peak_at_s = inverted_peak > 0 ? sim.time_s() : NAN;
   auto track_health = [&] {
-    if (const double excess = budget.excess(sim); excess > worst_excess) {
+    // !(<=): a NaN excess would be kept as the worst, never dropped as `>` does.
+    if (const double excess = budget.excess(sim); !(excess <= worst_excess)) {
       worst_excess = excess;
       worst_excess_at_s = sim.time_s();
     }

@@ -1,6 +1,8 @@
 #include "physics/diagnostics.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <string>
 
 #include "physics/forces.hpp"
@@ -21,9 +23,13 @@ double EnergyBudget::budget_J(const Simulation& sim) const {
 }
 
 double EnergyBudget::excess(const Simulation& sim) const {
-  const double energy = energy_J(sim);
+  const double energy = energy_J(sim), budget = budget_J(sim);
+  // A non-finite energy or budget (an infinite mass, a NaN work) says nothing
+  // is within bound: a NaN would read as "no excess" below, and std::max and
+  // `>` drop it where the worst excess is kept.
+  if (!std::isfinite(energy) || !std::isfinite(budget)) return std::numeric_limits<double>::infinity();
   // 1e-15 J: below that, energies are rounding noise of an almost-rest state.
-  return energy > 1e-15 ? energy / std::max(budget_J(sim), 1e-15) - 1.0 : 0.0;
+  return energy > 1e-15 ? energy / std::max(budget, 1e-15) - 1.0 : 0.0;
 }
 
 EnergyAudit audit_steps(Simulation& sim, int steps) {
@@ -41,14 +47,16 @@ EnergyAudit audit_steps(Simulation& sim, int steps) {
       audit.nonfinite = true;
       break;
     }
-    audit.worst_excess = std::max(audit.worst_excess, budget.excess(sim));
+    // Written so that a NaN excess would be kept, not dropped as std::max does.
+    if (const double excess = budget.excess(sim); !(excess <= audit.worst_excess)) audit.worst_excess = excess;
   }
   audit.inverted_tets = inverted_tet_count(sim.body());
   return audit;
 }
 
 AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit_rung) {
-  if (audit.nonfinite || audit.worst_excess > slack) return AuditOutcome::kFailed;
+  // !(<=): a NaN excess is not within the slack.
+  if (audit.nonfinite || !(audit.worst_excess <= slack)) return AuditOutcome::kFailed;
   if (!audit.refused) return AuditOutcome::kOk;
   // Every integrator rejects a non-finite step and keeps the old state: a
   // blow-up arrives here as a refusal, never as a non-finite state. The

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <string>
 
 #include "physics/forces.hpp"
@@ -148,6 +150,51 @@ TEST(Diagnostics, OnlyTheExplicitRungsRefusalAboveMaxSubstepsIsNotAFailure) {
     EXPECT_EQ(audit_outcome(refused, 0.05, true), AuditOutcome::kFailed) << rejected;
     EXPECT_EQ(audit_outcome(refused, 1e-6, false), AuditOutcome::kFailed) << rejected;
   }
+}
+
+// A non-finite energy or budget is no health: an infinite mass at a node at
+// rest makes the kinetic energy NaN (inf × 0), which read as an excess of 0,
+// and a budget taken from such a state made the excess NaN, which std::max
+// and `worst > slack` dropped: the audit said kOk.
+TEST(Diagnostics, ANonFiniteEnergyOrBudgetIsNeverWithinTheBound) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  scene::Scene s = testing::beam_scene();
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  Simulation sim(s);
+  testing::jiggle_free_nodes(sim.mutable_body(), 23, 0.001, 0.05);
+  Body& body = sim.mutable_body();
+  NodeId held = 0;  // a fixed node: at rest, and no integrator moves it
+  while (body.kind[held] != NodeKind::kFixed) ++held;
+  ASSERT_EQ(body.v_m_per_s[held], Vec3::Zero());
+  const double mass_kg = body.mass_kg[held];
+
+  const EnergyBudget finite_budget(sim);
+  ASSERT_TRUE(std::isfinite(finite_budget.excess(sim)));
+  body.mass_kg[held] = kInf;
+  ASSERT_TRUE(std::isnan(sim.kinetic_energy_J()));
+  EXPECT_EQ(finite_budget.excess(sim), kInf) << "a NaN energy";
+
+  const EnergyBudget nan_budget(sim);  // E0 is NaN
+  ASSERT_TRUE(std::isnan(nan_budget.budget_J(sim)));
+  body.mass_kg[held] = mass_kg;
+  ASSERT_TRUE(std::isfinite(sim.kinetic_energy_J()));
+  EXPECT_EQ(nan_budget.excess(sim), kInf) << "a NaN budget";
+
+  // Through the audit: every step is taken (the fixed node's mass is never
+  // used by the explicit rung), but the energy is NaN throughout.
+  body.mass_kg[held] = kInf;
+  const EnergyAudit audit = audit_steps(sim, 5);
+  ASSERT_EQ(audit.steps_taken, 5) << audit.error;
+  EXPECT_FALSE(audit.worst_excess <= 0.0) << audit.worst_excess;
+  EXPECT_FALSE(audit.within_energy_bound(1e9));
+  EXPECT_EQ(audit_outcome(audit, 1e9, true), AuditOutcome::kFailed);
+
+  // A NaN worst excess (from any source) is not within any slack either.
+  EnergyAudit nan_excess;
+  nan_excess.steps_taken = 10;
+  nan_excess.worst_excess = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(nan_excess.within_energy_bound(1e9));
+  EXPECT_EQ(audit_outcome(nan_excess, 1e9, false), AuditOutcome::kFailed);
 }
 
 // The count is taken at the end: a corner of a very soft cube is driven
