@@ -30,6 +30,10 @@ double edge_weight(scene::StiffnessLaw law, int depth, std::int64_t length2, std
 // Eq. (2): a node's mass is a quarter of the mass of every tet around it,
 // from the node's six-fold volume sum in lattice units (exact integers, so
 // the same after any split and merge) and the lattice unit's length.
+// Multiplied left to right, each partial product lies between the density x
+// six-volume and the result: the scene check (scene_yaml.cpp, kMinCubeScale)
+// bounds both, so none overflows or vanishes. The order is kept as it was so
+// that ordinary scenes give the same bits as before.
 inline double node_mass_kg(double density_kg_per_m3, std::int64_t six_volume, double lattice_unit_m) {
   return density_kg_per_m3 * static_cast<double>(six_volume) * lattice_unit_m * lattice_unit_m * lattice_unit_m / 24.0;
 }

@@ -38,11 +38,19 @@ constexpr std::uintmax_t kMaxSceneFileBytes = 16u << 20;
 // max_tets: 2147483647 with a tiny threshold, ran into std::bad_alloc.
 constexpr long long kMaxTets = 20'000'000;
 constexpr long long kMaxTotalCubes = kMaxTets / 6;
-// A cube's mass (density x cube_size³) and its springs' stiffness scale
-// (E x cube_size) must be ordinary doubles with room for refinement (2^-30),
-// squares and sums: a density of 1e308 overflowed the lumped masses to inf,
-// the free nodes stood still (1/inf = 0) and the report's kinetic energy was
-// NaN (written as null) after a run that said it succeeded.
+// A cube's volume (cube_size³), mass (density x cube_size³) and its springs'
+// stiffness scale (E x cube_size) must be ordinary doubles with room for
+// refinement (2^-30), squares and sums: a density of 1e308 overflowed the
+// lumped masses to inf, the free nodes stood still (1/inf = 0) and the
+// report's kinetic energy was NaN (written as null) after a run that said it
+// succeeded. The volume bounds the factors as well as the products: the body
+// forms density x six-volume x unit x unit x unit and six-volume x unit³ left
+// to right, each step between its first factor and the result, so with the
+// volume in range the density is within [1e-200, 1e200] and E within about
+// [1e-134, 1e134], and every step stays an ordinary double (cube_size_m
+// 1e-80 with density 1e308 passed the mass check and overflowed at
+// density x six-volume; cube_size_m 2e-108 made every tet's volume, and so
+// every stiffness, 0).
 constexpr double kMinCubeScale = 1e-100, kMaxCubeScale = 1e100;
 // The float explicit rung keeps lengths, masses, 1/mass and stiffnesses in
 // float: E = 1e48 Pa with density 1e48 passed the double range above, 1/m
@@ -274,6 +282,13 @@ class Validator : private yaml_util::ValueChecks<Validator> {
       if (!std::isfinite(extent_[a])) fail("object", "the object's size overflows");
     }
     tolerance_ = 1e-9 * std::max({extent_[0], extent_[1], extent_[2]});
+    const auto beyond_double = [&](double given) {
+      return ", outside [" + fmt_num(kMinCubeScale) + ", " + fmt_num(kMaxCubeScale) +
+             "]: beyond what the simulation holds in double precision (got " + fmt_num(given) + ")";
+    };
+    const double cube_m3 = o.cube_size_m * o.cube_size_m * o.cube_size_m;
+    if (!(cube_m3 >= kMinCubeScale && cube_m3 <= kMaxCubeScale))
+      fail("object.cube_size_m", "a cube's volume in m³ would be " + fmt_num(cube_m3) + beyond_double(o.cube_size_m));
 
     const MaterialSpec& m = s_.material;
     positive(m.youngs_modulus_Pa, "material.youngs_modulus_Pa");
@@ -281,10 +296,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     const auto representable = [&](double value, double given, const char* key, const std::string& what) {
       if (!(value >= kMinCubeScale && value <= kMaxCubeScale))
         fail(key, "with object.cube_size_m " + fmt_num(o.cube_size_m) + ", " + what + " would be " + fmt_num(value) +
-                      ", outside [" + fmt_num(kMinCubeScale) + ", " + fmt_num(kMaxCubeScale) +
-                      "]: beyond what the simulation holds in double precision (got " + fmt_num(given) + ")");
+                      beyond_double(given));
     };
-    const double cube_m3 = o.cube_size_m * o.cube_size_m * o.cube_size_m;
     representable(m.density_kg_per_m3 * cube_m3, m.density_kg_per_m3, "material.density_kg_per_m3",
                   "a cube's mass in kg");
     representable(m.youngs_modulus_Pa * o.cube_size_m, m.youngs_modulus_Pa, "material.youngs_modulus_Pa",

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "physics/body.hpp"
+#include "physics/spring_law.hpp"
 #include "support/process_support.hpp"
 
 namespace tissue::scene {
@@ -865,6 +867,19 @@ TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
                {"material.youngs_modulus_Pa=1e-300"});
   EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml",
                                              {"material.youngs_modulus_Pa=1e12", "material.density_kg_per_m3=2e4"}));
+  // The mass and stiffness scales were in range, but not the factors the
+  // body multiplies on the way: density x six-volume overflowed (inf masses),
+  // cube_size_m³ / 2^30 underflowed (every tet's volume and stiffness 0).
+  // kMinimal: no region to be refused first for lying outside so small a box.
+  expect_error(kMinimal, "object.cube_size_m", "a cube's volume in m³ would be 1e-240, outside [1e-100, 1e+100]",
+               {"object.cube_size_m=1e-80", "material.density_kg_per_m3=1e308", "material.youngs_modulus_Pa=1e80"});
+  expect_error(kMinimal, "object.cube_size_m", "beyond what the simulation holds in double precision (got 2e-108)",
+               {"object.cube_size_m=2e-108", "material.density_kg_per_m3=1e300", "material.youngs_modulus_Pa=1e100"});
+  // The other edge: a volume near double's largest (1.79e308 m³) made some
+  // edges' summed volumes, and their stiffnesses, inf.
+  expect_error(
+      kMinimal, "object.cube_size_m", "double precision (got 5.64e+102)",
+      {"object.cube_size_m=5.64e102", "material.density_kg_per_m3=1e-300", "material.youngs_modulus_Pa=1e-100"});
 
   // docs/scene-format.md: dt_s <= 1 s, substep_safety in (0, 1], min_age_steps
   // and rayleigh_alpha_per_s >= 0, at most 3333333 cubes (2e7 tets): the edges themselves are valid.
@@ -876,6 +891,99 @@ TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
   EXPECT_EQ(edges.integrator.substep_safety, 1.0);
   EXPECT_EQ(edges.adaptivity.min_age_steps, 0);
   EXPECT_EQ(edges.object.cubes, (std::array<int, 3>{333, 100, 100}));
+}
+
+// What the scale checks promise (scene_yaml.cpp, kMinCubeScale): every
+// scene they accept gets node masses, inverse masses and spring
+// stiffnesses that are ordinary doubles, from the starting cubes down to
+// the finest leaf the scene can reach (max_depth 30), and equal to the
+// unit body's (cube, density and E of 1) scaled by density x cube_size³
+// and E x cube_size. Swept over cube sizes 1e-120..1e120 m, densities and
+// moduli 1e-300..1e300.
+TEST(SceneYamlErrors, EveryScaleTheCheckAcceptsGivesOrdinaryMassesAndStiffnesses) {
+  Scene unit = parse_scene("object: {cubes: [2, 1, 1], cube_size_m: 1}\n", "unit.yaml");
+  unit.material.density_kg_per_m3 = 1.0;
+  unit.material.youngs_modulus_Pa = 1.0;
+  unit.adaptivity.enabled = true;
+  unit.adaptivity.max_depth = 30;
+  validate_scene(unit);
+  const physics::Body unit_body(unit);
+  const mesh::KuhnMesh& mesh = unit_body.mesh();
+  const auto& first_tet = mesh.tet(0).v;  // depth 0, the shape of every depth 3N, 30 included
+  ASSERT_EQ(mesh.tet(0).depth, 0);
+  const double leaf_edge_lattice_units = 1.0;  // the finest cube at depth 30 is one lattice unit across
+
+  // Decades, and the cube sizes that broke the body (scene_yaml.cpp, kMinCubeScale).
+  std::vector<double> cube_sizes_m = {2e-108, 1e-80, 5.64e102};
+  for (int cube_exp = -120; cube_exp <= 120; cube_exp += 10) cube_sizes_m.push_back(1.5 * std::pow(10.0, cube_exp));
+  int accepted = 0;
+  for (const double cube_size_m : cube_sizes_m)
+    for (int density_exp = -300; density_exp <= 300; density_exp += 20)
+      for (int modulus_exp = -300; modulus_exp <= 300; modulus_exp += 20) {
+        Scene s = unit;
+        s.object.cube_size_m = cube_size_m;
+        s.material.density_kg_per_m3 = 1.5 * std::pow(10.0, density_exp);
+        s.material.youngs_modulus_Pa = 1.5 * std::pow(10.0, modulus_exp);
+        try {
+          validate_scene(s);
+        } catch (const SceneError&) {
+          continue;
+        }
+        ++accepted;
+        const physics::Body body(s);
+        std::ostringstream where;
+        where << "cube_size_m " << s.object.cube_size_m << ", density " << s.material.density_kg_per_m3 << ", E "
+              << s.material.youngs_modulus_Pa;
+        const std::string at = where.str();
+        // The scales in long double (range to 1e4932): no over- or underflow.
+        const long double cube = s.object.cube_size_m;
+        const long double mass_scale = s.material.density_kg_per_m3 * cube * cube * cube;
+        const long double stiffness_scale = s.material.youngs_modulus_Pa * cube;
+        bool all_ok = true;
+        body.mesh().for_each_node([&](physics::NodeId n, const mesh::Node&) {
+          const double m = body.mass_kg[n];
+          const long double expected = mass_scale * unit_body.mass_kg[n];
+          if (!std::isnormal(m) || !std::isnormal(body.inv_mass_per_kg[n]) ||
+              std::fabs(static_cast<long double>(m) - expected) > 1e-12L * expected) {
+            ADD_FAILURE() << at << ": node " << n << " mass " << m << " kg, inverse " << body.inv_mass_per_kg[n]
+                          << ", expected " << static_cast<double>(expected);
+            all_ok = false;
+          }
+        });
+        body.mesh().for_each_edge([&](physics::EdgeId e, const mesh::Edge&) {
+          const double k = body.stiffness_N_per_m[e];
+          const long double expected = stiffness_scale * unit_body.stiffness_N_per_m[e];
+          if (!std::isnormal(k) || std::fabs(static_cast<long double>(k) - expected) > 1e-12L * expected) {
+            ADD_FAILURE() << at << ": edge " << e << " stiffness " << k << " N/m, expected "
+                          << static_cast<double>(expected);
+            all_ok = false;
+          }
+        });
+        // The finest leaf: a node holding one depth-30 tet's six-volume
+        // (1), and a depth-30 tet's springs, the shortest one lattice unit.
+        const double unit_m = body.mesh().lattice_unit_m();
+        const double leaf_mass_kg = physics::node_mass_kg(s.material.density_kg_per_m3, 1, unit_m);
+        const long double leaf_expected =
+            s.material.density_kg_per_m3 * static_cast<long double>(unit_m) * unit_m * unit_m / 24;
+        if (!std::isnormal(leaf_mass_kg) || !std::isnormal(1.0 / leaf_mass_kg) ||
+            std::fabs(static_cast<long double>(leaf_mass_kg) - leaf_expected) > 1e-12L * leaf_expected) {
+          ADD_FAILURE() << at << ": a leaf node's mass " << leaf_mass_kg << " kg, expected "
+                        << static_cast<double>(leaf_expected);
+          all_ok = false;
+        }
+        for (const double share_m3 : body.tet_edge_shares_m3(first_tet, 30)) {
+          const double k = physics::spring_stiffness_N_per_m(s.material.youngs_modulus_Pa, share_m3,
+                                                             leaf_edge_lattice_units * unit_m);
+          if (!std::isnormal(share_m3) || !std::isnormal(k)) {
+            ADD_FAILURE() << at << ": a leaf tet's share " << share_m3 << " m³, stiffness " << k << " N/m";
+            all_ok = false;
+          }
+        }
+        if (!all_ok) return;  // one scene's failures are enough to read
+      }
+  // The sweep reached the corners: cube sizes 1.5e-30..1.5e30 m, each with
+  // 10 densities and 10 moduli in range (the three that broke the body: none).
+  EXPECT_EQ(accepted, 7 * 10 * 10);
 }
 
 }  // namespace
