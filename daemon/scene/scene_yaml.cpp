@@ -401,6 +401,11 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     open_unit(g.cg_tolerance, "integrator.cg_tolerance");
     at_least(g.cg_max_iterations, 1, "integrator.cg_max_iterations");
     if (g.kind == IntegratorKind::kExplicit && g.explicit_precision == ExplicitPrecision::kFloat) float_range();
+    // After dt_s is known good: whether each profile acts at some step.
+    for (std::size_t i = 0; i < s_.prescribed.size(); ++i)
+      profile_acts(s_.prescribed[i].profile, join_index("prescribed", i) + ".profile", "displacement");
+    for (std::size_t i = 0; i < s_.loads.size(); ++i)
+      profile_acts(s_.loads[i].profile, join_index("loads", i) + ".profile", "force");
 
     for (std::size_t i = 0; i < s_.probes.size(); ++i) {
       const ProbeSpec& p = s_.probes[i];
@@ -535,6 +540,37 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (std::isnan(t.release_s)) fail(path + ".release_s", "must be a number or .inf (got nan)");
     if (!(t.release_s > t.start_s))
       fail(path + ".release_s", "must be > start_s (" + fmt_num(t.start_s) + ") (got " + fmt_num(t.release_s) + ")");
+  }
+
+  // A profile is sampled at step ends only (Simulation::step and the drivers:
+  // t = k · dt_s, k >= 1, the step count times dt): a release before the
+  // first step end after start_s left the load or displacement out of every
+  // step, silently (dt_s 0.01 with {start_s: 0.002, release_s: 0.008} did no
+  // work and exited 0). Runs after the profile's own checks and dt_s's.
+  void profile_acts(const TimeProfile& t, const std::string& path, const char* what) const {
+    const double dt_s = s_.integrator.dt_s;
+    // From 2^52 steps on, k · dt_s no longer steps by one dt; no run gets there.
+    const double first_k = std::floor(t.start_s / dt_s);
+    if (first_k >= 0x1p52) return;
+    // The step ends at and after start_s: k · dt_s exactly as the simulation
+    // forms it, from one below the rounded quotient (the division may round
+    // up across an integer) on; the ramp is 0 at start_s, so one more.
+    bool in_window = false;
+    for (int i = -1; i <= 3; ++i) {
+      const double k = std::max(1.0, first_k + i);
+      const double t_s = k * dt_s;
+      if (t_s >= t.release_s) break;
+      if (t_s < t.start_s) continue;
+      in_window = true;
+      if (t.at(t_s) > 0.0) return;
+    }
+    const std::string window = "[start_s, release_s) = [" + fmt_num(t.start_s) + ", " + fmt_num(t.release_s) + ") s";
+    fail(path + ".release_s",
+         (in_window ? "the profile is still 0 at the step ends in " + window + " (its ramp, ramp_s " +
+                          fmt_num(t.ramp_s) + ", rises from 0 at start_s)"
+                    : "no step end (a multiple k >= 1 of integrator.dt_s " + fmt_num(dt_s) + " s) falls in " + window) +
+             ": profiles are sampled at step ends only, so this " + what +
+             " would never act; widen the window or lower integrator.dt_s");
   }
 
   template <class T>

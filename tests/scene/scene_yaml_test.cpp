@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "physics/body.hpp"
+#include "physics/simulation.hpp"
 #include "physics/spring_law.hpp"
 #include "support/process_support.hpp"
 
@@ -418,6 +419,53 @@ TEST(SceneYamlErrors, BadEnumListsTheAllowedValues) {
   EXPECT_NE(what.find("'implict'"), std::string::npos) << what;
   expect_error(base_with("stiffness: isotropic", "stiffness: iso"), "material.stiffness",
                "allowed values: isotropic, paper");
+}
+
+// Profiles are sampled at step ends, k · dt_s (Simulation::step): a window
+// holding none where the profile is above 0 never acts. dt_s 0.01 with
+// {start_s: 0.002, release_s: 0.008} ran, did no work and exited 0.
+TEST(SceneYamlErrors, AProfileThatActsAtNoStepEndIsRefused) {
+  expect_error(kBase, "loads[0].profile.release_s",
+               "no step end (a multiple k >= 1 of integrator.dt_s 0.01 s) falls in [start_s, release_s) = [0.002, "
+               "0.008) s: profiles are sampled at step ends only, so this force would never act",
+               {"integrator.dt_s=0.01", "loads[0].profile.start_s=0.002", "loads[0].profile.release_s=0.008"});
+  // Released before the first step end.
+  expect_error(kBase, "loads[0].profile.release_s", "falls in [start_s, release_s) = [0, 5e-04) s",
+               {"loads[0].profile.release_s=0.0005"});
+  // A ramp is 0 at start_s: the one step end in the window is no use.
+  expect_error(kBase, "prescribed[0].profile.release_s",
+               "the profile is still 0 at the step ends in [start_s, release_s) = [0.01, 0.015) s (its ramp, ramp_s "
+               "0.5, rises from 0 at start_s): profiles are sampled at step ends only, so this displacement would "
+               "never act",
+               {"integrator.dt_s=0.01", "prescribed[0].profile.start_s=0.01", "prescribed[0].profile.release_s=0.015"});
+  // Step ends are the step count times dt_s, as the simulation forms them:
+  // 3 x 0.1 is 0.30000000000000004, not in [0.3, 0.30000000000000004).
+  expect_error(
+      kBase, "loads[0].profile.release_s", "[0.3, 0.30000000000000004)",
+      {"integrator.dt_s=0.1", "loads[0].profile.start_s=0.3", "loads[0].profile.release_s=0.30000000000000004"});
+
+  // One step end in the window is enough, and the simulation acts there:
+  // the load does work in the step ending at 0.02 s and in no other.
+  const Scene one_step = parse_scene_with_overrides(
+      kBase, "one_step.yaml",
+      {"integrator.dt_s=0.01", "loads[0].profile.start_s=0.02", "loads[0].profile.release_s=0.0200001"});
+  physics::Simulation sim(one_step);
+  double work_before_J = 0.0;
+  for (int step = 1; step <= 3; ++step) {
+    ASSERT_TRUE(sim.step().ok);
+    const double work_J = sim.counters().external_work_J;
+    if (step == 2)
+      EXPECT_GT(std::fabs(work_J - work_before_J), 0.0) << "the step ending at 0.02 s";
+    else
+      EXPECT_EQ(work_J, work_before_J) << "the step ending at " << sim.time_s() << " s";
+    work_before_J = work_J;
+  }
+  // A ramp from start_s acts from the next step end on, if the window holds it.
+  EXPECT_NO_THROW(parse_scene_with_overrides(
+      kBase, "ok.yaml",
+      {"integrator.dt_s=0.01", "prescribed[0].profile.start_s=0.01", "prescribed[0].profile.release_s=0.0200001"}));
+  EXPECT_NO_THROW(parse_scene_with_overrides(
+      kBase, "ok.yaml", {"integrator.dt_s=0.1", "loads[0].profile.start_s=0.3", "loads[0].profile.release_s=0.31"}));
 }
 
 TEST(SceneYamlErrors, Regions) {
@@ -883,10 +931,12 @@ TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
 
   // docs/scene-format.md: dt_s <= 1 s, substep_safety in (0, 1], min_age_steps
   // and rayleigh_alpha_per_s >= 0, at most 3333333 cubes (2e7 tets): the edges themselves are valid.
+  // The load is released at 2 s: kBase's 1 s is the first 1 s step's end, so
+  // it would act at no step (AProfileThatActsAtNoStepEndIsRefused).
   const Scene edges = parse_scene_with_overrides(
       kBase, "test.yaml",
       {"integrator.dt_s=1", "integrator.substep_safety=1", "adaptivity.min_age_steps=0", "object.cubes=[333, 100, 100]",
-       "object.cube_size_m=0.001", "adaptivity.enabled=false"});
+       "object.cube_size_m=0.001", "adaptivity.enabled=false", "loads[0].profile.release_s=2"});
   EXPECT_EQ(edges.integrator.dt_s, 1.0);
   EXPECT_EQ(edges.integrator.substep_safety, 1.0);
   EXPECT_EQ(edges.adaptivity.min_age_steps, 0);
