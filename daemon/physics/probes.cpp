@@ -31,11 +31,12 @@ void Probe::locate(const Body& body) {
       bary_ = l;
     }
   });
-  // The object fills its box, and the scene's checks keep a probe within the
-  // box (to 1e-9 of its size): such a point lies in or on a tet up to
-  // rounding, which relative to a small tet can exceed any fixed tolerance
-  // (0.09 nm outside a 25 mm tet is -3.6e-9). The nearest tet is taken; only
-  // a point clearly outside (callers that skip the scene's checks) is refused.
+  // The object fills its box, and the Simulation puts a probe the scene's
+  // checks let lie outside it (by up to 1e-9 of its size) onto the box: such
+  // a point lies in or on a tet up to rounding, which relative to a small tet
+  // can exceed any fixed tolerance (0.09 nm outside a 25 mm tet is -3.6e-9).
+  // The nearest tet is taken; only a point clearly outside (callers that
+  // skip the scene's checks) is refused.
   if (best < -1e-6) throw std::invalid_argument("probe '" + name_ + "' lies outside the object");
 }
 

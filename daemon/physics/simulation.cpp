@@ -7,6 +7,15 @@
 
 namespace tissue::physics {
 
+namespace {
+// How far outside the object's box, relative to its largest extent, a probe
+// is taken to be on it: twice what the scene check lets a probe lie outside
+// (1e-9, scene_yaml.cpp: rounding of a point given on the surface), so that
+// its extent (cubes x cube_size_m) and the mesh's (lattice units x the
+// unit's length) may differ in the last bit.
+constexpr double kProbeOutsideTolerance = 2e-9;
+}  // namespace
+
 Simulation::Simulation(const scene::Scene& scene)
     : body_(scene), integrator_(make_integrator(scene.integrator, scene.material)) {
   if (scene.adaptivity.enabled) adaptivity_ = std::make_unique<Adaptivity>(scene.adaptivity);
@@ -15,9 +24,23 @@ Simulation::Simulation(const scene::Scene& scene)
     tool_->spec = *scene.tool;
   }
   loads_.rebuild(body_);
+  // The object's box as the mesh holds it (from the origin to its far corner).
+  Vec3 box_max_m = Vec3::Zero();
+  body_.mesh().for_each_node([&](NodeId n, const mesh::Node&) { box_max_m = box_max_m.cwiseMax(body_.rest_m[n]); });
+  const double rounding_m = kProbeOutsideTolerance * box_max_m.maxCoeff();
   for (std::size_t i = 0; i < scene.probes.size(); ++i) {
     const scene::ProbeSpec& p = scene.probes[i];
-    probes_.emplace_back(p.name, Vec3(p.rest_m[0], p.rest_m[1], p.rest_m[2]));
+    // The scene check lets a probe lie outside the box by rounding (up to
+    // 1e-9 of its size). Locating it needs it inside to within a fraction of the
+    // containing tet, which refinement makes as small as 2^-10 of a cube: a
+    // probe 0.5 nm past a 512 mm object was refused at min_depth 6, or
+    // aborted the run when refinement reached it. Such a point is moved
+    // onto the box; one farther out is left for locate to refuse.
+    Vec3 rest_m(p.rest_m[0], p.rest_m[1], p.rest_m[2]);
+    for (int a = 0; a < 3; ++a)
+      if (rest_m[a] >= -rounding_m && rest_m[a] <= box_max_m[a] + rounding_m)
+        rest_m[a] = std::clamp(rest_m[a], 0.0, box_max_m[a]);
+    probes_.emplace_back(p.name, rest_m);
     try {
       probes_.back().displacement_m(body_);  // locates it now: a bad probe fails at load time
     } catch (const std::invalid_argument& e) {

@@ -4,6 +4,8 @@
 
 #include <Eigen/Dense>
 #include <array>
+#include <cmath>
+#include <memory>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -177,6 +179,72 @@ TEST(Probes, AProbeTheScenesChecksAcceptIsLocatedAndABadOneNamesItsKey) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("probes[1].rest_m: probe 'far' lies outside the object"), std::string::npos)
         << e.what();
+  }
+}
+
+// The scene check's tolerance is relative to the object (1e-9 of 512 mm is
+// 0.512 nm), the locator's to the tet (-1e-6 of its size): 0.5 nm past the
+// far face of 512 cubes of 1 mm is -5e-7 of a coarse tet but -2e-6 of a
+// depth-6 one. That probe was refused at load at min_depth 6 ("probe
+// 'probe0' lies outside the object") and, where refinement reached it
+// mid-run, threw out of displacement_m and aborted the batch ("internal
+// error"). Built into a Simulation, it sits on the box and reads as inside.
+TEST(Probes, AProbeTheScenesChecksAcceptStaysLocatableAtEveryDepth) {
+  scene::Scene s;
+  s.object.cubes = {512, 1, 1};
+  s.object.cube_size_m = 0.001;
+  s.probes = {{"probe0", {0.5120000005, 0.0005, 0.0005}}};
+  const Vec3 shift_m(1e-4, -2e-4, 3e-4);
+  const auto reads_the_shift = [&](Simulation& sim) {
+    Body& body = sim.mutable_body();
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.x_m[n] = body.rest_m[n] + shift_m; });
+    const Vec3 u = sim.probe_displacement_m(0);
+    EXPECT_TRUE(u.allFinite()) << u.transpose();
+    EXPECT_NEAR((u - shift_m).norm(), 0.0, 1e-15) << u.transpose();
+  };
+
+  // Refined uniformly at load.
+  scene::Scene refined = s;
+  refined.adaptivity.min_depth = 6;
+  std::unique_ptr<Simulation> at_load;
+  try {
+    at_load = std::make_unique<Simulation>(refined);
+  } catch (const std::invalid_argument& e) {
+    ADD_FAILURE() << "min_depth 6: " << e.what();
+  }
+  if (at_load) reads_the_shift(*at_load);
+
+  // Refined around it during the run: located on the coarse mesh, then the
+  // leaf holding it split down to depth 6.
+  scene::Scene adaptive = s;
+  adaptive.adaptivity.enabled = true;
+  adaptive.adaptivity.max_depth = 6;
+  Simulation sim(adaptive);
+  ASSERT_TRUE(sim.probe_displacement_m(0).allFinite());
+  const Vec3 on_face(0.512, 0.0005, 0.0005);
+  for (int depth = 0; depth < 6;) {
+    const mesh::KuhnMesh& mesh = sim.body().mesh();
+    TetId holder = mesh::kInvalidId;
+    double best = -INFINITY;
+    mesh.for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      const auto& v = tet.v;
+      const Body& b = sim.body();
+      const auto l = barycentric(on_face, b.rest_m[v[0]], b.rest_m[v[1]], b.rest_m[v[2]], b.rest_m[v[3]]);
+      const double worst = std::min({l[0], l[1], l[2], l[3]});
+      if (worst > best) {
+        best = worst;
+        holder = t;
+      }
+    });
+    depth = mesh.tet(holder).depth;
+    if (depth < 6) {
+      ASSERT_GT(sim.split_diamond(mesh.diamond_of(holder)), 0);
+    }
+  }
+  try {
+    reads_the_shift(sim);
+  } catch (const std::invalid_argument& e) {
+    FAIL() << "refined to depth 6 mid-run: " << e.what();
   }
 }
 
