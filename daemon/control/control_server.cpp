@@ -11,6 +11,7 @@
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/write.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <chrono>
@@ -59,14 +60,36 @@ class SessionBase {
   // to an idle socket fits its buffer).
   virtual void evict(const std::string& line) = 0;
   // Mid-request (part of a line received, or a response not yet taken) and
-  // no byte moved either way for `after`: a client that sent half a line
-  // and went quiet, or stopped reading. 16 of them locked every client out
-  // (tissue ctl shutdown included) until they closed.
-  bool stalled(std::chrono::steady_clock::time_point now, std::chrono::milliseconds after) const {
-    return !idle() && now - last_progress >= after;
+  // no byte moved either way for `stalled_after`: a client that sent half a
+  // line and went quiet, or stopped reading. 16 of them locked every client
+  // out (tissue ctl shutdown included) until they closed.
+  bool stalled(std::chrono::steady_clock::time_point now, std::chrono::milliseconds stalled_after) const {
+    return !idle() && now - last_progress >= stalled_after;
   }
+  // Mid-request, with the stage in progress (receiving its line, or sending
+  // its answer) begun more than kRequestDeadlineStalls * stalled_after ago:
+  // a client trickling a byte every few seconds (a space, or the rest of an
+  // over-long line being discarded) is never stalled, and 16 of them locked
+  // every client out just the same.
+  bool overdue(std::chrono::steady_clock::time_point now, std::chrono::milliseconds stalled_after) const {
+    return !idle() && now - request_stage_started >= kRequestDeadlineStalls * stalled_after;
+  }
+  // When a full server may first close it for a newcomer (once stalled or
+  // overdue); the earliest goes first. Meaningless while idle.
+  std::chrono::steady_clock::time_point evictable_from(std::chrono::milliseconds stalled_after) const {
+    return std::min(last_progress + stalled_after, request_stage_started + kRequestDeadlineStalls * stalled_after);
+  }
+  // The request deadline in units of stalled_after: twice the stall time, so
+  // a client that keeps its bytes moving gets longer than a silent one, and
+  // no setting of its own.
+  static constexpr int kRequestDeadlineStalls = 2;
+
   std::chrono::steady_clock::time_point last_active = std::chrono::steady_clock::now();
   std::chrono::steady_clock::time_point last_progress = std::chrono::steady_clock::now();
+  // When the request in progress began its current stage: the first byte of
+  // its line taken, or its answer (or a too-long line's error, after which
+  // the rest of that line is discarded) started to be sent.
+  std::chrono::steady_clock::time_point request_stage_started = std::chrono::steady_clock::now();
 };
 
 struct ControlServer::State : std::enable_shared_from_this<ControlServer::State> {
@@ -159,6 +182,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
   void process() {
     const std::size_t max_line = state_->settings.max_line_bytes;
     while (pos_ < pending_.size()) {
+      if (line_.empty() && !discarding_) request_stage_started = std::chrono::steady_clock::now();
       const std::size_t nl = pending_.find('\n', pos_);
       const std::size_t end = nl == std::string::npos ? pending_.size() : nl;
       if (discarding_) {
@@ -199,7 +223,9 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
 
   void respond(std::string response) {
     // Activity is a request answered: blank lines (ignored) do not count.
-    last_active = last_progress = std::chrono::steady_clock::now();
+    // The answer's stage starts now, not when its line began: the handler's
+    // own time is not the client's.
+    last_active = last_progress = request_stage_started = std::chrono::steady_clock::now();
     out_ = std::move(response);
     out_ += '\n';
     auto self = this->shared_from_this();
@@ -209,7 +235,8 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
         return;
       }
       self->out_.clear();
-      self->last_progress = std::chrono::steady_clock::now();
+      // Discarding the rest of a too-long line is a stage of its own.
+      self->last_progress = self->request_stage_started = std::chrono::steady_clock::now();
       self->process();
     });
   }
@@ -239,31 +266,37 @@ void ControlServer::State::admit(Socket socket) {
     // Full: the connection idle the longest (nothing asked since its last
     // answer) makes way, so forgotten connections (a script that never
     // closed its socket) cannot lock every client out; failing that, the one
-    // stalled the longest mid-request (half a line, then silence). Only when
-    // every connection is busy with a request is the newcomer refused.
+    // that first became stalled (no byte for stalled_after: half a line, then
+    // silence) or overdue (a request going on for twice that: a line
+    // trickled in a byte at a time). Only when every connection is busy with
+    // a request that is neither is the newcomer refused.
     const auto now = std::chrono::steady_clock::now();
+    const std::chrono::milliseconds stalled_after = settings.stalled_after;
     SessionBase* longest_idle = nullptr;
-    SessionBase* longest_stalled = nullptr;
+    SessionBase* first_evictable = nullptr;
     for (const auto& [session, owner] : sessions) {
       if (session->idle() && (!longest_idle || session->last_active < longest_idle->last_active))
         longest_idle = session;
-      if (session->stalled(now, settings.stalled_after) &&
-          (!longest_stalled || session->last_progress < longest_stalled->last_progress))
-        longest_stalled = session;
+      if ((session->stalled(now, stalled_after) || session->overdue(now, stalled_after)) &&
+          (!first_evictable || session->evictable_from(stalled_after) < first_evictable->evictable_from(stalled_after)))
+        first_evictable = session;
     }
+    const std::string places = std::to_string(settings.max_connections);
     if (longest_idle) {
-      longest_idle->evict(error_response("closed: this connection was the longest idle of " +
-                                         std::to_string(settings.max_connections) +
+      longest_idle->evict(error_response("closed: this connection was the longest idle of " + places +
                                          " open ones and a new client needed its place") +
                           "\n");
       sessions.erase(longest_idle);
-    } else if (longest_stalled) {
-      longest_stalled->evict(error_response("closed: this connection stalled mid-request (no byte for " +
-                                            std::to_string(settings.stalled_after.count()) + " ms) with all " +
-                                            std::to_string(settings.max_connections) +
+    } else if (first_evictable) {
+      const std::string why = first_evictable->stalled(now, stalled_after)
+                                  ? "stalled mid-request (no byte for " + std::to_string(stalled_after.count()) + " ms)"
+                                  : "took too long over a request (more than " +
+                                        std::to_string(SessionBase::kRequestDeadlineStalls * stalled_after.count()) +
+                                        " ms receiving its line or sending its answer)";
+      first_evictable->evict(error_response("closed: this connection " + why + " with all " + places +
                                             " places taken, and a new client needed its place") +
                              "\n");
-      sessions.erase(longest_stalled);
+      sessions.erase(first_evictable);
     }
   }
   if (sessions.size() >= static_cast<std::size_t>(settings.max_connections)) {

@@ -38,7 +38,9 @@ struct ServerSettings {
   std::size_t max_line_bytes = 65536;     // longest request line, without its '\n'
   int max_connections = 16;               // open connections over both listeners; more are refused
   // When full, a connection mid-request with no byte moved for this long
-  // makes way for a newcomer (after any idle one).
+  // makes way for a newcomer (after any idle one), and so does one whose
+  // request has been going on for twice this long (its line received, or its
+  // answer sent, a byte now and then).
   std::chrono::milliseconds stalled_after{5000};
 
   // ControlSpec's tcp_port 0 means "no TCP".

@@ -10,11 +10,13 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <string>
 #include <thread>
@@ -292,6 +294,84 @@ TEST(ControlServer, AConnectionStalledMidRequestMakesWayWhenFull) {
   const auto finished = stalled[1]->read_line();
   ASSERT_TRUE(finished.has_value());
   EXPECT_EQ(json::parse(*finished).at("ok"), true);
+}
+
+// ... and so does one whose request goes on too long, even with a byte now
+// and then: a client trickling a space every 50 ms into a half-sent line, or
+// the endless rest of a too-long line being discarded, was never idle and
+// never stalled, so with every place so taken every newcomer was refused
+// (tissue ctl shutdown included). Past twice stalled_after it makes way.
+TEST(ControlServer, AConnectionTricklingARequestMakesWayWhenFull) {
+  struct Case {
+    const char* what;
+    std::string first_bytes;  // the start of the endless request
+    std::string trickle;      // then this every 50 ms
+    const char* told_first;   // the error before the eviction, if any
+  };
+  const Case cases[] = {
+      {"a half line and then a space at a time", "{\"cmd\":\"sta", " ", nullptr},
+      {"a too-long line that never ends", std::string(300, 'a'), std::string(100, 'a'), "request line too long"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    ServerSettings settings = unix_settings(256, 1);
+    settings.stalled_after = std::chrono::milliseconds(200);
+    ServerHarness h(settings);
+    RawClient trickler(h.socket_path());
+    ASSERT_TRUE(trickler.connected());
+    ASSERT_TRUE(h.wait_for_connections(1));
+    ASSERT_TRUE(trickler.send_all(c.first_bytes));
+    // Stopped and joined however the test ends (an ASSERT returns early).
+    struct Sender {
+      std::atomic<bool> trickling{true};
+      std::thread thread;
+      ~Sender() {
+        trickling = false;
+        if (thread.joinable()) thread.join();
+      }
+    } sender;
+    sender.thread = std::thread([&] {
+      while (sender.trickling && trickler.send_all(c.trickle))
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    });
+    // A newcomer asks until it is served (bounded): refused at first, while
+    // the trickled request is younger than 400 ms.
+    std::optional<json> served;
+    std::string last_refusal;
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (!served && std::chrono::steady_clock::now() < give_up) {
+      RawClient newcomer(h.socket_path());
+      ASSERT_TRUE(newcomer.connected());
+      // A refused newcomer may find the socket closed before it sends: its
+      // refusal is there to read all the same.
+      newcomer.send_all("{\"id\":\"newcomer\",\"cmd\":\"status\"}\n");
+      const auto line = newcomer.read_line();
+      ASSERT_TRUE(line.has_value()) << "neither served nor refused";
+      const json r = json::parse(*line);
+      if (r.at("ok") == true)
+        served = r;
+      else
+        last_refusal = *line;
+      if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    sender.trickling = false;
+    sender.thread.join();
+    EXPECT_TRUE(served.has_value()) << "still refused after 10 s: " << last_refusal;
+    if (!served) continue;  // the other case may fail differently
+    EXPECT_EQ(served->at("id"), "newcomer");
+    // The trickler was told why, and closed.
+    auto told = trickler.read_line();
+    if (c.told_first) {
+      ASSERT_TRUE(told.has_value());
+      EXPECT_NE(told->find(c.told_first), std::string::npos) << *told;
+      told = trickler.read_line();
+    }
+    ASSERT_TRUE(told.has_value()) << "the trickler was not told";
+    EXPECT_EQ(json::parse(*told).at("error"),
+              "closed: this connection took too long over a request (more than 400 ms receiving its line or "
+              "sending its answer) with all 1 places taken, and a new client needed its place");
+    EXPECT_TRUE(trickler.sees_closed());  // its trickle may be unread: a reset, not an EOF
+  }
 }
 
 TEST(ControlServer, ManySimultaneousClientsAreAllServedWithinTheLimit) {

@@ -65,6 +65,17 @@ class LineSocket {
     char c;
     return ::recv(fd_, &c, 1, MSG_DONTWAIT) == 0;
   }
+  // True when the peer closed the connection within `timeout`, by an EOF or
+  // by a reset: a Unix socket closed with bytes of ours still unread in it
+  // makes our recv fail with ECONNRESET instead of seeing EOF (a client
+  // still sending when the server closes it).
+  bool sees_closed(milliseconds timeout = std::chrono::seconds(5)) {
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(timeout.count())) <= 0) return false;
+    char c;
+    const ssize_t n = ::recv(fd_, &c, 1, MSG_DONTWAIT);
+    return n == 0 || (n < 0 && errno == ECONNRESET);
+  }
   void close() {
     if (fd_ >= 0) ::close(fd_);
     fd_ = -1;
