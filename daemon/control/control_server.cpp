@@ -56,8 +56,9 @@ class SessionBase {
   // Waiting for a request with nothing of one received and no response
   // being written: closing it loses nothing.
   virtual bool idle() const = 0;
-  // Closes an idle connection after a best-effort error line (a short write
-  // to an idle socket fits its buffer).
+  // Closes the connection after a best-effort error line (a short write to
+  // an idle socket fits its buffer), or without one while an answer is
+  // being sent.
   virtual void evict(const std::string& line) = 0;
   // Mid-request (part of a line received, or a response not yet taken) and
   // no byte moved either way for `stalled_after`: a client that sent half a
@@ -151,9 +152,15 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
   bool idle() const override { return awaiting_request_ && !closed_; }
 
   void evict(const std::string& line) override {
-    boost::system::error_code ignored;
-    socket_.non_blocking(true, ignored);
-    socket_.write_some(asio::buffer(line), ignored);
+    // While an answer's async_write is pending, part of the answer may be
+    // out and the rest waiting for room: an error line written now would
+    // land in the middle of it, and the client would read one line that is
+    // not JSON. Such a connection is closed without a word.
+    if (out_.empty()) {
+      boost::system::error_code ignored;
+      socket_.non_blocking(true, ignored);
+      socket_.write_some(asio::buffer(line), ignored);
+    }
     close();
   }
 

@@ -374,6 +374,68 @@ TEST(ControlServer, AConnectionTricklingARequestMakesWayWhenFull) {
   }
 }
 
+// A connection closed for a newcomer while its answer is half sent gets no
+// farewell line: the error line went out with write_some while the answer's
+// async_write was still pending, so the client read the first part of the
+// answer, then the error line, then nothing: one line that is not JSON.
+// To line the events up, the io thread is held while the client makes room
+// in its socket and a newcomer connects; released, the server sees the
+// newcomer first (epoll reports in the order things happened), so it closes
+// the stalled connection before its pending write takes that room.
+TEST(ControlServer, AConnectionClosedWhileItsAnswerIsHalfSentGetsNoSplicedLine) {
+  ServerSettings settings = unix_settings(4u << 20, 1);
+  settings.stalled_after = std::chrono::milliseconds(200);
+  ServerHarness h(settings);
+  RawClient slow_reader(h.socket_path());
+  ASSERT_TRUE(slow_reader.connected());
+  // An answer far larger than a socket's buffers (its id is echoed).
+  const std::string id(1u << 20, 'x');
+  ASSERT_TRUE(slow_reader.send_all("{\"id\":\"" + id + "\",\"cmd\":\"status\"}\n"));
+  for (int i = 0; i < 2000 && h.handler().call_count() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_EQ(h.handler().call_count(), 1u);
+  // The handler's count rises before its answer is sent: two round trips
+  // through the io thread let the answer's first write run and its next one
+  // wait for room.
+  h.on_io([] { return 0; });
+  h.on_io([] { return 0; });
+  std::string received;
+  char buf[65536];
+  const auto drain = [&] {  // what the socket holds now, without waiting
+    for (;;) {
+      const ssize_t n = ::recv(slow_reader.fd(), buf, sizeof buf, MSG_DONTWAIT);
+      if (n <= 0) return;
+      received.append(buf, static_cast<std::size_t>(n));
+    }
+  };
+  {
+    testing::IoThreadHold hold(h);  // the answer's write is pending: 1 MiB does not fit
+    const auto held_since = std::chrono::steady_clock::now();
+    RawClient newcomer(h.socket_path());  // queued at the listener
+    ASSERT_TRUE(newcomer.connected());
+    drain();  // room for the rest of the answer, or for the farewell line
+    ASSERT_FALSE(received.empty());
+    ASSERT_LT(received.size(), id.size()) << "the answer was not half sent";
+    // The reader's last progress was before the hold: once past stalled_after
+    // it is the one to make way.
+    std::this_thread::sleep_until(held_since + 2 * settings.stalled_after);
+    hold.release();
+    ASSERT_TRUE(newcomer.send_all("{\"id\":\"newcomer\",\"cmd\":\"status\"}\n"));
+    const auto answer = newcomer.read_line();
+    ASSERT_TRUE(answer.has_value());
+    EXPECT_EQ(json::parse(*answer).at("ok"), true) << *answer;
+  }
+  received += slow_reader.read_to_eof();
+  // Only the answer's first part came: no line ended, and nothing else.
+  const std::string answer_start = "{\"id\":\"" + id;
+  const std::size_t after_id = std::min(received.find_first_not_of('x', 7), received.size());
+  EXPECT_EQ(received.find('\n'), std::string::npos)
+      << "a line ended in what the closed client read, after " << after_id << " bytes: " << received.substr(after_id);
+  EXPECT_LE(received.size(), answer_start.size());
+  EXPECT_EQ(answer_start.compare(0, received.size(), received), 0)
+      << "not the answer's start, after " << after_id << " bytes: " << received.substr(after_id);
+}
+
 TEST(ControlServer, ManySimultaneousClientsAreAllServedWithinTheLimit) {
   constexpr int kClients = 100;
   ServerHarness h(unix_settings(65536, kClients));

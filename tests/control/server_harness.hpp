@@ -50,6 +50,10 @@ class ServerHarness {
     return result.get();
   }
 
+  // Queues fn on the io thread without waiting for it (fn may hold that
+  // thread: IoThreadHold).
+  void post(std::function<void()> fn) { boost::asio::post(io_, std::move(fn)); }
+
   std::size_t connections() {
     return on_io([this] { return server_->connection_count(); });
   }
@@ -77,6 +81,36 @@ class ServerHarness {
   boost::asio::io_context io_;
   std::unique_ptr<ControlServer> server_;
   std::thread thread_;
+};
+
+// Holds the server's io thread (in a handler that waits) from construction
+// until release() or destruction, so that a test can line up socket events
+// that the server then sees together, in the order they happened.
+class IoThreadHold {
+ public:
+  explicit IoThreadHold(ServerHarness& harness) {
+    // Shared with the handler: the promise it sets must outlive its set_value.
+    auto holding = std::make_shared<std::promise<void>>();
+    auto held = holding->get_future();
+    harness.post([holding, released = released_.get_future().share()] {
+      holding->set_value();
+      released.wait();
+    });
+    held.wait();
+  }
+  ~IoThreadHold() { release(); }
+  IoThreadHold(const IoThreadHold&) = delete;
+  IoThreadHold& operator=(const IoThreadHold&) = delete;
+
+  void release() {
+    if (released_once_) return;
+    released_once_ = true;
+    released_.set_value();
+  }
+
+ private:
+  std::promise<void> released_;
+  bool released_once_ = false;
 };
 
 }  // namespace tissue::control::testing
