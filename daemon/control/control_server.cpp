@@ -60,15 +60,17 @@ class SessionBase {
   // an idle socket fits its buffer), or without one while an answer is
   // being sent.
   virtual void evict(const std::string& line) = 0;
-  // Mid-request (part of a line received, or a response not yet taken) and
-  // no byte moved either way for `stalled_after`: a client that sent half a
-  // line and went quiet, or stopped reading. 16 of them locked every client
+  // Mid-request and no progress for `stalled_after`: part of a line received
+  // and no byte since, or an answer not all taken that long after it was
+  // ready (its write counts as progress only once whole): a client that sent
+  // half a line and went quiet, or stopped reading. 16 of them locked every client
   // out (tissue ctl shutdown included) until they closed.
   bool stalled(std::chrono::steady_clock::time_point now, std::chrono::milliseconds stalled_after) const {
     return !idle() && now - last_progress >= stalled_after;
   }
-  // Mid-request, with the stage in progress (receiving its line, or sending
-  // its answer) begun more than kRequestDeadlineStalls * stalled_after ago:
+  // Mid-request, with the stage in progress (receiving its line, or
+  // discarding a too-long one) begun more than kRequestDeadlineStalls *
+  // stalled_after ago (an answer is stalled before that):
   // a client trickling a byte every few seconds (a space, or the rest of an
   // over-long line being discarded) is never stalled, and 16 of them locked
   // every client out just the same.
@@ -299,7 +301,7 @@ void ControlServer::State::admit(Socket socket) {
                                   ? "stalled mid-request (no byte for " + std::to_string(stalled_after.count()) + " ms)"
                                   : "took too long over a request (more than " +
                                         std::to_string(SessionBase::kRequestDeadlineStalls * stalled_after.count()) +
-                                        " ms receiving its line or sending its answer)";
+                                        " ms receiving its line)";
       first_evictable->evict(error_response("closed: this connection " + why + " with all " + places +
                                             " places taken, and a new client needed its place") +
                              "\n");

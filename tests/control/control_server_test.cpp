@@ -368,8 +368,8 @@ TEST(ControlServer, AConnectionTricklingARequestMakesWayWhenFull) {
     }
     ASSERT_TRUE(told.has_value()) << "the trickler was not told";
     EXPECT_EQ(json::parse(*told).at("error"),
-              "closed: this connection took too long over a request (more than 400 ms receiving its line or "
-              "sending its answer) with all 1 places taken, and a new client needed its place");
+              "closed: this connection took too long over a request (more than 400 ms receiving its line) with all 1 "
+              "places taken, and a new client needed its place");
     EXPECT_TRUE(trickler.sees_closed());  // its trickle may be unread: a reset, not an EOF
   }
 }
