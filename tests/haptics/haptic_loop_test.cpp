@@ -58,8 +58,9 @@ void press(Rig& rig, const LocalModel& model, int ticks) {
   }
 }
 
-TEST(HapticLoop, CrossFadeBoundsTheForceChangeAtAModelUpdate) {
-  Rig rig;
+// A rig with a 10 ms cross-fade and nothing else smoothing the force,
+// pressing 2 mm into a flat patch of 600 N/m for 100 ticks: the patch.
+LocalModel pressed_with_only_the_cross_fade(Rig& rig) {
   rig.device_spec.limits.max_force_rate_N_per_s = 1e9;  // isolate the cross-fade
   rig.device_spec.limits.ramp_in_s = 0.01;
   rig.device_spec.limits.stale_model_s = 10.0;
@@ -69,6 +70,12 @@ TEST(HapticLoop, CrossFadeBoundsTheForceChangeAtAModelUpdate) {
   LocalModel before = test::make_flat_patch();
   test::set_linear_contact(before, 600.0);
   press(rig, before, 100);
+  return before;
+}
+
+TEST(HapticLoop, CrossFadeBoundsTheForceChangeAtAModelUpdate) {
+  Rig rig;
+  const LocalModel before = pressed_with_only_the_cross_fade(rig);
   const Vec3 force_before = rig.device.last_force_N;
   // k_v k/(k_v+k) * 2 mm = 240 * 0.002
   ASSERT_NEAR(force_before.z(), 0.48, 1e-9);
@@ -122,15 +129,7 @@ TEST(HapticLoop, OverlappingModelUpdatesKeepTheForceContinuous) {
 // its samples said no contact (and the sim got no reaction).
 TEST(HapticLoop, AFreeHandFeelsNoCrossFadeOffset) {
   Rig rig;
-  rig.device_spec.limits.max_force_rate_N_per_s = 1e9;  // isolate the cross-fade
-  rig.device_spec.limits.ramp_in_s = 0.01;
-  rig.device_spec.limits.stale_model_s = 10.0;
-  rig.haptic_spec.crossfade_s = 0.01;
-  rig.haptic_spec.coupling_damping_N_s_per_m = 0.0;
-  rig.build();
-  LocalModel before = test::make_flat_patch();
-  test::set_linear_contact(before, 600.0);
-  press(rig, before, 100);
+  const LocalModel before = pressed_with_only_the_cross_fade(rig);
   ASSERT_NEAR(rig.device.last_force_N.z(), 0.48, 1e-9);
   LocalModel after = before;
   after.force_ref_N = Vec3(0, 0, -1.0);  // the new model's force is 0.4 N higher
