@@ -170,6 +170,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
   void read_more() {
     auto self = this->shared_from_this();
     awaiting_request_ = line_.empty() && !discarding_ && out_.empty();
+    if (awaiting_request_) stage_running_ = false;  // idle: the next byte begins a request
     socket_.async_read_some(asio::buffer(chunk_), [self](const boost::system::error_code& ec, std::size_t n) {
       self->awaiting_request_ = false;
       self->last_progress = std::chrono::steady_clock::now();
@@ -191,7 +192,13 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
   void process() {
     const std::size_t max_line = state_->settings.max_line_bytes;
     while (pos_ < pending_.size()) {
-      if (line_.empty() && !discarding_) request_stage_started = std::chrono::steady_clock::now();
+      // A line's first byte starts its stage, unless a stage is already
+      // running: a blank line (no request) does not end one, or a client
+      // sending " " then "\n " for ever would never be overdue.
+      if (!stage_running_ && line_.empty() && !discarding_) {
+        request_stage_started = std::chrono::steady_clock::now();
+        stage_running_ = true;
+      }
       const std::size_t nl = pending_.find('\n', pos_);
       const std::size_t end = nl == std::string::npos ? pending_.size() : nl;
       if (discarding_) {
@@ -235,6 +242,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
     // The answer's stage starts now, not when its line began: the handler's
     // own time is not the client's.
     last_active = last_progress = request_stage_started = std::chrono::steady_clock::now();
+    stage_running_ = false;  // the answer's own stage; the next line's first byte begins a new one
     out_ = std::move(response);
     out_ += '\n';
     auto self = this->shared_from_this();
@@ -265,6 +273,7 @@ class Session final : public SessionBase, public std::enable_shared_from_this<Se
   bool discarding_ = false;
   bool closed_ = false;
   bool awaiting_request_ = false;
+  bool stage_running_ = false;  // request_stage_started holds a line's stage still going on
 };
 
 }  // namespace

@@ -41,8 +41,12 @@
 // object's own surface (where f = 0) lies about K_c^-1 F0 above it; there the
 // solve still pushes k_v f0 / (k_v + k) with the device on the patch (f0 =
 // -n . F0). So the contact is held above the patch for as long as the solve
-// pushes (n . f < 0) and ends where that force reaches zero; the force is
-// continuous through the patch and at the release. A free device that was
+// pushes (n . f < 0) and ends where that force reaches zero; the normal
+// force is continuous through the patch and at the release. A sideways part
+// is not: where K_c couples the normal and sideways directions (an
+// anisotropic lattice's compliance), f has a tangential part when its normal
+// part reaches zero, and that part still drops at the release (a
+// known gap, in the notes). A free device that was
 // clear of that region at the last tick and is inside it now meets the
 // object there, so the way back in is the same. Both are limited to
 // kMaxHeldHeight_m above the patch: a K_c near zero (an eigenvalue clamped
