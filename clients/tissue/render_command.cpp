@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <array>
-#include <charconv>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -19,6 +18,7 @@
 #include "tissue/cli_checks.hpp"
 #include "tissue/live_source_options.hpp"
 #include "util/output_file.hpp"
+#include "util/text.hpp"
 
 namespace tissue::cli {
 
@@ -38,14 +38,6 @@ struct RenderCommandOptions {
   std::string out;
   LiveSourceOptions live;
 };
-
-// A number the user gave, as the shortest text that reads back as it:
-// "0.1", not "0.10000000000000001" (x3d's messages say them the same way).
-std::string given_number_text(double v) {
-  char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, r.ptr);
-}
 
 // OUT for frame i of a sequence: "%04d" in OUT is replaced, else -0000 goes
 // before the extension.
@@ -95,7 +87,7 @@ int run_render(RenderCommandOptions o) {
     } else if (o.time_s) {
       const auto at = x3d::frame_at_time(*source, *o.time_s);
       if (!at) {
-        std::cerr << "tissue render: --time " << given_number_text(*o.time_s) << ": " << source->name()
+        std::cerr << "tissue render: --time " << util::number_text(*o.time_s) << ": " << source->name()
                   << " has no frame that early (first at " << x3d::frame_time_text(source->frame_time_s(0)) << " s)\n";
         return kExitBadArguments;
       }

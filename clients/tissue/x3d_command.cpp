@@ -2,7 +2,6 @@
 
 #include <CLI/CLI.hpp>
 
-#include <charconv>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -17,6 +16,7 @@
 #include "tissue/cli_checks.hpp"
 #include "tissue/live_source_options.hpp"
 #include "util/output_file.hpp"
+#include "util/text.hpp"
 
 namespace tissue::cli {
 
@@ -41,19 +41,12 @@ struct BadArguments : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Shortest text that reads back as the same double: "0.1", not "0.10000000000000001".
-std::string fmt(double v) {
-  char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, r.ptr);
-}
-
 // The window options as the user gave them, for messages: "--from 0.5 --to
 // 2", "--to 2", or "(all frames)" when neither was given.
 std::string given_window_text(const X3dCommandOptions& o) {
   std::string text;
-  if (o.from_s) text = "--from " + fmt(*o.from_s);
-  if (o.to_s) text += (text.empty() ? "" : " ") + std::string("--to ") + fmt(*o.to_s);
+  if (o.from_s) text = "--from " + util::number_text(*o.from_s);
+  if (o.to_s) text += (text.empty() ? "" : " ") + std::string("--to ") + util::number_text(*o.to_s);
   return text.empty() ? "(all frames)" : text;
 }
 
@@ -77,8 +70,8 @@ std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o
   } else if (o.time_s) {
     const auto at = x3d::frame_at_time(source, *o.time_s);
     if (!at)
-      throw BadArguments("--time " + fmt(*o.time_s) + ": " + source.name() + " has no frame that early (first at " +
-                         x3d::frame_time_text(source.frame_time_s(0)) + " s)");
+      throw BadArguments("--time " + util::number_text(*o.time_s) + ": " + source.name() +
+                         " has no frame that early (first at " + x3d::frame_time_text(source.frame_time_s(0)) + " s)");
     k = *at;
   }
   x3d::SurfaceFrame frame = source.read_frame(k);
@@ -116,14 +109,14 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
   if (!(t0 < t1)) {
     const bool no_length = t0 == t1;
     if (o.from_s && o.to_s)
-      throw BadArguments("--from " + fmt(t0) + " --to " + fmt(t1) +
+      throw BadArguments("--from " + util::number_text(t0) + " --to " + util::number_text(t1) +
                          (no_length ? ": the window has no length; an animation needs at least 2 frames"
                                     : ": the window is empty (--from is after --to)"));
     if (o.to_s)
-      throw BadArguments("--to " + fmt(t1) +
+      throw BadArguments("--to " + util::number_text(t1) +
                          (no_length ? " is the time of the first frame" : " is before the first frame") +
                          " (t=" + x3d::frame_time_text(t0) + " s): an animation needs at least 2 frames");
-    throw BadArguments("--from " + fmt(t0) +
+    throw BadArguments("--from " + util::number_text(t0) +
                        (no_length ? " is the time of the last frame" : " is after the last frame") +
                        " (t=" + x3d::frame_time_text(t1) + " s): an animation needs at least 2 frames");
   }
@@ -155,7 +148,7 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
   }
   // The ends as the user wrote them, or the frame times they default to.
   const auto end_text = [](const std::optional<double>& given_s, double t_s) {
-    return given_s ? fmt(*given_s) : x3d::frame_time_text(t_s);
+    return given_s ? util::number_text(*given_s) : x3d::frame_time_text(t_s);
   };
   if (frames.size() < 2)
     throw BadArguments("--animate: " + source.name() + " has " + std::to_string(frames.size()) +

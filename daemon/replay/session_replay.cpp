@@ -1,7 +1,6 @@
 #include "replay/session_replay.hpp"
 
 #include <algorithm>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -9,6 +8,7 @@
 
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
+#include "util/text.hpp"
 
 namespace tissue::replay {
 
@@ -20,14 +20,6 @@ std::string fmt(double v) {
   return buf;
 }
 
-// An option as given: the shortest text that reads back as the same double
-// ("1e-07", "0.30000000000000004"), so two options that differ never read
-// the same, and a huge one is not 300 digits.
-std::string as_given(double v) {
-  char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, r.ptr);
-}
 }  // namespace
 
 SessionRows read_session_rows(const std::string& path) {
@@ -97,9 +89,9 @@ std::vector<TimelineItem> build_timeline(const std::vector<double>& frame_times_
                                          const std::vector<double>& sim_times_s, const TimelineOptions& o) {
   for (const auto& [rate_hz, what] : {std::pair{o.haptic_rate_hz, "haptic"}, std::pair{o.stats_rate_hz, "stats"}})
     if (!(rate_hz >= 0.0) || !std::isfinite(rate_hz))
-      throw ReplayError(std::string(what) + " rate " + as_given(rate_hz) + " Hz: must be >= 0 (0: every row)");
+      throw ReplayError(std::string(what) + " rate " + util::number_text(rate_hz) + " Hz: must be >= 0 (0: every row)");
   if (o.from_s && o.to_s && !(*o.from_s <= *o.to_s))
-    throw ReplayError("window --from " + as_given(*o.from_s) + " --to " + as_given(*o.to_s) +
+    throw ReplayError("window --from " + util::number_text(*o.from_s) + " --to " + util::number_text(*o.to_s) +
                       ": the start is after the end");
   const auto inside = [&](double t) { return x3d::time_in_window(t, o.from_s, o.to_s); };
   std::vector<TimelineItem> items;

@@ -17,6 +17,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "util/text.hpp"
+
 namespace tissue::yaml_util {
 
 namespace {
@@ -43,13 +45,7 @@ KeyPathError::KeyPathError(const std::string& source, const std::string& key_pat
 
 // ---------------------------------------------------------------- formatting
 
-std::string fmt_num(double v) {
-  if (std::isnan(v)) return "nan";
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  char buf[64];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, r.ptr);
-}
+std::string fmt_num(double v) { return util::number_text(v); }
 
 std::string printable_bare(std::string_view s) {
   std::string out;

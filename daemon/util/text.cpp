@@ -1,11 +1,19 @@
 #include "util/text.hpp"
 
 #include <charconv>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 
 namespace tissue::util {
+
+std::string number_text(double v) {
+  if (std::isnan(v)) return "nan";
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
 
 std::optional<double> whole_number(std::string_view text) {
   double v = 0.0;

@@ -38,4 +38,10 @@ std::string why_not_clean_text(std::string_view text);
 // tissue, tissue trade): locale-independent (std::from_chars).
 std::optional<double> whole_number(std::string_view text);
 
+// The shortest text that reads back as the same double ("0.1", "1e-07",
+// "1e+300", not "0.10000000000000001" nor %f's "0.000000" or 301 digits);
+// "nan", "inf", "-inf" for the others (a NaN's sign is not shown). The one
+// number writer of messages that quote a number as given.
+std::string number_text(double v);
+
 }  // namespace tissue::util

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include <string>
 
@@ -52,6 +53,20 @@ TEST(WholeNumber, TheWholeTextOrNothing) {
   EXPECT_EQ(whole_number("1e999"), HUGE_VAL);  // out of range: read as strtod reads it
   EXPECT_EQ(whole_number("-1e999"), -HUGE_VAL);
   EXPECT_EQ(whole_number("1e-999"), 0.0);
+}
+
+// Messages quote numbers in the shortest text that reads back the same.
+TEST(NumberText, TheShortestTextThatReadsBackTheSame) {
+  EXPECT_EQ(number_text(0.1), "0.1");
+  EXPECT_EQ(number_text(0.1 + 0.2), "0.30000000000000004");
+  EXPECT_EQ(number_text(1e-7), "1e-07");
+  EXPECT_EQ(number_text(1e300), "1e+300");
+  EXPECT_EQ(number_text(-2.0), "-2");
+  EXPECT_EQ(number_text(std::numeric_limits<double>::infinity()), "inf");
+  EXPECT_EQ(number_text(-std::numeric_limits<double>::infinity()), "-inf");
+  EXPECT_EQ(number_text(-std::numeric_limits<double>::quiet_NaN()), "nan");
+  for (const double v : {0.1, 1.0 / 3.0, 5e-324, 1.7976931348623157e308, -123.456e-78})
+    EXPECT_EQ(whole_number(number_text(v)), v) << number_text(v);
 }
 
 }  // namespace
