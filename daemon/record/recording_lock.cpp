@@ -4,6 +4,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
+
 namespace tissue::record {
 namespace {
 
@@ -18,17 +21,25 @@ struct flock whole_file(short type) {
 
 }  // namespace
 
-bool RecordingLock::take(const std::string& path) noexcept {
+std::string RecordingLock::take(const std::string& path) {
   release();
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return false;
+  if (fd < 0) return std::string("cannot open it for the lock: ") + std::strerror(errno);
   struct flock lock = whole_file(F_RDLCK);
   if (::fcntl(fd, F_OFD_SETLK, &lock) != 0) {
+    const int error = errno;
     ::close(fd);
-    return false;
+    const std::string why = std::string("(fcntl F_OFD_SETLK: ") + std::strerror(error) + ")";
+    // EINVAL: a kernel before 3.15 (no F_OFD_SETLK); the others come from
+    // file systems (some network and FUSE mounts) that do not lock, which
+    // is the case the operator has to act on: say so rather than only errno.
+    if (error == EINVAL || error == ENOLCK || error == EOPNOTSUPP || error == ENOSYS)
+      return "the file system or kernel does not support open file description locks " + why;
+    if (error == EAGAIN || error == EACCES) return "another lock on it conflicts " + why;
+    return "cannot lock it " + why;
   }
   fd_ = fd;
-  return true;
+  return {};
 }
 
 void RecordingLock::release() noexcept {

@@ -9,7 +9,10 @@
 // until it closes. The kernel drops it when the descriptor closes, however
 // the recorder's process ends, so a crashed session is never marked. It is
 // independent of HDF5's flock() locks and conflicts between descriptors of
-// one process too (what the tests rely on).
+// one process too (what the tests rely on). Without it there is no
+// recording (SessionWriter::create fails): on a file system without these
+// locks nothing would tell the live file from a crashed one, and a repair
+// would damage it.
 #pragma once
 
 #include <string>
@@ -23,9 +26,12 @@ class RecordingLock {
   RecordingLock(const RecordingLock&) = delete;
   RecordingLock& operator=(const RecordingLock&) = delete;
 
-  // Marks `path` as being recorded. False (and no mark) when the file system
-  // does not support the lock; the recording goes on unmarked.
-  bool take(const std::string& path) noexcept;
+  // Marks `path` as being recorded. Returns an empty string when it did, else
+  // why not (and no mark): the file could not be opened (no such file, the
+  // process is out of descriptors), the file system or kernel does not
+  // support these locks, or another holds a conflicting one. Nodiscard: a
+  // recording must not go on unmarked (above).
+  [[nodiscard]] std::string take(const std::string& path);
   void release() noexcept;
   bool held() const noexcept { return fd_ >= 0; }
 

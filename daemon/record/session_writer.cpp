@@ -293,8 +293,17 @@ std::unique_ptr<SessionWriter> SessionWriter::create(const std::string& path, co
   }
   // Marked before it appears, so no reader ever sees it live and unmarked
   // (`tissue session repair` refuses a marked file). The lock is on the
-  // inode: the rename keeps it.
-  writer->lock_.take(hidden);
+  // inode: the rename keeps it. Without the mark (out of descriptors, a file
+  // system without these locks) there is no recording: it would read as
+  // left by a crash, and a repair would trim and re-flag it under the
+  // writer. Nothing is recorded yet, so the hidden file goes, as below.
+  if (const std::string why = writer->lock_.take(hidden); !why.empty()) {
+    writer.reset();
+    std::filesystem::remove(hidden, ec);
+    throw RecordError("cannot create session file '" + path + "': cannot mark it as being recorded: " + why +
+                      "; unmarked, a live recording reads as left by a crash and `tissue session repair` "
+                      "would damage it");
+  }
   const int moved = util::rename_without_replacing(hidden, path);
   if (moved != 0) {
     writer.reset();

@@ -70,7 +70,9 @@ class SessionWriter {
   // Creates `state_dir/name` (never overwrites: an existing file is an
   // error). The directory must exist. The file is built under a hidden name
   // and renamed into place once in SWMR mode, so no reader ever finds it
-  // half-made (or blocks its creation). Throws RecordError.
+  // half-made (or blocks its creation). Throws RecordError, also when the
+  // file cannot be marked as being recorded (RecordingLock: out of file
+  // descriptors, a file system without the lock), leaving nothing behind.
   static std::unique_ptr<SessionWriter> open_in(const std::string& state_dir, const std::string& name,
                                                 const SessionMetadata& metadata);
   // Same, for a full path (tests, tools). Prefer open_in in the daemon.
