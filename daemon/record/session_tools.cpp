@@ -332,46 +332,64 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
     // A crash between the two writes: only triangles with their strain count.
     triangle_rows = std::min(triangle_rows, strain_rows);
   }
-  std::uint64_t v_end = 0, t_end = 0, frames = 0;
-  // Frames are appended back to back. After a crash (partial_ok) the last
-  // frames may have index rows ahead of their data: the frames before the
-  // first such row are complete, and the file counts up to there. In a
-  // closed or repaired file every index row was written with its data, so
-  // any break is damage and an error naming the row: trimming would hide
-  // the frames after it from every reader.
-  const auto damaged = [&](std::uint64_t f, DatasetId id, const std::string& why) {
-    if (!partial_ok)
-      bad_file(path, std::string(kDatasets[id].path) + "[" + std::to_string(f) + "] " + why + " (frame " +
-                         std::to_string(f) + " of " + std::to_string(indexed) + "): corrupt frame index");
+  // Frames are appended back to back: every index row the writer wrote
+  // continues where the previous frame ended, so an offset that does not is
+  // damage, wherever it is. The writer flushes a frame's data before its
+  // index (session_layout.hpp), so a crash (partial_ok) can leave only the
+  // last frames' index rows ahead of their data: the file counts up to the
+  // first frame whose count runs past the data, and every row after it, its
+  // offset still continuing, starts past the data too. A count past the data
+  // followed by a row that does not continue it is damage, not a crash:
+  // counting up to it made repair delete every frame after it. In a closed
+  // or repaired file every index row was written with its data, so any
+  // break is an error naming the row.
+  const auto corrupt = [&](std::uint64_t f, DatasetId id, const std::string& why) {
+    bad_file(path, std::string(kDatasets[id].path) + "[" + std::to_string(f) + "] " + why + " (frame " +
+                       std::to_string(f) + " of " + std::to_string(indexed) + "): corrupt frame index");
   };
-  for (; frames < indexed; ++frames) {
-    const std::uint64_t f = frames;
-    if (voff[f] != v_end) {
-      damaged(f, kMeshVertexOffset, "is " + std::to_string(voff[f]) + ", expected " + std::to_string(v_end));
-      break;
+  std::uint64_t v_end = 0, t_end = 0;  // where frame f starts
+  std::uint64_t frames = indexed;      // the first frame not all in the data (a crash tail), or all of them
+  std::string tail;                    // what that frame's index row says, for errors after it
+  for (std::uint64_t f = 0; f < indexed; ++f) {
+    const std::string after =
+        f > frames ? " (after " + tail + "; a crash leaves only the last frames past the data)" : "";
+    if (voff[f] != v_end)
+      corrupt(f, kMeshVertexOffset, "is " + std::to_string(voff[f]) + ", expected " + std::to_string(v_end) + after);
+    if (toff[f] != t_end)
+      corrupt(f, kMeshTriangleOffset, "is " + std::to_string(toff[f]) + ", expected " + std::to_string(t_end) + after);
+    if (f < frames) {
+      DatasetId past = kMeshVertexCount;
+      std::string why;
+      if (vcnt[f] > vertex_rows - v_end) {
+        why = "is " + std::to_string(vcnt[f]) + ": past the end of the " + std::to_string(vertex_rows) +
+              " vertex rows (/mesh/vertices_m, /mesh/vertex_level)";
+      } else if (tcnt[f] > triangle_rows - t_end) {
+        past = kMeshTriangleCount;
+        why = "is " + std::to_string(tcnt[f]) + ": past the end of the " + std::to_string(triangle_rows) +
+              " triangle rows";
+      }
+      if (!why.empty()) {
+        if (!partial_ok) corrupt(f, past, why);
+        frames = f;
+        tail = std::string(kDatasets[past].path) + "[" + std::to_string(f) + "], which " + why;
+        c.rows.mesh_vertices = v_end;
+        c.rows.mesh_triangles = t_end;
+      }
     }
-    if (toff[f] != t_end) {
-      damaged(f, kMeshTriangleOffset, "is " + std::to_string(toff[f]) + ", expected " + std::to_string(t_end));
-      break;
-    }
-    if (vcnt[f] > vertex_rows - v_end) {
-      damaged(f, kMeshVertexCount,
-              "is " + std::to_string(vcnt[f]) + ": past the end of the " + std::to_string(vertex_rows) +
-                  " vertex rows (/mesh/vertices_m, /mesh/vertex_level)");
-      break;
-    }
-    if (tcnt[f] > triangle_rows - t_end) {
-      damaged(f, kMeshTriangleCount,
-              "is " + std::to_string(tcnt[f]) + ": past the end of the " + std::to_string(triangle_rows) +
-                  " triangle rows");
-      break;
-    }
+    // Only a tail's count can exceed the data; one no offset can follow (the
+    // sum would wrap) is damage.
+    if (vcnt[f] > UINT64_MAX - v_end)
+      corrupt(f, kMeshVertexCount, "is " + std::to_string(vcnt[f]) + ": more rows than any file holds");
+    if (tcnt[f] > UINT64_MAX - t_end)
+      corrupt(f, kMeshTriangleCount, "is " + std::to_string(tcnt[f]) + ": more rows than any file holds");
     v_end += vcnt[f];
     t_end += tcnt[f];
   }
   c.rows.mesh_frames = frames;
-  c.rows.mesh_vertices = v_end;
-  c.rows.mesh_triangles = t_end;
+  if (frames == indexed) {
+    c.rows.mesh_vertices = v_end;
+    c.rows.mesh_triangles = t_end;
+  }
 
   // The last time stamp of every group (the duration of a session without a
   // recorded one) is a session time like those the row and frame readers
