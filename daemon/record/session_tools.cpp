@@ -434,10 +434,19 @@ std::array<std::uint64_t, kDatasetCount> rows_in_use(const Counts& counts) {
   return used;
 }
 
-// `partial_ok`: tolerate columns one write apart even though the superblock
-// flag is clear (repair, after it has cleared the flag itself).
+// Which rules count the rows (count_rows' partial_ok): a crash leaves
+// columns one write apart and the last index rows ahead of their data.
+enum class RowRules {
+  kByFlags,  // crash rules while the superblock says open for writing (every reader)
+  // Also for a file neither closed cleanly nor repaired: what h5clear -s
+  // leaves of a crashed one (repair's first look, so it trims that too). A
+  // repaired file was trimmed then, so uneven columns there are damage.
+  kUnlessClosedOrRepaired,
+  kCrashRules,  // always (repair, after it has cleared the flags itself)
+};
+
 SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Counts* counts_out = nullptr,
-                    bool partial_ok = false) {
+                    RowRules rules = RowRules::kByFlags) {
   SessionInfo info;
   info.path = path;
   info.open_for_write_flag = pre.consistency_flags != 0;
@@ -474,7 +483,10 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   h5::read_string_attribute(file, kAttrHostName, &info.host_name);
   h5::read_string_attribute(file, kAttrSoftwareVersion, &info.software_version);
   h5::read_string_attribute(file, kAttrRepairedTime, &info.repaired_utc);
-  Counts counts = count_rows(file, path, info.format_version, partial_ok || info.open_for_write_flag);
+  const SessionState state = session_state(info);
+  const bool partial_ok = rules == RowRules::kCrashRules || state == SessionState::kOpenForWrite ||
+                          (rules == RowRules::kUnlessClosedOrRepaired && state == SessionState::kNotClosed);
+  Counts counts = count_rows(file, path, info.format_version, partial_ok);
   info.rows = counts.rows;
   // A recorded duration is a session's length: finite, >= 0 and within
   // kMaxSessionTime_s (a damaged 1e300 was printed as the duration). Without
@@ -489,7 +501,7 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   // foreign writer's): reported, not hidden. The rows that are read stay
   // readable: each row is aligned by its number, and a frame is what the
   // index says (an index that does not match the data is an error above).
-  if (!info.open_for_write_flag && !partial_ok) {
+  if (!partial_ok) {
     const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
     for (std::size_t i = 0; i < kDatasetCount; ++i)
       if (counts.extents[i] > used[i]) info.unreferenced_rows[i] = counts.extents[i] - used[i];
@@ -834,9 +846,18 @@ RepairReport repair_session(const std::string& path) {
   RepairReport report;
   {
     Handle file = open_for_reading(path, pre);
-    const SessionInfo before = info_of(file.get(), path, pre);
+    Counts counts;
+    const SessionInfo before = info_of(file.get(), path, pre, &counts, RowRules::kUnlessClosedOrRepaired);
     report.before = before.rows;
-    if (!before.open_for_write_flag) {
+    // A file whose flags h5clear -s cleared after a crash still has its
+    // columns as the crash left them: trimmed like a crashed one. (A closed
+    // file's unreferenced rows are not a crash's: they stay.)
+    const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
+    bool rows_to_trim = false;
+    for (std::size_t i = 0; i < kDatasetCount; ++i)
+      rows_to_trim =
+          rows_to_trim || (dataset_in_version(kDatasets[i], before.format_version) && counts.extents[i] != used[i]);
+    if (!before.open_for_write_flag && !(session_state(before) == SessionState::kNotClosed && rows_to_trim)) {
       if (before.closed_cleanly)
         report.notes.push_back("closed cleanly: nothing to repair");
       else
@@ -863,7 +884,7 @@ RepairReport repair_session(const std::string& path) {
   if (H5Fincrement_filesize(file.get(), 1 << 20) < 0) bad_file(path, h5::describe("cannot move the end of allocation"));
 
   Counts counts;
-  const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts, /*partial_ok=*/true);
+  const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts, RowRules::kCrashRules);
   // Trim every column to what its whole group has, so plain readers see
   // aligned columns and only complete mesh frames.
   const std::array<std::uint64_t, kDatasetCount> keep = rows_in_use(counts);

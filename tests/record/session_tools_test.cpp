@@ -825,6 +825,63 @@ TEST(SessionTools, AVertexLevelColumnShorterThanTheFramesIsAnErrorNamingTheFrame
   expect_every_tool_refuses(path, dir, "(/mesh/vertices_m, /mesh/vertex_level)");
 }
 
+// `h5clear -s --increment` on a crashed session clears the superblock's
+// flags but leaves its columns as the crash did: closed_cleanly 0, no
+// repaired_utc ("NOT closed cleanly"). Repair does what h5clear does and
+// more, so it trims such a file too, by the crash rules: it refused one
+// whose strain column was a write short of the triangles (a crash between
+// the two writes) as corrupt, though every frame before the last is whole.
+TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
+  TempDir dir;
+  const auto not_closed_cleanly = [](const std::string& path) {
+    const hid_t file = open_for_edit(path);
+    ASSERT_GE(file, 0) << path;
+    ASSERT_GE(H5Adelete(file, kAttrClosedCleanly), 0);
+    h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
+    H5Fclose(file);
+  };
+  struct Crash {
+    const char* name;
+    std::vector<DatasetId> cut;  // each loses its rows of the frames from `kept` on
+    std::uint64_t kept;          // complete frames left
+  };
+  for (const Crash& c : {Crash{"strain a write short", {kMeshTriangleStrain}, 4},
+                         Crash{"the last two frames' vertices missing", {kMeshVertices, kMeshVertexLevel}, 3}}) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir / (std::to_string(c.kept) + ".h5");
+    write_small_session(path, 5);
+    const SessionInfo whole = read_session_info(path);
+    std::uint64_t vertices = 0, triangles = 0;  // of frames 0 .. kept-1
+    for (std::uint64_t f = 0; f < c.kept; ++f) {
+      vertices += testing::test_frame(f).vertices_m.size();
+      triangles += testing::test_frame(f).triangles.size();
+    }
+    for (const DatasetId id : c.cut) shorten(path, id, id == kMeshTriangleStrain ? triangles : vertices);
+    not_closed_cleanly(path);
+
+    const RepairReport report = repair_session(path);
+    EXPECT_TRUE(report.repair_needed);
+    EXPECT_EQ(report.before.mesh_frames, c.kept);
+    EXPECT_EQ(report.after.rows.mesh_frames, c.kept);
+    EXPECT_EQ(report.after.rows.mesh_vertices, vertices);
+    EXPECT_EQ(report.after.rows.mesh_triangles, triangles);
+    EXPECT_EQ(report.after.rows.haptic_rows, whole.rows.haptic_rows) << "other groups keep every row";
+    EXPECT_EQ(report.after.rows.sim_rows, whole.rows.sim_rows);
+    EXPECT_EQ(session_state(report.after), SessionState::kRepaired);
+    for (const std::uint64_t n : report.after.unreferenced_rows) EXPECT_EQ(n, 0u);
+    // The frames kept are whole: their strain reads back as written.
+    const SessionFile file(path);
+    std::uint64_t t0 = 0;
+    for (std::uint64_t f = 0; f < c.kept; ++f) {
+      const testing::TestFrame frame = testing::test_frame(f);
+      EXPECT_EQ(file.rows<float>(kMeshTriangleStrain, t0, frame.triangles.size()),
+                frame.triangle_strain_energy_J_per_m3)
+          << "frame " << f;
+      t0 += frame.triangles.size();
+    }
+  }
+}
+
 // Extents of 2^36 rows (chunks never written, so the file stays small) must
 // be refused before a read allocates for them (a bare std::bad_alloc, or
 // gigabytes and a minute for 1e8 rows).
