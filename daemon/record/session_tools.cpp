@@ -332,46 +332,64 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
     // A crash between the two writes: only triangles with their strain count.
     triangle_rows = std::min(triangle_rows, strain_rows);
   }
-  std::uint64_t v_end = 0, t_end = 0, frames = 0;
-  // Frames are appended back to back. After a crash (partial_ok) the last
-  // frames may have index rows ahead of their data: the frames before the
-  // first such row are complete, and the file counts up to there. In a
-  // closed or repaired file every index row was written with its data, so
-  // any break is damage and an error naming the row: trimming would hide
-  // the frames after it from every reader.
-  const auto damaged = [&](std::uint64_t f, DatasetId id, const std::string& why) {
-    if (!partial_ok)
-      bad_file(path, std::string(kDatasets[id].path) + "[" + std::to_string(f) + "] " + why + " (frame " +
-                         std::to_string(f) + " of " + std::to_string(indexed) + "): corrupt frame index");
+  // Frames are appended back to back: every index row the writer wrote
+  // continues where the previous frame ended, so an offset that does not is
+  // damage, wherever it is. The writer flushes a frame's data before its
+  // index (session_layout.hpp), so a crash (partial_ok) can leave only the
+  // last frames' index rows ahead of their data: the file counts up to the
+  // first frame whose count runs past the data, and every row after it, its
+  // offset still continuing, starts past the data too. A count past the data
+  // followed by a row that does not continue it is damage, not a crash:
+  // counting up to it made repair delete every frame after it. In a closed
+  // or repaired file every index row was written with its data, so any
+  // break is an error naming the row.
+  const auto corrupt = [&](std::uint64_t f, DatasetId id, const std::string& why) {
+    bad_file(path, std::string(kDatasets[id].path) + "[" + std::to_string(f) + "] " + why + " (frame " +
+                       std::to_string(f) + " of " + std::to_string(indexed) + "): corrupt frame index");
   };
-  for (; frames < indexed; ++frames) {
-    const std::uint64_t f = frames;
-    if (voff[f] != v_end) {
-      damaged(f, kMeshVertexOffset, "is " + std::to_string(voff[f]) + ", expected " + std::to_string(v_end));
-      break;
+  std::uint64_t v_end = 0, t_end = 0;  // where frame f starts
+  std::uint64_t frames = indexed;      // the first frame not all in the data (a crash tail), or all of them
+  std::string tail;                    // what that frame's index row says, for errors after it
+  for (std::uint64_t f = 0; f < indexed; ++f) {
+    const std::string after =
+        f > frames ? " (after " + tail + "; a crash leaves only the last frames past the data)" : "";
+    if (voff[f] != v_end)
+      corrupt(f, kMeshVertexOffset, "is " + std::to_string(voff[f]) + ", expected " + std::to_string(v_end) + after);
+    if (toff[f] != t_end)
+      corrupt(f, kMeshTriangleOffset, "is " + std::to_string(toff[f]) + ", expected " + std::to_string(t_end) + after);
+    if (f < frames) {
+      DatasetId past = kMeshVertexCount;
+      std::string why;
+      if (vcnt[f] > vertex_rows - v_end) {
+        why = "is " + std::to_string(vcnt[f]) + ": past the end of the " + std::to_string(vertex_rows) +
+              " vertex rows (/mesh/vertices_m, /mesh/vertex_level)";
+      } else if (tcnt[f] > triangle_rows - t_end) {
+        past = kMeshTriangleCount;
+        why = "is " + std::to_string(tcnt[f]) + ": past the end of the " + std::to_string(triangle_rows) +
+              " triangle rows";
+      }
+      if (!why.empty()) {
+        if (!partial_ok) corrupt(f, past, why);
+        frames = f;
+        tail = std::string(kDatasets[past].path) + "[" + std::to_string(f) + "], which " + why;
+        c.rows.mesh_vertices = v_end;
+        c.rows.mesh_triangles = t_end;
+      }
     }
-    if (toff[f] != t_end) {
-      damaged(f, kMeshTriangleOffset, "is " + std::to_string(toff[f]) + ", expected " + std::to_string(t_end));
-      break;
-    }
-    if (vcnt[f] > vertex_rows - v_end) {
-      damaged(f, kMeshVertexCount,
-              "is " + std::to_string(vcnt[f]) + ": past the end of the " + std::to_string(vertex_rows) +
-                  " vertex rows (/mesh/vertices_m, /mesh/vertex_level)");
-      break;
-    }
-    if (tcnt[f] > triangle_rows - t_end) {
-      damaged(f, kMeshTriangleCount,
-              "is " + std::to_string(tcnt[f]) + ": past the end of the " + std::to_string(triangle_rows) +
-                  " triangle rows");
-      break;
-    }
+    // Only a tail's count can exceed the data; one no offset can follow (the
+    // sum would wrap) is damage.
+    if (vcnt[f] > UINT64_MAX - v_end)
+      corrupt(f, kMeshVertexCount, "is " + std::to_string(vcnt[f]) + ": more rows than any file holds");
+    if (tcnt[f] > UINT64_MAX - t_end)
+      corrupt(f, kMeshTriangleCount, "is " + std::to_string(tcnt[f]) + ": more rows than any file holds");
     v_end += vcnt[f];
     t_end += tcnt[f];
   }
   c.rows.mesh_frames = frames;
-  c.rows.mesh_vertices = v_end;
-  c.rows.mesh_triangles = t_end;
+  if (frames == indexed) {
+    c.rows.mesh_vertices = v_end;
+    c.rows.mesh_triangles = t_end;
+  }
 
   // The last time stamp of every group (the duration of a session without a
   // recorded one) is a session time like those the row and frame readers
@@ -416,10 +434,19 @@ std::array<std::uint64_t, kDatasetCount> rows_in_use(const Counts& counts) {
   return used;
 }
 
-// `partial_ok`: tolerate columns one write apart even though the superblock
-// flag is clear (repair, after it has cleared the flag itself).
+// Which rules count the rows (count_rows' partial_ok): a crash leaves
+// columns one write apart and the last index rows ahead of their data.
+enum class RowRules {
+  kByFlags,  // crash rules while the superblock says open for writing (every reader)
+  // Also for a file neither closed cleanly nor repaired: what h5clear -s
+  // leaves of a crashed one (repair's first look, so it trims that too). A
+  // repaired file was trimmed then, so uneven columns there are damage.
+  kUnlessClosedOrRepaired,
+  kCrashRules,  // always (repair, after it has cleared the flags itself)
+};
+
 SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Counts* counts_out = nullptr,
-                    bool partial_ok = false) {
+                    RowRules rules = RowRules::kByFlags) {
   SessionInfo info;
   info.path = path;
   info.open_for_write_flag = pre.consistency_flags != 0;
@@ -456,7 +483,10 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   h5::read_string_attribute(file, kAttrHostName, &info.host_name);
   h5::read_string_attribute(file, kAttrSoftwareVersion, &info.software_version);
   h5::read_string_attribute(file, kAttrRepairedTime, &info.repaired_utc);
-  Counts counts = count_rows(file, path, info.format_version, partial_ok || info.open_for_write_flag);
+  const SessionState state = session_state(info);
+  const bool partial_ok = rules == RowRules::kCrashRules || state == SessionState::kOpenForWrite ||
+                          (rules == RowRules::kUnlessClosedOrRepaired && state == SessionState::kNotClosed);
+  Counts counts = count_rows(file, path, info.format_version, partial_ok);
   info.rows = counts.rows;
   // A recorded duration is a session's length: finite, >= 0 and within
   // kMaxSessionTime_s (a damaged 1e300 was printed as the duration). Without
@@ -471,7 +501,7 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   // foreign writer's): reported, not hidden. The rows that are read stay
   // readable: each row is aligned by its number, and a frame is what the
   // index says (an index that does not match the data is an error above).
-  if (!info.open_for_write_flag && !partial_ok) {
+  if (!partial_ok) {
     const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
     for (std::size_t i = 0; i < kDatasetCount; ++i)
       if (counts.extents[i] > used[i]) info.unreferenced_rows[i] = counts.extents[i] - used[i];
@@ -816,9 +846,18 @@ RepairReport repair_session(const std::string& path) {
   RepairReport report;
   {
     Handle file = open_for_reading(path, pre);
-    const SessionInfo before = info_of(file.get(), path, pre);
+    Counts counts;
+    const SessionInfo before = info_of(file.get(), path, pre, &counts, RowRules::kUnlessClosedOrRepaired);
     report.before = before.rows;
-    if (!before.open_for_write_flag) {
+    // A file whose flags h5clear -s cleared after a crash still has its
+    // columns as the crash left them: trimmed like a crashed one. (A closed
+    // file's unreferenced rows are not a crash's: they stay.)
+    const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
+    bool rows_to_trim = false;
+    for (std::size_t i = 0; i < kDatasetCount; ++i)
+      rows_to_trim =
+          rows_to_trim || (dataset_in_version(kDatasets[i], before.format_version) && counts.extents[i] != used[i]);
+    if (!before.open_for_write_flag && !(session_state(before) == SessionState::kNotClosed && rows_to_trim)) {
       if (before.closed_cleanly)
         report.notes.push_back("closed cleanly: nothing to repair");
       else
@@ -845,7 +884,7 @@ RepairReport repair_session(const std::string& path) {
   if (H5Fincrement_filesize(file.get(), 1 << 20) < 0) bad_file(path, h5::describe("cannot move the end of allocation"));
 
   Counts counts;
-  const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts, /*partial_ok=*/true);
+  const SessionInfo mid = info_of(file.get(), path, Preamble{}, &counts, RowRules::kCrashRules);
   // Trim every column to what its whole group has, so plain readers see
   // aligned columns and only complete mesh frames.
   const std::array<std::uint64_t, kDatasetCount> keep = rows_in_use(counts);

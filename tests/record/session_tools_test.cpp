@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -700,6 +701,82 @@ TEST(SessionTools, ABrokenFrameIndexInAClosedFileIsAnErrorNamingTheRow) {
   }
 }
 
+// Overwrites row `row` of the 1-D uint64 dataset `id` of a session still
+// marked open for writing (HDF5 opens such a file for reading only), in the
+// raw bytes of its chunk, as a flipped byte on disk would change it.
+void overwrite_u64_in_crashed(const std::string& path, DatasetId id, std::uint64_t row, std::uint64_t value) {
+  const hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, fapl);
+  H5Pclose(fapl);
+  ASSERT_GE(file, 0) << path;
+  const hid_t ds = H5Dopen2(file, kDatasets[id].path, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << kDatasets[id].path;
+  const hid_t space = H5Dget_space(ds);
+  hsize_t offset[1] = {};
+  unsigned filter_mask = 0;
+  haddr_t address = 0;
+  hsize_t bytes = 0;
+  const herr_t got = H5Dget_chunk_info(ds, space, 0, offset, &filter_mask, &address, &bytes);
+  H5Sclose(space);
+  H5Dclose(ds);
+  H5Fclose(file);
+  ASSERT_GE(got, 0) << kDatasets[id].path;
+  ASSERT_EQ(offset[0], 0u) << "the first chunk holds row 0";
+  ASSERT_GE(bytes, (row + 1) * sizeof value);
+  std::string content = testing::slurp(path);
+  ASSERT_LE(address + bytes, content.size());
+  std::memcpy(content.data() + address + row * sizeof value, &value, sizeof value);  // little-endian, as stored
+  testing::write_bytes(path, content);
+}
+
+// A crash can only leave the last index rows ahead of their data (the writer
+// flushes the data first), so a crashed file's index that breaks off with
+// rows after the break is damage: every tool said "2 frames" and repair cut
+// every mesh dataset to them, deleting the later frames for good. Now each
+// reader names the row, and repair refuses before it opens the file for
+// writing: the file keeps every byte.
+TEST(SessionTools, ABrokenFrameIndexWithFramesAfterItInACrashedFileIsRefusedAndKept) {
+  TempDir dir;
+  struct Damage {
+    DatasetId id;
+    std::uint64_t row, value;
+    const char* says;
+  };
+  for (const Damage d :
+       {Damage{kMeshTriangleOffset, 2, 7, "/mesh/triangle_offset[2] is 7, expected"},
+        Damage{kMeshVertexOffset, 2, std::uint64_t{1} << 40, "/mesh/vertex_offset[2] is 1099511627776, expected"},
+        // A count past the data is a crash tail only when it is the last
+        // frame's: the next frame's offset does not continue it.
+        Damage{kMeshVertexCount, 2, 1000000, "/mesh/vertex_offset[3] is "},
+        Damage{kMeshTriangleCount, 2, 1000000, "after /mesh/triangle_count[2], which is 1000000: past the end"},
+        // The last frame's, yet no writer's: no file holds that many rows.
+        Damage{kMeshVertexCount, 5, UINT64_MAX - 1, "/mesh/vertex_count[5] is 18446744073709551614: more rows"}}) {
+    const std::string path = dir / ("crashed" + std::to_string(d.id) + "_" + std::to_string(d.row) + ".h5");
+    testing::write_crashed_session(path, 100, 6);
+    ASSERT_EQ(read_session_info(path).rows.mesh_frames, 6u);
+    overwrite_u64_in_crashed(path, d.id, d.row, d.value);
+    const std::string before = testing::slurp(path);
+    SCOPED_TRACE(kDatasets[d.id].path);
+    for (const auto& [tool, call] : std::vector<std::pair<const char*, std::function<void()>>>{
+             {"info", [&] { read_session_info(path); }}, {"repair", [&] { repair_session(path); }}}) {
+      try {
+        call();
+        ADD_FAILURE() << tool << " accepted " << path << ": " << read_session_info(path).rows.mesh_frames << " frames";
+      } catch (const RecordError& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("'" + path + "'"), std::string::npos) << tool << ": " << what;
+        EXPECT_NE(what.find(d.says), std::string::npos) << tool << ": " << what;
+        EXPECT_NE(what.find("corrupt frame index"), std::string::npos) << tool << ": " << what;
+      }
+    }
+    EXPECT_TRUE(testing::slurp(path) == before) << "repair changed the file";
+    const auto cli = run(tissue() + " session repair " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 1) << cli.out;
+    EXPECT_NE(cli.err.find(d.says), std::string::npos) << cli.err;
+    EXPECT_TRUE(testing::slurp(path) == before) << "`tissue session repair` changed the file";
+  }
+}
+
 // Cuts dataset `id` of a closed session to `rows` rows (its other columns
 // keep theirs), as a crash between two column writes leaves it.
 void shorten(const std::string& path, DatasetId id, std::uint64_t rows) {
@@ -746,6 +823,63 @@ TEST(SessionTools, AVertexLevelColumnShorterThanTheFramesIsAnErrorNamingTheFrame
   shorten(path, kMeshVertexLevel, vertices - 1);
   expect_every_tool_refuses(path, dir, "/mesh/vertex_count[4] is ");
   expect_every_tool_refuses(path, dir, "(/mesh/vertices_m, /mesh/vertex_level)");
+}
+
+// `h5clear -s --increment` on a crashed session clears the superblock's
+// flags but leaves its columns as the crash did: closed_cleanly 0, no
+// repaired_utc ("NOT closed cleanly"). Repair does what h5clear does and
+// more, so it trims such a file too, by the crash rules: it refused one
+// whose strain column was a write short of the triangles (a crash between
+// the two writes) as corrupt, though every frame before the last is whole.
+TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
+  TempDir dir;
+  const auto not_closed_cleanly = [](const std::string& path) {
+    const hid_t file = open_for_edit(path);
+    ASSERT_GE(file, 0) << path;
+    ASSERT_GE(H5Adelete(file, kAttrClosedCleanly), 0);
+    h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
+    H5Fclose(file);
+  };
+  struct Crash {
+    const char* name;
+    std::vector<DatasetId> cut;  // each loses its rows of the frames from `kept` on
+    std::uint64_t kept;          // complete frames left
+  };
+  for (const Crash& c : {Crash{"strain a write short", {kMeshTriangleStrain}, 4},
+                         Crash{"the last two frames' vertices missing", {kMeshVertices, kMeshVertexLevel}, 3}}) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir / (std::to_string(c.kept) + ".h5");
+    write_small_session(path, 5);
+    const SessionInfo whole = read_session_info(path);
+    std::uint64_t vertices = 0, triangles = 0;  // of frames 0 .. kept-1
+    for (std::uint64_t f = 0; f < c.kept; ++f) {
+      vertices += testing::test_frame(f).vertices_m.size();
+      triangles += testing::test_frame(f).triangles.size();
+    }
+    for (const DatasetId id : c.cut) shorten(path, id, id == kMeshTriangleStrain ? triangles : vertices);
+    not_closed_cleanly(path);
+
+    const RepairReport report = repair_session(path);
+    EXPECT_TRUE(report.repair_needed);
+    EXPECT_EQ(report.before.mesh_frames, c.kept);
+    EXPECT_EQ(report.after.rows.mesh_frames, c.kept);
+    EXPECT_EQ(report.after.rows.mesh_vertices, vertices);
+    EXPECT_EQ(report.after.rows.mesh_triangles, triangles);
+    EXPECT_EQ(report.after.rows.haptic_rows, whole.rows.haptic_rows) << "other groups keep every row";
+    EXPECT_EQ(report.after.rows.sim_rows, whole.rows.sim_rows);
+    EXPECT_EQ(session_state(report.after), SessionState::kRepaired);
+    for (const std::uint64_t n : report.after.unreferenced_rows) EXPECT_EQ(n, 0u);
+    // The frames kept are whole: their strain reads back as written.
+    const SessionFile file(path);
+    std::uint64_t t0 = 0;
+    for (std::uint64_t f = 0; f < c.kept; ++f) {
+      const testing::TestFrame frame = testing::test_frame(f);
+      EXPECT_EQ(file.rows<float>(kMeshTriangleStrain, t0, frame.triangles.size()),
+                frame.triangle_strain_energy_J_per_m3)
+          << "frame " << f;
+      t0 += frame.triangles.size();
+    }
+  }
 }
 
 // Extents of 2^36 rows (chunks never written, so the file stays small) must
