@@ -1001,6 +1001,81 @@ TEST(SessionTools, XdmfRefusesFrameTimesThatAreNotFiniteOrGoBack) {
   }
 }
 
+// Overwrites element (row, column) of a closed session's N x 3 or 1-D
+// dataset (column 0) with *value, of HDF5 memory type `type`.
+void overwrite_element(const std::string& path, const char* dataset, hsize_t row, hsize_t column, hid_t type,
+                       const void* value) {
+  const hid_t file = testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << dataset;
+  const hid_t space = H5Dget_space(ds);
+  const int rank = H5Sget_simple_extent_ndims(space);
+  const hsize_t start[2] = {row, column}, one[2] = {1, 1};
+  H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, one, nullptr);
+  const hid_t mem = H5Screate_simple(rank, one, nullptr);
+  EXPECT_GE(H5Dwrite(ds, type, mem, space, H5P_DEFAULT, value), 0);
+  H5Sclose(mem);
+  H5Sclose(space);
+  H5Dclose(ds);
+  H5Fclose(file);
+}
+
+// `session xdmf` checks every frame's data as the frame source (x3d, render,
+// replay) does: found by the review of the session tools, it wrote a sidecar
+// over an index past the frame's vertices (VTK does not bounds-check) or a
+// NaN coordinate. Refused naming the file, dataset and row; nothing written.
+TEST(SessionTools, XdmfRefusesFrameDataEveryOtherFrameReaderRefuses) {
+  TempDir dir;
+  // Rows where frame 1 starts (frame 0 comes first in the flat datasets).
+  const std::uint64_t v1 = testing::test_frame(0).vertices_m.size();
+  const std::uint64_t t1 = testing::test_frame(0).triangles.size();
+  const std::int32_t far_index = 1000000;
+  const float nan = std::numeric_limits<float>::quiet_NaN(), energy = 5.0f;
+  struct Case {
+    const char* name;
+    DatasetId id;
+    hsize_t row, column;
+    hid_t type;
+    const void* value;
+    std::string expected;
+  };
+  const Case cases[] = {
+      {"index", kMeshTriangles, 0, 0, H5T_NATIVE_INT32, &far_index,
+       "/mesh/triangles row 0 (frame 0) holds the index 1000000, past the frame's " + std::to_string(v1) + " vertices"},
+      {"coordinate", kMeshVertices, v1 + 1, 2, H5T_NATIVE_FLOAT, &nan,
+       "/mesh/vertices_m row " + std::to_string(v1 + 1) + " (frame 1) holds the coordinate nan"},
+      // Frame 1 "recorded without strain" but for one value.
+      {"strain", kMeshTriangleStrain, t1, 0, H5T_NATIVE_FLOAT, &nan,
+       "row " + std::to_string(t1 + 1) + " (frame 1) holds"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir / (std::string(c.name) + ".h5");
+    write_small_session(path, 3);
+    if (c.id == kMeshTriangleStrain) {  // every value of frame 1 NaN but the one after the first
+      for (std::uint64_t t = t1; t < t1 + testing::test_frame(1).triangles.size(); ++t)
+        overwrite_element(path, kDatasets[c.id].path, t, 0, c.type, t == t1 + 1 ? &energy : c.value);
+    } else {
+      overwrite_element(path, kDatasets[c.id].path, c.row, c.column, c.type, c.value);
+    }
+    try {
+      const XdmfReport report = write_xdmf(path, "");
+      ADD_FAILURE() << "wrote " << report.out_path << " (" << report.frames << " grids)";
+    } catch (const RecordError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("'" + path + "': "), std::string::npos) << what;
+      EXPECT_NE(what.find(c.expected), std::string::npos) << what;
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / (std::string(c.name) + ".xdmf")));
+  }
+  // The command line too: exit 1, the reason on stderr, no sidecar.
+  const auto cli = run(tissue() + " session xdmf " + quote(dir / "index.h5"), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_NE(cli.err.find("/mesh/triangles row 0 (frame 0) holds the index 1000000"), std::string::npos) << cli.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "index.xdmf"));
+}
+
 // Frame times need only be non-decreasing: two frames of the same instant
 // are two grids at one time, not an error.
 TEST(SessionTools, XdmfTakesTwoFramesOfTheSameTime) {
