@@ -959,7 +959,22 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   const fs::path out_dir = fs::absolute(report.out_path, ec).parent_path();
   fs::path h5_ref = fs::relative(fs::absolute(h5_path, ec), out_dir, ec);
   if (ec || h5_ref.empty()) h5_ref = fs::absolute(h5_path, ec);
-  const std::string ref = util::escape_xml(h5_ref.string());
+  // XDMF 3 reads a Format="HDF" DataItem as FILE:DATASET, FILE up to the
+  // first ':' (one in a directory too), splits a reference on '|', and
+  // ParaView takes the XML as UTF-8 (escape_xml would put U+FFFD for a byte
+  // that is not): a path it cannot name gave a sidecar that does not open.
+  const std::string ref_text = h5_ref.string();
+  std::string ref_problem = util::why_not_clean_text(ref_text);
+  if (!ref_problem.empty())
+    ref_problem = "is not UTF-8 text or holds a control character (" + ref_problem + ")";
+  else if (ref_text.find(':') != std::string::npos)
+    ref_problem = "contains ':'";
+  else if (ref_text.find('|') != std::string::npos)
+    ref_problem = "contains '|'";
+  if (!ref_problem.empty())
+    bad_file(h5_path, "the session's path as the sidecar would reference it ('" + shown(ref_text) + "') " +
+                          ref_problem + ", which an XDMF data reference cannot name; rename it");
+  const std::string ref = util::escape_xml(ref_text);
 
   // Inner DataItems name the whole dataset with its full shape (XDMF
   // readers check it against the file).

@@ -1224,6 +1224,56 @@ TEST(SessionTools, XdmfOfASessionNamedWithDoubleHyphensIsWellFormed) {
   EXPECT_NE(xml.find("run--2.h5:/mesh/vertices_m"), std::string::npos) << "the DataItems still name the file";
 }
 
+// XDMF 3 takes a data reference's file name up to its first ':' and splits
+// references on '|', and the XML is UTF-8: found by the review of the
+// session tools, a session path it cannot name gave a sidecar ParaView could
+// not open (exit 0). Refused naming the file and the reason; no sidecar.
+TEST(SessionTools, XdmfOfASessionPathAReferenceCannotNameIsRefused) {
+  TempDir dir;
+  const struct {
+    std::string name, expected;
+  } cases[] = {
+      {"a:b.h5", "contains ':'"},
+      {"a|b.h5", "contains '|'"},
+      {"caf\xe9.h5", "is not UTF-8 text"},
+      {"line\nbreak.h5", "holds a control character"},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir / c.name;
+    write_small_session(path, 2);
+    const std::string sidecar = std::filesystem::path(path).replace_extension(".xdmf").string();
+    try {
+      write_xdmf(path, "");
+      ADD_FAILURE() << "wrote a sidecar referencing " << c.name;
+    } catch (const RecordError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("'" + path + "': "), std::string::npos) << what;
+      EXPECT_NE(what.find(c.expected), std::string::npos) << what;
+      EXPECT_NE(what.find("which an XDMF data reference cannot name; rename it"), std::string::npos) << what;
+    }
+    EXPECT_FALSE(std::filesystem::exists(sidecar));
+  }
+  // A ':' in a directory the reference passes through is refused too; one
+  // the relative reference does not name is no problem.
+  std::filesystem::create_directories(dir / "x:y");
+  const std::string inside = dir / "x:y/s.h5";
+  write_small_session(inside, 2);
+  EXPECT_NO_THROW(write_xdmf(inside, ""));
+  EXPECT_TRUE(std::filesystem::exists(dir / "x:y/s.xdmf"));
+  try {
+    write_xdmf(inside, dir / "s.xdmf");
+    ADD_FAILURE() << "wrote a sidecar referencing x:y/s.h5";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find("('x:y/s.h5') contains ':'"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "s.xdmf"));
+  // The command line: exit 1, the reason on stderr.
+  const auto cli = run(tissue() + " session xdmf " + quote(dir / "a:b.h5"), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_NE(cli.err.find("contains ':'"), std::string::npos) << cli.err;
+}
+
 // -o naming the session itself would replace the recording with its sidecar.
 TEST(SessionTools, XdmfRefusesToOverwriteItsInput) {
   TempDir dir;
