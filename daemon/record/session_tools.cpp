@@ -756,9 +756,13 @@ SessionListing list_sessions(const std::string& dir) {
   SessionListing listing;
   listing.dir = dir;
   std::error_code ec;
+  // A directory that cannot be reached (EACCES on the way, a symbolic link
+  // loop) has no type: its error says why, not "not a directory".
   if (const fs::file_status st = fs::status(dir, ec); !fs::is_directory(st))
-    throw RecordError("cannot list sessions in '" + dir +
-                      "': " + (st.type() == fs::file_type::not_found ? "no such directory" : "not a directory"));
+    throw RecordError("cannot list sessions in '" + dir + "': " +
+                      (st.type() == fs::file_type::not_found ? "no such directory"
+                       : ec                                  ? ec.message()
+                                                             : "not a directory"));
   std::vector<fs::path> candidates;
   fs::directory_iterator it(dir, ec), end;
   if (ec) throw RecordError("cannot list sessions in '" + dir + "': " + ec.message());

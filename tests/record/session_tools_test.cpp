@@ -8,12 +8,16 @@
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
 #include <sstream>
+#include <system_error>
 
+#include <grp.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -202,6 +206,79 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
   const auto missing = run(tissue() + " session list " + quote(dir / "missing"), dir);
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.err.find(dir / "missing"), std::string::npos) << missing.err;
+}
+
+constexpr const char* kCannotDropRoot = "cannot drop root";
+
+// list_sessions(d)'s error ("" when it lists d) as a user permissions apply
+// to: root bypasses them, so as root it runs in a child process that has
+// become nobody (kCannotDropRoot when that is not allowed).
+std::string list_error_as_unprivileged_user(const std::string& d) {
+  const auto error_of = [&d]() -> std::string {
+    try {
+      list_sessions(d);
+      return "";
+    } catch (const RecordError& e) {
+      return e.what();
+    }
+  };
+  if (::geteuid() != 0) return error_of();
+  int fds[2];
+  if (::pipe(fds) != 0) return std::string("pipe: ") + std::strerror(errno);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::close(fds[0]);
+    constexpr uid_t kNobody = 65534;
+    const std::string what =
+        ::setgroups(0, nullptr) == 0 && ::setgid(kNobody) == 0 && ::setuid(kNobody) == 0 ? error_of() : kCannotDropRoot;
+    const bool sent = ::write(fds[1], what.data(), what.size()) == static_cast<ssize_t>(what.size());
+    ::_exit(sent ? 0 : 1);
+  }
+  ::close(fds[1]);
+  std::string what;
+  char buf[512];
+  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) what.append(buf, static_cast<std::size_t>(n));
+  ::close(fds[0]);
+  int status = 0;
+  if (pid < 0 || ::waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    return "the unprivileged child failed: " + what;
+  return what;
+}
+
+// A directory `list` cannot reach is refused with the reason, not called
+// "not a directory" (found by the review of the session tools): a symbolic
+// link loop (ELOOP), and a parent without search permission (EACCES).
+TEST(SessionTools, ListOfADirectoryItCannotReachSaysWhy) {
+  TempDir dir;
+  const std::string loop = dir / "loop";
+  std::filesystem::create_directory_symlink(dir / "loop", loop);
+  const auto expect_refused = [](const std::string& d, const std::string& reason) {
+    try {
+      list_sessions(d);
+      ADD_FAILURE() << "listed " << d;
+    } catch (const RecordError& e) {
+      EXPECT_NE(std::string(e.what()).find("cannot list sessions in '" + d + "': " + reason), std::string::npos)
+          << e.what();
+    }
+  };
+  expect_refused(loop, std::error_code(ELOOP, std::generic_category()).message());
+  // Still: a file is not a directory, and a missing one is missing.
+  std::ofstream(dir / "file") << "x\n";
+  expect_refused(dir / "file", "not a directory");
+  expect_refused(dir / "missing", "no such directory");
+  expect_refused(dir / "file/sub", "no such directory");  // ENOTDIR: nothing there
+
+  // EACCES: a parent without search permission.
+  const std::string closed = dir / "closed";
+  std::filesystem::create_directories(closed + "/state");
+  ASSERT_EQ(::chmod(closed.c_str(), 0), 0);
+  const std::string what = list_error_as_unprivileged_user(closed + "/state");
+  ::chmod(closed.c_str(), 0700);  // so TempDir can remove it
+  if (what == kCannotDropRoot) GTEST_SKIP() << "running as root without the right to become another user";
+  EXPECT_NE(what.find("cannot list sessions in '" + closed +
+                      "/state': " + std::error_code(EACCES, std::generic_category()).message()),
+            std::string::npos)
+      << what;
 }
 
 // Lines of `text` that are not clean text (a control character, or bytes
