@@ -103,62 +103,36 @@ class SessionFrameSource final : public FrameSource {
     // dataset extents, this is the int32 index limit of the format).
     if (nv > static_cast<std::uint64_t>(std::numeric_limits<std::int32_t>::max()))
       fail("frame " + std::to_string(k) + " claims " + std::to_string(nv) + " vertices");
+    const auto xyz = read<float>(record::kMeshVertices, vertex_offset_[k], nv);
+    const auto idx = read<std::int32_t>(record::kMeshTriangles, triangle_offset_[k], nt);
+    std::vector<float> strain;
+    if (file_has_strain_ && nt > 0) strain = read<float>(record::kMeshTriangleStrain, triangle_offset_[k], nt);
+    // Every consumer (x3d, render, replay) indexes the frame's vertices with
+    // the triangles and draws or publishes the values: checked here, by the
+    // rule every reader of frames shares.
+    if (const std::string problem =
+            record::mesh_frame_problem(k, vertex_offset_[k], xyz, triangle_offset_[k], idx, strain);
+        !problem.empty())
+      fail(problem);
     SurfaceFrame f;
     f.time_s = times_[k];
-    const auto xyz = read<float>(record::kMeshVertices, vertex_offset_[k], nv);
     f.vertices_m.resize(nv);
     for (std::size_t i = 0; i < nv; ++i)
-      for (int a = 0; a < 3; ++a) {
-        const float coordinate = xyz[3 * i + a];
-        if (!std::isfinite(coordinate))
-          fail(std::string(record::kDatasets[record::kMeshVertices].path) + " row " +
-               std::to_string(vertex_offset_[k] + i) + " (frame " + std::to_string(k) + ") holds the coordinate " +
-               std::to_string(coordinate) + ": not a position");
-        f.vertices_m[i][a] = static_cast<double>(coordinate);
-      }
-    const auto idx = read<std::int32_t>(record::kMeshTriangles, triangle_offset_[k], nt);
+      for (int a = 0; a < 3; ++a) f.vertices_m[i][a] = static_cast<double>(xyz[3 * i + a]);
     f.triangles.resize(nt);
     for (std::size_t t = 0; t < nt; ++t)
-      for (int c = 0; c < 3; ++c) {
-        const std::int32_t v = idx[3 * t + c];
-        // Every consumer (x3d, render, replay) indexes the frame's vertices
-        // with these: checked here, with or without strain.
-        if (v < 0)
-          fail("/mesh/triangles row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
-               ") holds the negative index " + std::to_string(v));
-        if (static_cast<std::uint64_t>(v) >= nv)
-          fail("/mesh/triangles row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
-               ") holds the index " + std::to_string(v) + ", past the frame's " + std::to_string(nv) + " vertices");
-        f.triangles[t][c] = static_cast<std::uint32_t>(v);
-      }
+      for (int c = 0; c < 3; ++c) f.triangles[t][c] = static_cast<std::uint32_t>(idx[3 * t + c]);
     f.vertex_level = read<std::uint8_t>(record::kMeshVertexLevel, vertex_offset_[k], nv);
-    if (file_has_strain_ && nt > 0) {
-      std::vector<float> strain = read<float>(record::kMeshTriangleStrain, triangle_offset_[k], nt);
-      const std::string dataset = record::kDatasets[record::kMeshTriangleStrain].path;
-      const bool not_computed = std::isnan(strain[0]);
-      for (std::size_t t = 0; t < nt; ++t) {
-        const float e = strain[t];
-        // All NaN: recorded without strain. Anything else must be a real
-        // energy density: finite and >= 0. A value after a first NaN is
-        // named as the mix it is (the value itself may be fine).
-        if (not_computed && !std::isnan(e))
-          fail(dataset + " row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
-               ") holds " + std::to_string(e) + " J/m^3 but row " + std::to_string(triangle_offset_[k]) +
-               " is NaN (recorded without strain): a frame's strain is all NaN or all finite and >= 0");
-        if (std::isnan(e) != not_computed || (!not_computed && (!std::isfinite(e) || e < 0.0f)))
-          fail(dataset + " row " + std::to_string(triangle_offset_[k] + t) + " (frame " + std::to_string(k) +
-               ") holds " + std::to_string(e) + " J/m^3: not a strain energy density (must be finite and >= 0)");
+    // All NaN: recorded without strain (no per-vertex values).
+    if (!strain.empty() && !std::isnan(strain[0])) {
+      try {
+        f.vertex_strain_energy_Pa = vertex_strain_from_triangles(nv, f.triangles, strain);
+      } catch (const X3dInputError& e) {
+        fail("frame " + std::to_string(k) + ": " + e.what());
       }
-      if (!not_computed) {
-        try {
-          f.vertex_strain_energy_Pa = vertex_strain_from_triangles(nv, f.triangles, strain);
-        } catch (const X3dInputError& e) {
-          fail("frame " + std::to_string(k) + ": " + e.what());
-        }
-        // Both: per-vertex for colouring, the recorded per-triangle values
-        // for consumers that send them on (replay), unchanged.
-        f.triangle_strain_energy_J_per_m3 = std::move(strain);
-      }
+      // Both: per-vertex for colouring, the recorded per-triangle values
+      // for consumers that send them on (replay), unchanged.
+      f.triangle_strain_energy_J_per_m3 = std::move(strain);
     }
     return f;
   }

@@ -582,6 +582,50 @@ std::string frame_times_problem(const std::vector<double>& times_s) {
   return {};
 }
 
+std::string mesh_frame_problem(std::uint64_t frame, std::uint64_t vertex_offset, const std::vector<float>& vertices_xyz,
+                               std::uint64_t triangle_offset, const std::vector<std::int32_t>& triangles,
+                               const std::vector<float>& triangle_strain) {
+  const std::uint64_t nv = vertices_xyz.size() / 3, nt = triangles.size() / 3;
+  const std::string in_frame = " (frame " + std::to_string(frame) + ")";
+  for (std::uint64_t i = 0; i < nv; ++i)
+    for (int a = 0; a < 3; ++a)
+      if (const float coordinate = vertices_xyz[3 * i + a]; !std::isfinite(coordinate))
+        return std::string(kDatasets[kMeshVertices].path) + " row " + std::to_string(vertex_offset + i) + in_frame +
+               " holds the coordinate " + std::to_string(coordinate) + ": not a position";
+  for (std::uint64_t t = 0; t < nt; ++t)
+    for (int c = 0; c < 3; ++c) {
+      const std::int32_t v = triangles[3 * t + c];
+      const std::string row =
+          std::string(kDatasets[kMeshTriangles].path) + " row " + std::to_string(triangle_offset + t);
+      if (v < 0) return row + in_frame + " holds the negative index " + std::to_string(v);
+      if (static_cast<std::uint64_t>(v) >= nv)
+        return row + in_frame + " holds the index " + std::to_string(v) + ", past the frame's " + std::to_string(nv) +
+               " vertices";
+    }
+  if (triangle_strain.empty()) return {};
+  const std::string dataset = kDatasets[kMeshTriangleStrain].path;
+  // The session reader refuses a strain column whose length is not the
+  // triangles'; a caller's mismatch must not become a read past the values.
+  if (triangle_strain.size() != nt)
+    return dataset + in_frame + ": " + std::to_string(triangle_strain.size()) + " values for " + std::to_string(nt) +
+           " triangles";
+  const bool not_computed = std::isnan(triangle_strain[0]);
+  for (std::uint64_t t = 0; t < nt; ++t) {
+    const float e = triangle_strain[t];
+    // All NaN: recorded without strain. Anything else must be a real energy
+    // density: finite and >= 0. A value after a first NaN is named as the
+    // mix it is (the value itself may be fine).
+    if (not_computed && !std::isnan(e))
+      return dataset + " row " + std::to_string(triangle_offset + t) + in_frame + " holds " + std::to_string(e) +
+             " J/m^3 but row " + std::to_string(triangle_offset) +
+             " is NaN (recorded without strain): a frame's strain is all NaN or all finite and >= 0";
+    if (!not_computed && (!std::isfinite(e) || e < 0.0f))
+      return dataset + " row " + std::to_string(triangle_offset + t) + in_frame + " holds " + std::to_string(e) +
+             " J/m^3: not a strain energy density (must be finite and >= 0)";
+  }
+  return {};
+}
+
 namespace {
 
 template <typename Row>
@@ -742,9 +786,13 @@ SessionListing list_sessions(const std::string& dir) {
   SessionListing listing;
   listing.dir = dir;
   std::error_code ec;
+  // A directory that cannot be reached (EACCES on the way, a symbolic link
+  // loop) has no type: its error says why, not "not a directory".
   if (const fs::file_status st = fs::status(dir, ec); !fs::is_directory(st))
-    throw RecordError("cannot list sessions in '" + dir +
-                      "': " + (st.type() == fs::file_type::not_found ? "no such directory" : "not a directory"));
+    throw RecordError("cannot list sessions in '" + dir + "': " +
+                      (st.type() == fs::file_type::not_found ? "no such directory"
+                       : ec                                  ? ec.message()
+                                                             : "not a directory"));
   std::vector<fs::path> candidates;
   fs::directory_iterator it(dir, ec), end;
   if (ec) throw RecordError("cannot list sessions in '" + dir + "': " + ec.message());
@@ -931,6 +979,18 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   // The same rule as every other reader of frames (the frame source, replay):
   // ParaView steps through the grids by these times.
   if (const std::string problem = frame_times_problem(times); !problem.empty()) bad_file(h5_path, problem);
+  // And every frame's data by the rule the frame source (x3d, render,
+  // replay) applies: ParaView indexes the vertices with the stored triangles
+  // (VTK does not bounds-check) and draws the stored coordinates and strain.
+  // One frame in memory at a time.
+  for (std::uint64_t f = 0; f < frames; ++f) {
+    const auto xyz = read_column<float>(file.get(), h5_path, kMeshVertices, voff[f], vcnt[f]);
+    const auto idx = read_column<std::int32_t>(file.get(), h5_path, kMeshTriangles, toff[f], tcnt[f]);
+    const auto strain = info.has_strain ? read_column<float>(file.get(), h5_path, kMeshTriangleStrain, toff[f], tcnt[f])
+                                        : std::vector<float>{};
+    if (const std::string problem = mesh_frame_problem(f, voff[f], xyz, toff[f], idx, strain); !problem.empty())
+      bad_file(h5_path, problem);
+  }
 
   namespace fs = std::filesystem;
   XdmfReport report;
@@ -942,7 +1002,22 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   const fs::path out_dir = fs::absolute(report.out_path, ec).parent_path();
   fs::path h5_ref = fs::relative(fs::absolute(h5_path, ec), out_dir, ec);
   if (ec || h5_ref.empty()) h5_ref = fs::absolute(h5_path, ec);
-  const std::string ref = util::escape_xml(h5_ref.string());
+  // XDMF 3 reads a Format="HDF" DataItem as FILE:DATASET, FILE up to the
+  // first ':' (one in a directory too), splits a reference on '|', and
+  // ParaView takes the XML as UTF-8 (escape_xml would put U+FFFD for a byte
+  // that is not): a path it cannot name gave a sidecar that does not open.
+  const std::string ref_text = h5_ref.string();
+  std::string ref_problem = util::why_not_clean_text(ref_text);
+  if (!ref_problem.empty())
+    ref_problem = "is not UTF-8 text or holds a control character (" + ref_problem + ")";
+  else if (ref_text.find(':') != std::string::npos)
+    ref_problem = "contains ':'";
+  else if (ref_text.find('|') != std::string::npos)
+    ref_problem = "contains '|'";
+  if (!ref_problem.empty())
+    bad_file(h5_path, "the session's path as the sidecar would reference it ('" + shown(ref_text) + "') " +
+                          ref_problem + ", which an XDMF data reference cannot name; rename it");
+  const std::string ref = util::escape_xml(ref_text);
 
   // Inner DataItems name the whole dataset with its full shape (XDMF
   // readers check it against the file).

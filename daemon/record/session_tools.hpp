@@ -134,6 +134,20 @@ inline constexpr double kMaxSessionTime_s = 1e9;
 // replay, xdmf): replay paces by them, ParaView steps through them.
 std::string frame_times_problem(const std::vector<double>& times_s);
 
+// What is wrong with the rows of mesh frame `frame`, or "" when nothing is:
+// every coordinate finite, every triangle index within the frame's vertices,
+// and the strain all NaN (recorded without it) or every value finite and
+// >= 0 (a mix is named as one). The one rule of every reader of a frame's
+// data (the frame source, so x3d, render and replay; xdmf): they index the
+// frame's vertices with these (VTK does not bounds-check) and draw or
+// publish the values. `vertices_xyz` holds 3 floats a vertex (rows from
+// `vertex_offset`), `triangles` 3 indices a triangle and `triangle_strain`
+// one value a triangle, or none when the file stores no strain (rows from
+// `triangle_offset`); the message names the dataset, row and frame.
+std::string mesh_frame_problem(std::uint64_t frame, std::uint64_t vertex_offset, const std::vector<float>& vertices_xyz,
+                               std::uint64_t triangle_offset, const std::vector<std::int32_t>& triangles,
+                               const std::vector<float>& triangle_strain);
+
 // Every column of /haptic and /sim (docs/session-format.md), complete rows
 // only, session times finite and non-decreasing. Held in memory (about 100
 // bytes per haptic tick).

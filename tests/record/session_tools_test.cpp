@@ -8,13 +8,16 @@
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
 #include <sstream>
+#include <system_error>
 
+#include <grp.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -203,6 +206,79 @@ TEST(SessionTools, ListShowsEachSessionsStateAndTheFilesThatAreNotSessions) {
   const auto missing = run(tissue() + " session list " + quote(dir / "missing"), dir);
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.err.find(dir / "missing"), std::string::npos) << missing.err;
+}
+
+constexpr const char* kCannotDropRoot = "cannot drop root";
+
+// list_sessions(d)'s error ("" when it lists d) as a user permissions apply
+// to: root bypasses them, so as root it runs in a child process that has
+// become nobody (kCannotDropRoot when that is not allowed).
+std::string list_error_as_unprivileged_user(const std::string& d) {
+  const auto error_of = [&d]() -> std::string {
+    try {
+      list_sessions(d);
+      return "";
+    } catch (const RecordError& e) {
+      return e.what();
+    }
+  };
+  if (::geteuid() != 0) return error_of();
+  int fds[2];
+  if (::pipe(fds) != 0) return std::string("pipe: ") + std::strerror(errno);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::close(fds[0]);
+    constexpr uid_t kNobody = 65534;
+    const std::string what =
+        ::setgroups(0, nullptr) == 0 && ::setgid(kNobody) == 0 && ::setuid(kNobody) == 0 ? error_of() : kCannotDropRoot;
+    const bool sent = ::write(fds[1], what.data(), what.size()) == static_cast<ssize_t>(what.size());
+    ::_exit(sent ? 0 : 1);
+  }
+  ::close(fds[1]);
+  std::string what;
+  char buf[512];
+  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) what.append(buf, static_cast<std::size_t>(n));
+  ::close(fds[0]);
+  int status = 0;
+  if (pid < 0 || ::waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    return "the unprivileged child failed: " + what;
+  return what;
+}
+
+// A directory `list` cannot reach is refused with the reason, not called
+// "not a directory" (found by the review of the session tools): a symbolic
+// link loop (ELOOP), and a parent without search permission (EACCES).
+TEST(SessionTools, ListOfADirectoryItCannotReachSaysWhy) {
+  TempDir dir;
+  const std::string loop = dir / "loop";
+  std::filesystem::create_directory_symlink(dir / "loop", loop);
+  const auto expect_refused = [](const std::string& d, const std::string& reason) {
+    try {
+      list_sessions(d);
+      ADD_FAILURE() << "listed " << d;
+    } catch (const RecordError& e) {
+      EXPECT_NE(std::string(e.what()).find("cannot list sessions in '" + d + "': " + reason), std::string::npos)
+          << e.what();
+    }
+  };
+  expect_refused(loop, std::error_code(ELOOP, std::generic_category()).message());
+  // Still: a file is not a directory, and a missing one is missing.
+  std::ofstream(dir / "file") << "x\n";
+  expect_refused(dir / "file", "not a directory");
+  expect_refused(dir / "missing", "no such directory");
+  expect_refused(dir / "file/sub", "no such directory");  // ENOTDIR: nothing there
+
+  // EACCES: a parent without search permission.
+  const std::string closed = dir / "closed";
+  std::filesystem::create_directories(closed + "/state");
+  ASSERT_EQ(::chmod(closed.c_str(), 0), 0);
+  const std::string what = list_error_as_unprivileged_user(closed + "/state");
+  ::chmod(closed.c_str(), 0700);  // so TempDir can remove it
+  if (what == kCannotDropRoot) GTEST_SKIP() << "running as root without the right to become another user";
+  EXPECT_NE(what.find("cannot list sessions in '" + closed +
+                      "/state': " + std::error_code(EACCES, std::generic_category()).message()),
+            std::string::npos)
+      << what;
 }
 
 // Lines of `text` that are not clean text (a control character, or bytes
@@ -1135,6 +1211,81 @@ TEST(SessionTools, XdmfRefusesFrameTimesThatAreNotFiniteOrGoBack) {
   }
 }
 
+// Overwrites element (row, column) of a closed session's N x 3 or 1-D
+// dataset (column 0) with *value, of HDF5 memory type `type`.
+void overwrite_element(const std::string& path, const char* dataset, hsize_t row, hsize_t column, hid_t type,
+                       const void* value) {
+  const hid_t file = testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << dataset;
+  const hid_t space = H5Dget_space(ds);
+  const int rank = H5Sget_simple_extent_ndims(space);
+  const hsize_t start[2] = {row, column}, one[2] = {1, 1};
+  H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, one, nullptr);
+  const hid_t mem = H5Screate_simple(rank, one, nullptr);
+  EXPECT_GE(H5Dwrite(ds, type, mem, space, H5P_DEFAULT, value), 0);
+  H5Sclose(mem);
+  H5Sclose(space);
+  H5Dclose(ds);
+  H5Fclose(file);
+}
+
+// `session xdmf` checks every frame's data as the frame source (x3d, render,
+// replay) does: found by the review of the session tools, it wrote a sidecar
+// over an index past the frame's vertices (VTK does not bounds-check) or a
+// NaN coordinate. Refused naming the file, dataset and row; nothing written.
+TEST(SessionTools, XdmfRefusesFrameDataEveryOtherFrameReaderRefuses) {
+  TempDir dir;
+  // Rows where frame 1 starts (frame 0 comes first in the flat datasets).
+  const std::uint64_t v1 = testing::test_frame(0).vertices_m.size();
+  const std::uint64_t t1 = testing::test_frame(0).triangles.size();
+  const std::int32_t far_index = 1000000;
+  const float nan = std::numeric_limits<float>::quiet_NaN(), energy = 5.0f;
+  struct Case {
+    const char* name;
+    DatasetId id;
+    hsize_t row, column;
+    hid_t type;
+    const void* value;
+    std::string expected;
+  };
+  const Case cases[] = {
+      {"index", kMeshTriangles, 0, 0, H5T_NATIVE_INT32, &far_index,
+       "/mesh/triangles row 0 (frame 0) holds the index 1000000, past the frame's " + std::to_string(v1) + " vertices"},
+      {"coordinate", kMeshVertices, v1 + 1, 2, H5T_NATIVE_FLOAT, &nan,
+       "/mesh/vertices_m row " + std::to_string(v1 + 1) + " (frame 1) holds the coordinate nan"},
+      // Frame 1 "recorded without strain" but for one value.
+      {"strain", kMeshTriangleStrain, t1, 0, H5T_NATIVE_FLOAT, &nan,
+       "row " + std::to_string(t1 + 1) + " (frame 1) holds"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir / (std::string(c.name) + ".h5");
+    write_small_session(path, 3);
+    if (c.id == kMeshTriangleStrain) {  // every value of frame 1 NaN but the one after the first
+      for (std::uint64_t t = t1; t < t1 + testing::test_frame(1).triangles.size(); ++t)
+        overwrite_element(path, kDatasets[c.id].path, t, 0, c.type, t == t1 + 1 ? &energy : c.value);
+    } else {
+      overwrite_element(path, kDatasets[c.id].path, c.row, c.column, c.type, c.value);
+    }
+    try {
+      const XdmfReport report = write_xdmf(path, "");
+      ADD_FAILURE() << "wrote " << report.out_path << " (" << report.frames << " grids)";
+    } catch (const RecordError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("'" + path + "': "), std::string::npos) << what;
+      EXPECT_NE(what.find(c.expected), std::string::npos) << what;
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / (std::string(c.name) + ".xdmf")));
+  }
+  // The command line too: exit 1, the reason on stderr, no sidecar.
+  const auto cli = run(tissue() + " session xdmf " + quote(dir / "index.h5"), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_NE(cli.err.find("/mesh/triangles row 0 (frame 0) holds the index 1000000"), std::string::npos) << cli.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "index.xdmf"));
+}
+
 // Frame times need only be non-decreasing: two frames of the same instant
 // are two grids at one time, not an error.
 TEST(SessionTools, XdmfTakesTwoFramesOfTheSameTime) {
@@ -1281,6 +1432,56 @@ TEST(SessionTools, XdmfOfASessionNamedWithDoubleHyphensIsWellFormed) {
   }
   EXPECT_GT(comments, 0u);
   EXPECT_NE(xml.find("run--2.h5:/mesh/vertices_m"), std::string::npos) << "the DataItems still name the file";
+}
+
+// XDMF 3 takes a data reference's file name up to its first ':' and splits
+// references on '|', and the XML is UTF-8: found by the review of the
+// session tools, a session path it cannot name gave a sidecar ParaView could
+// not open (exit 0). Refused naming the file and the reason; no sidecar.
+TEST(SessionTools, XdmfOfASessionPathAReferenceCannotNameIsRefused) {
+  TempDir dir;
+  const struct {
+    std::string name, expected;
+  } cases[] = {
+      {"a:b.h5", "contains ':'"},
+      {"a|b.h5", "contains '|'"},
+      {"caf\xe9.h5", "is not UTF-8 text"},
+      {"line\nbreak.h5", "holds a control character"},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir / c.name;
+    write_small_session(path, 2);
+    const std::string sidecar = std::filesystem::path(path).replace_extension(".xdmf").string();
+    try {
+      write_xdmf(path, "");
+      ADD_FAILURE() << "wrote a sidecar referencing " << c.name;
+    } catch (const RecordError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("'" + path + "': "), std::string::npos) << what;
+      EXPECT_NE(what.find(c.expected), std::string::npos) << what;
+      EXPECT_NE(what.find("which an XDMF data reference cannot name; rename it"), std::string::npos) << what;
+    }
+    EXPECT_FALSE(std::filesystem::exists(sidecar));
+  }
+  // A ':' in a directory the reference passes through is refused too; one
+  // the relative reference does not name is no problem.
+  std::filesystem::create_directories(dir / "x:y");
+  const std::string inside = dir / "x:y/s.h5";
+  write_small_session(inside, 2);
+  EXPECT_NO_THROW(write_xdmf(inside, ""));
+  EXPECT_TRUE(std::filesystem::exists(dir / "x:y/s.xdmf"));
+  try {
+    write_xdmf(inside, dir / "s.xdmf");
+    ADD_FAILURE() << "wrote a sidecar referencing x:y/s.h5";
+  } catch (const RecordError& e) {
+    EXPECT_NE(std::string(e.what()).find("('x:y/s.h5') contains ':'"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "s.xdmf"));
+  // The command line: exit 1, the reason on stderr.
+  const auto cli = run(tissue() + " session xdmf " + quote(dir / "a:b.h5"), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_NE(cli.err.find("contains ':'"), std::string::npos) << cli.err;
 }
 
 // -o naming the session itself would replace the recording with its sidecar.
