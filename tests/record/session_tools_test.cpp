@@ -752,16 +752,19 @@ TEST(SessionTools, CorruptMetadataInACrashedSessionIsAnErrorNotAHang) {
   }
 }
 
+// Row `row` of frame-index dataset `id` overwritten with `value`; what the
+// tools must then say.
+struct Damage {
+  DatasetId id;
+  std::uint64_t row, value;
+  const char* says;
+};
+
 // In a closed file every frame's index row was written with its data: a
 // broken one is damage every tool reports (naming the dataset and row),
 // not a shorter session (10 of 46 frames, exit 0).
 TEST(SessionTools, ABrokenFrameIndexInAClosedFileIsAnErrorNamingTheRow) {
   TempDir dir;
-  struct Damage {
-    DatasetId id;
-    std::uint64_t row, value;
-    const char* says;
-  };
   for (const Damage d :
        {Damage{kMeshVertexOffset, 2, std::uint64_t{1} << 40, "/mesh/vertex_offset[2] is 1099511627776"},
         Damage{kMeshTriangleOffset, 3, 1, "/mesh/triangle_offset[3] is 1, expected"},
@@ -813,11 +816,6 @@ void overwrite_u64_in_crashed(const std::string& path, DatasetId id, std::uint64
 // writing: the file keeps every byte.
 TEST(SessionTools, ABrokenFrameIndexWithFramesAfterItInACrashedFileIsRefusedAndKept) {
   TempDir dir;
-  struct Damage {
-    DatasetId id;
-    std::uint64_t row, value;
-    const char* says;
-  };
   for (const Damage d :
        {Damage{kMeshTriangleOffset, 2, 7, "/mesh/triangle_offset[2] is 7, expected"},
         Damage{kMeshVertexOffset, 2, std::uint64_t{1} << 40, "/mesh/vertex_offset[2] is 1099511627776, expected"},
