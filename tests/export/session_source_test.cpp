@@ -77,24 +77,6 @@ void replace_dataset(const std::string& path, const char* dataset, hid_t file_ty
   H5Fclose(file);
 }
 
-// Overwrites element [row] (1-D) or [row][column] (2-D) of a dataset of a closed session.
-void poke(const std::string& path, const char* dataset, hsize_t row, hsize_t column, hid_t mem_type,
-          const void* value) {
-  const hid_t file = rt::open_for_edit(path);
-  ASSERT_GE(file, 0) << path;
-  const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
-  ASSERT_GE(ds, 0) << dataset;
-  const hid_t space = H5Dget_space(ds);
-  const hsize_t start[2] = {row, column}, count[2] = {1, 1};
-  const hid_t mem = H5Screate_simple(1, count, nullptr);
-  EXPECT_GE(H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, count, nullptr), 0);
-  EXPECT_GE(H5Dwrite(ds, mem_type, mem, space, H5P_DEFAULT, value), 0) << dataset;
-  H5Sclose(mem);
-  H5Sclose(space);
-  H5Dclose(ds);
-  H5Fclose(file);
-}
-
 // ---------------------------------------------------------------- files
 
 // x3d printed the accumulated 1.4999999999999456 where render printed 1.5.
@@ -247,14 +229,14 @@ TEST(SessionSource, ADamagedFrameIndexInAClosedFileIsAnErrorNamingTheRow) {
   const std::string huge = dir / "huge.h5";
   write_frames(huge, 4);
   const std::uint64_t count = std::uint64_t{1} << 40;  // a frame that would run far past the data
-  poke(huge, kDatasets[record::kMeshVertexCount].path, 2, 0, H5T_NATIVE_UINT64, &count);
+  rt::overwrite_element(huge, kDatasets[record::kMeshVertexCount].path, 2, 0, H5T_NATIVE_UINT64, &count);
   expect_source_error([&] { open_session_source(huge); },
                       {"'" + huge + "': ", "/mesh/vertex_count[2] is " + std::to_string(count) + ": past the end"});
 
   const std::string overlap = dir / "overlap.h5";
   write_frames(overlap, 4);
   const std::uint64_t zero = 0;  // frame 1 claims frame 0's triangles
-  poke(overlap, kDatasets[record::kMeshTriangleOffset].path, 1, 0, H5T_NATIVE_UINT64, &zero);
+  rt::overwrite_element(overlap, kDatasets[record::kMeshTriangleOffset].path, 1, 0, H5T_NATIVE_UINT64, &zero);
   expect_source_error([&] { open_session_source(overlap); },
                       {"'" + overlap + "': ", "/mesh/triangle_offset[1] is 0, expected"});
 }
@@ -275,7 +257,7 @@ TEST(SessionSource, ATriangleIndexOutsideItsFrameIsAnErrorNamingTheFrame) {
     SCOPED_TRACE(std::string(c.strain ? "with" : "without") + " strain, index " + std::to_string(c.index));
     const std::string path =
         write_frames(dir / ((c.strain ? "s" : "n") + std::to_string(c.index) + ".h5"), 3, c.strain);
-    poke(path, triangles, row, 1, H5T_NATIVE_INT32, &c.index);
+    rt::overwrite_element(path, triangles, row, 1, H5T_NATIVE_INT32, &c.index);
     auto source = open_session_source(path);
     EXPECT_NO_THROW(source->read_frame(0));
     EXPECT_NO_THROW(source->read_frame(2));
@@ -292,7 +274,8 @@ TEST(SessionSource, ANonFiniteStoredCoordinateIsAnErrorNamingTheDataset) {
     SCOPED_TRACE(strain ? "with strain" : "without strain");
     const std::string path = write_frames(dir / (strain ? "s.h5" : "n.h5"), 3, strain);
     const float nan = std::numeric_limits<float>::quiet_NaN();
-    poke(path, kDatasets[record::kMeshVertices].path, 1, 2, H5T_NATIVE_FLOAT, &nan);  // frame 0, vertex 1, z
+    rt::overwrite_element(path, kDatasets[record::kMeshVertices].path, 1, 2, H5T_NATIVE_FLOAT,
+                          &nan);  // frame 0, vertex 1, z
     auto source = open_session_source(path);
     expect_source_error([&] { source->read_frame(0); }, {"'" + path + "': ", kDatasets[record::kMeshVertices].path});
     EXPECT_NO_THROW(source->read_frame(1));

@@ -398,11 +398,8 @@ void make_version_1(const std::string& path) {
   H5Fclose(file);
 }
 
-namespace {
-
-template <typename T>
-void overwrite(const std::string& path, const char* dataset, std::uint64_t row, hid_t mem_type, T value,
-               std::uint64_t column = 0) {
+void overwrite_element(const std::string& path, const char* dataset, std::uint64_t row, std::uint64_t column,
+                       hid_t mem_type, const void* value) {
   const hid_t file = open_for_edit(path);
   ASSERT_GE(file, 0) << path;
   const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
@@ -413,11 +410,19 @@ void overwrite(const std::string& path, const char* dataset, std::uint64_t row, 
   const hsize_t start[2] = {row, column}, count[2] = {1, 1};
   const hid_t mem = H5Screate_simple(1, count, nullptr);
   EXPECT_GE(H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, count, nullptr), 0);
-  EXPECT_GE(H5Dwrite(ds, mem_type, mem, space, H5P_DEFAULT, &value), 0);
+  EXPECT_GE(H5Dwrite(ds, mem_type, mem, space, H5P_DEFAULT, value), 0) << dataset;
   H5Sclose(mem);
   H5Sclose(space);
   H5Dclose(ds);
   H5Fclose(file);
+}
+
+namespace {
+
+template <typename T>
+void overwrite(const std::string& path, const char* dataset, std::uint64_t row, hid_t mem_type, T value,
+               std::uint64_t column = 0) {
+  overwrite_element(path, dataset, row, column, mem_type, &value);
 }
 
 }  // namespace

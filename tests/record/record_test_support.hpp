@@ -102,6 +102,10 @@ hid_t open_for_edit(const std::string& path);
 // Turns a closed session into what the version-1 writer made: no
 // /mesh/triangle_strain_energy_J_per_m3, format_version 1. Fails the test on error.
 void make_version_1(const std::string& path);
+// Overwrites element [row] (1-D) or [row][column] (2-D) of a dataset of a
+// closed session with *value, of HDF5 memory type `mem_type`.
+void overwrite_element(const std::string& path, const char* dataset, std::uint64_t row, std::uint64_t column,
+                       hid_t mem_type, const void* value);
 // Overwrites row `row` of a 1-D float32 / float64 dataset of a closed session.
 void overwrite_f32(const std::string& path, const char* dataset, std::uint64_t row, float value);
 void overwrite_f64(const std::string& path, const char* dataset, std::uint64_t row, double value);

@@ -1209,26 +1209,6 @@ TEST(SessionTools, XdmfRefusesFrameTimesThatAreNotFiniteOrGoBack) {
   }
 }
 
-// Overwrites element (row, column) of a closed session's N x 3 or 1-D
-// dataset (column 0) with *value, of HDF5 memory type `type`.
-void overwrite_element(const std::string& path, const char* dataset, hsize_t row, hsize_t column, hid_t type,
-                       const void* value) {
-  const hid_t file = testing::open_for_edit(path);
-  ASSERT_GE(file, 0) << path;
-  const hid_t ds = H5Dopen2(file, dataset, H5P_DEFAULT);
-  ASSERT_GE(ds, 0) << dataset;
-  const hid_t space = H5Dget_space(ds);
-  const int rank = H5Sget_simple_extent_ndims(space);
-  const hsize_t start[2] = {row, column}, one[2] = {1, 1};
-  H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, one, nullptr);
-  const hid_t mem = H5Screate_simple(rank, one, nullptr);
-  EXPECT_GE(H5Dwrite(ds, type, mem, space, H5P_DEFAULT, value), 0);
-  H5Sclose(mem);
-  H5Sclose(space);
-  H5Dclose(ds);
-  H5Fclose(file);
-}
-
 // `session xdmf` checks every frame's data as the frame source (x3d, render,
 // replay) does: found by the review of the session tools, it wrote a sidecar
 // over an index past the frame's vertices (VTK does not bounds-check) or a
@@ -1263,9 +1243,9 @@ TEST(SessionTools, XdmfRefusesFrameDataEveryOtherFrameReaderRefuses) {
     write_small_session(path, 3);
     if (c.id == kMeshTriangleStrain) {  // every value of frame 1 NaN but the one after the first
       for (std::uint64_t t = t1; t < t1 + testing::test_frame(1).triangles.size(); ++t)
-        overwrite_element(path, kDatasets[c.id].path, t, 0, c.type, t == t1 + 1 ? &energy : c.value);
+        testing::overwrite_element(path, kDatasets[c.id].path, t, 0, c.type, t == t1 + 1 ? &energy : c.value);
     } else {
-      overwrite_element(path, kDatasets[c.id].path, c.row, c.column, c.type, c.value);
+      testing::overwrite_element(path, kDatasets[c.id].path, c.row, c.column, c.type, c.value);
     }
     try {
       const XdmfReport report = write_xdmf(path, "");
