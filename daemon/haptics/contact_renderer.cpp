@@ -195,18 +195,56 @@ Vec3 ContactRenderer::surface_velocity(const Closest& c) const noexcept {
          c.weight[2] * model_->vertex_velocity_m_per_s[tri[2]];
 }
 
-bool ContactRenderer::compliant_proxy(const Vec3& device_m, const Vec3& c, const Vec3& n,
-                                      Vec3* proxy_m) const noexcept {
+namespace {
+
+// The object's stiffness along the unit normal n with its sideways motion
+// free (the contact is frictionless, so the material under the tool slides
+// until it carries no sideways force): the Schur complement
+// k_nn - k_tn^T K_tt^+ k_tn of K in the frame (n, t1, t2). For a PSD K it
+// lies in [0, k_nn] also when K_tt is (nearly) singular, since each term
+// k_tn_i^2 / lambda_i is at most k_nn; rounding is clamped back into it.
+double normal_stiffness_N_per_m(const Mat3& K, const Vec3& n) noexcept {
+  const Vec3 t1 = n.unitOrthogonal();
+  const Vec3 t2 = n.cross(t1);
+  const Vec3 Kn = K * n;
+  const double k_nn = n.dot(Kn);
+  if (!(std::isfinite(k_nn) && k_nn > 0.0)) return 0.0;
+  Eigen::Matrix2d K_tt;
+  K_tt << t1.dot(K * t1), t1.dot(K * t2), t2.dot(K * t1), t2.dot(K * t2);
+  const Eigen::Vector2d k_tn(t1.dot(Kn), t2.dot(Kn));
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen;
+  eigen.computeDirect(K_tt);
+  double coupled = 0.0;
+  for (int i = 0; i < 2; ++i) {
+    const double lambda = eigen.eigenvalues()[i];
+    const double along = eigen.eigenvectors().col(i).dot(k_tn);
+    if (lambda > 1e-12 * k_nn) coupled += along * along / lambda;  // a null direction couples nothing
+  }
+  const double k = k_nn - coupled;
+  return std::isfinite(k) ? std::clamp(k, 0.0, k_nn) : 0.0;
+}
+
+}  // namespace
+
+bool ContactRenderer::compliant_proxy(const Vec3& device_m, const Vec3& n, Vec3* proxy_m) const noexcept {
   if (!model_->in_contact) return false;
   const double k_v = params_.coupling_stiffness_N_per_m;
-  const Mat3 tangential = Mat3::Identity() - n * n.transpose();
-  const Vec3 x0 = model_->position_ref_m + tangential * (c - model_->position_ref_m);
-  const Mat3& K = contact_stiffness_N_per_m_;
-  const Mat3 A = k_v * Mat3::Identity() + K;  // SPD: k_v > 0, K PSD
-  const Vec3 p = A.inverse() * (k_v * device_m + K * x0 - model_->force_ref_N);
-  const Vec3 force_on_object_N = k_v * (device_m - p);
-  if (!(p.allFinite() && n.dot(force_on_object_N) < 0.0)) return false;  // must push into the object (n is outward)
-  *proxy_m = p;
+  // Along n only (frictionless): heights above the patch point x0, the
+  // reference force's normal part f0_n (< 0 when the sim pushes the object
+  // in) and the object's normal stiffness k. x0 slides with the contact point
+  // along the surface, which leaves its height unchanged.
+  const double f0_n = n.dot(model_->force_ref_N);
+  double k = normal_stiffness_N_per_m(contact_stiffness_N_per_m_, n);
+  // No softer than f0 / kMaxHeldHeight_m, so the force reaches zero within
+  // that height (and the contact is let go gradually, not in one step there).
+  if (f0_n < 0.0) k = std::max(k, std::min(-f0_n / kMaxHeldHeight_m, params_.max_stiffness_N_per_m));
+  const double h_m = n.dot(device_m - model_->position_ref_m);
+  // The surface under the tool settles at height s where the coupling and
+  // the object balance: k_v (h - s) = f0_n + k s.
+  const double s_m = (k_v * h_m - f0_n) / (k_v + k);
+  const double push_N = k_v * (h_m - s_m);                  // n . (force on the object)
+  if (!(std::isfinite(s_m) && push_N < 0.0)) return false;  // must push into the object (n is outward)
+  *proxy_m = device_m + (s_m - h_m) * n;
   return true;
 }
 
@@ -275,8 +313,8 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
       // inside it feels no sudden force.
       const double h_m = device_height_m();
       Vec3 unused_proxy_m;
-      in_reach = h_m >= 0.0 && h_m <= kMaxHeldHeight_m &&
-                 compliant_proxy(device_m, nearest.point, pseudo_normal(nearest), &unused_proxy_m);
+      in_reach =
+          h_m >= 0.0 && h_m <= kMaxHeldHeight_m && compliant_proxy(device_m, pseudo_normal(nearest), &unused_proxy_m);
       if (in_reach && clear_) {
         touching_ = true;
         reference_m = nearest.point;
@@ -301,7 +339,7 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
       touching_ = false;  // a non-finite point must not become the proxy
     } else {
       n = pseudo_normal(c);
-      compliant = compliant_proxy(device_m, c.point, n, &compliant_proxy_m);
+      compliant = compliant_proxy(device_m, n, &compliant_proxy_m);
       // Back outside the patch. A deformed object still pushing holds the
       // contact until its force reaches zero (top of the header), so the
       // force does not drop by k_v f0 / (k_v + k) at the patch.

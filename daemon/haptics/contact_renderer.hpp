@@ -23,34 +23,38 @@
 //
 // Deformable object (LocalModel::in_contact): the patch is the surface as the
 // sim last left it under force_ref; pushing harder displaces the contact point
-// per the linearisation f(x) = F0 + K_c (x - x0) (f: force on the object). The
-// proxy is the massless point between the coupling spring and the object, so
-// it settles where the two forces balance:
-//       k_v (x_dev - p) = F0 + K_c (p - x0')
-//   <=> (k_v I + K_c) p = k_v x_dev + K_c x0' - F0,
-// i.e. the coupling and the object's contact stiffness act in series (pressing
-// a flat patch along its normal with K_c = k I gives k_v k / (k_v + k)).
-// Frictionless sliding: x0' = x0 + (I - n n^T)(c - x0), the reference point
-// slides with the geometric contact point c along the surface (n = contact
-// normal), so sliding sideways does not drag the node (the sim re-anchors x0
-// every step anyway). The contact is unilateral: if the solved proxy would
-// PULL on the object (n . f >= 0, n outward), the object is not being pushed
+// per the linearisation f(x) = F0 + K_c (x - x0) (f: force on the object).
+// The contact is frictionless, so the tool pushes along the contact normal n
+// only and the material under it slides sideways freely (until it carries no
+// sideways force): the object resists along n with
+//       k = k_nn - k_tn^T K_tt^+ k_tn,
+// K_c's normal stiffness with its sideways block condensed out (n, t1, t2
+// frame). A series solve with the whole K_c pushed the hand sideways where
+// K_c couples normal and sideways (an anisotropic lattice's compliance: the
+// 6-tet split is not symmetric), and that part dropped in one tick at the
+// release (0.108 N for K_c = [[300,0,200],[0,300,0],[200,0,900]] N/m,
+// f0 = 0.8 N, k_v = 400 N/m). The proxy is the massless point between the
+// coupling spring and the object, at height s above x0 where the two balance:
+//       k_v (h - s) = f0_n + k s,   h = n . (x_dev - x0),  f0_n = n . F0,
+// i.e. the coupling and the object act in series (pressing a flat patch with
+// K_c = k I gives k_v k / (k_v + k)); the proxy is x_dev + (s - h) n. x0
+// slides with the geometric contact point along the surface (the sim
+// re-anchors it every step anyway). The contact is unilateral: if the solve
+// would PULL on the object (k_v (h - s) >= 0), the object is not being pushed
 // and the proxy falls back to the surface point c.
 //
 // Release from a deformed patch: under F0 the patch is pressed in, and the
-// object's own surface (where f = 0) lies about K_c^-1 F0 above it; there the
+// object's own surface (where f = 0) lies -f0_n / k above it; there the
 // solve still pushes k_v f0 / (k_v + k) with the device on the patch (f0 =
-// -n . F0). So the contact is held above the patch for as long as the solve
-// pushes (n . f < 0) and ends where that force reaches zero; the normal
-// force is continuous through the patch and at the release. A sideways part
-// is not: where K_c couples the normal and sideways directions (an
-// anisotropic lattice's compliance), f has a tangential part when its normal
-// part reaches zero, and that part still drops at the release (a
-// known gap, in the notes). A free device that was
-// clear of that region at the last tick and is inside it now meets the
-// object there, so the way back in is the same. Both are limited to
-// kMaxHeldHeight_m above the patch: a K_c near zero (an eigenvalue clamped
-// to 0, an object with no fixed node) would put that surface metres away.
+// -f0_n). So the contact is held above the patch for as long as the solve
+// pushes and ends where that force reaches zero: the force is continuous
+// through the patch and at the release. A free device that was clear of that
+// region at the last tick and is inside it now meets the object there, so
+// the way back in is the same. k is at least f0 / kMaxHeldHeight_m, so that
+// height is at most kMaxHeldHeight_m: a K_c near zero (an eigenvalue clamped
+// to 0, an object with no fixed node) would put it metres away, and a
+// contact let go at a fixed height instead dropped the whole force there
+// (0.5 N for f0 = 0.5 N).
 //
 // Force on the device (scene frame, before safety):
 //       F = k_v (p - x_dev) - b_v (n . (v_dev - v_surface)) n
@@ -97,9 +101,9 @@ bool local_model_is_valid(const LocalModel& model) noexcept;
 class ContactRenderer {
  public:
   // A deformed patch holds the contact at most this far above it (see the
-  // top of the file): an object as soft as 150 N/m, pressed with the default
-  // 3 N force limit, is still let go where its force reaches zero; a K_c
-  // near zero would hold the contact metres above the patch.
+  // top of the file): the object is felt at least as stiff as f0 / this
+  // (150 N/m under the default 3 N force limit), so its force reaches zero
+  // within it; a K_c near zero would hold the contact metres above the patch.
   static constexpr double kMaxHeldHeight_m = 0.02;
 
   explicit ContactRenderer(const RenderParams& params = {});
@@ -135,10 +139,10 @@ class ContactRenderer {
   Closest closest_facing(const Vec3& device_m, const Vec3& reference_m, bool filter) const noexcept;
   Vec3 pseudo_normal(const Closest& c) const noexcept;
   Vec3 surface_velocity(const Closest& c) const noexcept;
-  // The deformable proxy (top of the file) for contact point c, normal n:
-  // true, with *proxy_m, when the model is in contact and the solve pushes
-  // into the object.
-  bool compliant_proxy(const Vec3& device_m, const Vec3& c, const Vec3& n, Vec3* proxy_m) const noexcept;
+  // The deformable proxy (top of the file) for contact normal n: true, with
+  // *proxy_m, when the model is in contact and the solve pushes into the
+  // object.
+  bool compliant_proxy(const Vec3& device_m, const Vec3& n, Vec3* proxy_m) const noexcept;
 
   RenderParams params_;
   const LocalModel* model_ = nullptr;

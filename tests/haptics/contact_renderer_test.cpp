@@ -239,6 +239,56 @@ TEST(ContactRenderer, DeformableContactForceIsContinuousAcrossThePatchAndEndsWhe
   EXPECT_TRUE(r.touching());
 }
 
+// Found by the review of the haptic proxy path (left open then, fixed the
+// next session). The contact is frictionless, yet the series solve with a
+// K_c that couples the normal and a sideways direction (an anisotropic
+// lattice's compliance: the 6-tet split is not symmetric) pushed the hand
+// sideways, and that sideways part was still there where the normal part
+// reached zero, so it dropped in one tick at the release and came back as
+// suddenly on re-entry. Frictionless means the material under the tool slides
+// freely: the object resists along the normal with the stiffness left when
+// its sideways motion is free (the Schur complement of K_c's sideways block).
+TEST(ContactRenderer, AnAnisotropicObjectPushesAlongTheNormalAndLetsGoWithoutAStep) {
+  const double f0_N = 0.8;
+  LocalModel patch = test::make_flat_patch();
+  test::set_linear_contact(patch, 0.0, Vec3(0.0, 0.0, -f0_N), Vec3::Zero());
+  patch.contact_stiffness_N_per_m << 300, 0, 200, 0, 300, 0, 200, 0, 900;
+  // Sideways free: k = 900 - 200^2 / 300 along the normal.
+  const double k_normal_N_per_m = 900.0 - 200.0 * 200.0 / 300.0;
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0, 0, 0.003), Vec3::Zero()).contact);
+  ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0, 0, -0.003), Vec3::Zero()).contact);
+
+  const double rest_height_m = f0_N / k_normal_N_per_m;
+  const double step_m = 1e-5;
+  const auto expected_N = [&](double z_m) {
+    return std::max(0.0, kCouplingStiffness_N_per_m * (f0_N - k_normal_N_per_m * z_m) /
+                             (kCouplingStiffness_N_per_m + k_normal_N_per_m));
+  };
+  Vec3 previous_N = r.render(now_ns += kMs, Vec3(0, 0, -0.003), Vec3::Zero()).force_on_device_N;
+  const auto check = [&](const Vec3& device, const RenderOutput& out) {
+    EXPECT_LE((out.force_on_device_N - previous_N).norm(), kCouplingStiffness_N_per_m * step_m + 1e-12)
+        << "at z " << device.z() << ": " << previous_N.transpose() << " then " << out.force_on_device_N.transpose();
+    previous_N = out.force_on_device_N;
+    EXPECT_NEAR(out.force_on_device_N.x(), 0.0, 1e-12) << "at z " << device.z();
+    EXPECT_NEAR(out.force_on_device_N.y(), 0.0, 1e-12) << "at z " << device.z();
+    EXPECT_NEAR(out.force_on_device_N.z(), expected_N(device.z()), 1e-9) << "at z " << device.z();
+    if (device.z() < rest_height_m - 1e-9) {
+      EXPECT_TRUE(out.contact) << "at z " << device.z();
+    }
+    if (device.z() > rest_height_m + 1e-9) {
+      EXPECT_FALSE(out.contact) << "at z " << device.z();
+    }
+  };
+  // Up from 3 mm deep, through the release at 1.04 mm, and back down.
+  sweep(r, now_ns, Vec3(0, 0, -0.003), Vec3(0, 0, 0.002), 500, check);
+  EXPECT_FALSE(r.touching());
+  sweep(r, now_ns, Vec3(0, 0, 0.002), Vec3(0, 0, -0.001), 300, check);
+  EXPECT_TRUE(r.touching());
+}
+
 // A contact stiffness near zero (a K_c eigenvalue clamped to 0, or an object
 // with no fixed node, whose K_c is its regularising mass term) puts the
 // linearised rest surface metres above the patch; the contact is held no
@@ -263,6 +313,21 @@ TEST(ContactRenderer, ANearlyZeroContactStiffnessDoesNotHoldTheContactFarAboveTh
   sweep(r, now_ns, Vec3(0, 0, 0.0395), Vec3(0, 0, 0.0005), 39, [](const Vec3& device, const RenderOutput& out) {
     EXPECT_EQ(out.contact, device.z() <= ContactRenderer::kMaxHeldHeight_m) << "at z " << device.z();
   });
+  // And the force is let go gradually, not in one step at that height: the
+  // object is felt at least as stiff as f0 / kMaxHeldHeight_m, so its force
+  // reaches zero there (it dropped by 0.5 N across the limit).
+  r.reset();
+  r.render(now_ns += kMs, Vec3(0, 0, 0.05), Vec3::Zero());
+  ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0, 0, -0.0005), Vec3::Zero()).contact);
+  const double step_m = 1e-4;
+  Vec3 previous_N = r.render(now_ns += kMs, Vec3(0, 0, -0.0005), Vec3::Zero()).force_on_device_N;
+  EXPECT_GT(previous_N.z(), 0.4);
+  sweep(r, now_ns, Vec3(0, 0, -0.0005), Vec3(0, 0, 0.0245), 250, [&](const Vec3& device, const RenderOutput& out) {
+    EXPECT_LE((out.force_on_device_N - previous_N).norm(), kCouplingStiffness_N_per_m * step_m + 1e-12)
+        << "at z " << device.z() << ": " << previous_N.transpose() << " then " << out.force_on_device_N.transpose();
+    previous_N = out.force_on_device_N;
+  });
+  EXPECT_FALSE(r.touching());
 }
 
 TEST(ContactRenderer, ConcaveValleyEdgeHoldsTheProxyAndUsesThePseudoNormal) {
