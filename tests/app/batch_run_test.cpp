@@ -757,7 +757,7 @@ TEST_F(TissuedProcess, AReportThatWouldReplaceTheSceneOrTheSessionIsRefused) {
 TEST_F(TissuedProcess, AReportToStandardOutputIsTheReportAlone) {
   const Process p = run({"--batch", "--scene", scene_path("beam"), "--duration", "0.2", "--report", "/dev/stdout"});
   ASSERT_EQ(p.exit_code, 0) << p.err;
-  EXPECT_NO_THROW((void)json::parse(p.out)) << p.out;
+  EXPECT_TRUE(json::parse(p.out, nullptr, false).is_object()) << p.out;
   EXPECT_TRUE(contains(p.err, "t    0.100 s")) << p.err;
   EXPECT_TRUE(contains(p.err, "done: ")) << p.err;
 }
