@@ -299,11 +299,17 @@ void ControlServer::State::admit(Socket socket) {
           (!first_evictable || session->evictable_from(stalled_after) < first_evictable->evictable_from(stalled_after)))
         first_evictable = session;
     }
+    // With a limit of 1 the connection closed held the only place: "the
+    // longest idle of 1 open ones" and "all 1 places taken" misled.
+    const bool only_place = settings.max_connections == 1;
     const std::string places = std::to_string(settings.max_connections);
     if (longest_idle) {
-      longest_idle->evict(error_response("closed: this connection was the longest idle of " + places +
-                                         " open ones and a new client needed its place") +
-                          "\n");
+      longest_idle->evict(
+          error_response(only_place ? "closed: this connection was idle in the only place (the limit is 1) and a new "
+                                      "client needed it"
+                                    : "closed: this connection was the longest idle of " + places +
+                                          " open ones and a new client needed its place") +
+          "\n");
       sessions.erase(longest_idle);
     } else if (first_evictable) {
       const std::string why = first_evictable->stalled(now, stalled_after)
@@ -311,9 +317,9 @@ void ControlServer::State::admit(Socket socket) {
                                   : "took too long over a request (more than " +
                                         std::to_string(SessionBase::kRequestDeadlineStalls * stalled_after.count()) +
                                         " ms receiving its line)";
-      first_evictable->evict(error_response("closed: this connection " + why + " with all " + places +
-                                            " places taken, and a new client needed its place") +
-                             "\n");
+      const std::string full = only_place ? " in the only place (the limit is 1), and a new client needed it"
+                                          : " with all " + places + " places taken, and a new client needed its place";
+      first_evictable->evict(error_response("closed: this connection " + why + full) + "\n");
       sessions.erase(first_evictable);
     }
   }
