@@ -15,6 +15,7 @@
 #include <array>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <functional>
 #include <unordered_map>
@@ -45,6 +46,9 @@ ServerSettings ServerSettings::from_spec(const config::ControlSpec& spec) {
   if (spec.tcp_port != 0) s.tcp_port = static_cast<std::uint16_t>(spec.tcp_port);
   s.max_line_bytes = spec.max_line_bytes;
   s.max_connections = spec.max_connections;
+  // Validated to [0.001, 3600] s (daemon_config_yaml.cpp): whole milliseconds
+  // fit, and rounding keeps 0.0015 s from becoming 1 ms.
+  s.stalled_after = std::chrono::milliseconds(std::llround(spec.stalled_after_s * 1000.0));
   return s;
 }
 

@@ -545,11 +545,18 @@ TEST(ControlServer, ControlSpecMapsToSettings) {
   spec.tcp_port = 47801;
   spec.max_line_bytes = 4096;
   spec.max_connections = 3;
+  spec.stalled_after_s = 0.25;
   const ServerSettings s = ServerSettings::from_spec(spec);
   EXPECT_EQ(s.tcp_port, 47801);
   EXPECT_EQ(s.unix_socket_path, spec.unix_socket_path);
   EXPECT_EQ(s.max_line_bytes, 4096u);
   EXPECT_EQ(s.max_connections, 3);
+  EXPECT_EQ(s.stalled_after, std::chrono::milliseconds(250)) << "control.stalled_after_s did not reach the server";
+  // The longest the config allows (an hour), in whole milliseconds.
+  spec.stalled_after_s = 3600.0;
+  EXPECT_EQ(ServerSettings::from_spec(spec).stalled_after, std::chrono::milliseconds(3'600'000));
+  spec.stalled_after_s = 0.0015;  // rounded to the nearest millisecond, not truncated to 1
+  EXPECT_EQ(ServerSettings::from_spec(spec).stalled_after, std::chrono::milliseconds(2));
 }
 
 // Limits of zero would refuse every request or every connection: start()
