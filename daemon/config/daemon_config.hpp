@@ -128,6 +128,10 @@ struct ControlSpec {
   int tcp_port = 0;                                            // 0: no TCP; otherwise bound to 127.0.0.1 only
   std::size_t max_line_bytes = 65536;
   int max_connections = 16;
+  // When full, a connection mid-request with no byte moved for this long
+  // makes way for a newcomer, and so does one whose request has been going on
+  // for twice this long (ServerSettings::stalled_after).
+  double stalled_after_s = 5.0;
   bool operator==(const ControlSpec&) const = default;  // a reload tells what changed
 };
 

@@ -33,6 +33,14 @@ constexpr std::uintmax_t kMaxConfigFileBytes = 1u << 20;
 constexpr std::size_t kMinLineBytes = 256;
 constexpr std::size_t kMaxLineBytes = 64u << 20;
 constexpr int kMaxConnections = 1024;
+// control.stalled_after_s: the server counts it in whole milliseconds (below
+// one it would be 0: every request in progress evictable at once) and adds
+// twice it to steady_clock time points in int64 nanoseconds: 1e300 s does not
+// convert to an integer at all, and past about 4e9 s the sum overflows. An
+// hour is far inside that, and past it a silent client would keep its place
+// for good anyway.
+constexpr double kMinStalledAfter_s = 0.001;
+constexpr double kMaxStalledAfter_s = 3600.0;
 // The haptic loop is 1 kHz; faster than this no device or scheduler keeps up.
 constexpr double kMaxHapticRateHz = 10000.0;
 constexpr double kMinHapticRateHz = 1.0;
@@ -208,7 +216,8 @@ class Converter : public yaml_util::Reader {
   }
 
   void control(const YAML::Node& n, const std::string& p, ControlSpec& c) const {
-    const FieldMap f = fields(n, p, {"unix_socket_path", "tcp_port", "max_line_bytes", "max_connections"});
+    const FieldMap f =
+        fields(n, p, {"unix_socket_path", "tcp_port", "max_line_bytes", "max_connections", "stalled_after_s"});
     if (const auto it = f.find("unix_socket_path"); it != f.end()) {
       // `unix_socket_path: ~` (null) or "" both switch the Unix socket off.
       if (it->second.IsNull())
@@ -219,6 +228,7 @@ class Converter : public yaml_util::Reader {
     opt(f, "tcp_port", p, c.tcp_port);
     opt(f, "max_line_bytes", p, c.max_line_bytes);
     opt(f, "max_connections", p, c.max_connections);
+    opt(f, "stalled_after_s", p, c.stalled_after_s);
   }
 };
 
@@ -317,6 +327,11 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (k.max_connections < 1 || k.max_connections > kMaxConnections)
       fail("control.max_connections",
            "must be in [1, " + std::to_string(kMaxConnections) + "] (got " + std::to_string(k.max_connections) + ")");
+    positive(k.stalled_after_s, "control.stalled_after_s");
+    at_least(k.stalled_after_s, kMinStalledAfter_s, "control.stalled_after_s",
+             "the server counts it in whole milliseconds");
+    at_most(k.stalled_after_s, kMaxStalledAfter_s, "control.stalled_after_s",
+            "twice it must fit the server's clock, and a silent client would keep its place for good anyway");
 
     positive(c_.record.rotate_s, "record.rotate_s");
     at_least(c_.record.rotate_s, kMinRotate_s, "record.rotate_s", "a file every few seconds is not a session");

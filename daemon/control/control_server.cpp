@@ -15,6 +15,7 @@
 #include <array>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <functional>
 #include <unordered_map>
@@ -45,6 +46,9 @@ ServerSettings ServerSettings::from_spec(const config::ControlSpec& spec) {
   if (spec.tcp_port != 0) s.tcp_port = static_cast<std::uint16_t>(spec.tcp_port);
   s.max_line_bytes = spec.max_line_bytes;
   s.max_connections = spec.max_connections;
+  // Validated to [0.001, 3600] s (daemon_config_yaml.cpp): whole milliseconds
+  // fit, and rounding keeps 0.0015 s from becoming 1 ms.
+  s.stalled_after = std::chrono::milliseconds(std::llround(spec.stalled_after_s * 1000.0));
   return s;
 }
 
@@ -299,11 +303,17 @@ void ControlServer::State::admit(Socket socket) {
           (!first_evictable || session->evictable_from(stalled_after) < first_evictable->evictable_from(stalled_after)))
         first_evictable = session;
     }
+    // With a limit of 1 the connection closed held the only place: "the
+    // longest idle of 1 open ones" and "all 1 places taken" misled.
+    const bool only_place = settings.max_connections == 1;
     const std::string places = std::to_string(settings.max_connections);
     if (longest_idle) {
-      longest_idle->evict(error_response("closed: this connection was the longest idle of " + places +
-                                         " open ones and a new client needed its place") +
-                          "\n");
+      longest_idle->evict(
+          error_response(only_place ? "closed: this connection was idle in the only place (the limit is 1) and a new "
+                                      "client needed it"
+                                    : "closed: this connection was the longest idle of " + places +
+                                          " open ones and a new client needed its place") +
+          "\n");
       sessions.erase(longest_idle);
     } else if (first_evictable) {
       const std::string why = first_evictable->stalled(now, stalled_after)
@@ -311,9 +321,9 @@ void ControlServer::State::admit(Socket socket) {
                                   : "took too long over a request (more than " +
                                         std::to_string(SessionBase::kRequestDeadlineStalls * stalled_after.count()) +
                                         " ms receiving its line)";
-      first_evictable->evict(error_response("closed: this connection " + why + " with all " + places +
-                                            " places taken, and a new client needed its place") +
-                             "\n");
+      const std::string full = only_place ? " in the only place (the limit is 1), and a new client needed it"
+                                          : " with all " + places + " places taken, and a new client needed its place";
+      first_evictable->evict(error_response("closed: this connection " + why + full) + "\n");
       sessions.erase(first_evictable);
     }
   }

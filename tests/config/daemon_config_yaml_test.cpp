@@ -62,6 +62,7 @@ control:
   tcp_port: 0
   max_line_bytes: 65536
   max_connections: 16
+  stalled_after_s: 5
 )";
 
 const std::string kSource = "/etc/tissued/tissued.yaml";
@@ -113,6 +114,7 @@ TEST(DaemonConfigYaml, BaseParsesWithEveryField) {
   EXPECT_EQ(c.control.unix_socket_path, "/run/tissued/control.sock");
   EXPECT_EQ(c.control.max_line_bytes, 65536u);
   EXPECT_EQ(c.control.max_connections, 16);
+  EXPECT_EQ(c.control.stalled_after_s, 5.0);
 }
 
 // udpm:// URLs are checked here: LCM itself took port 99999 or ttl=-3 and
@@ -157,6 +159,7 @@ TEST(DaemonConfigYaml, MinimalConfigTakesTheDocumentedDefaults) {
   EXPECT_EQ(c.realtime.sched_fifo, d.realtime.sched_fifo);
   EXPECT_EQ(c.control.unix_socket_path, d.control.unix_socket_path);
   EXPECT_EQ(c.control.tcp_port, 0);
+  EXPECT_EQ(c.control.stalled_after_s, d.control.stalled_after_s);
   EXPECT_DOUBLE_EQ(c.status_interval_s, d.status_interval_s);
   EXPECT_EQ(c.max_scene_tets, 1'000'000);
   EXPECT_EQ(parse_daemon_config(text + "max_scene_tets: 5000\n", "x.yaml").max_scene_tets, 5000);
@@ -339,6 +342,26 @@ TEST(DaemonConfigYaml, PortsPrioritiesAndControlLimits) {
   // "" and null both switch the Unix socket off.
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "\"\""), kSource).control.unix_socket_path, "");
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "~"), kSource).control.unix_socket_path, "");
+}
+
+// control.stalled_after_s was fixed at 5 s in the server: a lab whose
+// scripts pause mid-request longer, or that wants a stuck client out sooner,
+// could not change it. It is in seconds, and bounded so that the server's
+// milliseconds and its deadline of twice it fit their clocks.
+TEST(DaemonConfigYaml, ControlStalledAfterIsReadAndBounded) {
+  EXPECT_EQ(parse_daemon_config(kBase, kSource).control.stalled_after_s, 5.0);
+  EXPECT_EQ(parse_daemon_config(edit("stalled_after_s: 5", "stalled_after_s: 0.25"), kSource).control.stalled_after_s,
+            0.25);
+  EXPECT_EQ(parse_daemon_config(kBase, kSource, {"control.stalled_after_s=3600"}).control.stalled_after_s, 3600.0);
+  EXPECT_EQ(parse_daemon_config(kBase, kSource, {"control.stalled_after_s=0.001"}).control.stalled_after_s, 0.001);
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: 0"), "control.stalled_after_s", "must be > 0 (got 0)");
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: -1"), "control.stalled_after_s", "must be > 0 (got -1)");
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: .nan"), "control.stalled_after_s", "finite");
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: .inf"), "control.stalled_after_s", "finite");
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: 0.0004"), "control.stalled_after_s", "must be >= 0.001");
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: 3601"), "control.stalled_after_s", "must be <= 3600");
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: 1e300"), "control.stalled_after_s", "must be <= 3600");
+  expect_error(edit("stalled_after_s: 5", "stalled_after_s: soon"), "control.stalled_after_s", "");
 }
 
 TEST(DaemonConfigYaml, SimDeviceWaypoints) {

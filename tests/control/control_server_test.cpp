@@ -206,7 +206,8 @@ TEST(ControlServer, WhenFullTheLongestIdleConnectionMakesWayForANewClient) {
     ASSERT_TRUE(line.has_value()) << "client " << victim << " was not told";
     const json r = json::parse(*line);
     EXPECT_EQ(r.at("ok"), false);
-    EXPECT_NE(r.at("error").get<std::string>().find("longest idle"), std::string::npos) << r;
+    EXPECT_EQ(r.at("error"),
+              "closed: this connection was the longest idle of 4 open ones and a new client needed its place");
     EXPECT_TRUE(clients[victim]->sees_eof());
     ASSERT_TRUE(clients.back()->send_all("{\"id\":7,\"cmd\":\"status\"}\n"));
     const auto answer = clients.back()->read_line();
@@ -283,7 +284,10 @@ TEST(ControlServer, AConnectionStalledMidRequestMakesWayWhenFull) {
   ASSERT_TRUE(newcomer.connected());
   const auto told = stalled[0]->read_line();
   ASSERT_TRUE(told.has_value()) << "the longest stalled was not told";
-  EXPECT_NE(json::parse(*told).at("error").get<std::string>().find("stalled mid-request"), std::string::npos) << *told;
+  EXPECT_EQ(
+      json::parse(*told).at("error"),
+      "closed: this connection stalled mid-request (no byte for 200 ms) with all 3 places taken, and a new client "
+      "needed its place");
   EXPECT_TRUE(stalled[0]->sees_eof());
   ASSERT_TRUE(newcomer.send_all("{\"id\":1,\"cmd\":\"status\"}\n"));
   const auto answer = newcomer.read_line();
@@ -374,10 +378,45 @@ TEST(ControlServer, AConnectionTricklingARequestMakesWayWhenFull) {
     }
     ASSERT_TRUE(told.has_value()) << "the trickler was not told";
     EXPECT_EQ(json::parse(*told).at("error"),
-              "closed: this connection took too long over a request (more than 2000 ms receiving its line) with all 1 "
-              "places taken, and a new client needed its place");
+              "closed: this connection took too long over a request (more than 2000 ms receiving its line) in the "
+              "only place (the limit is 1), and a new client needed it");
     EXPECT_TRUE(trickler.sees_closed());  // its trickle may be unread: a reset, not an EOF
   }
+}
+
+// With max_connections 1 the closed connection is told it held the only
+// place: the messages read "the longest idle of 1 open ones" and "with all 1
+// places taken". With more places they count them.
+TEST(ControlServer, EvictionMessagesSpeakOfTheOnlyPlaceWhenTheLimitIsOne) {
+  ServerSettings settings = unix_settings(65536, 1);
+  settings.stalled_after = std::chrono::milliseconds(200);
+  ServerHarness h(settings);
+  RawClient idle(h.socket_path());
+  ASSERT_TRUE(idle.connected());
+  ASSERT_TRUE(h.wait_for_connections(1));
+  RawClient stalled(h.socket_path());  // takes the idle one's place
+  ASSERT_TRUE(stalled.connected());
+  const auto idle_told = idle.read_line();
+  ASSERT_TRUE(idle_told.has_value()) << "the idle one was not told";
+  EXPECT_EQ(json::parse(*idle_told).at("error"),
+            "closed: this connection was idle in the only place (the limit is 1) and a new client needed it");
+  EXPECT_TRUE(idle.sees_eof());
+  ASSERT_TRUE(h.wait_for_connections(1));
+  ASSERT_TRUE(stalled.send_all("{\"cmd\":\"sta"));
+  for (int i = 0; i < 1000 && h.idle_connections() > 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // past stalled_after
+  RawClient newcomer(h.socket_path());
+  ASSERT_TRUE(newcomer.connected());
+  const auto stalled_told = stalled.read_line();
+  ASSERT_TRUE(stalled_told.has_value()) << "the stalled one was not told";
+  EXPECT_EQ(json::parse(*stalled_told).at("error"),
+            "closed: this connection stalled mid-request (no byte for 200 ms) in the only place (the limit is 1), and "
+            "a new client needed it");
+  EXPECT_TRUE(stalled.sees_eof());
+  ASSERT_TRUE(newcomer.send_all("{\"id\":1,\"cmd\":\"status\"}\n"));
+  const auto answer = newcomer.read_line();
+  ASSERT_TRUE(answer.has_value());
+  EXPECT_EQ(json::parse(*answer).at("ok"), true);
 }
 
 // A connection closed for a newcomer while its answer is half sent gets no
@@ -506,11 +545,18 @@ TEST(ControlServer, ControlSpecMapsToSettings) {
   spec.tcp_port = 47801;
   spec.max_line_bytes = 4096;
   spec.max_connections = 3;
+  spec.stalled_after_s = 0.25;
   const ServerSettings s = ServerSettings::from_spec(spec);
   EXPECT_EQ(s.tcp_port, 47801);
   EXPECT_EQ(s.unix_socket_path, spec.unix_socket_path);
   EXPECT_EQ(s.max_line_bytes, 4096u);
   EXPECT_EQ(s.max_connections, 3);
+  EXPECT_EQ(s.stalled_after, std::chrono::milliseconds(250)) << "control.stalled_after_s did not reach the server";
+  // The longest the config allows (an hour), in whole milliseconds.
+  spec.stalled_after_s = 3600.0;
+  EXPECT_EQ(ServerSettings::from_spec(spec).stalled_after, std::chrono::milliseconds(3'600'000));
+  spec.stalled_after_s = 0.0015;  // rounded to the nearest millisecond, not truncated to 1
+  EXPECT_EQ(ServerSettings::from_spec(spec).stalled_after, std::chrono::milliseconds(2));
 }
 
 // Limits of zero would refuse every request or every connection: start()
