@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "mesh/kuhn_mesh.hpp"
+#include "physics/probes.hpp"
 #include "scene/scene_names.hpp"
 #include "scene/yaml_util.hpp"
 #include "util/text.hpp"
@@ -281,7 +282,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
       extent_[a] = o.cubes[a] * o.cube_size_m;
       if (!std::isfinite(extent_[a])) fail("object", "the object's size overflows");
     }
-    tolerance_ = 1e-9 * std::max({extent_[0], extent_[1], extent_[2]});
+    // Probes and regions may lie outside the box by rounding (probes.hpp).
+    tolerance_ = physics::kProbeOutsideBoxTolerance * std::max({extent_[0], extent_[1], extent_[2]});
     const auto beyond_double = [&](double given) {
       return ", outside [" + fmt_num(kMinCubeScale) + ", " + fmt_num(kMaxCubeScale) +
              "]: beyond what the simulation holds in double precision (got " + fmt_num(given) + ")";

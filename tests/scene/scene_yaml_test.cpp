@@ -2,11 +2,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <exception>
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -494,6 +497,82 @@ TEST(SceneYamlErrors, Regions) {
   // Touching the box at a face, edge or corner is inside.
   EXPECT_NO_THROW(parse_scene(base_with("rest_m: [0.1, 0.05, 0.05]", "rest_m: [0.1, 0.1, 0.1]"), "test.yaml"));
   EXPECT_NO_THROW(parse_scene(base_with("centre_m: [0.1, 0.05, 0.05]", "centre_m: [0.101, 0.05, 0.05]"), "t.yaml"));
+}
+
+// The scene check lets a probe lie outside the box by rounding
+// (physics::kProbeOutsideBoxTolerance of its largest extent) and the
+// Simulation moves such a probe onto the box, with twice that room, since the
+// two measure the box differently (cubes x cube_size_m, the mesh's lattice
+// units x the unit's length). The one constant keeps them together: the
+// farthest point the check accepts past every face, low and high, is located
+// in a mesh refined to depth 6 (tets 2^-6 of a cube, where a fixed-tolerance
+// locator refused 0.5 nm) and reads a uniform shift of the body exactly.
+TEST(SceneYaml, EveryProbeTheCheckAcceptsIsLocatedAtEveryDepth) {
+  struct Box {
+    std::array<int, 3> cubes;
+    double cube_size_m;
+  };
+  for (const Box& box : {Box{{512, 1, 1}, 0.001}, Box{{3, 7, 5}, 0.1 / 3}, Box{{4, 4, 4}, 0.025}}) {
+    Scene s = parse_scene(kMinimal, "probe.yaml");
+    s.object.cubes = box.cubes;
+    s.object.cube_size_m = box.cube_size_m;
+    s.adaptivity.min_depth = 6;
+    s.adaptivity.max_depth = 6;
+    const auto accepted = [&](const Vec3& rest_m) {
+      Scene t = s;
+      t.probes = {{"edge", rest_m}};
+      try {
+        validate_scene(t);
+        return true;
+      } catch (const SceneError&) {
+        return false;
+      }
+    };
+    const double largest_m = box.cube_size_m * *std::max_element(box.cubes.begin(), box.cubes.end());
+    for (int a = 0; a < 3; ++a) {
+      const double extent_m = box.cubes[a] * box.cube_size_m;
+      Vec3 centre_m{};
+      for (int b = 0; b < 3; ++b) centre_m[b] = 0.5 * box.cubes[b] * box.cube_size_m;
+      for (const double side : {-1.0, 1.0}) {
+        // From the stated edge, one ulp at a time to the last point accepted.
+        Vec3 rest_m = centre_m;
+        double& x = rest_m[a];
+        x = side > 0 ? extent_m + physics::kProbeOutsideBoxTolerance * largest_m
+                     : -physics::kProbeOutsideBoxTolerance * largest_m;
+        const double outward = side * std::numeric_limits<double>::infinity();
+        for (int i = 0; i < 64 && !accepted(rest_m); ++i) x = std::nextafter(x, -outward);
+        ASSERT_TRUE(accepted(rest_m)) << "axis " << a << ": nothing accepted near the edge";
+        for (int i = 0; i < 64; ++i) {
+          Vec3 next_m = rest_m;
+          next_m[a] = std::nextafter(x, outward);
+          if (!accepted(next_m)) break;
+          x = next_m[a];
+        }
+        Vec3 farther_m = rest_m;
+        farther_m[a] = side * std::abs(x) * (1.0 + 1e-6);
+        ASSERT_FALSE(accepted(farther_m)) << "the check accepts any point";
+        std::ostringstream where;
+        where.precision(17);
+        where << box.cubes[0] << "x" << box.cubes[1] << "x" << box.cubes[2] << " cubes of " << box.cube_size_m
+              << " m, axis " << a << ", probe at " << x << " m (box [0, " << extent_m << "])";
+        Scene t = s;
+        t.probes = {{"edge", rest_m}};
+        std::unique_ptr<physics::Simulation> sim;
+        try {
+          sim = std::make_unique<physics::Simulation>(t);
+        } catch (const std::exception& e) {
+          ADD_FAILURE() << where.str() << ": " << e.what();
+          continue;
+        }
+        physics::Body& body = sim->mutable_body();
+        const physics::Vec3 shift_m(1e-4, -2e-4, 3e-4);
+        body.mesh().for_each_node(
+            [&](physics::NodeId n, const mesh::Node&) { body.x_m[n] = body.rest_m[n] + shift_m; });
+        const physics::Vec3 u = sim->probe_displacement_m(0);
+        EXPECT_NEAR((u - shift_m).norm(), 0.0, 1e-15) << where.str() << ": read " << u.transpose();
+      }
+    }
+  }
 }
 
 TEST(SceneYamlErrors, DuplicateNames) {
