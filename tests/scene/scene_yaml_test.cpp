@@ -1022,6 +1022,70 @@ TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
   EXPECT_EQ(edges.object.cubes, (std::array<int, 3>{333, 100, 100}));
 }
 
+// Rayleigh damping the simulation cannot hold in double precision is
+// refused, naming the key: kBase is the cantilever (E 5e4 Pa, density 100,
+// cubes of 25 mm refined to depth 3, dt 1 ms), whose finest leaf's
+// frequency scale is sqrt(E / density) / 3.125 mm = 7155 /s. Accepted, beta
+// 1e300 s made the explicit rung's stable sub-step inf (its damping ratio
+// squared overflowed: one sub-step, then "state became non-finite"; from
+// beta 1e151 s), beta 1e160 s left the implicit rung's CG at 0 iterations
+// with the body frozen (from 1e140 s its steps stopped short of the
+// tolerance), and alpha 1e300 /s did the same to its steps.
+TEST(SceneYamlErrors, RayleighDampingBeyondDoublePrecisionIsRefused) {
+  const std::string said =
+      expect_error(kBase, "material.rayleigh_beta_s", "(got 1e+300)", {"material.rayleigh_beta_s=1e300"});
+  EXPECT_NE(said.find("beyond what the simulation holds in double precision"), std::string::npos) << said;
+  EXPECT_NE(said.find("7.16e+03 /s"), std::string::npos) << said;  // the frequency scale it is measured against
+  for (const char* beta : {"1e151", "1e140", "1e96", "1.7e308"})
+    expect_error(kBase, "material.rayleigh_beta_s", "beyond what the simulation holds in double precision",
+                 {std::string("material.rayleigh_beta_s=") + beta});
+  // beta x omega² x dt_s = beta x 5.12e4 is the tighter bound here.
+  expect_error(kBase, "material.rayleigh_beta_s", "x integrator.dt_s", {"material.rayleigh_beta_s=1e96"});
+  expect_error(kBase, "material.rayleigh_alpha_per_s", "alpha x integrator.dt_s) would be 1e+297",
+               {"material.rayleigh_alpha_per_s=1e300"});
+  expect_error(kBase, "material.rayleigh_alpha_per_s", "beyond what the simulation holds in double precision",
+               {"material.rayleigh_alpha_per_s=1e104"});
+  // The edges, and beta where the dampers do not use it (damping: paper).
+  EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml", {"material.rayleigh_beta_s=1e95"}));
+  EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml", {"material.rayleigh_alpha_per_s=5e102"}));
+  EXPECT_NO_THROW(
+      parse_scene_with_overrides(kBase, "ok.yaml", {"material.damping=paper", "material.rayleigh_beta_s=1e300"}));
+}
+
+// What the damping bound promises: at the largest beta and alpha the check
+// accepts, every rung either takes its steps with a finite state and energy
+// or refuses a step it cannot take at integrator.max_substeps (the explicit
+// rung: a damping ratio of 1e99 needs ever more sub-steps), saying so.
+TEST(SceneYamlErrors, TheLargestDampingTheCheckAcceptsRunsOrIsRefusedByTheSubstepCap) {
+  for (const char* kind : {"explicit", "implicit", "projective"})
+    for (const std::vector<std::string>& damping :
+         {std::vector<std::string>{"material.rayleigh_beta_s=1e95"},
+          std::vector<std::string>{"material.rayleigh_alpha_per_s=5e102"},
+          std::vector<std::string>{"material.rayleigh_beta_s=1e95", "material.rayleigh_alpha_per_s=5e102"}}) {
+      std::vector<std::string> overrides = damping;
+      overrides.push_back(std::string("integrator.kind=") + kind);
+      const Scene s = parse_scene_with_overrides(kBase, "edge.yaml", overrides);
+      physics::Simulation sim(s);
+      const std::string at = std::string(kind) + " with " + damping.back();
+      for (int i = 0; i < 5; ++i) {
+        const physics::StepResult r = sim.step();
+        if (!r.ok) {
+          EXPECT_EQ(std::string(kind), "explicit") << at << ": " << r.error;
+          EXPECT_NE(r.error.find("more than integrator.max_substeps"), std::string::npos) << at << ": " << r.error;
+          break;
+        }
+        const double energy_J = sim.kinetic_energy_J() + sim.elastic_energy_J();
+        ASSERT_TRUE(std::isfinite(energy_J)) << at << ", step " << i;
+        const physics::Body& body = sim.body();
+        bool finite = true;
+        body.mesh().for_each_node([&](physics::NodeId n, const mesh::Node&) {
+          finite = finite && body.x_m[n].allFinite() && body.v_m_per_s[n].allFinite();
+        });
+        ASSERT_TRUE(finite) << at << ", step " << i;
+      }
+    }
+}
+
 // What the scale checks promise (scene_yaml.cpp, kMinCubeScale): every
 // scene they accept gets node masses, inverse masses and spring
 // stiffnesses that are ordinary doubles, from the starting cubes down to
@@ -1033,6 +1097,11 @@ TEST(SceneYamlErrors, EveryScaleTheCheckAcceptsGivesOrdinaryMassesAndStiffnesses
   Scene unit = parse_scene("object: {cubes: [2, 1, 1], cube_size_m: 1}\n", "unit.yaml");
   unit.material.density_kg_per_m3 = 1.0;
   unit.material.youngs_modulus_Pa = 1.0;
+  // Undamped: the sweep's stiffest-and-lightest scales (frequencies to 1e109
+  // /s at depth 30) are beyond the damping bound with the default beta
+  // (RayleighDampingBeyondDoublePrecisionIsRefused); this is about masses and
+  // stiffnesses.
+  unit.material.rayleigh_beta_s = 0.0;
   unit.adaptivity.enabled = true;
   unit.adaptivity.max_depth = 30;
   validate_scene(unit);
