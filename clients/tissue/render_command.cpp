@@ -71,11 +71,19 @@ int run_render(RenderCommandOptions o) {
       return kExitBadInput;
     }
     std::vector<std::size_t> frames;
+    // The sequence's window; an end not given is the first or last frame's time.
+    const double t0_s = o.from_s.value_or(source->frame_time_s(0));
+    const double t1_s = o.to_s.value_or(source->frame_time_s(n - 1));
     if (o.sequence) {
-      frames = x3d::frames_in_window(*source, o.from_s.value_or(source->frame_time_s(0)),
-                                     o.to_s.value_or(source->frame_time_s(n - 1)));
+      frames = x3d::frames_in_window(*source, t0_s, t1_s);
+      // Said with the session and the window, as tissue x3d --animate says
+      // it (it said "no frame in the --from/--to window", naming neither).
       if (frames.empty()) {
-        std::cerr << "tissue render: no frame in the --from/--to window\n";
+        std::cerr << "tissue render: "
+                  << (t0_s > t1_s ? x3d::reversed_window_text(*source, o.from_s, o.to_s, t0_s, t1_s)
+                                  : "--sequence: " + source->name() + " has no frame " +
+                                        x3d::window_text(o.from_s, o.to_s, t0_s, t1_s))
+                  << "\n";
         return kExitBadArguments;
       }
     } else if (o.frame) {
@@ -114,8 +122,8 @@ int run_render(RenderCommandOptions o) {
         drawn.push_back(i);
       }
       if (drawn.empty()) {
-        std::cerr << "tissue render: the " << frames.size()
-                  << " frames in the --from/--to window are all empty surfaces: nothing to draw\n";
+        std::cerr << "tissue render: --sequence: " << source->name() << ": its " << frames.size() << " frames "
+                  << x3d::window_text(o.from_s, o.to_s, t0_s, t1_s) << " are all empty surfaces: nothing to draw\n";
         return kExitBadInput;
       }
       frames = std::move(drawn);

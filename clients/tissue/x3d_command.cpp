@@ -107,18 +107,19 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
   // Said with the options the user gave: the other end is the source's
   // first or last frame ("--to 0.05" said "--from 0.1 --to 0.05").
   if (!(t0 < t1)) {
-    const bool no_length = t0 == t1;
+    // A window that ends before it starts, as tissue render says it.
+    if (t0 != t1) {
+      const std::string why = x3d::reversed_window_text(source, o.from_s, o.to_s, t0, t1);
+      throw BadArguments(o.from_s && o.to_s ? why : why + ": an animation needs at least 2 frames");
+    }
     if (o.from_s && o.to_s)
       throw BadArguments("--from " + util::number_text(t0) + " --to " + util::number_text(t1) +
-                         (no_length ? ": the window has no length; an animation needs at least 2 frames"
-                                    : ": the window is empty (--from is after --to)"));
+                         ": the window has no length; an animation needs at least 2 frames");
     if (o.to_s)
-      throw BadArguments("--to " + util::number_text(t1) +
-                         (no_length ? " is the time of the first frame" : " is before the first frame") +
-                         " (t=" + x3d::frame_time_text(t0) + " s): an animation needs at least 2 frames");
-    throw BadArguments("--from " + util::number_text(t0) +
-                       (no_length ? " is the time of the last frame" : " is after the last frame") +
-                       " (t=" + x3d::frame_time_text(t1) + " s): an animation needs at least 2 frames");
+      throw BadArguments("--to " + util::number_text(t1) + " is the time of the first frame (t=" +
+                         x3d::frame_time_text(t0) + " s): an animation needs at least 2 frames");
+    throw BadArguments("--from " + util::number_text(t0) + " is the time of the last frame (t=" +
+                       x3d::frame_time_text(t1) + " s): an animation needs at least 2 frames");
   }
   std::vector<std::size_t> picked = x3d::frames_in_window(source, t0, t1);
   // Every frame of the window is held at once: refused before reading when
@@ -146,14 +147,9 @@ std::string export_animation(x3d::FrameSource& source, const X3dCommandOptions& 
     }
     frames.push_back(std::move(f));
   }
-  // The ends as the user wrote them, or the frame times they default to.
-  const auto end_text = [](const std::optional<double>& given_s, double t_s) {
-    return given_s ? util::number_text(*given_s) : x3d::frame_time_text(t_s);
-  };
   if (frames.size() < 2)
-    throw BadArguments("--animate: " + source.name() + " has " + std::to_string(frames.size()) +
-                       " non-empty frames between " + end_text(o.from_s, t0) + " s and " + end_text(o.to_s, t1) +
-                       " s; an animation needs 2");
+    throw BadArguments("--animate: " + source.name() + " has " + std::to_string(frames.size()) + " non-empty frames " +
+                       x3d::window_text(o.from_s, o.to_s, t0, t1) + "; an animation needs 2");
   try {
     std::string text = x3d::x3d_animation(frames, xo);
     const std::size_t runs = x3d::animation_runs(frames, xo).size();

@@ -254,12 +254,11 @@ std::string report_text(const nlohmann::json& report) {
   return report.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
-namespace {
-
 // What the report's health figures say, said once more where a user looks
 // (stderr, after the run): a run that passes the stability bar
 // prints none of it.
-void warn_of_health(const scene::Scene& scene, const physics::SimCounters& c, const nlohmann::json& result) {
+void warn_of_health(const scene::Scene& scene, const physics::SimCounters& c, const nlohmann::json& result,
+                    std::FILE* err) {
   if (c.unconverged_steps > 0) {
     // The run succeeded, but part of it is less accurate than the scene asked.
     std::fflush(stdout);
@@ -267,7 +266,7 @@ void warn_of_health(const scene::Scene& scene, const physics::SimCounters& c, co
     // its CG's; projective has none) and where it is not what ran already.
     const bool hint_two_level = scene.integrator.kind == scene::IntegratorKind::kImplicit &&
                                 scene.integrator.cg_preconditioner != scene::CgPreconditioner::kTwoLevel;
-    std::fprintf(stderr,
+    std::fprintf(err,
                  "tissued: warning: %lld of %lld steps stopped at integrator.cg_max_iterations = %d short of "
                  "integrator.cg_tolerance = %g; raise cg_max_iterations%s lower dt_s%s\n",
                  static_cast<long long>(c.unconverged_steps), static_cast<long long>(c.steps),
@@ -276,15 +275,26 @@ void warn_of_health(const scene::Scene& scene, const physics::SimCounters& c, co
   }
   if (c.energy_limited_steps > 0) {
     std::fflush(stdout);
-    std::fprintf(stderr,
+    std::fprintf(err,
                  "tissued: warning: %lld of %lld implicit steps ended with more energy than the body was given and "
                  "were slowed (%.3g J taken out): the springs turned far within a step; lower dt_s for a faithful "
                  "trajectory\n",
                  static_cast<long long>(c.energy_limited_steps), static_cast<long long>(c.steps), c.energy_limited_J);
   }
-  if (const auto& audit = result["energy_audit"]; audit["worst_excess"].get<double>() > kReportedEnergyExcess) {
+  // An energy or budget that is not a finite number is an infinite excess
+  // (EnergyBudget::excess; null in the written report): said as what it is,
+  // not as "held inf % more energy".
+  if (const auto& audit = result["energy_audit"];
+      audit["worst_excess"].is_null() || !std::isfinite(audit["worst_excess"].get<double>())) {
     std::fflush(stdout);
-    std::fprintf(stderr,
+    std::fprintf(err,
+                 "tissued: warning: the body's energy or its budget (the energy it started with plus the work done "
+                 "on it) was not a finite number at t = %.6g s: the energy audit could not judge the run "
+                 "(energy_audit.worst_excess is null in the report)\n",
+                 audit["at_t_s"].is_null() ? NAN : audit["at_t_s"].get<double>());
+  } else if (audit["worst_excess"].get<double>() > kReportedEnergyExcess) {
+    std::fflush(stdout);
+    std::fprintf(err,
                  "tissued: warning: the body held %.3g %% more energy than it started with plus the work done on it "
                  "(at t = %.6g s)%s\n",
                  100.0 * audit["worst_excess"].get<double>(), audit["at_t_s"].get<double>(),
@@ -295,14 +305,14 @@ void warn_of_health(const scene::Scene& scene, const physics::SimCounters& c, co
   }
   if (c.refine_ceiling_passes > 0) {
     std::fflush(stdout);
-    std::fprintf(stderr,
+    std::fprintf(err,
                  "tissued: warning: %lld adaptation passes stopped refining at adaptivity.max_tets = %d; raise it "
                  "or the threshold (adaptivity.refine_threshold_Pa)\n",
                  static_cast<long long>(c.refine_ceiling_passes), scene.adaptivity.max_tets);
   }
   if (const auto& inverted = result["inverted_tets"]; inverted["peak"].get<std::size_t>() > 0) {
     std::fflush(stdout);
-    std::fprintf(stderr,
+    std::fprintf(err,
                  "tissued: warning: %zu tets were inside out at the worst (t = %.6g s), %zu at the end: springs do "
                  "not resist inversion (NUMERICS.md section 3)\n",
                  inverted["peak"].get<std::size_t>(),
@@ -310,8 +320,6 @@ void warn_of_health(const scene::Scene& scene, const physics::SimCounters& c, co
                  inverted["final"].get<std::size_t>());
   }
 }
-
-}  // namespace
 
 int batch_command(const BatchOptions& options) {
   // stdout carries the live figures; flush it before each stderr line so the
@@ -450,7 +458,7 @@ int batch_command(const BatchOptions& options) {
       return fail(kExitReport, write_error);
     }
     if (!record_error.empty()) return fail(kExitRecord, record_error);
-    warn_of_health(scene, sim->counters(), result);
+    warn_of_health(scene, sim->counters(), result, stderr);
     if (talk) {
       std::fprintf(talk_to, "done: %.6g s simulated in %lld steps", sim->time_s(),
                    static_cast<long long>(sim->counters().steps));

@@ -102,6 +102,14 @@ nlohmann::json run_batch(const scene::Scene& scene, const BatchOptions& options,
 // The report as written to the file: two-space indentation, newline at the end.
 std::string report_text(const nlohmann::json& report);
 
+// The warnings batch_command prints to `err` (stderr) after a run that
+// succeeded, from its report's `result` and the simulation's counters:
+// solver steps short of their tolerance, energy-limited steps, more energy
+// than the body was given, adaptation at its ceiling, tets inside out.
+// Nothing for a run that passes the stability bar.
+void warn_of_health(const scene::Scene& scene, const physics::SimCounters& counters, const nlohmann::json& result,
+                    std::FILE* err);
+
 // The whole batch command: loads the scene with the overrides, runs it, writes
 // the report, prints a one-line reason on stderr for every failure and
 // returns the exit code. Never throws.

@@ -78,6 +78,19 @@ std::string frame_time_text(double t_s);
 // The frames whose times are in the window [t0, t1] (time_in_window), in order.
 std::vector<std::size_t> frames_in_window(const FrameSource& source, double t0_s, double t1_s);
 
+// A --from/--to window [t0, t1] for messages, "between 0.5 s and 2 s": each
+// end as the user gave it (util::number_text), or, not given, as the frame
+// time it stands for (frame_time_text: "0.3", not 0.30000000000000004).
+std::string window_text(std::optional<double> from_s, std::optional<double> to_s, double t0_s, double t1_s);
+
+// Why a window that ends before it starts (t0 > t1; an end not given is the
+// first or last frame's time) holds no frame, in the options the user gave:
+// "--from 1 --to 0.5: the window is empty (--from is after --to)", "--to 0.2
+// is before the first frame of NAME (t=0.3 s)", "--from 5 is after the last
+// frame of NAME (t=0.6 s)". Both clients refuse such a window with it.
+std::string reversed_window_text(const FrameSource& source, std::optional<double> from_s, std::optional<double> to_s,
+                                 double t0_s, double t1_s);
+
 // Frame data an export may hold in memory at once (x3d --animate keeps every
 // frame of its window, then makes a text 2-3 times their size): the same
 // 1 GiB that stops a live collection (kLiveFrameBudgetBytes). A whole

@@ -13,6 +13,7 @@
 #include "record/record_types.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
+#include "util/text.hpp"
 
 namespace tissue::x3d {
 
@@ -228,6 +229,27 @@ std::vector<std::size_t> frames_in_window(const FrameSource& source, double t0_s
   for (std::size_t k = 0; k < source.frame_count(); ++k)
     if (time_in_window(source.frame_time_s(k), t0_s, t1_s)) out.push_back(k);
   return out;
+}
+
+std::string window_text(std::optional<double> from_s, std::optional<double> to_s, double t0_s, double t1_s) {
+  const auto end_text = [](const std::optional<double>& given_s, double t_s) {
+    return given_s ? util::number_text(*given_s) : frame_time_text(t_s);
+  };
+  return "between " + end_text(from_s, t0_s) + " s and " + end_text(to_s, t1_s) + " s";
+}
+
+std::string reversed_window_text(const FrameSource& source, std::optional<double> from_s, std::optional<double> to_s,
+                                 double t0_s, double t1_s) {
+  if (from_s && to_s)
+    return "--from " + util::number_text(*from_s) + " --to " + util::number_text(*to_s) +
+           ": the window is empty (--from is after --to)";
+  // One end given: the other is the session's first or last frame, said as
+  // its time (it said "--from 0.25 --to 0.1" to a user who gave no --from).
+  if (to_s)
+    return "--to " + util::number_text(*to_s) + " is before the first frame of " + source.name() +
+           " (t=" + frame_time_text(t0_s) + " s)";
+  return "--from " + util::number_text(from_s.value_or(t0_s)) + " is after the last frame of " + source.name() +
+         " (t=" + frame_time_text(t1_s) + " s)";
 }
 
 std::unique_ptr<FrameSource> open_session_source(const std::string& path) {

@@ -32,7 +32,7 @@ void Probe::locate(const Body& body) {
     }
   });
   // The object fills its box, and the Simulation puts a probe the scene's
-  // checks let lie outside it (by up to 1e-9 of its size) onto the box: such
+  // checks let lie outside it (kProbeOutsideBoxTolerance) onto the box: such
   // a point lies in or on a tet up to rounding, which relative to a small tet
   // can exceed any fixed tolerance (0.09 nm outside a 25 mm tet is -3.6e-9).
   // The nearest tet is taken; only a point clearly outside (callers that

@@ -9,6 +9,16 @@
 
 namespace tissue::physics {
 
+// How far outside the object's box a probe may lie and still be taken for a
+// point on it, relative to the box's largest extent: rounding of a point
+// given on the surface (0.2 + 1e-17 for a 0.2 m face). The scene check
+// accepts a probe up to this far out (scene_yaml.cpp), and the Simulation
+// moves such a probe onto the box before locating it (simulation.cpp), with
+// twice this room there: the check measures the box as cubes x cube_size_m,
+// the Simulation as the mesh holds it (lattice units x the unit's length),
+// and the two may differ in the last bit.
+inline constexpr double kProbeOutsideBoxTolerance = 1e-9;
+
 class Probe {
  public:
   Probe(std::string name, const Vec3& rest_m) : name_(std::move(name)), rest_m_(rest_m) {}

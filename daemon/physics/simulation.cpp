@@ -7,15 +7,6 @@
 
 namespace tissue::physics {
 
-namespace {
-// How far outside the object's box, relative to its largest extent, a probe
-// is taken to be on it: twice what the scene check lets a probe lie outside
-// (1e-9, scene_yaml.cpp: rounding of a point given on the surface), so that
-// its extent (cubes x cube_size_m) and the mesh's (lattice units x the
-// unit's length) may differ in the last bit.
-constexpr double kProbeOutsideTolerance = 2e-9;
-}  // namespace
-
 Simulation::Simulation(const scene::Scene& scene)
     : body_(scene), integrator_(make_integrator(scene.integrator, scene.material)) {
   if (scene.adaptivity.enabled) adaptivity_ = std::make_unique<Adaptivity>(scene.adaptivity);
@@ -27,11 +18,12 @@ Simulation::Simulation(const scene::Scene& scene)
   // The object's box as the mesh holds it (from the origin to its far corner).
   Vec3 box_max_m = Vec3::Zero();
   body_.mesh().for_each_node([&](NodeId n, const mesh::Node&) { box_max_m = box_max_m.cwiseMax(body_.rest_m[n]); });
-  const double rounding_m = kProbeOutsideTolerance * box_max_m.maxCoeff();
+  // Twice the check's room (probes.hpp): every probe the check accepts is moved.
+  const double rounding_m = 2.0 * kProbeOutsideBoxTolerance * box_max_m.maxCoeff();
   for (std::size_t i = 0; i < scene.probes.size(); ++i) {
     const scene::ProbeSpec& p = scene.probes[i];
     // The scene check lets a probe lie outside the box by rounding (up to
-    // 1e-9 of its size). Locating it needs it inside to within a fraction of the
+    // kProbeOutsideBoxTolerance of its size). Locating it needs it inside to within a fraction of the
     // containing tet, which refinement makes as small as 2^-10 of a cube: a
     // probe 0.5 nm past a 512 mm object was refused at min_depth 6, or
     // aborted the run when refinement reached it. Such a point is moved

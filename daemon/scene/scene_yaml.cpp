@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <string_view>
@@ -11,6 +12,7 @@
 #include <vector>
 
 #include "mesh/kuhn_mesh.hpp"
+#include "physics/probes.hpp"
 #include "scene/scene_names.hpp"
 #include "scene/yaml_util.hpp"
 #include "util/text.hpp"
@@ -61,6 +63,25 @@ constexpr double kMinCubeScale = 1e-100, kMaxCubeScale = 1e100;
 // they keep to its square root.
 constexpr double kMinFloatScale = 1e-30, kMaxFloatScale = 1e30;
 constexpr double kMinFloatLength_m = 1e-15, kMaxFloatLength_m = 1e15;
+// Rayleigh damping the body can form in double precision. The dampers
+// (c = beta x k per spring, alpha x m per node) enter the rungs as ratios to
+// the springs and masses, and those ratios are squared: the explicit rung's
+// stable sub-step squares the damping ratio of the fastest mode (about beta
+// x omega), the implicit rung's CG the dot products of a system of M (1 +
+// alpha h) + h C + h² K. On the cantilever (omega 7.16e3 /s) beta 1e300 s
+// made the explicit stable sub-step inf (one sub-step, then "state became
+// non-finite"; from beta 1e151 s), beta 1e160 s stopped the implicit CG at
+// 0 iterations with the body frozen (its steps fell short of the tolerance
+// from 1e140 s), alpha 1e300 /s made its steps fall short too. So, as the
+// cube scales, these products are kept within 1e100, leaving 1e208 of
+// double's range for their squares and sums (a damping ratio of 1e100 is no
+// material: the explicit rung refuses such a step at its sub-step cap):
+//   beta x omega             the damping ratio of the fastest mode,
+//   beta x omega² x dt_s     the dampers against the masses in one step,
+//   alpha x dt_s             the mass damping in one step,
+// with omega = sqrt(E / density) / (cube_size_m x 2^-depth), the frequency
+// scale of the finest leaf the scene can reach.
+constexpr double kMaxDampingScale = 1e100;
 constexpr int kMaxDepthLimit = 30;
 constexpr double kMinDt_s = 1e-7;
 constexpr int kMaxSubsteps = 100'000;
@@ -281,7 +302,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
       extent_[a] = o.cubes[a] * o.cube_size_m;
       if (!std::isfinite(extent_[a])) fail("object", "the object's size overflows");
     }
-    tolerance_ = 1e-9 * std::max({extent_[0], extent_[1], extent_[2]});
+    // Probes and regions may lie outside the box by rounding (probes.hpp).
+    tolerance_ = physics::kProbeOutsideBoxTolerance * std::max({extent_[0], extent_[1], extent_[2]});
     const auto beyond_double = [&](double given) {
       return ", outside [" + fmt_num(kMinCubeScale) + ", " + fmt_num(kMaxCubeScale) +
              "]: beyond what the simulation holds in double precision (got " + fmt_num(given) + ")";
@@ -401,6 +423,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     open_unit(g.cg_tolerance, "integrator.cg_tolerance");
     at_least(g.cg_max_iterations, 1, "integrator.cg_max_iterations");
     if (g.kind == IntegratorKind::kExplicit && g.explicit_precision == ExplicitPrecision::kFloat) float_range();
+    damping_range();
     // After dt_s is known good: whether each profile acts at some step.
     for (std::size_t i = 0; i < s_.prescribed.size(); ++i)
       profile_acts(s_.prescribed[i].profile, join_index("prescribed", i) + ".profile", "displacement");
@@ -464,6 +487,41 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (gravity > 0.0)
       in_float(gravity * mass_kg, gravity * leaf_mass_kg, kMinFloatScale, kMaxFloatScale,
                "the gravity forces in N (gravity_m_per_s2 x a node's mass)");
+  }
+
+  // Rayleigh damping within what the body holds in double precision (see
+  // kMaxDampingScale). Runs after the material, object, adaptivity and
+  // integrator checks: all its factors are finite and positive by then.
+  void damping_range() const {
+    const MaterialSpec& m = s_.material;
+    const double dt_s = s_.integrator.dt_s;
+    const auto said = [](double v) {  // derived figures to 3 digits, as a person reads them
+      char text[32];
+      std::snprintf(text, sizeof text, "%.3g", v);
+      return std::string(text);
+    };
+    const auto beyond = [&](const char* key, double given, const std::string& what, double value) {
+      if (value <= kMaxDampingScale) return;
+      fail(key, what + " would be " + said(value) + ", above " + fmt_num(kMaxDampingScale) +
+                    ": beyond what the simulation holds in double precision (got " + fmt_num(given) + ")");
+    };
+    // beta is the dampers' only when they follow Rayleigh's law (material.damping).
+    if (m.damping == DampingLaw::kRayleigh) {
+      const int depth = std::max(s_.adaptivity.min_depth, s_.adaptivity.max_depth);
+      // sqrt of each: E / density can overflow (E up to ~1e134, density down to ~1e-200).
+      const double leaf_m = s_.object.cube_size_m * std::exp2(-static_cast<double>(depth));
+      const double omega_per_s = std::sqrt(m.youngs_modulus_Pa) / std::sqrt(m.density_kg_per_m3) / leaf_m;
+      const std::string omega = "omega = sqrt(E / density) / leaf size = " + said(omega_per_s) +
+                                " /s at adaptivity depth " + std::to_string(depth);
+      const double ratio = m.rayleigh_beta_s * omega_per_s;  // finite or inf, never NaN (beta, omega finite)
+      beyond("material.rayleigh_beta_s", m.rayleigh_beta_s,
+             "the dampers' damping ratio of the finest leaf (beta x omega, " + omega + ")", ratio);
+      beyond("material.rayleigh_beta_s", m.rayleigh_beta_s,
+             "the dampers against the masses in one step (beta x omega² x integrator.dt_s, " + omega + ")",
+             ratio * (omega_per_s * dt_s));
+    }
+    beyond("material.rayleigh_alpha_per_s", m.rayleigh_alpha_per_s,
+           "the mass damping in one step (alpha x integrator.dt_s)", m.rayleigh_alpha_per_s * dt_s);
   }
 
   [[noreturn]] void fail(const std::string& path, const std::string& reason) const {

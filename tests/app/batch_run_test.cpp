@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -320,6 +321,46 @@ TEST(BatchReport, ProgressLinesEveryIntervalOfSimTime) {
   run_batch(scene, options, quiet);
   EXPECT_EQ(std::ftell(quiet), 0L);
   std::fclose(quiet);
+}
+
+// A body whose energy or budget is not a finite number has an infinite
+// excess (EnergyBudget::excess; written null in the report), and the warning
+// says that in words. It said "the body held inf % more energy than it
+// started with plus the work done on it". A fixed node given an infinite
+// mass: at rest, its kinetic energy is inf x 0 = NaN from the start, while
+// the explicit rung, which never moves it, takes every step.
+TEST(BatchReport, ANonFiniteEnergyIsWarnedOfInWords) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const scene::Scene scene = scene::load_scene_file_with_overrides(
+      scene_path("cantilever"), {"integrator.kind=explicit", "adaptivity.enabled=false"});
+  physics::Simulation sim(scene);
+  physics::Body& body = sim.mutable_body();
+  physics::NodeId held = 0;
+  while (body.kind[held] != physics::NodeKind::kFixed) ++held;
+  body.mass_kg[held] = kInf;
+  BatchOptions options;
+  options.duration_s = 0.005;
+  options.progress_every_s = 0.0;
+  const json report = run_batch(sim, options, nullptr);
+  const json& result = report["result"];
+  ASSERT_TRUE(result["error"].is_null()) << result["error"];
+  ASSERT_EQ(result["energy_audit"]["worst_excess"].get<double>(), kInf);
+  EXPECT_TRUE(json::parse(report_text(report))["result"]["energy_audit"]["worst_excess"].is_null());
+
+  std::FILE* err = std::tmpfile();
+  ASSERT_NE(err, nullptr);
+  warn_of_health(scene, sim.counters(), result, err);
+  std::rewind(err);
+  std::string text;
+  char buf[1024];
+  while (std::fgets(buf, sizeof buf, err)) text += buf;
+  std::fclose(err);
+  EXPECT_NE(text.find("tissued: warning: the body's energy or its budget (the energy it started with plus the work "
+                      "done on it) was not a finite number at t = 0.001 s"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("inf"), std::string::npos) << text;
+  EXPECT_EQ(text.find("more energy than it started with"), std::string::npos) << text;
 }
 
 // ---- the process ---------------------------------------------------------

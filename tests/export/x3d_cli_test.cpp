@@ -292,11 +292,14 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
     EXPECT_NE(r.err.find("tissue x3d: " + said), std::string::npos) << given << "\n" << r.err;
     EXPECT_EQ(r.err.find(absent), std::string::npos) << given << "\n" << r.err;
   };
-  expect_only("--to 0.1", "--from",
-              "--to 0.1 is before the first frame (t=0.25 s): an animation needs at least 2 frames");
+  expect_only(
+      "--to 0.1", "--from",
+      "--to 0.1 is before the first frame of '" + session_ + "' (t=0.25 s): an animation needs at least 2 frames");
   expect_only("--to 0.25", "--from",
               "--to 0.25 is the time of the first frame (t=0.25 s): an animation needs at least 2 frames");
-  expect_only("--from 2", "--to", "--from 2 is after the last frame (t=1.25 s): an animation needs at least 2 frames");
+  expect_only(
+      "--from 2", "--to",
+      "--from 2 is after the last frame of '" + session_ + "' (t=1.25 s): an animation needs at least 2 frames");
   expect_only("--from 1.25", "--to",
               "--from 1.25 is the time of the last frame (t=1.25 s): an animation needs at least 2 frames");
   expect_2(s + " --colour purple", "purple");

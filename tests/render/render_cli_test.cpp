@@ -93,7 +93,42 @@ TEST(RenderCli, ASequenceSkipsEmptyFrames) {
   EXPECT_NE(r.out.find("2 empty frames skipped"), std::string::npos) << r.out << r.err;
   r = render(dir, "--session " + quote(session) + " --sequence --from 0 --to 0.05 -o " + quote(dir / "g.png"));
   EXPECT_EQ(r.exit_code, 1) << r.err;
-  EXPECT_NE(r.err.find("all empty surfaces"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--sequence: '" + session +
+                       "': its 1 frames between 0 s and 0.05 s are all empty surfaces: "
+                       "nothing to draw"),
+            std::string::npos)
+      << r.err;
+}
+
+// A --from/--to window that holds no frame is said with the session and the
+// window, as tissue x3d --animate says it: the ends as given, an end not
+// given as the frame time it stands for (to 9 digits). It said "no frame in
+// the --from/--to window", naming neither.
+TEST(RenderCli, AWindowWithNoFrameNamesTheSessionAndTheWindow) {
+  TempDir dir;
+  const std::string session = dir / "summed.h5";
+  const double t0_s = 0.1 + 0.2, t1_s = t0_s + 0.3;  // 0.30000000000000004, 0.6000000000000001
+  {
+    auto writer = record::SessionWriter::create(session, record::SessionMetadata{});
+    for (const double t_s : {t0_s, t1_s}) {
+      const x3d::SurfaceFrame f = x3d::testing::box_frame(t_s, {0, 0, 0}, {0.1, 0.05, 0.02});
+      writer->append_mesh_frame(record::MeshFrameView{f.time_s, f.vertices_m, f.triangles, f.vertex_level, {}});
+    }
+    writer->close();
+  }
+  const auto expect_said = [&](const std::string& window, const std::string& said) {
+    const RunResult r =
+        render(dir, "--session " + quote(session) + " --sequence " + window + " -o " + quote(dir / "f.png"));
+    EXPECT_EQ(r.exit_code, 2) << window << "\n" << r.err;
+    EXPECT_NE(r.err.find("tissue render: " + said + "\n"), std::string::npos) << window << "\n" << r.err;
+    EXPECT_EQ(r.err.find("0000000"), std::string::npos) << window << "\n" << r.err;
+  };
+  expect_said("--from 0.4 --to 0.5", "--sequence: '" + session + "' has no frame between 0.4 s and 0.5 s");
+  expect_said("--from 2 --to 3", "--sequence: '" + session + "' has no frame between 2 s and 3 s");
+  expect_said("--from 1 --to 0.5", "--from 1 --to 0.5: the window is empty (--from is after --to)");
+  expect_said("--to 0.2", "--to 0.2 is before the first frame of '" + session + "' (t=0.3 s)");
+  expect_said("--from 0.7", "--from 0.7 is after the last frame of '" + session + "' (t=0.6 s)");
+  EXPECT_FALSE(std::filesystem::exists(dir / "f-0000.png"));
 }
 
 TEST(RenderCli, ErrorsHaveExitCodes) {

@@ -2,11 +2,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <exception>
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -496,6 +499,82 @@ TEST(SceneYamlErrors, Regions) {
   EXPECT_NO_THROW(parse_scene(base_with("centre_m: [0.1, 0.05, 0.05]", "centre_m: [0.101, 0.05, 0.05]"), "t.yaml"));
 }
 
+// The scene check lets a probe lie outside the box by rounding
+// (physics::kProbeOutsideBoxTolerance of its largest extent) and the
+// Simulation moves such a probe onto the box, with twice that room, since the
+// two measure the box differently (cubes x cube_size_m, the mesh's lattice
+// units x the unit's length). The one constant keeps them together: the
+// farthest point the check accepts past every face, low and high, is located
+// in a mesh refined to depth 6 (tets 2^-6 of a cube, where a fixed-tolerance
+// locator refused 0.5 nm) and reads a uniform shift of the body exactly.
+TEST(SceneYaml, EveryProbeTheCheckAcceptsIsLocatedAtEveryDepth) {
+  struct Box {
+    std::array<int, 3> cubes;
+    double cube_size_m;
+  };
+  for (const Box& box : {Box{{512, 1, 1}, 0.001}, Box{{3, 7, 5}, 0.1 / 3}, Box{{4, 4, 4}, 0.025}}) {
+    Scene s = parse_scene(kMinimal, "probe.yaml");
+    s.object.cubes = box.cubes;
+    s.object.cube_size_m = box.cube_size_m;
+    s.adaptivity.min_depth = 6;
+    s.adaptivity.max_depth = 6;
+    const auto accepted = [&](const Vec3& rest_m) {
+      Scene t = s;
+      t.probes = {{"edge", rest_m}};
+      try {
+        validate_scene(t);
+        return true;
+      } catch (const SceneError&) {
+        return false;
+      }
+    };
+    const double largest_m = box.cube_size_m * *std::max_element(box.cubes.begin(), box.cubes.end());
+    for (int a = 0; a < 3; ++a) {
+      const double extent_m = box.cubes[a] * box.cube_size_m;
+      Vec3 centre_m{};
+      for (int b = 0; b < 3; ++b) centre_m[b] = 0.5 * box.cubes[b] * box.cube_size_m;
+      for (const double side : {-1.0, 1.0}) {
+        // From the stated edge, one ulp at a time to the last point accepted.
+        Vec3 rest_m = centre_m;
+        double& x = rest_m[a];
+        x = side > 0 ? extent_m + physics::kProbeOutsideBoxTolerance * largest_m
+                     : -physics::kProbeOutsideBoxTolerance * largest_m;
+        const double outward = side * std::numeric_limits<double>::infinity();
+        for (int i = 0; i < 64 && !accepted(rest_m); ++i) x = std::nextafter(x, -outward);
+        ASSERT_TRUE(accepted(rest_m)) << "axis " << a << ": nothing accepted near the edge";
+        for (int i = 0; i < 64; ++i) {
+          Vec3 next_m = rest_m;
+          next_m[a] = std::nextafter(x, outward);
+          if (!accepted(next_m)) break;
+          x = next_m[a];
+        }
+        Vec3 farther_m = rest_m;
+        farther_m[a] = side * std::abs(x) * (1.0 + 1e-6);
+        ASSERT_FALSE(accepted(farther_m)) << "the check accepts any point";
+        std::ostringstream where;
+        where.precision(17);
+        where << box.cubes[0] << "x" << box.cubes[1] << "x" << box.cubes[2] << " cubes of " << box.cube_size_m
+              << " m, axis " << a << ", probe at " << x << " m (box [0, " << extent_m << "])";
+        Scene t = s;
+        t.probes = {{"edge", rest_m}};
+        std::unique_ptr<physics::Simulation> sim;
+        try {
+          sim = std::make_unique<physics::Simulation>(t);
+        } catch (const std::exception& e) {
+          ADD_FAILURE() << where.str() << ": " << e.what();
+          continue;
+        }
+        physics::Body& body = sim->mutable_body();
+        const physics::Vec3 shift_m(1e-4, -2e-4, 3e-4);
+        body.mesh().for_each_node(
+            [&](physics::NodeId n, const mesh::Node&) { body.x_m[n] = body.rest_m[n] + shift_m; });
+        const physics::Vec3 u = sim->probe_displacement_m(0);
+        EXPECT_NEAR((u - shift_m).norm(), 0.0, 1e-15) << where.str() << ": read " << u.transpose();
+      }
+    }
+  }
+}
+
 TEST(SceneYamlErrors, DuplicateNames) {
   const std::string what =
       expect_error(kBase + "  - name: tip\n    rest_m: [0, 0, 0]\n", "probes[1].name", "duplicate");
@@ -943,6 +1022,70 @@ TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
   EXPECT_EQ(edges.object.cubes, (std::array<int, 3>{333, 100, 100}));
 }
 
+// Rayleigh damping the simulation cannot hold in double precision is
+// refused, naming the key: kBase is the cantilever (E 5e4 Pa, density 100,
+// cubes of 25 mm refined to depth 3, dt 1 ms), whose finest leaf's
+// frequency scale is sqrt(E / density) / 3.125 mm = 7155 /s. Accepted, beta
+// 1e300 s made the explicit rung's stable sub-step inf (its damping ratio
+// squared overflowed: one sub-step, then "state became non-finite"; from
+// beta 1e151 s), beta 1e160 s left the implicit rung's CG at 0 iterations
+// with the body frozen (from 1e140 s its steps stopped short of the
+// tolerance), and alpha 1e300 /s did the same to its steps.
+TEST(SceneYamlErrors, RayleighDampingBeyondDoublePrecisionIsRefused) {
+  const std::string said =
+      expect_error(kBase, "material.rayleigh_beta_s", "(got 1e+300)", {"material.rayleigh_beta_s=1e300"});
+  EXPECT_NE(said.find("beyond what the simulation holds in double precision"), std::string::npos) << said;
+  EXPECT_NE(said.find("7.16e+03 /s"), std::string::npos) << said;  // the frequency scale it is measured against
+  for (const char* beta : {"1e151", "1e140", "1e96", "1.7e308"})
+    expect_error(kBase, "material.rayleigh_beta_s", "beyond what the simulation holds in double precision",
+                 {std::string("material.rayleigh_beta_s=") + beta});
+  // beta x omega² x dt_s = beta x 5.12e4 is the tighter bound here.
+  expect_error(kBase, "material.rayleigh_beta_s", "x integrator.dt_s", {"material.rayleigh_beta_s=1e96"});
+  expect_error(kBase, "material.rayleigh_alpha_per_s", "alpha x integrator.dt_s) would be 1e+297",
+               {"material.rayleigh_alpha_per_s=1e300"});
+  expect_error(kBase, "material.rayleigh_alpha_per_s", "beyond what the simulation holds in double precision",
+               {"material.rayleigh_alpha_per_s=1e104"});
+  // The edges, and beta where the dampers do not use it (damping: paper).
+  EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml", {"material.rayleigh_beta_s=1e95"}));
+  EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml", {"material.rayleigh_alpha_per_s=5e102"}));
+  EXPECT_NO_THROW(
+      parse_scene_with_overrides(kBase, "ok.yaml", {"material.damping=paper", "material.rayleigh_beta_s=1e300"}));
+}
+
+// What the damping bound promises: at the largest beta and alpha the check
+// accepts, every rung either takes its steps with a finite state and energy
+// or refuses a step it cannot take at integrator.max_substeps (the explicit
+// rung: a damping ratio of 1e99 needs ever more sub-steps), saying so.
+TEST(SceneYamlErrors, TheLargestDampingTheCheckAcceptsRunsOrIsRefusedByTheSubstepCap) {
+  for (const char* kind : {"explicit", "implicit", "projective"})
+    for (const std::vector<std::string>& damping :
+         {std::vector<std::string>{"material.rayleigh_beta_s=1e95"},
+          std::vector<std::string>{"material.rayleigh_alpha_per_s=5e102"},
+          std::vector<std::string>{"material.rayleigh_beta_s=1e95", "material.rayleigh_alpha_per_s=5e102"}}) {
+      std::vector<std::string> overrides = damping;
+      overrides.push_back(std::string("integrator.kind=") + kind);
+      const Scene s = parse_scene_with_overrides(kBase, "edge.yaml", overrides);
+      physics::Simulation sim(s);
+      const std::string at = std::string(kind) + " with " + damping.back();
+      for (int i = 0; i < 5; ++i) {
+        const physics::StepResult r = sim.step();
+        if (!r.ok) {
+          EXPECT_EQ(std::string(kind), "explicit") << at << ": " << r.error;
+          EXPECT_NE(r.error.find("more than integrator.max_substeps"), std::string::npos) << at << ": " << r.error;
+          break;
+        }
+        const double energy_J = sim.kinetic_energy_J() + sim.elastic_energy_J();
+        ASSERT_TRUE(std::isfinite(energy_J)) << at << ", step " << i;
+        const physics::Body& body = sim.body();
+        bool finite = true;
+        body.mesh().for_each_node([&](physics::NodeId n, const mesh::Node&) {
+          finite = finite && body.x_m[n].allFinite() && body.v_m_per_s[n].allFinite();
+        });
+        ASSERT_TRUE(finite) << at << ", step " << i;
+      }
+    }
+}
+
 // What the scale checks promise (scene_yaml.cpp, kMinCubeScale): every
 // scene they accept gets node masses, inverse masses and spring
 // stiffnesses that are ordinary doubles, from the starting cubes down to
@@ -954,6 +1097,11 @@ TEST(SceneYamlErrors, EveryScaleTheCheckAcceptsGivesOrdinaryMassesAndStiffnesses
   Scene unit = parse_scene("object: {cubes: [2, 1, 1], cube_size_m: 1}\n", "unit.yaml");
   unit.material.density_kg_per_m3 = 1.0;
   unit.material.youngs_modulus_Pa = 1.0;
+  // Undamped: the sweep's stiffest-and-lightest scales (frequencies to 1e109
+  // /s at depth 30) are beyond the damping bound with the default beta
+  // (RayleighDampingBeyondDoublePrecisionIsRefused); this is about masses and
+  // stiffnesses.
+  unit.material.rayleigh_beta_s = 0.0;
   unit.adaptivity.enabled = true;
   unit.adaptivity.max_depth = 30;
   validate_scene(unit);
