@@ -982,7 +982,11 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   // And every frame's data by the rule the frame source (x3d, render,
   // replay) applies: ParaView indexes the vertices with the stored triangles
   // (VTK does not bounds-check) and draws the stored coordinates and strain.
-  // One frame in memory at a time.
+  // One frame in memory at a time. On the way, whether a frame has strain:
+  // a session recorded without it holds NaN for every triangle
+  // (mesh_frame_problem: a frame's strain is all NaN or all finite and
+  // >= 0), and a Cell attribute of NaN alone is nothing to colour by.
+  bool any_strain = false;
   for (std::uint64_t f = 0; f < frames; ++f) {
     const auto xyz = read_column<float>(file.get(), h5_path, kMeshVertices, voff[f], vcnt[f]);
     const auto idx = read_column<std::int32_t>(file.get(), h5_path, kMeshTriangles, toff[f], tcnt[f]);
@@ -990,6 +994,7 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
                                         : std::vector<float>{};
     if (const std::string problem = mesh_frame_problem(f, voff[f], xyz, toff[f], idx, strain); !problem.empty())
       bad_file(h5_path, problem);
+    any_strain = any_strain || (!strain.empty() && !std::isnan(strain[0]));
   }
 
   namespace fs = std::filesystem;
@@ -1060,7 +1065,11 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
     x << "      <DataItem Dimensions=\"" << all_levels << "\" NumberType=\"UChar\" Precision=\"1\" Format=\"HDF\">"
       << ref << ":/mesh/vertex_level</DataItem>\n";
     x << "     </DataItem>\n    </Attribute>\n";
-    if (info.has_strain) {  // per triangle: a Cell attribute ParaView can colour by
+    // Per triangle: a Cell attribute ParaView can colour by. On every grid
+    // or none, so the arrays ParaView offers stay the same over the time
+    // steps: a frame recorded without strain, in a session whose other
+    // frames have it, shows NaN there.
+    if (any_strain) {
       x << "    <Attribute Name=\"strain_energy_density_J_per_m3\" AttributeType=\"Scalar\" Center=\"Cell\">\n";
       x << "     <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << tcnt[f] << "\" Type=\"HyperSlab\">\n";
       x << "      <DataItem Dimensions=\"3 1\" Format=\"XML\">" << toff[f] << " 1 " << tcnt[f] << "</DataItem>\n";

@@ -191,9 +191,11 @@ struct XdmfReport {
 
 // Writes an XDMF 3 sidecar: a temporal collection with one triangle grid per
 // complete mesh frame, HyperSlab DataItems into the flat /mesh datasets
-// (vertex_level as a Node attribute; strain energy density, when the file
-// has it, as a Cell attribute). The
-// HDF5 path in the XML is relative to the sidecar's directory when possible.
+// (vertex_level as a Node attribute; strain energy density, when a frame of
+// the session has it, as a Cell attribute of every grid: NaN on a frame
+// recorded without it; none for a session recorded without strain or of
+// format version 1). The HDF5 path in the XML is relative to the sidecar's
+// directory when possible.
 // out_path empty: FILE with its extension replaced by .xdmf.
 XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path);
 

@@ -1301,6 +1301,42 @@ TEST(SessionTools, XdmfSkipsAndCountsFramesWithoutTriangles) {
   EXPECT_EQ(xml.find("frame_1"), std::string::npos) << xml;
 }
 
+// A format-2 session recorded without strain stores NaN for every triangle:
+// its sidecar had the strain Cell attribute anyway, and ParaView coloured
+// every frame by NaN. Now the attribute is there only when a frame of the
+// session has strain; then every grid has it (ParaView's list of arrays
+// stays the same across the time steps) and a frame recorded without
+// strain reads as NaN there.
+TEST(SessionTools, XdmfOfASessionRecordedWithoutStrainHasNoStrainAttribute) {
+  TempDir dir;
+  const auto strain_attributes = [](const std::string& xml) {
+    std::size_t n = 0;
+    for (std::size_t at = xml.find("\"strain_energy_density_J_per_m3\""); at != std::string::npos;
+         at = xml.find("\"strain_energy_density_J_per_m3\"", at + 1))
+      ++n;
+    return n;
+  };
+  testing::TestSession without;
+  without.frames = 4;
+  without.strain = false;
+  const std::string none = testing::write_test_session(dir / "none.h5", without);
+  ASSERT_TRUE(read_session_info(none).has_strain) << "format version 2: the dataset is there, all NaN";
+  const XdmfReport report = write_xdmf(none, "");
+  EXPECT_EQ(report.frames, 4u);
+  const std::string xml = testing::slurp(report.out_path);
+  EXPECT_EQ(strain_attributes(xml), 0u) << xml;
+  EXPECT_NE(xml.find("vertex_level"), std::string::npos);
+
+  // Frame 0 recorded without strain, the others with it: every grid keeps
+  // the attribute.
+  const std::string some = dir / "some.h5";
+  write_small_session(some, 4);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (std::uint64_t t = 0; t < testing::test_frame(0).triangles.size(); ++t)
+    testing::overwrite_element(some, kDatasets[kMeshTriangleStrain].path, t, 0, H5T_NATIVE_FLOAT, &nan);
+  EXPECT_EQ(strain_attributes(testing::slurp(write_xdmf(some, "").out_path)), 4u);
+}
+
 // A session still marked open for writing (crashed, or being recorded) is
 // refused by `xdmf` with what to do: ParaView's ordinary open would refuse it.
 TEST(SessionTools, XdmfOfACrashedSessionIsRefusedSayingToRepairItFirst) {
