@@ -382,6 +382,14 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
       corrupt(f, kMeshVertexCount, "is " + std::to_string(vcnt[f]) + ": more rows than any file holds");
     if (tcnt[f] > UINT64_MAX - t_end)
       corrupt(f, kMeshTriangleCount, "is " + std::to_string(tcnt[f]) + ": more rows than any file holds");
+    // Nor does a writer make a frame its int32 triangle indices cannot
+    // reach, crash or not. Checked here, for every reader at open, so none
+    // reads (or allocates for) such a frame: the data extents may make room
+    // for it when they are damaged too.
+    if (vcnt[f] > kMaxMeshFrameVertices)
+      corrupt(f, kMeshVertexCount,
+              "is " + std::to_string(vcnt[f]) + ": more vertices than a frame's int32 triangle indices reach (" +
+                  std::to_string(kMaxMeshFrameVertices) + ")");
     v_end += vcnt[f];
     t_end += tcnt[f];
   }

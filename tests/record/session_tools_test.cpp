@@ -824,8 +824,13 @@ TEST(SessionTools, ABrokenFrameIndexWithFramesAfterItInACrashedFileIsRefusedAndK
         Damage{kMeshVertexCount, 2, 1000000, "/mesh/vertex_offset[3] is "},
         Damage{kMeshTriangleCount, 2, 1000000, "after /mesh/triangle_count[2], which is 1000000: past the end"},
         // The last frame's, yet no writer's: no file holds that many rows.
-        Damage{kMeshVertexCount, 5, UINT64_MAX - 1, "/mesh/vertex_count[5] is 18446744073709551614: more rows"}}) {
-    const std::string path = dir / ("crashed" + std::to_string(d.id) + "_" + std::to_string(d.row) + ".h5");
+        Damage{kMeshVertexCount, 5, UINT64_MAX - 1, "/mesh/vertex_count[5] is 18446744073709551614: more rows"},
+        // Nor this many vertices: the writer refuses a frame its int32
+        // triangle indices cannot reach (read as a crash tail: 5 frames).
+        Damage{kMeshVertexCount, 5, kMaxMeshFrameVertices + 1,
+               "/mesh/vertex_count[5] is 2147483648: more vertices than"}}) {
+    const std::string path =
+        dir / ("crashed" + std::to_string(d.id) + "_" + std::to_string(d.row) + "_" + std::to_string(d.value) + ".h5");
     testing::write_crashed_session(path, 100, 6);
     ASSERT_EQ(read_session_info(path).rows.mesh_frames, 6u);
     overwrite_u64_in_crashed(path, d.id, d.row, d.value);
@@ -849,6 +854,40 @@ TEST(SessionTools, ABrokenFrameIndexWithFramesAfterItInACrashedFileIsRefusedAndK
     EXPECT_NE(cli.err.find(d.says), std::string::npos) << cli.err;
     EXPECT_TRUE(testing::slurp(path) == before) << "`tissue session repair` changed the file";
   }
+}
+
+// Triangles index their frame's vertices with int32, so no writer makes a
+// frame of more than 2^31 - 1 vertices; a count beyond that is damage even
+// where the data extents (damaged too, chunks never written) make room for
+// it. Only the frame source bounded it, as it read the frame; info, repair
+// and the row readers took the file, and xdmf went on to read the frame.
+// Now the one reader refuses it at open, naming the index row, before
+// anything is read for the frame.
+TEST(SessionTools, AVertexCountPastWhatTriangleIndicesReachIsRefusedNamingTheRow) {
+  TempDir dir;
+  const std::string path = dir / "huge_frame.h5";
+  write_small_session(path, 5);
+  std::uint64_t v4 = 0;  // where frame 4 starts
+  for (std::uint64_t f = 0; f < 4; ++f) v4 += testing::test_frame(f).vertices_m.size();
+  const std::uint64_t count = kMaxMeshFrameVertices + 1;
+  overwrite_u64(path, kDatasets[kMeshVertexCount].path, 4, count);
+  {
+    const hid_t file = testing::open_for_edit(path);
+    ASSERT_GE(file, 0);
+    for (const DatasetId id : {kMeshVertices, kMeshVertexLevel}) {
+      const hid_t ds = H5Dopen2(file, kDatasets[id].path, H5P_DEFAULT);
+      const hsize_t dims[2] = {v4 + count, static_cast<hsize_t>(kDatasets[id].columns)};
+      EXPECT_GE(H5Dset_extent(ds, dims), 0) << kDatasets[id].path;
+      H5Dclose(ds);
+    }
+    H5Fclose(file);
+  }
+  ASSERT_LT(std::filesystem::file_size(path), 10u << 20);
+  const std::string says = "/mesh/vertex_count[4] is 2147483648: more vertices than a frame's int32 triangle indices";
+  expect_every_tool_refuses(path, dir, says);
+  const auto cli = run(tissue() + " session xdmf " + quote(path), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_NE(cli.err.find(says), std::string::npos) << cli.err;
 }
 
 // Cuts dataset `id` of a closed session to `rows` rows (its other columns
