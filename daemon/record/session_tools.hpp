@@ -53,6 +53,12 @@ struct SessionInfo {
   // The writer leaves none; `tissue session info` lists them. Always 0 in a
   // file open for writing, whose last write may be ahead of its group.
   std::array<std::uint64_t, kDatasetCount> unreferenced_rows{};
+  // Left by a crash (open for writing with no recorder holding it, or
+  // neither closed cleanly nor repaired) with rows past its complete ones:
+  // a column past the shortest of its group, mesh data or index rows past
+  // the last complete frame. `tissue session repair` trims them; info and
+  // list say so.
+  bool crash_tail = false;
 };
 
 // Opens read-only (SWMR read when the superblock says it is still open for

@@ -938,6 +938,16 @@ TEST(SessionTools, AVertexLevelColumnShorterThanTheFramesIsAnErrorNamingTheFrame
   expect_every_tool_refuses(path, dir, "(/mesh/vertices_m, /mesh/vertex_level)");
 }
 
+// A closed session as `h5clear -s` leaves a crashed one: closed_cleanly 0,
+// flags clear, no repaired_utc ("NOT closed cleanly").
+void mark_not_closed_cleanly(const std::string& path) {
+  const hid_t file = testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  ASSERT_GE(H5Adelete(file, kAttrClosedCleanly), 0);
+  h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
+  H5Fclose(file);
+}
+
 // `h5clear -s --increment` on a crashed session clears the superblock's
 // flags but leaves its columns as the crash did: closed_cleanly 0, no
 // repaired_utc ("NOT closed cleanly"). Repair does what h5clear does and
@@ -946,13 +956,6 @@ TEST(SessionTools, AVertexLevelColumnShorterThanTheFramesIsAnErrorNamingTheFrame
 // the two writes) as corrupt, though every frame before the last is whole.
 TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
   TempDir dir;
-  const auto not_closed_cleanly = [](const std::string& path) {
-    const hid_t file = open_for_edit(path);
-    ASSERT_GE(file, 0) << path;
-    ASSERT_GE(H5Adelete(file, kAttrClosedCleanly), 0);
-    h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
-    H5Fclose(file);
-  };
   struct Crash {
     const char* name;
     std::vector<DatasetId> cut;  // each loses its rows of the frames from `kept` on
@@ -970,7 +973,7 @@ TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
       triangles += testing::test_frame(f).triangles.size();
     }
     for (const DatasetId id : c.cut) shorten(path, id, id == kMeshTriangleStrain ? triangles : vertices);
-    not_closed_cleanly(path);
+    mark_not_closed_cleanly(path);
 
     const RepairReport report = repair_session(path);
     EXPECT_TRUE(report.repair_needed);
@@ -993,6 +996,85 @@ TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
       t0 += frame.triangles.size();
     }
   }
+}
+
+// What `tissue session info` and `list` say of a file a crash left uneven
+// (columns or mesh data past the complete rows, or the last frames' index
+// rows ahead of their data): `repair` trims it, and they now say so, for a
+// file still marked open (left by a crash) and for one whose flags were
+// cleared without a repair ("NOT closed cleanly"; its readers refuse a
+// frame index ahead of the data, and the refusal says so). Before, a file
+// in the second state read as "NOT closed cleanly" with "unreferenced rows"
+// or as "corrupt frame index", with no word of repair. Not for damage
+// repair refuses, nor for a clean or even file.
+TEST(SessionTools, InfoAndListSayThatRepairTrimsASessionACrashLeftUneven) {
+  TempDir dir;
+  const std::string d = dir / "state";
+  std::filesystem::create_directories(d);
+  const std::string hint = "`tissue session repair FILE` trims it to its last complete frame";
+  std::uint64_t v3 = 0;  // vertices of frames 0 .. 2
+  for (std::uint64_t f = 0; f < 3; ++f) v3 += testing::test_frame(f).vertices_m.size();
+
+  // Open for writing, no recorder: the last frame's count past the data.
+  const std::string crashed = d + "/crashed.h5";
+  testing::write_crashed_session(crashed, 100, 6);
+  overwrite_u64_in_crashed(crashed, kMeshVertexCount, 5, testing::test_frame(5).vertices_m.size() + 1);
+  // Flags cleared, not repaired: a column past its group (rows read fine).
+  const std::string uneven = d + "/uneven.h5";
+  write_small_session(uneven, 5);
+  shorten(uneven, kHapticForce, 1200);
+  mark_not_closed_cleanly(uneven);
+  // Flags cleared, not repaired: the last two frames' index ahead of the data.
+  const std::string tail = d + "/tail.h5";
+  write_small_session(tail, 5);
+  shorten(tail, kMeshVertices, v3);
+  shorten(tail, kMeshVertexLevel, v3);
+  mark_not_closed_cleanly(tail);
+  // Not for these: even, closed cleanly (its extra rows are not a crash's),
+  // and damage repair refuses.
+  const std::string even = d + "/even.h5";
+  write_small_session(even, 5);
+  mark_not_closed_cleanly(even);
+  const std::string closed = d + "/closed.h5";
+  write_small_session(closed, 5);
+  shorten(closed, kHapticForce, 1200);
+  const std::string damaged = d + "/damaged.h5";
+  write_small_session(damaged, 5);
+  overwrite_u64(damaged, kDatasets[kMeshTriangleOffset].path, 2, 7);
+  mark_not_closed_cleanly(damaged);
+
+  for (const std::string& path : {crashed, uneven}) {
+    SCOPED_TRACE(path);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 0) << cli.err;
+    EXPECT_NE(cli.out.find(hint), std::string::npos) << cli.out;
+  }
+  EXPECT_EQ(read_session_info(crashed).rows.mesh_frames, 5u);
+  const auto refused = run(tissue() + " session info " + quote(tail), dir);
+  EXPECT_EQ(refused.exit_code, 1) << refused.out;
+  EXPECT_NE(refused.err.find("/mesh/vertex_count[3] is "), std::string::npos) << refused.err;
+  EXPECT_NE(refused.err.find(hint), std::string::npos) << refused.err;
+  for (const std::string& path : {even, closed, damaged}) {
+    SCOPED_TRACE(path);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, path == damaged ? 1 : 0) << cli.out << cli.err;
+    EXPECT_EQ((cli.out + cli.err).find("session repair"), std::string::npos) << cli.out << cli.err;
+  }
+
+  const auto list = run(tissue() + " session list " + quote(d), dir);
+  EXPECT_EQ(list.exit_code, 0) << list.err;
+  const auto line_of = [&](const std::string& start) {
+    const std::size_t at = ("\n" + list.out).find("\n" + start);  // at the start of a line
+    return at == std::string::npos ? std::string() : list.out.substr(at, list.out.find('\n', at) - at);
+  };
+  EXPECT_NE(line_of("crashed.h5 ").find("OPEN (crashed)"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("uneven.h5 ").find("NOT closed (crash tail)"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("even.h5 ").find("NOT closed cleanly"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("unreadable: '" + tail + "'").find(hint), std::string::npos) << list.out;
+  EXPECT_NE(line_of("unreadable: '" + damaged + "'"), "") << list.out;
+  EXPECT_EQ(line_of("unreadable: '" + damaged + "'").find("repair"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("OPEN (crashed): ").find(hint), std::string::npos) << list.out;
+  EXPECT_NE(line_of("NOT closed (crash tail): ").find(hint), std::string::npos) << list.out;
 }
 
 // Extents of 2^36 rows (chunks never written, so the file stays small) must
