@@ -265,7 +265,7 @@ Subcommand add_session_command(CLI::App& parent) {
   options->list = session->add_subcommand(
       "list",
       "The sessions in a state directory: state (closed cleanly, OPEN: recording or crashed, repaired, NOT closed "
-      "cleanly), start, duration, rows, scene");
+      "cleanly, NOT closed (crash tail): `tissue session repair` trims it), start, duration, rows, scene");
   options->list->add_option("dir", options->dir, "Directory (default: tissued's default state_dir)")
       ->capture_default_str();
   options->list->footer(

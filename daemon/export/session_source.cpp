@@ -98,12 +98,11 @@ class SessionFrameSource final : public FrameSource {
     if (k >= frames_)
       throw std::out_of_range("frame " + std::to_string(k) + " of " + name() + " does not exist (" +
                               std::to_string(frames_) + " frames)");
+    // Counts come from the file, bounded by the session reader at open: by
+    // the dataset extents (complete frames), the int32 index limit of the
+    // format (kMaxMeshFrameVertices) and, as the rows are read, the file's
+    // size.
     const std::uint64_t nv = vertex_count_[k], nt = triangle_count_[k];
-    // Counts come from the file: bound them before allocating (the
-    // complete-frame check of the session reader already bounded them by the
-    // dataset extents, this is the int32 index limit of the format).
-    if (nv > static_cast<std::uint64_t>(std::numeric_limits<std::int32_t>::max()))
-      fail("frame " + std::to_string(k) + " claims " + std::to_string(nv) + " vertices");
     const auto xyz = read<float>(record::kMeshVertices, vertex_offset_[k], nv);
     const auto idx = read<std::int32_t>(record::kMeshTriangles, triangle_offset_[k], nt);
     std::vector<float> strain;

@@ -11,6 +11,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 
 namespace tissue::record {
 
@@ -109,6 +110,12 @@ inline constexpr std::array<DatasetSpec, kDatasetCount> kDatasets = {{
     {"/events/message", Group::kEvents, ElementType::kString, 1, "text (UTF-8, 255 bytes max)", 64},
     {"/events/time_s", Group::kEvents, ElementType::kF64, 1, "s (session time)", 64},
 }};
+
+// The most vertices a mesh frame has: /mesh/triangles indexes them with
+// int32. The writer refuses a frame of more; every reader refuses a
+// /mesh/vertex_count beyond it as damage, naming the row, before it reads
+// (or allocates for) the frame.
+inline constexpr std::uint64_t kMaxMeshFrameVertices = std::numeric_limits<std::int32_t>::max();
 
 // Root attributes.
 inline constexpr const char* kAttrFormatVersion = "format_version";

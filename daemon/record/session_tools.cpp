@@ -34,6 +34,10 @@ using h5::Handle;
   throw RecordError("'" + path + "': " + what);
 }
 
+// What info, list and the readers' refusals say of a file a crash left with
+// rows past its complete ones (SessionInfo::crash_tail).
+constexpr const char* kRepairTrims = "`tissue session repair FILE` trims it to its last complete frame";
+
 // A string from a session file or a directory, as `info` and `list` print
 // it. The file may hold anything (a foreign writer, an edit, damage): printed
 // raw, an escape sequence drove the terminal and a line break forged a line
@@ -382,6 +386,14 @@ Counts count_rows(hid_t file, const std::string& path, std::int64_t version, boo
       corrupt(f, kMeshVertexCount, "is " + std::to_string(vcnt[f]) + ": more rows than any file holds");
     if (tcnt[f] > UINT64_MAX - t_end)
       corrupt(f, kMeshTriangleCount, "is " + std::to_string(tcnt[f]) + ": more rows than any file holds");
+    // Nor does a writer make a frame its int32 triangle indices cannot
+    // reach, crash or not. Checked here, for every reader at open, so none
+    // reads (or allocates for) such a frame: the data extents may make room
+    // for it when they are damaged too.
+    if (vcnt[f] > kMaxMeshFrameVertices)
+      corrupt(f, kMeshVertexCount,
+              "is " + std::to_string(vcnt[f]) + ": more vertices than a frame's int32 triangle indices reach (" +
+                  std::to_string(kMaxMeshFrameVertices) + ")");
     v_end += vcnt[f];
     t_end += tcnt[f];
   }
@@ -486,7 +498,26 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   const SessionState state = session_state(info);
   const bool partial_ok = rules == RowRules::kCrashRules || state == SessionState::kOpenForWrite ||
                           (rules == RowRules::kUnlessClosedOrRepaired && state == SessionState::kNotClosed);
-  Counts counts = count_rows(file, path, info.format_version, partial_ok);
+  Counts counts;
+  try {
+    counts = count_rows(file, path, info.format_version, partial_ok);
+  } catch (const RecordError& e) {
+    // Readers read a file whose flags were cleared without a repair by the
+    // rules of a closed one, repair by the crash rules (it trims such a
+    // file): when those take what these refuse (the last frames' index
+    // ahead of their data, a strain column a write short), the refusal says
+    // what repair does. Not for damage repair refuses too.
+    if (partial_ok || state != SessionState::kNotClosed) throw;
+    bool repair_takes = true;
+    try {
+      count_rows(file, path, info.format_version, true);
+    } catch (const RecordError&) {
+      repair_takes = false;
+    }
+    if (!repair_takes) throw;
+    throw RecordError(std::string(e.what()) +
+                      "; the file was not closed cleanly, and a crash leaves this: " + kRepairTrims);
+  }
   info.rows = counts.rows;
   // A recorded duration is a session's length: finite, >= 0 and within
   // kMaxSessionTime_s (a damaged 1e300 was printed as the duration). Without
@@ -501,11 +532,17 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
   // foreign writer's): reported, not hidden. The rows that are read stay
   // readable: each row is aligned by its number, and a frame is what the
   // index says (an index that does not match the data is an error above).
+  const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
   if (!partial_ok) {
-    const std::array<std::uint64_t, kDatasetCount> used = rows_in_use(counts);
     for (std::size_t i = 0; i < kDatasetCount; ++i)
       if (counts.extents[i] > used[i]) info.unreferenced_rows[i] = counts.extents[i] - used[i];
   }
+  // What repair would trim (repair_session's rows_to_trim): a file it
+  // repairs, with rows past those in use. Where the rules above are a
+  // closed file's ("NOT closed cleanly"), the counts are the crash rules'
+  // too, since those differ only where these refuse the file.
+  if ((state == SessionState::kOpenForWrite && !info.being_recorded) || state == SessionState::kNotClosed)
+    for (std::size_t i = 0; i < kDatasetCount; ++i) info.crash_tail = info.crash_tail || counts.extents[i] > used[i];
   if (counts_out) *counts_out = counts;
   return info;
 }
@@ -746,6 +783,9 @@ std::string format_session_info(const SessionInfo& info) {
       o << "NOT closed cleanly (the clean-close mark is missing)\n";
       break;
   }
+  if (info.crash_tail)
+    o << "repair:           its last write is incomplete (rows past the complete ones, as a crash leaves them): "
+      << kRepairTrims << "\n";
   o << "scene:            " << (info.scene_name.empty() ? "(none)" : shown(info.scene_name)) << "\n";
   o << "start time (UTC): " << shown(info.start_time_utc) << "\n";
   if (!info.end_time_utc.empty()) o << "end time (UTC):   " << shown(info.end_time_utc) << "\n";
@@ -843,6 +883,10 @@ const char* state_label(SessionState state) {
   return "NOT closed cleanly";
 }
 
+// A file not closed cleanly, flags clear, with a crash's incomplete last
+// write (repair trims it).
+constexpr const char* kCrashTailLabel = "NOT closed (crash tail)";
+
 }  // namespace
 
 std::string format_session_listing(const SessionListing& listing) {
@@ -862,9 +906,13 @@ std::string format_session_listing(const SessionListing& listing) {
   for (const SessionInfo& s : listing.sessions) {
     char duration[32];
     std::snprintf(duration, sizeof duration, "%.3f", s.duration_s);
+    const SessionState state = session_state(s);
     row(shown(std::filesystem::path(s.path).filename().string()),
-        s.being_recorded ? "being recorded" : state_label(session_state(s)), shown(s.start_time_utc), duration,
-        std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames), shown(s.scene_name));
+        s.being_recorded                                    ? "being recorded"
+        : state == SessionState::kNotClosed && s.crash_tail ? kCrashTailLabel
+                                                            : state_label(state),
+        shown(s.start_time_utc), duration, std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames),
+        shown(s.scene_name));
   }
   for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << shown(u.reason) << "\n";
   for (const std::string& f : listing.unfinished)
@@ -874,7 +922,12 @@ std::string format_session_listing(const SessionListing& listing) {
   if (std::any_of(listing.sessions.begin(), listing.sessions.end(), [](const SessionInfo& s) {
         return session_state(s) == SessionState::kOpenForWrite && !s.being_recorded;
       }))
-    o << "OPEN (crashed): left open by a recorder that is gone: `tissue session repair FILE`\n";
+    o << "OPEN (crashed): left open by a recorder that is gone: " << kRepairTrims
+      << " and makes it readable by ordinary readers\n";
+  if (std::any_of(listing.sessions.begin(), listing.sessions.end(),
+                  [](const SessionInfo& s) { return session_state(s) == SessionState::kNotClosed && s.crash_tail; }))
+    o << kCrashTailLabel << ": not closed cleanly, its last write incomplete as a crash leaves it: " << kRepairTrims
+      << "\n";
   return o.str();
 }
 
@@ -982,7 +1035,11 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
   // And every frame's data by the rule the frame source (x3d, render,
   // replay) applies: ParaView indexes the vertices with the stored triangles
   // (VTK does not bounds-check) and draws the stored coordinates and strain.
-  // One frame in memory at a time.
+  // One frame in memory at a time. On the way, whether a frame has strain:
+  // a session recorded without it holds NaN for every triangle
+  // (mesh_frame_problem: a frame's strain is all NaN or all finite and
+  // >= 0), and a Cell attribute of NaN alone is nothing to colour by.
+  bool any_strain = false;
   for (std::uint64_t f = 0; f < frames; ++f) {
     const auto xyz = read_column<float>(file.get(), h5_path, kMeshVertices, voff[f], vcnt[f]);
     const auto idx = read_column<std::int32_t>(file.get(), h5_path, kMeshTriangles, toff[f], tcnt[f]);
@@ -990,6 +1047,7 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
                                         : std::vector<float>{};
     if (const std::string problem = mesh_frame_problem(f, voff[f], xyz, toff[f], idx, strain); !problem.empty())
       bad_file(h5_path, problem);
+    any_strain = any_strain || (!strain.empty() && !std::isnan(strain[0]));
   }
 
   namespace fs = std::filesystem;
@@ -1060,7 +1118,11 @@ XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path_in
     x << "      <DataItem Dimensions=\"" << all_levels << "\" NumberType=\"UChar\" Precision=\"1\" Format=\"HDF\">"
       << ref << ":/mesh/vertex_level</DataItem>\n";
     x << "     </DataItem>\n    </Attribute>\n";
-    if (info.has_strain) {  // per triangle: a Cell attribute ParaView can colour by
+    // Per triangle: a Cell attribute ParaView can colour by. On every grid
+    // or none, so the arrays ParaView offers stay the same over the time
+    // steps: a frame recorded without strain, in a session whose other
+    // frames have it, shows NaN there.
+    if (any_strain) {
       x << "    <Attribute Name=\"strain_energy_density_J_per_m3\" AttributeType=\"Scalar\" Center=\"Cell\">\n";
       x << "     <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << tcnt[f] << "\" Type=\"HyperSlab\">\n";
       x << "      <DataItem Dimensions=\"3 1\" Format=\"XML\">" << toff[f] << " 1 " << tcnt[f] << "</DataItem>\n";

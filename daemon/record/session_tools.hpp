@@ -53,6 +53,12 @@ struct SessionInfo {
   // The writer leaves none; `tissue session info` lists them. Always 0 in a
   // file open for writing, whose last write may be ahead of its group.
   std::array<std::uint64_t, kDatasetCount> unreferenced_rows{};
+  // Left by a crash (open for writing with no recorder holding it, or
+  // neither closed cleanly nor repaired) with rows past its complete ones:
+  // a column past the shortest of its group, mesh data or index rows past
+  // the last complete frame. `tissue session repair` trims them; info and
+  // list say so.
+  bool crash_tail = false;
 };
 
 // Opens read-only (SWMR read when the superblock says it is still open for
@@ -191,9 +197,11 @@ struct XdmfReport {
 
 // Writes an XDMF 3 sidecar: a temporal collection with one triangle grid per
 // complete mesh frame, HyperSlab DataItems into the flat /mesh datasets
-// (vertex_level as a Node attribute; strain energy density, when the file
-// has it, as a Cell attribute). The
-// HDF5 path in the XML is relative to the sidecar's directory when possible.
+// (vertex_level as a Node attribute; strain energy density, when a frame of
+// the session has it, as a Cell attribute of every grid: NaN on a frame
+// recorded without it; none for a session recorded without strain or of
+// format version 1). The HDF5 path in the XML is relative to the sidecar's
+// directory when possible.
 // out_path empty: FILE with its extension replaced by .xdmf.
 XdmfReport write_xdmf(const std::string& h5_path, const std::string& out_path);
 

@@ -520,8 +520,7 @@ void SessionWriter::append_mesh_frame(const MeshFrameView& frame) {
   throw_if_failed();
   const std::size_t nv = frame.vertices_m.size();
   const std::size_t nt = frame.triangles.size();
-  if (nv > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
-    throw std::invalid_argument("mesh frame has too many vertices for int32 indices");
+  if (nv > kMaxMeshFrameVertices) throw std::invalid_argument("mesh frame has too many vertices for int32 indices");
   if (!frame.vertex_level.empty() && frame.vertex_level.size() != nv)
     throw std::invalid_argument("mesh frame has " + std::to_string(frame.vertex_level.size()) + " vertex levels for " +
                                 std::to_string(nv) + " vertices");

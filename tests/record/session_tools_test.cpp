@@ -824,8 +824,13 @@ TEST(SessionTools, ABrokenFrameIndexWithFramesAfterItInACrashedFileIsRefusedAndK
         Damage{kMeshVertexCount, 2, 1000000, "/mesh/vertex_offset[3] is "},
         Damage{kMeshTriangleCount, 2, 1000000, "after /mesh/triangle_count[2], which is 1000000: past the end"},
         // The last frame's, yet no writer's: no file holds that many rows.
-        Damage{kMeshVertexCount, 5, UINT64_MAX - 1, "/mesh/vertex_count[5] is 18446744073709551614: more rows"}}) {
-    const std::string path = dir / ("crashed" + std::to_string(d.id) + "_" + std::to_string(d.row) + ".h5");
+        Damage{kMeshVertexCount, 5, UINT64_MAX - 1, "/mesh/vertex_count[5] is 18446744073709551614: more rows"},
+        // Nor this many vertices: the writer refuses a frame its int32
+        // triangle indices cannot reach (read as a crash tail: 5 frames).
+        Damage{kMeshVertexCount, 5, kMaxMeshFrameVertices + 1,
+               "/mesh/vertex_count[5] is 2147483648: more vertices than"}}) {
+    const std::string path =
+        dir / ("crashed" + std::to_string(d.id) + "_" + std::to_string(d.row) + "_" + std::to_string(d.value) + ".h5");
     testing::write_crashed_session(path, 100, 6);
     ASSERT_EQ(read_session_info(path).rows.mesh_frames, 6u);
     overwrite_u64_in_crashed(path, d.id, d.row, d.value);
@@ -849,6 +854,40 @@ TEST(SessionTools, ABrokenFrameIndexWithFramesAfterItInACrashedFileIsRefusedAndK
     EXPECT_NE(cli.err.find(d.says), std::string::npos) << cli.err;
     EXPECT_TRUE(testing::slurp(path) == before) << "`tissue session repair` changed the file";
   }
+}
+
+// Triangles index their frame's vertices with int32, so no writer makes a
+// frame of more than 2^31 - 1 vertices; a count beyond that is damage even
+// where the data extents (damaged too, chunks never written) make room for
+// it. Only the frame source bounded it, as it read the frame; info, repair
+// and the row readers took the file, and xdmf went on to read the frame.
+// Now the one reader refuses it at open, naming the index row, before
+// anything is read for the frame.
+TEST(SessionTools, AVertexCountPastWhatTriangleIndicesReachIsRefusedNamingTheRow) {
+  TempDir dir;
+  const std::string path = dir / "huge_frame.h5";
+  write_small_session(path, 5);
+  std::uint64_t v4 = 0;  // where frame 4 starts
+  for (std::uint64_t f = 0; f < 4; ++f) v4 += testing::test_frame(f).vertices_m.size();
+  const std::uint64_t count = kMaxMeshFrameVertices + 1;
+  overwrite_u64(path, kDatasets[kMeshVertexCount].path, 4, count);
+  {
+    const hid_t file = testing::open_for_edit(path);
+    ASSERT_GE(file, 0);
+    for (const DatasetId id : {kMeshVertices, kMeshVertexLevel}) {
+      const hid_t ds = H5Dopen2(file, kDatasets[id].path, H5P_DEFAULT);
+      const hsize_t dims[2] = {v4 + count, static_cast<hsize_t>(kDatasets[id].columns)};
+      EXPECT_GE(H5Dset_extent(ds, dims), 0) << kDatasets[id].path;
+      H5Dclose(ds);
+    }
+    H5Fclose(file);
+  }
+  ASSERT_LT(std::filesystem::file_size(path), 10u << 20);
+  const std::string says = "/mesh/vertex_count[4] is 2147483648: more vertices than a frame's int32 triangle indices";
+  expect_every_tool_refuses(path, dir, says);
+  const auto cli = run(tissue() + " session xdmf " + quote(path), dir);
+  EXPECT_EQ(cli.exit_code, 1) << cli.out;
+  EXPECT_NE(cli.err.find(says), std::string::npos) << cli.err;
 }
 
 // Cuts dataset `id` of a closed session to `rows` rows (its other columns
@@ -899,6 +938,16 @@ TEST(SessionTools, AVertexLevelColumnShorterThanTheFramesIsAnErrorNamingTheFrame
   expect_every_tool_refuses(path, dir, "(/mesh/vertices_m, /mesh/vertex_level)");
 }
 
+// A closed session as `h5clear -s` leaves a crashed one: closed_cleanly 0,
+// flags clear, no repaired_utc ("NOT closed cleanly").
+void mark_not_closed_cleanly(const std::string& path) {
+  const hid_t file = testing::open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  ASSERT_GE(H5Adelete(file, kAttrClosedCleanly), 0);
+  h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
+  H5Fclose(file);
+}
+
 // `h5clear -s --increment` on a crashed session clears the superblock's
 // flags but leaves its columns as the crash did: closed_cleanly 0, no
 // repaired_utc ("NOT closed cleanly"). Repair does what h5clear does and
@@ -907,13 +956,6 @@ TEST(SessionTools, AVertexLevelColumnShorterThanTheFramesIsAnErrorNamingTheFrame
 // the two writes) as corrupt, though every frame before the last is whole.
 TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
   TempDir dir;
-  const auto not_closed_cleanly = [](const std::string& path) {
-    const hid_t file = open_for_edit(path);
-    ASSERT_GE(file, 0) << path;
-    ASSERT_GE(H5Adelete(file, kAttrClosedCleanly), 0);
-    h5::write_u8_attribute(file, kAttrClosedCleanly, 0);
-    H5Fclose(file);
-  };
   struct Crash {
     const char* name;
     std::vector<DatasetId> cut;  // each loses its rows of the frames from `kept` on
@@ -931,7 +973,7 @@ TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
       triangles += testing::test_frame(f).triangles.size();
     }
     for (const DatasetId id : c.cut) shorten(path, id, id == kMeshTriangleStrain ? triangles : vertices);
-    not_closed_cleanly(path);
+    mark_not_closed_cleanly(path);
 
     const RepairReport report = repair_session(path);
     EXPECT_TRUE(report.repair_needed);
@@ -954,6 +996,85 @@ TEST(SessionTools, RepairTrimsAFileLeftNotClosedCleanlyToItsLastCompleteFrame) {
       t0 += frame.triangles.size();
     }
   }
+}
+
+// What `tissue session info` and `list` say of a file a crash left uneven
+// (columns or mesh data past the complete rows, or the last frames' index
+// rows ahead of their data): `repair` trims it, and they now say so, for a
+// file still marked open (left by a crash) and for one whose flags were
+// cleared without a repair ("NOT closed cleanly"; its readers refuse a
+// frame index ahead of the data, and the refusal says so). Before, a file
+// in the second state read as "NOT closed cleanly" with "unreferenced rows"
+// or as "corrupt frame index", with no word of repair. Not for damage
+// repair refuses, nor for a clean or even file.
+TEST(SessionTools, InfoAndListSayThatRepairTrimsASessionACrashLeftUneven) {
+  TempDir dir;
+  const std::string d = dir / "state";
+  std::filesystem::create_directories(d);
+  const std::string hint = "`tissue session repair FILE` trims it to its last complete frame";
+  std::uint64_t v3 = 0;  // vertices of frames 0 .. 2
+  for (std::uint64_t f = 0; f < 3; ++f) v3 += testing::test_frame(f).vertices_m.size();
+
+  // Open for writing, no recorder: the last frame's count past the data.
+  const std::string crashed = d + "/crashed.h5";
+  testing::write_crashed_session(crashed, 100, 6);
+  overwrite_u64_in_crashed(crashed, kMeshVertexCount, 5, testing::test_frame(5).vertices_m.size() + 1);
+  // Flags cleared, not repaired: a column past its group (rows read fine).
+  const std::string uneven = d + "/uneven.h5";
+  write_small_session(uneven, 5);
+  shorten(uneven, kHapticForce, 1200);
+  mark_not_closed_cleanly(uneven);
+  // Flags cleared, not repaired: the last two frames' index ahead of the data.
+  const std::string tail = d + "/tail.h5";
+  write_small_session(tail, 5);
+  shorten(tail, kMeshVertices, v3);
+  shorten(tail, kMeshVertexLevel, v3);
+  mark_not_closed_cleanly(tail);
+  // Not for these: even, closed cleanly (its extra rows are not a crash's),
+  // and damage repair refuses.
+  const std::string even = d + "/even.h5";
+  write_small_session(even, 5);
+  mark_not_closed_cleanly(even);
+  const std::string closed = d + "/closed.h5";
+  write_small_session(closed, 5);
+  shorten(closed, kHapticForce, 1200);
+  const std::string damaged = d + "/damaged.h5";
+  write_small_session(damaged, 5);
+  overwrite_u64(damaged, kDatasets[kMeshTriangleOffset].path, 2, 7);
+  mark_not_closed_cleanly(damaged);
+
+  for (const std::string& path : {crashed, uneven}) {
+    SCOPED_TRACE(path);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, 0) << cli.err;
+    EXPECT_NE(cli.out.find(hint), std::string::npos) << cli.out;
+  }
+  EXPECT_EQ(read_session_info(crashed).rows.mesh_frames, 5u);
+  const auto refused = run(tissue() + " session info " + quote(tail), dir);
+  EXPECT_EQ(refused.exit_code, 1) << refused.out;
+  EXPECT_NE(refused.err.find("/mesh/vertex_count[3] is "), std::string::npos) << refused.err;
+  EXPECT_NE(refused.err.find(hint), std::string::npos) << refused.err;
+  for (const std::string& path : {even, closed, damaged}) {
+    SCOPED_TRACE(path);
+    const auto cli = run(tissue() + " session info " + quote(path), dir);
+    EXPECT_EQ(cli.exit_code, path == damaged ? 1 : 0) << cli.out << cli.err;
+    EXPECT_EQ((cli.out + cli.err).find("session repair"), std::string::npos) << cli.out << cli.err;
+  }
+
+  const auto list = run(tissue() + " session list " + quote(d), dir);
+  EXPECT_EQ(list.exit_code, 0) << list.err;
+  const auto line_of = [&](const std::string& start) {
+    const std::size_t at = ("\n" + list.out).find("\n" + start);  // at the start of a line
+    return at == std::string::npos ? std::string() : list.out.substr(at, list.out.find('\n', at) - at);
+  };
+  EXPECT_NE(line_of("crashed.h5 ").find("OPEN (crashed)"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("uneven.h5 ").find("NOT closed (crash tail)"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("even.h5 ").find("NOT closed cleanly"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("unreadable: '" + tail + "'").find(hint), std::string::npos) << list.out;
+  EXPECT_NE(line_of("unreadable: '" + damaged + "'"), "") << list.out;
+  EXPECT_EQ(line_of("unreadable: '" + damaged + "'").find("repair"), std::string::npos) << list.out;
+  EXPECT_NE(line_of("OPEN (crashed): ").find(hint), std::string::npos) << list.out;
+  EXPECT_NE(line_of("NOT closed (crash tail): ").find(hint), std::string::npos) << list.out;
 }
 
 // Extents of 2^36 rows (chunks never written, so the file stays small) must
@@ -1299,6 +1420,42 @@ TEST(SessionTools, XdmfSkipsAndCountsFramesWithoutTriangles) {
   const std::string xml = testing::slurp(report.out_path);
   EXPECT_NE(xml.find("frame_0"), std::string::npos) << xml;
   EXPECT_EQ(xml.find("frame_1"), std::string::npos) << xml;
+}
+
+// A format-2 session recorded without strain stores NaN for every triangle:
+// its sidecar had the strain Cell attribute anyway, and ParaView coloured
+// every frame by NaN. Now the attribute is there only when a frame of the
+// session has strain; then every grid has it (ParaView's list of arrays
+// stays the same across the time steps) and a frame recorded without
+// strain reads as NaN there.
+TEST(SessionTools, XdmfOfASessionRecordedWithoutStrainHasNoStrainAttribute) {
+  TempDir dir;
+  const auto strain_attributes = [](const std::string& xml) {
+    std::size_t n = 0;
+    for (std::size_t at = xml.find("\"strain_energy_density_J_per_m3\""); at != std::string::npos;
+         at = xml.find("\"strain_energy_density_J_per_m3\"", at + 1))
+      ++n;
+    return n;
+  };
+  testing::TestSession without;
+  without.frames = 4;
+  without.strain = false;
+  const std::string none = testing::write_test_session(dir / "none.h5", without);
+  ASSERT_TRUE(read_session_info(none).has_strain) << "format version 2: the dataset is there, all NaN";
+  const XdmfReport report = write_xdmf(none, "");
+  EXPECT_EQ(report.frames, 4u);
+  const std::string xml = testing::slurp(report.out_path);
+  EXPECT_EQ(strain_attributes(xml), 0u) << xml;
+  EXPECT_NE(xml.find("vertex_level"), std::string::npos);
+
+  // Frame 0 recorded without strain, the others with it: every grid keeps
+  // the attribute.
+  const std::string some = dir / "some.h5";
+  write_small_session(some, 4);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (std::uint64_t t = 0; t < testing::test_frame(0).triangles.size(); ++t)
+    testing::overwrite_element(some, kDatasets[kMeshTriangleStrain].path, t, 0, H5T_NATIVE_FLOAT, &nan);
+  EXPECT_EQ(strain_attributes(testing::slurp(write_xdmf(some, "").out_path)), 4u);
 }
 
 // A session still marked open for writing (crashed, or being recorded) is
