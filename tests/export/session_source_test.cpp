@@ -210,7 +210,13 @@ TEST(SessionSource, FrameTimesThatAreNotFiniteOrGoBackAreRefusedAtOpen) {
         Damage{1, -inf, "/mesh/frame_time_s[1] is not finite"},
         Damage{2, 0.0, "/mesh/frame_time_s goes backwards at frame 2"}}) {
     SCOPED_TRACE(d.says);
-    const std::string path = write_frames(dir / ("t" + std::to_string(d.frame) + std::to_string(d.value) + ".h5"), 4);
+    // Appended, not "t" + ...: GCC 12 warns -Wrestrict (a false positive) on
+    // a literal plus a temporary string here.
+    std::string name = "t";
+    name += std::to_string(d.frame);
+    name += std::to_string(d.value);
+    name += ".h5";
+    const std::string path = write_frames(dir / name, 4);
     rt::overwrite_f64(path, times, d.frame, d.value);
     expect_source_error([&] { open_session_source(path); }, {"'" + path + "': " + d.says});
   }
