@@ -13,6 +13,8 @@
 #include <filesystem>
 #include <optional>
 #include <stdexcept>
+#include <string_view>
+#include <vector>
 
 #include "config/daemon_config_yaml.hpp"
 #include "control/control_server.hpp"
@@ -60,6 +62,47 @@ nlohmann::json status_json(const SimStatus& s) {
           {"tool", {{"pushing", s.tool_pushing}, {"force_N", s.tool_force_N}, {"model_version", s.model_version}}}};
 }
 
+// Event texts of at most kEventMessageBytes - 1 bytes for `parts` in order:
+// as many whole parts as fit in each (one event when all do), the next
+// event starting with `continued` and the part without its leading
+// separator. A part too long for an event on its own is spread over
+// consecutive events "CONTINUED(part i of n): ...", which joined in order
+// give it back whole: an override is never cut short or lost.
+std::vector<std::string> pack_event_texts(const std::vector<std::string>& parts, const std::string& continued) {
+  constexpr std::size_t kMax = record::kEventMessageBytes - 1;
+  std::vector<std::string> events;
+  std::string current;
+  for (const std::string& part : parts) {
+    if (current.size() + part.size() <= kMax && (!current.empty() || events.empty())) {
+      current += part;
+      continue;
+    }
+    if (!current.empty()) events.push_back(std::move(current));
+    current.clear();
+    std::string_view rest(part);
+    while (!rest.empty() && (rest.front() == ',' || rest.front() == ';' || rest.front() == ' ')) rest.remove_prefix(1);
+    if (continued.size() + rest.size() <= kMax) {
+      current = continued + std::string(rest);
+      continue;
+    }
+    // Room for the longest label; cut before a UTF-8 continuation byte.
+    const std::string widest = continued + "(part 9999 of 9999): ";
+    const std::size_t room = kMax - widest.size();
+    std::vector<std::string_view> pieces;
+    while (!rest.empty()) {
+      std::size_t n = std::min(room, rest.size());
+      if (n < rest.size())
+        while (n > 1 && (static_cast<unsigned char>(rest[n]) & 0xC0u) == 0x80u) --n;
+      pieces.push_back(rest.substr(0, n));
+      rest.remove_prefix(n);
+    }
+    for (std::size_t k = 0; k < pieces.size(); ++k)
+      events.push_back(continued + "(part " + std::to_string(k + 1) + " of " + std::to_string(pieces.size()) +
+                       "): " + std::string(pieces[k]));
+  }
+  if (!current.empty()) events.push_back(std::move(current));
+  return events;
+}
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -209,29 +252,30 @@ std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name
 void Service::install_recorder(std::unique_ptr<record::Recorder> recorder) {
   // Straight from the old file (if any) to the new one: no row in neither.
   hand_over_recorder(sim_.get(), recorder_, std::move(recorder), retired_recorders_);
-  record_event(static_cast<int>(record::EventKind::kSceneLoaded), recording_started_text());
+  for (const std::string& text : recording_started_events())
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded), text);
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
   std::fflush(options_.out);
 }
 
-std::string Service::recording_started_text() const {
-  const auto joined = [](const std::vector<std::string>& list) {
-    std::string out;
-    for (const std::string& o : list) out += (out.empty() ? "" : ", ") + o;
-    return out;
+std::vector<std::string> Service::recording_started_events() const {
+  // The parts of the text, each kept whole in one event: the scene and its
+  // file, then each override with the separator before it.
+  std::vector<std::string> parts{"recording " + scene_.name + " from " + scene_path_};
+  const auto add_list = [&parts](const std::string& lead, const std::vector<std::string>& list) {
+    for (std::size_t i = 0; i < list.size(); ++i) parts.push_back((i == 0 ? lead : ", ") + list[i]);
   };
-  std::string text = "recording " + scene_.name + " from " + scene_path_;
   // The scene_text attribute is the file before these (the command line's
   // --set, then the control socket's set).
-  if (!scene_.overrides.empty()) text += " with " + joined(scene_.overrides);
-  if (const std::vector<std::string> config_sets = config_overrides(); !config_sets.empty())
-    text += "; daemon config " + options_.config_path + " with " + joined(config_sets);
+  add_list(" with ", scene_.overrides);
+  add_list("; daemon config " + options_.config_path + " with ", config_overrides());
   // config_text is the file as last (re)loaded; what in it a reload could
   // not apply still runs with the old values (the motor scale, say).
-  if (!waiting_for_restart_.empty())
-    text += "; " + joined(waiting_for_restart_) +
-            " in config_text are not in use until a restart (the values before the reload run)";
-  return text;
+  if (!waiting_for_restart_.empty()) {
+    add_list("; ", waiting_for_restart_);
+    parts.back() += " in config_text are not in use until a restart (the values before the reload run)";
+  }
+  return pack_event_texts(parts, "recording, continued: ");
 }
 
 void Service::start_automatic_recording() {

@@ -151,8 +151,10 @@ class Service : public control::ControlHandler {
   void record_event(int kind, const std::string& text);  // no-op when not recording
   std::vector<std::string> scene_overrides() const;
   std::vector<std::string> config_overrides() const;
-  // The first event of a recording: the scene, its file and the overrides in force.
-  std::string recording_started_text() const;
+  // The first events of a recording: the scene, its file and the overrides
+  // in force, each override whole (an event holds 255 bytes; one event when
+  // they fit).
+  std::vector<std::string> recording_started_events() const;
 
   ServiceOptions options_;
   config::DaemonConfig config_;

@@ -448,6 +448,36 @@ TEST(Service, SetChangesTheSceneAsLoadedAndRecordingsSayWhatWasSet) {
       << events[0];
 }
 
+// Events hold 255 bytes: overrides past that went on in the first event and
+// were cut ("..., material.density_kg_per_m3=1100, adapti"), the rest lost,
+// so the session could not reproduce the run. Each override is in the
+// recording's first events whole, in order, none cut.
+TEST(Service, EveryOverrideIsRecordedWholeHoweverManyThereAre) {
+  TempDir dir;
+  const std::vector<std::string> overrides = {
+      "material.youngs_modulus_Pa=60000",
+      "material.rayleigh_beta_s=0.004",
+      "material.rayleigh_alpha_per_s=0.5",
+      "material.density_kg_per_m3=1100",
+      "adaptivity.refine_threshold_Pa=25",
+      "adaptivity.simplify_factor=0.3",
+      "adaptivity.every_steps=6",
+      "integrator.dt_s=0.001",
+      "status_interval_s=0.2",
+      "max_scene_tets=200000",
+      "device.limits.max_force_N=2.5",  // a daemon key past the first 255 bytes
+  };
+  Running run(write_config(dir, scene_file("cantilever.yaml")), 0.0, overrides, "s.h5");
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(client.call("record_stop")["ok"].get<bool>());
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk) << run.err_text();
+  const std::vector<std::string> events = record::testing::event_messages(dir / "s.h5");
+  std::string all;
+  for (const std::string& e : events) all += e + "\n";
+  for (const std::string& o : overrides) EXPECT_NE(all.find(o), std::string::npos) << o << " not in\n" << all;
+}
+
 // A scene past max_scene_tets is refused before it is built (6e6 tets took
 // 7.6 s on the control thread, past systemd's 5 s watchdog), at start and
 // over the socket; the running scene goes on.
