@@ -314,6 +314,49 @@ void Service::rotate_automatic_recording() {
   start_automatic_recording();  // the new file takes over from this one
 }
 
+Service::RecordingHandover Service::continue_recording_in_new_file(const std::string& what) {
+  // A session file's scene_name, scene_text and config_text are written once
+  // (SWMR): rows of another scene under them would be described as the old
+  // one. The new scene's rows go to a new file, which describes them; the
+  // old file ends with an event naming it.
+  RecordingHandover out;
+  if (!recorder_ || recorder_->state() != record::RecorderState::kRecording) {
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded), what);  // a failed one's last events
+    return out;
+  }
+  if (automatic_recording_) {
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded), what + ": the recording goes on in a new file");
+    start_automatic_recording();  // said and tried again at the next rotation if it cannot be made
+  } else {
+    std::unique_ptr<record::Recorder> next;
+    try {
+      next = open_recorder(next_part_name(client_record_name_));
+    } catch (const std::exception& e) {
+      // Stopped rather than go on under the old scene's description.
+      out.stopped = "recording stopped at the scene change (" + what + "): the next file cannot be made: " + e.what();
+      record_event(static_cast<int>(record::EventKind::kRecordingError), out.stopped);
+      stop_recording();
+      return out;
+    }
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded),
+                 what + ": the recording goes on in " + next->path());
+    install_recorder(std::move(next));
+  }
+  if (recorder_ && recorder_->state() == record::RecorderState::kRecording) out.file = recorder_->path();
+  return out;
+}
+
+std::string Service::next_part_name(const std::string& first) const {
+  // exp1.h5 -> exp1-part2.h5, exp1-part3.h5, ...: the first free one.
+  const std::filesystem::path p(first);
+  const std::string stem = p.stem().string(), extension = p.extension().string();
+  std::error_code ec;
+  for (int k = 2;; ++k) {
+    const std::string name = stem + "-part" + std::to_string(k) + extension;
+    if (!std::filesystem::exists(std::filesystem::path(config_.state_dir) / name, ec)) return name;
+  }
+}
+
 void Service::stop_recording() {
   if (!recorder_) return;
   // Closes the file; later pushes from a stalled sim thread are refused.
@@ -473,12 +516,14 @@ void Service::reload() {
     scene_sets_.clear();
     std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
                  haptics_changed && haptics_ ? " (haptic settings changed: the haptic thread restarted)" : "");
-    record_event(static_cast<int>(record::EventKind::kSceneLoaded),
-                 "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
-                     (applied.empty() ? "" : "; changed: " + applied));
-    (void)with_device_warning({}, device_problem);  // said on stderr and recorded; a signal has no reply
     const std::vector<std::string> kept = restart_only_changes(config_, config);
-    waiting_for_restart_ = kept;
+    waiting_for_restart_ = kept;  // before the new file's first events, which name them
+    const RecordingHandover handover =
+        continue_recording_in_new_file("reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
+                                       (applied.empty() ? "" : "; changed: " + applied));
+    // A new file is said by install_recorder ("recording to ..."); no file is said here.
+    if (!handover.stopped.empty()) std::fprintf(options_.err, "tissued: %s\n", handover.stopped.c_str());
+    (void)with_device_warning({}, device_problem);  // said on stderr and recorded; a signal has no reply
     if (!kept.empty()) {
       std::string list;
       for (const std::string& k : kept) list += (list.empty() ? "" : ", ") + k;
@@ -702,6 +747,7 @@ int Service::run() {
     server_->start();
     if (!options_.record_name.empty()) {
       record::validate_client_session_name(options_.record_name);
+      client_record_name_ = options_.record_name;
       start_recording(options_.record_name);
     } else if (config_.record.auto_start)
       start_automatic_recording();
@@ -832,8 +878,11 @@ nlohmann::json Service::load_scene(const std::string& path) {
   scene_path_ = path;
   base_scene_overrides_.clear();
   scene_sets_.clear();
-  record_event(static_cast<int>(record::EventKind::kSceneLoaded), "scene " + scene_.name + " loaded from " + path);
-  return with_device_warning({{"scene", scene_.name}, {"source", path}}, device_problem);
+  nlohmann::json result = {{"scene", scene_.name}, {"source", path}};
+  const RecordingHandover handover = continue_recording_in_new_file("scene " + scene_.name + " loaded from " + path);
+  if (!handover.file.empty()) result["recording"] = handover.file;
+  if (!handover.stopped.empty()) result["recording_stopped"] = handover.stopped;
+  return with_device_warning(std::move(result), device_problem);
 }
 
 nlohmann::json Service::set(const std::string& key, const nlohmann::json& value) {
@@ -893,7 +942,8 @@ nlohmann::json Service::record_start(const std::string& name) {
   if (recorder_ && recorder_->state() == record::RecorderState::kRecording && automatic_recording_)
     record_event(static_cast<int>(record::EventKind::kInfo),
                  "record_start " + next->path() + " (control): the automatic recording ends here");
-  automatic_recording_ = false;       // the client's from now on
+  automatic_recording_ = false;  // the client's from now on
+  client_record_name_ = std::filesystem::path(next->path()).filename().string();
   install_recorder(std::move(next));  // closes the automatic or a failed earlier one
   return {{"file", recorder_->path()}};
 }

@@ -155,6 +155,17 @@ class Service : public control::ControlHandler {
   // in force, each override whole (an event holds 255 bytes; one event when
   // they fit).
   std::vector<std::string> recording_started_events() const;
+  // After the running scene changed (load_scene, reload): a recording goes on
+  // in a new file that describes the new scene (an automatic one rotates, a
+  // client's goes on in NAME-partK.h5), `what` recorded as the old file's
+  // last event. `file` is the new file, `stopped` why there is none (a
+  // client's recording whose next file cannot be made stops).
+  struct RecordingHandover {
+    std::string file;
+    std::string stopped;
+  };
+  RecordingHandover continue_recording_in_new_file(const std::string& what);
+  std::string next_part_name(const std::string& first) const;
 
   ServiceOptions options_;
   config::DaemonConfig config_;
@@ -169,6 +180,9 @@ class Service : public control::ControlHandler {
   // The settings the last reload found changed and could not apply
   // (restart_only_changes): recordings' first event names them.
   std::vector<std::string> waiting_for_restart_;
+  // The file name a client's recording started with: the files it goes on
+  // in after a scene change are named after it.
+  std::string client_record_name_;
 
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;

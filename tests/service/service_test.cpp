@@ -1043,6 +1043,51 @@ TEST(Service, RecordsOnItsOwnAndRotatesTheFile) {
       << first.size() << " events";
 }
 
+// A session file's root attributes (scene_name, scene_text, config_text)
+// cannot change once written: after a load_scene the file went on with the
+// new scene's rows under the old scene's name ("scene: cantilever" for a
+// session two-thirds contact). A scene change while recording hands over to
+// a new file: a client's goes on in NAME-part2.h5 (the answer says so), an
+// automatic one rotates (a reload too).
+TEST(Service, ASceneLoadedWhileRecordingIsDescribedByTheFileHoldingItsRows) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"), "sim", state);
+  Running run(config);
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(client.call("record_start", {{"name", "s1.h5"}})["ok"].get<bool>());
+  std::this_thread::sleep_for(300ms);
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+  EXPECT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
+  EXPECT_EQ(loaded.value("result", nlohmann::json::object()).value("recording", ""), state + "/s1-part2.h5")
+      << loaded.dump();
+  EXPECT_EQ(client.call("status")["result"]["recording"].value("file", ""), state + "/s1-part2.h5");
+  std::this_thread::sleep_for(300ms);
+  // The reload goes back to the configured cantilever.
+  ASSERT_EQ(::raise(SIGHUP), 0);
+  EXPECT_TRUE(written_within_5_s(run.out, "reloaded")) << file_text(run.out);
+  std::this_thread::sleep_for(300ms);
+  const nlohmann::json stop = client.call("record_stop");
+  EXPECT_EQ(stop["result"].value("file", ""), state + "/s1-part3.h5") << stop.dump();
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk);
+  const auto expect_scene = [&](const std::string& file, const std::string& name, const std::string& scene_path) {
+    EXPECT_EQ(record::testing::root_string_attribute(file, "scene_name"), name) << file;
+    EXPECT_EQ(record::testing::root_string_attribute(file, "scene_text"), file_text(scene_path)) << file;
+    const record::SessionInfo info = record::read_session_info(file);
+    EXPECT_TRUE(info.closed_cleanly) << file;
+    EXPECT_GT(info.rows.sim_rows, 0u) << file;
+  };
+  expect_scene(state + "/s1.h5", "cantilever", scene_file("cantilever.yaml"));
+  expect_scene(state + "/s1-part2.h5", "contact", scene_file("contact.yaml"));
+  expect_scene(state + "/s1-part3.h5", "cantilever", scene_file("cantilever.yaml"));
+  const std::vector<std::string> first = record::testing::event_messages(state + "/s1.h5");
+  EXPECT_TRUE(std::any_of(first.begin(), first.end(), [&](const std::string& m) {
+    return m.find(state + "/s1-part2.h5") != std::string::npos;
+  })) << "the old file names the one the recording goes on in";
+}
+
 // record.keep_gb: past the budget the oldest automatic files go at each
 // rotation (said on stdout); a file a client named stays.
 TEST(Service, OldAutomaticRecordingsGoPastTheirBudget) {
