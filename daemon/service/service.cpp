@@ -1,6 +1,7 @@
 #include "service/service.hpp"
 
 #include <fcntl.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -14,6 +15,8 @@
 #include <optional>
 #include <stdexcept>
 #include <string_view>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include "config/daemon_config_yaml.hpp"
@@ -103,6 +106,40 @@ std::vector<std::string> pack_event_texts(const std::vector<std::string>& parts,
   if (!current.empty()) events.push_back(std::move(current));
   return events;
 }
+
+// Free bytes for an unprivileged writer on the file system holding `dir`.
+std::optional<std::uint64_t> free_bytes_in(const std::string& dir) {
+  struct statvfs fs {};
+  if (::statvfs(dir.c_str(), &fs) != 0) return std::nullopt;
+  return static_cast<std::uint64_t>(fs.f_bavail) * fs.f_frsize;
+}
+
+// The automatic recordings in `dir` (the names the service makes up, as
+// record::remove_oldest_automatic_recordings takes them), oldest first,
+// without `live`.
+std::vector<std::string> automatic_recordings_oldest_first(const std::string& dir, const std::string& live) {
+  namespace fs = std::filesystem;
+  std::vector<std::pair<util::NameStamp, std::string>> files;
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec), end;
+  for (; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(record::kAutomaticPrefix, 0) != 0 || it->path().extension() != ".h5" || !it->is_regular_file(ec))
+      continue;
+    const std::optional<util::NameStamp> stamp =
+        util::read_name_stamp(it->path().stem().string().substr(record::kAutomaticPrefix.size()));
+    if (!stamp || (!live.empty() && fs::equivalent(it->path(), live, ec))) continue;
+    files.emplace_back(*stamp, it->path().string());
+  }
+  std::sort(files.begin(), files.end(), [](const auto& x, const auto& y) {
+    return std::tie(x.first.time, x.first.k, x.second) < std::tie(y.first.time, y.first.k, y.second);
+  });
+  std::vector<std::string> out;
+  for (auto& f : files) out.push_back(std::move(f.second));
+  return out;
+}
+
+std::string mib(std::uint64_t bytes) { return std::to_string(bytes >> 20) + " MiB"; }
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -241,6 +278,13 @@ std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name
     boost::asio::post(io_, [this, message] {
       std::fprintf(options_.err, "tissued: recording stopped: %s (the simulation goes on)\n", message.c_str());
       std::fflush(options_.err);
+      // An automatic recording the reserve stopped goes on in a new file
+      // once older automatic files made room (not at the next rotation,
+      // up to record.rotate_s later).
+      const std::optional<std::uint64_t> free = free_bytes_in(config_.state_dir);
+      if (automatic_recording_ && !stopping_ && recorder_ && recorder_->state() == record::RecorderState::kFailed &&
+          free && *free < record::RecorderOptions{}.min_free_bytes)
+        start_automatic_recording();
     });
   };
   return record::Recorder::start(
@@ -278,12 +322,49 @@ std::vector<std::string> Service::recording_started_events() const {
   return pack_event_texts(parts, "recording, continued: ");
 }
 
+std::vector<std::string> Service::make_room_for_automatic_recording() {
+  // The reserve stops a recording; a new file needs room above it, as much
+  // as the file it follows took (at least kAutomaticRoom_bytes).
+  const std::uint64_t reserve = record::RecorderOptions{}.min_free_bytes;
+  std::uint64_t room = kAutomaticRoom_bytes;
+  std::string live;
+  if (recorder_) {
+    live = recorder_->path();
+    std::error_code ec;
+    const std::uintmax_t size = std::filesystem::file_size(live, ec);
+    if (!ec) room = std::max<std::uint64_t>(room, size);
+  }
+  std::optional<std::uint64_t> free = free_bytes_in(config_.state_dir);
+  std::vector<std::string> said;
+  if (!free || *free >= reserve + room) return said;
+  // Only automatic files, never a client's, never the one being written.
+  for (const std::string& old : automatic_recordings_oldest_first(config_.state_dir, live)) {
+    std::error_code ec;
+    if (!std::filesystem::remove(old, ec)) continue;
+    said.push_back("removed the oldest automatic recording " + old + " (" + mib(*free) + " free in state_dir " +
+                   config_.state_dir + ", less than the " + mib(reserve) + " reserve and " + mib(room) +
+                   " for the next file)");
+    std::fprintf(options_.out, "tissued: %s\n", said.back().c_str());
+    std::fflush(options_.out);
+    free = free_bytes_in(config_.state_dir);
+    if (!free || *free >= reserve + room) return said;
+  }
+  if (free && *free < reserve)
+    throw std::runtime_error("state_dir " + config_.state_dir + ": disk almost full (" + mib(*free) +
+                             " free, reserve " + mib(reserve) +
+                             ") and no older automatic recording left to remove: no new file");
+  return said;
+}
+
 void Service::start_automatic_recording() {
   automatic_recording_ = true;
   automatic_since_ = std::chrono::steady_clock::now();
   try {
+    // Room first: past the reserve a new file would stop at once.
+    const std::vector<std::string> removed = make_room_for_automatic_recording();
     start_recording(
         util::free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5", std::time(nullptr)));
+    for (const std::string& what : removed) record_event(static_cast<int>(record::EventKind::kInfo), what);
     // The oldest automatic files go once they hold more than keep_gb, this
     // one counted; said on stdout and in the new file's events.
     if (config_.record.keep_gb > 0.0)

@@ -147,6 +147,13 @@ class Service : public control::ControlHandler {
   // file that cannot be created is said and tried again at the next
   // rotation; the service keeps serving.
   void start_automatic_recording();
+  // Before a new automatic file: removes the oldest automatic files (never
+  // a client's, never the live one) until state_dir has the recorder's
+  // free-space reserve plus room for the file (the size of the one it
+  // follows, at least kAutomaticRoom_bytes) free. Returns what it removed
+  // (said on stdout); throws when it stays below the reserve.
+  std::vector<std::string> make_room_for_automatic_recording();
+  static constexpr std::uint64_t kAutomaticRoom_bytes = 64ull << 20;
   void rotate_automatic_recording();
   void record_event(int kind, const std::string& text);  // no-op when not recording
   std::vector<std::string> scene_overrides() const;

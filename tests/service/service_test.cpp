@@ -8,8 +8,11 @@
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
+#include <sched.h>
 #include <signal.h>
+#include <sys/mount.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #include <boost/asio/ip/tcp.hpp>
 
@@ -1103,6 +1106,79 @@ TEST(Service, OldAutomaticRecordingsGoPastTheirBudget) {
   EXPECT_NE(out.find("(record.keep_gb 1e-09 reached)"), std::string::npos) << out;
   EXPECT_EQ(session_files(state), (std::vector<std::string>{session_files(state).front(), state + "/mine.h5"}))
       << "the newest automatic file and the client's";
+}
+
+// A file of `bytes` bytes (written, not sparse: a tmpfs counts pages used).
+void write_bytes(const std::string& path, std::size_t bytes) {
+  std::ofstream f(path, std::ios::binary);
+  const std::string block(1 << 20, 'x');
+  for (std::size_t left = bytes; left > 0; left -= std::min(left, block.size()))
+    f.write(block.data(), static_cast<std::streamsize>(std::min(left, block.size())));
+}
+
+// Runs `body` in a child process with its own user and mount namespaces, `dir`
+// a tmpfs of `size_mib` MiB there; gtest failures in the child fail the test.
+// Returns false (and the test skips) when the namespace cannot be made.
+bool run_on_small_tmpfs(const std::string& dir, int size_mib, const std::function<void()>& body) {
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) return false;
+  if (pid == 0) {
+    const uid_t uid = ::getuid();
+    const gid_t gid = ::getgid();
+    if (::unshare(CLONE_NEWUSER | CLONE_NEWNS) != 0) ::_exit(77);
+    std::ofstream("/proc/self/setgroups") << "deny";
+    std::ofstream("/proc/self/uid_map") << "0 " << uid << " 1";
+    std::ofstream("/proc/self/gid_map") << "0 " << gid << " 1";
+    const std::string size = "size=" + std::to_string(size_mib) + "m";
+    if (::mount(nullptr, "/", nullptr, MS_REC | MS_PRIVATE, nullptr) != 0 ||
+        ::mount("tissue_test_tmpfs", dir.c_str(), "tmpfs", 0, size.c_str()) != 0)
+      ::_exit(77);
+    body();
+    std::fflush(nullptr);
+    ::_exit(::testing::Test::HasFailure() ? 1 : 0);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 77) return false;
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "the child's failures are above; status " << status;
+  return true;
+}
+
+// record.keep_gb removed old automatic files only past its budget (50 GB
+// shipped): on a smaller disk the recordings filled it to the 64 MiB
+// free-space reserve, which stopped recording for good, each rotation
+// making another file that stopped at once. Now the oldest automatic files
+// go before a new one is made until there is room for it; a client's stays.
+TEST(Service, OldAutomaticRecordingsGoWhenTheDiskIsNearlyFull) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  const std::string config = write_config(dir, scene_file("beam.yaml"), "none", state);
+  const bool ran = run_on_small_tmpfs(state, 200, [&] {
+    write_bytes(state + "/auto-20000101-000000.h5", 60u << 20);
+    write_bytes(state + "/auto-20000101-000001.h5", 60u << 20);
+    write_bytes(state + "/mine.h5", 10u << 20);  // a client's: never removed
+    Running run(config, 2.5, {"record.auto_start=true", "record.rotate_s=1"});
+    EXPECT_EQ(run.wait(), kServiceOk);
+    const std::string out = file_text(run.out);
+    EXPECT_FALSE(std::filesystem::exists(state + "/auto-20000101-000000.h5")) << out;
+    EXPECT_NE(out.find("removed the oldest automatic recording " + state + "/auto-20000101-000000.h5"),
+              std::string::npos)
+        << out;
+    EXPECT_TRUE(std::filesystem::exists(state + "/mine.h5"));
+    EXPECT_EQ(run.err_text().find("disk almost full"), std::string::npos) << run.err_text();
+    std::size_t recorded = 0;
+    for (const std::string& f : session_files(state)) {
+      if (f.find("/auto-2000") != std::string::npos || f == state + "/mine.h5") continue;
+      const record::SessionInfo info = record::read_session_info(f);
+      EXPECT_TRUE(info.closed_cleanly) << f;
+      EXPECT_GT(info.rows.sim_rows, 0u) << f;
+      ++recorded;
+    }
+    EXPECT_GE(recorded, 2u) << "rotated and went on recording";
+  });
+  if (!ran) GTEST_SKIP() << "no user and mount namespace here (unshare): cannot make a small file system";
 }
 
 // Names the daemon makes up never collide: two nameless record_start (or
