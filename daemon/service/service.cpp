@@ -296,6 +296,7 @@ std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name
 void Service::install_recorder(std::unique_ptr<record::Recorder> recorder) {
   // Straight from the old file (if any) to the new one: no row in neither.
   hand_over_recorder(sim_.get(), recorder_, std::move(recorder), retired_recorders_);
+  recorded_description_ = recording_description();
   for (const std::string& text : recording_started_events())
     record_event(static_cast<int>(record::EventKind::kSceneLoaded), text);
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
@@ -401,7 +402,10 @@ Service::RecordingHandover Service::continue_recording_in_new_file(const std::st
   // one. The new scene's rows go to a new file, which describes them; the
   // old file ends with an event naming it.
   RecordingHandover out;
-  if (!recorder_ || recorder_->state() != record::RecorderState::kRecording) {
+  // The same scene text, overrides and config text (a load_scene of the
+  // running file, a reload of unchanged files): the file still describes it.
+  if (!recorder_ || recorder_->state() != record::RecorderState::kRecording ||
+      recording_description() == recorded_description_) {
     record_event(static_cast<int>(record::EventKind::kSceneLoaded), what);  // a failed one's last events
     return out;
   }
@@ -425,6 +429,12 @@ Service::RecordingHandover Service::continue_recording_in_new_file(const std::st
   }
   if (recorder_ && recorder_->state() == record::RecorderState::kRecording) out.file = recorder_->path();
   return out;
+}
+
+std::string Service::recording_description() const {
+  std::string d = scene_.name + '\0' + scene_path_ + '\0' + scene_.source_text + '\0' + config_.source_text;
+  for (const std::string& o : scene_.overrides) d += '\0' + o;
+  return d;
 }
 
 std::string Service::next_part_name(const std::string& first) const {

@@ -173,6 +173,9 @@ class Service : public control::ControlHandler {
   };
   RecordingHandover continue_recording_in_new_file(const std::string& what);
   std::string next_part_name(const std::string& first) const;
+  // What a recording's root attributes and first events describe (scene
+  // name, path, text and overrides, config text): a change hands over.
+  std::string recording_description() const;
 
   ServiceOptions options_;
   config::DaemonConfig config_;
@@ -190,6 +193,7 @@ class Service : public control::ControlHandler {
   // The file name a client's recording started with: the files it goes on
   // in after a scene change are named after it.
   std::string client_record_name_;
+  std::string recorded_description_;  // recording_description() when the live file started
 
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;

@@ -621,13 +621,17 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   EXPECT_NE(after.front().find("; device.offset_m/scale, publish in config_text are not in use until a restart"),
             std::string::npos)
       << after.front();
-  // The recording says what the reload changed and what it could not.
-  const std::vector<std::string> events = record::testing::event_messages(dir / "reload.h5");
+  // The recording says what the reload changed and what it could not: the
+  // changed config_text goes on in a new file, which the old one names.
+  EXPECT_EQ(record::testing::root_string_attribute(dir / "reload-part2.h5", "config_text"), file_text(config));
+  std::vector<std::string> events = record::testing::event_messages(dir / "reload.h5");
+  for (const std::string& m : record::testing::event_messages(dir / "reload-part2.h5")) events.push_back(m);
   const auto has = [&](const std::string& part) {
     return std::any_of(events.begin(), events.end(), [&](const std::string& m) { return m.find(part) != m.npos; });
   };
   EXPECT_TRUE(has("reloaded (SIGHUP): scene cantilever from ")) << events.size() << " events";
-  EXPECT_TRUE(has("; changed: device.limits")) << events.size() << " events";
+  EXPECT_TRUE(has("; changed: device.limits: the recording goes on in " + dir / "reload-part2.h5"))
+      << events.size() << " events";
   EXPECT_TRUE(has("reload: device.offset_m/scale, publish changed in ")) << events.size() << " events";
 }
 
@@ -872,9 +876,11 @@ TEST(Service, ARestartedHapticSideHasItsOwnTripsRecorded) {
     client.call("shutdown");
     EXPECT_EQ(run.wait(), kServiceOk);
   }
+  // The reload changed the config: the recording went on in a second file.
   std::vector<std::string> trips;
-  for (const std::string& m : record::testing::event_messages(dir / "trips.h5"))
-    if (m.rfind("haptic safety tripped (", 0) == 0) trips.push_back(m);
+  for (const std::string file : {"trips.h5", "trips-part2.h5"})
+    for (const std::string& m : record::testing::event_messages(dir / file))
+      if (m.rfind("haptic safety tripped (", 0) == 0) trips.push_back(m);
   const auto device_lost_once = [](const std::string& m) {
     return m.find("(1 device lost") != std::string::npos || m.find(", 1 device lost") != std::string::npos;
   };
