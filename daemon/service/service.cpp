@@ -1,6 +1,7 @@
 #include "service/service.hpp"
 
 #include <fcntl.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,6 +14,10 @@
 #include <filesystem>
 #include <optional>
 #include <stdexcept>
+#include <string_view>
+#include <tuple>
+#include <utility>
+#include <vector>
 
 #include "config/daemon_config_yaml.hpp"
 #include "control/control_server.hpp"
@@ -60,6 +65,81 @@ nlohmann::json status_json(const SimStatus& s) {
           {"tool", {{"pushing", s.tool_pushing}, {"force_N", s.tool_force_N}, {"model_version", s.model_version}}}};
 }
 
+// Event texts of at most kEventMessageBytes - 1 bytes for `parts` in order:
+// as many whole parts as fit in each (one event when all do), the next
+// event starting with `continued` and the part without its leading
+// separator. A part too long for an event on its own is spread over
+// consecutive events "CONTINUED(part i of n): ...", which joined in order
+// give it back whole: an override is never cut short or lost.
+std::vector<std::string> pack_event_texts(const std::vector<std::string>& parts, const std::string& continued) {
+  constexpr std::size_t kMax = record::kEventMessageBytes - 1;
+  std::vector<std::string> events;
+  std::string current;
+  for (const std::string& part : parts) {
+    if (current.size() + part.size() <= kMax && (!current.empty() || events.empty())) {
+      current += part;
+      continue;
+    }
+    if (!current.empty()) events.push_back(std::move(current));
+    current.clear();
+    std::string_view rest(part);
+    while (!rest.empty() && (rest.front() == ',' || rest.front() == ';' || rest.front() == ' ')) rest.remove_prefix(1);
+    if (continued.size() + rest.size() <= kMax) {
+      current = continued + std::string(rest);
+      continue;
+    }
+    // Room for the longest label; cut before a UTF-8 continuation byte.
+    const std::string widest = continued + "(part 9999 of 9999): ";
+    const std::size_t room = kMax - widest.size();
+    std::vector<std::string_view> pieces;
+    while (!rest.empty()) {
+      std::size_t n = std::min(room, rest.size());
+      if (n < rest.size())
+        while (n > 1 && (static_cast<unsigned char>(rest[n]) & 0xC0u) == 0x80u) --n;
+      pieces.push_back(rest.substr(0, n));
+      rest.remove_prefix(n);
+    }
+    for (std::size_t k = 0; k < pieces.size(); ++k)
+      events.push_back(continued + "(part " + std::to_string(k + 1) + " of " + std::to_string(pieces.size()) +
+                       "): " + std::string(pieces[k]));
+  }
+  if (!current.empty()) events.push_back(std::move(current));
+  return events;
+}
+
+// Free bytes for an unprivileged writer on the file system holding `dir`.
+std::optional<std::uint64_t> free_bytes_in(const std::string& dir) {
+  struct statvfs fs {};
+  if (::statvfs(dir.c_str(), &fs) != 0) return std::nullopt;
+  return static_cast<std::uint64_t>(fs.f_bavail) * fs.f_frsize;
+}
+
+// The automatic recordings in `dir` (the names the service makes up, as
+// record::remove_oldest_automatic_recordings takes them), oldest first,
+// without `live`.
+std::vector<std::string> automatic_recordings_oldest_first(const std::string& dir, const std::string& live) {
+  namespace fs = std::filesystem;
+  std::vector<std::pair<util::NameStamp, std::string>> files;
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec), end;
+  for (; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(record::kAutomaticPrefix, 0) != 0 || it->path().extension() != ".h5" || !it->is_regular_file(ec))
+      continue;
+    const std::optional<util::NameStamp> stamp =
+        util::read_name_stamp(it->path().stem().string().substr(record::kAutomaticPrefix.size()));
+    if (!stamp || (!live.empty() && fs::equivalent(it->path(), live, ec))) continue;
+    files.emplace_back(*stamp, it->path().string());
+  }
+  std::sort(files.begin(), files.end(), [](const auto& x, const auto& y) {
+    return std::tie(x.first.time, x.first.k, x.second) < std::tie(y.first.time, y.first.k, y.second);
+  });
+  std::vector<std::string> out;
+  for (auto& f : files) out.push_back(std::move(f.second));
+  return out;
+}
+
+std::string mib(std::uint64_t bytes) { return std::to_string(bytes >> 20) + " MiB"; }
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -198,6 +278,13 @@ std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name
     boost::asio::post(io_, [this, message] {
       std::fprintf(options_.err, "tissued: recording stopped: %s (the simulation goes on)\n", message.c_str());
       std::fflush(options_.err);
+      // An automatic recording the reserve stopped goes on in a new file
+      // once older automatic files made room (not at the next rotation,
+      // up to record.rotate_s later).
+      const std::optional<std::uint64_t> free = free_bytes_in(config_.state_dir);
+      if (automatic_recording_ && !stopping_ && recorder_ && recorder_->state() == record::RecorderState::kFailed &&
+          free && *free < record::RecorderOptions{}.min_free_bytes)
+        start_automatic_recording();
     });
   };
   return record::Recorder::start(
@@ -209,37 +296,76 @@ std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name
 void Service::install_recorder(std::unique_ptr<record::Recorder> recorder) {
   // Straight from the old file (if any) to the new one: no row in neither.
   hand_over_recorder(sim_.get(), recorder_, std::move(recorder), retired_recorders_);
-  record_event(static_cast<int>(record::EventKind::kSceneLoaded), recording_started_text());
+  recorded_description_ = recording_description();
+  for (const std::string& text : recording_started_events())
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded), text);
   std::fprintf(options_.out, "tissued: recording to %s\n", recorder_->path().c_str());
   std::fflush(options_.out);
 }
 
-std::string Service::recording_started_text() const {
-  const auto joined = [](const std::vector<std::string>& list) {
-    std::string out;
-    for (const std::string& o : list) out += (out.empty() ? "" : ", ") + o;
-    return out;
+std::vector<std::string> Service::recording_started_events() const {
+  // The parts of the text, each kept whole in one event: the scene and its
+  // file, then each override with the separator before it.
+  std::vector<std::string> parts{"recording " + scene_.name + " from " + scene_path_};
+  const auto add_list = [&parts](const std::string& lead, const std::vector<std::string>& list) {
+    for (std::size_t i = 0; i < list.size(); ++i) parts.push_back((i == 0 ? lead : ", ") + list[i]);
   };
-  std::string text = "recording " + scene_.name + " from " + scene_path_;
   // The scene_text attribute is the file before these (the command line's
   // --set, then the control socket's set).
-  if (!scene_.overrides.empty()) text += " with " + joined(scene_.overrides);
-  if (const std::vector<std::string> config_sets = config_overrides(); !config_sets.empty())
-    text += "; daemon config " + options_.config_path + " with " + joined(config_sets);
+  add_list(" with ", scene_.overrides);
+  add_list("; daemon config " + options_.config_path + " with ", config_overrides());
   // config_text is the file as last (re)loaded; what in it a reload could
   // not apply still runs with the old values (the motor scale, say).
-  if (!waiting_for_restart_.empty())
-    text += "; " + joined(waiting_for_restart_) +
-            " in config_text are not in use until a restart (the values before the reload run)";
-  return text;
+  if (!waiting_for_restart_.empty()) {
+    add_list("; ", waiting_for_restart_);
+    parts.back() += " in config_text are not in use until a restart (the values before the reload run)";
+  }
+  return pack_event_texts(parts, "recording, continued: ");
+}
+
+std::vector<std::string> Service::make_room_for_automatic_recording() {
+  // The reserve stops a recording; a new file needs room above it, as much
+  // as the file it follows took (at least kAutomaticRoom_bytes).
+  const std::uint64_t reserve = record::RecorderOptions{}.min_free_bytes;
+  std::uint64_t room = kAutomaticRoom_bytes;
+  std::string live;
+  if (recorder_) {
+    live = recorder_->path();
+    std::error_code ec;
+    const std::uintmax_t size = std::filesystem::file_size(live, ec);
+    if (!ec) room = std::max<std::uint64_t>(room, size);
+  }
+  std::optional<std::uint64_t> free = free_bytes_in(config_.state_dir);
+  std::vector<std::string> said;
+  if (!free || *free >= reserve + room) return said;
+  // Only automatic files, never a client's, never the one being written.
+  for (const std::string& old : automatic_recordings_oldest_first(config_.state_dir, live)) {
+    std::error_code ec;
+    if (!std::filesystem::remove(old, ec)) continue;
+    said.push_back("removed the oldest automatic recording " + old + " (" + mib(*free) + " free in state_dir " +
+                   config_.state_dir + ", less than the " + mib(reserve) + " reserve and " + mib(room) +
+                   " for the next file)");
+    std::fprintf(options_.out, "tissued: %s\n", said.back().c_str());
+    std::fflush(options_.out);
+    free = free_bytes_in(config_.state_dir);
+    if (!free || *free >= reserve + room) return said;
+  }
+  if (free && *free < reserve)
+    throw std::runtime_error("state_dir " + config_.state_dir + ": disk almost full (" + mib(*free) +
+                             " free, reserve " + mib(reserve) +
+                             ") and no older automatic recording left to remove: no new file");
+  return said;
 }
 
 void Service::start_automatic_recording() {
   automatic_recording_ = true;
   automatic_since_ = std::chrono::steady_clock::now();
   try {
+    // Room first: past the reserve a new file would stop at once.
+    const std::vector<std::string> removed = make_room_for_automatic_recording();
     start_recording(
         util::free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5", std::time(nullptr)));
+    for (const std::string& what : removed) record_event(static_cast<int>(record::EventKind::kInfo), what);
     // The oldest automatic files go once they hold more than keep_gb, this
     // one counted; said on stdout and in the new file's events.
     if (config_.record.keep_gb > 0.0)
@@ -268,6 +394,58 @@ void Service::rotate_automatic_recording() {
                                                                yaml_util::fmt_num(config_.record.rotate_s) +
                                                                " s) reached: the recording goes on in a new file");
   start_automatic_recording();  // the new file takes over from this one
+}
+
+Service::RecordingHandover Service::continue_recording_in_new_file(const std::string& what) {
+  // A session file's scene_name, scene_text and config_text are written once
+  // (SWMR): rows of another scene under them would be described as the old
+  // one. The new scene's rows go to a new file, which describes them; the
+  // old file ends with an event naming it.
+  RecordingHandover out;
+  // The same scene text, overrides and config text (a load_scene of the
+  // running file, a reload of unchanged files): the file still describes it.
+  if (!recorder_ || recorder_->state() != record::RecorderState::kRecording ||
+      recording_description() == recorded_description_) {
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded), what);  // a failed one's last events
+    return out;
+  }
+  if (automatic_recording_) {
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded), what + ": the recording goes on in a new file");
+    start_automatic_recording();  // said and tried again at the next rotation if it cannot be made
+  } else {
+    std::unique_ptr<record::Recorder> next;
+    try {
+      next = open_recorder(next_part_name(client_record_name_));
+    } catch (const std::exception& e) {
+      // Stopped rather than go on under the old scene's description.
+      out.stopped = "recording stopped at the scene change (" + what + "): the next file cannot be made: " + e.what();
+      record_event(static_cast<int>(record::EventKind::kRecordingError), out.stopped);
+      stop_recording();
+      return out;
+    }
+    record_event(static_cast<int>(record::EventKind::kSceneLoaded),
+                 what + ": the recording goes on in " + next->path());
+    install_recorder(std::move(next));
+  }
+  if (recorder_ && recorder_->state() == record::RecorderState::kRecording) out.file = recorder_->path();
+  return out;
+}
+
+std::string Service::recording_description() const {
+  std::string d = scene_.name + '\0' + scene_path_ + '\0' + scene_.source_text + '\0' + config_.source_text;
+  for (const std::string& o : scene_.overrides) d += '\0' + o;
+  return d;
+}
+
+std::string Service::next_part_name(const std::string& first) const {
+  // exp1.h5 -> exp1-part2.h5, exp1-part3.h5, ...: the first free one.
+  const std::filesystem::path p(first);
+  const std::string stem = p.stem().string(), extension = p.extension().string();
+  std::error_code ec;
+  for (int k = 2;; ++k) {
+    const std::string name = stem + "-part" + std::to_string(k) + extension;
+    if (!std::filesystem::exists(std::filesystem::path(config_.state_dir) / name, ec)) return name;
+  }
 }
 
 void Service::stop_recording() {
@@ -429,12 +607,14 @@ void Service::reload() {
     scene_sets_.clear();
     std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
                  haptics_changed && haptics_ ? " (haptic settings changed: the haptic thread restarted)" : "");
-    record_event(static_cast<int>(record::EventKind::kSceneLoaded),
-                 "reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
-                     (applied.empty() ? "" : "; changed: " + applied));
-    (void)with_device_warning({}, device_problem);  // said on stderr and recorded; a signal has no reply
     const std::vector<std::string> kept = restart_only_changes(config_, config);
-    waiting_for_restart_ = kept;
+    waiting_for_restart_ = kept;  // before the new file's first events, which name them
+    const RecordingHandover handover =
+        continue_recording_in_new_file("reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
+                                       (applied.empty() ? "" : "; changed: " + applied));
+    // A new file is said by install_recorder ("recording to ..."); no file is said here.
+    if (!handover.stopped.empty()) std::fprintf(options_.err, "tissued: %s\n", handover.stopped.c_str());
+    (void)with_device_warning({}, device_problem);  // said on stderr and recorded; a signal has no reply
     if (!kept.empty()) {
       std::string list;
       for (const std::string& k : kept) list += (list.empty() ? "" : ", ") + k;
@@ -658,6 +838,7 @@ int Service::run() {
     server_->start();
     if (!options_.record_name.empty()) {
       record::validate_client_session_name(options_.record_name);
+      client_record_name_ = options_.record_name;
       start_recording(options_.record_name);
     } else if (config_.record.auto_start)
       start_automatic_recording();
@@ -788,8 +969,11 @@ nlohmann::json Service::load_scene(const std::string& path) {
   scene_path_ = path;
   base_scene_overrides_.clear();
   scene_sets_.clear();
-  record_event(static_cast<int>(record::EventKind::kSceneLoaded), "scene " + scene_.name + " loaded from " + path);
-  return with_device_warning({{"scene", scene_.name}, {"source", path}}, device_problem);
+  nlohmann::json result = {{"scene", scene_.name}, {"source", path}};
+  const RecordingHandover handover = continue_recording_in_new_file("scene " + scene_.name + " loaded from " + path);
+  if (!handover.file.empty()) result["recording"] = handover.file;
+  if (!handover.stopped.empty()) result["recording_stopped"] = handover.stopped;
+  return with_device_warning(std::move(result), device_problem);
 }
 
 nlohmann::json Service::set(const std::string& key, const nlohmann::json& value) {
@@ -849,7 +1033,8 @@ nlohmann::json Service::record_start(const std::string& name) {
   if (recorder_ && recorder_->state() == record::RecorderState::kRecording && automatic_recording_)
     record_event(static_cast<int>(record::EventKind::kInfo),
                  "record_start " + next->path() + " (control): the automatic recording ends here");
-  automatic_recording_ = false;       // the client's from now on
+  automatic_recording_ = false;  // the client's from now on
+  client_record_name_ = std::filesystem::path(next->path()).filename().string();
   install_recorder(std::move(next));  // closes the automatic or a failed earlier one
   return {{"file", recorder_->path()}};
 }

@@ -147,12 +147,35 @@ class Service : public control::ControlHandler {
   // file that cannot be created is said and tried again at the next
   // rotation; the service keeps serving.
   void start_automatic_recording();
+  // Before a new automatic file: removes the oldest automatic files (never
+  // a client's, never the live one) until state_dir has the recorder's
+  // free-space reserve plus room for the file (the size of the one it
+  // follows, at least kAutomaticRoom_bytes) free. Returns what it removed
+  // (said on stdout); throws when it stays below the reserve.
+  std::vector<std::string> make_room_for_automatic_recording();
+  static constexpr std::uint64_t kAutomaticRoom_bytes = 64ull << 20;
   void rotate_automatic_recording();
   void record_event(int kind, const std::string& text);  // no-op when not recording
   std::vector<std::string> scene_overrides() const;
   std::vector<std::string> config_overrides() const;
-  // The first event of a recording: the scene, its file and the overrides in force.
-  std::string recording_started_text() const;
+  // The first events of a recording: the scene, its file and the overrides
+  // in force, each override whole (an event holds 255 bytes; one event when
+  // they fit).
+  std::vector<std::string> recording_started_events() const;
+  // After the running scene changed (load_scene, reload): a recording goes on
+  // in a new file that describes the new scene (an automatic one rotates, a
+  // client's goes on in NAME-partK.h5), `what` recorded as the old file's
+  // last event. `file` is the new file, `stopped` why there is none (a
+  // client's recording whose next file cannot be made stops).
+  struct RecordingHandover {
+    std::string file;
+    std::string stopped;
+  };
+  RecordingHandover continue_recording_in_new_file(const std::string& what);
+  std::string next_part_name(const std::string& first) const;
+  // What a recording's root attributes and first events describe (scene
+  // name, path, text and overrides, config text): a change hands over.
+  std::string recording_description() const;
 
   ServiceOptions options_;
   config::DaemonConfig config_;
@@ -167,6 +190,10 @@ class Service : public control::ControlHandler {
   // The settings the last reload found changed and could not apply
   // (restart_only_changes): recordings' first event names them.
   std::vector<std::string> waiting_for_restart_;
+  // The file name a client's recording started with: the files it goes on
+  // in after a scene change are named after it.
+  std::string client_record_name_;
+  std::string recorded_description_;  // recording_description() when the live file started
 
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;

@@ -8,8 +8,11 @@
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
+#include <sched.h>
 #include <signal.h>
+#include <sys/mount.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #include <boost/asio/ip/tcp.hpp>
 
@@ -448,6 +451,36 @@ TEST(Service, SetChangesTheSceneAsLoadedAndRecordingsSayWhatWasSet) {
       << events[0];
 }
 
+// Events hold 255 bytes: overrides past that went on in the first event and
+// were cut ("..., material.density_kg_per_m3=1100, adapti"), the rest lost,
+// so the session could not reproduce the run. Each override is in the
+// recording's first events whole, in order, none cut.
+TEST(Service, EveryOverrideIsRecordedWholeHoweverManyThereAre) {
+  TempDir dir;
+  const std::vector<std::string> overrides = {
+      "material.youngs_modulus_Pa=60000",
+      "material.rayleigh_beta_s=0.004",
+      "material.rayleigh_alpha_per_s=0.5",
+      "material.density_kg_per_m3=1100",
+      "adaptivity.refine_threshold_Pa=25",
+      "adaptivity.simplify_factor=0.3",
+      "adaptivity.every_steps=6",
+      "integrator.dt_s=0.001",
+      "status_interval_s=0.2",
+      "max_scene_tets=200000",
+      "device.limits.max_force_N=2.5",  // a daemon key past the first 255 bytes
+  };
+  Running run(write_config(dir, scene_file("cantilever.yaml")), 0.0, overrides, "s.h5");
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(client.call("record_stop")["ok"].get<bool>());
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk) << run.err_text();
+  const std::vector<std::string> events = record::testing::event_messages(dir / "s.h5");
+  std::string all;
+  for (const std::string& e : events) all += e + "\n";
+  for (const std::string& o : overrides) EXPECT_NE(all.find(o), std::string::npos) << o << " not in\n" << all;
+}
+
 // A scene past max_scene_tets is refused before it is built (6e6 tets took
 // 7.6 s on the control thread, past systemd's 5 s watchdog), at start and
 // over the socket; the running scene goes on.
@@ -588,13 +621,17 @@ TEST(Service, AReloadAppliesNewForceLimitsAndNamesWhatNeedsARestart) {
   EXPECT_NE(after.front().find("; device.offset_m/scale, publish in config_text are not in use until a restart"),
             std::string::npos)
       << after.front();
-  // The recording says what the reload changed and what it could not.
-  const std::vector<std::string> events = record::testing::event_messages(dir / "reload.h5");
+  // The recording says what the reload changed and what it could not: the
+  // changed config_text goes on in a new file, which the old one names.
+  EXPECT_EQ(record::testing::root_string_attribute(dir / "reload-part2.h5", "config_text"), file_text(config));
+  std::vector<std::string> events = record::testing::event_messages(dir / "reload.h5");
+  for (const std::string& m : record::testing::event_messages(dir / "reload-part2.h5")) events.push_back(m);
   const auto has = [&](const std::string& part) {
     return std::any_of(events.begin(), events.end(), [&](const std::string& m) { return m.find(part) != m.npos; });
   };
   EXPECT_TRUE(has("reloaded (SIGHUP): scene cantilever from ")) << events.size() << " events";
-  EXPECT_TRUE(has("; changed: device.limits")) << events.size() << " events";
+  EXPECT_TRUE(has("; changed: device.limits: the recording goes on in " + dir / "reload-part2.h5"))
+      << events.size() << " events";
   EXPECT_TRUE(has("reload: device.offset_m/scale, publish changed in ")) << events.size() << " events";
 }
 
@@ -839,9 +876,11 @@ TEST(Service, ARestartedHapticSideHasItsOwnTripsRecorded) {
     client.call("shutdown");
     EXPECT_EQ(run.wait(), kServiceOk);
   }
+  // The reload changed the config: the recording went on in a second file.
   std::vector<std::string> trips;
-  for (const std::string& m : record::testing::event_messages(dir / "trips.h5"))
-    if (m.rfind("haptic safety tripped (", 0) == 0) trips.push_back(m);
+  for (const std::string file : {"trips.h5", "trips-part2.h5"})
+    for (const std::string& m : record::testing::event_messages(dir / file))
+      if (m.rfind("haptic safety tripped (", 0) == 0) trips.push_back(m);
   const auto device_lost_once = [](const std::string& m) {
     return m.find("(1 device lost") != std::string::npos || m.find(", 1 device lost") != std::string::npos;
   };
@@ -1013,6 +1052,51 @@ TEST(Service, RecordsOnItsOwnAndRotatesTheFile) {
       << first.size() << " events";
 }
 
+// A session file's root attributes (scene_name, scene_text, config_text)
+// cannot change once written: after a load_scene the file went on with the
+// new scene's rows under the old scene's name ("scene: cantilever" for a
+// session two-thirds contact). A scene change while recording hands over to
+// a new file: a client's goes on in NAME-part2.h5 (the answer says so), an
+// automatic one rotates (a reload too).
+TEST(Service, ASceneLoadedWhileRecordingIsDescribedByTheFileHoldingItsRows) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"), "sim", state);
+  Running run(config);
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(client.call("record_start", {{"name", "s1.h5"}})["ok"].get<bool>());
+  std::this_thread::sleep_for(300ms);
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+  EXPECT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
+  EXPECT_EQ(loaded.value("result", nlohmann::json::object()).value("recording", ""), state + "/s1-part2.h5")
+      << loaded.dump();
+  EXPECT_EQ(client.call("status")["result"]["recording"].value("file", ""), state + "/s1-part2.h5");
+  std::this_thread::sleep_for(300ms);
+  // The reload goes back to the configured cantilever.
+  ASSERT_EQ(::raise(SIGHUP), 0);
+  EXPECT_TRUE(written_within_5_s(run.out, "reloaded")) << file_text(run.out);
+  std::this_thread::sleep_for(300ms);
+  const nlohmann::json stop = client.call("record_stop");
+  EXPECT_EQ(stop["result"].value("file", ""), state + "/s1-part3.h5") << stop.dump();
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk);
+  const auto expect_scene = [&](const std::string& file, const std::string& name, const std::string& scene_path) {
+    EXPECT_EQ(record::testing::root_string_attribute(file, "scene_name"), name) << file;
+    EXPECT_EQ(record::testing::root_string_attribute(file, "scene_text"), file_text(scene_path)) << file;
+    const record::SessionInfo info = record::read_session_info(file);
+    EXPECT_TRUE(info.closed_cleanly) << file;
+    EXPECT_GT(info.rows.sim_rows, 0u) << file;
+  };
+  expect_scene(state + "/s1.h5", "cantilever", scene_file("cantilever.yaml"));
+  expect_scene(state + "/s1-part2.h5", "contact", scene_file("contact.yaml"));
+  expect_scene(state + "/s1-part3.h5", "cantilever", scene_file("cantilever.yaml"));
+  const std::vector<std::string> first = record::testing::event_messages(state + "/s1.h5");
+  EXPECT_TRUE(std::any_of(first.begin(), first.end(), [&](const std::string& m) {
+    return m.find(state + "/s1-part2.h5") != std::string::npos;
+  })) << "the old file names the one the recording goes on in";
+}
+
 // record.keep_gb: past the budget the oldest automatic files go at each
 // rotation (said on stdout); a file a client named stays.
 TEST(Service, OldAutomaticRecordingsGoPastTheirBudget) {
@@ -1028,6 +1112,79 @@ TEST(Service, OldAutomaticRecordingsGoPastTheirBudget) {
   EXPECT_NE(out.find("(record.keep_gb 1e-09 reached)"), std::string::npos) << out;
   EXPECT_EQ(session_files(state), (std::vector<std::string>{session_files(state).front(), state + "/mine.h5"}))
       << "the newest automatic file and the client's";
+}
+
+// A file of `bytes` bytes (written, not sparse: a tmpfs counts pages used).
+void write_bytes(const std::string& path, std::size_t bytes) {
+  std::ofstream f(path, std::ios::binary);
+  const std::string block(1 << 20, 'x');
+  for (std::size_t left = bytes; left > 0; left -= std::min(left, block.size()))
+    f.write(block.data(), static_cast<std::streamsize>(std::min(left, block.size())));
+}
+
+// Runs `body` in a child process with its own user and mount namespaces, `dir`
+// a tmpfs of `size_mib` MiB there; gtest failures in the child fail the test.
+// Returns false (and the test skips) when the namespace cannot be made.
+bool run_on_small_tmpfs(const std::string& dir, int size_mib, const std::function<void()>& body) {
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) return false;
+  if (pid == 0) {
+    const uid_t uid = ::getuid();
+    const gid_t gid = ::getgid();
+    if (::unshare(CLONE_NEWUSER | CLONE_NEWNS) != 0) ::_exit(77);
+    std::ofstream("/proc/self/setgroups") << "deny";
+    std::ofstream("/proc/self/uid_map") << "0 " << uid << " 1";
+    std::ofstream("/proc/self/gid_map") << "0 " << gid << " 1";
+    const std::string size = "size=" + std::to_string(size_mib) + "m";
+    if (::mount(nullptr, "/", nullptr, MS_REC | MS_PRIVATE, nullptr) != 0 ||
+        ::mount("tissue_test_tmpfs", dir.c_str(), "tmpfs", 0, size.c_str()) != 0)
+      ::_exit(77);
+    body();
+    std::fflush(nullptr);
+    ::_exit(::testing::Test::HasFailure() ? 1 : 0);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 77) return false;
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "the child's failures are above; status " << status;
+  return true;
+}
+
+// record.keep_gb removed old automatic files only past its budget (50 GB
+// shipped): on a smaller disk the recordings filled it to the 64 MiB
+// free-space reserve, which stopped recording for good, each rotation
+// making another file that stopped at once. Now the oldest automatic files
+// go before a new one is made until there is room for it; a client's stays.
+TEST(Service, OldAutomaticRecordingsGoWhenTheDiskIsNearlyFull) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  const std::string config = write_config(dir, scene_file("beam.yaml"), "none", state);
+  const bool ran = run_on_small_tmpfs(state, 200, [&] {
+    write_bytes(state + "/auto-20000101-000000.h5", 60u << 20);
+    write_bytes(state + "/auto-20000101-000001.h5", 60u << 20);
+    write_bytes(state + "/mine.h5", 10u << 20);  // a client's: never removed
+    Running run(config, 2.5, {"record.auto_start=true", "record.rotate_s=1"});
+    EXPECT_EQ(run.wait(), kServiceOk);
+    const std::string out = file_text(run.out);
+    EXPECT_FALSE(std::filesystem::exists(state + "/auto-20000101-000000.h5")) << out;
+    EXPECT_NE(out.find("removed the oldest automatic recording " + state + "/auto-20000101-000000.h5"),
+              std::string::npos)
+        << out;
+    EXPECT_TRUE(std::filesystem::exists(state + "/mine.h5"));
+    EXPECT_EQ(run.err_text().find("disk almost full"), std::string::npos) << run.err_text();
+    std::size_t recorded = 0;
+    for (const std::string& f : session_files(state)) {
+      if (f.find("/auto-2000") != std::string::npos || f == state + "/mine.h5") continue;
+      const record::SessionInfo info = record::read_session_info(f);
+      EXPECT_TRUE(info.closed_cleanly) << f;
+      EXPECT_GT(info.rows.sim_rows, 0u) << f;
+      ++recorded;
+    }
+    EXPECT_GE(recorded, 2u) << "rotated and went on recording";
+  });
+  if (!ran) GTEST_SKIP() << "no user and mount namespace here (unshare): cannot make a small file system";
 }
 
 // Names the daemon makes up never collide: two nameless record_start (or
