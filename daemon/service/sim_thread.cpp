@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <span>
 #include <stdexcept>
 
 #include "record/recorder.hpp"
@@ -150,23 +151,10 @@ std::string SimThread::scheduling() const {
 void SimThread::publish_model(std::int64_t t_ns, bool rebuilt) {
   if (!models_ || !runner_->simulation().has_tool()) return;
   // Re-published while paused too, so the haptic loop does not read a
-  // resting object as a stale model.
+  // resting object as a stale model: rebuilt (a new version) when the tool
+  // moved, re-stamped when it did not.
   if (rebuilt) scratch_model_.version = ++model_version_;
   if (scratch_model_.version == 0) return;  // nothing built yet
-  // A paused object stands still. Its last model still carries the surface
-  // velocities of the step before the pause, and the haptic side, finding
-  // the model fresh at every re-affirmation, would extrapolate the patch
-  // along them (a sawtooth of velocity x step) and damp against a moving
-  // surface. So the first re-affirmation while paused is a new version with
-  // the velocities zeroed; later ones re-stamp it.
-  if (!rebuilt && paused_.load(std::memory_order_relaxed)) {
-    auto& velocity = scratch_model_.vertex_velocity_m_per_s;
-    const auto moving = [](const haptics::Vec3& v) { return !v.isZero(0.0); };
-    if (std::any_of(velocity.begin(), velocity.begin() + scratch_model_.vertex_count, moving)) {
-      std::fill(velocity.begin(), velocity.begin() + scratch_model_.vertex_count, haptics::Vec3::Zero());
-      scratch_model_.version = ++model_version_;
-    }
-  }
   scratch_model_.built_ns = t_ns;
   models_->write(scratch_model_);
 }
@@ -265,6 +253,10 @@ void SimThread::run(std::promise<void>& scheduled) {
       runner_ = std::move(pending_);
       ++generation_;
       first_model_version_ = model_version_ + 1;
+      // Its first model comes in this same loop: from its step, or, paused,
+      // from refresh_model (a new runner's first call always builds). Paused,
+      // none came: the haptic side held the old scene's model until it went
+      // stale, and safety ramped the force out with a false trip.
       scratch_model_.version = 0;
       shed_ = false;
       halted_ = false;
@@ -313,6 +305,17 @@ void SimThread::run(std::promise<void>& scheduled) {
           ++failed_steps_;
           last_error_ = last_step_.error;
         }
+      } else if (paused && !halted_ && models_) {
+        // Paused, the object is frozen but the hand is not: the model follows
+        // the tool over the frozen surface (a rigid wall standing still; the
+        // paused body takes no force), where it stayed around the tool's
+        // position at the pause and met a hand elsewhere with the old patch's
+        // edge. The drained ticks give the tool's position, the newest tick
+        // when none was drained.
+        const std::span<const haptics::ToolSample> tool =
+            !batch_.empty() ? std::span<const haptics::ToolSample>(batch_)
+                            : std::span<const haptics::ToolSample>(&last_tick_, samples_total_ > 0 ? 1 : 0);
+        rebuilt = runner_->refresh_model(tool, &scratch_model_);
       }
       t1 = now_ns();
       step_ms_last_ = 1e-6 * static_cast<double>(t1 - t0);
