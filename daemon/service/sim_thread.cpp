@@ -81,7 +81,7 @@ bool SimThread::set_recorder(record::Recorder* recorder, double wait_s) {
   return true;
 }
 
-void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
+void SimThread::record_haptic(record::Recorder& recorder) {
   for (const haptics::ToolSample& s : batch_) {
     record::HapticRow row;
     row.time_s = recorder.session_time_s(s.time_ns);
@@ -92,6 +92,9 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
     row.model_version = s.model_version;
     recorder.push_haptic(row);
   }
+}
+
+void SimThread::record_sim(record::Recorder& recorder, std::int64_t t_ns) {
   // A halted runner's state may be half-changed: no rows or frames from it.
   if (halted_) return;
   const physics::Simulation& sim = runner_->simulation();
@@ -273,13 +276,18 @@ void SimThread::run(std::promise<void>& scheduled) {
       samples_->drain([this](const haptics::ToolSample& s) {
         if (batch_.size() >= batch_.capacity()) return;
         batch_.push_back(s);
-        // Pressed on the runner before a reset / load / set: where the tool
-        // is still counts, what it touched does not (pushing old node ids
-        // into the new mesh would put a force on unrelated nodes).
-        if (s.model_version < first_model_version_) batch_.back().contact = false;
       });
     samples_total_ += batch_.size();
     if (!batch_.empty()) last_tick_ = batch_.back();
+    // Recorded as rendered, before anything below can throw: written after
+    // the step, the rows of a loop whose step threw were lost, and those
+    // masked below said contact 0 where the device was touching.
+    if (recorder) record_haptic(*recorder);
+    // Pressed on the runner before a reset / load / set: where the tool is
+    // still counts, what it touched does not (pushing old node ids into the
+    // new mesh would put a force on unrelated nodes).
+    for (haptics::ToolSample& s : batch_)
+      if (s.model_version < first_model_version_) s.contact = false;
 
     if (const std::int64_t stall = stall_ns_.exchange(0, std::memory_order_relaxed); stall > 0)
       sleep_until_ns(now_ns() + stall);
@@ -321,7 +329,7 @@ void SimThread::run(std::promise<void>& scheduled) {
       step_ms_last_ = 1e-6 * static_cast<double>(t1 - t0);
       step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
       if (!halted_) publish_model(t1, rebuilt);
-      if (recorder) record(*recorder, t1);
+      if (recorder) record_sim(*recorder, t1);
       if (!halted_ && t1 >= next_snapshot_ns_) {
         build_snapshot();
         snapshots_.publish();

@@ -18,6 +18,7 @@
 #include "haptics/haptic_thread.hpp"
 #include "haptics/sim_device.hpp"
 #include "physics/physics_test_support.hpp"
+#include "record/record_test_support.hpp"
 #include "record/recorder.hpp"
 #include "record/session_tools.hpp"
 #include "transport/dds_messages.hpp"
@@ -290,33 +291,52 @@ haptics::ToolSample press(const haptics::LocalModel& model) {
 
 // Ticks rendered against the old runner's model name the old mesh's nodes.
 // Drained after a reset / load / set, they must not push on the new mesh
-// (same ids, other nodes or none): the new runner starts untouched.
+// (same ids, other nodes or none): the new runner starts untouched. They are
+// still recorded as rendered: the device was touching (the recorded contact
+// column said 0 for them).
 TEST(SimThread, TicksRenderedBeforeANewRunnerPushNothingOnIt) {
-  ToolSampleRing samples;
-  LocalModelChannel models;
-  SimThreadOptions options;
-  options.status_every_s = 0.002;
-  scene::Scene scene = cantilever_with_tool();
-  scene.loads.clear();
-  SimThread thread(std::make_unique<SimRunner>(scene), &samples, &models, options);
-  thread.start();
-  ASSERT_TRUE(wait_for([&] { return models.read().value->version > 0; }));
-  const haptics::LocalModel model = *models.read().value;
-  const haptics::ToolSample pressed = press(model);
-  // The press is real: on the runner it was rendered against, it pushes.
-  ASSERT_TRUE(samples.try_push(pressed));
-  ASSERT_TRUE(wait_for([&] { return thread.status().tool_pushing; }));
-  // Hold the thread between a drain and its step, queue the same press and
-  // a new runner: the next loop takes the runner first, then drains the press.
-  thread.inject_stall(300ms);
-  std::this_thread::sleep_for(50ms);
-  for (int i = 0; i < 3; ++i) ASSERT_TRUE(samples.try_push(pressed));
-  thread.replace_runner(std::make_unique<SimRunner>(scene));
-  ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 3; }));
-  const SimStatus st = thread.status();
-  thread.stop();
-  EXPECT_FALSE(st.tool_pushing);
-  EXPECT_EQ(st.tool_force_N, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  {
+    ToolSampleRing samples;
+    LocalModelChannel models;
+    SimThreadOptions options;
+    options.status_every_s = 0.002;
+    scene::Scene scene = cantilever_with_tool();
+    scene.loads.clear();
+    SimThread thread(std::make_unique<SimRunner>(scene), &samples, &models, options);
+    auto recorder = record::Recorder::start(dir, "masked.h5", record::SessionMetadata{});
+    ASSERT_TRUE(thread.set_recorder(recorder.get()));
+    thread.start();
+    ASSERT_TRUE(wait_for([&] { return models.read().value->version > 0; }));
+    const haptics::LocalModel model = *models.read().value;
+    const haptics::ToolSample pressed = press(model);
+    // The press is real: on the runner it was rendered against, it pushes.
+    ASSERT_TRUE(samples.try_push(pressed));
+    ASSERT_TRUE(wait_for([&] { return thread.status().tool_pushing; }));
+    // Hold the thread between a drain and its step, queue the same press and
+    // a new runner: the next loop takes the runner first, then drains the press.
+    thread.inject_stall(300ms);
+    std::this_thread::sleep_for(50ms);
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(samples.try_push(pressed));
+    thread.replace_runner(std::make_unique<SimRunner>(scene));
+    ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 3; }));
+    const SimStatus st = thread.status();
+    ASSERT_TRUE(thread.set_recorder(nullptr));
+    thread.stop();
+    recorder->stop();
+    EXPECT_FALSE(st.tool_pushing);
+    EXPECT_EQ(st.tool_force_N, (std::array<double, 3>{0.0, 0.0, 0.0}));
+
+    const hid_t file = H5Fopen((dir + "/masked.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    ASSERT_GE(file, 0);
+    const std::vector<std::uint8_t> contact = record::testing::read_u8(file, "/haptic/contact");
+    H5Fclose(file);
+    ASSERT_EQ(contact.size(), 4u);  // the four presses, nothing else was pushed
+    for (std::size_t i = 0; i < contact.size(); ++i) EXPECT_EQ(int{contact[i]}, 1) << "press " << i;
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(SimThread, ReplacingTheRunnerStartsANewGeneration) {
@@ -401,6 +421,44 @@ TEST(SimThread, AStepThatThrowsHaltsTheRunnerAndTheThreadKeepsServing) {
     EXPECT_EQ(thread.status().failed_steps, failed);  // the new runner steps
     thread.stop();
     recorder->stop();
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// The haptic rows drained in the loop whose step throws are written like
+// any others: they were recorded only after the step, inside the exception
+// barrier, so the throw lost them.
+TEST(SimThread, HapticRowsDrainedInALoopWhoseStepThrowsAreRecorded) {
+  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  {
+    ToolSampleRing samples;
+    LocalModelChannel models;
+    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
+    auto recorder = record::Recorder::start(dir, "thrown.h5", record::SessionMetadata{});
+    ASSERT_TRUE(thread.set_recorder(recorder.get()));
+    // Queued before the thread starts, so its first loop drains them all,
+    // and that loop's step throws.
+    std::vector<double> pushed_s;
+    const std::int64_t t0_ns = now_ns();
+    for (int k = 0; k < 10; ++k) {
+      haptics::ToolSample s = hovering_over_the_free_end();
+      s.time_ns = t0_ns + k * 1000000;
+      ASSERT_TRUE(samples.try_push(s));
+      pushed_s.push_back(recorder->session_time_s(s.time_ns));
+    }
+    thread.inject_step_exception();
+    thread.start();
+    ASSERT_TRUE(wait_for([&] { return thread.status().halted; }));
+    ASSERT_TRUE(thread.set_recorder(nullptr));
+    thread.stop();
+    recorder->stop();
+    const hid_t file = H5Fopen((dir + "/thrown.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    ASSERT_GE(file, 0);
+    const std::vector<double> recorded_s = record::testing::read_f64(file, "/haptic/time_s");
+    H5Fclose(file);
+    EXPECT_EQ(recorded_s, pushed_s);
   }
   std::filesystem::remove_all(dir);
 }
