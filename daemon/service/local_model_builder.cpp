@@ -21,7 +21,8 @@ void LocalModelBuilder::refresh_surface(const physics::Simulation& sim) {
   surface_known_ = true;
 }
 
-void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query, haptics::LocalModel* out) {
+void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query, haptics::LocalModel* out,
+                              bool frozen) {
   if (!sim.has_tool()) throw std::logic_error("LocalModelBuilder: the scene has no tool");
   refresh_surface(sim);
   const physics::Body& body = sim.body();
@@ -66,7 +67,10 @@ void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query,
         const int i = out->vertex_count++;
         patch_index_[v] = i;
         out->vertex_m[i] = body.x_m[nodes[v]];
-        out->vertex_velocity_m_per_s[i] = body.v_m_per_s[nodes[v]];
+        // Frozen, the surface stands still: the velocities of the step
+        // before the pause would have the haptic side extrapolate the patch
+        // along them and damp against a surface that does not move.
+        out->vertex_velocity_m_per_s[i] = frozen ? Vec3::Zero() : body.v_m_per_s[nodes[v]];
         out->vertex_node[i] = nodes[v];
       }
       local[k] = patch_index_[v];
@@ -77,7 +81,10 @@ void LocalModelBuilder::build(physics::Simulation& sim, const PatchQuery& query,
   // Contact reference and stiffness.
   out->sim_time_s = sim.time_s();
   const Vec3 force_N = sim.tool_force_N();
-  out->in_contact = force_N.squaredNorm() > 0.0;
+  // Frozen, the body takes no force: a held tool force (pressed when the
+  // simulation was paused) would have the haptic side render an object that
+  // yields under the tool, though nothing under it ever moves.
+  out->in_contact = !frozen && force_N.squaredNorm() > 0.0;
   std::uint32_t contact_node = nodes.empty() ? 0 : nodes[tri[nearest_tri][0]];
   if (out->in_contact) {
     Vec3 x0 = Vec3::Zero();

@@ -10,6 +10,10 @@
 //   - K_c, the static condensation at the contact node, only while the tool
 //     is within tool.engage_distance_m of the surface (it costs three sparse
 //     back-substitutions, and a refactorisation after a mesh change).
+// A frozen build (the paused simulation: not stepped, taking no force)
+// describes the surface as a rigid wall standing still: zero velocities, no
+// contact reference (in_contact false, force_ref zero, position_ref the
+// nearest surface point), whatever force the simulation still holds.
 // Runs on the sim thread; allocates only when the mesh changed.
 #pragma once
 
@@ -34,8 +38,8 @@ struct PatchQuery {
 class LocalModelBuilder {
  public:
   // Fills everything in `out` but version and built_ns (the publisher's).
-  // Requires a scene with a tool.
-  void build(physics::Simulation& sim, const PatchQuery& query, haptics::LocalModel* out);
+  // Requires a scene with a tool. `frozen`: see above.
+  void build(physics::Simulation& sim, const PatchQuery& query, haptics::LocalModel* out, bool frozen = false);
 
   // Distance from the tool to the surface at the last build [m].
   double surface_distance_m() const { return surface_distance_m_; }

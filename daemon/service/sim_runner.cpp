@@ -50,8 +50,24 @@ void SimRunner::apply_tool(std::span<const haptics::ToolSample> samples, RunnerS
   }
 }
 
+void SimRunner::move_tool(std::span<const haptics::ToolSample> samples) {
+  for (const haptics::ToolSample& s : samples)
+    if (s.proxy_position_m.allFinite()) query_.tool_m = s.proxy_position_m;  // never trust another thread's numbers
+}
+
+bool SimRunner::refresh_model(std::span<const haptics::ToolSample> samples, haptics::LocalModel* model) {
+  if (!sim_->has_tool() || !model) return false;
+  const physics::Vec3 before_m = query_.tool_m;
+  move_tool(samples);
+  if (frozen_model_built_ && query_.tool_m == before_m) return false;
+  builder_.build(*sim_, query_, model, /*frozen=*/true);
+  frozen_model_built_ = true;
+  return true;
+}
+
 RunnerStep SimRunner::step(std::span<const haptics::ToolSample> samples, haptics::LocalModel* model) {
   RunnerStep out;
+  frozen_model_built_ = false;
   const bool tool = sim_->has_tool();
   if (tool) apply_tool(samples, &out);
   const physics::StepResult r = sim_->step();

@@ -5,6 +5,7 @@
 //   step, those off the object counting as zero) -> freeze adaptivity under
 //   an engaged tool -> Simulation::step()
 //   -> rebuild the LocalModel around the tool.
+// Paused, refresh_model() keeps the LocalModel around the tool without a step.
 // A scene without a tool runs none of the tool code (no samples expected, no
 // local model built).
 #pragma once
@@ -39,15 +40,28 @@ class SimRunner {
   // local model (version and built_ns are the caller's to stamp).
   RunnerStep step(std::span<const haptics::ToolSample> samples, haptics::LocalModel* model);
 
+  // Paused: the simulation is neither stepped nor pushed (the samples'
+  // contacts and forces are ignored). Moves the tool to the newest of
+  // `samples` (none: where it was) and rebuilds `model` around it on the
+  // frozen surface, a rigid wall standing still (LocalModelBuilder::build,
+  // frozen): the patch follows the hand, which would otherwise meet the edge
+  // of the patch built where the tool was at the pause. Returns whether
+  // `model` was rewritten: not when the scene has no tool, nor when the last
+  // call already rebuilt it (no step since) with the tool where it is.
+  bool refresh_model(std::span<const haptics::ToolSample> samples, haptics::LocalModel* model);
+
   physics::Simulation& simulation() { return *sim_; }
   const physics::Simulation& simulation() const { return *sim_; }
 
  private:
   void apply_tool(std::span<const haptics::ToolSample> samples, RunnerStep* out);
+  // The newest finite proxy position among `samples` becomes the tool's.
+  void move_tool(std::span<const haptics::ToolSample> samples);
 
   std::unique_ptr<physics::Simulation> sim_;
   LocalModelBuilder builder_;
   PatchQuery query_;
+  bool frozen_model_built_ = false;  // refresh_model rebuilt the model, no step since
 };
 
 }  // namespace tissue::service

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <span>
 #include <stdexcept>
 
 #include "record/recorder.hpp"
@@ -80,7 +81,7 @@ bool SimThread::set_recorder(record::Recorder* recorder, double wait_s) {
   return true;
 }
 
-void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
+void SimThread::record_haptic(record::Recorder& recorder) {
   for (const haptics::ToolSample& s : batch_) {
     record::HapticRow row;
     row.time_s = recorder.session_time_s(s.time_ns);
@@ -91,6 +92,9 @@ void SimThread::record(record::Recorder& recorder, std::int64_t t_ns) {
     row.model_version = s.model_version;
     recorder.push_haptic(row);
   }
+}
+
+void SimThread::record_sim(record::Recorder& recorder, std::int64_t t_ns) {
   // A halted runner's state may be half-changed: no rows or frames from it.
   if (halted_) return;
   const physics::Simulation& sim = runner_->simulation();
@@ -150,23 +154,10 @@ std::string SimThread::scheduling() const {
 void SimThread::publish_model(std::int64_t t_ns, bool rebuilt) {
   if (!models_ || !runner_->simulation().has_tool()) return;
   // Re-published while paused too, so the haptic loop does not read a
-  // resting object as a stale model.
+  // resting object as a stale model: rebuilt (a new version) when the tool
+  // moved, re-stamped when it did not.
   if (rebuilt) scratch_model_.version = ++model_version_;
   if (scratch_model_.version == 0) return;  // nothing built yet
-  // A paused object stands still. Its last model still carries the surface
-  // velocities of the step before the pause, and the haptic side, finding
-  // the model fresh at every re-affirmation, would extrapolate the patch
-  // along them (a sawtooth of velocity x step) and damp against a moving
-  // surface. So the first re-affirmation while paused is a new version with
-  // the velocities zeroed; later ones re-stamp it.
-  if (!rebuilt && paused_.load(std::memory_order_relaxed)) {
-    auto& velocity = scratch_model_.vertex_velocity_m_per_s;
-    const auto moving = [](const haptics::Vec3& v) { return !v.isZero(0.0); };
-    if (std::any_of(velocity.begin(), velocity.begin() + scratch_model_.vertex_count, moving)) {
-      std::fill(velocity.begin(), velocity.begin() + scratch_model_.vertex_count, haptics::Vec3::Zero());
-      scratch_model_.version = ++model_version_;
-    }
-  }
   scratch_model_.built_ns = t_ns;
   models_->write(scratch_model_);
 }
@@ -265,6 +256,10 @@ void SimThread::run(std::promise<void>& scheduled) {
       runner_ = std::move(pending_);
       ++generation_;
       first_model_version_ = model_version_ + 1;
+      // Its first model comes in this same loop: from its step, or, paused,
+      // from refresh_model (a new runner's first call always builds). Paused,
+      // none came: the haptic side held the old scene's model until it went
+      // stale, and safety ramped the force out with a false trip.
       scratch_model_.version = 0;
       shed_ = false;
       halted_ = false;
@@ -281,13 +276,18 @@ void SimThread::run(std::promise<void>& scheduled) {
       samples_->drain([this](const haptics::ToolSample& s) {
         if (batch_.size() >= batch_.capacity()) return;
         batch_.push_back(s);
-        // Pressed on the runner before a reset / load / set: where the tool
-        // is still counts, what it touched does not (pushing old node ids
-        // into the new mesh would put a force on unrelated nodes).
-        if (s.model_version < first_model_version_) batch_.back().contact = false;
       });
     samples_total_ += batch_.size();
     if (!batch_.empty()) last_tick_ = batch_.back();
+    // Recorded as rendered, before anything below can throw: written after
+    // the step, the rows of a loop whose step threw were lost, and those
+    // masked below said contact 0 where the device was touching.
+    if (recorder) record_haptic(*recorder);
+    // Pressed on the runner before a reset / load / set: where the tool is
+    // still counts, what it touched does not (pushing old node ids into the
+    // new mesh would put a force on unrelated nodes).
+    for (haptics::ToolSample& s : batch_)
+      if (s.model_version < first_model_version_) s.contact = false;
 
     if (const std::int64_t stall = stall_ns_.exchange(0, std::memory_order_relaxed); stall > 0)
       sleep_until_ns(now_ns() + stall);
@@ -313,12 +313,23 @@ void SimThread::run(std::promise<void>& scheduled) {
           ++failed_steps_;
           last_error_ = last_step_.error;
         }
+      } else if (paused && !halted_ && models_) {
+        // Paused, the object is frozen but the hand is not: the model follows
+        // the tool over the frozen surface (a rigid wall standing still; the
+        // paused body takes no force), where it stayed around the tool's
+        // position at the pause and met a hand elsewhere with the old patch's
+        // edge. The drained ticks give the tool's position, the newest tick
+        // when none was drained.
+        const std::span<const haptics::ToolSample> tool =
+            !batch_.empty() ? std::span<const haptics::ToolSample>(batch_)
+                            : std::span<const haptics::ToolSample>(&last_tick_, samples_total_ > 0 ? 1 : 0);
+        rebuilt = runner_->refresh_model(tool, &scratch_model_);
       }
       t1 = now_ns();
       step_ms_last_ = 1e-6 * static_cast<double>(t1 - t0);
       step_ms_max_ = std::max(step_ms_max_, step_ms_last_);
       if (!halted_) publish_model(t1, rebuilt);
-      if (recorder) record(*recorder, t1);
+      if (recorder) record_sim(*recorder, t1);
       if (!halted_ && t1 >= next_snapshot_ns_) {
         build_snapshot();
         snapshots_.publish();

@@ -157,7 +157,10 @@ class SimThread {
   void halt(const char* what) noexcept;
   void publish_model(std::int64_t now_ns, bool rebuilt);
   void publish_status(std::int64_t now_ns);
-  void record(record::Recorder& recorder, std::int64_t now_ns);
+  // The drained ticks as the haptic loop rendered them (batch_ before the
+  // new runner's mask), then the sim row and mesh frame of this loop.
+  void record_haptic(record::Recorder& recorder);
+  void record_sim(record::Recorder& recorder, std::int64_t now_ns);
   // Fills the snapshot write buffer from the current mesh.
   MeshSnapshot& build_snapshot();
 

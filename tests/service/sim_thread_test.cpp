@@ -9,12 +9,16 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <thread>
 #include <vector>
 
+#include "config/daemon_config.hpp"
+#include "haptics/closest_point.hpp"
 #include "haptics/haptic_thread.hpp"
 #include "haptics/sim_device.hpp"
 #include "physics/physics_test_support.hpp"
+#include "record/record_test_support.hpp"
 #include "record/recorder.hpp"
 #include "record/session_tools.hpp"
 #include "transport/dds_messages.hpp"
@@ -174,6 +178,102 @@ TEST(SimThread, PauseStopsTimeButKeepsTheModelFresh) {
   EXPECT_TRUE(wait_for([&] { return thread.status().sim_time_s > t_paused; }));
 }
 
+// The unloaded cantilever with a tool: it stands still, so where its
+// surface is does not depend on when the thread is paused.
+scene::Scene resting_cantilever_with_tool() {
+  scene::Scene s = cantilever_with_tool();
+  s.loads.clear();
+  return s;
+}
+
+haptics::ToolSample hovering_at(const haptics::Vec3& at_m) {
+  haptics::ToolSample s;
+  s.proxy_position_m = at_m;
+  s.device_position_m = at_m;
+  return s;
+}
+
+// Distance from `at_m` to the nearest triangle of the model's patch.
+double patch_distance_m(const haptics::LocalModel& m, const haptics::Vec3& at_m) {
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (int t = 0; t < m.triangle_count; ++t) {
+    const auto& tr = m.triangle[t];
+    const haptics::TriangleClosest c =
+        haptics::closest_point_on_triangle(at_m, m.vertex_m[tr[0]], m.vertex_m[tr[1]], m.vertex_m[tr[2]]);
+    nearest_m = std::min(nearest_m, (c.point_m - at_m).norm());
+  }
+  return nearest_m;
+}
+
+// "pause: the haptic loop keeps rendering the frozen model" means the frozen
+// object, wherever the hand goes: the patch follows the tool over the frozen
+// surface. It stayed around where the tool was at the pause, so touching the
+// object 50 mm away met the old patch's edge (3 N sideways at max_force_N).
+// The frozen surface is a rigid wall (no force reference, no velocities):
+// the paused body is not pushed, so it must not feel as if it yields.
+TEST(SimThread, WhilePausedTheModelFollowsTheToolOverTheFrozenSurface) {
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThread thread(std::make_unique<SimRunner>(resting_cantilever_with_tool()), &samples, &models, fast_status());
+  // 5 mm above the top face (z = 0.1 m), within engage distance.
+  const haptics::Vec3 at_pause_m(0.02, 0.05, 0.105), later_m(0.07, 0.05, 0.105);
+  ASSERT_TRUE(samples.try_push(hovering_at(at_pause_m)));
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return thread.status().samples >= 1 && thread.status().steps > 5; }));
+  thread.pause();
+  ASSERT_TRUE(wait_for([&] { return thread.status().paused; }));
+  std::this_thread::sleep_for(20ms);
+  const haptics::LocalModel at_pause = *models.read().value;
+  const double t_paused = thread.status().sim_time_s;
+  ASSERT_LT(patch_distance_m(at_pause, at_pause_m), 0.006);
+  // The pause-time patch does not reach the surface under the new position.
+  ASSERT_GT(patch_distance_m(at_pause, later_m), 0.006);
+
+  ASSERT_TRUE(samples.try_push(hovering_at(later_m)));
+  const auto follows = [&] { return patch_distance_m(*models.read().value, later_m) < 0.006; };
+  const bool followed = wait_for(follows, 1000ms);
+  const haptics::LocalModel later = *models.read().value;
+  thread.stop();
+  EXPECT_TRUE(followed) << "the patch's nearest triangle is " << patch_distance_m(later, later_m)
+                        << " m from the tool, 0.005 m above the surface (patch_radius_m 0.02)";
+  EXPECT_GT(later.version, at_pause.version);
+  EXPECT_EQ(later.sim_time_s, t_paused);  // rebuilt, not stepped
+  EXPECT_EQ(thread.status().sim_time_s, t_paused);
+  EXPECT_FALSE(later.in_contact);
+  EXPECT_EQ(later.force_ref_N, haptics::Vec3::Zero());
+  for (int i = 0; i < later.vertex_count; ++i)
+    EXPECT_EQ(later.vertex_velocity_m_per_s[i], haptics::Vec3::Zero()) << "vertex " << i;
+}
+
+// A reset / load / set while paused hands the haptic side the new scene's
+// first model at once: it rendered the old scene's model until that went
+// stale, and safety then ramped the force out and recorded a false trip.
+TEST(SimThread, ANewRunnerWhilePausedPublishesItsFirstModel) {
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
+  ASSERT_TRUE(samples.try_push(hovering_over_the_free_end()));
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return thread.status().samples >= 1 && thread.status().sim_time_s > 0.02; }));
+  thread.pause();
+  ASSERT_TRUE(wait_for([&] { return thread.status().paused; }));
+  std::this_thread::sleep_for(20ms);
+  const std::uint64_t old_version = models.read().value->version;
+  thread.replace_runner(std::make_unique<SimRunner>(cantilever_with_tool()));
+  const double stale_model_s = config::ForceLimits{}.stale_model_s;
+  std::this_thread::sleep_for(std::chrono::duration<double>(3.0 * stale_model_s));
+  const haptics::LocalModel model = *models.read().value;
+  const std::int64_t age_ns = now_ns() - model.built_ns;
+  const SimStatus status = thread.status();
+  thread.stop();
+  EXPECT_EQ(status.generation, 1u);
+  EXPECT_TRUE(status.paused);
+  EXPECT_GT(model.version, old_version) << "the haptic side still holds the old scene's model";
+  EXPECT_EQ(model.sim_time_s, 0.0);  // the new runner's, not stepped
+  EXPECT_GT(model.triangle_count, 0);
+  EXPECT_LT(age_ns, static_cast<std::int64_t>(stale_model_s * 1e9)) << "the model went stale";
+}
+
 // A tick pressing on the first triangle of `model`, rendered against it.
 haptics::ToolSample press(const haptics::LocalModel& model) {
   haptics::ToolSample s;
@@ -191,33 +291,52 @@ haptics::ToolSample press(const haptics::LocalModel& model) {
 
 // Ticks rendered against the old runner's model name the old mesh's nodes.
 // Drained after a reset / load / set, they must not push on the new mesh
-// (same ids, other nodes or none): the new runner starts untouched.
+// (same ids, other nodes or none): the new runner starts untouched. They are
+// still recorded as rendered: the device was touching (the recorded contact
+// column said 0 for them).
 TEST(SimThread, TicksRenderedBeforeANewRunnerPushNothingOnIt) {
-  ToolSampleRing samples;
-  LocalModelChannel models;
-  SimThreadOptions options;
-  options.status_every_s = 0.002;
-  scene::Scene scene = cantilever_with_tool();
-  scene.loads.clear();
-  SimThread thread(std::make_unique<SimRunner>(scene), &samples, &models, options);
-  thread.start();
-  ASSERT_TRUE(wait_for([&] { return models.read().value->version > 0; }));
-  const haptics::LocalModel model = *models.read().value;
-  const haptics::ToolSample pressed = press(model);
-  // The press is real: on the runner it was rendered against, it pushes.
-  ASSERT_TRUE(samples.try_push(pressed));
-  ASSERT_TRUE(wait_for([&] { return thread.status().tool_pushing; }));
-  // Hold the thread between a drain and its step, queue the same press and
-  // a new runner: the next loop takes the runner first, then drains the press.
-  thread.inject_stall(300ms);
-  std::this_thread::sleep_for(50ms);
-  for (int i = 0; i < 3; ++i) ASSERT_TRUE(samples.try_push(pressed));
-  thread.replace_runner(std::make_unique<SimRunner>(scene));
-  ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 3; }));
-  const SimStatus st = thread.status();
-  thread.stop();
-  EXPECT_FALSE(st.tool_pushing);
-  EXPECT_EQ(st.tool_force_N, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  {
+    ToolSampleRing samples;
+    LocalModelChannel models;
+    SimThreadOptions options;
+    options.status_every_s = 0.002;
+    scene::Scene scene = cantilever_with_tool();
+    scene.loads.clear();
+    SimThread thread(std::make_unique<SimRunner>(scene), &samples, &models, options);
+    auto recorder = record::Recorder::start(dir, "masked.h5", record::SessionMetadata{});
+    ASSERT_TRUE(thread.set_recorder(recorder.get()));
+    thread.start();
+    ASSERT_TRUE(wait_for([&] { return models.read().value->version > 0; }));
+    const haptics::LocalModel model = *models.read().value;
+    const haptics::ToolSample pressed = press(model);
+    // The press is real: on the runner it was rendered against, it pushes.
+    ASSERT_TRUE(samples.try_push(pressed));
+    ASSERT_TRUE(wait_for([&] { return thread.status().tool_pushing; }));
+    // Hold the thread between a drain and its step, queue the same press and
+    // a new runner: the next loop takes the runner first, then drains the press.
+    thread.inject_stall(300ms);
+    std::this_thread::sleep_for(50ms);
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(samples.try_push(pressed));
+    thread.replace_runner(std::make_unique<SimRunner>(scene));
+    ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 3; }));
+    const SimStatus st = thread.status();
+    ASSERT_TRUE(thread.set_recorder(nullptr));
+    thread.stop();
+    recorder->stop();
+    EXPECT_FALSE(st.tool_pushing);
+    EXPECT_EQ(st.tool_force_N, (std::array<double, 3>{0.0, 0.0, 0.0}));
+
+    const hid_t file = H5Fopen((dir + "/masked.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    ASSERT_GE(file, 0);
+    const std::vector<std::uint8_t> contact = record::testing::read_u8(file, "/haptic/contact");
+    H5Fclose(file);
+    ASSERT_EQ(contact.size(), 4u);  // the four presses, nothing else was pushed
+    for (std::size_t i = 0; i < contact.size(); ++i) EXPECT_EQ(int{contact[i]}, 1) << "press " << i;
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(SimThread, ReplacingTheRunnerStartsANewGeneration) {
@@ -302,6 +421,44 @@ TEST(SimThread, AStepThatThrowsHaltsTheRunnerAndTheThreadKeepsServing) {
     EXPECT_EQ(thread.status().failed_steps, failed);  // the new runner steps
     thread.stop();
     recorder->stop();
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// The haptic rows drained in the loop whose step throws are written like
+// any others: they were recorded only after the step, inside the exception
+// barrier, so the throw lost them.
+TEST(SimThread, HapticRowsDrainedInALoopWhoseStepThrowsAreRecorded) {
+  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  {
+    ToolSampleRing samples;
+    LocalModelChannel models;
+    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
+    auto recorder = record::Recorder::start(dir, "thrown.h5", record::SessionMetadata{});
+    ASSERT_TRUE(thread.set_recorder(recorder.get()));
+    // Queued before the thread starts, so its first loop drains them all,
+    // and that loop's step throws.
+    std::vector<double> pushed_s;
+    const std::int64_t t0_ns = now_ns();
+    for (int k = 0; k < 10; ++k) {
+      haptics::ToolSample s = hovering_over_the_free_end();
+      s.time_ns = t0_ns + k * 1000000;
+      ASSERT_TRUE(samples.try_push(s));
+      pushed_s.push_back(recorder->session_time_s(s.time_ns));
+    }
+    thread.inject_step_exception();
+    thread.start();
+    ASSERT_TRUE(wait_for([&] { return thread.status().halted; }));
+    ASSERT_TRUE(thread.set_recorder(nullptr));
+    thread.stop();
+    recorder->stop();
+    const hid_t file = H5Fopen((dir + "/thrown.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    ASSERT_GE(file, 0);
+    const std::vector<double> recorded_s = record::testing::read_f64(file, "/haptic/time_s");
+    H5Fclose(file);
+    EXPECT_EQ(recorded_s, pushed_s);
   }
   std::filesystem::remove_all(dir);
 }
