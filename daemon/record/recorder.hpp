@@ -12,7 +12,8 @@
 // The recorder thread drains the rings every poll interval, writes mesh
 // frames as they arrive and the row groups in batches, and flushes the file
 // at least every flush_interval_s, so a concurrent SWMR reader sees the
-// session grow and a crash loses at most about one flush interval.
+// session grow and a crash loses at most about one flush interval (a power
+// cut too: each flush ends with an fdatasync of the file).
 //
 // Every push is either written or counted as a drop, also when producers
 // keep pushing while the recorder stops or fails (a retired recorder whose
