@@ -9,7 +9,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
   liblcm-dev liblcm-bin libglib2.0-dev
-  libhdf5-dev hdf5-tools python3-h5py
+  libhdf5-dev hdf5-tools python3-h5py python3-pip
   libosmesa6-dev libpng-dev
   libboost-dev libsystemd-dev
   clang-format iproute2

@@ -134,7 +134,14 @@ bool Recorder::push_mesh_frame(const MeshFrameView& frame) noexcept {
   const PushGuard push(*this, frame_push_);
   if (!push.open()) return drop();
   if (frame.vertices_m.size() > options_.mesh_max_vertices || frame.triangles.size() > options_.mesh_max_triangles) {
-    mesh_frames_too_big_.fetch_add(1, std::memory_order_relaxed);
+    // The first one's size, for the recorder thread's warning (see
+    // too_big_vertices_); this thread is the count's only writer.
+    if (mesh_frames_too_big_.load(std::memory_order_relaxed) == 0) {
+      too_big_vertices_ = frame.vertices_m.size();
+      too_big_triangles_ = frame.triangles.size();
+      too_big_time_s_ = frame.time_s;
+    }
+    mesh_frames_too_big_.fetch_add(1, std::memory_order_release);
     return drop();
   }
   std::uint32_t index = 0;
@@ -324,6 +331,20 @@ bool Recorder::drain_and_write(bool force_flush) {
                                         : "mesh frame not recorded: strain value count differs from triangle count"));
     }
     free_frames_.try_push(index);
+  }
+
+  // Oversized frames were only counted (in one drops total of the
+  // service's status): a surface over the buffers recorded a session with no
+  // frames and no word of why. Once per recording, since every later frame
+  // of that surface is over them too.
+  if (!too_big_warned_ && mesh_frames_too_big_.load(std::memory_order_acquire) > 0) {
+    too_big_warned_ = true;
+    pending_events_.push_back(Event::make(
+        too_big_time_s_, EventKind::kWarning,
+        "mesh frame not recorded: " + std::to_string(too_big_vertices_) + " vertices, " +
+            std::to_string(too_big_triangles_) + " triangles is over the recorder's frame buffers (at most " +
+            std::to_string(options_.mesh_max_vertices) + " vertices, " + std::to_string(options_.mesh_max_triangles) +
+            " triangles); such frames are dropped and counted (mesh_frames_too_big), this warning is given once"));
   }
 
   const auto now = Clock::now();

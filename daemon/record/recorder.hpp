@@ -12,7 +12,8 @@
 // The recorder thread drains the rings every poll interval, writes mesh
 // frames as they arrive and the row groups in batches, and flushes the file
 // at least every flush_interval_s, so a concurrent SWMR reader sees the
-// session grow and a crash loses at most about one flush interval.
+// session grow and a crash loses at most about one flush interval (a power
+// cut too: each flush ends with an fdatasync of the file).
 //
 // Every push is either written or counted as a drop, also when producers
 // keep pushing while the recorder stops or fails (a retired recorder whose
@@ -69,6 +70,9 @@ struct RecorderOptions {
   // bigger frame is refused (counted in mesh_frames_too_big).
   std::size_t mesh_max_vertices = 100'000;
   std::size_t mesh_max_triangles = 200'000;
+  // (The first such frame gets a warning event in the session naming its
+  // size and these capacities, once per recording: every later frame of
+  // the same surface would be over them too.)
   std::size_t mesh_frame_buffers = 4;  // 2..16
   // Stop recording (everything accepted written, then a recording_error
   // event and a clean close; state kFailed with the reason) when the file
@@ -199,6 +203,14 @@ class Recorder {
   concurrency::SpscRing<std::uint32_t, kMaxFrameBuffers> ready_frames_;
   double next_frame_due_s_ = -1e300;  // sim thread only
   std::atomic<std::uint64_t> mesh_frames_too_big_{0};
+  // The first oversized frame's size and time, for the recorder thread's
+  // warning (building it on the sim thread would allocate). Written by the
+  // sim thread only before mesh_frames_too_big_ first becomes nonzero (a
+  // release increment), never again, so the recorder thread reads them
+  // whole once it sees the count.
+  std::size_t too_big_vertices_ = 0, too_big_triangles_ = 0;
+  double too_big_time_s_ = 0.0;
+  bool too_big_warned_ = false;  // recorder thread only
   std::atomic<std::uint64_t> mesh_frame_drops_{0};
   // Refused at push, or accepted and then not written because recording
   // failed.

@@ -588,11 +588,35 @@ void SessionWriter::append_mesh_frame(const MeshFrameView& frame) {
 void SessionWriter::flush() {
   h5::QuietErrors quiet;
   throw_if_failed();
+  bool synced = true;  // nothing new: nothing to sync
   for (std::size_t i = 0; i < kDatasetCount; ++i) {
     if (!dirty_[i]) continue;
     if (H5Dflush(datasets_[i].get()) < 0) fail(std::string("cannot flush ") + kDatasets[i].path);
     dirty_[i] = false;
+    synced = false;
   }
+  if (!synced) sync_to_disk(vfd_descriptor());
+}
+
+// HDF5's default (sec2) driver's descriptor, which H5Fget_vfd_handle gives
+// as an int*; -1 when it cannot be had.
+int SessionWriter::vfd_descriptor() const {
+  void* handle = nullptr;
+  if (!file_.valid() || H5Fget_vfd_handle(file_.get(), H5P_DEFAULT, &handle) < 0 || handle == nullptr) return -1;
+  return *static_cast<int*>(handle);
+}
+
+// H5Dflush and H5Fclose hand the data to the page cache only: a power cut
+// (or a kernel crash) loses what the kernel has not written back yet, and
+// may write HDF5's metadata out of order. fdatasync makes everything up to
+// this flush durable. A failure is a write error: the data may not be on
+// disk.
+void SessionWriter::sync_to_disk(int fd) {
+  const int error = fd < 0 ? EBADF : sync_ ? sync_(fd) : (::fdatasync(fd) == 0 ? 0 : errno);
+  if (error == 0) return;
+  error_ = "session file '" + path_ + "': cannot sync it to disk (fdatasync): " + std::strerror(error);
+  detach_from_disk();
+  throw RecordError(error_);
 }
 
 std::array<std::uint64_t, 4> SessionWriter::group_rows() const {
@@ -634,6 +658,10 @@ void SessionWriter::close(std::optional<double> duration_s) {
       ok = false;
     }
   }
+  // Synced after the close (the close writes HDF5's last metadata), through
+  // a copy of HDF5's descriptor that outlives it.
+  const int fd = ok ? vfd_descriptor() : -1;
+  const int sync_fd = fd >= 0 ? ::fcntl(fd, F_DUPFD_CLOEXEC, 0) : -1;
   for (h5::Handle& ds : datasets_) ok = ds.reset() && ok;
   // The close writes the mark and then clears the superblock's open-for-write
   // flags; a session reads as closed cleanly only with both.
@@ -641,6 +669,14 @@ void SessionWriter::close(std::optional<double> duration_s) {
     ok = false;
     error_ = "session file '" + path_ + "': " + h5::describe("closing the file failed");
   }
+  if (ok) {
+    try {
+      sync_to_disk(sync_fd);
+    } catch (const RecordError&) {
+      ok = false;  // error_ says why
+    }
+  }
+  if (sync_fd >= 0) ::close(sync_fd);
   if (!ok) {
     if (error_.empty()) error_ = "session file '" + path_ + "': " + h5::describe("closing the file failed");
     throw RecordError(error_);

@@ -96,12 +96,13 @@ class SessionWriter {
   void append_mesh_frame(const MeshFrameView& frame);
 
   // H5Dflush on every dataset that grew since the last flush (data columns
-  // before the columns readers count by).
+  // before the columns readers count by), then fdatasync of the file, so
+  // what was flushed survives a power cut too (RecordError if it fails).
   void flush();
 
   // Flushes every row, rewrites closed_cleanly = 1, end_time_utc and
   // duration_s in place (still in SWMR mode, so readers may keep the file
-  // open), then closes the file. Throws RecordError (the file then does not
+  // open), then closes the file and syncs it to disk (fdatasync). Throws RecordError (the file then does not
   // read as closed cleanly). Idempotent. duration_s: the session's length in
   // its own time when that is not the wall time since opening (a batch run's
   // simulated seconds); unset, negative or not finite: the wall time.
@@ -123,6 +124,11 @@ class SessionWriter {
   // writer still healthy (as std::bad_alloc from a scratch column would).
   using WriteFault = std::function<void(const char* dataset_path)>;
   void set_write_fault_for_testing(WriteFault fault) { write_fault_ = std::move(fault); }
+  // Test seam (never set in the daemon): replaces fdatasync(2) on the file's
+  // descriptor (flush() and close() sync the file to disk). Returns 0 or an
+  // errno value, which fails the writer like a write error.
+  using SyncFile = std::function<int(int fd)>;
+  void set_sync_for_testing(SyncFile sync) { sync_ = std::move(sync); }
 
  private:
   static std::unique_ptr<SessionWriter> finish_create(const std::string& path, const SessionMetadata& metadata,
@@ -132,6 +138,8 @@ class SessionWriter {
   void append(DatasetId id, const void* data, std::uint64_t rows);
   [[noreturn]] void fail(const std::string& what);
   void detach_from_disk();
+  int vfd_descriptor() const;
+  void sync_to_disk(int fd);
   void throw_if_failed() const;
 
   std::string path_;
@@ -145,6 +153,7 @@ class SessionWriter {
   bool closed_ = false;
   RecordingLock lock_;      // from before the file appears under its name until close()
   WriteFault write_fault_;  // see set_write_fault_for_testing
+  SyncFile sync_;           // see set_sync_for_testing; empty: fdatasync
 
   // Column scratch (reused, so steady state allocates nothing).
   std::vector<double> f64_;

@@ -118,8 +118,12 @@ TEST(Recorder, OversizedAndInvalidFramesAreCountedNotWritten) {
   o.mesh_frame_buffers = 8;  // every frame below gets a buffer, however slow the recorder thread
   auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
   testing::TestFrame big;
+  big.time_s = 0.25;
   big.vertices_m.resize(65);
   EXPECT_FALSE(rec->push_mesh_frame(big.view()));
+  testing::TestFrame big_triangles = testing::test_frame(0);
+  big_triangles.triangles.resize(65);
+  EXPECT_FALSE(rec->push_mesh_frame(big_triangles.view()));
   testing::TestFrame bad = testing::test_frame(0);
   bad.triangles[0][0] = 1000;
   EXPECT_TRUE(rec->push_mesh_frame(bad.view()));  // found on the recorder thread
@@ -135,13 +139,23 @@ TEST(Recorder, OversizedAndInvalidFramesAreCountedNotWritten) {
   ASSERT_TRUE(rec->push_mesh_frame(testing::test_frame(0).view()));
   rec->stop();
   const RecorderStats s = rec->stats();
-  EXPECT_EQ(s.mesh_frames_too_big, 1u);
-  EXPECT_EQ(s.mesh_frame_drops, 1u);
+  EXPECT_EQ(s.mesh_frames_too_big, 2u);
+  EXPECT_EQ(s.mesh_frame_drops, 2u);
   EXPECT_EQ(s.mesh_frames_invalid, 4u);
   EXPECT_EQ(s.mesh_frames_written, 1u);
   const SessionInfo info = read_session_info(dir / "s.h5");
   EXPECT_EQ(info.rows.mesh_frames, 1u);
-  EXPECT_EQ(info.rows.events, 4u);  // one warning per refused frame, saying why
+  // One warning per invalid frame, saying why, and one for the oversized
+  // frames (every frame of a surface over the buffers is, so once per
+  // recording), naming the first one's size and the buffers' capacity: a
+  // session recorded with no frames otherwise says nothing of why.
+  EXPECT_EQ(info.rows.events, 5u);
+  const std::vector<std::string> messages = testing::event_messages(dir / "s.h5");
+  const auto too_big = std::count_if(messages.begin(), messages.end(), [](const std::string& m) {
+    return m.find("65 vertices, 0 triangles") != std::string::npos &&
+           m.find("64 vertices, 64 triangles") != std::string::npos;
+  });
+  EXPECT_EQ(too_big, 1) << ::testing::PrintToString(messages);
 }
 
 TEST(Recorder, StartRejectsBadNamesAndDirectoriesWithTheReason) {

@@ -7,8 +7,10 @@
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -371,6 +373,75 @@ TEST(SessionWriter, StrainIsStoredPerTriangleAndAFrameWithoutItHoldsNaN) {
   const SessionInfo info = read_session_info(dir / "s.h5");
   EXPECT_EQ(info.format_version, 2);
   EXPECT_TRUE(info.has_strain);
+}
+
+// flush() and close() sync the file to disk (fdatasync on HDF5's own
+// descriptor): H5Dflush and H5Fclose only hand the data to the page cache,
+// which a power cut loses, so "a crash loses at most one flush interval" held
+// for a process crash only. The sync at close comes after the file is closed,
+// so the clean-close mark and the cleared open-for-write flags are on disk
+// too.
+TEST(SessionWriter, EachFlushAndTheCloseSyncTheFileToDisk) {
+  TempDir dir;
+  const std::string path = dir / "s.h5";
+  auto w = SessionWriter::open_in(dir.path(), "s.h5", test_metadata());
+  struct stat session {};
+  ASSERT_EQ(::stat(path.c_str(), &session), 0);
+  int syncs = 0;
+  bool closed_at_last_sync = false;
+  w->set_sync_for_testing([&](int fd) {
+    ++syncs;
+    struct stat synced {};
+    EXPECT_EQ(::fstat(fd, &synced), 0);
+    EXPECT_EQ(synced.st_ino, session.st_ino) << "synced a descriptor that is not the session file";
+    EXPECT_EQ(synced.st_dev, session.st_dev);
+    // Readable as closed cleanly here only once the close has written the
+    // mark and closed the file.
+    const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    std::int64_t closed_cleanly = 0;
+    closed_at_last_sync =
+        file >= 0 && h5::read_i64_attribute(file, kAttrClosedCleanly, &closed_cleanly) && closed_cleanly == 1;
+    if (file >= 0) H5Fclose(file);
+    return ::fdatasync(fd) == 0 ? 0 : errno;
+  });
+  const std::vector<HapticRow> rows{testing::haptic_row(0), testing::haptic_row(1)};
+  w->append_haptic(rows);
+  w->flush();
+  EXPECT_EQ(syncs, 1) << "a flush that wrote rows syncs once";
+  w->append_mesh_frame(testing::test_frame(0).view());
+  w->flush();
+  EXPECT_EQ(syncs, 2);
+  EXPECT_FALSE(closed_at_last_sync);
+  w->close();
+  EXPECT_EQ(syncs, 3) << "the close syncs once";
+  EXPECT_TRUE(closed_at_last_sync) << "the close synced before the file was closed with its mark";
+  EXPECT_FALSE(w->failed()) << w->error();
+}
+
+// A failed sync is a write error (the data may not be on disk): the writer
+// fails naming the file and the reason, as for a full disk.
+TEST(SessionWriter, AFailedSyncFailsTheWriterNamingTheFileAndTheReason) {
+  TempDir dir;
+  for (const bool at_close : {false, true}) {
+    const std::string name = at_close ? "close.h5" : "flush.h5";
+    auto w = SessionWriter::open_in(dir.path(), name, test_metadata());
+    w->set_sync_for_testing([](int) { return EIO; });
+    const std::vector<HapticRow> rows{testing::haptic_row(0)};
+    w->append_haptic(rows);
+    try {
+      if (at_close)
+        w->close();
+      else
+        w->flush();
+      ADD_FAILURE() << name << ": a failed sync went unreported";
+    } catch (const RecordError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(dir / name), std::string::npos) << what;
+      EXPECT_NE(what.find("fdatasync"), std::string::npos) << what;
+      EXPECT_NE(what.find(std::strerror(EIO)), std::string::npos) << what;
+    }
+    EXPECT_TRUE(w->failed()) << name;
+  }
 }
 
 }  // namespace
