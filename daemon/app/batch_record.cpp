@@ -68,7 +68,7 @@ void BatchRecorder::after_step(const physics::Simulation& sim, double step_ms) {
       frame(sim);
     } else if (rows_.size() >= kRowsPerWrite) {
       append_rows();
-      writer_->flush();
+      writer_->flush(record::SessionWriter::Sync::kNone);
     }
   } catch (const std::exception& e) {
     stop(e);
@@ -105,7 +105,10 @@ void BatchRecorder::frame(const physics::Simulation& sim) {
   view.vertex_level = snapshot_.vertex_level;
   view.triangle_strain_energy_J_per_m3 = snapshot_.triangle_strain_energy_J_per_m3;
   writer_->append_mesh_frame(view);
-  writer_->flush();
+  // Readers may follow a batch run; durability waits for the close: a batch
+  // run is repeatable, and a sync per frame (every 1/30 s of simulated time)
+  // made a recorded 10 s cantilever run take 4.7 s instead of 1.8 s.
+  writer_->flush(record::SessionWriter::Sync::kNone);
   last_frame_s_ = sim.time_s();
   const double slack_s = 1e-6 * sim.scene().integrator.dt_s;
   next_frame_s_ = (std::floor((sim.time_s() + slack_s) / frame_interval_s_) + 1.0) * frame_interval_s_;

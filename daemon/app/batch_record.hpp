@@ -50,6 +50,8 @@ class BatchRecorder {
   // Rows written: sim rows, mesh frames, events (tests, the done line).
   std::uint64_t sim_rows() const { return writer_ ? writer_->group_rows()[1] : 0; }
   std::uint64_t mesh_frames() const { return writer_ ? writer_->group_rows()[2] : 0; }
+  // Test seam: see record::SessionWriter::set_sync_for_testing.
+  void set_sync_for_testing(record::SessionWriter::SyncFile sync) { writer_->set_sync_for_testing(std::move(sync)); }
 
  private:
   void frame(const physics::Simulation& sim);

@@ -585,7 +585,7 @@ void SessionWriter::append_mesh_frame(const MeshFrameView& frame) {
   append(kMeshFrameTime, &frame.time_s, 1);
 }
 
-void SessionWriter::flush() {
+void SessionWriter::flush(Sync sync) {
   h5::QuietErrors quiet;
   throw_if_failed();
   bool synced = true;  // nothing new: nothing to sync
@@ -595,7 +595,7 @@ void SessionWriter::flush() {
     dirty_[i] = false;
     synced = false;
   }
-  if (!synced) sync_to_disk(vfd_descriptor());
+  if (!synced && sync == Sync::kToDisk) sync_to_disk(vfd_descriptor());
 }
 
 // HDF5's default (sec2) driver's descriptor, which H5Fget_vfd_handle gives

@@ -96,9 +96,14 @@ class SessionWriter {
   void append_mesh_frame(const MeshFrameView& frame);
 
   // H5Dflush on every dataset that grew since the last flush (data columns
-  // before the columns readers count by), then fdatasync of the file, so
-  // what was flushed survives a power cut too (RecordError if it fails).
-  void flush();
+  // before the columns readers count by), then, with Sync::kToDisk,
+  // fdatasync of the file, so what was flushed survives a power cut too
+  // (RecordError if it fails). Sync::kNone leaves the data in the page cache
+  // (readers see it, a process crash keeps it): for a writer that flushes
+  // far more often than durability is worth, such as a batch run's frame
+  // every 1/30 s of simulated time, which close() syncs once.
+  enum class Sync { kToDisk, kNone };
+  void flush(Sync sync = Sync::kToDisk);
 
   // Flushes every row, rewrites closed_cleanly = 1, end_time_utc and
   // duration_s in place (still in SWMR mode, so readers may keep the file
