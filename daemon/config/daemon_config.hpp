@@ -167,12 +167,13 @@ struct PublishSpec {
 // (auto-<UTC time>.h5 in state_dir) and starts a new file every rotate_s, so
 // a daemon that runs for weeks leaves files of a size a tool can open. The
 // oldest automatic files go once they hold more than keep_gb together (the
-// shipped scene writes ~1.2 GB an hour); files a client named, or started
-// with record_start, are never removed.
+// shipped scene writes ~1.2 GB an hour), and, whatever keep_gb, when the disk
+// is nearly full (Service::make_room_for_automatic_recording); files a client
+// named, or started with record_start, are never removed.
 struct RecordSpec {
   bool auto_start = false;
   double rotate_s = 3600.0;
-  double keep_gb = 50.0;                               // 0: keep every automatic file
+  double keep_gb = 50.0;                               // 0: no budget (a nearly full disk still removes)
   bool operator==(const RecordSpec&) const = default;  // a reload tells what changed
 };
 
