@@ -443,7 +443,22 @@ std::string Service::next_part_name(const std::string& first) const {
   const std::string stem = p.stem().string(), extension = p.extension().string();
   std::error_code ec;
   for (int k = 2;; ++k) {
-    const std::string name = stem + "-part" + std::to_string(k) + extension;
+    const std::string suffix = "-part" + std::to_string(k) + extension;
+    // A name near the length limit (accepted by record_start) would be
+    // refused with the suffix, stopping the recording at the change: the
+    // stem is shortened to fit, never within a UTF-8 character.
+    std::string name = stem;
+    if (name.size() + suffix.size() > record::kMaxSessionNameBytes && suffix.size() < record::kMaxSessionNameBytes) {
+      name.resize(record::kMaxSessionNameBytes - suffix.size());
+      std::size_t lead = name.size();
+      while (lead > 0 && (static_cast<unsigned char>(name[lead - 1]) & 0xC0) == 0x80) --lead;
+      if (lead > 0) {
+        const unsigned char b = static_cast<unsigned char>(name[lead - 1]);
+        const std::size_t length = b < 0x80 ? 1 : b < 0xE0 ? 2 : b < 0xF0 ? 3 : 4;
+        if (lead - 1 + length > name.size()) name.resize(lead - 1);  // a character cut short
+      }
+    }
+    name += suffix;
     if (!std::filesystem::exists(std::filesystem::path(config_.state_dir) / name, ec)) return name;
   }
 }

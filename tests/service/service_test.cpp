@@ -1097,6 +1097,34 @@ TEST(Service, ASceneLoadedWhileRecordingIsDescribedByTheFileHoldingItsRows) {
   })) << "the old file names the one the recording goes on in";
 }
 
+// Found by the review of the day's diff: record_start takes names of up to
+// 200 bytes, and "-part2" pushed a 195-200-byte one past that, so the
+// recording stopped at the first scene change ("the next file cannot be
+// made: ... longer than 200 bytes"). The stem is shortened to fit, never
+// within a UTF-8 character (an 'é' straddles the cut here).
+TEST(Service, ARecordingWithANameAtTheLengthLimitGoesOnAcrossASceneChange) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", state));
+  ControlClient client = connect(dir / "ctl.sock");
+  const std::string stem = std::string(190, 'a') + "\xc3\xa9" + "aaa";  // 195 bytes
+  ASSERT_TRUE(client.call("record_start", {{"name", stem + ".h5"}})["ok"].get<bool>());
+  std::this_thread::sleep_for(300ms);
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+  EXPECT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
+  const std::string next = std::string(190, 'a') + "-part2.h5";
+  EXPECT_EQ(loaded.value("result", nlohmann::json::object()).value("recording", ""), state + "/" + next)
+      << loaded.dump();
+  EXPECT_FALSE(loaded.value("result", nlohmann::json::object()).contains("recording_stopped")) << loaded.dump();
+  std::this_thread::sleep_for(300ms);
+  client.call("record_stop");
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk);
+  EXPECT_EQ(record::testing::root_string_attribute(state + "/" + next, "scene_name"), "contact");
+  EXPECT_TRUE(record::read_session_info(state + "/" + next).closed_cleanly);
+}
+
 // record.keep_gb: past the budget the oldest automatic files go at each
 // rotation (said on stdout); a file a client named stays.
 TEST(Service, OldAutomaticRecordingsGoPastTheirBudget) {
