@@ -298,6 +298,7 @@ std::unique_ptr<SessionWriter> SessionWriter::create(const std::string& path, co
   // left by a crash, and a repair would trim and re-flag it under the
   // writer. Nothing is recorded yet, so the hidden file goes, as below.
   if (const std::string why = writer->lock_.take(hidden); !why.empty()) {
+    writer->to_be_removed_ = true;
     writer.reset();
     std::filesystem::remove(hidden, ec);
     throw RecordError("cannot create session file '" + path + "': cannot mark it as being recorded: " + why +
@@ -306,6 +307,7 @@ std::unique_ptr<SessionWriter> SessionWriter::create(const std::string& path, co
   }
   const int moved = util::rename_without_replacing(hidden, path);
   if (moved != 0) {
+    writer->to_be_removed_ = true;
     writer.reset();
     std::filesystem::remove(hidden, ec);
     if (moved == EEXIST) throw RecordError("cannot create session file '" + path + "': it already exists");
@@ -660,7 +662,8 @@ void SessionWriter::close(std::optional<double> duration_s) {
   }
   // Synced after the close (the close writes HDF5's last metadata), through
   // a copy of HDF5's descriptor that outlives it.
-  const int fd = ok ? vfd_descriptor() : -1;
+  const bool sync = ok && !to_be_removed_;
+  const int fd = sync ? vfd_descriptor() : -1;
   const int sync_fd = fd >= 0 ? ::fcntl(fd, F_DUPFD_CLOEXEC, 0) : -1;
   for (h5::Handle& ds : datasets_) ok = ds.reset() && ok;
   // The close writes the mark and then clears the superblock's open-for-write
@@ -669,7 +672,7 @@ void SessionWriter::close(std::optional<double> duration_s) {
     ok = false;
     error_ = "session file '" + path_ + "': " + h5::describe("closing the file failed");
   }
-  if (ok) {
+  if (ok && sync) {
     try {
       sync_to_disk(sync_fd);
     } catch (const RecordError&) {

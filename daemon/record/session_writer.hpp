@@ -159,6 +159,10 @@ class SessionWriter {
   RecordingLock lock_;      // from before the file appears under its name until close()
   WriteFault write_fault_;  // see set_write_fault_for_testing
   SyncFile sync_;           // see set_sync_for_testing; empty: fdatasync
+  // A create that failed after the file was made removes it: its close
+  // syncs nothing (out of descriptors, the copy for the sync failed and the
+  // close reported "cannot sync it to disk" for a file about to go).
+  bool to_be_removed_ = false;
 
   // Column scratch (reused, so steady state allocates nothing).
   std::vector<double> f64_;
