@@ -1052,6 +1052,17 @@ TEST(Service, RecordsOnItsOwnAndRotatesTheFile) {
       << first.size() << " events";
 }
 
+// Until the current recording has a sim row (at most 10 s): a fixed sleep
+// could leave a file without rows on a loaded machine.
+bool recording_has_sim_rows(ControlClient& client) {
+  for (int i = 0; i < 200; ++i) {
+    const nlohmann::json r = client.call("status")["result"]["recording"];
+    if (r.is_object() && r.value("sim_rows", 0) > 0) return true;
+    std::this_thread::sleep_for(50ms);
+  }
+  return false;
+}
+
 // A session file's root attributes (scene_name, scene_text, config_text)
 // cannot change once written: after a load_scene the file went on with the
 // new scene's rows under the old scene's name ("scene: cantilever" for a
@@ -1066,17 +1077,17 @@ TEST(Service, ASceneLoadedWhileRecordingIsDescribedByTheFileHoldingItsRows) {
   Running run(config);
   ControlClient client = connect(dir / "ctl.sock");
   ASSERT_TRUE(client.call("record_start", {{"name", "s1.h5"}})["ok"].get<bool>());
-  std::this_thread::sleep_for(300ms);
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
   const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
   EXPECT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
   EXPECT_EQ(loaded.value("result", nlohmann::json::object()).value("recording", ""), state + "/s1-part2.h5")
       << loaded.dump();
   EXPECT_EQ(client.call("status")["result"]["recording"].value("file", ""), state + "/s1-part2.h5");
-  std::this_thread::sleep_for(300ms);
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
   // The reload goes back to the configured cantilever.
   ASSERT_EQ(::raise(SIGHUP), 0);
   EXPECT_TRUE(written_within_5_s(run.out, "reloaded")) << file_text(run.out);
-  std::this_thread::sleep_for(300ms);
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
   const nlohmann::json stop = client.call("record_stop");
   EXPECT_EQ(stop["result"].value("file", ""), state + "/s1-part3.h5") << stop.dump();
   client.call("shutdown");
@@ -1110,14 +1121,14 @@ TEST(Service, ARecordingWithANameAtTheLengthLimitGoesOnAcrossASceneChange) {
   ControlClient client = connect(dir / "ctl.sock");
   const std::string stem = std::string(190, 'a') + "\xc3\xa9" + "aaa";  // 195 bytes
   ASSERT_TRUE(client.call("record_start", {{"name", stem + ".h5"}})["ok"].get<bool>());
-  std::this_thread::sleep_for(300ms);
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
   const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
   EXPECT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
   const std::string next = std::string(190, 'a') + "-part2.h5";
   EXPECT_EQ(loaded.value("result", nlohmann::json::object()).value("recording", ""), state + "/" + next)
       << loaded.dump();
   EXPECT_FALSE(loaded.value("result", nlohmann::json::object()).contains("recording_stopped")) << loaded.dump();
-  std::this_thread::sleep_for(300ms);
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
   client.call("record_stop");
   client.call("shutdown");
   ASSERT_EQ(run.wait(), kServiceOk);
