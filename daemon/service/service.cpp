@@ -835,6 +835,16 @@ int Service::run() {
   } catch (const std::exception&) {
     // The server names the path when it cannot bind; nothing more to say here.
   }
+  // The state directory is made too (README: `--set state_dir=/tmp/tissued`):
+  // a missing one would leave the automatic recording off for a whole
+  // record.rotate_s and refuse every record_start and export.
+  {
+    std::error_code ec;
+    std::filesystem::create_directories(config_.state_dir, ec);
+    if (ec)
+      std::fprintf(options_.err, "tissued: state_dir %s: cannot make it (%s); recordings and exports will fail\n",
+                   config_.state_dir.c_str(), ec.message().c_str());
+  }
   // A recorder killed while creating a session leaves a hidden, never
   // published file with no recorded row in it: remove it, named, rather than
   // let such files pile up in the state directory.

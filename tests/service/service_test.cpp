@@ -977,6 +977,25 @@ TEST(Service, UnusableStateDirectoryRefusesRecordingAndKeepsServing) {
   EXPECT_EQ(run.wait(), kServiceOk);
 }
 
+// A state_dir that does not exist yet is made at start (as the control
+// socket's directory is): the README's `--set state_dir=/tmp/tissued` would
+// otherwise leave the daemon serving without its automatic recording for a
+// whole record.rotate_s, and every record_start refused.
+TEST(Service, AMissingStateDirectoryIsMadeAtStartAndRecordedIn) {
+  TempDir dir;
+  const std::string state = dir / "not-yet/state";
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", state), 0.0, {"record.auto_start=true"});
+  ControlClient client = connect(dir / "ctl.sock");
+  const nlohmann::json recording = client.call("status")["result"]["recording"];
+  ASSERT_TRUE(recording.is_object()) << recording.dump() << run.err_text();
+  EXPECT_EQ(recording["state"], "recording") << recording.dump();
+  client.call("shutdown");
+  EXPECT_EQ(run.wait(), kServiceOk);
+  EXPECT_TRUE(std::filesystem::is_directory(state));
+  const std::string err = run.err_text();
+  EXPECT_EQ(err.find("automatic recording"), std::string::npos) << err;
+}
+
 // The session files in `dir`, sorted.
 std::vector<std::string> session_files(const std::string& dir) {
   std::vector<std::string> files;
