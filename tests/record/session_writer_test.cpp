@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -442,6 +443,38 @@ TEST(SessionWriter, AFailedSyncFailsTheWriterNamingTheFileAndTheReason) {
     }
     EXPECT_TRUE(w->failed()) << name;
   }
+}
+
+// docs/session-format.md's Python example, pasted as it stands (with only the
+// file name changed), reads frame 0 of a session: what it reads is the frame
+// written.
+TEST(SessionWriter, TheFormatDocsPythonExampleReadsAFrame) {
+  if (!testing::have_system_h5py()) GTEST_SKIP() << "/usr/bin/python3 has no h5py: the docs' example needs it";
+  TempDir dir;
+  const std::string path = testing::write_test_session(dir / "session.h5");
+  const std::string doc = testing::slurp(std::string(TISSUE_SOURCE_DIR) + "/docs/session-format.md");
+  const std::string heading = "in Python:\n\n```python\n";
+  const std::size_t begin = doc.find(heading);
+  ASSERT_NE(begin, std::string::npos) << "docs/session-format.md has no Python example";
+  const std::size_t code = begin + heading.size();
+  const std::size_t end = doc.find("```", code);
+  ASSERT_NE(end, std::string::npos);
+  std::string script = doc.substr(code, end - code);
+  const std::size_t name = script.find("\"session.h5\"");
+  ASSERT_NE(name, std::string::npos) << script;
+  script.replace(name, 12, "sys.argv[1]");
+  script = "import sys\n" + script +
+           "print('%d %d %.6f %d' % (len(vertices), len(triangles), float(vertices.sum()), len(strain)))\n";
+  const testing::RunResult py =
+      testing::run("/usr/bin/python3 -c " + testing::quote(script) + " " + testing::quote(path), dir);
+  ASSERT_EQ(py.exit_code, 0) << py.err << script;
+  const testing::TestFrame frame = testing::test_frame(0);
+  double sum_m = 0.0;
+  for (const auto& v : frame.vertices_m) sum_m += v[0] + v[1] + v[2];
+  char expected[128];
+  std::snprintf(expected, sizeof expected, "%zu %zu %.6f %zu\n", frame.vertices_m.size(), frame.triangles.size(), sum_m,
+                frame.triangles.size());
+  EXPECT_EQ(py.out, expected) << script;
 }
 
 }  // namespace
