@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <functional>
 #include <iterator>
 #include <map>
@@ -253,8 +254,18 @@ void static_bend(const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string path = argc > 1 ? argv[1] : "config/scenes/cantilever.yaml";
-  shipped_run(path);
-  static_bend(path);
+  const std::string arg = argc > 1 ? argv[1] : "";
+  if (argc > 2 || arg == "--help" || arg == "-h") {
+    std::fprintf(argc > 2 ? stderr : stdout, "usage: %s [path/to/cantilever.yaml]\n", argv[0]);
+    return argc > 2 ? 2 : 0;
+  }
+  const std::string path = arg.empty() ? "config/scenes/cantilever.yaml" : arg;
+  try {
+    shipped_run(path);
+    static_bend(path);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "split_energy: %s\n", e.what());
+    return 2;
+  }
   return 0;
 }
