@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# README command 2: build and pass every test, twice: a Release tree and an
-# ASan+UBSan tree. Each tree is reused if present (incremental builds).
+# README command 2: build and pass every test in three trees: a Release tree,
+# an ASan+UBSan tree, and a TSan tree for the threaded suites (ctest -L
+# threaded). Each tree is reused if present (incremental builds).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 jobs="$(nproc)"
