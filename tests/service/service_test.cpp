@@ -31,6 +31,7 @@
 #include "record/record_test_support.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
+#include "scene/scene_yaml.hpp"
 #include "support/process_support.hpp"
 
 namespace tissue::service {
@@ -1134,6 +1135,68 @@ TEST(Service, ARecordingWithANameAtTheLengthLimitGoesOnAcrossASceneChange) {
   ASSERT_EQ(run.wait(), kServiceOk);
   EXPECT_EQ(record::testing::root_string_attribute(state + "/" + next, "scene_name"), "contact");
   EXPECT_TRUE(record::read_session_info(state + "/" + next).closed_cleanly);
+}
+
+// The simulated times of a session's sim rows, in row order.
+std::vector<double> recorded_sim_times_s(const std::string& path) {
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (file < 0) {
+    ADD_FAILURE() << "cannot open " << path;
+    return {};
+  }
+  std::vector<double> times_s = record::testing::read_f64(file, "/sim/sim_time_s");
+  H5Fclose(file);
+  return times_s;
+}
+
+// The index of the first sim row whose simulated time does not go on from
+// the row before (a new runner starts again at its first step), or the row
+// count when every row goes on from the one before.
+std::size_t first_restart(const std::vector<double>& times_s) {
+  for (std::size_t i = 1; i < times_s.size(); ++i)
+    if (times_s[i] <= times_s[i - 1]) return i;
+  return times_s.size();
+}
+
+// The new runner ran from the moment load_scene handed it to the sim
+// thread, while the recording's next file was being made: the new scene's
+// first steps went to the old file (under the old scene's name and text),
+// and the new file began a few steps into its scene. The sim thread now
+// takes the runner and the next file together, between two steps: each
+// file's rows are its own scene's, the next file's first row the new
+// scene's first step (a scene's time starts at 0).
+TEST(Service, EveryRowOfASceneLoadedWhileRecordingIsInTheFileThatDescribesIt) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", state));
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(client.call("record_start", {{"name", "s1.h5"}})["ok"].get<bool>());
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+  ASSERT_EQ(loaded.value("result", nlohmann::json::object()).value("recording", ""), state + "/s1-part2.h5")
+      << loaded.dump();
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  ASSERT_EQ(::raise(SIGHUP), 0);  // back to the configured cantilever, in s1-part3.h5
+  EXPECT_TRUE(written_within_5_s(run.out, "reloaded")) << file_text(run.out);
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  const nlohmann::json stop = client.call("record_stop");
+  ASSERT_EQ(stop["result"].value("file", ""), state + "/s1-part3.h5") << stop.dump();
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk);
+
+  const double contact_dt_s = scene::load_scene_file_with_overrides(scene_file("contact.yaml"), {}).integrator.dt_s;
+  const double cantilever_dt_s =
+      scene::load_scene_file_with_overrides(scene_file("cantilever.yaml"), {}).integrator.dt_s;
+  for (const std::string name : {"s1.h5", "s1-part2.h5", "s1-part3.h5"}) {
+    const std::vector<double> times_s = recorded_sim_times_s(state + "/" + name);
+    ASSERT_FALSE(times_s.empty()) << name;
+    EXPECT_EQ(first_restart(times_s), times_s.size())
+        << name << ": the next scene's rows from row " << first_restart(times_s) << " of " << times_s.size()
+        << " (simulated time " << times_s[std::min(first_restart(times_s), times_s.size() - 1)] << " s)";
+  }
+  EXPECT_EQ(recorded_sim_times_s(state + "/s1-part2.h5").front(), contact_dt_s) << "contact's first step";
+  EXPECT_EQ(recorded_sim_times_s(state + "/s1-part3.h5").front(), cantilever_dt_s) << "cantilever's first step";
 }
 
 // record.keep_gb: past the budget the oldest automatic files go at each
