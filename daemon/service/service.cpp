@@ -430,23 +430,20 @@ Service::RecordingHandover Service::continue_recording_in_new_file(const std::st
     next =
         automatic_recording_ ? open_automatic_recorder(&removed) : open_recorder(next_part_name(client_record_name_));
   } catch (const std::exception& e) {
+    // Stopped rather than go on under the old scene's description (an
+    // automatic recording kept its old file at a failed rotation, where the
+    // file still describes the scene running; not here).
+    out.stopped = std::string(automatic_recording_ ? "automatic " : "") + "recording stopped at the scene change (" +
+                  what + "): the next file cannot be made: " + e.what();
     if (automatic_recording_) {
-      // As after a failed rotation: the old file goes on, and the new file
-      // is tried again at the next rotation.
-      record_event(static_cast<int>(record::EventKind::kSceneLoaded), what + ": the recording goes on in a new file");
+      // Tried again as after a failed rotation (with no file going on).
       automatic_since_ = std::chrono::steady_clock::now();
-      std::fprintf(options_.err,
-                   "tissued: automatic recording: %s; the recording goes on in %s, trying again in %s s\n", e.what(),
-                   recorder_->path().c_str(), yaml_util::fmt_num(config_.record.rotate_s).c_str());
-      std::fflush(options_.err);
-      sim_->replace_runner(std::move(runner));
-      out.file = recorder_->path();
-      return out;
+      out.stopped += "; trying again in " + yaml_util::fmt_num(config_.record.rotate_s) + " s";
     }
-    // Stopped rather than go on under the old scene's description.
-    out.stopped = "recording stopped at the scene change (" + what + "): the next file cannot be made: " + e.what();
     record_event(static_cast<int>(record::EventKind::kRecordingError), out.stopped);
     stop_recording(std::move(runner));
+    std::fprintf(options_.err, "tissued: %s\n", out.stopped.c_str());
+    std::fflush(options_.err);
     return out;
   }
   record_event(static_cast<int>(record::EventKind::kSceneLoaded), what + ": the recording goes on in " + next->path());
@@ -662,12 +659,11 @@ void Service::reload() {
     scene_sets_.clear();
     const std::vector<std::string> kept = restart_only_changes(config_, config);
     waiting_for_restart_ = kept;  // before the new file's first events, which name them
-    // A new file is said by install_recorder ("recording to ..."); no file is said here.
-    const RecordingHandover handover =
-        continue_recording_in_new_file("reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
-                                           (applied.empty() ? "" : "; changed: " + applied),
-                                       std::move(runner));
-    if (!handover.stopped.empty()) std::fprintf(options_.err, "tissued: %s\n", handover.stopped.c_str());
+    // A new file is said by install_recorder ("recording to ..."), a stopped
+    // recording by continue_recording_in_new_file.
+    (void)continue_recording_in_new_file("reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
+                                             (applied.empty() ? "" : "; changed: " + applied),
+                                         std::move(runner));
     const std::string device_problem = match_haptics_to_scene(had_tool, haptics_changed);
     std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
                  haptics_changed && haptics_ ? " (haptic settings changed: the haptic thread restarted)" : "");

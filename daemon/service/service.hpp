@@ -187,8 +187,10 @@ class Service : public control::ControlHandler {
   // automatic one rotates, a client's goes on in NAME-partK.h5), `what`
   // recorded as the old file's last event. The sim thread takes the runner
   // and the new file together: the new scene's rows are all in the new file,
-  // none in the old. `file` is the new file, `stopped` why there is none (a
-  // client's recording whose next file cannot be made stops).
+  // none in the old. `file` is the new file, `stopped` why there is none: a
+  // next file that cannot be made stops the recording at the change (said on
+  // stderr), rather than record the new scene under the old one's
+  // description; an automatic one is tried again after record.rotate_s.
   struct RecordingHandover {
     std::string file;
     std::string stopped;
