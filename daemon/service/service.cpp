@@ -293,9 +293,9 @@ std::unique_ptr<record::Recorder> Service::open_recorder(const std::string& name
       options);
 }
 
-void Service::install_recorder(std::unique_ptr<record::Recorder> recorder) {
+void Service::install_recorder(std::unique_ptr<record::Recorder> recorder, std::unique_ptr<SimRunner> runner) {
   // Straight from the old file (if any) to the new one: no row in neither.
-  hand_over_recorder(sim_.get(), recorder_, std::move(recorder), retired_recorders_);
+  hand_over_recorder(sim_.get(), recorder_, std::move(recorder), retired_recorders_, std::move(runner));
   recorded_description_ = recording_description();
   for (const std::string& text : recording_started_events())
     record_event(static_cast<int>(record::EventKind::kSceneLoaded), text);
@@ -357,25 +357,34 @@ std::vector<std::string> Service::make_room_for_automatic_recording() {
   return said;
 }
 
+std::unique_ptr<record::Recorder> Service::open_automatic_recorder(std::vector<std::string>* removed) {
+  // Room first: past the reserve a new file would stop at once.
+  *removed = make_room_for_automatic_recording();
+  return open_recorder(
+      util::free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5", std::time(nullptr)));
+}
+
+void Service::note_automatic_recording_started(const std::vector<std::string>& removed) {
+  for (const std::string& what : removed) record_event(static_cast<int>(record::EventKind::kInfo), what);
+  // The oldest automatic files go once they hold more than keep_gb, this
+  // one counted; said on stdout and in the new file's events.
+  if (config_.record.keep_gb > 0.0)
+    for (const std::string& gone : record::remove_oldest_automatic_recordings(
+             config_.state_dir, static_cast<std::uintmax_t>(config_.record.keep_gb * 1e9), recorder_->path())) {
+      const std::string what = "removed the oldest automatic recording " + gone + " (record.keep_gb " +
+                               yaml_util::fmt_num(config_.record.keep_gb) + " reached)";
+      std::fprintf(options_.out, "tissued: %s\n", what.c_str());
+      record_event(static_cast<int>(record::EventKind::kInfo), what);
+    }
+}
+
 void Service::start_automatic_recording() {
   automatic_recording_ = true;
   automatic_since_ = std::chrono::steady_clock::now();
   try {
-    // Room first: past the reserve a new file would stop at once.
-    const std::vector<std::string> removed = make_room_for_automatic_recording();
-    start_recording(
-        util::free_timestamped_name(config_.state_dir, record::kAutomaticPrefix, ".h5", std::time(nullptr)));
-    for (const std::string& what : removed) record_event(static_cast<int>(record::EventKind::kInfo), what);
-    // The oldest automatic files go once they hold more than keep_gb, this
-    // one counted; said on stdout and in the new file's events.
-    if (config_.record.keep_gb > 0.0)
-      for (const std::string& gone : record::remove_oldest_automatic_recordings(
-               config_.state_dir, static_cast<std::uintmax_t>(config_.record.keep_gb * 1e9), recorder_->path())) {
-        const std::string what = "removed the oldest automatic recording " + gone + " (record.keep_gb " +
-                                 yaml_util::fmt_num(config_.record.keep_gb) + " reached)";
-        std::fprintf(options_.out, "tissued: %s\n", what.c_str());
-        record_event(static_cast<int>(record::EventKind::kInfo), what);
-      }
+    std::vector<std::string> removed;
+    install_recorder(open_automatic_recorder(&removed));
+    note_automatic_recording_started(removed);
   } catch (const std::exception& e) {
     // A rotation whose new file cannot be made keeps the old one going.
     const bool going_on = recorder_ && recorder_->state() == record::RecorderState::kRecording;
@@ -396,37 +405,51 @@ void Service::rotate_automatic_recording() {
   start_automatic_recording();  // the new file takes over from this one
 }
 
-Service::RecordingHandover Service::continue_recording_in_new_file(const std::string& what) {
+Service::RecordingHandover Service::continue_recording_in_new_file(const std::string& what,
+                                                                   std::unique_ptr<SimRunner> runner) {
   // A session file's scene_name, scene_text and config_text are written once
   // (SWMR): rows of another scene under them would be described as the old
   // one. The new scene's rows go to a new file, which describes them; the
-  // old file ends with an event naming it.
+  // old file ends with an event naming it. The new file is made while the
+  // old scene still runs (its rows still go to the old file, which describes
+  // them), then the sim thread takes the new runner and the new file between
+  // two steps: handed the runner first, it stepped the new scene into the
+  // old file while the new one was being made.
   RecordingHandover out;
   // The same scene text, overrides and config text (a load_scene of the
   // running file, a reload of unchanged files): the file still describes it.
   if (!recorder_ || recorder_->state() != record::RecorderState::kRecording ||
       recording_description() == recorded_description_) {
     record_event(static_cast<int>(record::EventKind::kSceneLoaded), what);  // a failed one's last events
+    sim_->replace_runner(std::move(runner));
     return out;
   }
-  if (automatic_recording_) {
-    record_event(static_cast<int>(record::EventKind::kSceneLoaded), what + ": the recording goes on in a new file");
-    start_automatic_recording();  // said and tried again at the next rotation if it cannot be made
-  } else {
-    std::unique_ptr<record::Recorder> next;
-    try {
-      next = open_recorder(next_part_name(client_record_name_));
-    } catch (const std::exception& e) {
-      // Stopped rather than go on under the old scene's description.
-      out.stopped = "recording stopped at the scene change (" + what + "): the next file cannot be made: " + e.what();
-      record_event(static_cast<int>(record::EventKind::kRecordingError), out.stopped);
-      stop_recording();
-      return out;
+  std::vector<std::string> removed;  // automatic files the new one's room took
+  std::unique_ptr<record::Recorder> next;
+  try {
+    next =
+        automatic_recording_ ? open_automatic_recorder(&removed) : open_recorder(next_part_name(client_record_name_));
+  } catch (const std::exception& e) {
+    // Stopped rather than go on under the old scene's description (an
+    // automatic recording kept its old file at a failed rotation, where the
+    // file still describes the scene running; not here).
+    out.stopped = std::string(automatic_recording_ ? "automatic " : "") + "recording stopped at the scene change (" +
+                  what + "): the next file cannot be made: " + e.what();
+    if (automatic_recording_) {
+      // Tried again as after a failed rotation (with no file going on).
+      automatic_since_ = std::chrono::steady_clock::now();
+      out.stopped += "; trying again in " + yaml_util::fmt_num(config_.record.rotate_s) + " s";
     }
-    record_event(static_cast<int>(record::EventKind::kSceneLoaded),
-                 what + ": the recording goes on in " + next->path());
-    install_recorder(std::move(next));
+    record_event(static_cast<int>(record::EventKind::kRecordingError), out.stopped);
+    stop_recording(std::move(runner));
+    std::fprintf(options_.err, "tissued: %s\n", out.stopped.c_str());
+    std::fflush(options_.err);
+    return out;
   }
+  record_event(static_cast<int>(record::EventKind::kSceneLoaded), what + ": the recording goes on in " + next->path());
+  if (automatic_recording_) automatic_since_ = std::chrono::steady_clock::now();
+  install_recorder(std::move(next), std::move(runner));
+  if (automatic_recording_) note_automatic_recording_started(removed);
   if (recorder_ && recorder_->state() == record::RecorderState::kRecording) out.file = recorder_->path();
   return out;
 }
@@ -463,10 +486,13 @@ std::string Service::next_part_name(const std::string& first) const {
   }
 }
 
-void Service::stop_recording() {
-  if (!recorder_) return;
+void Service::stop_recording(std::unique_ptr<SimRunner> runner) {
+  if (!recorder_) {
+    if (runner) sim_->replace_runner(std::move(runner));
+    return;
+  }
   // Closes the file; later pushes from a stalled sim thread are refused.
-  hand_over_recorder(sim_.get(), recorder_, nullptr, retired_recorders_);
+  hand_over_recorder(sim_.get(), recorder_, nullptr, retired_recorders_, std::move(runner));
 }
 
 void Service::record_event(int kind, const std::string& text) {
@@ -476,17 +502,24 @@ void Service::record_event(int kind, const std::string& text) {
 }
 
 std::string Service::apply_scene(scene::Scene scene, bool restart_haptics) {
-  require_servable(scene);  // throws std::invalid_argument: nothing changes
-  std::unique_ptr<SimRunner> runner;
-  try {
-    require_steppable(scene);                     // ditto
-    runner = std::make_unique<SimRunner>(scene);  // ditto
-  } catch (const scene::SceneModelError& e) {
-    throw scene::model_error(scene, e);  // the file, the key and any --set or `set` to blame
-  }
+  std::unique_ptr<SimRunner> runner = build_runner(scene);  // throws: nothing changes
   const bool had_tool = scene_.tool.has_value();
   scene_ = std::move(scene);
   sim_->replace_runner(std::move(runner));
+  return match_haptics_to_scene(had_tool, restart_haptics);
+}
+
+std::unique_ptr<SimRunner> Service::build_runner(const scene::Scene& scene) const {
+  require_servable(scene);  // throws std::invalid_argument: nothing changes
+  try {
+    require_steppable(scene);                   // ditto
+    return std::make_unique<SimRunner>(scene);  // ditto
+  } catch (const scene::SceneModelError& e) {
+    throw scene::model_error(scene, e);  // the file, the key and any --set or `set` to blame
+  }
+}
+
+std::string Service::match_haptics_to_scene(bool had_tool, bool restart_haptics) {
   const bool want_haptics = scene_.tool && config_.device.kind != config::DeviceSpec::Kind::kNone;
   if (restart_haptics) stop_haptic_side();
   if (had_tool && !want_haptics) {
@@ -601,15 +634,19 @@ void Service::reload() {
     config_.haptics = config.haptics;
     config_.device.limits = config.device.limits;
     config_.max_scene_tets = config.max_scene_tets;
-    std::string device_problem;
+    std::unique_ptr<SimRunner> runner;
     try {
-      device_problem = apply_scene(std::move(scene), haptics_changed);
+      runner = build_runner(scene);  // with the new max_scene_tets
     } catch (...) {
       config_.haptics = old_haptics;
       config_.device.limits = old_limits;
       config_.max_scene_tets = old_max_scene_tets;
       throw;
     }
+    // Committed: what a recording describes first, then the runner goes to
+    // the sim thread with the recording's next file (nothing below throws).
+    const bool had_tool = scene_.tool.has_value();
+    scene_ = std::move(scene);
     if (config.status_interval_s != config_.status_interval_s) {
       config_.status_interval_s = config.status_interval_s;
       arm_status_timer();  // now, not after the old interval (up to an hour) has run out
@@ -620,15 +657,16 @@ void Service::reload() {
     scene_path_ = config.scene_path;
     base_scene_overrides_ = scene_overrides();
     scene_sets_.clear();
-    std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
-                 haptics_changed && haptics_ ? " (haptic settings changed: the haptic thread restarted)" : "");
     const std::vector<std::string> kept = restart_only_changes(config_, config);
     waiting_for_restart_ = kept;  // before the new file's first events, which name them
-    const RecordingHandover handover =
-        continue_recording_in_new_file("reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
-                                       (applied.empty() ? "" : "; changed: " + applied));
-    // A new file is said by install_recorder ("recording to ..."); no file is said here.
-    if (!handover.stopped.empty()) std::fprintf(options_.err, "tissued: %s\n", handover.stopped.c_str());
+    // A new file is said by install_recorder ("recording to ..."), a stopped
+    // recording by continue_recording_in_new_file.
+    (void)continue_recording_in_new_file("reloaded (SIGHUP): scene " + scene_.name + " from " + scene_path_ +
+                                             (applied.empty() ? "" : "; changed: " + applied),
+                                         std::move(runner));
+    const std::string device_problem = match_haptics_to_scene(had_tool, haptics_changed);
+    std::fprintf(options_.out, "tissued: reloaded %s and %s%s\n", options_.config_path.c_str(), scene_path_.c_str(),
+                 haptics_changed && haptics_ ? " (haptic settings changed: the haptic thread restarted)" : "");
     (void)with_device_warning({}, device_problem);  // said on stderr and recorded; a signal has no reply
     if (!kept.empty()) {
       std::string list;
@@ -982,20 +1020,26 @@ nlohmann::json Service::reset() {
 
 nlohmann::json Service::load_scene(const std::string& path) {
   scene::Scene scene;
-  std::string device_problem;
+  std::unique_ptr<SimRunner> runner;
   try {
     // The file as written: earlier `set`s and the command line's --set were
     // for the scene that was running.
     scene = scene::load_scene_file_with_overrides(path, {});
-    device_problem = apply_scene(scene);
+    runner = build_runner(scene);
   } catch (const std::exception& e) {
     throw control::ControlError(e.what());  // names the file, the key and the reason
   }
+  // Committed: what a recording describes first, then the runner goes to
+  // the sim thread with the recording's next file (nothing below throws).
+  const bool had_tool = scene_.tool.has_value();
+  scene_ = std::move(scene);
   scene_path_ = path;
   base_scene_overrides_.clear();
   scene_sets_.clear();
   nlohmann::json result = {{"scene", scene_.name}, {"source", path}};
-  const RecordingHandover handover = continue_recording_in_new_file("scene " + scene_.name + " loaded from " + path);
+  const RecordingHandover handover =
+      continue_recording_in_new_file("scene " + scene_.name + " loaded from " + path, std::move(runner));
+  const std::string device_problem = match_haptics_to_scene(had_tool, false);
   if (!handover.file.empty()) result["recording"] = handover.file;
   if (!handover.stopped.empty()) result["recording_stopped"] = handover.stopped;
   return with_device_warning(std::move(result), device_problem);

@@ -104,6 +104,13 @@ class Service : public control::ControlHandler {
   // its session file gone) leaves the scene running without it, and the
   // returned text says so (empty: the device is as the scene wants).
   [[nodiscard]] std::string apply_scene(scene::Scene scene, bool restart_haptics = false);
+  // apply_scene's halves. The runner for `scene`: throws, changing nothing,
+  // when the scene cannot be served or built. Then, once the scene is
+  // committed (scene_ and what a recording describes, the runner handed to
+  // the sim thread), the haptic side started or stopped to match; returns
+  // apply_scene's device problem.
+  std::unique_ptr<SimRunner> build_runner(const scene::Scene& scene) const;
+  [[nodiscard]] std::string match_haptics_to_scene(bool had_tool, bool restart_haptics);
   // `result` with apply_scene's device problem as its "warning" (also said on
   // stderr and recorded as a warning event); `result` itself when none.
   nlohmann::json with_device_warning(nlohmann::json result, const std::string& device_problem);
@@ -139,14 +146,26 @@ class Service : public control::ControlHandler {
   void print_status();
   void start_recording(const std::string& name);  // throws record::RecordError
   // The two halves of start_recording: a recorder for a new file (throws,
-  // changing nothing), and making it the one the threads record to.
+  // changing nothing), and making it the one the threads record to. With a
+  // `runner`, the sim thread takes it and the new file at one step boundary:
+  // its first row is the runner's first step, and no row of it goes to the
+  // file before.
   std::unique_ptr<record::Recorder> open_recorder(const std::string& name);
-  void install_recorder(std::unique_ptr<record::Recorder> recorder);
-  void stop_recording();
+  void install_recorder(std::unique_ptr<record::Recorder> recorder, std::unique_ptr<SimRunner> runner = nullptr);
+  // Closes the file; with a `runner`, the sim thread takes it as it lets go
+  // of the recorder (none of the runner's rows goes to the file).
+  void stop_recording(std::unique_ptr<SimRunner> runner = nullptr);
   // record.auto_start: a timestamped file, new every record.rotate_s. A
   // file that cannot be created is said and tried again at the next
   // rotation; the service keeps serving.
   void start_automatic_recording();
+  // start_automatic_recording's first half: room made, then the recorder for
+  // a new automatic file (throws when it cannot be made). `removed` gets the
+  // files the room took, for the new file's events.
+  std::unique_ptr<record::Recorder> open_automatic_recorder(std::vector<std::string>* removed);
+  // Its second half, once the new file is the one recorded to: the removals
+  // in its events, and the oldest automatic files past record.keep_gb gone.
+  void note_automatic_recording_started(const std::vector<std::string>& removed);
   // Before a new automatic file: removes the oldest automatic files (never
   // a client's, never the live one) until state_dir has the recorder's
   // free-space reserve plus room for the file (the size of the one it
@@ -162,16 +181,21 @@ class Service : public control::ControlHandler {
   // in force, each override whole (an event holds 255 bytes; one event when
   // they fit).
   std::vector<std::string> recording_started_events() const;
-  // After the running scene changed (load_scene, reload): a recording goes on
-  // in a new file that describes the new scene (an automatic one rotates, a
-  // client's goes on in NAME-partK.h5), `what` recorded as the old file's
-  // last event. `file` is the new file, `stopped` why there is none (a
-  // client's recording whose next file cannot be made stops).
+  // Hands `runner` (built for the scene just committed by load_scene or a
+  // reload: scene_ and what a recording describes) to the sim thread, and a
+  // recording goes on in a new file that describes the new scene (an
+  // automatic one rotates, a client's goes on in NAME-partK.h5), `what`
+  // recorded as the old file's last event. The sim thread takes the runner
+  // and the new file together: the new scene's rows are all in the new file,
+  // none in the old. `file` is the new file, `stopped` why there is none: a
+  // next file that cannot be made stops the recording at the change (said on
+  // stderr), rather than record the new scene under the old one's
+  // description; an automatic one is tried again after record.rotate_s.
   struct RecordingHandover {
     std::string file;
     std::string stopped;
   };
-  RecordingHandover continue_recording_in_new_file(const std::string& what);
+  RecordingHandover continue_recording_in_new_file(const std::string& what, std::unique_ptr<SimRunner> runner);
   std::string next_part_name(const std::string& first) const;
   // What a recording's root attributes and first events describe (scene
   // name, path, text and overrides, config text): a change hands over.

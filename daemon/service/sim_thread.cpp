@@ -61,8 +61,46 @@ void SimThread::replace_runner(std::unique_ptr<SimRunner> runner) {
   pending_ = std::move(runner);
 }
 
+bool SimThread::replace_runner(std::unique_ptr<SimRunner> runner, record::Recorder* recorder, double wait_s) {
+  std::uint64_t handed = 0;
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    pending_ = std::move(runner);
+    pending_recorder_ = recorder;
+    pending_has_recorder_ = true;
+    handed = ++runners_with_recorder_handed_;
+    // Not running: nothing holds the recorder before; the thread, if it
+    // starts, takes both in its first loop.
+    if (!thread_.joinable()) {
+      recorder_.store(recorder, std::memory_order_release);
+      return true;
+    }
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  const auto given_up = [&] { return stop_.load() || std::chrono::steady_clock::now() >= deadline; };
+  while (runners_with_recorder_taken_.load(std::memory_order_acquire) < handed) {
+    if (given_up()) return false;
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  // The loop that took them may still be writing the drained ticks to the
+  // recorder before: it has ended once the heartbeat advances past the
+  // value it had then (at most the one read here).
+  const std::uint64_t target = heartbeat_.load(std::memory_order_acquire) + 1;
+  while (heartbeat_.load(std::memory_order_acquire) < target) {
+    if (given_up()) return false;
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  return true;
+}
+
 bool SimThread::set_recorder(record::Recorder* recorder, double wait_s) {
-  recorder_.store(recorder, std::memory_order_release);
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    recorder_.store(recorder, std::memory_order_release);
+    // A runner still waiting with a recorder of its own would bring back the
+    // one this replaces (stopped, perhaps freed) when the thread takes it.
+    if (pending_ && pending_has_recorder_) pending_recorder_ = recorder;
+  }
   if (!thread_.joinable()) return true;
   // The iteration that read the old pointer has ended once the heartbeat has
   // advanced twice (it increments at the start of every iteration, paused or
@@ -250,10 +288,22 @@ void SimThread::run(std::promise<void>& scheduled) {
   std::int64_t last_status_ns = 0;
   while (!stop_.load(std::memory_order_relaxed)) {
     heartbeat_.fetch_add(1, std::memory_order_release);  // see set_recorder
-    record::Recorder* const recorder = recorder_.load(std::memory_order_acquire);
+    // The ticks drained below were rendered before this loop: they go to the
+    // recorder of the runner they were rendered against, the sim row and
+    // mesh frame to the runner stepped here.
+    record::Recorder* const haptic_recorder = recorder_.load(std::memory_order_acquire);
+    record::Recorder* recorder = haptic_recorder;
     // A new runner (reset / load / set) takes over between steps.
     if (std::unique_lock<std::mutex> lock(pending_mutex_, std::try_to_lock); lock.owns_lock() && pending_) {
       runner_ = std::move(pending_);
+      if (pending_has_recorder_) {
+        // Its recorder with it: its first row goes there, none to the file
+        // describing the scene before.
+        recorder = pending_recorder_;
+        recorder_.store(recorder, std::memory_order_relaxed);  // the lock orders it with set_recorder's
+        pending_has_recorder_ = false;
+        runners_with_recorder_taken_.fetch_add(1, std::memory_order_release);
+      }
       ++generation_;
       first_model_version_ = model_version_ + 1;
       // Its first model comes in this same loop: from its step, or, paused,
@@ -282,7 +332,7 @@ void SimThread::run(std::promise<void>& scheduled) {
     // Recorded as rendered, before anything below can throw: written after
     // the step, the rows of a loop whose step threw were lost, and those
     // masked below said contact 0 where the device was touching.
-    if (recorder) record_haptic(*recorder);
+    if (haptic_recorder) record_haptic(*haptic_recorder);
     // Pressed on the runner before a reset / load / set: where the tool is
     // still counts, what it touched does not (pushing old node ids into the
     // new mesh would put a force on unrelated nodes).
@@ -370,14 +420,16 @@ void SimThread::run(std::promise<void>& scheduled) {
 }
 
 void hand_over_recorder(SimThread* sim, std::unique_ptr<record::Recorder>& current,
-                        std::unique_ptr<record::Recorder> next,
-                        std::vector<std::unique_ptr<record::Recorder>>& retired) {
+                        std::unique_ptr<record::Recorder> next, std::vector<std::unique_ptr<record::Recorder>>& retired,
+                        std::unique_ptr<SimRunner> runner) {
   // The new one in first, then the old one out: the thread takes the new
   // pointer at its next iteration, and rows drained until then still go to
   // the old one, which is stopped only after the thread let go of it.
   std::unique_ptr<record::Recorder> old = std::move(current);
   current = std::move(next);
-  const bool released = !sim || sim->set_recorder(current.get());
+  const bool released = !sim     ? true
+                        : runner ? sim->replace_runner(std::move(runner), current.get())
+                                 : sim->set_recorder(current.get());
   if (released) retired.clear();  // no older one is held either
   if (!old) return;
   old->stop();

@@ -110,6 +110,17 @@ class SimThread {
   // Hands over a new runner (built on the caller's thread: construction
   // allocates and may throw, neither belongs on the sim thread).
   void replace_runner(std::unique_ptr<SimRunner> runner);
+  // Hands over a new runner together with the recorder its rows go to (null:
+  // none), taken by the sim thread at one step boundary: none of the new
+  // runner's rows reaches the recorder before (a file describing the old
+  // scene), none of the old runner's reaches `recorder`. The ticks drained in
+  // the loop that switches were rendered against the old runner's model and
+  // go to the recorder before. Returns as set_recorder does: true once the
+  // sim thread has taken both and let go of the recorder before, false when
+  // it has not within `wait_s` (the recorder before must then be kept alive).
+  // Any thread but the sim thread.
+  bool replace_runner(std::unique_ptr<SimRunner> runner, record::Recorder* recorder,
+                      double wait_s = kRecorderHandOverWait_s);
 
   // Fault injection (tests, drills): the sim thread's next iteration blocks
   // for this long, as a pathological step would. The haptic side must ride
@@ -177,8 +188,19 @@ class SimThread {
   std::atomic<bool> throw_next_step_{false};
   std::atomic<record::Recorder*> recorder_{nullptr};
 
-  std::mutex pending_mutex_;  // guards pending_ only; the sim thread only try_locks
+  // Guards pending_, pending_recorder_, pending_has_recorder_ and
+  // runners_with_recorder_handed_, and orders the io side's recorder_ stores
+  // with them; the sim thread only try_locks.
+  std::mutex pending_mutex_;
   std::unique_ptr<SimRunner> pending_;
+  // The recorder the pending runner's rows go to (replace_runner with a
+  // recorder); without one the recorder stays as it is.
+  record::Recorder* pending_recorder_ = nullptr;
+  bool pending_has_recorder_ = false;
+  // Runners handed over with a recorder, and those the sim thread took
+  // (release, in the loop that took it / acquire, in replace_runner).
+  std::uint64_t runners_with_recorder_handed_ = 0;
+  std::atomic<std::uint64_t> runners_with_recorder_taken_{0};
 
   concurrency::LatestValue<SimStatus> status_;
   concurrency::LatestValue<MeshSnapshot> snapshots_;
@@ -231,9 +253,12 @@ std::int64_t now_ns();
 // rotation or a record_start leaves no gap. An old recorder the thread has
 // not let go of within the hand-over wait (a stalled thread) is stopped and
 // kept in `retired` until a later hand-over, or the thread's stop, releases
-// it. A null `sim` holds no recorder. Io thread only.
+// it. A null `sim` holds no recorder. With a `runner`, the thread takes it
+// and `next` at one step boundary (SimThread::replace_runner): the new
+// runner's rows all go to `next`, the old runner's to `current`. Io thread
+// only.
 void hand_over_recorder(SimThread* sim, std::unique_ptr<record::Recorder>& current,
-                        std::unique_ptr<record::Recorder> next,
-                        std::vector<std::unique_ptr<record::Recorder>>& retired);
+                        std::unique_ptr<record::Recorder> next, std::vector<std::unique_ptr<record::Recorder>>& retired,
+                        std::unique_ptr<SimRunner> runner = nullptr);
 
 }  // namespace tissue::service

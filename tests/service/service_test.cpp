@@ -31,6 +31,7 @@
 #include "record/record_test_support.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
+#include "scene/scene_yaml.hpp"
 #include "support/process_support.hpp"
 
 namespace tissue::service {
@@ -1153,6 +1154,130 @@ TEST(Service, ARecordingWithANameAtTheLengthLimitGoesOnAcrossASceneChange) {
   ASSERT_EQ(run.wait(), kServiceOk);
   EXPECT_EQ(record::testing::root_string_attribute(state + "/" + next, "scene_name"), "contact");
   EXPECT_TRUE(record::read_session_info(state + "/" + next).closed_cleanly);
+}
+
+// The simulated times of a session's sim rows, in row order.
+std::vector<double> recorded_sim_times_s(const std::string& path) {
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (file < 0) {
+    ADD_FAILURE() << "cannot open " << path;
+    return {};
+  }
+  std::vector<double> times_s = record::testing::read_f64(file, "/sim/sim_time_s");
+  H5Fclose(file);
+  return times_s;
+}
+
+// The index of the first sim row whose simulated time does not go on from
+// the row before (a new runner starts again at its first step), or the row
+// count when every row goes on from the one before.
+std::size_t first_restart(const std::vector<double>& times_s) {
+  for (std::size_t i = 1; i < times_s.size(); ++i)
+    if (times_s[i] <= times_s[i - 1]) return i;
+  return times_s.size();
+}
+
+// The new runner ran from the moment load_scene handed it to the sim
+// thread, while the recording's next file was being made: the new scene's
+// first steps went to the old file (under the old scene's name and text),
+// and the new file began a few steps into its scene. The sim thread now
+// takes the runner and the next file together, between two steps: each
+// file's rows are its own scene's, the next file's first row the new
+// scene's first step (a scene's time starts at 0).
+TEST(Service, EveryRowOfASceneLoadedWhileRecordingIsInTheFileThatDescribesIt) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", state));
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(client.call("record_start", {{"name", "s1.h5"}})["ok"].get<bool>());
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+  ASSERT_EQ(loaded.value("result", nlohmann::json::object()).value("recording", ""), state + "/s1-part2.h5")
+      << loaded.dump();
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  ASSERT_EQ(::raise(SIGHUP), 0);  // back to the configured cantilever, in s1-part3.h5
+  EXPECT_TRUE(written_within_5_s(run.out, "reloaded")) << file_text(run.out);
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  const nlohmann::json stop = client.call("record_stop");
+  ASSERT_EQ(stop["result"].value("file", ""), state + "/s1-part3.h5") << stop.dump();
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk);
+
+  const double contact_dt_s = scene::load_scene_file_with_overrides(scene_file("contact.yaml"), {}).integrator.dt_s;
+  const double cantilever_dt_s =
+      scene::load_scene_file_with_overrides(scene_file("cantilever.yaml"), {}).integrator.dt_s;
+  for (const std::string name : {"s1.h5", "s1-part2.h5", "s1-part3.h5"}) {
+    const std::vector<double> times_s = recorded_sim_times_s(state + "/" + name);
+    ASSERT_FALSE(times_s.empty()) << name;
+    EXPECT_EQ(first_restart(times_s), times_s.size())
+        << name << ": the next scene's rows from row " << first_restart(times_s) << " of " << times_s.size()
+        << " (simulated time " << times_s[std::min(first_restart(times_s), times_s.size() - 1)] << " s)";
+  }
+  EXPECT_EQ(recorded_sim_times_s(state + "/s1-part2.h5").front(), contact_dt_s) << "contact's first step";
+  EXPECT_EQ(recorded_sim_times_s(state + "/s1-part3.h5").front(), cantilever_dt_s) << "cantilever's first step";
+}
+
+// At a scene change an automatic recording goes on in a new file. One that
+// could not be made left it going on in the old file (as after a failed
+// rotation), whose last event had just said "the recording goes on in a new
+// file", and load_scene answered with the old file: the new scene's rows
+// were recorded under the old scene's name and text. It stops at the change
+// instead (the old file's last event says why, the file is closed, stderr
+// says it, the answer says recording_stopped) and is tried again after
+// record.rotate_s, the service serving meanwhile.
+TEST(Service, AnAutomaticRecordingWhoseNextFileCannotBeMadeStopsAtTheSceneChange) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", state), 0.0,
+              {"record.auto_start=true", "record.rotate_s=2"});
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  const std::string old_name =
+      std::filesystem::path(client.call("status")["result"]["recording"].value("file", "")).filename().string();
+  ASSERT_EQ(old_name.rfind("auto-", 0), 0u) << old_name;
+  // Nothing can be made in state_dir from here on, whoever runs the test
+  // (root ignores permission bits): the directory moves away, the file open
+  // in it goes on being written, and a regular file takes its name.
+  const std::string moved = dir / "state-moved";
+  std::filesystem::rename(state, moved);
+  std::ofstream(state) << "not a directory";
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+  ASSERT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
+  const nlohmann::json result = loaded["result"];
+  EXPECT_FALSE(result.contains("recording")) << loaded.dump();
+  const std::string stopped = result.value("recording_stopped", "");
+  EXPECT_NE(stopped.find("the next file cannot be made"), std::string::npos) << loaded.dump();
+  EXPECT_NE(stopped.find(state), std::string::npos) << loaded.dump();  // the reason names the directory
+  EXPECT_TRUE(client.call("status")["result"]["recording"].is_null()) << client.call("status").dump();
+  EXPECT_TRUE(written_within_5_s(run.err, "automatic recording stopped at the scene change")) << run.err_text();
+  EXPECT_NE(run.err_text().find("trying again in 2 s"), std::string::npos) << run.err_text();
+  // The directory back: the next try (record.rotate_s after the change)
+  // makes a file, which describes the scene running.
+  std::filesystem::remove(state);
+  std::filesystem::rename(moved, state);
+  std::string next_file;
+  for (int i = 0; i < 200 && next_file.empty(); ++i) {
+    std::this_thread::sleep_for(50ms);
+    const nlohmann::json r = client.call("status")["result"]["recording"];
+    if (r.is_object() && r.value("sim_rows", 0) > 0) next_file = r.value("file", "");
+  }
+  ASSERT_FALSE(next_file.empty()) << "not tried again: " << run.err_text();
+  EXPECT_NE(next_file, state + "/" + old_name);
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk);
+  EXPECT_EQ(record::testing::root_string_attribute(next_file, "scene_name"), "contact") << next_file;
+
+  const std::string old_file = state + "/" + old_name;
+  EXPECT_TRUE(record::read_session_info(old_file).closed_cleanly) << old_file;
+  const std::vector<std::string> events = record::testing::event_messages(old_file);
+  ASSERT_FALSE(events.empty());
+  EXPECT_NE(events.back().find("the next file cannot be made"), std::string::npos) << events.back();
+  for (const std::string& m : events)
+    EXPECT_EQ(m.find("loaded from " + scene_file("contact.yaml") + ": the recording goes on"), std::string::npos) << m;
+  const std::vector<double> times_s = recorded_sim_times_s(old_file);
+  EXPECT_EQ(first_restart(times_s), times_s.size()) << "contact's rows in the cantilever's file";
 }
 
 // record.keep_gb: past the budget the oldest automatic files go at each

@@ -2,13 +2,10 @@
 
 #include <gtest/gtest.h>
 
-#include <stdlib.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <filesystem>
 #include <limits>
 #include <thread>
 #include <vector>
@@ -21,6 +18,7 @@
 #include "record/record_test_support.hpp"
 #include "record/recorder.hpp"
 #include "record/session_tools.hpp"
+#include "support/process_support.hpp"
 #include "transport/dds_messages.hpp"
 #include "transport/lcm_messages.hpp"
 
@@ -295,48 +293,44 @@ haptics::ToolSample press(const haptics::LocalModel& model) {
 // still recorded as rendered: the device was touching (the recorded contact
 // column said 0 for them).
 TEST(SimThread, TicksRenderedBeforeANewRunnerPushNothingOnIt) {
-  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
-  ASSERT_NE(mkdtemp(dir_template), nullptr);
-  const std::string dir = dir_template;
-  {
-    ToolSampleRing samples;
-    LocalModelChannel models;
-    SimThreadOptions options;
-    options.status_every_s = 0.002;
-    scene::Scene scene = cantilever_with_tool();
-    scene.loads.clear();
-    SimThread thread(std::make_unique<SimRunner>(scene), &samples, &models, options);
-    auto recorder = record::Recorder::start(dir, "masked.h5", record::SessionMetadata{});
-    ASSERT_TRUE(thread.set_recorder(recorder.get()));
-    thread.start();
-    ASSERT_TRUE(wait_for([&] { return models.read().value->version > 0; }));
-    const haptics::LocalModel model = *models.read().value;
-    const haptics::ToolSample pressed = press(model);
-    // The press is real: on the runner it was rendered against, it pushes.
-    ASSERT_TRUE(samples.try_push(pressed));
-    ASSERT_TRUE(wait_for([&] { return thread.status().tool_pushing; }));
-    // Hold the thread between a drain and its step, queue the same press and
-    // a new runner: the next loop takes the runner first, then drains the press.
-    thread.inject_stall(300ms);
-    std::this_thread::sleep_for(50ms);
-    for (int i = 0; i < 3; ++i) ASSERT_TRUE(samples.try_push(pressed));
-    thread.replace_runner(std::make_unique<SimRunner>(scene));
-    ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 3; }));
-    const SimStatus st = thread.status();
-    ASSERT_TRUE(thread.set_recorder(nullptr));
-    thread.stop();
-    recorder->stop();
-    EXPECT_FALSE(st.tool_pushing);
-    EXPECT_EQ(st.tool_force_N, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThreadOptions options;
+  options.status_every_s = 0.002;
+  scene::Scene scene = cantilever_with_tool();
+  scene.loads.clear();
+  SimThread thread(std::make_unique<SimRunner>(scene), &samples, &models, options);
+  auto recorder = record::Recorder::start(dir, "masked.h5", record::SessionMetadata{});
+  ASSERT_TRUE(thread.set_recorder(recorder.get()));
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return models.read().value->version > 0; }));
+  const haptics::LocalModel model = *models.read().value;
+  const haptics::ToolSample pressed = press(model);
+  // The press is real: on the runner it was rendered against, it pushes.
+  ASSERT_TRUE(samples.try_push(pressed));
+  ASSERT_TRUE(wait_for([&] { return thread.status().tool_pushing; }));
+  // Hold the thread between a drain and its step, queue the same press and
+  // a new runner: the next loop takes the runner first, then drains the press.
+  thread.inject_stall(300ms);
+  std::this_thread::sleep_for(50ms);
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(samples.try_push(pressed));
+  thread.replace_runner(std::make_unique<SimRunner>(scene));
+  ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 3; }));
+  const SimStatus st = thread.status();
+  ASSERT_TRUE(thread.set_recorder(nullptr));
+  thread.stop();
+  recorder->stop();
+  EXPECT_FALSE(st.tool_pushing);
+  EXPECT_EQ(st.tool_force_N, (std::array<double, 3>{0.0, 0.0, 0.0}));
 
-    const hid_t file = H5Fopen((dir + "/masked.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-    ASSERT_GE(file, 0);
-    const std::vector<std::uint8_t> contact = record::testing::read_u8(file, "/haptic/contact");
-    H5Fclose(file);
-    ASSERT_EQ(contact.size(), 4u);  // the four presses, nothing else was pushed
-    for (std::size_t i = 0; i < contact.size(); ++i) EXPECT_EQ(int{contact[i]}, 1) << "press " << i;
-  }
-  std::filesystem::remove_all(dir);
+  const hid_t file = H5Fopen((dir + "/masked.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const std::vector<std::uint8_t> contact = record::testing::read_u8(file, "/haptic/contact");
+  H5Fclose(file);
+  ASSERT_EQ(contact.size(), 4u);  // the four presses, nothing else was pushed
+  for (std::size_t i = 0; i < contact.size(); ++i) EXPECT_EQ(int{contact[i]}, 1) << "press " << i;
 }
 
 TEST(SimThread, ReplacingTheRunnerStartsANewGeneration) {
@@ -358,109 +352,101 @@ TEST(SimThread, ReplacingTheRunnerStartsANewGeneration) {
 // stepping the half-changed state, publishing models from it and recording
 // sim rows from it (haptic rows still go in), and a new runner starts afresh.
 TEST(SimThread, AStepThatThrowsHaltsTheRunnerAndTheThreadKeepsServing) {
-  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
-  ASSERT_NE(mkdtemp(dir_template), nullptr);
-  const std::string dir = dir_template;
-  {
-    record::RecorderOptions recording;
-    recording.flush_interval_s = 0.01;  // rows are written (and counted) within 10 ms of their push
-    auto recorder = record::Recorder::start(dir, "halt.h5", record::SessionMetadata{}, recording);
-    ToolSampleRing samples;
-    LocalModelChannel models;
-    SimThreadOptions options;
-    options.status_every_s = 0.002;
-    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
-    thread.start();
-    ASSERT_TRUE(thread.set_recorder(recorder.get()));
-    haptics::ToolSample hover;
-    hover.proxy_position_m = haptics::Vec3(0.05, 0.05, 0.102);
-    const auto feed = [&](std::chrono::milliseconds how_long) {
-      const auto end = std::chrono::steady_clock::now() + how_long;
-      while (std::chrono::steady_clock::now() < end) {
-        samples.try_push(hover);
-        std::this_thread::sleep_for(1ms);
-      }
-    };
-    ASSERT_TRUE(wait_for([&] { return thread.status().steps > 20 && models.read().value->version > 0; }));
-    EXPECT_FALSE(thread.status().halted);
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  record::RecorderOptions recording;
+  recording.flush_interval_s = 0.01;  // rows are written (and counted) within 10 ms of their push
+  auto recorder = record::Recorder::start(dir, "halt.h5", record::SessionMetadata{}, recording);
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThreadOptions options;
+  options.status_every_s = 0.002;
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
+  thread.start();
+  ASSERT_TRUE(thread.set_recorder(recorder.get()));
+  haptics::ToolSample hover;
+  hover.proxy_position_m = haptics::Vec3(0.05, 0.05, 0.102);
+  const auto feed = [&](std::chrono::milliseconds how_long) {
+    const auto end = std::chrono::steady_clock::now() + how_long;
+    while (std::chrono::steady_clock::now() < end) {
+      samples.try_push(hover);
+      std::this_thread::sleep_for(1ms);
+    }
+  };
+  ASSERT_TRUE(wait_for([&] { return thread.status().steps > 20 && models.read().value->version > 0; }));
+  EXPECT_FALSE(thread.status().halted);
 
-    thread.inject_step_exception();
-    EXPECT_TRUE(wait_for([&] { return thread.status().halted; }));
-    const SimStatus at_halt = thread.status();
-    const haptics::LocalModel model_at_halt = *models.read().value;
-    feed(100ms);  // what was pushed before the halt is written
-    const record::RecorderStats rows_at_halt = recorder->stats();
-    feed(200ms);
-    const SimStatus later = thread.status();
-    EXPECT_TRUE(later.halted);
-    EXPECT_NE(std::string(later.last_error).find("injected step fault"), std::string::npos) << later.last_error;
-    EXPECT_NE(std::string(later.last_error).find("reset or load a scene"), std::string::npos) << later.last_error;
-    EXPECT_EQ(later.steps, at_halt.steps);                     // not stepped again
-    EXPECT_EQ(later.sim_time_s, at_halt.sim_time_s);           // time stands
-    EXPECT_GT(later.failed_steps, at_halt.failed_steps + 20);  // every step it cannot take fails, with the reason
-    EXPECT_FALSE(later.tool_pushing);
-    // The haptic side sees the model stop refreshing (it ramps its force out).
-    const haptics::LocalModel model_later = *models.read().value;
-    EXPECT_EQ(model_later.version, model_at_halt.version);
-    EXPECT_EQ(model_later.built_ns, model_at_halt.built_ns);
-    // Recording: the device's rows still go in, the halted sim's do not.
-    ASSERT_TRUE(thread.set_recorder(nullptr));
-    const record::RecorderStats rows_later = recorder->stats();
-    EXPECT_EQ(rows_later.sim_rows_written, rows_at_halt.sim_rows_written);
-    EXPECT_EQ(rows_later.sim_drops, rows_at_halt.sim_drops);
-    EXPECT_GT(rows_later.haptic_rows_written, rows_at_halt.haptic_rows_written + 20);
+  thread.inject_step_exception();
+  EXPECT_TRUE(wait_for([&] { return thread.status().halted; }));
+  const SimStatus at_halt = thread.status();
+  const haptics::LocalModel model_at_halt = *models.read().value;
+  feed(100ms);  // what was pushed before the halt is written
+  const record::RecorderStats rows_at_halt = recorder->stats();
+  feed(200ms);
+  const SimStatus later = thread.status();
+  EXPECT_TRUE(later.halted);
+  EXPECT_NE(std::string(later.last_error).find("injected step fault"), std::string::npos) << later.last_error;
+  EXPECT_NE(std::string(later.last_error).find("reset or load a scene"), std::string::npos) << later.last_error;
+  EXPECT_EQ(later.steps, at_halt.steps);                     // not stepped again
+  EXPECT_EQ(later.sim_time_s, at_halt.sim_time_s);           // time stands
+  EXPECT_GT(later.failed_steps, at_halt.failed_steps + 20);  // every step it cannot take fails, with the reason
+  EXPECT_FALSE(later.tool_pushing);
+  // The haptic side sees the model stop refreshing (it ramps its force out).
+  const haptics::LocalModel model_later = *models.read().value;
+  EXPECT_EQ(model_later.version, model_at_halt.version);
+  EXPECT_EQ(model_later.built_ns, model_at_halt.built_ns);
+  // Recording: the device's rows still go in, the halted sim's do not.
+  ASSERT_TRUE(thread.set_recorder(nullptr));
+  const record::RecorderStats rows_later = recorder->stats();
+  EXPECT_EQ(rows_later.sim_rows_written, rows_at_halt.sim_rows_written);
+  EXPECT_EQ(rows_later.sim_drops, rows_at_halt.sim_drops);
+  EXPECT_GT(rows_later.haptic_rows_written, rows_at_halt.haptic_rows_written + 20);
 
-    thread.replace_runner(std::make_unique<SimRunner>(cantilever_with_tool()));
-    EXPECT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps > 20; }));
-    const SimStatus fresh = thread.status();
-    EXPECT_FALSE(fresh.halted);
-    EXPECT_STREQ(fresh.last_error, "");
-    EXPECT_TRUE(wait_for([&] { return models.read().value->version > model_at_halt.version; }));
-    const std::int64_t failed = thread.status().failed_steps;
-    feed(50ms);
-    EXPECT_EQ(thread.status().failed_steps, failed);  // the new runner steps
-    thread.stop();
-    recorder->stop();
-  }
-  std::filesystem::remove_all(dir);
+  thread.replace_runner(std::make_unique<SimRunner>(cantilever_with_tool()));
+  EXPECT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps > 20; }));
+  const SimStatus fresh = thread.status();
+  EXPECT_FALSE(fresh.halted);
+  EXPECT_STREQ(fresh.last_error, "");
+  EXPECT_TRUE(wait_for([&] { return models.read().value->version > model_at_halt.version; }));
+  const std::int64_t failed = thread.status().failed_steps;
+  feed(50ms);
+  EXPECT_EQ(thread.status().failed_steps, failed);  // the new runner steps
+  thread.stop();
+  recorder->stop();
 }
 
 // The haptic rows drained in the loop whose step throws are written like
 // any others: they were recorded only after the step, inside the exception
 // barrier, so the throw lost them.
 TEST(SimThread, HapticRowsDrainedInALoopWhoseStepThrowsAreRecorded) {
-  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
-  ASSERT_NE(mkdtemp(dir_template), nullptr);
-  const std::string dir = dir_template;
-  {
-    ToolSampleRing samples;
-    LocalModelChannel models;
-    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
-    auto recorder = record::Recorder::start(dir, "thrown.h5", record::SessionMetadata{});
-    ASSERT_TRUE(thread.set_recorder(recorder.get()));
-    // Queued before the thread starts, so its first loop drains them all,
-    // and that loop's step throws.
-    std::vector<double> pushed_s;
-    const std::int64_t t0_ns = now_ns();
-    for (int k = 0; k < 10; ++k) {
-      haptics::ToolSample s = hovering_over_the_free_end();
-      s.time_ns = t0_ns + k * 1000000;
-      ASSERT_TRUE(samples.try_push(s));
-      pushed_s.push_back(recorder->session_time_s(s.time_ns));
-    }
-    thread.inject_step_exception();
-    thread.start();
-    ASSERT_TRUE(wait_for([&] { return thread.status().halted; }));
-    ASSERT_TRUE(thread.set_recorder(nullptr));
-    thread.stop();
-    recorder->stop();
-    const hid_t file = H5Fopen((dir + "/thrown.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-    ASSERT_GE(file, 0);
-    const std::vector<double> recorded_s = record::testing::read_f64(file, "/haptic/time_s");
-    H5Fclose(file);
-    EXPECT_EQ(recorded_s, pushed_s);
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
+  auto recorder = record::Recorder::start(dir, "thrown.h5", record::SessionMetadata{});
+  ASSERT_TRUE(thread.set_recorder(recorder.get()));
+  // Queued before the thread starts, so its first loop drains them all,
+  // and that loop's step throws.
+  std::vector<double> pushed_s;
+  const std::int64_t t0_ns = now_ns();
+  for (int k = 0; k < 10; ++k) {
+    haptics::ToolSample s = hovering_over_the_free_end();
+    s.time_ns = t0_ns + k * 1000000;
+    ASSERT_TRUE(samples.try_push(s));
+    pushed_s.push_back(recorder->session_time_s(s.time_ns));
   }
-  std::filesystem::remove_all(dir);
+  thread.inject_step_exception();
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return thread.status().halted; }));
+  ASSERT_TRUE(thread.set_recorder(nullptr));
+  thread.stop();
+  recorder->stop();
+  const hid_t file = H5Fopen((dir + "/thrown.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const std::vector<double> recorded_s = record::testing::read_f64(file, "/haptic/time_s");
+  H5Fclose(file);
+  EXPECT_EQ(recorded_s, pushed_s);
 }
 
 // The status carries the solver's work: CG iterations per step and the
@@ -615,32 +601,28 @@ TEST(SimThread, PublishesSurfaceSnapshots) {
 // the old recorder is still the one the thread holds, so it must stay valid;
 // stopped, it refuses what the thread pushes instead of writing it.
 TEST(SimThread, RecorderHandOverReportsAStalledSimThread) {
-  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
-  ASSERT_NE(mkdtemp(dir_template), nullptr);
-  const std::string dir = dir_template;
-  {
-    auto recorder = record::Recorder::start(dir, "handover.h5", record::SessionMetadata{});
-    SimThreadOptions options;
-    SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr, options);
-    thread.start();
-    ASSERT_TRUE(thread.set_recorder(recorder.get()));
-    thread.inject_stall(3000ms);
-    std::this_thread::sleep_for(100ms);  // the stall has begun (steps are 1 ms apart)
-    const auto t0 = std::chrono::steady_clock::now();
-    EXPECT_FALSE(thread.set_recorder(nullptr, 0.05));
-    EXPECT_LT(std::chrono::steady_clock::now() - t0, 600ms);  // bounded by the wait asked for
-    // The default wait gives up well inside the watchdog's margin (the io
-    // thread calls this and feeds the watchdog: 5 s in the unit, fed every
-    // 2.5 s), not after the stall.
-    const auto t1 = std::chrono::steady_clock::now();
-    EXPECT_FALSE(thread.set_recorder(nullptr));
-    EXPECT_LT(std::chrono::steady_clock::now() - t1, 2000ms);
-    recorder->stop();                                 // the file closes; the stalled thread still holds the recorder
-    EXPECT_TRUE(thread.set_recorder(nullptr, 10.0));  // the stall ends, the thread lets go
-    thread.stop();
-    EXPECT_TRUE(thread.set_recorder(nullptr, 0.0));  // a stopped thread holds nothing
-  }
-  std::filesystem::remove_all(dir);
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  auto recorder = record::Recorder::start(dir, "handover.h5", record::SessionMetadata{});
+  SimThreadOptions options;
+  SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr, options);
+  thread.start();
+  ASSERT_TRUE(thread.set_recorder(recorder.get()));
+  thread.inject_stall(3000ms);
+  std::this_thread::sleep_for(100ms);  // the stall has begun (steps are 1 ms apart)
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_FALSE(thread.set_recorder(nullptr, 0.05));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 600ms);  // bounded by the wait asked for
+  // The default wait gives up well inside the watchdog's margin (the io
+  // thread calls this and feeds the watchdog: 5 s in the unit, fed every
+  // 2.5 s), not after the stall.
+  const auto t1 = std::chrono::steady_clock::now();
+  EXPECT_FALSE(thread.set_recorder(nullptr));
+  EXPECT_LT(std::chrono::steady_clock::now() - t1, 2000ms);
+  recorder->stop();                                 // the file closes; the stalled thread still holds the recorder
+  EXPECT_TRUE(thread.set_recorder(nullptr, 10.0));  // the stall ends, the thread lets go
+  thread.stop();
+  EXPECT_TRUE(thread.set_recorder(nullptr, 0.0));  // a stopped thread holds nothing
 }
 
 // A hand-over from one recorder to the next (a rotation, a record_start)
@@ -649,48 +631,44 @@ TEST(SimThread, RecorderHandOverReportsAStalledSimThread) {
 // once. (Stopping the old recorder before the new one was in, the samples
 // the sim thread drained in between were in neither file.)
 TEST(SimThread, AHandOverBetweenRecordersLosesNoRow) {
-  char dir_template[] = "/tmp/tissue_sim_thread_XXXXXX";
-  ASSERT_NE(mkdtemp(dir_template), nullptr);
-  const std::string dir = dir_template;
-  {
-    ToolSampleRing samples;
-    LocalModelChannel models;
-    SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, SimThreadOptions{});
-    thread.start();
-    std::unique_ptr<record::Recorder> current;
-    std::vector<std::unique_ptr<record::Recorder>> retired;
-    hand_over_recorder(&thread, current, record::Recorder::start(dir, "a.h5", record::SessionMetadata{}), retired);
-    std::atomic<bool> stop_pushing{false};
-    std::atomic<int> pushed{0};
-    std::thread producer([&] {
-      haptics::ToolSample s;
-      for (int k = 0; !stop_pushing.load(); ++k) {
-        s.time_ns = now_ns();
-        s.device_position_m = haptics::Vec3(k, 0.0, 0.0);
-        while (!samples.try_push(s)) std::this_thread::yield();  // never dropped at the ring
-        pushed.store(k + 1);
-        std::this_thread::sleep_for(200us);
-      }
-    });
-    ASSERT_TRUE(wait_for([&] { return pushed.load() >= 200; }));
-    hand_over_recorder(&thread, current, record::Recorder::start(dir, "b.h5", record::SessionMetadata{}), retired);
-    const int at_hand_over = pushed.load();
-    ASSERT_TRUE(wait_for([&] { return pushed.load() >= at_hand_over + 200; }));
-    stop_pushing.store(true);
-    producer.join();
-    ASSERT_TRUE(wait_for([&] { return samples.size() == 0; }));
-    hand_over_recorder(&thread, current, nullptr, retired);  // after the thread took the last samples
-    thread.stop();
-    EXPECT_TRUE(retired.empty());
-    std::vector<int> seen;
-    for (const char* name : {"a.h5", "b.h5"})
-      for (const auto& p : record::read_haptic_track(dir + "/" + name).device_position_m)
-        seen.push_back(static_cast<int>(p[0]));
-    std::sort(seen.begin(), seen.end());
-    ASSERT_EQ(seen.size(), static_cast<std::size_t>(pushed.load())) << "rows lost (or doubled) at the hand-over";
-    for (int k = 0; k < pushed.load(); ++k) ASSERT_EQ(seen[static_cast<std::size_t>(k)], k);
-  }
-  std::filesystem::remove_all(dir);
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, SimThreadOptions{});
+  thread.start();
+  std::unique_ptr<record::Recorder> current;
+  std::vector<std::unique_ptr<record::Recorder>> retired;
+  hand_over_recorder(&thread, current, record::Recorder::start(dir, "a.h5", record::SessionMetadata{}), retired);
+  std::atomic<bool> stop_pushing{false};
+  std::atomic<int> pushed{0};
+  std::thread producer([&] {
+    haptics::ToolSample s;
+    for (int k = 0; !stop_pushing.load(); ++k) {
+      s.time_ns = now_ns();
+      s.device_position_m = haptics::Vec3(k, 0.0, 0.0);
+      while (!samples.try_push(s)) std::this_thread::yield();  // never dropped at the ring
+      pushed.store(k + 1);
+      std::this_thread::sleep_for(200us);
+    }
+  });
+  ASSERT_TRUE(wait_for([&] { return pushed.load() >= 200; }));
+  hand_over_recorder(&thread, current, record::Recorder::start(dir, "b.h5", record::SessionMetadata{}), retired);
+  const int at_hand_over = pushed.load();
+  ASSERT_TRUE(wait_for([&] { return pushed.load() >= at_hand_over + 200; }));
+  stop_pushing.store(true);
+  producer.join();
+  ASSERT_TRUE(wait_for([&] { return samples.size() == 0; }));
+  hand_over_recorder(&thread, current, nullptr, retired);  // after the thread took the last samples
+  thread.stop();
+  EXPECT_TRUE(retired.empty());
+  std::vector<int> seen;
+  for (const char* name : {"a.h5", "b.h5"})
+    for (const auto& p : record::read_haptic_track(dir + "/" + name).device_position_m)
+      seen.push_back(static_cast<int>(p[0]));
+  std::sort(seen.begin(), seen.end());
+  ASSERT_EQ(seen.size(), static_cast<std::size_t>(pushed.load())) << "rows lost (or doubled) at the hand-over";
+  for (int k = 0; k < pushed.load(); ++k) ASSERT_EQ(seen[static_cast<std::size_t>(k)], k);
 }
 
 // Status at 200 Hz, energies at 4 Hz: the energies in consecutive statuses
