@@ -86,8 +86,9 @@ class HapticSideImpl final : public HapticSide {
       const haptics::FrameTransform frame = haptics::FrameTransform::from(config.device.offset_m, config.device.scale);
       for (const auto& p : track.device_position_m)
         positions.push_back(frame.position_to_device(haptics::Vec3(p[0], p[1], p[2])));
-      device_ = std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
-                                                        config.device.replay.loop);
+      device_ =
+          std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
+                                                  config.device.replay.loop, config.device.limits.max_speed_m_per_s);
     } else {
       device_ = haptics::make_device(config.device, &error);
     }

@@ -57,5 +57,28 @@ TEST(ReplayDevice, BadTracksAreRefusedAtStart) {
   EXPECT_FALSE(ReplayDevice({0.0}, {Vec3::Zero()}, 0.0, false).start(&error));
 }
 
+// device.replay.speed scales the hand's speed: above
+// device.limits.max_speed_m_per_s the loop would take every replayed sample
+// as a glitch and ramp the force out mid-replay, silently. Refused at start,
+// with the numbers, instead.
+TEST(ReplayDevice, ASpeedThatTakesTheTrackPastTheSpeedLimitIsRefusedAtStart) {
+  // A 0.6 m/s stroke (its peak, device frame) between two slower segments.
+  const std::vector<double> time_s{0.0, 1.0, 1.5, 3.5};
+  const std::vector<Vec3> position_m{Vec3(0, 0, 0), Vec3(0.1, 0, 0), Vec3(0.1, 0.3, 0), Vec3(0.1, 0.3, 0.2)};
+  const double max_speed_m_per_s = 5.0;
+  std::string error;
+  ReplayDevice too_fast(time_s, position_m, 10.0, false, max_speed_m_per_s);
+  EXPECT_FALSE(too_fast.start(&error));
+  EXPECT_NE(error.find("replay device: device.replay.speed 10 plays the track at up to 6 m/s"), std::string::npos)
+      << error;
+  EXPECT_NE(error.find("above device.limits.max_speed_m_per_s 5"), std::string::npos) << error;
+  EXPECT_NE(error.find("at most 8.33"), std::string::npos) << error;
+
+  ReplayDevice real_time(time_s, position_m, 1.0, false, max_speed_m_per_s);
+  EXPECT_TRUE(real_time.start(&error)) << error;
+  ReplayDevice at_the_limit(time_s, position_m, 8.0, false, max_speed_m_per_s);
+  EXPECT_TRUE(at_the_limit.start(&error)) << error;
+}
+
 }  // namespace
 }  // namespace tissue::haptics
