@@ -39,10 +39,17 @@ bool ReplayDevice::start(std::string* error) {
   // The loop rejects a sample faster than device.limits.max_speed_m_per_s as
   // a glitch: a replay sped up past it would lose the hand on the track's
   // fast strokes and ramp the force out mid-replay, with no word why.
+  // Each step is measured over the time since its position came, as the loop
+  // measured it live: a device slower than the loop is recorded as a
+  // position held for some rows, then a step (one row's time would make a
+  // 250 Hz device look four times as fast as it moved).
   double peak_m_per_s = 0.0;
+  double held_since_s = time_s_.front();
   for (std::size_t i = 1; i < time_s_.size(); ++i) {
-    const double dt_s = time_s_[i] - time_s_[i - 1];
+    if (position_m_[i] == position_m_[i - 1]) continue;
+    const double dt_s = time_s_[i] - held_since_s;
     if (dt_s > 0.0) peak_m_per_s = std::max(peak_m_per_s, (position_m_[i] - position_m_[i - 1]).norm() / dt_s);
+    held_since_s = time_s_[i];
   }
   if (peak_m_per_s * speed_ > max_speed_m_per_s_)
     return fail("device.replay.speed " + fmt(speed_) + " plays the track at up to " + fmt(peak_m_per_s * speed_) +

@@ -80,5 +80,24 @@ TEST(ReplayDevice, ASpeedThatTakesTheTrackPastTheSpeedLimitIsRefusedAtStart) {
   EXPECT_TRUE(at_the_limit.start(&error)) << error;
 }
 
+// Haptic rows are written every tick, so a device slower than the loop (a
+// 250 Hz UDP device) is recorded as a position held for a few rows, then a
+// step. Its speed is the step over the time since that position came, as the
+// loop measured it live, not over one row: a 1.5 m/s stroke is no 6 m/s one.
+TEST(ReplayDevice, ASlowDevicesHeldRowsDoNotCountAsSpeed) {
+  std::vector<double> time_s;
+  std::vector<Vec3> position_m;
+  for (int row = 0; row <= 400; ++row) {  // 0.4 s at 1 kHz, a new pose every 4 rows (6 mm: 1.5 m/s)
+    time_s.push_back(1e-3 * row);
+    position_m.push_back(Vec3(0.006 * (row / 4), 0, 0));
+  }
+  std::string error;
+  ReplayDevice real_time(time_s, position_m, 1.0, false, 5.0);
+  EXPECT_TRUE(real_time.start(&error)) << error;
+  ReplayDevice too_fast(time_s, position_m, 4.0, false, 5.0);  // 6 m/s
+  EXPECT_FALSE(too_fast.start(&error));
+  EXPECT_NE(error.find("its peak 1.5 m/s"), std::string::npos) << error;
+}
+
 }  // namespace
 }  // namespace tissue::haptics
