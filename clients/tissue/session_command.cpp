@@ -220,11 +220,26 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
   r.replay.timeline.stats_rate_hz = defaults.stats_rate_hz;
   CLI::App* cmd = options.replay_cmd = session->add_subcommand(
       "replay", "Publish a recorded session over LCM and/or Fast DDS at the recorded pace, as tissued would");
-  cmd->add_option("file", options.file, "Session file (.h5)")->required();
+  // Not ->required(): `--lcm FILE` may have taken it (below).
+  cmd->add_option("file", options.file, "Session file (.h5)");
   cmd->add_option("--lcm", r.lcm_url, "Publish over LCM at URL (publish.lcm.url)")
       ->check(lcm_url())  // as the daemon's config checks publish.lcm.url
       ->expected(0, 1)
       ->default_str(defaults.lcm.url);
+  // --lcm's URL is optional, so CLI11 takes whatever word follows it: in
+  // `--lcm stroke.h5` the session file, which left no FILE ("file is
+  // required"). An LCM URL is PROVIDER://...; anything else there is FILE,
+  // published on the default URL (docs/replay-and-live.md).
+  cmd->parse_complete_callback([&options, url = defaults.lcm.url] {
+    std::optional<std::string>& lcm = options.replay.lcm_url;
+    if (lcm && !lcm->empty() && lcm->find("://") == std::string::npos) {
+      if (!options.file.empty())
+        throw CLI::ValidationError("--lcm", "'" + *lcm + "' is not an LCM URL (PROVIDER://...)");
+      options.file = *lcm;
+      lcm = url;
+    }
+    if (options.file.empty()) throw CLI::RequiredError("file");
+  });
   CLI::Option* dds = add_dds_options(cmd, r.dds, "Publish over Fast DDS (topics <prefix>surface_mesh, ...)");
   cmd->add_option("--dds-wait", r.dds_wait_s, "Wait up to S seconds for a DDS mesh reader before starting")
       ->check(finite_number())  // CLI::Range lets NaN through (every comparison with it is false)

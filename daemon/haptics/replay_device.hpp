@@ -10,6 +10,7 @@
 // (HapticSideImpl), so the hand retraces the recorded path whatever those are.
 #pragma once
 
+#include <limits>
 #include <vector>
 
 #include "haptics/device.hpp"
@@ -19,7 +20,10 @@ namespace tissue::haptics {
 class ReplayDevice final : public Device {
  public:
   // time_s non-decreasing, the same length as position_m, at least one row.
-  ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop);
+  // max_speed_m_per_s: device.limits.max_speed_m_per_s (device frame, as
+  // position_m): start() refuses a speed that plays the track faster.
+  ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
+               double max_speed_m_per_s = std::numeric_limits<double>::infinity());
 
   bool start(std::string* error) override;
   void stop() noexcept override {}
@@ -37,6 +41,7 @@ class ReplayDevice final : public Device {
   std::vector<Vec3> position_m_;
   double speed_;
   bool loop_;
+  double max_speed_m_per_s_;
   std::int64_t start_ns_ = -1;
   std::size_t cursor_ = 0;  // row at or before the last time read (monotone search)
   Vec3 last_force_N_ = Vec3::Zero();

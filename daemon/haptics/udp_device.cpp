@@ -1,10 +1,14 @@
 #include "haptics/udp_device.hpp"
 
+#include <netinet/in.h>
 #include <sys/socket.h>
 
+#include <algorithm>
 #include <boost/asio/buffer.hpp>
 #include <boost/asio/ip/address.hpp>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 
 #include "tissue_lcm/tissue/device_packet.hpp"
 
@@ -102,6 +106,22 @@ bool UdpDevice::start(std::string* error) {
     }
   }
 
+  // Bound to a wildcard address, the socket may only be connected to a sender
+  // if the poses came to the address the route back to it leaves from
+  // (filter_to): ask the kernel for each datagram's destination.
+  wildcard_ = address.is_unspecified();
+  if (wildcard_) {
+    const int on = 1;
+    const bool v4 = address.is_v4();
+    if (::setsockopt(socket_.native_handle(), v4 ? IPPROTO_IP : IPPROTO_IPV6, v4 ? IP_PKTINFO : IPV6_RECVPKTINFO, &on,
+                     sizeof on) != 0) {
+      const std::string why = "cannot ask for the destination address of datagrams on " + where +
+                              (v4 ? " (IP_PKTINFO): " : " (IPV6_RECVPKTINFO): ") + std::strerror(errno);
+      stop();
+      return fail(why);
+    }
+  }
+
   timeout_ns_ = static_cast<std::int64_t>(std::llround(spec_.timeout_s * 1e9));
   // Packet::getHash() computes the fingerprint once behind a function-local
   // static; take that first-call guard here, not in the tick.
@@ -118,6 +138,7 @@ bool UdpDevice::start(std::string* error) {
   behind_last_sequence_number_ = 0;
   peer_ = ip::udp::endpoint();
   filtered_ = false;  // a new socket: not connected
+  filter_refused_ = false;
   buttons_.store(0, std::memory_order_relaxed);
   for (auto& r : rejected_) r.store(0, std::memory_order_relaxed);
   for (auto* c :
@@ -169,8 +190,12 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
   }
   behind_count_ = 0;
 
-  if (!live) bump(sessions_);
+  if (!live) {
+    bump(sessions_);
+    filter_refused_ = false;  // a new sender: it may be reached where the route back leaves from
+  }
   peer_ = from_;
+  peer_to_ = to_;
   have_pose_ = true;
   last_accept_ns_ = now_ns;
   last_sequence_number_ = packet.sequence_number;
@@ -188,6 +213,56 @@ void UdpDevice::filter_to(const ip::udp::endpoint* peer) noexcept {
   const int rc = peer ? ::connect(socket_.native_handle(), peer->data(), static_cast<socklen_t>(peer->size()))
                       : ::connect(socket_.native_handle(), &unspecified, sizeof unspecified);
   filtered_ = peer != nullptr && rc == 0;
+  if (!filtered_ || !wildcard_) return;
+  // Connecting a wildcard-bound socket also fixes its local address, to the
+  // source of the route back to the peer. If the peer's poses came to another
+  // local address (a hostname on 127.0.1.1, a secondary address, broadcast),
+  // the kernel would drop every one of them from now on: the sender would be
+  // lost after timeout_s, taken again, lost again. Stay unconnected for this
+  // session then; the other_sender check still refuses the rest, in userspace.
+  boost::system::error_code ec;
+  const ip::udp::endpoint local = socket_.local_endpoint(ec);
+  if (!ec && local.address() == peer_to_) return;
+  ::connect(socket_.native_handle(), &unspecified, sizeof unspecified);
+  filtered_ = false;
+  filter_refused_ = true;
+}
+
+std::size_t UdpDevice::receive(boost::system::error_code& ec) noexcept {
+  if (!wildcard_) return socket_.receive_from(boost::asio::buffer(receive_buffer_), from_, 0, ec);
+  // recvmsg for the destination address (IP_PKTINFO / IPV6_PKTINFO, v4-mapped
+  // on a v6 socket), which receive_from does not give. Stack buffers only.
+  iovec iov{receive_buffer_.data(), receive_buffer_.size()};
+  alignas(cmsghdr) unsigned char control[CMSG_SPACE(sizeof(in_pktinfo)) + CMSG_SPACE(sizeof(in6_pktinfo))];
+  msghdr msg{};
+  msg.msg_name = from_.data();
+  msg.msg_namelen = static_cast<socklen_t>(from_.capacity());
+  msg.msg_iov = &iov;
+  msg.msg_iovlen = 1;
+  msg.msg_control = control;
+  msg.msg_controllen = sizeof control;
+  const ssize_t n = ::recvmsg(socket_.native_handle(), &msg, MSG_DONTWAIT);
+  if (n < 0) {
+    ec = boost::system::error_code(errno, boost::asio::error::get_system_category());
+    return 0;
+  }
+  ec = boost::system::error_code();
+  from_.resize(std::min<std::size_t>(msg.msg_namelen, from_.capacity()));
+  to_ = ip::address();
+  for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
+    if (c->cmsg_level == IPPROTO_IP && c->cmsg_type == IP_PKTINFO) {
+      in_pktinfo info;
+      std::memcpy(&info, CMSG_DATA(c), sizeof info);
+      to_ = ip::address_v4(ntohl(info.ipi_addr.s_addr));  // the header's destination
+    } else if (c->cmsg_level == IPPROTO_IPV6 && c->cmsg_type == IPV6_PKTINFO) {
+      in6_pktinfo info;
+      std::memcpy(&info, CMSG_DATA(c), sizeof info);
+      ip::address_v6::bytes_type bytes;
+      std::memcpy(bytes.data(), &info.ipi6_addr, bytes.size());
+      to_ = ip::address_v6(bytes);
+    }
+  }
+  return static_cast<std::size_t>(n);
 }
 
 bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
@@ -200,7 +275,7 @@ bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   bool fresh = false;
   for (int i = 0; i < kMaxDatagramsPerRead; ++i) {
     boost::system::error_code ec;
-    const std::size_t bytes = socket_.receive_from(boost::asio::buffer(receive_buffer_), from_, 0, ec);
+    const std::size_t bytes = receive(ec);
     if (ec == boost::asio::error::would_block || ec == boost::asio::error::try_again) break;
     if (ec) {
       // Nothing a tick can fix (e.g. a queued ICMP error): count it and let
@@ -211,7 +286,7 @@ bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     bump(received_);
     if (consider(bytes, now_ns) == Verdict::kAccepted) fresh = true;
   }
-  if (fresh && !filtered_) filter_to(&peer_);
+  if (fresh && !filtered_ && !filter_refused_) filter_to(&peer_);
   // Only a pose that arrived during this read is a sample: handing the held
   // pose back every tick would make a 250 Hz device look like one that jumps
   // 4 ms of motion in 1 ms (the loop's speed check) and would hide a device

@@ -23,7 +23,10 @@
 //   non_finite    a position or velocity component is NaN or infinite
 //   other_sender  while a sender is live, datagrams from any other address
 //                 (only those queued before it went live: from then on the
-//                 socket is connected to it and the kernel drops the rest)
+//                 socket is connected to it and the kernel drops the rest;
+//                 not so when bound to a wildcard address and the poses come
+//                 to a local address other than the route back's source,
+//                 see filter_to: every datagram is then read and refused)
 // and then the ordering rule: sequence_number must exceed the last accepted
 // one (duplicates and reordered packets are dropped and counted as
 // out_of_order), except that kResyncPackets valid poses in a row below it,
@@ -116,7 +119,13 @@ class UdpDevice final : public Device {
   // Connects the socket to `peer` (the kernel then drops datagrams from
   // every other address before they queue) or, with nullptr, disconnects it
   // (any address may start the next session). One syscall, no allocation.
+  // Bound to a wildcard address, it connects only if the local address the
+  // connect picks is the one peer_'s poses came to (else disconnects again
+  // and sets filter_refused_ for the session).
   void filter_to(const boost::asio::ip::udp::endpoint* peer) noexcept;
+  // One datagram into receive_buffer_, its source into from_ and, when bound
+  // to a wildcard address, its destination into to_.
+  std::size_t receive(boost::system::error_code& ec) noexcept;
   static void bump(std::atomic<std::uint64_t>& counter) noexcept {
     counter.store(counter.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // one writer
   }
@@ -131,6 +140,10 @@ class UdpDevice final : public Device {
   boost::asio::ip::udp::endpoint from_;  // scratch for receive_from
   boost::asio::ip::udp::endpoint peer_;  // sender of the newest accepted pose
   bool filtered_ = false;                // the socket is connected to peer_ (filter_to)
+  bool wildcard_ = false;                // bound to 0.0.0.0 or ::
+  bool filter_refused_ = false;          // this session's poses come to another local address: no connect
+  boost::asio::ip::address to_;          // destination of the datagram in receive_buffer_ (wildcard_ only)
+  boost::asio::ip::address peer_to_;     // destination of the newest accepted pose (wildcard_ only)
   std::array<unsigned char, kReceiveBufferBytes> receive_buffer_{};
   std::array<unsigned char, kReceiveBufferBytes> send_buffer_{};
 

@@ -8,6 +8,7 @@
 #include "haptics/frame_transform.hpp"
 #include "haptics/haptic_loop.hpp"
 #include "haptics/haptic_thread.hpp"
+#include "haptics/loop_wrap.hpp"
 #include "haptics/replay_device.hpp"
 #include "record/session_tools.hpp"
 
@@ -74,8 +75,10 @@ namespace {
 
 class HapticSideImpl final : public HapticSide {
  public:
-  HapticSideImpl(const config::DaemonConfig& config, ToolSampleRing& samples, LocalModelChannel& models) {
+  HapticSideImpl(const config::DaemonConfig& config, ToolSampleRing& samples, LocalModelChannel& models,
+                 std::FILE* out) {
     std::string error;
+    std::string wrap_warning;  // a looping track's wrap the loop will take as a glitch
     if (config.device.kind == config::DeviceSpec::Kind::kReplay) {
       const record::HapticTrack track = record::read_haptic_track(config.device.replay.session);  // names the file
       std::vector<haptics::Vec3> positions;
@@ -86,10 +89,25 @@ class HapticSideImpl final : public HapticSide {
       const haptics::FrameTransform frame = haptics::FrameTransform::from(config.device.offset_m, config.device.scale);
       for (const auto& p : track.device_position_m)
         positions.push_back(frame.position_to_device(haptics::Vec3(p[0], p[1], p[2])));
-      device_ = std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
-                                                        config.device.replay.loop);
+      if (config.device.replay.loop && !positions.empty())
+        wrap_warning = haptics::loop_wrap_warning("device.replay.loop", (positions.back() - positions.front()).norm(),
+                                                  config.device.limits.max_speed_m_per_s, config.haptics.rate_hz);
+      device_ =
+          std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
+                                                  config.device.replay.loop, config.device.limits.max_speed_m_per_s);
     } else {
       device_ = haptics::make_device(config.device, &error);
+      const config::SimDeviceSpec& sim = config.device.sim;
+      // A hand (mode: hand) follows the jumped target through its spring; a
+      // trajectory jumps with it.
+      if (config.device.kind == config::DeviceSpec::Kind::kSim && sim.loop &&
+          sim.mode == config::SimDeviceSpec::Mode::kTrajectory && !sim.waypoints.empty()) {
+        const auto& first = sim.waypoints.front().position_m;
+        const auto& last = sim.waypoints.back().position_m;
+        const haptics::Vec3 jump(last[0] - first[0], last[1] - first[1], last[2] - first[2]);
+        wrap_warning = haptics::loop_wrap_warning("device.sim.waypoints", jump.norm(),
+                                                  config.device.limits.max_speed_m_per_s, config.haptics.rate_hz);
+      }
     }
     if (!device_) throw std::runtime_error("haptic device: " + (error.empty() ? "none configured" : error));
     udp_ = dynamic_cast<const haptics::UdpDevice*>(device_.get());
@@ -104,6 +122,10 @@ class HapticSideImpl final : public HapticSide {
     }
     rate_hz_ = config.haptics.rate_hz;
     limits_ = config.device.limits;
+    if (out && !wrap_warning.empty()) {
+      std::fprintf(out, "tissued: warning: %s\n", wrap_warning.c_str());
+      std::fflush(out);
+    }
   }
   ~HapticSideImpl() override { stop(); }
 
@@ -182,8 +204,8 @@ class HapticSideImpl final : public HapticSide {
 }  // namespace
 
 std::unique_ptr<HapticSide> HapticSide::start(const config::DaemonConfig& config, ToolSampleRing& samples,
-                                              LocalModelChannel& models, std::FILE* /*out*/) {
-  return std::make_unique<HapticSideImpl>(config, samples, models);
+                                              LocalModelChannel& models, std::FILE* out) {
+  return std::make_unique<HapticSideImpl>(config, samples, models, out);
 }
 
 }  // namespace tissue::service

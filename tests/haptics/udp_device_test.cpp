@@ -83,9 +83,11 @@ std::vector<unsigned char> encode(const T& msg) {
 // The far side: what a device box or a vendor-SDK shim does.
 class FakeDevice {
  public:
-  explicit FakeDevice(std::uint16_t tissued_port)
+  // `tissued_address`: where the poses go (any local address reaches a
+  // device bound to 0.0.0.0; all of 127/8 is on lo).
+  explicit FakeDevice(std::uint16_t tissued_port, const char* tissued_address = "127.0.0.1")
       : socket_(io_, ip::udp::endpoint(ip::make_address("127.0.0.1"), 0)),
-        tissued_(ip::make_address("127.0.0.1"), tissued_port) {
+        tissued_(ip::make_address(tissued_address), tissued_port) {
     socket_.non_blocking(true);
   }
 
@@ -136,8 +138,15 @@ config::UdpDeviceSpec loopback_spec(double timeout_s = 0.05) {
   return spec;
 }
 
+config::UdpDeviceSpec wildcard_spec(double timeout_s = 0.05) {
+  config::UdpDeviceSpec spec = loopback_spec(timeout_s);
+  spec.bind_address = "0.0.0.0";  // what docs/daemon-config.md says for a device on another machine
+  return spec;
+}
+
 struct Started {
-  explicit Started(double timeout_s = 0.05) : device(loopback_spec(timeout_s)) {
+  explicit Started(double timeout_s = 0.05) : Started(loopback_spec(timeout_s)) {}
+  explicit Started(const config::UdpDeviceSpec& spec) : device(spec) {
     std::string error;
     EXPECT_TRUE(device.start(&error)) << error;
     EXPECT_NE(device.local_port(), 0);
@@ -411,6 +420,50 @@ TEST(UdpDevice, ASecondSenderIsRejectedWhileTheFirstIsLiveAndTakesOverAfterLoss)
 // kernel's buffer).
 TEST(UdpDevice, AFloodFromElsewhereDoesNotDelayTheLiveDevice) {
   Started s(0.05);
+  FakeDevice device(s.device.local_port()), flood(s.device.local_port());
+  device.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  DeviceSample sample;
+  ASSERT_TRUE(read_until_received(s.device, 1, kT0, &sample));
+  for (int i = 0; i < 200; ++i) flood.send(pose_packet(1000 + i, Vec3(0.5, 0, 0)));
+  device.send(pose_packet(2, Vec3(0.02, 0, 0)));
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // everything sent has arrived
+  ASSERT_TRUE(s.device.read(kT0 + kMs, &sample)) << "the device's pose was not read on the next tick";
+  EXPECT_EQ(sample.position_m.x(), 0.02);
+  EXPECT_EQ(s.device.stats().received, 2u);
+}
+
+// Bound to 0.0.0.0, a sender whose poses go to a local address other than
+// the one the route back to it leaves from (the hostname's 127.0.1.1 on
+// Debian, a secondary address, broadcast) stays one session. Connecting the
+// socket to it fixed the socket's local address to that route's source, so
+// the kernel dropped every later pose: each was lost after timeout_s and
+// taken again as a new session, and the force never ramped in.
+TEST(UdpDevice, AWildcardBoundDeviceKeepsASenderThatSendsToAnotherLocalAddress) {
+  Started s(wildcard_spec(0.05));
+  FakeDevice fake(s.device.local_port(), "127.0.1.1");
+  DeviceSample sample;
+  for (int i = 1; i <= 10; ++i) {
+    fake.send(pose_packet(i, Vec3(0.001 * i, 0, 0)));
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    s.device.read(kT0 + i * kMs, &sample);
+  }
+  eventually([&] { return s.device.read(kT0 + 11 * kMs, &sample), s.device.stats().accepted >= 10; },
+             std::chrono::milliseconds(500));
+  const UdpDevice::Stats st = s.device.stats();
+  EXPECT_EQ(st.accepted, 10u) << "poses to 127.0.1.1 were dropped after the first";
+  EXPECT_EQ(st.sessions, 1u);
+  EXPECT_EQ(sample.position_m.x(), 0.01);
+  s.device.write(kT0 + 11 * kMs, Vec3(0.5, 0, 0));
+  const std::optional<Packet> force = fake.receive();
+  ASSERT_TRUE(force.has_value()) << "no force back to the sender";
+  EXPECT_EQ(force->echo_sequence_number, 10);
+}
+
+// Bound to 0.0.0.0, a sender whose poses go to the address the route back
+// to it leaves from (the usual case) still gets the kernel's filter: a flood
+// from elsewhere does not reach the socket while it is live.
+TEST(UdpDevice, AWildcardBoundDeviceStillFiltersAFloodFromElsewhere) {
+  Started s(wildcard_spec(0.05));
   FakeDevice device(s.device.local_port()), flood(s.device.local_port());
   device.send(pose_packet(1, Vec3(0.01, 0, 0)));
   DeviceSample sample;

@@ -507,6 +507,32 @@ TEST(ReplayCli, ReplaysEverythingAndPrintsTheSummary) {
   EXPECT_NE(r.out.find("(asked 8.000x)"), std::string::npos) << r.out;
 }
 
+// `--lcm`'s URL is optional: a FILE right after it is the FILE, published on
+// the default URL (docs/replay-and-live.md), not taken as the URL, which left
+// no FILE ("file is required", exit 2). Without the network: a bad file after
+// `--lcm` is opened and reported (the file is read before any transport
+// starts), and a URL-less value with a FILE beside it is an error naming it.
+TEST(ReplayCli, AFileRightAfterLcmIsTheFileNotTheUrl) {
+  TempDir dir;
+  const std::string bad = dir / "not-a-session.h5";
+  record::testing::write_bytes(bad, "not HDF5");
+  RunResult r = record::testing::run(tissue() + " session replay --lcm " + quote(bad) + " --speed 100", dir);
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_EQ(r.err.rfind("tissue session replay: '" + bad + "': ", 0), 0u) << r.err;
+
+  const std::string path = testing::write_session(dir / "s.h5", 5);
+  r = record::testing::run(tissue() + " session replay --lcm memq:// " + quote(path) + " --speed 100", dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("LCM memq://: 5 meshes"), std::string::npos) << r.out;
+
+  r = record::testing::run(tissue() + " session replay --lcm nourl " + quote(path), dir);
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("--lcm: 'nourl' is not an LCM URL (PROVIDER://...)"), std::string::npos) << r.err;
+  r = record::testing::run(tissue() + " session replay --lcm", dir);
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("file is required"), std::string::npos) << r.err;
+}
+
 // A tcpq:// server that accepts and never greets (a web server, a typo'd
 // port) is exit 3 within the greeting wait (10 s), not a hang: LCM's own
 // client waits for the greeting without a limit. Bounded by timeout(1).

@@ -1,0 +1,19 @@
+// A looping device track (device.replay.loop; device.sim.loop with
+// mode: trajectory) goes from its last point back to its first in one tick.
+// No return path is added: one could press the hand through the object. When
+// that jump is longer than the haptic loop accepts in one tick, the loop
+// rejects it as a glitch (too fast) and, until the hand has been still long
+// enough, takes the device as lost: the force ramps out at every wrap and back
+// in after it. The daemon says so once when the device starts.
+#pragma once
+
+#include <string>
+
+namespace tissue::haptics {
+
+// The warning for a looping track whose wrap jumps jump_m (device frame) in
+// one tick, when that is more than max_speed_m_per_s / rate_hz; empty
+// otherwise. `key` is the config key to blame (e.g. "device.replay.loop").
+std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz);
+
+}  // namespace tissue::haptics
