@@ -69,6 +69,7 @@ bool SimThread::replace_runner(std::unique_ptr<SimRunner> runner, record::Record
     pending_recorder_ = recorder;
     pending_has_recorder_ = true;
     handed = ++runners_with_recorder_handed_;
+    pending_seq_ = handed;
     // Not running: nothing holds the recorder before; the thread, if it
     // starts, takes both in its first loop.
     if (!thread_.joinable()) {
@@ -302,7 +303,10 @@ void SimThread::run(std::promise<void>& scheduled) {
         recorder = pending_recorder_;
         recorder_.store(recorder, std::memory_order_relaxed);  // the lock orders it with set_recorder's
         pending_has_recorder_ = false;
-        runners_with_recorder_taken_.fetch_add(1, std::memory_order_release);
+        // The hand-over's own number, not one more: a runner that replaced
+        // another still pending is one take for two hand-overs, and counted
+        // as one, every later hand-over waited its whole wait and failed.
+        runners_with_recorder_taken_.store(pending_seq_, std::memory_order_release);
       }
       ++generation_;
       first_model_version_ = model_version_ + 1;

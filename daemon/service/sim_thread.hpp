@@ -188,8 +188,8 @@ class SimThread {
   std::atomic<bool> throw_next_step_{false};
   std::atomic<record::Recorder*> recorder_{nullptr};
 
-  // Guards pending_, pending_recorder_, pending_has_recorder_ and
-  // runners_with_recorder_handed_, and orders the io side's recorder_ stores
+  // Guards pending_, pending_recorder_, pending_has_recorder_,
+  // runners_with_recorder_handed_ and pending_seq_, and orders the io side's recorder_ stores
   // with them; the sim thread only try_locks.
   std::mutex pending_mutex_;
   std::unique_ptr<SimRunner> pending_;
@@ -197,9 +197,13 @@ class SimThread {
   // recorder); without one the recorder stays as it is.
   record::Recorder* pending_recorder_ = nullptr;
   bool pending_has_recorder_ = false;
-  // Runners handed over with a recorder, and those the sim thread took
-  // (release, in the loop that took it / acquire, in replace_runner).
+  // Runners handed over with a recorder, numbered 1, 2, …; the number of
+  // the one pending; and the number of the last one the sim thread took
+  // (release, in the loop that took it / acquire, in replace_runner): a
+  // hand-over whose runner another replaced while pending is done when that
+  // one is taken.
   std::uint64_t runners_with_recorder_handed_ = 0;
+  std::uint64_t pending_seq_ = 0;
   std::atomic<std::uint64_t> runners_with_recorder_taken_{0};
 
   concurrency::LatestValue<SimStatus> status_;

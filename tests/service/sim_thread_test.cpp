@@ -671,6 +671,92 @@ TEST(SimThread, AHandOverBetweenRecordersLosesNoRow) {
   for (int k = 0; k < pushed.load(); ++k) ASSERT_EQ(seen[static_cast<std::size_t>(k)], k);
 }
 
+// A scene change while recording hands the new runner and its recorder over
+// together: while the sim thread stalls the hand-over times out (the caller
+// keeps the recorder before alive), and once it moves again it takes both:
+// the new runner's rows go to the new recorder.
+TEST(SimThread, ARunnerWithItsRecorderIsTakenAfterAStallItTimedOutOn) {
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  auto before = record::Recorder::start(dir, "before.h5", record::SessionMetadata{});
+  auto after = record::Recorder::start(dir, "after.h5", record::SessionMetadata{});
+  SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr,
+                   SimThreadOptions{});
+  thread.start();
+  ASSERT_TRUE(thread.set_recorder(before.get()));
+  thread.inject_stall(1000ms);
+  std::this_thread::sleep_for(100ms);  // the stall has begun (steps are 1 ms apart)
+  EXPECT_FALSE(
+      thread.replace_runner(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), after.get(), 0.05));
+  EXPECT_EQ(thread.status().generation, 0u);  // not taken yet
+  ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 20; }));
+  ASSERT_TRUE(thread.set_recorder(nullptr, 10.0));
+  thread.stop();
+  before->stop();
+  after->stop();
+  EXPECT_GE(after->stats().sim_rows_written, 20u);  // the new runner's rows, in the new file
+}
+
+// Two scene changes during one stall (load_scene A times out, load_scene B
+// comes before the step ends): the second replaces the first while pending,
+// and the sim thread takes one runner for both. A later hand-over completes
+// as soon as the thread takes it. (Counting the runners taken, one behind the
+// hand-overs for good, every later one waited its whole wait and failed.)
+TEST(SimThread, TwoHandOversDuringOneStallLeaveTheNextOnePrompt) {
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  auto r0 = record::Recorder::start(dir, "r0.h5", record::SessionMetadata{});
+  auto r1 = record::Recorder::start(dir, "r1.h5", record::SessionMetadata{});
+  auto r2 = record::Recorder::start(dir, "r2.h5", record::SessionMetadata{});
+  auto r3 = record::Recorder::start(dir, "r3.h5", record::SessionMetadata{});
+  SimThread thread(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), nullptr, nullptr,
+                   SimThreadOptions{});
+  thread.start();
+  ASSERT_TRUE(thread.set_recorder(r0.get()));
+  thread.inject_stall(1000ms);
+  std::this_thread::sleep_for(100ms);  // the stall has begun
+  EXPECT_FALSE(
+      thread.replace_runner(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), r1.get(), 0.05));
+  EXPECT_FALSE(
+      thread.replace_runner(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), r2.get(), 0.05));
+  ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1; }));  // the stall has ended
+  // 2 s: far more than a step takes, a hand-over that waits it out has failed.
+  EXPECT_TRUE(thread.replace_runner(std::make_unique<SimRunner>(physics::testing::cantilever_scene()), r3.get(), 2.0));
+  ASSERT_TRUE(thread.set_recorder(nullptr, 10.0));
+  thread.stop();
+  for (auto* r : {r0.get(), r1.get(), r2.get(), r3.get()}) r->stop();
+  EXPECT_EQ(r1->stats().sim_rows_written, 0u);  // replaced before the thread took it
+}
+
+// set_recorder(nullptr) (record_stop) while a runner handed over with a
+// recorder is still pending: the recorder goes with it, the thread never
+// pushes to it (the caller stops and frees it).
+TEST(SimThread, StoppingRecordingWhileARunnerWithARecorderIsPendingDropsThatRecorder) {
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  ToolSampleRing samples;
+  auto pending = record::Recorder::start(dir, "pending.h5", record::SessionMetadata{});
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, nullptr, SimThreadOptions{});
+  thread.start();
+  thread.inject_stall(500ms);
+  std::this_thread::sleep_for(100ms);  // the stall has begun
+  EXPECT_FALSE(thread.replace_runner(std::make_unique<SimRunner>(cantilever_with_tool()), pending.get(), 0.05));
+  EXPECT_FALSE(thread.set_recorder(nullptr, 0.05));
+  // Ticks drained after the switch would be haptic rows in `pending`.
+  haptics::ToolSample s;
+  for (int i = 0; i < 5; ++i) {
+    s.time_ns = now_ns();
+    ASSERT_TRUE(samples.try_push(s));
+  }
+  ASSERT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps >= 20; }));
+  ASSERT_TRUE(wait_for([&] { return samples.size() == 0; }));
+  EXPECT_TRUE(thread.set_recorder(nullptr, 10.0));
+  thread.stop();
+  pending->stop();
+  EXPECT_EQ(pending->stats().sim_rows_written, 0u);
+  EXPECT_EQ(pending->stats().haptic_rows_written, 0u);
+}
+
 // Status at 200 Hz, energies at 4 Hz: the energies in consecutive statuses
 // repeat between refreshes while time moves on (the loaded cantilever's
 // kinetic energy changes every step, so fresh sums would all differ).
