@@ -1109,6 +1109,16 @@ nlohmann::json Service::record_start(const std::string& name) {
 }
 
 nlohmann::json Service::record_stop() {
+  if (!recorder_ && automatic_recording_) {
+    // An automatic recording stopped at a scene change (or whose file could
+    // not be made) waits for its next try: record_stop ends it too. Left
+    // pending, record.rotate_s later a new file started against the
+    // operator's wish.
+    automatic_recording_ = false;
+    return {{"file", nullptr},
+            {"error", nullptr},
+            {"cancelled", "no file was open: the automatic recording's next try (record.rotate_s) is cancelled"}};
+  }
   if (!recorder_) throw control::ControlError("not recording");
   const std::string path = recorder_->path();
   const std::string error = recorder_->error();

@@ -1280,6 +1280,44 @@ TEST(Service, AnAutomaticRecordingWhoseNextFileCannotBeMadeStopsAtTheSceneChange
   EXPECT_EQ(first_restart(times_s), times_s.size()) << "contact's rows in the cantilever's file";
 }
 
+// record_stop ends the automatic recording (docs/daemon-config.md), also
+// when it had stopped at a scene change and waits for its next try: it
+// answered "not recording" and left the try pending, so record.rotate_s
+// later a new automatic file started against the operator's wish. It now
+// succeeds, says the try is cancelled, and no file starts.
+TEST(Service, RecordStopCancelsTheNextTryOfAnAutomaticRecordingStoppedAtTheSceneChange) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  Running run(write_config(dir, scene_file("cantilever.yaml"), "sim", state), 0.0,
+              {"record.auto_start=true", "record.rotate_s=1"});
+  ControlClient client = connect(dir / "ctl.sock");
+  ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
+  // No file can be made in state_dir (as in the test above).
+  const std::string moved = dir / "state-moved";
+  std::filesystem::rename(state, moved);
+  std::ofstream(state) << "not a directory";
+  const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+  ASSERT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
+  ASSERT_TRUE(loaded["result"].contains("recording_stopped")) << loaded.dump();
+  const nlohmann::json stop = client.call("record_stop");
+  ASSERT_TRUE(stop["ok"].get<bool>()) << stop.dump();
+  EXPECT_TRUE(stop["result"]["file"].is_null()) << stop.dump();  // no file was open
+  EXPECT_NE(stop["result"].value("cancelled", "").find("the automatic recording's next try"), std::string::npos)
+      << stop.dump();
+  std::filesystem::remove(state);
+  std::filesystem::rename(moved, state);
+  // Two record.rotate_s: a pending try would have made a file by then.
+  bool started = false;
+  for (const auto end = std::chrono::steady_clock::now() + 2s; std::chrono::steady_clock::now() < end && !started;) {
+    started = !client.call("status")["result"]["recording"].is_null();
+    std::this_thread::sleep_for(50ms);
+  }
+  EXPECT_FALSE(started) << client.call("status").dump();
+  client.call("shutdown");
+  ASSERT_EQ(run.wait(), kServiceOk);
+}
+
 // record.keep_gb: past the budget the oldest automatic files go at each
 // rotation (said on stdout); a file a client named stays.
 TEST(Service, OldAutomaticRecordingsGoPastTheirBudget) {
