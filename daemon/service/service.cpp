@@ -416,6 +416,10 @@ Service::RecordingHandover Service::continue_recording_in_new_file(const std::st
   // two steps: handed the runner first, it stepped the new scene into the
   // old file while the new one was being made.
   RecordingHandover out;
+  // The haptic side's trips since the last status tick happened under the
+  // scene before: said now, they go to its file. (Said when the side stops,
+  // after the hand-over, they went to the new scene's.)
+  note_safety_trips();
   // The same scene text, overrides and config text (a load_scene of the
   // running file, a reload of unchanged files): the file still describes it.
   if (!recorder_ || recorder_->state() != record::RecorderState::kRecording ||

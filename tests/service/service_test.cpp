@@ -825,6 +825,54 @@ TEST(Service, HapticSafetyTripsAreRecordedAsEvents) {
   EXPECT_NE(trip, events.end()) << "no trip event among " << events.size() << " events";
 }
 
+// The trips of a haptic side that stops at a scene change (load_scene of a
+// scene without a tool) happened under the scene before: they are recorded
+// in its file, not in the file the recording goes on in. (Noted when the
+// side stopped, after the hand-over, they landed in the new scene's file.)
+// Status lines an hour apart: the trips are looked at only at the change. A
+// UDP device nobody sends to is lost from the first tick: one trip, which
+// does not come again (a model stale after 0.2 ms trips all the time, also
+// between the hand-over and the side's stop); stale_model_s 60: the model
+// goes stale at most at the first tick.
+TEST(Service, TripsBeforeASceneChangeAreRecordedInTheFileOfTheSceneBefore) {
+  TempDir dir;
+  const std::string state = dir / "state";
+  std::filesystem::create_directory(state);
+  int port = 0;
+  const int holder = bound_loopback_udp_socket(&port);
+  ASSERT_GE(holder, 0);
+  ::close(holder);  // free for the device: a port the system had free a moment ago
+  const std::string config = write_config(dir, scene_file("cantilever.yaml"), "udp", state);
+  edit_file(config, "status_interval_s: 0.1", "status_interval_s: 3600");
+  edit_file(config, "  sim:\n", "  udp: {port: " + std::to_string(port) + "}\n  limits: {stale_model_s: 60}\n  sim:\n");
+  {
+    Running run(config);
+    ControlClient client = connect(dir / "ctl.sock");
+    EXPECT_TRUE(client.call("record_start", {{"name", "s1.h5"}})["ok"].get<bool>());
+    for (int i = 0; i < 250; ++i) {
+      const nlohmann::json haptics = client.call("status")["result"]["haptics"];
+      if (haptics.is_object() && haptics.value("device_lost_trips", 0) > 0) break;
+      std::this_thread::sleep_for(20ms);
+    }
+    const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
+    EXPECT_EQ(loaded["result"].value("recording", ""), state + "/s1-part2.h5") << loaded.dump();
+    EXPECT_TRUE(client.call("record_stop")["ok"].get<bool>());
+    client.call("shutdown");
+    EXPECT_EQ(run.wait(), kServiceOk);
+  }
+  const auto trips = [](const std::string& file) {
+    std::vector<std::string> found;
+    for (const std::string& m : record::testing::event_messages(file))
+      if (m.rfind("haptic safety tripped (", 0) == 0) found.push_back(m);
+    return found;
+  };
+  const std::vector<std::string> before = trips(state + "/s1.h5");
+  ASSERT_EQ(before.size(), 1u);
+  EXPECT_NE(before[0].find("device lost"), std::string::npos) << before[0];
+  const std::vector<std::string> after = trips(state + "/s1-part2.h5");
+  EXPECT_TRUE(after.empty()) << after.front();
+}
+
 // Trips are told per haptic side by the side's number, never its address:
 // a side started where the last one was freed looked like the same side,
 // and its counts were taken as the old side's. A UDP device nobody sends to
