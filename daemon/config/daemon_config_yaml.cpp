@@ -51,6 +51,10 @@ constexpr double kMaxRamp_s = 10.0;
 constexpr double kMaxRampOut_s = 1.0;
 constexpr double kMaxTimeout_s = 60.0;
 constexpr double kMaxCrossfade_s = 1.0;
+// status_interval_s: each period writes a line to stdout (the journal) and
+// STATUS= to systemd; 1e-9 s wrote 108,120 lines in 3 s. Ten a second is
+// more than a person reads.
+constexpr double kMinStatusInterval_s = 0.1;
 constexpr double kMaxStatusInterval_s = 3600.0;
 // record.rotate_s: a week at most (files of a few GB at 1 kHz haptic rows).
 constexpr double kMinRotate_s = 1.0;
@@ -244,6 +248,9 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (c_.scene_path.empty()) fail("scene", "must not be empty (the scene file to load)");
     if (c_.state_dir.empty()) fail("state_dir", "must not be empty (recordings and exports go there)");
     positive(c_.status_interval_s, "status_interval_s");
+    at_least(c_.status_interval_s, kMinStatusInterval_s, "status_interval_s",
+             "each period writes a status line to stdout (the journal) and to systemd, and ten a second is more than "
+             "anyone reads");
     at_most(c_.status_interval_s, kMaxStatusInterval_s, "status_interval_s", "the status timer must fit its clock");
     if (c_.max_scene_tets < 1) fail("max_scene_tets", "must be >= 1 (got " + std::to_string(c_.max_scene_tets) + ")");
 

@@ -339,6 +339,12 @@ TEST(DaemonConfigYaml, PortsPrioritiesAndControlLimits) {
                "must be <= device.limits.max_stiffness_N_per_m (1000) / device.scale^2 (4) = 250", {"device.scale=2"});
   EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.scale=2", "haptics.coupling_stiffness_N_per_m=250"}));
   expect_error(edit("status_interval_s: 1.0", "status_interval_s: 0"), "status_interval_s", "must be > 0");
+  // A status line every nanosecond wrote 108,120 lines in 3 s.
+  expect_error(edit("status_interval_s: 1.0", "status_interval_s: 1e-9"), "status_interval_s",
+               "must be >= 0.1 (got 1e-09): ");
+  expect_error(edit("status_interval_s: 1.0", "status_interval_s: 0.09"), "status_interval_s", "must be >= 0.1");
+  EXPECT_EQ(parse_daemon_config(edit("status_interval_s: 1.0", "status_interval_s: 0.1"), kSource).status_interval_s,
+            0.1);
   // "" and null both switch the Unix socket off.
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "\"\""), kSource).control.unix_socket_path, "");
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "~"), kSource).control.unix_socket_path, "");
