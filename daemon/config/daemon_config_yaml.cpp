@@ -12,6 +12,7 @@
 #include <string_view>
 #include <utility>
 
+#include "config/daemon_config_keys.hpp"
 #include "scene/yaml_util.hpp"
 #include "util/lcm_url.hpp"
 
@@ -67,9 +68,7 @@ constexpr int kMaxRtPriority = 99;
 // CPU_SETSIZE: sched_setaffinity cannot name a CPU beyond it.
 constexpr int kMaxCpuIndex = 1023;
 
-const std::array<std::string_view, 10> kTopLevelKeys{"scene",   "state_dir", "status_interval_s", "max_scene_tets",
-                                                     "device",  "haptics",   "realtime",          "control",
-                                                     "publish", "record"};
+constexpr const auto& kTopLevelKeys = kDaemonTopLevelKeys;
 
 const yaml_util::DocumentKind kConfigDocument{
     "daemon config", "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
@@ -502,7 +501,12 @@ DaemonConfig load_daemon_config(const std::string& path, const std::vector<std::
 }
 
 bool is_daemon_config_key(std::string_view key_path) {
-  const std::size_t end = key_path.find_first_of(".[");
+  // Trimmed as the override parser trims its key ("scene =x.yaml" sets
+  // `scene`): untrimmed, the service sent such an override to the scene.
+  const std::size_t first = key_path.find_first_not_of(" \t");
+  if (first == std::string_view::npos) return false;
+  key_path.remove_prefix(first);
+  const std::size_t end = key_path.find_first_of(".[ \t");
   const std::string_view head = key_path.substr(0, end);
   for (const std::string_view k : kTopLevelKeys)
     if (head == k) return true;

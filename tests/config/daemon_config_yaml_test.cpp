@@ -471,6 +471,11 @@ TEST(DaemonConfigYaml, ValidateCatchesProgrammaticConfigs) {
 
 TEST(DaemonConfigYaml, DaemonKeysAreTellableFromSceneKeys) {
   EXPECT_TRUE(is_daemon_config_key("haptics.rate_hz"));
+  // Spaces around the key, as an override may have them ("scene =x.yaml"; the
+  // override parser trims them): routed to the scene, 'scene ' was refused there.
+  EXPECT_TRUE(is_daemon_config_key("scene "));
+  EXPECT_TRUE(is_daemon_config_key(" \thaptics.rate_hz"));
+  EXPECT_FALSE(is_daemon_config_key(" material.youngs_modulus_Pa "));
   EXPECT_TRUE(is_daemon_config_key("device.sim.waypoints[0].time_s"));
   EXPECT_TRUE(is_daemon_config_key("scene"));
   EXPECT_FALSE(is_daemon_config_key("material.youngs_modulus_Pa"));

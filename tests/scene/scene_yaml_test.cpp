@@ -874,6 +874,22 @@ TEST(SceneYamlOverrides, ValueThatBreaksValidationFailsWithTheKeyPath) {
   expect_error(kBase, "gravity_m_per_s2", "expected a list of 3 numbers", {"gravity_m_per_s2=0,0,-9.81"});
 }
 
+// A daemon key set on the scene (tissued --batch, or a misspelt one under
+// --config, which routes unknown keys to the scene) was "unknown key
+// 'haptic'; allowed keys: name, object, ..." with no word of the daemon.
+TEST(SceneYamlOverrides, AKeyNearADaemonSettingSaysSo) {
+  const std::string typo = expect_error(
+      kMinimal, "haptic", "unknown key 'haptic' (did you mean the daemon setting 'haptics'?", {"haptic.rate_hz=500"});
+  EXPECT_NE(typo.find("allowed keys: name, object"), std::string::npos) << typo;
+  expect_error(kMinimal, "scene", "unknown key 'scene' (did you mean the daemon setting 'scene'?",
+               {"scene=cantilever.yaml"});
+  expect_error(kMinimal + "status_interval_s: 1\n", "status_interval_s",
+               "(did you mean the daemon setting 'status_interval_s'?");
+  // A scene key's own suggestion comes first.
+  const std::string scene_typo = expect_error(kMinimal + "materal: {}\n", "materal", "(did you mean 'material'?)");
+  EXPECT_EQ(scene_typo.find("daemon"), std::string::npos) << scene_typo;
+}
+
 TEST(SceneYamlOverrides, MalformedOverrideFailsClearly) {
   const std::string what = expect_error(kBase, "", "expected key.path=value", {"integrator.dt_s"});
   EXPECT_NE(what.find("integrator.dt_s"), std::string::npos) << what;
