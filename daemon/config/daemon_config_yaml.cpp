@@ -343,7 +343,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     at_least(c_.record.rotate_s, kMinRotate_s, "record.rotate_s", "a file every few seconds is not a session");
     at_most(c_.record.rotate_s, kMaxRotate_s, "record.rotate_s", "the rotation timer must fit its clock");
     non_negative(c_.record.keep_gb, "record.keep_gb");
-    at_most(c_.record.keep_gb, 1e9, "record.keep_gb", "an exabyte; 0 keeps every file");
+    at_most(c_.record.keep_gb, 1e9, "record.keep_gb",
+            "an exabyte; 0 sets no size budget (a nearly full disk still removes the oldest automatic files)");
 
     const PublishSpec& pub = c_.publish;
     for (const auto& [rate, key] :

@@ -77,9 +77,9 @@ std::string edit(const std::string& from, const std::string& to) {
 }
 
 // Parsing `text` fails with a ConfigError naming kSource, exactly `key_path`,
-// and a reason containing `reason_part`.
-void expect_error(const std::string& text, const std::string& key_path, const std::string& reason_part,
-                  const std::vector<std::string>& overrides = {}) {
+// and a reason containing `reason_part`; returns the message.
+std::string expect_error(const std::string& text, const std::string& key_path, const std::string& reason_part,
+                         const std::vector<std::string>& overrides = {}) {
   try {
     parse_daemon_config(text, kSource, overrides);
     ADD_FAILURE() << "no error for key " << key_path << " (wanted '" << reason_part << "')";
@@ -92,7 +92,9 @@ void expect_error(const std::string& text, const std::string& key_path, const st
     if (!key_path.empty()) {
       EXPECT_NE(what.find(": " + key_path + ": "), std::string::npos) << what;
     }
+    return what;
   }
+  return {};
 }
 
 TEST(DaemonConfigYaml, BaseParsesWithEveryField) {
@@ -368,6 +370,16 @@ TEST(DaemonConfigYaml, ControlStalledAfterIsReadAndBounded) {
   expect_error(edit("stalled_after_s: 5", "stalled_after_s: 3601"), "control.stalled_after_s", "must be <= 3600");
   expect_error(edit("stalled_after_s: 5", "stalled_after_s: 1e300"), "control.stalled_after_s", "must be <= 3600");
   expect_error(edit("stalled_after_s: 5", "stalled_after_s: soon"), "control.stalled_after_s", "");
+}
+
+// record.keep_gb's bound said "0 keeps every file", which is not so since a
+// nearly full disk removes the oldest automatic files whatever the budget.
+TEST(DaemonConfigYaml, KeepGbAboveAnExabyteIsRefusedSayingWhatZeroDoes) {
+  const std::string said =
+      expect_error(kBase, "record.keep_gb", "must be <= 1e+09 (got 2e+09): ", {"record.keep_gb=2e9"});
+  EXPECT_NE(said.find("0 sets no size budget"), std::string::npos) << said;
+  EXPECT_NE(said.find("nearly full disk"), std::string::npos) << said;
+  EXPECT_EQ(said.find("keeps every file"), std::string::npos) << said;
 }
 
 TEST(DaemonConfigYaml, SimDeviceWaypoints) {
