@@ -263,7 +263,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     // section does not wait for the day someone switches to it. Only "has
     // waypoints" and "names a session" depend on the kind.
     limits(d.limits, "device.limits");
-    sim(d.sim, "device.sim", d.kind == DeviceSpec::Kind::kSim);
+    sim(d.sim, "device.sim", d.kind == DeviceSpec::Kind::kSim, d.limits.workspace_radius_m);
     udp(d.udp, "device.udp");
     // The bridge drops a sender silent for udp.timeout_s; shorter than the
     // loop's device_timeout_s, a slow device's every pose started a new
@@ -415,7 +415,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     positive(l.workspace_radius_m, p + ".workspace_radius_m");
   }
 
-  void sim(const SimDeviceSpec& s, const std::string& p, bool in_use) const {
+  void sim(const SimDeviceSpec& s, const std::string& p, bool in_use, double workspace_radius_m) const {
     const int mode = static_cast<int>(s.mode);
     if (mode < 0 || mode >= static_cast<int>(kSimModes.size()))
       fail(p + ".mode", "invalid mode " + std::to_string(mode));
@@ -433,6 +433,18 @@ class Validator : private yaml_util::ValueChecks<Validator> {
         fail(wp + ".time_s", "waypoint times must increase: must be > " + join_index(wl, i - 1) + ".time_s (" +
                                  fmt_num(s.waypoints[i - 1].time_s) + ") (got " + fmt_num(w.time_s) + ")");
       finite(w.position_m, wp + ".position_m");
+      // The waypoints are the device's own samples (device frame: the haptic
+      // loop maps them with offset_m and scale), and the loop rejects every
+      // sample beyond the workspace: the hand would never reach the scene
+      // ("inputs rejected: 2968 outside the workspace"). Between two waypoints
+      // inside the ball the path stays inside it.
+      const double distance_m = std::hypot(w.position_m[0], w.position_m[1], w.position_m[2]);
+      if (in_use && distance_m > workspace_radius_m)
+        fail(wp + ".position_m", "is " + fmt_num(distance_m) +
+                                     " m from the device origin, farther than device.limits.workspace_radius_m (" +
+                                     fmt_num(workspace_radius_m) +
+                                     " m): the haptic loop would reject those samples (waypoints are in the device "
+                                     "frame, before offset_m and scale)");
     }
     if (in_use && s.loop && !(s.waypoints.back().time_s > s.waypoints.front().time_s))
       fail(p + ".loop", "looping needs a timeline of positive length (at least 2 waypoints)");

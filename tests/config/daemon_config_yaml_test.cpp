@@ -382,6 +382,23 @@ TEST(DaemonConfigYaml, KeepGbAboveAnExabyteIsRefusedSayingWhatZeroDoes) {
   EXPECT_EQ(said.find("keeps every file"), std::string::npos) << said;
 }
 
+// A simulated device's waypoints are its raw samples (device frame; the
+// haptic loop maps them to the scene with offset_m and scale). One farther
+// from the device origin than device.limits.workspace_radius_m made every
+// sample be rejected ("inputs rejected: 2968 outside the workspace").
+TEST(DaemonConfigYaml, SimWaypointsOutsideTheWorkspaceAreRefused) {
+  const std::string said = expect_error(kBase, "device.sim.waypoints[1].position_m",
+                                        "is 2 m from the device origin, farther than "
+                                        "device.limits.workspace_radius_m (1 m)",
+                                        {"device.sim.waypoints[1].position_m=[2, 0, 0]"});
+  // kBase's first waypoint is 0.149 m from the origin, in the device frame whatever the offset.
+  expect_error(kBase, "device.sim.waypoints[0].position_m", "farther than device.limits.workspace_radius_m (0.1 m)",
+               {"device.limits.workspace_radius_m=0.1", "device.offset_m=[0.05, 0.05, 0.13]"});
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.limits.workspace_radius_m=0.15"}));
+  // Waypoints of a device not in use are not its samples.
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.kind=udp", "device.limits.workspace_radius_m=0.1"}));
+}
+
 TEST(DaemonConfigYaml, SimDeviceWaypoints) {
   expect_error(edit("    waypoints:\n      - {time_s: 0.0, position_m: [0.05, 0.05, 0.13]}\n      - {time_s: 1.0, "
                     "position_m: [0.05, 0.05, 0.094]}\n",
