@@ -12,6 +12,7 @@
 #include <string_view>
 #include <utility>
 
+#include "config/daemon_config_keys.hpp"
 #include "scene/yaml_util.hpp"
 #include "util/lcm_url.hpp"
 
@@ -51,6 +52,10 @@ constexpr double kMaxRamp_s = 10.0;
 constexpr double kMaxRampOut_s = 1.0;
 constexpr double kMaxTimeout_s = 60.0;
 constexpr double kMaxCrossfade_s = 1.0;
+// status_interval_s: each period writes a line to stdout (the journal) and
+// STATUS= to systemd; 1e-9 s wrote 108,120 lines in 3 s. Ten a second is
+// more than a person reads.
+constexpr double kMinStatusInterval_s = 0.1;
 constexpr double kMaxStatusInterval_s = 3600.0;
 // record.rotate_s: a week at most (files of a few GB at 1 kHz haptic rows).
 constexpr double kMinRotate_s = 1.0;
@@ -63,9 +68,7 @@ constexpr int kMaxRtPriority = 99;
 // CPU_SETSIZE: sched_setaffinity cannot name a CPU beyond it.
 constexpr int kMaxCpuIndex = 1023;
 
-const std::array<std::string_view, 10> kTopLevelKeys{"scene",   "state_dir", "status_interval_s", "max_scene_tets",
-                                                     "device",  "haptics",   "realtime",          "control",
-                                                     "publish", "record"};
+constexpr const auto& kTopLevelKeys = kDaemonTopLevelKeys;
 
 const yaml_util::DocumentKind kConfigDocument{
     "daemon config", "a daemon config needs at least a 'scene' key (see docs/daemon-config.md)"};
@@ -244,6 +247,9 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     if (c_.scene_path.empty()) fail("scene", "must not be empty (the scene file to load)");
     if (c_.state_dir.empty()) fail("state_dir", "must not be empty (recordings and exports go there)");
     positive(c_.status_interval_s, "status_interval_s");
+    at_least(c_.status_interval_s, kMinStatusInterval_s, "status_interval_s",
+             "each period writes a status line to stdout (the journal) and to systemd, and ten a second is more than "
+             "anyone reads");
     at_most(c_.status_interval_s, kMaxStatusInterval_s, "status_interval_s", "the status timer must fit its clock");
     if (c_.max_scene_tets < 1) fail("max_scene_tets", "must be >= 1 (got " + std::to_string(c_.max_scene_tets) + ")");
 
@@ -257,7 +263,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     // section does not wait for the day someone switches to it. Only "has
     // waypoints" and "names a session" depend on the kind.
     limits(d.limits, "device.limits");
-    sim(d.sim, "device.sim", d.kind == DeviceSpec::Kind::kSim);
+    sim(d.sim, "device.sim", d.kind == DeviceSpec::Kind::kSim, d.limits.workspace_radius_m);
     udp(d.udp, "device.udp");
     // The bridge drops a sender silent for udp.timeout_s; shorter than the
     // loop's device_timeout_s, a slow device's every pose started a new
@@ -337,7 +343,8 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     at_least(c_.record.rotate_s, kMinRotate_s, "record.rotate_s", "a file every few seconds is not a session");
     at_most(c_.record.rotate_s, kMaxRotate_s, "record.rotate_s", "the rotation timer must fit its clock");
     non_negative(c_.record.keep_gb, "record.keep_gb");
-    at_most(c_.record.keep_gb, 1e9, "record.keep_gb", "an exabyte; 0 keeps every file");
+    at_most(c_.record.keep_gb, 1e9, "record.keep_gb",
+            "an exabyte; 0 sets no size budget (a nearly full disk still removes the oldest automatic files)");
 
     const PublishSpec& pub = c_.publish;
     for (const auto& [rate, key] :
@@ -408,7 +415,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     positive(l.workspace_radius_m, p + ".workspace_radius_m");
   }
 
-  void sim(const SimDeviceSpec& s, const std::string& p, bool in_use) const {
+  void sim(const SimDeviceSpec& s, const std::string& p, bool in_use, double workspace_radius_m) const {
     const int mode = static_cast<int>(s.mode);
     if (mode < 0 || mode >= static_cast<int>(kSimModes.size()))
       fail(p + ".mode", "invalid mode " + std::to_string(mode));
@@ -426,6 +433,18 @@ class Validator : private yaml_util::ValueChecks<Validator> {
         fail(wp + ".time_s", "waypoint times must increase: must be > " + join_index(wl, i - 1) + ".time_s (" +
                                  fmt_num(s.waypoints[i - 1].time_s) + ") (got " + fmt_num(w.time_s) + ")");
       finite(w.position_m, wp + ".position_m");
+      // The waypoints are the device's own samples (device frame: the haptic
+      // loop maps them with offset_m and scale), and the loop rejects every
+      // sample beyond the workspace: the hand would never reach the scene
+      // ("inputs rejected: 2968 outside the workspace"). Between two waypoints
+      // inside the ball the path stays inside it.
+      const double distance_m = std::hypot(w.position_m[0], w.position_m[1], w.position_m[2]);
+      if (in_use && distance_m > workspace_radius_m)
+        fail(wp + ".position_m", "is " + fmt_num(distance_m) +
+                                     " m from the device origin, farther than device.limits.workspace_radius_m (" +
+                                     fmt_num(workspace_radius_m) +
+                                     " m): the haptic loop would reject those samples (waypoints are in the device "
+                                     "frame, before offset_m and scale)");
     }
     if (in_use && s.loop && !(s.waypoints.back().time_s > s.waypoints.front().time_s))
       fail(p + ".loop", "looping needs a timeline of positive length (at least 2 waypoints)");
@@ -495,7 +514,12 @@ DaemonConfig load_daemon_config(const std::string& path, const std::vector<std::
 }
 
 bool is_daemon_config_key(std::string_view key_path) {
-  const std::size_t end = key_path.find_first_of(".[");
+  // Trimmed as the override parser trims its key ("scene =x.yaml" sets
+  // `scene`): untrimmed, the service sent such an override to the scene.
+  const std::size_t first = key_path.find_first_not_of(" \t");
+  if (first == std::string_view::npos) return false;
+  key_path.remove_prefix(first);
+  const std::size_t end = key_path.find_first_of(".[ \t");
   const std::string_view head = key_path.substr(0, end);
   for (const std::string_view k : kTopLevelKeys)
     if (head == k) return true;

@@ -47,8 +47,9 @@ void validate_daemon_config(const DaemonConfig& c);
 
 // True when `key_path` ("haptics.rate_hz", "device.sim.waypoints[0].time_s")
 // starts with a top-level key of the daemon config; scene keys
-// ("material.youngs_modulus_Pa") never do. Lets a `set` command decide which
-// document a key belongs to.
+// ("material.youngs_modulus_Pa") never do. Spaces and tabs around it are
+// ignored, as in an override ("scene =x.yaml"). Lets a `set` command and the
+// service's --set decide which document a key belongs to.
 bool is_daemon_config_key(std::string_view key_path);
 
 }  // namespace tissue::config

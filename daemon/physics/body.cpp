@@ -1,10 +1,12 @@
 #include "physics/body.hpp"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "mesh/refine_ops.hpp"
 #include "physics/spring_law.hpp"
@@ -77,6 +79,76 @@ void Body::require_every_region_selects_a_node() const {
     check(scene_.prescribed[i].region, "prescribed[" + std::to_string(i) + "].region");
   for (std::size_t i = 0; i < scene_.loads.size(); ++i)
     check(scene_.loads[i].region, "loads[" + std::to_string(i) + "].region");
+
+  // A node is held by the first region that claims it: fixed ones, then
+  // prescribed ones in order (classify_node). A prescribed region whose every
+  // node another holds moves nothing, and a load on fixed and prescribed nodes
+  // only does no work (a tip load moved onto the clamped face: external work
+  // 0, the tip still); both ran as if they acted. Refuse them, naming what
+  // holds their nodes.
+  struct Holders {
+    bool free_node = false;                      // the region holds a free node
+    std::vector<std::size_t> fixed, prescribed;  // what holds the others: indices, ascending, each once
+  };
+  const auto holders = [&](const scene::Region& region) {
+    Holders h;
+    auto& [acts, fixed, prescribed] = h;
+    mesh_.for_each_node([&](NodeId n, const mesh::Node&) {
+      if (acts) return;
+      const scene::Vec3 p{rest_m[n][0], rest_m[n][1], rest_m[n][2]};
+      if (!region.contains(p, tol)) return;
+      if (kind[n] == NodeKind::kFree) {
+        acts = true;
+        return;
+      }
+      if (kind[n] == NodeKind::kPrescribed) {
+        prescribed.push_back(static_cast<std::size_t>(prescribed_index[n]));
+        return;
+      }
+      for (std::size_t i = 0; i < scene_.fixed.size(); ++i)
+        if (scene_.fixed[i].region.contains(p, tol)) fixed.push_back(i);
+    });
+    for (auto* v : {&fixed, &prescribed}) {
+      std::sort(v->begin(), v->end());
+      v->erase(std::unique(v->begin(), v->end()), v->end());
+    }
+    return h;
+  };
+  // "fixed by fixed[0] or fixed[2], or prescribed by prescribed[1]"
+  const auto held_by = [](const std::vector<std::size_t>& fixed, const std::vector<std::size_t>& prescribed) {
+    const auto keys = [](const char* list, const std::vector<std::size_t>& at) {
+      std::string out;
+      for (std::size_t j = 0; j < at.size(); ++j)
+        out += (j == 0 ? "" : " or ") + std::string(list) + "[" + std::to_string(at[j]) + "]";
+      return out;
+    };
+    std::string out;
+    if (!fixed.empty()) out = "fixed by " + keys("fixed", fixed);
+    if (!prescribed.empty())
+      out += (out.empty() ? "" : ", or ") + std::string("prescribed by ") + keys("prescribed", prescribed);
+    return out;
+  };
+  for (std::size_t i = 0; i < scene_.prescribed.size(); ++i) {
+    bool own = false;
+    mesh_.for_each_node(
+        [&](NodeId n, const mesh::Node&) { own = own || prescribed_index[n] == static_cast<std::int32_t>(i); });
+    if (own) continue;
+    // Not one of its nodes is its own: each is fixed or an earlier region's.
+    const Holders h = holders(scene_.prescribed[i].region);
+    throw scene::SceneModelError(
+        "prescribed[" + std::to_string(i) + "].region",
+        "every node it selects is " + held_by(h.fixed, h.prescribed) +
+            " (a node is held by the first region that selects it: fixed ones, then prescribed ones in order), so "
+            "it moves none; move it onto other nodes");
+  }
+  for (std::size_t i = 0; i < scene_.loads.size(); ++i) {
+    const Holders h = holders(scene_.loads[i].region);
+    if (!h.free_node)
+      throw scene::SceneModelError("loads[" + std::to_string(i) + "].region",
+                                   "every node it selects is " + held_by(h.fixed, h.prescribed) +
+                                       ", and a force on a fixed or prescribed node does nothing; move it onto free "
+                                       "nodes");
+  }
 }
 
 void Body::resize_to_mesh() {

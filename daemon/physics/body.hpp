@@ -92,8 +92,10 @@ class Body {
  private:
   void apply_log(const mesh::MeshChangeLog& log);
   void resize_to_mesh();
-  // Throws std::invalid_argument naming the key path of a fixed, prescribed
-  // or load region that holds no node of the starting mesh.
+  // Throws std::invalid_argument (scene::SceneModelError) naming the key
+  // path of a fixed, prescribed or load region that holds no node of the
+  // starting mesh, of a prescribed region every node of which another region
+  // holds, or of a load on no free node.
   void require_every_region_selects_a_node() const;
   void classify_node(NodeId n);
   // Puts a fixed or prescribed node on its target at time_s, moving as the

@@ -2,15 +2,18 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string_view>
 #include <utility>
 #include <vector>
 
+#include "config/daemon_config_keys.hpp"
 #include "mesh/kuhn_mesh.hpp"
 #include "physics/probes.hpp"
 #include "scene/scene_names.hpp"
@@ -32,8 +35,11 @@ using yaml_util::join_index;
 using yaml_util::join_key;
 using yaml_util::printable;
 
-// Largest scene file we read; anything bigger is not a hand-written scene.
-constexpr std::uintmax_t kMaxSceneFileBytes = 16u << 20;
+// Largest scene file we read: a scene is a few kilobytes (the shipped ones
+// 1-3 KB; one with every list at its limit, every key written, ~420 KB).
+// 16 MiB took 48 s and 3.9 GB to parse, on the daemon's control thread,
+// which feeds systemd's 5 s watchdog.
+constexpr std::uintmax_t kMaxSceneFileBytes = 1u << 20;
 // The most leaf tets a scene may ask for, at the start (cubes x 6 x
 // 2^min_depth) or by refining (adaptivity.max_tets): about 4 GB (~200 bytes a
 // tet with its springs and nodes). A typo such as cubes: [4000, 4000, 4], or
@@ -88,7 +94,7 @@ constexpr int kMaxSubsteps = 100'000;
 constexpr std::size_t kMaxProbes = 1000;
 // Regions are tested against every node (fixed, prescribed) or surface
 // triangle (loads) whenever the mesh changes: 20,000 loads on 20³ cubes took
-// 3 s a step, and a 16 MiB file holds ~170,000.
+// 3 s a step, and a 1 MiB file holds ~10,000.
 constexpr std::size_t kMaxRegionsPerList = 1000;
 constexpr std::size_t kMaxNameLength = 64;
 constexpr std::size_t kMaxSceneNameBytes = 200;  // the scene's own name (free text)
@@ -100,11 +106,43 @@ class Converter : public yaml_util::Reader {
  public:
   explicit Converter(const std::string& source) : Reader(source) {}
 
+  // A top-level key that is no scene section but is, or is close to, a
+  // daemon setting ("haptic.rate_hz" set on a scene, or under --config a
+  // misspelt daemon key, which goes to the scene) says so; the plain
+  // "unknown key" named the scene's sections only. A scene section's own
+  // suggestion (fields()) comes first.
+  void daemon_setting_hint(const YAML::Node& root, yaml_util::KeyList sections) const {
+    for (auto it = root.begin(); it != root.end(); ++it) {
+      if (!it->first.IsScalar()) continue;
+      const std::string& name = it->first.Scalar();
+      const bool plain =
+          !name.empty() && name.size() <= kMaxNameLength && std::all_of(name.begin(), name.end(), [](char c) {
+            return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+          });
+      if (!plain || std::find(sections.begin(), sections.end(), name) != sections.end() ||
+          yaml_util::suggest(name, sections))
+        continue;
+      const yaml_util::KeyList daemon_keys(config::kDaemonTopLevelKeys);
+      std::optional<std::string_view> near;
+      if (std::find(daemon_keys.begin(), daemon_keys.end(), name) != daemon_keys.end())
+        near = name;
+      else
+        near = yaml_util::suggest(name, daemon_keys);
+      if (near)
+        fail(name, "unknown key " + printable(name) + " (did you mean the daemon setting '" + std::string(*near) +
+                       "'? it belongs in the daemon config: tissued --config FILE, where --set routes it there); "
+                       "allowed keys: " +
+                       yaml_util::join_list(sections));
+    }
+  }
+
   Scene scene(const YAML::Node& root) {
     if (!root.IsMap()) fail("", "a scene document must be a map of sections, got " + describe_kind(root));
-    const FieldMap f = fields(root, "",
-                              {"name", "object", "material", "gravity_m_per_s2", "fixed", "prescribed", "loads",
-                               "adaptivity", "integrator", "probes", "tool"});
+    static constexpr std::array<std::string_view, 11> kSections{
+        "name",  "object",     "material",   "gravity_m_per_s2", "fixed", "prescribed",
+        "loads", "adaptivity", "integrator", "probes",           "tool"};
+    daemon_setting_hint(root, kSections);
+    const FieldMap f = fields(root, "", kSections);
     Scene s;
     s.source = source_;
     s.name = default_name(source_);

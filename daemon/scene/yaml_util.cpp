@@ -333,20 +333,33 @@ std::string at_mark(const YAML::Mark& m) {
   return "line " + std::to_string(m.line + 1) + ", column " + std::to_string(m.column + 1);
 }
 
-// Records where each document starts; ignores everything else.
+// Thrown by DocumentStarts past kMaxDocumentNodes: stops the parser there.
+struct TooManyNodes {};
+
+// Records where each document starts and counts the nodes; ignores the rest.
 class DocumentStarts : public YAML::EventHandler {
  public:
   void OnDocumentStart(const YAML::Mark& mark) override { starts.push_back(mark); }
   void OnDocumentEnd() override {}
-  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
-  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
-  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override {}
-  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override { count(); }
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override { count(); }
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override { count(); }
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {
+    count();
+  }
   void OnSequenceEnd() override {}
-  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {
+    count();
+  }
   void OnMapEnd() override {}
 
   std::vector<YAML::Mark> starts;
+
+ private:
+  void count() {
+    if (++nodes_ > kMaxDocumentNodes) throw TooManyNodes{};
+  }
+  std::size_t nodes_ = 0;
 };
 
 bool is_key_char(char c) {
@@ -418,7 +431,8 @@ bool path_within(const std::string& inner, const std::string& outer) {
 // Not YAML::LoadAll: in yaml-cpp 0.7 it never returns for some malformed
 // input (e.g. "!x\n,"), appending empty documents until memory runs out
 // (jbeder/yaml-cpp#1040, fixed upstream by PR #1319). Instead the parser is
-// asked for at most two documents, then YAML::Load builds the first.
+// asked for at most two documents, counting their nodes (a tree is never
+// built for more than kMaxDocumentNodes), then YAML::Load builds the first.
 YAML::Node load_document(const std::string& text, const std::string& source, const std::string& key_path,
                          const std::string& prefix, const DocumentKind& doc, bool allow_empty) {
   const auto error = [&](const std::string& reason) { return PathError(source, key_path, prefix + reason); };
@@ -441,6 +455,9 @@ YAML::Node load_document(const std::string& text, const std::string& source, con
       throw error("empty document: " + doc.empty_hint);
     }
     return root;
+  } catch (const TooManyNodes&) {
+    throw error("more than " + std::to_string(kMaxDocumentNodes) + " YAML nodes (scalars, lists and maps); a " +
+                doc.kind + " is far smaller, and the limit bounds the time and memory loading may take");
   } catch (const YAML::DeepRecursion& e) {
     throw error("YAML nesting too deep (the limit is " + std::to_string(e.depth()) + " levels)");
   } catch (const YAML::Exception& e) {

@@ -77,9 +77,9 @@ std::string edit(const std::string& from, const std::string& to) {
 }
 
 // Parsing `text` fails with a ConfigError naming kSource, exactly `key_path`,
-// and a reason containing `reason_part`.
-void expect_error(const std::string& text, const std::string& key_path, const std::string& reason_part,
-                  const std::vector<std::string>& overrides = {}) {
+// and a reason containing `reason_part`; returns the message.
+std::string expect_error(const std::string& text, const std::string& key_path, const std::string& reason_part,
+                         const std::vector<std::string>& overrides = {}) {
   try {
     parse_daemon_config(text, kSource, overrides);
     ADD_FAILURE() << "no error for key " << key_path << " (wanted '" << reason_part << "')";
@@ -92,7 +92,9 @@ void expect_error(const std::string& text, const std::string& key_path, const st
     if (!key_path.empty()) {
       EXPECT_NE(what.find(": " + key_path + ": "), std::string::npos) << what;
     }
+    return what;
   }
+  return {};
 }
 
 TEST(DaemonConfigYaml, BaseParsesWithEveryField) {
@@ -339,6 +341,12 @@ TEST(DaemonConfigYaml, PortsPrioritiesAndControlLimits) {
                "must be <= device.limits.max_stiffness_N_per_m (1000) / device.scale^2 (4) = 250", {"device.scale=2"});
   EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.scale=2", "haptics.coupling_stiffness_N_per_m=250"}));
   expect_error(edit("status_interval_s: 1.0", "status_interval_s: 0"), "status_interval_s", "must be > 0");
+  // A status line every nanosecond wrote 108,120 lines in 3 s.
+  expect_error(edit("status_interval_s: 1.0", "status_interval_s: 1e-9"), "status_interval_s",
+               "must be >= 0.1 (got 1e-09): ");
+  expect_error(edit("status_interval_s: 1.0", "status_interval_s: 0.09"), "status_interval_s", "must be >= 0.1");
+  EXPECT_EQ(parse_daemon_config(edit("status_interval_s: 1.0", "status_interval_s: 0.1"), kSource).status_interval_s,
+            0.1);
   // "" and null both switch the Unix socket off.
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "\"\""), kSource).control.unix_socket_path, "");
   EXPECT_EQ(parse_daemon_config(edit("/run/tissued/control.sock", "~"), kSource).control.unix_socket_path, "");
@@ -362,6 +370,33 @@ TEST(DaemonConfigYaml, ControlStalledAfterIsReadAndBounded) {
   expect_error(edit("stalled_after_s: 5", "stalled_after_s: 3601"), "control.stalled_after_s", "must be <= 3600");
   expect_error(edit("stalled_after_s: 5", "stalled_after_s: 1e300"), "control.stalled_after_s", "must be <= 3600");
   expect_error(edit("stalled_after_s: 5", "stalled_after_s: soon"), "control.stalled_after_s", "");
+}
+
+// record.keep_gb's bound said "0 keeps every file", which is not so since a
+// nearly full disk removes the oldest automatic files whatever the budget.
+TEST(DaemonConfigYaml, KeepGbAboveAnExabyteIsRefusedSayingWhatZeroDoes) {
+  const std::string said =
+      expect_error(kBase, "record.keep_gb", "must be <= 1e+09 (got 2e+09): ", {"record.keep_gb=2e9"});
+  EXPECT_NE(said.find("0 sets no size budget"), std::string::npos) << said;
+  EXPECT_NE(said.find("nearly full disk"), std::string::npos) << said;
+  EXPECT_EQ(said.find("keeps every file"), std::string::npos) << said;
+}
+
+// A simulated device's waypoints are its raw samples (device frame; the
+// haptic loop maps them to the scene with offset_m and scale). One farther
+// from the device origin than device.limits.workspace_radius_m made every
+// sample be rejected ("inputs rejected: 2968 outside the workspace").
+TEST(DaemonConfigYaml, SimWaypointsOutsideTheWorkspaceAreRefused) {
+  const std::string said = expect_error(kBase, "device.sim.waypoints[1].position_m",
+                                        "is 2 m from the device origin, farther than "
+                                        "device.limits.workspace_radius_m (1 m)",
+                                        {"device.sim.waypoints[1].position_m=[2, 0, 0]"});
+  // kBase's first waypoint is 0.149 m from the origin, in the device frame whatever the offset.
+  expect_error(kBase, "device.sim.waypoints[0].position_m", "farther than device.limits.workspace_radius_m (0.1 m)",
+               {"device.limits.workspace_radius_m=0.1", "device.offset_m=[0.05, 0.05, 0.13]"});
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.limits.workspace_radius_m=0.15"}));
+  // Waypoints of a device not in use are not its samples.
+  EXPECT_NO_THROW(parse_daemon_config(kBase, kSource, {"device.kind=udp", "device.limits.workspace_radius_m=0.1"}));
 }
 
 TEST(DaemonConfigYaml, SimDeviceWaypoints) {
@@ -465,6 +500,11 @@ TEST(DaemonConfigYaml, ValidateCatchesProgrammaticConfigs) {
 
 TEST(DaemonConfigYaml, DaemonKeysAreTellableFromSceneKeys) {
   EXPECT_TRUE(is_daemon_config_key("haptics.rate_hz"));
+  // Spaces around the key, as an override may have them ("scene =x.yaml"; the
+  // override parser trims them): routed to the scene, 'scene ' was refused there.
+  EXPECT_TRUE(is_daemon_config_key("scene "));
+  EXPECT_TRUE(is_daemon_config_key(" \thaptics.rate_hz"));
+  EXPECT_FALSE(is_daemon_config_key(" material.youngs_modulus_Pa "));
   EXPECT_TRUE(is_daemon_config_key("device.sim.waypoints[0].time_s"));
   EXPECT_TRUE(is_daemon_config_key("scene"));
   EXPECT_FALSE(is_daemon_config_key("material.youngs_modulus_Pa"));

@@ -78,6 +78,10 @@ TEST(Body, ARegionThatSelectsNoNodeIsRefusedNamingItsKey) {
       EXPECT_EQ(e.reason().rfind("selects no node of the mesh", 0), 0u) << e.what();
     }
   };
+  // Each on its own corner: a node a fixed region holds is neither moved nor
+  // loaded by another (Body.ARegionThatCanActOnNoNodeIsRefusedNamingWhatHoldsItsNodes).
+  const auto on_other_node = scene::Region::sphere({0.0, 0.0, 0.0}, 0.001);
+  const auto on_third_node = scene::Region::sphere({0.05, 0.0, 0.0}, 0.001);
   scene::Scene s = testing::free_cube_scene(1, 0);
   s.fixed.push_back({on_node});
   s.fixed.push_back({between});
@@ -85,14 +89,65 @@ TEST(Body, ARegionThatSelectsNoNodeIsRefusedNamingItsKey) {
   s.fixed.pop_back();
   s.prescribed.push_back({"poke", between, {0, 0, -0.001}, {}});
   refused(s, "prescribed[0].region");
-  s.prescribed.back().region = on_node;
+  s.prescribed.back().region = on_other_node;
   s.loads.push_back({"pull", between, {0, 0, -1}, {}});
   refused(s, "loads[0].region");
-  s.loads.back().region = on_node;
+  s.loads.back().region = on_third_node;
   EXPECT_NO_THROW(Body body(s));
   // One level down the face centre holds a node (a region may rely on min_depth).
   s = testing::free_cube_scene(1, 2);
   s.loads.push_back({"pull", scene::Region::sphere({0.05, 0.025, 0.025}, 0.001), {0, 0, -1}, {}});
+  EXPECT_NO_THROW(Body body(s));
+}
+
+// A node is held by the first region that claims it (fixed ones, then
+// prescribed ones in order). A prescribed region whose every node another
+// region holds moves nothing, and a load whose every node is fixed or
+// prescribed does no work; both ran as if they acted (a tip load on the
+// clamped face: external_work_J 0, tip displacement 0). Refused, naming the
+// key and what holds its nodes.
+TEST(Body, ARegionThatCanActOnNoNodeIsRefusedNamingWhatHoldsItsNodes) {
+  const auto refused = [](const scene::Scene& s, const std::string& key, const std::string& why) {
+    try {
+      Body body(s);
+      ADD_FAILURE() << key << ": accepted";
+    } catch (const scene::SceneModelError& e) {
+      EXPECT_EQ(e.key_path(), key) << e.what();
+      EXPECT_EQ(e.reason().rfind(why, 0), 0u) << e.what();
+    }
+  };
+  const auto face = [](double x) { return testing::box({x, 0, 0}, {x, 0.1, 0.1}); };
+  const auto node_on_face = [](double x) { return scene::Region::sphere({x, 0.05, 0.05}, 0.001); };
+  // Two cubes a side (0.05 m): faces at x = 0, 0.05, 0.1.
+  scene::Scene clamped = testing::free_cube_scene(2, 0);
+  clamped.fixed.push_back({face(0.0)});
+
+  scene::Scene s = clamped;
+  s.loads.push_back({"pull", face(0.0), {0, 0, -1}, {}});
+  refused(s, "loads[0].region", "every node it selects is fixed by fixed[0]");
+  s.loads.back().region = testing::box({0, 0, 0}, {0.05, 0.1, 0.1});  // the clamped face and the free middle
+  EXPECT_NO_THROW(Body body(s));
+
+  s = clamped;
+  s.prescribed.push_back({"poke", node_on_face(0.0), {0.01, 0, 0}, {}});
+  refused(s, "prescribed[0].region", "every node it selects is fixed by fixed[0]");
+
+  s = clamped;
+  s.prescribed.push_back({"face", face(0.1), {0, 0, -0.005}, {}});
+  s.prescribed.push_back({"poke", node_on_face(0.1), {0, 0, -0.02}, {}});
+  refused(s, "prescribed[1].region", "every node it selects is prescribed by prescribed[0]");
+  s.prescribed.pop_back();
+  s.loads.push_back({"pull", face(0.1), {0, 0, -1}, {}});
+  refused(s, "loads[0].region", "every node it selects is prescribed by prescribed[0]");
+  // Held partly by each: both named.
+  s.loads.back().region = testing::box({0, 0, 0.05}, {0.1, 0.1, 0.05});
+  s.fixed.push_back({face(0.05)});
+  refused(s, "loads[0].region",
+          "every node it selects is fixed by fixed[0] or fixed[1], or prescribed by prescribed[0]");
+  // A region that moves one node of its own is accepted, overlap or not.
+  s = clamped;
+  s.prescribed.push_back({"face", face(0.1), {0, 0, -0.005}, {}});
+  s.prescribed.push_back({"corner", testing::box({0.05, 0, 0}, {0.1, 0, 0}), {0, 0, -0.005}, {}});
   EXPECT_NO_THROW(Body body(s));
 }
 

@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <exception>
 #include <fstream>
+#include <iostream>
 #include <iterator>
 #include <limits>
 #include <memory>
@@ -666,6 +668,72 @@ TEST(SceneYamlErrors, MissingFile) {
   EXPECT_THROW(load_scene_file(std::string(TISSUE_SOURCE_DIR) + "/config/scenes"), SceneFileUnreadable);  // a directory
 }
 
+// A scene is a few kilobytes; a bigger file is refused unread (the daemon
+// reads it on its control thread, which the systemd watchdog watches).
+TEST(SceneYamlErrors, AFileLargerThanOneMebibyteIsRefusedUnread) {
+  TempDir dir;
+  const std::string path = dir / "big.yaml";
+  write_text(path, kMinimal + "# " + std::string((1u << 20) - kMinimal.size() - 2, 'x'));  // exactly 1 MiB
+  EXPECT_EQ(load_scene_file(path).object.cubes[0], 4);
+  write_text(path, kMinimal + "# " + std::string((1u << 20) - kMinimal.size() - 1, 'x'));
+  try {
+    load_scene_file(path);
+    FAIL() << "no error";
+  } catch (const SceneFileUnreadable& e) {
+    EXPECT_EQ(e.source(), path);
+    EXPECT_EQ(e.reason(), "cannot read scene file: 1048577 bytes is too large (the limit is 1048576 bytes)");
+  }
+}
+
+// Under the size limit a flow list of half a million zeros took seconds and
+// gigabytes to build before its length was checked (3 MiB: 6.6 s, 750 MB; the
+// control thread was blocked past the watchdog's 5 s). The node count refuses
+// it from the parser's events, before a tree is built.
+TEST(SceneYamlErrors, AHugeListIsRefusedByItsNodeCountNamingTheFileAndTheLimit) {
+  TempDir dir;
+  const std::string path = dir / "huge.yaml";
+  std::string text = kMinimal + "gravity_m_per_s2: [0";
+  while (text.size() < (1u << 20) - 4) text += ",0";
+  write_text(path, text + "]\n");
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    load_scene_file(path);
+    FAIL() << "no error";
+  } catch (const SceneFileUnreadable& e) {
+    FAIL() << "refused as unreadable, not by its node count: " << e.what();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.source(), path) << e.what();
+    EXPECT_EQ(e.key_path(), "") << e.what();
+    EXPECT_EQ(std::string(e.what()).rfind(path + ": ", 0), 0u) << e.what();
+    EXPECT_NE(e.reason().find("more than 100000 YAML nodes"), std::string::npos) << e.what();
+  }
+  // Printed, not asserted: a unit test does not time.
+  std::cout << "refused in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()
+            << " s\n";
+}
+
+// The node limit leaves room for every list at its own limit (1000 regions a
+// list, 1000 probes), each item with every key written out: ~83,000 nodes.
+TEST(SceneYaml, ASceneWithEveryListAtItsLimitIsWithinTheNodeLimit) {
+  const std::string box = "{box: {min_m: [0.1, 0, 0], max_m: [0.1, 0.1, 0.1]}}";
+  const std::string profile = "{start_s: 0, ramp_s: 0.5, release_s: 1.0}";
+  std::string text = kMinimal + "fixed:\n";
+  for (int i = 0; i < 1000; ++i) text += "  - region: {box: {min_m: [0, 0, 0], max_m: [0, 0.1, 0.1]}}\n";
+  text += "prescribed:\n";
+  for (int i = 0; i < 1000; ++i)
+    text += "  - {name: p" + std::to_string(i) + ", region: " + box +
+            ", displacement_m: [0, 0, -0.01], profile: " + profile + "}\n";
+  text += "loads:\n";
+  for (int i = 0; i < 1000; ++i)
+    text += "  - {name: l" + std::to_string(i) + ", region: " + box +
+            ", total_force_N: [0, 0, -1], profile: " + profile + "}\n";
+  text += "probes:\n";
+  for (int i = 0; i < 1000; ++i) text += "  - {name: q" + std::to_string(i) + ", rest_m: [0.1, 0.05, 0.05]}\n";
+  ASSERT_LT(text.size(), 1u << 20);
+  const Scene s = parse_scene(text, "limits.yaml");
+  EXPECT_EQ(s.fixed.size() + s.prescribed.size() + s.loads.size() + s.probes.size(), 4000u);
+}
+
 // What is wrong inside a file that was read is the file's own error, not an
 // unreadable file (the daemon blames its config's `scene` key only for the
 // latter).
@@ -804,6 +872,22 @@ TEST(SceneYamlOverrides, ValueThatBreaksValidationFailsWithTheKeyPath) {
   expect_error(kBase, "adaptivity.enabled", "expected a boolean", {"adaptivity.enabled=maybe"});
   expect_error(kBase, "gravity_m_per_s2", "not valid YAML", {"gravity_m_per_s2=[0,0"});
   expect_error(kBase, "gravity_m_per_s2", "expected a list of 3 numbers", {"gravity_m_per_s2=0,0,-9.81"});
+}
+
+// A daemon key set on the scene (tissued --batch, or a misspelt one under
+// --config, which routes unknown keys to the scene) was "unknown key
+// 'haptic'; allowed keys: name, object, ..." with no word of the daemon.
+TEST(SceneYamlOverrides, AKeyNearADaemonSettingSaysSo) {
+  const std::string typo = expect_error(
+      kMinimal, "haptic", "unknown key 'haptic' (did you mean the daemon setting 'haptics'?", {"haptic.rate_hz=500"});
+  EXPECT_NE(typo.find("allowed keys: name, object"), std::string::npos) << typo;
+  expect_error(kMinimal, "scene", "unknown key 'scene' (did you mean the daemon setting 'scene'?",
+               {"scene=cantilever.yaml"});
+  expect_error(kMinimal + "status_interval_s: 1\n", "status_interval_s",
+               "(did you mean the daemon setting 'status_interval_s'?");
+  // A scene key's own suggestion comes first.
+  const std::string scene_typo = expect_error(kMinimal + "materal: {}\n", "materal", "(did you mean 'material'?)");
+  EXPECT_EQ(scene_typo.find("daemon"), std::string::npos) << scene_typo;
 }
 
 TEST(SceneYamlOverrides, MalformedOverrideFailsClearly) {

@@ -530,6 +530,28 @@ TEST(YamlUtil, LoadDocumentTakesExactlyOneDocument) {
   expect_reason_has(load(std::string(20000, '[')), "f.yaml", "", "YAML nesting too deep (the limit is ");
 }
 
+// The node count is checked in the event pass, before yaml-cpp builds a tree:
+// a megabyte of "0," is half a million nodes, seconds and gigabytes to build.
+TEST(YamlUtil, LoadDocumentRefusesMoreThanAHundredThousandNodes) {
+  const auto flow_list = [](std::size_t items) {
+    std::string text = "[";
+    for (std::size_t i = 0; i < items; ++i) text += i == 0 ? "0" : ",0";
+    return text + "]";
+  };
+  // The list and its items: exactly the limit, then one more.
+  EXPECT_EQ(load_document(flow_list(99'999), "f.yaml", "", "", kKind, false).size(), 99'999u);
+  expect_path_error([&] { load_document(flow_list(100'000), "f.yaml", "k", "PRE: ", kKind, true); }, "f.yaml", "k",
+                    "PRE: more than 100000 YAML nodes (scalars, lists and maps); a thing is far smaller, and the "
+                    "limit bounds the time and memory loading may take");
+  // Maps and aliases count too.
+  std::string maps = "- &a {x: 1}\n";
+  for (int i = 0; i < 33'333; ++i) maps += "- *a\n";
+  EXPECT_NO_THROW(load_document(maps, "f.yaml", "", "", kKind, false));  // 1 + 3 + 33333 nodes
+  for (int i = 0; i < 70'000; ++i) maps += "- *a\n";
+  expect_reason_has([&] { load_document(maps, "f.yaml", "", "", kKind, false); }, "f.yaml", "",
+                    "more than 100000 YAML nodes");
+}
+
 TEST(YamlUtil, LoadDocumentPrefixKeyPathAndAllowEmpty) {
   // Empty is a value when allowed (an override's "key=").
   const YAML::Node empty = load_document("", "f.yaml", "k", "", kKind, true);
