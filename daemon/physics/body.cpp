@@ -4,11 +4,14 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "mesh/refine_ops.hpp"
+#include "mesh/surface.hpp"
+#include "physics/boundary.hpp"
 #include "physics/spring_law.hpp"
 
 namespace tissue::physics {
@@ -90,13 +93,12 @@ void Body::require_every_region_selects_a_node() const {
     bool free_node = false;                      // the region holds a free node
     std::vector<std::size_t> fixed, prescribed;  // what holds the others: indices, ascending, each once
   };
-  const auto holders = [&](const scene::Region& region) {
+  // Over the nodes `for_each_selected` visits.
+  const auto holders = [&](const auto& for_each_selected) {
     Holders h;
     auto& [acts, fixed, prescribed] = h;
-    mesh_.for_each_node([&](NodeId n, const mesh::Node&) {
+    for_each_selected([&](NodeId n) {
       if (acts) return;
-      const scene::Vec3 p{rest_m[n][0], rest_m[n][1], rest_m[n][2]};
-      if (!region.contains(p, tol)) return;
       if (kind[n] == NodeKind::kFree) {
         acts = true;
         return;
@@ -105,6 +107,7 @@ void Body::require_every_region_selects_a_node() const {
         prescribed.push_back(static_cast<std::size_t>(prescribed_index[n]));
         return;
       }
+      const scene::Vec3 p{rest_m[n][0], rest_m[n][1], rest_m[n][2]};
       for (std::size_t i = 0; i < scene_.fixed.size(); ++i)
         if (scene_.fixed[i].region.contains(p, tol)) fixed.push_back(i);
     });
@@ -134,15 +137,29 @@ void Body::require_every_region_selects_a_node() const {
         [&](NodeId n, const mesh::Node&) { own = own || prescribed_index[n] == static_cast<std::int32_t>(i); });
     if (own) continue;
     // Not one of its nodes is its own: each is fixed or an earlier region's.
-    const Holders h = holders(scene_.prescribed[i].region);
+    const scene::Region& region = scene_.prescribed[i].region;
+    const Holders h = holders([&](const auto& visit) {
+      mesh_.for_each_node([&](NodeId n, const mesh::Node&) {
+        if (region.contains({rest_m[n][0], rest_m[n][1], rest_m[n][2]}, tol)) visit(n);
+      });
+    });
     throw scene::SceneModelError(
         "prescribed[" + std::to_string(i) + "].region",
         "every node it selects is " + held_by(h.fixed, h.prescribed) +
             " (a node is held by the first region that selects it: fixed ones, then prescribed ones in order), so "
             "it moves none; move it onto other nodes");
   }
+  // A load acts on the nodes LoadDistribution gives it: the boundary
+  // triangles wholly in its region, else the nodes in it. A region holding
+  // the clamped face's triangles and a free node inside the body loads the
+  // face only.
+  mesh::SurfaceMesh surface;
+  if (!scene_.loads.empty()) mesh::extract_surface(mesh_, &surface);
   for (std::size_t i = 0; i < scene_.loads.size(); ++i) {
-    const Holders h = holders(scene_.loads[i].region);
+    const std::map<NodeId, double> acted_on = load_node_weights(*this, surface, scene_.loads[i].region);
+    const Holders h = holders([&](const auto& visit) {
+      for (const auto& [n, weight] : acted_on) visit(n);
+    });
     if (!h.free_node)
       throw scene::SceneModelError("loads[" + std::to_string(i) + "].region",
                                    "every node it selects is " + held_by(h.fixed, h.prescribed) +

@@ -36,28 +36,34 @@ void kinematic_nodes(const Body& body, std::vector<NodeId>& out) {
   });
 }
 
+std::map<NodeId, double> load_node_weights(const Body& body, const mesh::SurfaceMesh& surface,
+                                           const scene::Region& region) {
+  const double tol = 1e-6 * body.mesh().lattice_unit_m();
+  auto in_region = [&](NodeId n) {
+    return region.contains({body.rest_m[n][0], body.rest_m[n][1], body.rest_m[n][2]}, tol);
+  };
+  std::map<NodeId, double> weight;  // ordered: deterministic sums
+  for (const auto& tri : surface.triangles) {
+    const NodeId a = surface.vertex_nodes[tri[0]], b = surface.vertex_nodes[tri[1]], c = surface.vertex_nodes[tri[2]];
+    if (!in_region(a) || !in_region(b) || !in_region(c)) continue;
+    const double area = 0.5 * (body.rest_m[b] - body.rest_m[a]).cross(body.rest_m[c] - body.rest_m[a]).norm();
+    for (NodeId n : {a, b, c}) weight[n] += area / 3.0;
+  }
+  if (weight.empty())
+    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+      if (in_region(n)) weight[n] += body.mass_kg[n];
+    });
+  return weight;
+}
+
 void LoadDistribution::rebuild(const Body& body) {
   const auto& loads = body.scene().loads;
   shares_.assign(loads.size(), {});
   if (loads.empty()) return;
-  const double tol = 1e-6 * body.mesh().lattice_unit_m();
-  auto in_region = [&](const scene::Region& r, NodeId n) {
-    return r.contains({body.rest_m[n][0], body.rest_m[n][1], body.rest_m[n][2]}, tol);
-  };
   mesh::SurfaceMesh surface;
   mesh::extract_surface(body.mesh(), &surface);
   for (std::size_t i = 0; i < loads.size(); ++i) {
-    std::map<NodeId, double> weight;  // ordered: deterministic sums
-    for (const auto& tri : surface.triangles) {
-      const NodeId a = surface.vertex_nodes[tri[0]], b = surface.vertex_nodes[tri[1]], c = surface.vertex_nodes[tri[2]];
-      if (!in_region(loads[i].region, a) || !in_region(loads[i].region, b) || !in_region(loads[i].region, c)) continue;
-      const double area = 0.5 * (body.rest_m[b] - body.rest_m[a]).cross(body.rest_m[c] - body.rest_m[a]).norm();
-      for (NodeId n : {a, b, c}) weight[n] += area / 3.0;
-    }
-    if (weight.empty())
-      body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-        if (in_region(loads[i].region, n)) weight[n] += body.mass_kg[n];
-      });
+    const std::map<NodeId, double> weight = load_node_weights(body, surface, loads[i].region);
     double total = 0.0;
     for (const auto& [n, w] : weight) total += w;
     for (const auto& [n, w] : weight) shares_[i].emplace_back(n, w / total);

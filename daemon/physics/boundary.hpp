@@ -2,8 +2,10 @@
 // prescribed displacement) and external forces (gravity, region loads).
 #pragma once
 
+#include <map>
 #include <vector>
 
+#include "mesh/surface.hpp"
 #include "physics/body.hpp"
 
 namespace tissue::physics {
@@ -22,6 +24,13 @@ void kinematic_nodes(const Body& body, std::vector<NodeId>& out);
 // (region containing boundary triangles) is shared by lumped triangle area,
 // a volume or point load by lumped mass; either way the share of a node does
 // not depend on how finely the rest of the region is meshed.
+// The nodes a load on `region` acts on, with unnormalised weights: the
+// vertices of the boundary triangles wholly inside it, by lumped area; if
+// there are none, the nodes inside it, by lumped mass. One rule for
+// LoadDistribution and for the scene check that a load can act (Body).
+std::map<NodeId, double> load_node_weights(const Body& body, const mesh::SurfaceMesh& surface,
+                                           const scene::Region& region);
+
 class LoadDistribution {
  public:
   // Recomputes the node shares; call after every mesh change.

@@ -127,6 +127,15 @@ TEST(Body, ARegionThatCanActOnNoNodeIsRefusedNamingWhatHoldsItsNodes) {
   refused(s, "loads[0].region", "every node it selects is fixed by fixed[0]");
   s.loads.back().region = testing::box({0, 0, 0}, {0.05, 0.1, 0.1});  // the clamped face and the free middle
   EXPECT_NO_THROW(Body body(s));
+  // A region holding the clamped face's boundary triangles and a free node
+  // inside the body: a surface load goes to the triangles wholly in the
+  // region (LoadDistribution), all on fixed nodes, so it does nothing either.
+  // (Three cubes a side, 0.15 m: the sphere holds the clamped face's inner
+  // square and the four free nodes behind it, no other boundary triangle.)
+  s = testing::free_cube_scene(3, 0);
+  s.fixed.push_back({testing::box({0, 0, 0}, {0, 0.15, 0.15})});
+  s.loads.push_back({"pull", scene::Region::sphere({0.0, 0.075, 0.075}, 0.065), {0, 0, -1}, {}});
+  refused(s, "loads[0].region", "every node it selects is fixed by fixed[0]");
 
   s = clamped;
   s.prescribed.push_back({"poke", node_on_face(0.0), {0.01, 0, 0}, {}});
