@@ -130,7 +130,8 @@ class Converter : public yaml_util::Reader {
         near = yaml_util::suggest(name, daemon_keys);
       if (near)
         fail(name, "unknown key " + printable(name) + " (did you mean the daemon setting '" + std::string(*near) +
-                       "'? it belongs in the daemon config: tissued --config FILE, where --set routes it there); "
+                       "'? it belongs in the daemon config: tissued --config FILE, where --set routes it there; for a "
+                       "running daemon: edit that file and reload it (SIGHUP)); "
                        "allowed keys: " +
                        yaml_util::join_list(sections));
     }

@@ -881,6 +881,10 @@ TEST(SceneYamlOverrides, AKeyNearADaemonSettingSaysSo) {
   const std::string typo = expect_error(
       kMinimal, "haptic", "unknown key 'haptic' (did you mean the daemon setting 'haptics'?", {"haptic.rate_hz=500"});
   EXPECT_NE(typo.find("allowed keys: name, object"), std::string::npos) << typo;
+  // The same text answers the control protocol's `set`, which refuses daemon
+  // keys: it says how a running daemon takes one (not only --set, which a
+  // `set` user cannot use).
+  EXPECT_NE(typo.find("a running daemon: edit that file and reload it (SIGHUP)"), std::string::npos) << typo;
   expect_error(kMinimal, "scene", "unknown key 'scene' (did you mean the daemon setting 'scene'?",
                {"scene=cantilever.yaml"});
   expect_error(kMinimal + "status_interval_s: 1\n", "status_interval_s",
