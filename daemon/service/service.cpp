@@ -140,6 +140,16 @@ std::vector<std::string> automatic_recordings_oldest_first(const std::string& di
 }
 
 std::string mib(std::uint64_t bytes) { return std::to_string(bytes >> 20) + " MiB"; }
+
+// The key of a `key=value` override, trimmed of blanks as the override parser
+// trims it ("scene = x.yaml" sets `scene`).
+std::string_view override_key(std::string_view text) {
+  std::string_view key = text.substr(0, text.find('='));
+  const std::size_t first = key.find_first_not_of(" \t");
+  if (first == std::string_view::npos) return {};
+  key.remove_prefix(first);
+  return key.substr(0, key.find_last_not_of(" \t") + 1);
+}
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -181,7 +191,7 @@ scene::Scene Service::load_config_scene(const config::DaemonConfig& config) cons
     // the file and key themselves.
     std::string blame;
     for (const std::string& o : config_overrides())
-      if (o.rfind("scene=", 0) == 0) blame = " (set by the override " + yaml_util::printable(o) + ")";
+      if (override_key(o) == "scene") blame = " (set by the override " + yaml_util::printable(o) + ")";
     throw config::ConfigError(config.source, "scene", e.source() + ": " + e.reason() + blame);
   }
 }

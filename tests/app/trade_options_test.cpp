@@ -94,7 +94,7 @@ TEST(TradeOptions, EachErrorNamesTheOptionOrTheConflict) {
   // the built-in cantilever, never opening --scene-file).
   EXPECT_EQ(parse_error({"--table1", "--scene-file", "mine.yaml", "--set", "a=1"}),
             "--scene-file is the sweep's option (Table 1 and beam theory do not read it): add --sweep");
-  for (const std::vector<std::string> option : {std::vector<std::string>{"--scene", "beam"},
+  for (const std::vector<std::string>& option : {std::vector<std::string>{"--scene", "beam"},
                                                 {"--th", "20"},
                                                 {"--depths", "3"},
                                                 {"--integrators", "implicit"},

@@ -272,7 +272,10 @@ TEST(Service, BadConfigExitsWithCodeTwoNamingTheFile) {
 TEST(Service, AnUnreadableSceneNamesTheConfigsSceneKey) {
   TempDir dir;
   const std::string config = write_config(dir, scene_file("beam.yaml"));
-  for (const bool by_set : {false, true}) {
+  // The override's key may have blanks around it, as the override parser
+  // allows ("scene = gone.yaml" sets `scene`): the blame used to miss it.
+  for (const std::string set : {"", "scene=gone.yaml", " scene = gone.yaml"}) {
+    const bool by_set = !set.empty();
     if (!by_set) {
       std::string text = file_text(config);
       text.replace(text.find(scene_file("beam.yaml")), scene_file("beam.yaml").size(), "missing.yaml");
@@ -280,7 +283,7 @@ TEST(Service, AnUnreadableSceneNamesTheConfigsSceneKey) {
     }
     ServiceOptions options;
     options.config_path = config;
-    if (by_set) options.overrides = {"scene=gone.yaml"};
+    if (by_set) options.overrides = {set};
     options.err = std::tmpfile();
     options.out = std::tmpfile();
     EXPECT_EQ(Service(options).run(), kServiceBadConfig);
@@ -288,7 +291,7 @@ TEST(Service, AnUnreadableSceneNamesTheConfigsSceneKey) {
     const std::string scene = dir / (by_set ? "gone.yaml" : "missing.yaml");
     EXPECT_NE(err.find(config + ": scene: " + scene + ": cannot read scene file: no such file"), std::string::npos)
         << err;
-    EXPECT_EQ(err.find("(set by the override 'scene=gone.yaml')") != std::string::npos, by_set) << err;
+    EXPECT_EQ(err.find("(set by the override '" + set + "')") != std::string::npos, by_set) << err;
     std::fclose(options.err);
     std::fclose(options.out);
   }
@@ -1266,6 +1269,25 @@ TEST(Service, EveryRowOfASceneLoadedWhileRecordingIsInTheFileThatDescribesIt) {
   EXPECT_EQ(recorded_sim_times_s(state + "/s1-part3.h5").front(), cantilever_dt_s) << "cantilever's first step";
 }
 
+// Nothing can be made in `state` from construction until restore(),
+// whoever runs the test (root ignores permission bits): the directory moves
+// away, a file open in it goes on being written, and a regular file takes its
+// name.
+class UnusableStateDir {
+ public:
+  explicit UnusableStateDir(std::string state) : state_(std::move(state)), moved_(state_ + "-moved") {
+    std::filesystem::rename(state_, moved_);
+    std::ofstream(state_) << "not a directory";
+  }
+  void restore() {
+    std::filesystem::remove(state_);
+    std::filesystem::rename(moved_, state_);
+  }
+
+ private:
+  std::string state_, moved_;
+};
+
 // At a scene change an automatic recording goes on in a new file. One that
 // could not be made left it going on in the old file (as after a failed
 // rotation), whose last event had just said "the recording goes on in a new
@@ -1285,12 +1307,7 @@ TEST(Service, AnAutomaticRecordingWhoseNextFileCannotBeMadeStopsAtTheSceneChange
   const std::string old_name =
       std::filesystem::path(client.call("status")["result"]["recording"].value("file", "")).filename().string();
   ASSERT_EQ(old_name.rfind("auto-", 0), 0u) << old_name;
-  // Nothing can be made in state_dir from here on, whoever runs the test
-  // (root ignores permission bits): the directory moves away, the file open
-  // in it goes on being written, and a regular file takes its name.
-  const std::string moved = dir / "state-moved";
-  std::filesystem::rename(state, moved);
-  std::ofstream(state) << "not a directory";
+  UnusableStateDir unusable(state);
   const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
   ASSERT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
   const nlohmann::json result = loaded["result"];
@@ -1303,8 +1320,7 @@ TEST(Service, AnAutomaticRecordingWhoseNextFileCannotBeMadeStopsAtTheSceneChange
   EXPECT_NE(run.err_text().find("trying again in 2 s"), std::string::npos) << run.err_text();
   // The directory back: the next try (record.rotate_s after the change)
   // makes a file, which describes the scene running.
-  std::filesystem::remove(state);
-  std::filesystem::rename(moved, state);
+  unusable.restore();
   std::string next_file;
   for (int i = 0; i < 200 && next_file.empty(); ++i) {
     std::this_thread::sleep_for(50ms);
@@ -1341,10 +1357,7 @@ TEST(Service, RecordStopCancelsTheNextTryOfAnAutomaticRecordingStoppedAtTheScene
               {"record.auto_start=true", "record.rotate_s=1"});
   ControlClient client = connect(dir / "ctl.sock");
   ASSERT_TRUE(recording_has_sim_rows(client)) << client.call("status").dump();
-  // No file can be made in state_dir (as in the test above).
-  const std::string moved = dir / "state-moved";
-  std::filesystem::rename(state, moved);
-  std::ofstream(state) << "not a directory";
+  UnusableStateDir unusable(state);
   const nlohmann::json loaded = client.call("load_scene", {{"path", scene_file("contact.yaml")}});
   ASSERT_TRUE(loaded["ok"].get<bool>()) << loaded.dump();
   ASSERT_TRUE(loaded["result"].contains("recording_stopped")) << loaded.dump();
@@ -1353,8 +1366,7 @@ TEST(Service, RecordStopCancelsTheNextTryOfAnAutomaticRecordingStoppedAtTheScene
   EXPECT_TRUE(stop["result"]["file"].is_null()) << stop.dump();  // no file was open
   EXPECT_NE(stop["result"].value("cancelled", "").find("the automatic recording's next try"), std::string::npos)
       << stop.dump();
-  std::filesystem::remove(state);
-  std::filesystem::rename(moved, state);
+  unusable.restore();
   // Two record.rotate_s: a pending try would have made a file by then.
   bool started = false;
   for (const auto end = std::chrono::steady_clock::now() + 2s; std::chrono::steady_clock::now() < end && !started;) {
