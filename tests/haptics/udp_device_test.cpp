@@ -154,6 +154,16 @@ struct Started {
   UdpDevice device;
 };
 
+// The wildcard tests' setup: tissued bound to 0.0.0.0 and a fake device (on
+// 127.0.0.1) that sends its poses to `to_address`. The route back to
+// 127.0.0.1 leaves from 127.0.0.1, so any other to_address in 127/8 is
+// "another local address" (filter_to leaves the socket unconnected).
+struct WildcardBound {
+  explicit WildcardBound(const char* to_address) : s(wildcard_spec()), fake(s.device.local_port(), to_address) {}
+  Started s;
+  FakeDevice fake;
+};
+
 // Reads at now_ns until the device has taken `received` datagrams in total.
 bool read_until_received(UdpDevice& device, std::uint64_t received, std::int64_t now_ns, DeviceSample* out,
                          bool* result = nullptr) {
@@ -439,41 +449,50 @@ TEST(UdpDevice, AFloodFromElsewhereDoesNotDelayTheLiveDevice) {
 // the kernel dropped every later pose: each was lost after timeout_s and
 // taken again as a new session, and the force never ramped in.
 TEST(UdpDevice, AWildcardBoundDeviceKeepsASenderThatSendsToAnotherLocalAddress) {
-  Started s(wildcard_spec(0.05));
-  FakeDevice fake(s.device.local_port(), "127.0.1.1");
+  WildcardBound w("127.0.1.1");
+  UdpDevice& device = w.s.device;
+  FakeDevice& fake = w.fake;
   DeviceSample sample;
   for (int i = 1; i <= 10; ++i) {
     fake.send(pose_packet(i, Vec3(0.001 * i, 0, 0)));
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    s.device.read(kT0 + i * kMs, &sample);
+    device.read(kT0 + i * kMs, &sample);
   }
-  eventually([&] { return s.device.read(kT0 + 11 * kMs, &sample), s.device.stats().accepted >= 10; },
+  eventually([&] { return device.read(kT0 + 11 * kMs, &sample), device.stats().accepted >= 10; },
              std::chrono::milliseconds(500));
-  const UdpDevice::Stats st = s.device.stats();
+  const UdpDevice::Stats st = device.stats();
   EXPECT_EQ(st.accepted, 10u) << "poses to 127.0.1.1 were dropped after the first";
   EXPECT_EQ(st.sessions, 1u);
   EXPECT_EQ(sample.position_m.x(), 0.01);
-  s.device.write(kT0 + 11 * kMs, Vec3(0.5, 0, 0));
+  device.write(kT0 + 11 * kMs, Vec3(0.5, 0, 0));
   const std::optional<Packet> force = fake.receive();
   ASSERT_TRUE(force.has_value()) << "no force back to the sender";
   EXPECT_EQ(force->echo_sequence_number, 10);
+}
+
+// The fake device sends a pose, `flood` 200, the fake device another: that
+// one is read on the next tick, and none of the flood reached the socket (it
+// is connected to the fake device, so the kernel dropped them).
+void expect_a_flood_from_elsewhere_is_filtered(WildcardBound& w, FakeDevice& flood) {
+  UdpDevice& device = w.s.device;
+  w.fake.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  DeviceSample sample;
+  ASSERT_TRUE(read_until_received(device, 1, kT0, &sample));
+  for (int i = 0; i < 200; ++i) flood.send(pose_packet(1000 + i, Vec3(0.5, 0, 0)));
+  w.fake.send(pose_packet(2, Vec3(0.02, 0, 0)));
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // everything sent has arrived
+  ASSERT_TRUE(device.read(kT0 + kMs, &sample)) << "the device's pose was not read on the next tick";
+  EXPECT_EQ(sample.position_m.x(), 0.02);
+  EXPECT_EQ(device.stats().received, 2u) << "the flood reached the socket";
 }
 
 // Bound to 0.0.0.0, a sender whose poses go to the address the route back
 // to it leaves from (the usual case) still gets the kernel's filter: a flood
 // from elsewhere does not reach the socket while it is live.
 TEST(UdpDevice, AWildcardBoundDeviceStillFiltersAFloodFromElsewhere) {
-  Started s(wildcard_spec(0.05));
-  FakeDevice device(s.device.local_port()), flood(s.device.local_port());
-  device.send(pose_packet(1, Vec3(0.01, 0, 0)));
-  DeviceSample sample;
-  ASSERT_TRUE(read_until_received(s.device, 1, kT0, &sample));
-  for (int i = 0; i < 200; ++i) flood.send(pose_packet(1000 + i, Vec3(0.5, 0, 0)));
-  device.send(pose_packet(2, Vec3(0.02, 0, 0)));
-  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // everything sent has arrived
-  ASSERT_TRUE(s.device.read(kT0 + kMs, &sample)) << "the device's pose was not read on the next tick";
-  EXPECT_EQ(sample.position_m.x(), 0.02);
-  EXPECT_EQ(s.device.stats().received, 2u);
+  WildcardBound w("127.0.0.1");
+  FakeDevice flood(w.s.device.local_port());
+  expect_a_flood_from_elsewhere_is_filtered(w, flood);
 }
 
 // One pose whose sequence number leapt ahead (a glitch, a bad sender on the
