@@ -226,6 +226,9 @@ void UdpDevice::filter_to(const ip::udp::endpoint* peer) noexcept {
   // lost after timeout_s, taken again, lost again. Stay unconnected for this
   // session then; the other_sender check still refuses the rest, in userspace,
   // and write() names the source address of each force itself.
+  // (peer_to_ of an IPv6 link-local address carries the scope id of the
+  // interface the poses came in on, as the connected local endpoint does:
+  // without it no link-local session was ever connected.)
   boost::system::error_code ec;
   const ip::udp::endpoint local = socket_.local_endpoint(ec);
   if (!ec && local.address() == peer_to_) return;
@@ -268,7 +271,8 @@ std::size_t UdpDevice::receive(boost::system::error_code& ec) noexcept {
       ip::address_v6::bytes_type bytes;
       std::memcpy(bytes.data(), &info.ipi6_addr, bytes.size());
       const ip::address_v6 to(bytes);
-      to_ = to;
+      const ip::address_v6 scoped(bytes, to.is_link_local() ? info.ipi6_ifindex : 0);
+      to_ = scoped;
       // v4-mapped (an IPv4 datagram on a dual-stack socket): 224/4 is
       // multicast, 255.255.255.255 the limited broadcast. A subnet broadcast
       // cannot be told from here: the kernel refuses it as a source, and
@@ -276,7 +280,7 @@ std::size_t UdpDevice::receive(boost::system::error_code& ec) noexcept {
       const bool mapped_multicast = to.is_v4_mapped() && (bytes[12] & 0xF0) == 0xE0;
       const bool mapped_broadcast =
           to.is_v4_mapped() && bytes[12] == 0xFF && bytes[13] == 0xFF && bytes[14] == 0xFF && bytes[15] == 0xFF;
-      if (!to.is_multicast() && !mapped_multicast && !mapped_broadcast) reply_from_ = to;
+      if (!to.is_multicast() && !mapped_multicast && !mapped_broadcast) reply_from_ = scoped;
     }
   }
   return static_cast<std::size_t>(n);
@@ -309,7 +313,8 @@ UdpDevice::SendFrom UdpDevice::send_from_reply_address(std::size_t bytes, boost:
   } else {
     // man 7 ipv6: ipi6_addr is the source. On a dual-stack socket a v4-mapped
     // one is taken for an IPv4 peer (the kernel's IPv4 path reads the
-    // IPV6_PKTINFO of a v6 socket and wants it v4-mapped).
+    // IPV6_PKTINFO of a v6 socket and wants it v4-mapped). A link-local one
+    // needs its interface: the scope id it came in on.
     const ip::address_v6 from = peer_reply_from_.to_v6();
     in6_pktinfo info{};
     const ip::address_v6::bytes_type from_bytes = from.to_bytes();

@@ -155,7 +155,10 @@ class UdpDevice final : public Device {
   bool filtered_ = false;                // the socket is connected to peer_ (filter_to)
   bool wildcard_ = false;                // bound to 0.0.0.0 or ::
   bool filter_refused_ = false;          // this session's poses come to another local address: no connect
-  boost::asio::ip::address to_;          // destination of the datagram in receive_buffer_ (wildcard_ only)
+  // Destination of the datagram in receive_buffer_ (wildcard_ only); an IPv6
+  // link-local one carries the scope id of the interface it came in on, as
+  // the socket's local endpoint does once connected over that interface.
+  boost::asio::ip::address to_;
   // The local address a reply to that datagram leaves from: IPv4 the
   // kernel's own choice (in_pktinfo.ipi_spec_dst: to_, or the interface's
   // address for a broadcast); IPv6 to_, unspecified for a multicast to_ (no

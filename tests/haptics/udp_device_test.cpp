@@ -89,10 +89,11 @@ class FakeDevice {
   enum class Link { kUnconnected, kConnected };
 
   // `tissued_address`: where the poses go (any local address reaches a
-  // device bound to 0.0.0.0; all of 127/8 is on lo).
+  // device bound to 0.0.0.0; all of 127/8 is on lo). `own_address`: where
+  // the fake itself is bound.
   explicit FakeDevice(std::uint16_t tissued_port, const char* tissued_address = "127.0.0.1",
-                      Link link = Link::kUnconnected)
-      : socket_(io_, ip::udp::endpoint(ip::make_address("127.0.0.1"), 0)),
+                      Link link = Link::kUnconnected, const char* own_address = "127.0.0.1")
+      : socket_(io_, ip::udp::endpoint(ip::make_address(own_address), 0)),
         tissued_(ip::make_address(tissued_address), tissued_port) {
     socket_.non_blocking(true);
     socket_.set_option(ip::udp::socket::broadcast(true));  // tissued_address may be a broadcast address
@@ -168,8 +169,8 @@ struct Started {
 // in 127/8 is "another local address" (filter_to leaves the socket unconnected).
 struct WildcardBound {
   explicit WildcardBound(const char* to_address, FakeDevice::Link link = FakeDevice::Link::kUnconnected,
-                         const char* bind_address = "0.0.0.0")
-      : s(wildcard_spec(bind_address)), fake(s.device.local_port(), to_address, link) {}
+                         const char* bind_address = "0.0.0.0", const char* own_address = "127.0.0.1")
+      : s(wildcard_spec(bind_address)), fake(s.device.local_port(), to_address, link, own_address) {}
   Started s;
   FakeDevice fake;
 };
@@ -559,6 +560,100 @@ TEST(UdpDevice, AWildcardBoundDeviceAnswersPosesSentToABroadcastAddress) {
     WildcardBound w("127.255.255.255", FakeDevice::Link::kUnconnected, bind_address);
     expect_forces_reach_the_fake_device(w);
   }
+}
+
+// IPv6 link-local addresses, in a private network namespace where lo carries
+// fe80::1/64 (tests/haptics/CMakeLists.txt, UdpDeviceNetns.InPrivateNamespace).
+bool in_link_local_netns() { return std::getenv("TISSUE_TEST_UDP_LINK_LOCAL") != nullptr; }
+
+// A link-local sender gets the kernel's filter like any other. The socket's
+// local address after the connect carries lo's scope id, the poses'
+// destination (from IPV6_PKTINFO) none: compared as endpoints they never
+// matched, so every link-local session stayed unconnected and a flood from
+// another port of the sender's address reached the socket.
+TEST(UdpDeviceNetns, AWildcardBoundDeviceFiltersAFloodWhileALinkLocalSenderIsLive) {
+  if (!in_link_local_netns()) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  WildcardBound w("fe80::1%lo", FakeDevice::Link::kUnconnected, "::", "fe80::1%lo");
+  FakeDevice flood(w.s.device.local_port(), "fe80::1%lo", FakeDevice::Link::kUnconnected, "fe80::1%lo");
+  expect_a_flood_from_elsewhere_is_filtered(w, flood);
+}
+
+// A connected device on ::1 that sends to fe80::1%lo (the route back to ::1
+// leaves from ::1: unconnected session) gets its forces from fe80::1, which
+// as a source needs its interface named (IPV6_PKTINFO's ifindex).
+TEST(UdpDeviceNetns, AWildcardBoundDeviceAnswersFromTheLinkLocalAddressThePosesCameTo) {
+  if (!in_link_local_netns()) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  WildcardBound w("fe80::1%lo", FakeDevice::Link::kConnected, "::", "::1");
+  expect_forces_reach_the_fake_device(w);
+}
+
+// One pose whose sequence number leapt ahead (a glitch, a bad sender on the
+// same address) is accepted, as any higher number is; the real stream below it
+// is followed again after kResyncPackets poses, not locked out for timeout_s.
+TEST(UdpDevice, ASequenceThatLeaptAheadIsFollowedBackAfterThreePoses) {
+  Started s(0.05);
+  FakeDevice fake(s.device.local_port());
+  DeviceSample sample;
+  std::uint64_t sent = 0;
+  auto send_and_read = [&](std::int64_t sequence, double x_m, std::int64_t now_ns) {
+    fake.send(pose_packet(sequence, Vec3(x_m, 0, 0)));
+    ++sent;
+    bool got = false;
+    EXPECT_TRUE(read_until_received(s.device, sent, now_ns, &sample, &got));
+    return got;
+  };
+  for (int i = 1; i <= 5; ++i) EXPECT_TRUE(send_and_read(i, 0.001 * i, kT0 + i * kMs));
+  EXPECT_TRUE(send_and_read(std::int64_t{1} << 62, 0.5, kT0 + 6 * kMs));
+  EXPECT_EQ(sample.position_m.x(), 0.5);
+  EXPECT_FALSE(send_and_read(6, 0.006, kT0 + 7 * kMs));
+  EXPECT_FALSE(send_and_read(7, 0.007, kT0 + 8 * kMs));
+  EXPECT_TRUE(send_and_read(8, 0.008, kT0 + 9 * kMs)) << "the third in a row is followed";
+  EXPECT_EQ(sample.position_m.x(), 0.008);
+  EXPECT_TRUE(send_and_read(9, 0.009, kT0 + 10 * kMs));
+  UdpDevice::Stats st = s.device.stats();
+  EXPECT_EQ(st.out_of_order, 2u);
+  EXPECT_EQ(st.resyncs, 1u);
+  EXPECT_EQ(st.sessions, 1u);
+
+  // Duplicates and a reordering never add up to a resync: each is followed by
+  // a pose above the last accepted one, or repeats the same number.
+  for (int i = 0; i < 5; ++i) EXPECT_FALSE(send_and_read(9, 0.1, kT0 + 11 * kMs));
+  EXPECT_TRUE(send_and_read(11, 0.011, kT0 + 12 * kMs));
+  EXPECT_FALSE(send_and_read(10, 0.1, kT0 + 13 * kMs));
+  EXPECT_TRUE(send_and_read(12, 0.012, kT0 + 14 * kMs));
+  EXPECT_FALSE(send_and_read(11, 0.1, kT0 + 15 * kMs));
+  EXPECT_TRUE(send_and_read(13, 0.013, kT0 + 16 * kMs));
+  st = s.device.stats();
+  EXPECT_EQ(st.out_of_order, 2u + 7u);
+  EXPECT_EQ(st.resyncs, 1u);
+  EXPECT_EQ(sample.position_m.x(), 0.013);
+}
+
+// A lost sender gets forces until one zero force has gone, then none: its
+// address may no longer be a device. Its next pose makes it live again.
+TEST(UdpDevice, ALostSenderGetsForcesUntilAZeroForceThenNothing) {
+  Started s(0.05);
+  FakeDevice fake(s.device.local_port());
+  fake.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  DeviceSample sample;
+  ASSERT_TRUE(read_until_received(s.device, 1, kT0, &sample));
+  s.device.write(kT0 + 1 * kMs, Vec3(0, 0, 0));  // live: a zero force goes
+  s.device.write(kT0 + 2 * kMs, Vec3(0, 0, 0));
+  s.device.write(kT0 + 60 * kMs, Vec3(0.5, 0, 0));  // lost, ramping out: goes
+  s.device.write(kT0 + 61 * kMs, Vec3(0, 0, 0));    // the first zero after the loss: goes
+  s.device.write(kT0 + 62 * kMs, Vec3(0, 0, 0));    // then nothing
+  s.device.write(kT0 + 500 * kMs, Vec3(0, 0, 0));
+  EXPECT_EQ(s.device.stats().sent, 4u);
+  std::vector<double> forces_x;
+  while (const std::optional<Packet> f = fake.receive(std::chrono::milliseconds(200)))
+    forces_x.push_back(f->force_N[0]);
+  EXPECT_EQ(forces_x, (std::vector<double>{0.0, 0.0, 0.5, 0.0}));
+
+  fake.send(pose_packet(1, Vec3(0.02, 0, 0)));  // back: a new session
+  ASSERT_TRUE(read_until_received(s.device, 2, kT0 + 600 * kMs, &sample));
+  s.device.write(kT0 + 601 * kMs, Vec3(0, 0, 0));
+  EXPECT_EQ(s.device.stats().sent, 5u);
+  EXPECT_TRUE(fake.receive().has_value());
 }
 
 // The bridge under the haptic loop, on a synthetic clock: a device that sends
