@@ -139,6 +139,9 @@ bool UdpDevice::start(std::string* error) {
   peer_ = ip::udp::endpoint();
   filtered_ = false;  // a new socket: not connected
   filter_refused_ = false;
+  peer_to_ = ip::address();
+  peer_reply_from_ = ip::address();
+  reply_from_refused_ = false;
   buttons_.store(0, std::memory_order_relaxed);
   for (auto& r : rejected_) r.store(0, std::memory_order_relaxed);
   for (auto* c :
@@ -193,9 +196,11 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
   if (!live) {
     bump(sessions_);
     filter_refused_ = false;  // a new sender: it may be reached where the route back leaves from
+    reply_from_refused_ = false;
   }
   peer_ = from_;
   peer_to_ = to_;
+  peer_reply_from_ = reply_from_;
   have_pose_ = true;
   last_accept_ns_ = now_ns;
   last_sequence_number_ = packet.sequence_number;
@@ -219,7 +224,11 @@ void UdpDevice::filter_to(const ip::udp::endpoint* peer) noexcept {
   // local address (a hostname on 127.0.1.1, a secondary address, broadcast),
   // the kernel would drop every one of them from now on: the sender would be
   // lost after timeout_s, taken again, lost again. Stay unconnected for this
-  // session then; the other_sender check still refuses the rest, in userspace.
+  // session then; the other_sender check still refuses the rest, in userspace,
+  // and write() names the source address of each force itself.
+  // (peer_to_ of an IPv6 link-local address carries the scope id of the
+  // interface the poses came in on, as the connected local endpoint does:
+  // without it no link-local session was ever connected.)
   boost::system::error_code ec;
   const ip::udp::endpoint local = socket_.local_endpoint(ec);
   if (!ec && local.address() == peer_to_) return;
@@ -249,20 +258,85 @@ std::size_t UdpDevice::receive(boost::system::error_code& ec) noexcept {
   ec = boost::system::error_code();
   from_.resize(std::min<std::size_t>(msg.msg_namelen, from_.capacity()));
   to_ = ip::address();
+  reply_from_ = ip::address();
   for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
     if (c->cmsg_level == IPPROTO_IP && c->cmsg_type == IP_PKTINFO) {
       in_pktinfo info;
       std::memcpy(&info, CMSG_DATA(c), sizeof info);
       to_ = ip::address_v4(ntohl(info.ipi_addr.s_addr));  // the header's destination
+      reply_from_ = ip::address_v4(ntohl(info.ipi_spec_dst.s_addr));
     } else if (c->cmsg_level == IPPROTO_IPV6 && c->cmsg_type == IPV6_PKTINFO) {
       in6_pktinfo info;
       std::memcpy(&info, CMSG_DATA(c), sizeof info);
       ip::address_v6::bytes_type bytes;
       std::memcpy(bytes.data(), &info.ipi6_addr, bytes.size());
-      to_ = ip::address_v6(bytes);
+      const ip::address_v6 to(bytes);
+      const ip::address_v6 scoped(bytes, to.is_link_local() ? info.ipi6_ifindex : 0);
+      to_ = scoped;
+      // v4-mapped (an IPv4 datagram on a dual-stack socket): 224/4 is
+      // multicast, 255.255.255.255 the limited broadcast. A subnet broadcast
+      // cannot be told from here: the kernel refuses it as a source, and
+      // write() falls back to the route's choice for the session.
+      const bool mapped_multicast = to.is_v4_mapped() && (bytes[12] & 0xF0) == 0xE0;
+      const bool mapped_broadcast =
+          to.is_v4_mapped() && bytes[12] == 0xFF && bytes[13] == 0xFF && bytes[14] == 0xFF && bytes[15] == 0xFF;
+      if (!to.is_multicast() && !mapped_multicast && !mapped_broadcast) reply_from_ = scoped;
     }
   }
   return static_cast<std::size_t>(n);
+}
+
+UdpDevice::SendFrom UdpDevice::send_from_reply_address(std::size_t bytes, boost::system::error_code& ec) noexcept {
+  // Connected (filter_to), the socket's local address already is the one the
+  // poses came to; not bound to a wildcard, there is only one.
+  if (!wildcard_ || filtered_ || reply_from_refused_ || peer_reply_from_.is_unspecified()) return SendFrom::kNotUsed;
+  iovec iov{send_buffer_.data(), bytes};
+  alignas(cmsghdr) unsigned char control[CMSG_SPACE(sizeof(in6_pktinfo))] = {};
+  static_assert(sizeof(in6_pktinfo) >= sizeof(in_pktinfo), "the control buffer holds either");
+  msghdr msg{};
+  msg.msg_name = peer_.data();
+  msg.msg_namelen = static_cast<socklen_t>(peer_.size());
+  msg.msg_iov = &iov;
+  msg.msg_iovlen = 1;
+  msg.msg_control = control;
+  if (peer_reply_from_.is_v4()) {
+    // man 7 ip: a non-zero ipi_spec_dst is the source address (ipi_ifindex 0:
+    // the route to peer_ picks the interface).
+    in_pktinfo info{};
+    info.ipi_spec_dst.s_addr = htonl(peer_reply_from_.to_v4().to_uint());
+    msg.msg_controllen = CMSG_SPACE(sizeof info);
+    cmsghdr* c = CMSG_FIRSTHDR(&msg);
+    c->cmsg_level = IPPROTO_IP;
+    c->cmsg_type = IP_PKTINFO;
+    c->cmsg_len = CMSG_LEN(sizeof info);
+    std::memcpy(CMSG_DATA(c), &info, sizeof info);
+  } else {
+    // man 7 ipv6: ipi6_addr is the source. On a dual-stack socket a v4-mapped
+    // one is taken for an IPv4 peer (the kernel's IPv4 path reads the
+    // IPV6_PKTINFO of a v6 socket and wants it v4-mapped). A link-local one
+    // needs its interface: the scope id it came in on.
+    const ip::address_v6 from = peer_reply_from_.to_v6();
+    in6_pktinfo info{};
+    const ip::address_v6::bytes_type from_bytes = from.to_bytes();
+    std::memcpy(&info.ipi6_addr, from_bytes.data(), from_bytes.size());
+    info.ipi6_ifindex = from.scope_id();
+    msg.msg_controllen = CMSG_SPACE(sizeof info);
+    cmsghdr* c = CMSG_FIRSTHDR(&msg);
+    c->cmsg_level = IPPROTO_IPV6;
+    c->cmsg_type = IPV6_PKTINFO;
+    c->cmsg_len = CMSG_LEN(sizeof info);
+    std::memcpy(CMSG_DATA(c), &info, sizeof info);
+  }
+  if (::sendmsg(socket_.native_handle(), &msg, MSG_DONTWAIT | MSG_NOSIGNAL) >= 0) {
+    ec = boost::system::error_code();
+    return SendFrom::kSent;
+  }
+  const int error = errno;
+  ec = boost::system::error_code(error, boost::asio::error::get_system_category());
+  // Not a usable source, or no route from it (a v4-mapped subnet broadcast:
+  // ENETUNREACH; an address removed since: EINVAL, EADDRNOTAVAIL).
+  const bool source_refused = error == EINVAL || error == EADDRNOTAVAIL || error == ENETUNREACH;
+  return source_refused ? SendFrom::kSourceRefused : SendFrom::kSent;
 }
 
 bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
@@ -323,7 +397,14 @@ void UdpDevice::write(std::int64_t now_ns, const Vec3& force_N) noexcept {
     return;
   }
   boost::system::error_code ec;
-  socket_.send_to(boost::asio::buffer(send_buffer_.data(), static_cast<std::size_t>(bytes)), peer_, 0, ec);
+  const SendFrom how = send_from_reply_address(static_cast<std::size_t>(bytes), ec);
+  if (how != SendFrom::kSent) {
+    socket_.send_to(boost::asio::buffer(send_buffer_.data(), static_cast<std::size_t>(bytes)), peer_, 0, ec);
+    // The route's own source reaches the peer where the named one did not:
+    // use it for the rest of the session (one syscall a tick again). Not when
+    // both failed: that was the network, not the source.
+    if (how == SendFrom::kSourceRefused && !ec) reply_from_refused_ = true;
+  }
   bump(ec ? send_failures_ : sent_);  // would_block: dropped, the next tick sends a newer force
   last_sent_zero_ = !ec && zero;
 }

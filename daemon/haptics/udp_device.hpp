@@ -5,6 +5,12 @@
 // UdpDeviceSpec.bind_address:port; every write() answers the sender of the
 // newest valid pose with a kind = force packet.
 //
+// Bound to a wildcard address (0.0.0.0, ::), forces leave from the local
+// address the newest pose came to (sendmsg with IP_PKTINFO / IPV6_PKTINFO),
+// not from whichever address the route back to the device prefers: a device
+// that connect()s its socket to tissued's address takes datagrams only from
+// exactly there.
+//
 // Real-time: read() and write() run in the 1 kHz tick. The socket is
 // non-blocking; read() drains at most kMaxDatagramsPerRead waiting datagrams
 // into a preallocated buffer and keeps the newest valid pose, returning true
@@ -124,8 +130,15 @@ class UdpDevice final : public Device {
   // and sets filter_refused_ for the session).
   void filter_to(const boost::asio::ip::udp::endpoint* peer) noexcept;
   // One datagram into receive_buffer_, its source into from_ and, when bound
-  // to a wildcard address, its destination into to_.
+  // to a wildcard address, its destination into to_ and reply_from_.
   std::size_t receive(boost::system::error_code& ec) noexcept;
+  // Sends send_buffer_[0, bytes) to peer_ from peer_reply_from_ (sendmsg with
+  // a PKTINFO control message): kSent (ec says how it went), kNotUsed (not
+  // bound to a wildcard address, connected, no such address, refused earlier
+  // this session) or kSourceRefused (the kernel would not send from it): for
+  // those two the caller sends plainly. One syscall, stack buffers only.
+  enum class SendFrom { kSent, kNotUsed, kSourceRefused };
+  SendFrom send_from_reply_address(std::size_t bytes, boost::system::error_code& ec) noexcept;
   static void bump(std::atomic<std::uint64_t>& counter) noexcept {
     counter.store(counter.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // one writer
   }
@@ -142,8 +155,18 @@ class UdpDevice final : public Device {
   bool filtered_ = false;                // the socket is connected to peer_ (filter_to)
   bool wildcard_ = false;                // bound to 0.0.0.0 or ::
   bool filter_refused_ = false;          // this session's poses come to another local address: no connect
-  boost::asio::ip::address to_;          // destination of the datagram in receive_buffer_ (wildcard_ only)
-  boost::asio::ip::address peer_to_;     // destination of the newest accepted pose (wildcard_ only)
+  // Destination of the datagram in receive_buffer_ (wildcard_ only); an IPv6
+  // link-local one carries the scope id of the interface it came in on, as
+  // the socket's local endpoint does once connected over that interface.
+  boost::asio::ip::address to_;
+  // The local address a reply to that datagram leaves from: IPv4 the
+  // kernel's own choice (in_pktinfo.ipi_spec_dst: to_, or the interface's
+  // address for a broadcast); IPv6 to_, unspecified for a multicast to_ (no
+  // source can be one; the route picks).
+  boost::asio::ip::address reply_from_;
+  boost::asio::ip::address peer_to_;          // to_ of the newest accepted pose (wildcard_ only)
+  boost::asio::ip::address peer_reply_from_;  // reply_from_ of the newest accepted pose (wildcard_ only)
+  bool reply_from_refused_ = false;           // peer_reply_from_ failed as a source, the route's did not (this session)
   std::array<unsigned char, kReceiveBufferBytes> receive_buffer_{};
   std::array<unsigned char, kReceiveBufferBytes> send_buffer_{};
 

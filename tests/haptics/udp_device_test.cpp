@@ -83,17 +83,26 @@ std::vector<unsigned char> encode(const T& msg) {
 // The far side: what a device box or a vendor-SDK shim does.
 class FakeDevice {
  public:
+  // kConnected: connect()s its socket to tissued's address and port, as many
+  // device bridges do; the kernel then hands it only datagrams from exactly
+  // there, so a force from any other source address never arrives.
+  enum class Link { kUnconnected, kConnected };
+
   // `tissued_address`: where the poses go (any local address reaches a
-  // device bound to 0.0.0.0; all of 127/8 is on lo).
-  explicit FakeDevice(std::uint16_t tissued_port, const char* tissued_address = "127.0.0.1")
-      : socket_(io_, ip::udp::endpoint(ip::make_address("127.0.0.1"), 0)),
+  // device bound to 0.0.0.0; all of 127/8 is on lo). `own_address`: where
+  // the fake itself is bound.
+  explicit FakeDevice(std::uint16_t tissued_port, const char* tissued_address = "127.0.0.1",
+                      Link link = Link::kUnconnected, const char* own_address = "127.0.0.1")
+      : socket_(io_, ip::udp::endpoint(ip::make_address(own_address), 0)),
         tissued_(ip::make_address(tissued_address), tissued_port) {
     socket_.non_blocking(true);
+    socket_.set_option(ip::udp::socket::broadcast(true));  // tissued_address may be a broadcast address
+    if (link == Link::kConnected) socket_.connect(tissued_);
   }
 
   void send_bytes(const std::vector<unsigned char>& bytes) {
     boost::system::error_code ec;
-    socket_.send_to(boost::asio::buffer(bytes), tissued_, 0, ec);
+    socket_.send_to(boost::asio::buffer(bytes), tissued_, 0, ec);  // connected: the same address, allowed
     ASSERT_FALSE(ec) << ec.message();
   }
   void send(const Packet& p) { send_bytes(encode(p)); }
@@ -138,9 +147,9 @@ config::UdpDeviceSpec loopback_spec(double timeout_s = 0.05) {
   return spec;
 }
 
-config::UdpDeviceSpec wildcard_spec(double timeout_s = 0.05) {
+config::UdpDeviceSpec wildcard_spec(const char* bind_address = "0.0.0.0", double timeout_s = 0.05) {
   config::UdpDeviceSpec spec = loopback_spec(timeout_s);
-  spec.bind_address = "0.0.0.0";  // what docs/daemon-config.md says for a device on another machine
+  spec.bind_address = bind_address;  // 0.0.0.0: what docs/daemon-config.md says for a device on another machine
   return spec;
 }
 
@@ -152,6 +161,18 @@ struct Started {
     EXPECT_NE(device.local_port(), 0);
   }
   UdpDevice device;
+};
+
+// The wildcard tests' setup: tissued bound to `bind_address` (0.0.0.0 or ::)
+// and a fake device (on 127.0.0.1) that sends its poses to `to_address`.
+// The route back to 127.0.0.1 leaves from 127.0.0.1, so any other to_address
+// in 127/8 is "another local address" (filter_to leaves the socket unconnected).
+struct WildcardBound {
+  explicit WildcardBound(const char* to_address, FakeDevice::Link link = FakeDevice::Link::kUnconnected,
+                         const char* bind_address = "0.0.0.0", const char* own_address = "127.0.0.1")
+      : s(wildcard_spec(bind_address)), fake(s.device.local_port(), to_address, link, own_address) {}
+  Started s;
+  FakeDevice fake;
 };
 
 // Reads at now_ns until the device has taken `received` datagrams in total.
@@ -439,41 +460,131 @@ TEST(UdpDevice, AFloodFromElsewhereDoesNotDelayTheLiveDevice) {
 // the kernel dropped every later pose: each was lost after timeout_s and
 // taken again as a new session, and the force never ramped in.
 TEST(UdpDevice, AWildcardBoundDeviceKeepsASenderThatSendsToAnotherLocalAddress) {
-  Started s(wildcard_spec(0.05));
-  FakeDevice fake(s.device.local_port(), "127.0.1.1");
+  WildcardBound w("127.0.1.1");
+  UdpDevice& device = w.s.device;
+  FakeDevice& fake = w.fake;
   DeviceSample sample;
   for (int i = 1; i <= 10; ++i) {
     fake.send(pose_packet(i, Vec3(0.001 * i, 0, 0)));
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    s.device.read(kT0 + i * kMs, &sample);
+    device.read(kT0 + i * kMs, &sample);
   }
-  eventually([&] { return s.device.read(kT0 + 11 * kMs, &sample), s.device.stats().accepted >= 10; },
+  eventually([&] { return device.read(kT0 + 11 * kMs, &sample), device.stats().accepted >= 10; },
              std::chrono::milliseconds(500));
-  const UdpDevice::Stats st = s.device.stats();
+  const UdpDevice::Stats st = device.stats();
   EXPECT_EQ(st.accepted, 10u) << "poses to 127.0.1.1 were dropped after the first";
   EXPECT_EQ(st.sessions, 1u);
   EXPECT_EQ(sample.position_m.x(), 0.01);
-  s.device.write(kT0 + 11 * kMs, Vec3(0.5, 0, 0));
+  device.write(kT0 + 11 * kMs, Vec3(0.5, 0, 0));
   const std::optional<Packet> force = fake.receive();
   ASSERT_TRUE(force.has_value()) << "no force back to the sender";
   EXPECT_EQ(force->echo_sequence_number, 10);
+}
+
+// The fake device sends a pose, `flood` 200, the fake device another: that
+// one is read on the next tick, and none of the flood reached the socket (it
+// is connected to the fake device, so the kernel dropped them).
+void expect_a_flood_from_elsewhere_is_filtered(WildcardBound& w, FakeDevice& flood) {
+  UdpDevice& device = w.s.device;
+  w.fake.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  DeviceSample sample;
+  ASSERT_TRUE(read_until_received(device, 1, kT0, &sample));
+  for (int i = 0; i < 200; ++i) flood.send(pose_packet(1000 + i, Vec3(0.5, 0, 0)));
+  w.fake.send(pose_packet(2, Vec3(0.02, 0, 0)));
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // everything sent has arrived
+  ASSERT_TRUE(device.read(kT0 + kMs, &sample)) << "the device's pose was not read on the next tick";
+  EXPECT_EQ(sample.position_m.x(), 0.02);
+  EXPECT_EQ(device.stats().received, 2u) << "the flood reached the socket";
 }
 
 // Bound to 0.0.0.0, a sender whose poses go to the address the route back
 // to it leaves from (the usual case) still gets the kernel's filter: a flood
 // from elsewhere does not reach the socket while it is live.
 TEST(UdpDevice, AWildcardBoundDeviceStillFiltersAFloodFromElsewhere) {
-  Started s(wildcard_spec(0.05));
-  FakeDevice device(s.device.local_port()), flood(s.device.local_port());
-  device.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  WildcardBound w("127.0.0.1");
+  FakeDevice flood(w.s.device.local_port());
+  expect_a_flood_from_elsewhere_is_filtered(w, flood);
+}
+
+// Sends a pose, reads it, writes a force: the fake device must get the force,
+// also after the sender is lost (the socket is disconnected then, and the
+// ramped-out force still goes).
+void expect_forces_reach_the_fake_device(WildcardBound& w) {
+  UdpDevice& device = w.s.device;
+  w.fake.send(pose_packet(7, Vec3(0.01, 0, 0)));
   DeviceSample sample;
-  ASSERT_TRUE(read_until_received(s.device, 1, kT0, &sample));
-  for (int i = 0; i < 200; ++i) flood.send(pose_packet(1000 + i, Vec3(0.5, 0, 0)));
-  device.send(pose_packet(2, Vec3(0.02, 0, 0)));
-  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // everything sent has arrived
-  ASSERT_TRUE(s.device.read(kT0 + kMs, &sample)) << "the device's pose was not read on the next tick";
-  EXPECT_EQ(sample.position_m.x(), 0.02);
-  EXPECT_EQ(s.device.stats().received, 2u);
+  bool got = false;
+  ASSERT_TRUE(read_until_received(device, 1, kT0, &sample, &got));
+  ASSERT_TRUE(got);
+  device.write(kT0 + kMs, Vec3(0.5, 0, 0));
+  const std::optional<Packet> force = w.fake.receive();
+  ASSERT_TRUE(force.has_value()) << "no force reached the device";
+  EXPECT_EQ(force->echo_sequence_number, 7);
+  EXPECT_EQ(force->force_N[0], 0.5);
+
+  EXPECT_FALSE(device.read(kT0 + 100 * kMs, &sample));  // lost: the filter (if any) is lifted
+  device.write(kT0 + 100 * kMs, Vec3(0.25, 0, 0));
+  const std::optional<Packet> ramp = w.fake.receive();
+  ASSERT_TRUE(ramp.has_value()) << "no force reached the device after it was lost";
+  EXPECT_EQ(ramp->force_N[0], 0.25);
+  const UdpDevice::Stats st = device.stats();
+  EXPECT_EQ(st.sent, 2u);
+  EXPECT_EQ(st.send_failures, 0u);
+}
+
+// A device that connect()s its socket to tissued's address (common in device
+// bridges) takes only datagrams from exactly that address. Bound to 0.0.0.0
+// and reached at 127.0.0.2 while the route back to the device leaves from
+// 127.0.0.1, tissued keeps the session unconnected (filter_to); its forces
+// went out from 127.0.0.1 and the device's kernel dropped every one.
+TEST(UdpDevice, AWildcardBoundDeviceAnswersFromTheAddressThePosesCameTo) {
+  WildcardBound w("127.0.0.2", FakeDevice::Link::kConnected);
+  expect_forces_reach_the_fake_device(w);
+}
+
+// The same on a dual-stack socket bound to ::, where the IPv4 device's poses
+// arrive as v4-mapped addresses.
+TEST(UdpDevice, ADualStackWildcardBoundDeviceAnswersAnIpv4DeviceFromTheAddressThePosesCameTo) {
+  WildcardBound w("127.0.0.2", FakeDevice::Link::kConnected, "::");
+  expect_forces_reach_the_fake_device(w);
+}
+
+// Poses sent to a broadcast address (lo's 127.255.255.255), which no force
+// can come from. Bound to 0.0.0.0, the kernel names lo's own address for the
+// reply (in_pktinfo.ipi_spec_dst); bound to ::, the v4-mapped broadcast is
+// refused as a source and the route picks one for the session. Either way
+// every force goes out to the (unconnected) device.
+TEST(UdpDevice, AWildcardBoundDeviceAnswersPosesSentToABroadcastAddress) {
+  for (const char* bind_address : {"0.0.0.0", "::"}) {
+    SCOPED_TRACE(bind_address);
+    WildcardBound w("127.255.255.255", FakeDevice::Link::kUnconnected, bind_address);
+    expect_forces_reach_the_fake_device(w);
+  }
+}
+
+// IPv6 link-local addresses, in a private network namespace where lo carries
+// fe80::1/64 (tests/haptics/CMakeLists.txt, UdpDeviceNetns.InPrivateNamespace).
+bool in_link_local_netns() { return std::getenv("TISSUE_TEST_UDP_LINK_LOCAL") != nullptr; }
+
+// A link-local sender gets the kernel's filter like any other. The socket's
+// local address after the connect carries lo's scope id, the poses'
+// destination (from IPV6_PKTINFO) none: compared as endpoints they never
+// matched, so every link-local session stayed unconnected and a flood from
+// another port of the sender's address reached the socket.
+TEST(UdpDeviceNetns, AWildcardBoundDeviceFiltersAFloodWhileALinkLocalSenderIsLive) {
+  if (!in_link_local_netns()) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  WildcardBound w("fe80::1%lo", FakeDevice::Link::kUnconnected, "::", "fe80::1%lo");
+  FakeDevice flood(w.s.device.local_port(), "fe80::1%lo", FakeDevice::Link::kUnconnected, "fe80::1%lo");
+  expect_a_flood_from_elsewhere_is_filtered(w, flood);
+}
+
+// A connected device on ::1 that sends to fe80::1%lo (the route back to ::1
+// leaves from ::1: unconnected session) gets its forces from fe80::1, which
+// as a source needs its interface named (IPV6_PKTINFO's ifindex).
+TEST(UdpDeviceNetns, AWildcardBoundDeviceAnswersFromTheLinkLocalAddressThePosesCameTo) {
+  if (!in_link_local_netns()) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  WildcardBound w("fe80::1%lo", FakeDevice::Link::kConnected, "::", "::1");
+  expect_forces_reach_the_fake_device(w);
 }
 
 // One pose whose sequence number leapt ahead (a glitch, a bad sender on the
@@ -683,15 +794,16 @@ TEST(UdpDevice, StreamsWithAFakeDeviceThreadThroughLossAndReturn) {
   EXPECT_EQ(st.send_failures, 0u);
 }
 
-TEST(UdpDeviceRealtime, TenThousandReadWriteCallsAllocateNothing) {
-  Started s(0.05);
-  FakeDevice fake(s.device.local_port());
+// 10,000 ticks of read()/write() with valid poses and garbage arriving,
+// counting allocations on this thread; returns the force packets the fake
+// device received.
+int expect_ten_thousand_read_write_calls_allocate_nothing(UdpDevice& device, FakeDevice& fake) {
   // The fake side encodes outside the counted window (counting is per thread
   // and only switched on around read()/write()).
   const std::vector<unsigned char> garbage(121, 0x5A);
 
   constexpr int kCalls = 10'000;
-  int valid_reads = 0;
+  int valid_reads = 0, forces = 0;
   std::int64_t now_ns = kT0;
   tissue::testing::reset_allocations();
   for (int i = 0; i < kCalls; ++i) {
@@ -702,22 +814,30 @@ TEST(UdpDeviceRealtime, TenThousandReadWriteCallsAllocateNothing) {
     } else if (i % 10 == 5) {
       fake.send_bytes(garbage);
     }
-    if (i % 100 == 99) fake.drain();
+    if (i % 100 == 99) forces += fake.drain();
     now_ns += kMs;
     DeviceSample sample;
     tissue::testing::count_this_thread(true);
-    const bool ok = s.device.read(now_ns, &sample);
-    s.device.write(now_ns, Vec3(0.001 * (i % 7), 0, 0));
+    const bool ok = device.read(now_ns, &sample);
+    device.write(now_ns, Vec3(0.001 * (i % 7), 0, 0));
     tissue::testing::count_this_thread(false);
     valid_reads += ok ? 1 : 0;
   }
   EXPECT_EQ(tissue::testing::allocations(), 0u) << "read()/write() allocated";
-  const UdpDevice::Stats st = s.device.stats();
+  const UdpDevice::Stats st = device.stats();
   EXPECT_GT(st.accepted, 900u) << "the valid path ran";
   EXPECT_LE(static_cast<std::uint64_t>(valid_reads), st.accepted) << "each pose is a sample once";
   EXPECT_GT(valid_reads, 900);
   EXPECT_GT(st.rejected[static_cast<int>(Reject::kFingerprint)], 900u) << "the reject path ran";
   EXPECT_GT(st.sent, static_cast<std::uint64_t>(kCalls) * 9 / 10);
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the last forces have arrived
+  return forces + fake.drain();
+}
+
+TEST(UdpDeviceRealtime, TenThousandReadWriteCallsAllocateNothing) {
+  Started s(0.05);
+  FakeDevice fake(s.device.local_port());
+  EXPECT_GT(expect_ten_thousand_read_write_calls_allocate_nothing(s.device, fake), 9'000);
 
   // The counter itself works (a check that guards against a silent zero).
   tissue::testing::count_this_thread(true);
@@ -725,6 +845,19 @@ TEST(UdpDeviceRealtime, TenThousandReadWriteCallsAllocateNothing) {
   tissue::testing::count_this_thread(false);
   delete probe;
   EXPECT_GE(tissue::testing::allocations(), 1u);
+}
+
+// The same where write() names the source address (sendmsg with IP_PKTINFO):
+// bound to 0.0.0.0, poses to 127.0.0.2, a device connected there.
+// On 0.0.0.0 (IP_PKTINFO) and on a dual-stack :: (a v4-mapped IPV6_PKTINFO).
+TEST(UdpDeviceRealtime, AWildcardBoundDeviceAnsweringFromThePosesAddressAllocatesNothing) {
+  for (const char* bind_address : {"0.0.0.0", "::"}) {
+    SCOPED_TRACE(bind_address);
+    WildcardBound w("127.0.0.2", FakeDevice::Link::kConnected, bind_address);
+    EXPECT_GT(expect_ten_thousand_read_write_calls_allocate_nothing(w.s.device, w.fake), 9'000)
+        << "the forces did not reach the device";
+    EXPECT_EQ(w.s.device.stats().rejected[static_cast<int>(Reject::kOtherSender)], 0u);
+  }
 }
 
 }  // namespace
