@@ -4,10 +4,15 @@
 // that jump is longer than the haptic loop accepts in one tick, the loop
 // rejects it as a glitch (too fast) and, until the hand has been still long
 // enough, takes the device as lost: the force ramps out at every wrap and back
-// in after it. The daemon says so once when the device starts.
+// in after it. With device.sim mode: hand, the target jumps and the hand
+// follows through its spring, over several ticks, but a long jump still swings
+// it faster than the loop accepts. The daemon says so once when the device
+// starts.
 #pragma once
 
 #include <string>
+
+#include "config/daemon_config.hpp"
 
 namespace tissue::haptics {
 
@@ -15,5 +20,10 @@ namespace tissue::haptics {
 // one tick, when that is more than max_speed_m_per_s / rate_hz; empty
 // otherwise. `key` is the config key to blame (e.g. "device.replay.loop").
 std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz);
+
+// The warning for a looping simulated device (kind sim, device.sim.loop),
+// blamed on device.sim.waypoints; empty when it does not loop or its wrap is
+// taken smoothly. mode: trajectory jumps with its target (loop_wrap_warning).
+std::string sim_loop_wrap_warning(const config::DeviceSpec& device, double rate_hz);
 
 }  // namespace tissue::haptics

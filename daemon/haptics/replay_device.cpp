@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <string>
 
@@ -39,49 +40,100 @@ bool ReplayDevice::start(std::string* error) {
   // The loop rejects a sample faster than device.limits.max_speed_m_per_s as
   // a glitch: a replay sped up past it would lose the hand on the track's
   // fast strokes and ramp the force out mid-replay, with no word why.
-  // Each step is measured over the time since its position came, as the loop
-  // measured it live: a device slower than the loop is recorded as a
-  // position held for some rows, then a step (one row's time would make a
-  // 250 Hz device look four times as fast as it moved).
+  // Measured on the knots read() plays, segment by segment, so a speed is
+  // refused exactly when read() would hand the loop a too-fast sample.
+  build_knots();
   double peak_m_per_s = 0.0;
-  double held_since_s = time_s_.front();
-  for (std::size_t i = 1; i < time_s_.size(); ++i) {
-    if (position_m_[i] == position_m_[i - 1]) continue;
-    const double dt_s = time_s_[i] - held_since_s;
-    if (dt_s > 0.0) peak_m_per_s = std::max(peak_m_per_s, (position_m_[i] - position_m_[i - 1]).norm() / dt_s);
-    held_since_s = time_s_[i];
-  }
-  if (peak_m_per_s * speed_ > max_speed_m_per_s_)
+  for (std::size_t k = 1; k < knot_time_s_.size(); ++k)
+    peak_m_per_s = std::max(
+        peak_m_per_s, (knot_position_m_[k] - knot_position_m_[k - 1]).norm() / (knot_time_s_[k] - knot_time_s_[k - 1]));
+  if (peak_m_per_s * speed_ > max_speed_m_per_s_) {
+    knot_time_s_.clear();  // not started: read() says so
     return fail("device.replay.speed " + fmt(speed_) + " plays the track at up to " + fmt(peak_m_per_s * speed_) +
                 " m/s (its peak " + fmt(peak_m_per_s) + " m/s in the device frame, times the speed), above " +
                 "device.limits.max_speed_m_per_s " + fmt(max_speed_m_per_s_) +
                 ": the haptic loop would reject the hand as a glitch and ramp the force out; use a speed of at most " +
                 fmt(max_speed_m_per_s_ / peak_m_per_s) + " for this track");
+  }
   start_ns_ = -1;
   cursor_ = 0;
   return true;
 }
 
-bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
-  if (time_s_.empty()) return false;
-  if (start_ns_ < 0) start_ns_ = now_ns;
-  double t = time_s_.front() + speed_ * 1e-9 * static_cast<double>(now_ns - start_ns_);
-  const double span = duration_s();
-  if (loop_ && span > 0.0 && t > time_s_.back()) {
-    t = time_s_.front() + std::fmod(t - time_s_.front(), span);
-    if (t < time_s_[cursor_]) cursor_ = 0;
+void ReplayDevice::build_knots() {
+  const std::size_t rows = time_s_.size();
+  // The device's sample period: the median time between position changes
+  // (robust to the long gaps where the hand stood still, and to jitter).
+  std::vector<double> gaps_s;
+  std::size_t changes = 0;
+  for (std::size_t i = 1; i < rows; ++i) changes += position_m_[i] != position_m_[i - 1];
+  gaps_s.reserve(changes);
+  bool have_change = false;
+  double last_change_s = 0.0;
+  for (std::size_t i = 1; i < rows; ++i) {
+    if (position_m_[i] == position_m_[i - 1]) continue;
+    if (have_change) gaps_s.push_back(time_s_[i] - last_change_s);
+    have_change = true;
+    last_change_s = time_s_[i];
   }
-  if (t >= time_s_.back()) {
-    out->position_m = position_m_.back();
+  device_period_s_ = 0.0;
+  if (!gaps_s.empty()) {
+    const auto middle = gaps_s.begin() + static_cast<std::ptrdiff_t>(gaps_s.size() / 2);
+    std::nth_element(gaps_s.begin(), middle, gaps_s.end());
+    device_period_s_ = *middle;
+  }
+
+  knot_time_s_.clear();
+  knot_position_m_.clear();
+  knot_time_s_.reserve(2 * changes + 2);
+  knot_position_m_.reserve(2 * changes + 2);
+  auto add = [&](double t_s, const Vec3& p_m) {
+    if (t_s > knot_time_s_.back()) {
+      knot_time_s_.push_back(t_s);
+      knot_position_m_.push_back(p_m);
+    } else {
+      knot_position_m_.back() = p_m;  // rows at the same time: the later one holds
+    }
+  };
+  knot_time_s_.push_back(time_s_.front());
+  knot_position_m_.push_back(position_m_.front());
+  double held_since_s = time_s_.front();
+  for (std::size_t i = 1; i < rows; ++i) {
+    if (position_m_[i] == position_m_[i - 1]) continue;
+    // With no period known (fewer than two changes) this is the last row
+    // that showed the old pose: row to row, as a 1 kHz track plays anyway.
+    if (time_s_[i] - held_since_s > kStillAfterPeriods * device_period_s_) {
+      const double hold_until_s = std::min(time_s_[i] - device_period_s_, time_s_[i - 1]);
+      if (hold_until_s > knot_time_s_.back()) add(hold_until_s, position_m_[i - 1]);
+    }
+    add(time_s_[i], position_m_[i]);
+    held_since_s = time_s_[i];
+  }
+  if (time_s_.back() > knot_time_s_.back()) add(time_s_.back(), position_m_.back());
+}
+
+bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
+  if (knot_time_s_.empty()) return false;  // not started
+  if (start_ns_ < 0) start_ns_ = now_ns;
+  const double first_s = knot_time_s_.front(), last_s = knot_time_s_.back();
+  double t = first_s + speed_ * 1e-9 * static_cast<double>(now_ns - start_ns_);
+  const double span = last_s - first_s;
+  if (loop_ && span > 0.0 && t > last_s) {
+    t = first_s + std::fmod(t - first_s, span);
+    if (t < knot_time_s_[cursor_]) cursor_ = 0;
+  }
+  if (t >= last_s) {
+    out->position_m = knot_position_m_.back();
     out->velocity_m_per_s.setZero();
     return true;
   }
-  while (cursor_ + 1 < time_s_.size() && time_s_[cursor_ + 1] <= t) ++cursor_;
-  const std::size_t i = cursor_, j = std::min(cursor_ + 1, time_s_.size() - 1);
-  const double dt = time_s_[j] - time_s_[i];
-  const double u = dt > 0.0 ? std::clamp((t - time_s_[i]) / dt, 0.0, 1.0) : 0.0;
-  out->position_m = (1.0 - u) * position_m_[i] + u * position_m_[j];
-  out->velocity_m_per_s = dt > 0.0 ? Vec3(speed_ * (position_m_[j] - position_m_[i]) / dt) : Vec3::Zero();
+  const std::size_t n = knot_time_s_.size();
+  while (cursor_ + 1 < n && knot_time_s_[cursor_ + 1] <= t) ++cursor_;
+  const std::size_t i = cursor_, j = std::min(cursor_ + 1, n - 1);
+  const double dt = knot_time_s_[j] - knot_time_s_[i];
+  const double u = dt > 0.0 ? std::clamp((t - knot_time_s_[i]) / dt, 0.0, 1.0) : 0.0;
+  out->position_m = (1.0 - u) * knot_position_m_[i] + u * knot_position_m_[j];
+  out->velocity_m_per_s = dt > 0.0 ? Vec3(speed_ * (knot_position_m_[j] - knot_position_m_[i]) / dt) : Vec3::Zero();
   return true;
 }
 

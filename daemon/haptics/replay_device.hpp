@@ -8,6 +8,14 @@
 // in the device frame: a session records them in the scene frame, and the
 // service maps them back with the config's device.offset_m and scale
 // (HapticSideImpl), so the hand retraces the recorded path whatever those are.
+//
+// A session writes a row every haptic tick, so a device slower than the loop
+// (a 250 Hz UDP device) is recorded as a pose held for a few rows, then a
+// step. Played row to row, the whole motion between two poses would come in
+// one tick at several times the speed the loop measured live (it saw each
+// pose a device period after the last), and the loop would reject the hand
+// as too fast. So the hand is played through knots: the rows where a new
+// position came, each step spread over the recorded device's sample period.
 #pragma once
 
 #include <limits>
@@ -28,22 +36,44 @@ class ReplayDevice final : public Device {
   bool start(std::string* error) override;
   void stop() noexcept override {}
   // The position at (now - first read) * speed into the track: linear between
-  // rows, held at the end (or wrapped when looping). Velocity by the slope.
+  // the knots (see build_knots), held at the end (or wrapped when looping).
+  // Velocity by the slope. False before start().
   bool read(std::int64_t now_ns, DeviceSample* out) noexcept override;
   void write(std::int64_t /*now_ns*/, const Vec3& force_N) noexcept override { last_force_N_ = force_N; }
   const char* name() const noexcept override { return "replay"; }
 
   double duration_s() const noexcept { return time_s_.back() - time_s_.front(); }
   const Vec3& last_force_N() const noexcept { return last_force_N_; }
+  // The recorded device's sample period start() found (the median time
+  // between the track's position changes; 0 with fewer than two changes).
+  double device_period_s() const noexcept { return device_period_s_; }
+
+  // A pose that comes more than this many periods after the last one means
+  // the device sent the same pose in between: it stood still. Up to it, the
+  // pose was late (a device's jitter) and the loop measured the step over the
+  // whole gap, as the knots then spread it.
+  static constexpr double kStillAfterPeriods = 1.5;
 
  private:
+  // The knots read() interpolates and start() checks the speed of (one rule
+  // for both): the first row; every row whose position differs from the row
+  // before (the time a new pose came); before such a row, when the old pose
+  // was held longer than kStillAfterPeriods device periods, a knot holding it
+  // until one period before the change (or the last row that still showed
+  // it, if later), so the hand stands still and then moves over one period;
+  // and the last row. A track whose position changes every row keeps every
+  // row as a knot and replays as it did row to row.
+  void build_knots();
   std::vector<double> time_s_;
   std::vector<Vec3> position_m_;
   double speed_;
   bool loop_;
   double max_speed_m_per_s_;
+  std::vector<double> knot_time_s_;  // strictly increasing, from time_s_.front() to time_s_.back()
+  std::vector<Vec3> knot_position_m_;
+  double device_period_s_ = 0.0;
   std::int64_t start_ns_ = -1;
-  std::size_t cursor_ = 0;  // row at or before the last time read (monotone search)
+  std::size_t cursor_ = 0;  // knot at or before the last time read (monotone search)
   Vec3 last_force_N_ = Vec3::Zero();
 };
 

@@ -78,6 +78,46 @@ Vec3 SimDevice::target_velocity_m_per_s(double t_s) const noexcept {
   return (waypoint_m_[i + 1] - waypoint_m_[i]) / span;
 }
 
+int SimDevice::hand_substeps(double elapsed_s, double* h_s) noexcept {
+  // Clamped as a double: a long gap (a caller that read days ago) would
+  // overflow the conversion to int.
+  const int substeps = static_cast<int>(std::min<double>(kMaxSubsteps, std::ceil(elapsed_s / kMaxSubstep_s)));
+  *h_s = substeps > 0 ? std::min(kMaxSubstep_s, elapsed_s / substeps) : 0.0;
+  return std::max(substeps, 0);
+}
+
+void SimDevice::hand_substep(const config::SimDeviceSpec& spec, const Vec3& target_m,
+                             const Vec3& target_velocity_m_per_s, const Vec3& force_N, double h_s, Vec3* position_m,
+                             Vec3* velocity_m_per_s) noexcept {
+  // The hand's muscles track the target (spring) and its motion (damper on
+  // the velocity error); the rendered force pushes back.
+  const Vec3 hand_force_N = spec.hand_stiffness_N_per_m * (target_m - *position_m) +
+                            spec.hand_damping_N_s_per_m * (target_velocity_m_per_s - *velocity_m_per_s) + force_N;
+  *velocity_m_per_s += (h_s / spec.hand_mass_kg) * hand_force_N;
+  *position_m += h_s * *velocity_m_per_s;
+}
+
+double SimDevice::hand_jump_peak_speed_m_per_s(const config::SimDeviceSpec& spec, double jump_m, double rate_hz) {
+  if (!(spec.hand_stiffness_N_per_m > 0.0) || !(spec.hand_mass_kg > 0.0) || !(rate_hz > 0.0) || !(jump_m > 0.0))
+    return 0.0;
+  // The target jumps from the hand at rest to the origin, and holds there.
+  constexpr double kPi = 3.14159265358979323846;
+  const double undamped_period_s = 2.0 * kPi * std::sqrt(spec.hand_mass_kg / spec.hand_stiffness_N_per_m);
+  const double window_s = std::clamp(undamped_period_s, 1.0, 60.0);
+  double h_s = 0.0;
+  const int substeps = hand_substeps(1.0 / rate_hz, &h_s);
+  Vec3 position_m(jump_m, 0.0, 0.0), velocity_m_per_s = Vec3::Zero();
+  double peak_m_per_s = 0.0;
+  const long reads = static_cast<long>(std::ceil(window_s * rate_hz));
+  for (long read = 0; read < reads; ++read) {
+    const Vec3 last_read_m = position_m;
+    for (int k = 0; k < substeps; ++k)
+      hand_substep(spec, Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), h_s, &position_m, &velocity_m_per_s);
+    peak_m_per_s = std::max({peak_m_per_s, velocity_m_per_s.norm(), (position_m - last_read_m).norm() * rate_hz});
+  }
+  return peak_m_per_s;
+}
+
 bool SimDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   if (waypoint_m_.empty()) return false;
   if (!started_clock_) {
@@ -90,23 +130,14 @@ bool SimDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     position_m_ = target_m(t_s);
     velocity_m_per_s_ = target_velocity_m_per_s(t_s);
   } else {
-    double remaining_s = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, now_ns - last_ns_));
-    // Clamped as a double: a long gap (a caller that read days ago) would
-    // overflow the conversion to int.
-    const int substeps = static_cast<int>(std::min<double>(kMaxSubsteps, std::ceil(remaining_s / kMaxSubstep_s)));
-    if (substeps > 0) {
-      const double h_s = std::min(kMaxSubstep_s, remaining_s / substeps);
-      const double t_begin_s = t_s - h_s * substeps;
-      for (int k = 0; k < substeps; ++k) {
-        const Vec3 target = target_m(t_begin_s + (k + 1) * h_s);
-        const Vec3 target_velocity = target_velocity_m_per_s(t_begin_s + (k + 1) * h_s);
-        // The hand's muscles track the target (spring) and its motion (damper
-        // on the velocity error); the rendered force pushes back.
-        const Vec3 hand_force_N = spec_.hand_stiffness_N_per_m * (target - position_m_) +
-                                  spec_.hand_damping_N_s_per_m * (target_velocity - velocity_m_per_s_) + force_N_;
-        velocity_m_per_s_ += (h_s / spec_.hand_mass_kg) * hand_force_N;
-        position_m_ += h_s * velocity_m_per_s_;
-      }
+    const double remaining_s = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, now_ns - last_ns_));
+    double h_s = 0.0;
+    const int substeps = hand_substeps(remaining_s, &h_s);
+    const double t_begin_s = t_s - h_s * substeps;
+    for (int k = 0; k < substeps; ++k) {
+      const double t_k_s = t_begin_s + (k + 1) * h_s;
+      hand_substep(spec_, target_m(t_k_s), target_velocity_m_per_s(t_k_s), force_N_, h_s, &position_m_,
+                   &velocity_m_per_s_);
     }
   }
   last_ns_ = now_ns;

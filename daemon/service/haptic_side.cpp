@@ -97,17 +97,7 @@ class HapticSideImpl final : public HapticSide {
                                                   config.device.replay.loop, config.device.limits.max_speed_m_per_s);
     } else {
       device_ = haptics::make_device(config.device, &error);
-      const config::SimDeviceSpec& sim = config.device.sim;
-      // A hand (mode: hand) follows the jumped target through its spring; a
-      // trajectory jumps with it.
-      if (config.device.kind == config::DeviceSpec::Kind::kSim && sim.loop &&
-          sim.mode == config::SimDeviceSpec::Mode::kTrajectory && !sim.waypoints.empty()) {
-        const auto& first = sim.waypoints.front().position_m;
-        const auto& last = sim.waypoints.back().position_m;
-        const haptics::Vec3 jump(last[0] - first[0], last[1] - first[1], last[2] - first[2]);
-        wrap_warning = haptics::loop_wrap_warning("device.sim.waypoints", jump.norm(),
-                                                  config.device.limits.max_speed_m_per_s, config.haptics.rate_hz);
-      }
+      wrap_warning = haptics::sim_loop_wrap_warning(config.device, config.haptics.rate_hz);
     }
     if (!device_) throw std::runtime_error("haptic device: " + (error.empty() ? "none configured" : error));
     udp_ = dynamic_cast<const haptics::UdpDevice*>(device_.get());
