@@ -92,7 +92,8 @@ bool UdpDevice::start(std::string* error) {
   if (spec_.port == 0) {
     // Port 0 took an ephemeral port, which Linux gives back when the peer
     // filter disconnects (connect(AF_UNSPEC) keeps only a port bound by
-    // number). Bind that number explicitly on a fresh socket.
+    // number; IPv4 only, IPv6 sockets are never connected, but the same
+    // steps do no harm there). Bind that number explicitly on a fresh socket.
     const ip::udp::endpoint numbered(address, local_port_);
     socket_.close(ec);
     socket_.open(numbered.protocol(), ec);
@@ -110,6 +111,7 @@ bool UdpDevice::start(std::string* error) {
   // if the poses came to the address the route back to it leaves from
   // (filter_to): ask the kernel for each datagram's destination.
   wildcard_ = address.is_unspecified();
+  connectable_ = address.is_v4();  // IPv6: see connectable_ in the header
   if (wildcard_) {
     const int on = 1;
     const bool v4 = address.is_v4();
@@ -226,9 +228,6 @@ void UdpDevice::filter_to(const ip::udp::endpoint* peer) noexcept {
   // lost after timeout_s, taken again, lost again. Stay unconnected for this
   // session then; the other_sender check still refuses the rest, in userspace,
   // and write() names the source address of each force itself.
-  // (peer_to_ of an IPv6 link-local address carries the scope id of the
-  // interface the poses came in on, as the connected local endpoint does:
-  // without it no link-local session was ever connected.)
   boost::system::error_code ec;
   const ip::udp::endpoint local = socket_.local_endpoint(ec);
   if (!ec && local.address() == peer_to_) return;
@@ -345,6 +344,8 @@ bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   // connected to it, so datagrams from other addresses never queue (a flood
   // from elsewhere took the 64 reads of a tick and the kernel's buffer, and
   // crowded the device out); once it is lost, any address may start anew.
+  // IPv4 sockets only: an IPv6 one is never connected (connectable_), and
+  // consider() alone refuses other senders.
   if (filtered_ && !sender_live(now_ns)) filter_to(nullptr);
   bool fresh = false;
   for (int i = 0; i < kMaxDatagramsPerRead; ++i) {
@@ -360,7 +361,7 @@ bool UdpDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     bump(received_);
     if (consider(bytes, now_ns) == Verdict::kAccepted) fresh = true;
   }
-  if (fresh && !filtered_ && !filter_refused_) filter_to(&peer_);
+  if (fresh && connectable_ && !filtered_ && !filter_refused_) filter_to(&peer_);
   // Only a pose that arrived during this read is a sample: handing the held
   // pose back every tick would make a 250 Hz device look like one that jumps
   // 4 ms of motion in 1 ms (the loop's speed check) and would hide a device

@@ -30,9 +30,10 @@
 //   other_sender  while a sender is live, datagrams from any other address
 //                 (only those queued before it went live: from then on the
 //                 socket is connected to it and the kernel drops the rest;
-//                 not so when bound to a wildcard address and the poses come
-//                 to a local address other than the route back's source,
-//                 see filter_to: every datagram is then read and refused)
+//                 not so on a socket of the IPv6 family, nor when bound to
+//                 0.0.0.0 and the poses come to a local address other than
+//                 the route back's source, see filter_to: every datagram is
+//                 then read and refused)
 // and then the ordering rule: sequence_number must exceed the last accepted
 // one (duplicates and reordered packets are dropped and counted as
 // out_of_order), except that kResyncPackets valid poses in a row below it,
@@ -125,9 +126,9 @@ class UdpDevice final : public Device {
   // Connects the socket to `peer` (the kernel then drops datagrams from
   // every other address before they queue) or, with nullptr, disconnects it
   // (any address may start the next session). One syscall, no allocation.
-  // Bound to a wildcard address, it connects only if the local address the
-  // connect picks is the one peer_'s poses came to (else disconnects again
-  // and sets filter_refused_ for the session).
+  // Bound to 0.0.0.0, it connects only if the local address the connect
+  // picks is the one peer_'s poses came to (else disconnects again and sets
+  // filter_refused_ for the session). IPv4 sockets only (connectable_).
   void filter_to(const boost::asio::ip::udp::endpoint* peer) noexcept;
   // One datagram into receive_buffer_, its source into from_ and, when bound
   // to a wildcard address, its destination into to_ and reply_from_.
@@ -153,11 +154,22 @@ class UdpDevice final : public Device {
   boost::asio::ip::udp::endpoint from_;  // scratch for receive_from
   boost::asio::ip::udp::endpoint peer_;  // sender of the newest accepted pose
   bool filtered_ = false;                // the socket is connected to peer_ (filter_to)
-  bool wildcard_ = false;                // bound to 0.0.0.0 or ::
-  bool filter_refused_ = false;          // this session's poses come to another local address: no connect
+  // The socket is of the IPv4 family, so filter_to may connect it. Never one
+  // of the IPv6 family (bound to ::, ::1, any IPv6 address): Linux's
+  // connect(AF_UNSPEC) forgets its peer's port but not its address
+  // (__udp_disconnect leaves sk_v6_daddr, which udp6's lookup still
+  // compares), so after one session the kernel would drop every datagram from
+  // any other address until restart (on a dual-stack ::, an IPv4 session
+  // would shut out every native IPv6 device). No connect() clears it (one to
+  // :: connects to ::1), and a new socket would, but the tick may not open one
+  // (asio's register_descriptor takes a mutex). Such a socket refuses other
+  // senders in userspace only (consider(), other_sender).
+  bool connectable_ = false;
+  bool wildcard_ = false;        // bound to 0.0.0.0 or ::
+  bool filter_refused_ = false;  // this session's poses come to another local address: no connect
   // Destination of the datagram in receive_buffer_ (wildcard_ only); an IPv6
-  // link-local one carries the scope id of the interface it came in on, as
-  // the socket's local endpoint does once connected over that interface.
+  // link-local one carries the scope id of the interface it came in on, which
+  // write() names as the source's interface (IPV6_PKTINFO).
   boost::asio::ip::address to_;
   // The local address a reply to that datagram leaves from: IPv4 the
   // kernel's own choice (in_pktinfo.ipi_spec_dst: to_, or the interface's

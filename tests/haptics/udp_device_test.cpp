@@ -24,6 +24,7 @@
 #include <limits>
 #include <new>
 #include <optional>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -562,20 +563,106 @@ TEST(UdpDevice, AWildcardBoundDeviceAnswersPosesSentToABroadcastAddress) {
   }
 }
 
-// IPv6 link-local addresses, in a private network namespace where lo carries
-// fe80::1/64 (tests/haptics/CMakeLists.txt, UdpDeviceNetns.InPrivateNamespace).
+// `first` goes live and is lost; `second`, at another address, must then be
+// heard and answered, and `first` refused while `second` is live. On a socket
+// of the IPv6 family that refusal happens in userspace (the socket is never
+// connected, see UdpDevice::filter_to), so its datagram is read and counted.
+// Linux keeps an IPv6 socket filtering by its last peer's address after
+// connect(AF_UNSPEC): connected once, such a socket never heard a device at
+// another address again until restart.
+void expect_a_sender_at_another_address_is_heard_after_loss(UdpDevice& device, FakeDevice& first, FakeDevice& second) {
+  DeviceSample sample;
+  bool live = false;
+  first.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  ASSERT_TRUE(read_until_received(device, 1, kT0, &sample, &live));
+  ASSERT_TRUE(live);
+  device.write(kT0 + kMs, Vec3(0.5, 0, 0));
+  ASSERT_TRUE(first.receive().has_value()) << "no force reached the first sender";
+
+  EXPECT_FALSE(device.read(kT0 + 100 * kMs, &sample));  // lost
+  EXPECT_FALSE(device.sender_live(kT0 + 100 * kMs));
+  second.send(pose_packet(1, Vec3(0.06, 0, 0)));
+  ASSERT_TRUE(read_until_received(device, 2, kT0 + 100 * kMs, &sample, &live))
+      << "a sender at another address was never heard after the first was lost";
+  EXPECT_TRUE(live);
+  EXPECT_EQ(sample.position_m.x(), 0.06);
+  EXPECT_EQ(device.stats().sessions, 2u);
+  device.write(kT0 + 101 * kMs, Vec3(2, 0, 0));
+  const std::optional<Packet> force = second.receive();
+  ASSERT_TRUE(force.has_value()) << "no force reached the second sender";
+  EXPECT_EQ(force->force_N[0], 2.0);
+
+  first.send(pose_packet(2, Vec3(0.02, 0, 0)));
+  ASSERT_TRUE(read_until_received(device, 3, kT0 + 102 * kMs, &sample, &live))
+      << "the first sender's datagram did not reach the socket";
+  EXPECT_FALSE(live);
+  EXPECT_EQ(device.stats().rejected[static_cast<int>(Reject::kOtherSender)], 1u);
+  EXPECT_EQ(device.stats().accepted, 2u);
+}
+
+// Bound to :: (dual-stack), an IPv4 device's session (v4-mapped) was lost
+// and a native IPv6 device was never heard: the socket had been connected to
+// ::ffff:127.0.0.1, and Linux filters an IPv6 socket by that address after
+// the disconnect.
+TEST(UdpDevice, ADualStackDeviceHearsAnIpv6SenderAfterAnIpv4SessionIsLost) {
+  Started s(wildcard_spec("::"));
+  FakeDevice first(s.device.local_port(), "127.0.0.1", FakeDevice::Link::kUnconnected, "127.0.0.1");
+  FakeDevice second(s.device.local_port(), "::1", FakeDevice::Link::kUnconnected, "::1");
+  expect_a_sender_at_another_address_is_heard_after_loss(s.device, first, second);
+}
+
+// IPv6 link-local and unique-local addresses, in a private network namespace
+// where lo carries fe80::1/64 and fd00::2/128 (tests/haptics/CMakeLists.txt,
+// UdpDeviceNetns.InPrivateNamespace).
 bool in_link_local_netns() { return std::getenv("TISSUE_TEST_UDP_LINK_LOCAL") != nullptr; }
 
-// A link-local sender gets the kernel's filter like any other. The socket's
-// local address after the connect carries lo's scope id, the poses'
-// destination (from IPV6_PKTINFO) none: compared as endpoints they never
-// matched, so every link-local session stayed unconnected and a flood from
-// another port of the sender's address reached the socket.
-TEST(UdpDeviceNetns, AWildcardBoundDeviceFiltersAFloodWhileALinkLocalSenderIsLive) {
+// Bound to ::1 or ::, a device on ::1 goes live and is lost; a device at
+// another IPv6 address (unique-local, link-local) was then never heard.
+TEST(UdpDeviceNetns, AnIpv6BoundDeviceHearsASenderAtAnotherAddressAfterTheFirstIsLost) {
+  if (!in_link_local_netns()) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  for (const char* bind_address : {"::1", "::"}) {
+    for (const char* second_address : {"fd00::2", "fe80::1%lo"}) {
+      SCOPED_TRACE(std::string(bind_address) + " then " + second_address);
+      Started s(wildcard_spec(bind_address));
+      FakeDevice first(s.device.local_port(), "::1", FakeDevice::Link::kUnconnected, "::1");
+      FakeDevice second(s.device.local_port(), "::1", FakeDevice::Link::kUnconnected, second_address);
+      expect_a_sender_at_another_address_is_heard_after_loss(s.device, first, second);
+    }
+  }
+}
+
+// On a socket of the IPv6 family the flood defence is userspace only (the
+// socket is never connected: Linux would keep filtering by the last peer's
+// address after the disconnect, see UdpDevice::filter_to). A flood from
+// another port of a live link-local sender's address reaches the socket, and
+// every datagram of it is refused as other_sender; the device's next pose
+// waits behind it (64 reads a tick) but is taken, and the flood never is.
+// 100 datagrams: they fit the socket's default buffer, so none is lost and the
+// counts are exact.
+TEST(UdpDeviceNetns, AWildcardBoundDeviceRefusesAFloodWhileALinkLocalSenderIsLive) {
   if (!in_link_local_netns()) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
   WildcardBound w("fe80::1%lo", FakeDevice::Link::kUnconnected, "::", "fe80::1%lo");
   FakeDevice flood(w.s.device.local_port(), "fe80::1%lo", FakeDevice::Link::kUnconnected, "fe80::1%lo");
-  expect_a_flood_from_elsewhere_is_filtered(w, flood);
+  UdpDevice& device = w.s.device;
+  w.fake.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  DeviceSample sample;
+  ASSERT_TRUE(read_until_received(device, 1, kT0, &sample));
+  constexpr int kFlood = 100;
+  for (int i = 0; i < kFlood; ++i) flood.send(pose_packet(1000 + i, Vec3(0.5, 0, 0)));
+  w.fake.send(pose_packet(2, Vec3(0.02, 0, 0)));
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // everything sent has arrived
+  int ticks = 0;
+  bool got = false;
+  while (!got && ticks < 10) got = device.read(kT0 + (++ticks) * kMs, &sample);
+  ASSERT_TRUE(got) << "the device's pose was never read";
+  EXPECT_EQ(ticks, (kFlood + 1 + UdpDevice::kMaxDatagramsPerRead - 1) / UdpDevice::kMaxDatagramsPerRead)
+      << "the device's pose waited longer than the flood's reads";
+  EXPECT_EQ(sample.position_m.x(), 0.02);
+  const UdpDevice::Stats st = device.stats();
+  EXPECT_EQ(st.received, static_cast<std::uint64_t>(kFlood) + 2u);
+  EXPECT_EQ(st.rejected[static_cast<int>(Reject::kOtherSender)], static_cast<std::uint64_t>(kFlood));
+  EXPECT_EQ(st.accepted, 2u);
+  EXPECT_EQ(st.sessions, 1u);
 }
 
 // A connected device on ::1 that sends to fe80::1%lo (the route back to ::1
@@ -794,10 +881,12 @@ TEST(UdpDevice, StreamsWithAFakeDeviceThreadThroughLossAndReturn) {
   EXPECT_EQ(st.send_failures, 0u);
 }
 
-// 10,000 ticks of read()/write() with valid poses and garbage arriving,
+// 10,000 ticks of read()/write() with valid poses and garbage arriving (and,
+// with `other`, valid poses from another sender that the device must refuse),
 // counting allocations on this thread; returns the force packets the fake
 // device received.
-int expect_ten_thousand_read_write_calls_allocate_nothing(UdpDevice& device, FakeDevice& fake) {
+int expect_ten_thousand_read_write_calls_allocate_nothing(UdpDevice& device, FakeDevice& fake,
+                                                          FakeDevice* other = nullptr) {
   // The fake side encodes outside the counted window (counting is per thread
   // and only switched on around read()/write()).
   const std::vector<unsigned char> garbage(121, 0x5A);
@@ -813,6 +902,8 @@ int expect_ten_thousand_read_write_calls_allocate_nothing(UdpDevice& device, Fak
       fake.send(pose_packet(i + 1, Vec3(0.0001 * (i % 100), 0, 0)));
     } else if (i % 10 == 5) {
       fake.send_bytes(garbage);
+    } else if (i % 10 == 3 && other) {
+      other->send(pose_packet(i + 1, Vec3(0.5, 0, 0)));
     }
     if (i % 100 == 99) forces += fake.drain();
     now_ns += kMs;
@@ -829,6 +920,9 @@ int expect_ten_thousand_read_write_calls_allocate_nothing(UdpDevice& device, Fak
   EXPECT_LE(static_cast<std::uint64_t>(valid_reads), st.accepted) << "each pose is a sample once";
   EXPECT_GT(valid_reads, 900);
   EXPECT_GT(st.rejected[static_cast<int>(Reject::kFingerprint)], 900u) << "the reject path ran";
+  if (other) {
+    EXPECT_GT(st.rejected[static_cast<int>(Reject::kOtherSender)], 900u) << "the other_sender path ran";
+  }
   EXPECT_GT(st.sent, static_cast<std::uint64_t>(kCalls) * 9 / 10);
   std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the last forces have arrived
   return forces + fake.drain();
@@ -857,6 +951,20 @@ TEST(UdpDeviceRealtime, AWildcardBoundDeviceAnsweringFromThePosesAddressAllocate
     EXPECT_GT(expect_ten_thousand_read_write_calls_allocate_nothing(w.s.device, w.fake), 9'000)
         << "the forces did not reach the device";
     EXPECT_EQ(w.s.device.stats().rejected[static_cast<int>(Reject::kOtherSender)], 0u);
+  }
+}
+
+// Bound to an IPv6 address (::1, and :: where write() names ::1 as the source
+// with IPV6_PKTINFO), the socket is never connected: another sender's poses
+// (::1, another port) are read and refused in userspace, each tick.
+TEST(UdpDeviceRealtime, AnIpv6BoundDeviceRefusingAnotherSenderAllocatesNothing) {
+  for (const char* bind_address : {"::1", "::"}) {
+    SCOPED_TRACE(bind_address);
+    WildcardBound w("::1", FakeDevice::Link::kConnected, bind_address, "::1");
+    FakeDevice other(w.s.device.local_port(), "::1", FakeDevice::Link::kUnconnected, "::1");
+    EXPECT_GT(expect_ten_thousand_read_write_calls_allocate_nothing(w.s.device, w.fake, &other), 9'000)
+        << "the forces did not reach the device";
+    EXPECT_EQ(w.s.device.stats().sessions, 1u);
   }
 }
 
