@@ -62,6 +62,30 @@ python3 "$subscriber" --types "$types" --seconds 0.5 --plot "$work" >"$work/isdi
 [ "$rc" -eq 2 ] || { cat "$work/isdir.log"; fail "--plot at a directory: exit $rc, expected 2"; }
 grep -q -- "--plot $work: is a directory" "$work/isdir.log" || { cat "$work/isdir.log"; fail "--plot at a directory"; }
 
+# --seconds that is not > 0 and --plot-points under 2 are bad arguments (2),
+# said before listening.
+for seconds in 0 -1 nan; do
+  rc=0
+  python3 "$subscriber" --types "$types" --seconds "$seconds" >"$work/seconds.log" 2>&1 || rc=$?
+  [ "$rc" -eq 2 ] || { cat "$work/seconds.log"; fail "--seconds $seconds: exit $rc, expected 2"; }
+  grep -q -- "--seconds must be > 0" "$work/seconds.log" || { cat "$work/seconds.log"; fail "--seconds $seconds: no reason"; }
+  no_traceback "$work/seconds.log"
+done
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --plot-points 1 >"$work/points.log" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/points.log"; fail "--plot-points 1: exit $rc, expected 2"; }
+grep -q -- "--plot-points 1: must be at least 2" "$work/points.log" || { cat "$work/points.log"; fail "--plot-points 1"; }
+
+# Nothing published (the daemon and the foreign publisher are gone): exit 1,
+# said with the URL, and no plot.
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --plot "$work/none.svg" >"$work/none.log" 2>&1 || rc=$?
+[ "$rc" -eq 1 ] || { cat "$work/none.log"; fail "no statistics: exit $rc, expected 1"; }
+grep -q "no sim_stats at udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608 in 0.5 s" "$work/none.log" ||
+  { cat "$work/none.log"; fail "no statistics: not said"; }
+[ ! -e "$work/none.svg" ] || fail "a plot without statistics"
+no_traceback "$work/none.log"
+
 # The rest listens to a stream of statistics from the foreign publisher.
 python3 "$here/foreign_lcm_publisher.py" "$types" stream &
 stream=$!
