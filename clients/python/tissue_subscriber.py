@@ -23,8 +23,9 @@ one is dropped when full, so a long run is evenly thinned, not cut).
 The plot is written to a hidden temporary file beside it and renamed over it,
 so a failed write leaves an earlier plot as it was.
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
-2 bad arguments or missing modules, 3 statistics arrived but the plot could
-not be written.
+2 bad arguments, missing modules or LCM cannot start at --url (said with the
+likely cause: no route for a udpm:// group), 3 statistics arrived but the
+plot could not be written.
 """
 import argparse
 import io
@@ -144,6 +145,62 @@ def current_umask():
     return mask
 
 
+def udpm_group(url):
+    """The multicast group of a udpm:// URL as a 32-bit number, or None when the
+    URL does not start with a dotted IPv4 multicast address (the C++
+    daemon/util/lcm_url.cpp udpm_group: four octets of 1 to 3 digits, no
+    leading zero, which inet_aton would read as octal)."""
+    if not url.startswith("udpm://"):
+        return None
+    address = url[len("udpm://"):].split("?", 1)[0]
+    octets = address.rsplit(":", 1)[0].split(".")
+    if len(octets) != 4 or not all(o.isdigit() and o.isascii() and len(o) <= 3 and (o == "0" or o[0] != "0")
+                                   and int(o) <= 255 for o in octets):
+        return None
+    group = 0
+    for o in octets:
+        group = group << 8 | int(o)
+    return group if group >> 28 == 0xE else None
+
+
+def has_route_to(group, proc_net_route):
+    """Whether the IPv4 routing table (the text of /proc/net/route) has an up
+    route covering `group`: a default route or one whose destination and mask
+    contain it. The table prints each address as the 32-bit word of its
+    network-order bytes read in this machine's order, so the group is put in
+    the same form."""
+    raw = int.from_bytes(group.to_bytes(4, "big"), sys.byteorder)
+    for line in proc_net_route.splitlines()[1:]:
+        fields = line.split()
+        if len(fields) < 8:
+            continue
+        try:
+            destination, flags, mask = int(fields[1], 16), int(fields[3], 16), int(fields[7], 16)
+        except ValueError:
+            continue
+        if flags & 0x1 and raw & mask == destination:  # RTF_UP
+            return True
+    return False
+
+
+def lcm_start_failure(url):
+    """Why lcm.LCM(url) failed, as far as can be told from outside (LCM prints
+    its own reason on stderr; the exception says only "Couldn't create LCM").
+    The wording of the C++ clients (daemon/util/lcm_url.cpp lcm_start_failure)."""
+    group = udpm_group(url)
+    if group is not None:
+        try:
+            with open("/proc/net/route") as f:
+                table = f.read()
+        except OSError:
+            table = None
+        if table is not None and not has_route_to(group, table):
+            dotted = ".".join(str(group >> shift & 0xFF) for shift in (24, 16, 8, 0))
+            return (f"cannot start LCM: no route covers its multicast group {dotted} "
+                    "(add one, e.g. `ip route add 224.0.0.0/4 dev lo` for this host only)")
+    return "cannot start LCM (LCM's own message above says why)"
+
+
 def mesh_error(m, left_bytes):
     """Why the decoded surface_mesh `m`, followed by `left_bytes` undecoded
     bytes, is not a usable mesh: (reason, text), or None. The rules of the
@@ -209,8 +266,8 @@ def main():
 
     try:
         lc = lcm.LCM(args.url)
-    except (IOError, RuntimeError) as e:
-        print(f"tissue_subscriber: cannot listen at {args.url}: {e}", file=sys.stderr)
+    except (IOError, RuntimeError):  # its text is only "Couldn't create LCM"
+        print(f"tissue_subscriber: --url {args.url}: {lcm_start_failure(args.url)}", file=sys.stderr)
         return 2
     # Only what the plot needs is kept, and at most --plot-points of it.
     plot = Thinned(args.plot_points) if args.plot else None

@@ -86,6 +86,26 @@ grep -q "no sim_stats at udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608 i
 [ ! -e "$work/none.svg" ] || fail "a plot without statistics"
 no_traceback "$work/none.log"
 
+# LCM cannot start: exit 2 naming --url and why. In a network namespace of
+# its own (nested in this one; nothing leaves it) no route covers the
+# multicast group; a scheme LCM does not know is left to LCM's own message.
+if unshare -n true 2>/dev/null; then
+  rc=0
+  unshare -n sh -c 'ip link set lo up && exec "$@"' noroute python3 "$subscriber" --types "$types" --seconds 0.5 \
+    >"$work/noroute.log" 2>&1 || rc=$?
+  [ "$rc" -eq 2 ] || { cat "$work/noroute.log"; fail "no multicast route: exit $rc, expected 2"; }
+  grep -q -- "--url udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608: cannot start LCM: no route covers its multicast group 239.255.76.67 (add one, e.g. \`ip route add 224.0.0.0/4 dev lo\` for this host only)" \
+    "$work/noroute.log" || { cat "$work/noroute.log"; fail "no multicast route: the cause is not said"; }
+  no_traceback "$work/noroute.log"
+else
+  echo "python_subscriber_test: no nested network namespace here; the no-route case is not run"
+fi
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --url "nosuch://x" >"$work/scheme.log" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/scheme.log"; fail "an unknown scheme: exit $rc, expected 2"; }
+grep -q -- "--url nosuch://x: cannot start LCM (LCM's own message above says why)" "$work/scheme.log" ||
+  { cat "$work/scheme.log"; fail "an unknown scheme: --url not named"; }
+
 # The rest listens to a stream of statistics from the foreign publisher.
 python3 "$here/foreign_lcm_publisher.py" "$types" stream &
 stream=$!
