@@ -3,7 +3,8 @@
 
 Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
 writes an SVG of tets and real-time factor over time when it stops: after
---seconds, or on SIGINT (Ctrl-C) or SIGTERM. Mesh and haptic messages are
+--seconds, or on SIGINT (Ctrl-C) or SIGTERM. A tcpq:// server is first asked
+for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for ever). Mesh and haptic messages are
 counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see proto/README.md for
 every field.
 
@@ -28,11 +29,14 @@ likely cause: no route for a udpm:// group), 3 statistics arrived but the
 plot could not be written.
 """
 import argparse
+import errno
 import io
 import math
 import os
 import select
 import signal
+import socket
+import struct
 import sys
 import tempfile
 import time
@@ -201,6 +205,65 @@ def lcm_start_failure(url):
     return "cannot start LCM (LCM's own message above says why)"
 
 
+TCPQ_GREETING_WAIT_S = 10.0  # at most; less when --seconds is shorter (the C++ clients' wait)
+TCPQ_MAGIC_CLIENT, TCPQ_MAGIC_SERVER, TCPQ_VERSION = 0x287617FB, 0x287617FA, 0x0100  # LCM's lcm_tcpq.c
+
+
+def tcpq_server_problem(url, timeout_s, stop):
+    """Whether a tcpq:// URL's server answers LCM's greeting within timeout_s:
+    None when it does (or the URL is not tcpq://), else why not. LCM's own
+    client sends its magic number and protocol version and then waits for the
+    server's (8 bytes, big-endian) inside lcm.LCM() with no time limit, so a
+    port that accepts and says nothing hung the subscriber past --seconds. The
+    probe of the C++ clients (daemon/util/lcm_url.cpp tcpq_server_problem),
+    with LCM's own defaults for a missing host (127.0.0.1) or port (7700). It
+    waits in slices and gives up early once `stop` (the signal list) fills."""
+    if not url.startswith("tcpq://"):
+        return None
+    host, _, port = url[len("tcpq://"):].split("?", 1)[0].partition(":")  # LCM splits at the first ':'
+    host, port = host or "127.0.0.1", port or "7700"
+    if not (port.isascii() and port.isdigit() and len(port) <= 5 and 1 <= int(port) <= 65535):
+        return "the port must be in [1, 65535]"
+    try:
+        address = socket.getaddrinfo(host, int(port), socket.AF_INET, socket.SOCK_STREAM)[0][4]
+    except (OSError, IndexError):
+        return f"cannot resolve '{host}'"
+    deadline = time.monotonic() + timeout_s
+
+    def ready(s, writing):
+        while not stop and (left := deadline - time.monotonic()) > 0:
+            r, w, _ = select.select([] if writing else [s], [s] if writing else [], [], min(left, 0.1))
+            if r or w:
+                return True
+        return False
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setblocking(False)
+        err = s.connect_ex(address)
+        if err not in (0, errno.EINPROGRESS):
+            return f"cannot connect: {os.strerror(err)}"
+        if not ready(s, True):
+            return f"no connection within {timeout_s:g} s"
+        err = s.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
+        if err:
+            return f"cannot connect: {os.strerror(err)}"
+        try:
+            s.sendall(struct.pack(">II", TCPQ_MAGIC_CLIENT, TCPQ_VERSION))  # 8 bytes: a fresh socket takes them
+            reply = b""
+            while len(reply) < 8 and ready(s, False):
+                chunk = s.recv(8 - len(reply))
+                if not chunk:
+                    break
+                reply += chunk
+        except OSError as e:
+            return f"cannot greet the server: {e.strerror or e}"
+    if len(reply) < 8:
+        return f"the server did not answer LCM's greeting within {timeout_s:g} s (is it an LCM tcpq server?)"
+    if struct.unpack(">I", reply[:4])[0] != TCPQ_MAGIC_SERVER:
+        return "the server's answer is not LCM's (is it an LCM tcpq server?)"
+    return None
+
+
 def mesh_error(m, left_bytes):
     """Why the decoded surface_mesh `m`, followed by `left_bytes` undecoded
     bytes, is not a usable mesh: (reason, text), or None. The rules of the
@@ -264,8 +327,34 @@ def main():
     sys.path.insert(0, types)
     from tissue import haptic_state, sim_stats, surface_mesh
 
+    # SIGINT and SIGTERM end the listening early; the summary and the plot
+    # still follow. Installed before LCM starts: a tcpq:// server's greeting
+    # is waited for before listening, and Ctrl-C there is a stop too, not a
+    # KeyboardInterrupt traceback. (A SIGINT the parent ignores, as a shell
+    # does for a background job, stays ignored.)
+    stop = []
+
+    def on_signal(signum, frame):
+        stop.append(signum)
+
+    signal.signal(signal.SIGTERM, on_signal)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, on_signal)
+    # LCM's tcpq client waits for its server's greeting with no time limit
+    # (--seconds would never start): the greeting is asked for first.
+    why = tcpq_server_problem(args.url, min(args.seconds, TCPQ_GREETING_WAIT_S), stop)
+    if stop:
+        print(f"tissue_subscriber: stopped before listening at {args.url}; no sim_stats", file=sys.stderr)
+        return 1
+    if why:
+        print(f"tissue_subscriber: --url {args.url}: {why}", file=sys.stderr)
+        return 2
     try:
         lc = lcm.LCM(args.url)
+        # A tcpq server that went away since it greeted leaves LCM without a
+        # socket (fileno -1), which select() would refuse.
+        if lc.fileno() < 0 and not stop:
+            raise RuntimeError("no socket")
     except (IOError, RuntimeError):  # its text is only "Couldn't create LCM"
         print(f"tissue_subscriber: --url {args.url}: {lcm_start_failure(args.url)}", file=sys.stderr)
         return 2
@@ -322,17 +411,6 @@ def main():
     lc.subscribe("TISSUE_SIM_STATS", on_stats)
     lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
     lc.subscribe("TISSUE_HAPTIC_STATE", on_haptic)
-    # SIGINT and SIGTERM end the listening early; the summary and the plot
-    # still follow. (A SIGINT the parent ignores, as a shell does for a
-    # background job, stays ignored.)
-    stop = []
-
-    def on_signal(signum, frame):
-        stop.append(signum)
-
-    signal.signal(signal.SIGTERM, on_signal)
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, on_signal)
     end = time.monotonic() + args.seconds
     while not stop and (left := end - time.monotonic()) > 0:
         ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))

@@ -14,7 +14,8 @@ if ! python3 -c 'import lcm' 2>/dev/null; then
 fi
 work="$(mktemp -d)"
 stream=""
-trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; rm -rf "$work"' EXIT
+listeners=""
+trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; for l in $listeners; do kill "$l" 2>/dev/null; done; rm -rf "$work"' EXIT
 "$tissued" --config "$src/config/tissued.yaml" --duration 4 \
   --set "control.unix_socket_path=$work/c.sock" --set "state_dir=$work" \
   --set publish.lcm.enabled=true --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
@@ -105,6 +106,73 @@ python3 "$subscriber" --types "$types" --seconds 0.5 --url "nosuch://x" >"$work/
 [ "$rc" -eq 2 ] || { cat "$work/scheme.log"; fail "an unknown scheme: exit $rc, expected 2"; }
 grep -q -- "--url nosuch://x: cannot start LCM (LCM's own message above says why)" "$work/scheme.log" ||
   { cat "$work/scheme.log"; fail "an unknown scheme: --url not named"; }
+
+# A tcpq:// server that accepts and never greets: LCM's client waits for the
+# greeting without a time limit. The subscriber gives up after
+# min(--seconds, 10) s: exit 2 naming --url and why. A server that greets is
+# listened to for --seconds (nothing arrives: exit 1); one whose answer is not
+# LCM's is exit 2.
+listen() {  # MODE: starts a loopback_tcp_listener.py, sets $port and $listener_log
+  listener_log="$work/listener-$1.log"
+  python3 "$here/loopback_tcp_listener.py" "$1" >"$listener_log" &
+  listeners="$listeners $!"
+  polls=0
+  until [ -s "$listener_log" ]; do
+    polls=$((polls + 1))
+    [ "$polls" -le 100 ] || fail "the $1 listener did not start"
+    sleep 0.1
+  done
+  port="$(head -1 "$listener_log")"
+}
+listen silent
+rc=0
+start="$(date +%s)"
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/silent.log" 2>&1 ||
+  rc=$?
+waited=$(($(date +%s) - start))
+[ "$rc" -eq 2 ] || { cat "$work/silent.log"; fail "a silent tcpq server: exit $rc, expected 2"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: the server did not answer LCM's greeting within 1 s (is it an LCM tcpq server?)" \
+  "$work/silent.log" || { cat "$work/silent.log"; fail "a silent tcpq server: not said"; }
+[ "$waited" -le 10 ] || fail "a silent tcpq server: gave up after $waited s for --seconds 1"
+no_traceback "$work/silent.log"
+# Ctrl-C while it waits for the greeting: stopped before listening, exit 1,
+# no traceback. (SIGINT's default action restored, as below.)
+env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 300 --url "tcpq://127.0.0.1:$port" \
+  >"$work/silent-int.log" 2>&1 &
+waiting=$!
+polls=0
+until [ "$(grep -c accepted "$listener_log")" -ge 2 ]; do
+  polls=$((polls + 1))
+  [ "$polls" -le 300 ] || { kill "$waiting"; fail "the subscriber did not connect to the silent server"; }
+  sleep 0.1
+done
+sleep 0.2
+kill -INT "$waiting"
+polls=0
+while kill -0 "$waiting" 2>/dev/null; do
+  polls=$((polls + 1))
+  [ "$polls" -le 100 ] || { kill -KILL "$waiting"; fail "Ctrl-C while waiting for a tcpq greeting: still running after 10 s"; }
+  sleep 0.1
+done
+rc=0
+wait "$waiting" || rc=$?
+no_traceback "$work/silent-int.log"
+[ "$rc" -eq 1 ] || { cat "$work/silent-int.log"; fail "Ctrl-C while waiting for a tcpq greeting: exit $rc, expected 1"; }
+grep -q "stopped before listening at tcpq://127.0.0.1:$port; no sim_stats" "$work/silent-int.log" ||
+  { cat "$work/silent-int.log"; fail "Ctrl-C while waiting for a tcpq greeting: not said"; }
+listen greet
+rc=0
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/greet.log" 2>&1 ||
+  rc=$?
+[ "$rc" -eq 1 ] || { cat "$work/greet.log"; fail "a tcpq server that greets: exit $rc, expected 1"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/greet.log" || { cat "$work/greet.log"; fail "greet"; }
+listen web
+rc=0
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/web.log" 2>&1 ||
+  rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/web.log"; fail "a web server at tcpq://: exit $rc, expected 2"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: the server's answer is not LCM's" "$work/web.log" ||
+  { cat "$work/web.log"; fail "a web server at tcpq://: not said"; }
 
 # The rest listens to a stream of statistics from the foreign publisher.
 python3 "$here/foreign_lcm_publisher.py" "$types" stream &
