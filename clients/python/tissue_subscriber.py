@@ -4,7 +4,8 @@
 Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
 writes an SVG of tets and real-time factor over time when it stops: after
 --seconds, or on SIGINT (Ctrl-C) or SIGTERM. A tcpq:// server is first asked
-for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for ever). Mesh and haptic messages are
+for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for ever). A standard output
+that closes (| head) ends only the printing. Mesh and haptic messages are
 counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see proto/README.md for
 every field.
 
@@ -358,6 +359,22 @@ def main():
     except (IOError, RuntimeError):  # its text is only "Couldn't create LCM"
         print(f"tissue_subscriber: --url {args.url}: {lcm_start_failure(args.url)}", file=sys.stderr)
         return 2
+    stdout_closed = []
+
+    def say(line):
+        """One line on standard output, unless it has closed (`| head`): then
+        nothing more is printed, and listening and the plot go on."""
+        if stdout_closed:
+            return
+        try:
+            print(line, flush=True)
+        except BrokenPipeError:
+            stdout_closed.append(True)
+            # What the failed print left buffered would fail again at exit
+            # ("Exception ignored ... BrokenPipeError", exit 120): standard
+            # output becomes /dev/null (the way the Python docs give).
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
     # Only what the plot needs is kept, and at most --plot-points of it.
     plot = Thinned(args.plot_points) if args.plot else None
     counts = {"stats": 0, "mesh": 0, "haptic": 0}
@@ -385,10 +402,10 @@ def main():
         sample = (m.time_s, m.tet_count, m.real_time_factor)
         if plot is not None and all(math.isfinite(v) for v in sample):  # a NaN would break the polyline
             plot.add(sample)
-        print(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
-              f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
-              f"E {m.kinetic_energy_J + m.elastic_energy_J:.3e} J  "
-              f"(meshes {counts['mesh']}, haptic states {counts['haptic']})", flush=True)
+        say(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
+            f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
+            f"E {m.kinetic_energy_J + m.elastic_energy_J:.3e} J  "
+            f"(meshes {counts['mesh']}, haptic states {counts['haptic']})")
 
     def on_mesh(channel, data):
         m, left_bytes = decoded(surface_mesh, channel, data)
@@ -429,7 +446,7 @@ def main():
     if plot is not None:
         try:
             if write_svg(args.plot, plot.points):
-                print(f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)")
+                say(f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)")
             else:
                 print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
         except OSError as e:

@@ -194,6 +194,22 @@ wait "$term" || rc=$?
 [ "$rc" -eq 0 ] || { cat "$work/term.err"; fail "stopped by SIGTERM: exit $rc, expected 0"; }
 grep -q '<polyline' "$work/term.svg" || fail "no plot after SIGTERM"
 
+# A standard output that closes (| head -1): printing stops, listening goes
+# on, the plot is written, exit 0 without a traceback. A pipe holds a few
+# hundred lines, so 1000 points show listening went on after the close.
+{
+  rc=0
+  python3 "$subscriber" --types "$types" --seconds 3 --plot "$work/pipe.svg" 2>"$work/pipe.err" || rc=$?
+  echo "$rc" >"$work/pipe.rc"
+} | head -1 >"$work/pipe.head"
+rc="$(cat "$work/pipe.rc")"
+no_traceback "$work/pipe.err"
+[ "$rc" -eq 0 ] || { cat "$work/pipe.err"; fail "standard output closed: exit $rc, expected 0"; }
+grep -q '^t ' "$work/pipe.head" || fail "standard output closed: no first line"
+[ -f "$work/pipe.svg" ] || { cat "$work/pipe.err"; fail "standard output closed: no plot"; }
+points="$(sed -n 's/.*<polyline points="\([^"]*\)".*/\1/p' "$work/pipe.svg" | head -1 | wc -w)"
+[ "$points" -ge 1000 ] || fail "standard output closed: $points points in the plot (listening stopped?)"
+
 # A plot that cannot be written (file size limit): exit 3 with the reason,
 # the earlier plot unchanged, no temporary file left. stdout goes to
 # /dev/null, which the limit does not cover.
