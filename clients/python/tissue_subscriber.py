@@ -19,8 +19,10 @@ A message that does not decode (another publisher on the channel, a damaged
 datagram) is counted and dropped; so is a surface_mesh that decodes but is
 not a usable mesh (the checks of the C++ subscriber: 3 coordinates per
 vertex, 3 indices per triangle each naming a vertex, finite coordinates and
-time, no bytes left over). Non-finite statistics are printed but left out of
-the plot. The plot keeps at most --plot-points points per line (every other
+time, no bytes left over). Non-finite statistics are printed; in the plot a
+non-finite value leaves out its own point only (a sample without a finite
+time_s leaves out both), and with no finite time_s at all the plot is not
+written (exit 3). The plot keeps at most --plot-points points per line (every other
 one is dropped when full, so a long run is evenly thinned, not cut).
 The plot is written to a hidden temporary file beside it and renamed over it,
 so a failed write leaves an earlier plot as it was.
@@ -104,9 +106,13 @@ def write_svg(path, samples):
     """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib.
     Written to a temporary file in the same directory, synced, then renamed
     over `path`: a failure (full disk, file size limit) leaves an existing
-    plot intact and no temporary file. False when there is nothing to plot;
-    OSError when writing fails."""
+    plot intact and no temporary file. False when there is nothing to plot
+    (no sample with a finite time); OSError when writing fails."""
     width, height, pad = 640, 400, 50
+    # A point needs a finite time; a NaN or infinite value leaves out its own
+    # point only (a NaN would break the polyline), so the tets of a sample
+    # whose real-time factor is not yet measured are still drawn.
+    samples = [s for s in samples if math.isfinite(s[0])]
     if not samples:
         return False
     t = [s[0] for s in samples]
@@ -117,11 +123,15 @@ def write_svg(path, samples):
            f'<rect width="{width}" height="{height}" fill="white"/>']
     for i, (name, values, colour) in enumerate(series):
         top = pad + i * (panel_h + pad)
-        lo, hi = min(values), max(values)
+        out.append(f'<rect x="{pad}" y="{top}" width="{width - 2 * pad}" height="{panel_h}" fill="none" stroke="#888"/>')
+        finite = [(x, v) for x, v in zip(t, values) if math.isfinite(v)]
+        if not finite:
+            out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: no finite values</text>')
+            continue
+        lo, hi = min(v for _, v in finite), max(v for _, v in finite)
         points = " ".join(f"{pad + fraction(x, t0, t1) * (width - 2 * pad):.1f},"
                           f"{top + panel_h - fraction(v, lo, hi) * panel_h:.1f}"
-                          for x, v in zip(t, values))
-        out.append(f'<rect x="{pad}" y="{top}" width="{width - 2 * pad}" height="{panel_h}" fill="none" stroke="#888"/>')
+                          for x, v in finite)
         out.append(f'<polyline points="{points}" fill="none" stroke="{colour}" stroke-width="1.5"/>')
         out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
     out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.6g} .. {t1:.6g} s</text>')
@@ -400,7 +410,7 @@ def main():
             return
         counts["stats"] += 1
         sample = (m.time_s, m.tet_count, m.real_time_factor)
-        if plot is not None and all(math.isfinite(v) for v in sample):  # a NaN would break the polyline
+        if plot is not None and math.isfinite(m.time_s):  # write_svg leaves out each non-finite value alone
             plot.add(sample)
         say(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
             f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
@@ -448,7 +458,11 @@ def main():
             if write_svg(args.plot, plot.points):
                 say(f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)")
             else:
-                print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
+                # The plot asked for is not there (an earlier one stays): 3, as
+                # for any plot that cannot be written, not 0.
+                print(f"tissue_subscriber: cannot write {args.plot}: nothing to plot: none of the {counts['stats']} "
+                      "sim_stats received has a finite time_s", file=sys.stderr)
+                return 3
         except OSError as e:
             print(f"tissue_subscriber: cannot write {args.plot}: {e.strerror or e}", file=sys.stderr)
             return 3

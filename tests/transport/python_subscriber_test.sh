@@ -14,8 +14,8 @@ if ! python3 -c 'import lcm' 2>/dev/null; then
 fi
 work="$(mktemp -d)"
 stream=""
-listeners=""
-trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; for l in $listeners; do kill "$l" 2>/dev/null; done; rm -rf "$work"' EXIT
+helpers=""  # background listeners and publishers, killed at exit
+trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; for h in $helpers; do kill "$h" 2>/dev/null || :; done; rm -rf "$work"' EXIT
 "$tissued" --config "$src/config/tissued.yaml" --duration 4 \
   --set "control.unix_socket_path=$work/c.sock" --set "state_dir=$work" \
   --set publish.lcm.enabled=true --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
@@ -115,7 +115,7 @@ grep -q -- "--url nosuch://x: cannot start LCM (LCM's own message above says why
 listen() {  # MODE: starts a loopback_tcp_listener.py, sets $port and $listener_log
   listener_log="$work/listener-$1.log"
   python3 "$here/loopback_tcp_listener.py" "$1" >"$listener_log" &
-  listeners="$listeners $!"
+  helpers="$helpers $!"
   polls=0
   until [ -s "$listener_log" ]; do
     polls=$((polls + 1))
@@ -173,6 +173,40 @@ timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.
 [ "$rc" -eq 2 ] || { cat "$work/web.log"; fail "a web server at tcpq://: exit $rc, expected 2"; }
 grep -q -- "--url tcpq://127.0.0.1:$port: the server's answer is not LCM's" "$work/web.log" ||
   { cat "$work/web.log"; fail "a web server at tcpq://: not said"; }
+
+# Statistics whose real-time factor is NaN (a daemon before it has measured
+# it) but whose time and tets are finite: printed, their tets plotted (every
+# one: fewer than --plot-points), no NaN in the plot, exit 0.
+python3 "$here/foreign_lcm_publisher.py" "$types" nan_rtf &
+nan=$!
+helpers="$helpers $nan"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1.5 --plot "$work/nanrtf.svg" >"$work/nanrtf.log" 2>"$work/nanrtf.err" ||
+  rc=$?
+kill "$nan"
+[ "$rc" -eq 0 ] || { cat "$work/nanrtf.err"; fail "a NaN real-time factor: exit $rc, expected 0"; }
+lines="$(grep -c '^t .*rtf   nan' "$work/nanrtf.log")"
+[ "$lines" -ge 10 ] || { cat "$work/nanrtf.log" "$work/nanrtf.err"; fail "a NaN real-time factor: $lines lines printed"; }
+[ -f "$work/nanrtf.svg" ] || { cat "$work/nanrtf.err"; fail "a NaN real-time factor: no plot"; }
+points="$(sed -n 's/.*<polyline points="\([^"]*\)".*/\1/p' "$work/nanrtf.svg" | head -1 | wc -w)"
+[ "$points" -eq "$lines" ] || fail "a NaN real-time factor: $points tets points for $lines statistics"
+if grep -qi 'nan' "$work/nanrtf.svg"; then fail "a NaN real-time factor: NaN in the plot"; fi
+grep -q "real-time factor: no finite values" "$work/nanrtf.svg" || fail "a NaN real-time factor: its panel does not say so"
+# Statistics with no finite time: nothing can be plotted, so the plot asked
+# for cannot be written (3, said); an earlier plot stays as it was.
+printf 'an earlier plot\n' >"$work/nantime.svg"
+python3 "$here/foreign_lcm_publisher.py" "$types" nan_time &
+nan=$!
+helpers="$helpers $nan"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1.5 --plot "$work/nantime.svg" >"$work/nantime.log" 2>"$work/nantime.err" ||
+  rc=$?
+kill "$nan"
+lines="$(grep -c '^t ' "$work/nantime.log")"
+[ "$rc" -eq 3 ] || { cat "$work/nantime.err"; fail "statistics without a finite time: exit $rc, expected 3"; }
+grep -q "cannot write $work/nantime.svg: nothing to plot: none of the $lines sim_stats received has a finite time_s" \
+  "$work/nantime.err" || { cat "$work/nantime.err"; fail "statistics without a finite time: not said"; }
+[ "$(cat "$work/nantime.svg")" = "an earlier plot" ] || fail "statistics without a finite time: the earlier plot changed"
 
 # The rest listens to a stream of statistics from the foreign publisher.
 python3 "$here/foreign_lcm_publisher.py" "$types" stream &
