@@ -4,10 +4,10 @@
 Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
 writes an SVG of tets and real-time factor over time when it stops: after
 --seconds, or on SIGINT (Ctrl-C) or SIGTERM. A tcpq:// server is first asked
-for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for ever). A standard output
-that closes (| head) ends only the printing. Mesh and haptic messages are
-counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see proto/README.md for
-every field.
+for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for
+ever). A standard output that closes (| head) ends only the printing. Mesh
+and haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE);
+see proto/README.md for every field.
 
   python3 clients/python/tissue_subscriber.py --seconds 10 --plot stats.svg
 
@@ -22,10 +22,14 @@ vertex, 3 indices per triangle each naming a vertex, finite coordinates and
 time, no bytes left over). Non-finite statistics are printed; in the plot a
 non-finite value leaves out its own point only (a sample without a finite
 time_s leaves out both), and with no finite time_s at all the plot is not
-written (exit 3). The plot keeps at most --plot-points points per line (every other
-one is dropped when full, so a long run is evenly thinned, not cut).
-The plot is written to a hidden temporary file beside it and renamed over it,
-so a failed write leaves an earlier plot as it was.
+written (exit 3). The plot keeps at most --plot-points points per line
+(every other one is dropped when full, so a long run is evenly thinned, not
+cut).
+The plot is written as the C++ tools write their -o files: to a hidden
+temporary file beside it, renamed over it (a failed write leaves an earlier
+plot as it was; its permissions are kept; a symbolic link stays a link and
+its target is replaced), or in place for a FIFO, a device or a file reached
+through /proc (--plot /dev/stdout).
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
 2 bad arguments, missing modules or LCM cannot start at --url (said with the
 likely cause: no route for a udpm:// group), 3 statistics arrived but the
@@ -39,6 +43,7 @@ import os
 import select
 import signal
 import socket
+import stat
 import struct
 import sys
 import tempfile
@@ -61,18 +66,129 @@ def find_types(explicit):
     return None
 
 
+def canonical_link_path(path):
+    """The canonical directory of `path` joined with its last name (the link
+    itself, not followed); "" when the directory does not resolve."""
+    directory = os.path.realpath(os.path.dirname(path) or ".")
+    if not os.path.isdir(directory):
+        return ""
+    return os.path.join(directory, os.path.basename(path))
+
+
+def through_proc(path):
+    """Whether `path`, following its symbolic links, passes through /proc: an
+    open descriptor's link such as /dev/stdout (-> /proc/self/fd/1), /dev/fd/N
+    or /proc/PID/fd/N. Its file is one a process already holds open (a
+    shell's `> out`): it is written in place, never renamed over (as root a
+    rename would replace /dev/stdout itself). util::through_proc in C++."""
+    p = path
+    for _ in range(40):  # the kernel's own limit on a chain
+        link = canonical_link_path(p)
+        if not link:
+            return False
+        if link.startswith("/proc/"):
+            return True
+        try:
+            if not stat.S_ISLNK(os.lstat(link).st_mode):
+                return False
+            target = os.readlink(link)
+        except OSError:
+            return False
+        p = target if target.startswith("/") else os.path.join(os.path.dirname(link), target)
+    return False
+
+
+def writes_in_place(st, path):
+    """Whether the existing node `path` (os.stat result `st`) is written in
+    place rather than replaced: one that is not a regular file (a FIFO, a
+    character device such as /dev/null: a rename would put a regular file in
+    its place) or a file reached through /proc."""
+    return not stat.S_ISREG(st.st_mode) or through_proc(path)
+
+
 def plot_path_error(path):
     """Why an SVG cannot be written at path, or None: checked before listening,
-    so a typo does not cost the whole run."""
-    if os.path.isdir(path):
+    so a typo does not cost the whole run. By the rules write_output_file
+    follows: a node written in place must be writable; otherwise the
+    directory of the file that will be replaced (a symbolic link's target)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        st = None
+    if st is not None and stat.S_ISDIR(st.st_mode):
         return "is a directory"
-    directory = os.path.dirname(os.path.abspath(path))
+    if st is not None and writes_in_place(st, path):
+        return None if os.access(path, os.W_OK) else "is not writable"
+    target = os.path.realpath(path) if st is not None and os.path.islink(path) else path
+    directory = os.path.dirname(os.path.abspath(target))
     if not os.path.isdir(directory):
         return f"directory {directory} does not exist" if not os.path.exists(directory) \
             else f"{directory} is not a directory"
     if not os.access(directory, os.W_OK | os.X_OK):
         return f"directory {directory} is not writable"
     return None
+
+
+def write_output_file(path, text):
+    """Writes `text` to `path` whole or not at all, by the rules of the C++
+    tools' output files (daemon/util/output_file.hpp PendingOutputFile).
+    A regular file (or a new name) is written to a hidden temporary file
+    beside it, synced and renamed over it: a failure (full disk, file size
+    limit) leaves an existing file intact and no temporary file. A symbolic
+    link to a regular file stays a link, and the file it names is replaced.
+    The replacement keeps the replaced file's permissions (a plot made
+    private stays private); a new file is 0666 less the umask. Written in
+    place instead, never renamed over: an existing node that is not a regular
+    file (a FIFO, a device) and a file reached through /proc (appended to:
+    its holder opened it, `>` truncated it already). OSError when it fails."""
+    data = text.encode()
+    try:
+        st = os.stat(path)
+    except OSError:
+        st = None
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), path)
+    if st is not None and writes_in_place(st, path):
+        fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        return
+    target = os.path.realpath(path) if st is not None and os.path.islink(path) else path
+    directory = os.path.dirname(os.path.abspath(target))
+    # Its name cut so that the whole fits the 255 bytes of a name.
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(target)[:200] + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            # mkstemp made it 0600.
+            os.fchmod(f.fileno(), stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~current_umask())
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())  # on disk before it replaces anything
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    try:  # the rename itself, durable (best effort: some filesystems refuse it)
+        dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+    except OSError:
+        pass
+
+
+def is_standard_output(path):
+    """Whether `path` is the file (or pipe) this process's standard output
+    writes to: the "wrote" line then goes to stderr, not into the plot."""
+    try:
+        out, st = os.fstat(sys.stdout.fileno()), os.stat(path)
+    except (OSError, ValueError):
+        return False
+    return (out.st_dev, out.st_ino) == (st.st_dev, st.st_ino)
 
 
 class Thinned:
@@ -103,10 +219,9 @@ def fraction(x, lo, hi):
 
 
 def write_svg(path, samples):
-    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib.
-    Written to a temporary file in the same directory, synced, then renamed
-    over `path`: a failure (full disk, file size limit) leaves an existing
-    plot intact and no temporary file. False when there is nothing to plot
+    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib,
+    written by write_output_file's rules: a failure (full disk, file size
+    limit) leaves an existing plot intact. False when there is nothing to plot
     (no sample with a finite time); OSError when writing fails."""
     width, height, pad = 640, 400, 50
     # A point needs a finite time; a NaN or infinite value leaves out its own
@@ -136,21 +251,7 @@ def write_svg(path, samples):
         out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
     out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.6g} .. {t1:.6g} s</text>')
     out.append("</svg>")
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write("\n".join(out) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp makes it 0600; a plot is an ordinary file
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    write_output_file(path, "\n".join(out) + "\n")
     return True
 
 
@@ -385,6 +486,9 @@ def main():
             # output becomes /dev/null (the way the Python docs give).
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
+    # Decided now: a closed standard output becomes /dev/null (say), which a
+    # --plot /dev/stdout would then silently write to.
+    plot_is_stdout = args.plot is not None and is_standard_output(args.plot)
     # Only what the plot needs is kept, and at most --plot-points of it.
     plot = Thinned(args.plot_points) if args.plot else None
     counts = {"stats": 0, "mesh": 0, "haptic": 0}
@@ -454,9 +558,16 @@ def main():
               file=sys.stderr)
         return 1
     if plot is not None:
+        if stdout_closed and plot_is_stdout:
+            print(f"tissue_subscriber: cannot write {args.plot}: standard output has closed", file=sys.stderr)
+            return 3
         try:
             if write_svg(args.plot, plot.points):
-                say(f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)")
+                summary = f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)"
+                if plot_is_stdout:  # not after the plot on standard output (--plot /dev/stdout)
+                    print(summary, file=sys.stderr)
+                else:
+                    say(summary)
             else:
                 # The plot asked for is not there (an earlier one stays): 3, as
                 # for any plot that cannot be written, not 0.

@@ -244,6 +244,62 @@ grep -q '^t ' "$work/pipe.head" || fail "standard output closed: no first line"
 points="$(sed -n 's/.*<polyline points="\([^"]*\)".*/\1/p' "$work/pipe.svg" | head -1 | wc -w)"
 [ "$points" -ge 1000 ] || fail "standard output closed: $points points in the plot (listening stopped?)"
 
+# What --plot names is written as the C++ tools write their -o
+# (util::PendingOutputFile): a symbolic link stays a link and the file it
+# names is replaced, with that file's permissions; an existing plot keeps its
+# permissions; a FIFO and a file reached through /proc (a link to
+# /proc/self/fd/1, as /dev/stdout is) are written in place, never renamed
+# over. (Never /dev itself here: the test may run as root.)
+mkdir "$work/plots"
+printf 'old\n' >"$work/plots/real.svg"
+chmod 640 "$work/plots/real.svg"
+ln -s plots/real.svg "$work/link.svg"
+printf 'old\n' >"$work/private.svg"
+chmod 600 "$work/private.svg"
+for plot in link.svg private.svg new.svg; do
+  rc=0
+  (umask 022 && exec python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/$plot" >/dev/null 2>"$work/out.err") ||
+    rc=$?
+  [ "$rc" -eq 0 ] || { cat "$work/out.err"; fail "--plot $plot: exit $rc, expected 0"; }
+done
+[ -L "$work/link.svg" ] || fail "--plot at a symbolic link: the link was replaced by a file"
+[ "$(readlink "$work/link.svg")" = plots/real.svg ] || fail "--plot at a symbolic link: it now names $(readlink "$work/link.svg")"
+grep -q '<polyline' "$work/plots/real.svg" || fail "--plot at a symbolic link: the file it names was not written"
+[ "$(stat -c %a "$work/plots/real.svg")" = 640 ] || fail "--plot at a symbolic link: mode $(stat -c %a "$work/plots/real.svg"), expected 640"
+grep -q '<polyline' "$work/private.svg" || fail "--plot at a private file: not written"
+[ "$(stat -c %a "$work/private.svg")" = 600 ] || fail "--plot at a private file: mode $(stat -c %a "$work/private.svg"), expected 600"
+[ "$(stat -c %a "$work/new.svg")" = 644 ] || fail "--plot at a new file: mode $(stat -c %a "$work/new.svg") with umask 022"
+if ls -A "$work" "$work/plots" | grep -q '\.tmp$'; then ls -A "$work" "$work/plots"; fail "a temporary plot was left"; fi
+mkfifo "$work/plot.fifo"
+cat "$work/plot.fifo" >"$work/fifo.out" &
+reader=$!
+helpers="$helpers $reader"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/plot.fifo" >/dev/null 2>"$work/fifo.err" || rc=$?
+[ -p "$work/plot.fifo" ] || fail "--plot at a FIFO: the FIFO was replaced"
+[ "$rc" -eq 0 ] || { cat "$work/fifo.err"; fail "--plot at a FIFO: exit $rc, expected 0"; }
+wait "$reader"
+grep -q '<polyline' "$work/fifo.out" || fail "--plot at a FIFO: nothing came through it"
+ln -s /proc/self/fd/1 "$work/stdout"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stdout" >"$work/stdout.out" 2>"$work/stdout.err" || rc=$?
+[ -L "$work/stdout" ] || fail "--plot through /proc: the link was replaced by a file"
+[ "$rc" -eq 0 ] || { cat "$work/stdout.err"; fail "--plot through /proc: exit $rc, expected 0"; }
+grep -q '^t ' "$work/stdout.out" || fail "--plot through /proc: the statistics printed before it are gone"
+[ "$(tail -1 "$work/stdout.out")" = '</svg>' ] || { tail -2 "$work/stdout.out"; fail "--plot through /proc: the plot does not end standard output"; }
+grep -q "^wrote $work/stdout (" "$work/stdout.err" || { cat "$work/stdout.err"; fail "--plot through /proc: 'wrote' not on stderr"; }
+# ... and when that standard output has closed (| head -1) the plot cannot
+# be written: exit 3, said.
+{
+  rc=0
+  python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stdout" 2>"$work/stdout-closed.err" || rc=$?
+  echo "$rc" >"$work/stdout-closed.rc"
+} | head -1 >/dev/null
+rc="$(cat "$work/stdout-closed.rc")"
+[ "$rc" -eq 3 ] || { cat "$work/stdout-closed.err"; fail "--plot to a closed standard output: exit $rc, expected 3"; }
+grep -q "cannot write $work/stdout: standard output has closed" "$work/stdout-closed.err" ||
+  { cat "$work/stdout-closed.err"; fail "--plot to a closed standard output: not said"; }
+
 # A plot that cannot be written (file size limit): exit 3 with the reason,
 # the earlier plot unchanged, no temporary file left. stdout goes to
 # /dev/null, which the limit does not cover.
