@@ -3,9 +3,11 @@
 
 Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
 writes an SVG of tets and real-time factor over time when it stops: after
---seconds, or on SIGINT (Ctrl-C) or SIGTERM. Mesh and haptic messages are
-counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE); see proto/README.md for
-every field.
+--seconds, or on SIGINT (Ctrl-C) or SIGTERM. A tcpq:// server is first asked
+for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for
+ever). A standard output that closes (| head) ends only the printing. Mesh
+and haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE);
+see proto/README.md for every field.
 
   python3 clients/python/tissue_subscriber.py --seconds 10 --plot stats.svg
 
@@ -17,21 +19,32 @@ A message that does not decode (another publisher on the channel, a damaged
 datagram) is counted and dropped; so is a surface_mesh that decodes but is
 not a usable mesh (the checks of the C++ subscriber: 3 coordinates per
 vertex, 3 indices per triangle each naming a vertex, finite coordinates and
-time, no bytes left over). Non-finite statistics are printed but left out of
-the plot. The plot keeps at most --plot-points points per line (every other
-one is dropped when full, so a long run is evenly thinned, not cut).
-The plot is written to a hidden temporary file beside it and renamed over it,
-so a failed write leaves an earlier plot as it was.
+time, no bytes left over). Non-finite statistics are printed; in the plot a
+non-finite value leaves out its own point only (a sample without a finite
+time_s leaves out both), and with no finite time_s at all the plot is not
+written (exit 3). The plot keeps at most --plot-points points per line
+(every other one is dropped when full, so a long run is evenly thinned, not
+cut).
+The plot is written as the C++ tools write their -o files: to a hidden
+temporary file beside it, renamed over it (a failed write leaves an earlier
+plot as it was; its permissions are kept; a symbolic link stays a link and
+its target is replaced), or in place for a FIFO, a device or a file reached
+through /proc (--plot /dev/stdout).
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
-2 bad arguments or missing modules, 3 statistics arrived but the plot could
-not be written.
+2 bad arguments, missing modules or LCM cannot start at --url (said with the
+likely cause: no route for a udpm:// group), 3 statistics arrived but the
+plot could not be written.
 """
 import argparse
+import errno
 import io
 import math
 import os
 import select
 import signal
+import socket
+import stat
+import struct
 import sys
 import tempfile
 import time
@@ -53,18 +66,129 @@ def find_types(explicit):
     return None
 
 
+def canonical_link_path(path):
+    """The canonical directory of `path` joined with its last name (the link
+    itself, not followed); "" when the directory does not resolve."""
+    directory = os.path.realpath(os.path.dirname(path) or ".")
+    if not os.path.isdir(directory):
+        return ""
+    return os.path.join(directory, os.path.basename(path))
+
+
+def through_proc(path):
+    """Whether `path`, following its symbolic links, passes through /proc: an
+    open descriptor's link such as /dev/stdout (-> /proc/self/fd/1), /dev/fd/N
+    or /proc/PID/fd/N. Its file is one a process already holds open (a
+    shell's `> out`): it is written in place, never renamed over (as root a
+    rename would replace /dev/stdout itself). util::through_proc in C++."""
+    p = path
+    for _ in range(40):  # the kernel's own limit on a chain
+        link = canonical_link_path(p)
+        if not link:
+            return False
+        if link.startswith("/proc/"):
+            return True
+        try:
+            if not stat.S_ISLNK(os.lstat(link).st_mode):
+                return False
+            target = os.readlink(link)
+        except OSError:
+            return False
+        p = target if target.startswith("/") else os.path.join(os.path.dirname(link), target)
+    return False
+
+
+def writes_in_place(st, path):
+    """Whether the existing node `path` (os.stat result `st`) is written in
+    place rather than replaced: one that is not a regular file (a FIFO, a
+    character device such as /dev/null: a rename would put a regular file in
+    its place) or a file reached through /proc."""
+    return not stat.S_ISREG(st.st_mode) or through_proc(path)
+
+
 def plot_path_error(path):
     """Why an SVG cannot be written at path, or None: checked before listening,
-    so a typo does not cost the whole run."""
-    if os.path.isdir(path):
+    so a typo does not cost the whole run. By the rules write_output_file
+    follows: a node written in place must be writable; otherwise the
+    directory of the file that will be replaced (a symbolic link's target)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        st = None
+    if st is not None and stat.S_ISDIR(st.st_mode):
         return "is a directory"
-    directory = os.path.dirname(os.path.abspath(path))
+    if st is not None and writes_in_place(st, path):
+        return None if os.access(path, os.W_OK) else "is not writable"
+    target = os.path.realpath(path) if st is not None and os.path.islink(path) else path
+    directory = os.path.dirname(os.path.abspath(target))
     if not os.path.isdir(directory):
         return f"directory {directory} does not exist" if not os.path.exists(directory) \
             else f"{directory} is not a directory"
     if not os.access(directory, os.W_OK | os.X_OK):
         return f"directory {directory} is not writable"
     return None
+
+
+def write_output_file(path, text):
+    """Writes `text` to `path` whole or not at all, by the rules of the C++
+    tools' output files (daemon/util/output_file.hpp PendingOutputFile).
+    A regular file (or a new name) is written to a hidden temporary file
+    beside it, synced and renamed over it: a failure (full disk, file size
+    limit) leaves an existing file intact and no temporary file. A symbolic
+    link to a regular file stays a link, and the file it names is replaced.
+    The replacement keeps the replaced file's permissions (a plot made
+    private stays private); a new file is 0666 less the umask. Written in
+    place instead, never renamed over: an existing node that is not a regular
+    file (a FIFO, a device) and a file reached through /proc (appended to:
+    its holder opened it, `>` truncated it already). OSError when it fails."""
+    data = text.encode()
+    try:
+        st = os.stat(path)
+    except OSError:
+        st = None
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), path)
+    if st is not None and writes_in_place(st, path):
+        fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        return
+    target = os.path.realpath(path) if st is not None and os.path.islink(path) else path
+    directory = os.path.dirname(os.path.abspath(target))
+    # Its name cut so that the whole fits the 255 bytes of a name.
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(target)[:200] + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            # mkstemp made it 0600.
+            os.fchmod(f.fileno(), stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~current_umask())
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())  # on disk before it replaces anything
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    try:  # the rename itself, durable (best effort: some filesystems refuse it)
+        dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+    except OSError:
+        pass
+
+
+def is_standard_output(path):
+    """Whether `path` is the file (or pipe) this process's standard output
+    writes to: the "wrote" line then goes to stderr, not into the plot."""
+    try:
+        out, st = os.fstat(sys.stdout.fileno()), os.stat(path)
+    except (OSError, ValueError):
+        return False
+    return (out.st_dev, out.st_ino) == (st.st_dev, st.st_ino)
 
 
 class Thinned:
@@ -95,12 +219,15 @@ def fraction(x, lo, hi):
 
 
 def write_svg(path, samples):
-    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib.
-    Written to a temporary file in the same directory, synced, then renamed
-    over `path`: a failure (full disk, file size limit) leaves an existing
-    plot intact and no temporary file. False when there is nothing to plot;
-    OSError when writing fails."""
+    """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib,
+    written by write_output_file's rules: a failure (full disk, file size
+    limit) leaves an existing plot intact. False when there is nothing to plot
+    (no sample with a finite time); OSError when writing fails."""
     width, height, pad = 640, 400, 50
+    # A point needs a finite time; a NaN or infinite value leaves out its own
+    # point only (a NaN would break the polyline), so the tets of a sample
+    # whose real-time factor is not yet measured are still drawn.
+    samples = [s for s in samples if math.isfinite(s[0])]
     if not samples:
         return False
     t = [s[0] for s in samples]
@@ -111,30 +238,20 @@ def write_svg(path, samples):
            f'<rect width="{width}" height="{height}" fill="white"/>']
     for i, (name, values, colour) in enumerate(series):
         top = pad + i * (panel_h + pad)
-        lo, hi = min(values), max(values)
+        out.append(f'<rect x="{pad}" y="{top}" width="{width - 2 * pad}" height="{panel_h}" fill="none" stroke="#888"/>')
+        finite = [(x, v) for x, v in zip(t, values) if math.isfinite(v)]
+        if not finite:
+            out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: no finite values</text>')
+            continue
+        lo, hi = min(v for _, v in finite), max(v for _, v in finite)
         points = " ".join(f"{pad + fraction(x, t0, t1) * (width - 2 * pad):.1f},"
                           f"{top + panel_h - fraction(v, lo, hi) * panel_h:.1f}"
-                          for x, v in zip(t, values))
-        out.append(f'<rect x="{pad}" y="{top}" width="{width - 2 * pad}" height="{panel_h}" fill="none" stroke="#888"/>')
+                          for x, v in finite)
         out.append(f'<polyline points="{points}" fill="none" stroke="{colour}" stroke-width="1.5"/>')
         out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
     out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.6g} .. {t1:.6g} s</text>')
     out.append("</svg>")
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write("\n".join(out) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp makes it 0600; a plot is an ordinary file
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    write_output_file(path, "\n".join(out) + "\n")
     return True
 
 
@@ -142,6 +259,121 @@ def current_umask():
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def udpm_group(url):
+    """The multicast group of a udpm:// URL as a 32-bit number, or None when the
+    URL does not start with a dotted IPv4 multicast address (the C++
+    daemon/util/lcm_url.cpp udpm_group: four octets of 1 to 3 digits, no
+    leading zero, which inet_aton would read as octal)."""
+    if not url.startswith("udpm://"):
+        return None
+    address = url[len("udpm://"):].split("?", 1)[0]
+    octets = address.rsplit(":", 1)[0].split(".")
+    if len(octets) != 4 or not all(o.isdigit() and o.isascii() and len(o) <= 3 and (o == "0" or o[0] != "0")
+                                   and int(o) <= 255 for o in octets):
+        return None
+    group = 0
+    for o in octets:
+        group = group << 8 | int(o)
+    return group if group >> 28 == 0xE else None
+
+
+def has_route_to(group, proc_net_route):
+    """Whether the IPv4 routing table (the text of /proc/net/route) has an up
+    route covering `group`: a default route or one whose destination and mask
+    contain it. The table prints each address as the 32-bit word of its
+    network-order bytes read in this machine's order, so the group is put in
+    the same form."""
+    raw = int.from_bytes(group.to_bytes(4, "big"), sys.byteorder)
+    for line in proc_net_route.splitlines()[1:]:
+        fields = line.split()
+        if len(fields) < 8:
+            continue
+        try:
+            destination, flags, mask = int(fields[1], 16), int(fields[3], 16), int(fields[7], 16)
+        except ValueError:
+            continue
+        if flags & 0x1 and raw & mask == destination:  # RTF_UP
+            return True
+    return False
+
+
+def lcm_start_failure(url):
+    """Why lcm.LCM(url) failed, as far as can be told from outside (LCM prints
+    its own reason on stderr; the exception says only "Couldn't create LCM").
+    The wording of the C++ clients (daemon/util/lcm_url.cpp lcm_start_failure)."""
+    group = udpm_group(url)
+    if group is not None:
+        try:
+            with open("/proc/net/route") as f:
+                table = f.read()
+        except OSError:
+            table = None
+        if table is not None and not has_route_to(group, table):
+            dotted = ".".join(str(group >> shift & 0xFF) for shift in (24, 16, 8, 0))
+            return (f"cannot start LCM: no route covers its multicast group {dotted} "
+                    "(add one, e.g. `ip route add 224.0.0.0/4 dev lo` for this host only)")
+    return "cannot start LCM (LCM's own message above says why)"
+
+
+TCPQ_GREETING_WAIT_S = 10.0  # at most; less when --seconds is shorter (the C++ clients' wait)
+TCPQ_MAGIC_CLIENT, TCPQ_MAGIC_SERVER, TCPQ_VERSION = 0x287617FB, 0x287617FA, 0x0100  # LCM's lcm_tcpq.c
+
+
+def tcpq_server_problem(url, timeout_s, stop):
+    """Whether a tcpq:// URL's server answers LCM's greeting within timeout_s:
+    None when it does (or the URL is not tcpq://), else why not. LCM's own
+    client sends its magic number and protocol version and then waits for the
+    server's (8 bytes, big-endian) inside lcm.LCM() with no time limit, so a
+    port that accepts and says nothing hung the subscriber past --seconds. The
+    probe of the C++ clients (daemon/util/lcm_url.cpp tcpq_server_problem),
+    with LCM's own defaults for a missing host (127.0.0.1) or port (7700). It
+    waits in slices and gives up early once `stop` (the signal list) fills."""
+    if not url.startswith("tcpq://"):
+        return None
+    host, _, port = url[len("tcpq://"):].split("?", 1)[0].partition(":")  # LCM splits at the first ':'
+    host, port = host or "127.0.0.1", port or "7700"
+    if not (port.isascii() and port.isdigit() and len(port) <= 5 and 1 <= int(port) <= 65535):
+        return "the port must be in [1, 65535]"
+    try:
+        address = socket.getaddrinfo(host, int(port), socket.AF_INET, socket.SOCK_STREAM)[0][4]
+    except (OSError, IndexError):
+        return f"cannot resolve '{host}'"
+    deadline = time.monotonic() + timeout_s
+
+    def ready(s, writing):
+        while not stop and (left := deadline - time.monotonic()) > 0:
+            r, w, _ = select.select([] if writing else [s], [s] if writing else [], [], min(left, 0.1))
+            if r or w:
+                return True
+        return False
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setblocking(False)
+        err = s.connect_ex(address)
+        if err not in (0, errno.EINPROGRESS):
+            return f"cannot connect: {os.strerror(err)}"
+        if not ready(s, True):
+            return f"no connection within {timeout_s:g} s"
+        err = s.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
+        if err:
+            return f"cannot connect: {os.strerror(err)}"
+        try:
+            s.sendall(struct.pack(">II", TCPQ_MAGIC_CLIENT, TCPQ_VERSION))  # 8 bytes: a fresh socket takes them
+            reply = b""
+            while len(reply) < 8 and ready(s, False):
+                chunk = s.recv(8 - len(reply))
+                if not chunk:
+                    break
+                reply += chunk
+        except OSError as e:
+            return f"cannot greet the server: {e.strerror or e}"
+    if len(reply) < 8:
+        return f"the server did not answer LCM's greeting within {timeout_s:g} s (is it an LCM tcpq server?)"
+    if struct.unpack(">I", reply[:4])[0] != TCPQ_MAGIC_SERVER:
+        return "the server's answer is not LCM's (is it an LCM tcpq server?)"
+    return None
 
 
 def mesh_error(m, left_bytes):
@@ -207,11 +439,56 @@ def main():
     sys.path.insert(0, types)
     from tissue import haptic_state, sim_stats, surface_mesh
 
+    # SIGINT and SIGTERM end the listening early; the summary and the plot
+    # still follow. Installed before LCM starts: a tcpq:// server's greeting
+    # is waited for before listening, and Ctrl-C there is a stop too, not a
+    # KeyboardInterrupt traceback. (A SIGINT the parent ignores, as a shell
+    # does for a background job, stays ignored.)
+    stop = []
+
+    def on_signal(signum, frame):
+        stop.append(signum)
+
+    signal.signal(signal.SIGTERM, on_signal)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, on_signal)
+    # LCM's tcpq client waits for its server's greeting with no time limit
+    # (--seconds would never start): the greeting is asked for first.
+    why = tcpq_server_problem(args.url, min(args.seconds, TCPQ_GREETING_WAIT_S), stop)
+    if stop:
+        print(f"tissue_subscriber: stopped before listening at {args.url}; no sim_stats", file=sys.stderr)
+        return 1
+    if why:
+        print(f"tissue_subscriber: --url {args.url}: {why}", file=sys.stderr)
+        return 2
     try:
         lc = lcm.LCM(args.url)
-    except (IOError, RuntimeError) as e:
-        print(f"tissue_subscriber: cannot listen at {args.url}: {e}", file=sys.stderr)
+        # A tcpq server that went away since it greeted leaves LCM without a
+        # socket (fileno -1), which select() would refuse.
+        if lc.fileno() < 0 and not stop:
+            raise RuntimeError("no socket")
+    except (IOError, RuntimeError):  # its text is only "Couldn't create LCM"
+        print(f"tissue_subscriber: --url {args.url}: {lcm_start_failure(args.url)}", file=sys.stderr)
         return 2
+    stdout_closed = []
+
+    def say(line):
+        """One line on standard output, unless it has closed (`| head`): then
+        nothing more is printed, and listening and the plot go on."""
+        if stdout_closed:
+            return
+        try:
+            print(line, flush=True)
+        except BrokenPipeError:
+            stdout_closed.append(True)
+            # What the failed print left buffered would fail again at exit
+            # ("Exception ignored ... BrokenPipeError", exit 120): standard
+            # output becomes /dev/null (the way the Python docs give).
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+    # Decided now: a closed standard output becomes /dev/null (say), which a
+    # --plot /dev/stdout would then silently write to.
+    plot_is_stdout = args.plot is not None and is_standard_output(args.plot)
     # Only what the plot needs is kept, and at most --plot-points of it.
     plot = Thinned(args.plot_points) if args.plot else None
     counts = {"stats": 0, "mesh": 0, "haptic": 0}
@@ -237,12 +514,12 @@ def main():
             return
         counts["stats"] += 1
         sample = (m.time_s, m.tet_count, m.real_time_factor)
-        if plot is not None and all(math.isfinite(v) for v in sample):  # a NaN would break the polyline
+        if plot is not None and math.isfinite(m.time_s):  # write_svg leaves out each non-finite value alone
             plot.add(sample)
-        print(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
-              f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
-              f"E {m.kinetic_energy_J + m.elastic_energy_J:.3e} J  "
-              f"(meshes {counts['mesh']}, haptic states {counts['haptic']})", flush=True)
+        say(f"t {m.time_s:8.3f} s  nodes {m.node_count:6d}  tets {m.tet_count:7d}  springs {m.spring_count:7d}  "
+            f"refines {m.refine_count:6d}  merges {m.merge_count:6d}  rtf {m.real_time_factor:5.2f}  "
+            f"E {m.kinetic_energy_J + m.elastic_energy_J:.3e} J  "
+            f"(meshes {counts['mesh']}, haptic states {counts['haptic']})")
 
     def on_mesh(channel, data):
         m, left_bytes = decoded(surface_mesh, channel, data)
@@ -265,17 +542,6 @@ def main():
     lc.subscribe("TISSUE_SIM_STATS", on_stats)
     lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
     lc.subscribe("TISSUE_HAPTIC_STATE", on_haptic)
-    # SIGINT and SIGTERM end the listening early; the summary and the plot
-    # still follow. (A SIGINT the parent ignores, as a shell does for a
-    # background job, stays ignored.)
-    stop = []
-
-    def on_signal(signum, frame):
-        stop.append(signum)
-
-    signal.signal(signal.SIGTERM, on_signal)
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, on_signal)
     end = time.monotonic() + args.seconds
     while not stop and (left := end - time.monotonic()) > 0:
         ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))
@@ -292,11 +558,22 @@ def main():
               file=sys.stderr)
         return 1
     if plot is not None:
+        if stdout_closed and plot_is_stdout:
+            print(f"tissue_subscriber: cannot write {args.plot}: standard output has closed", file=sys.stderr)
+            return 3
         try:
             if write_svg(args.plot, plot.points):
-                print(f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)")
+                summary = f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)"
+                if plot_is_stdout:  # not after the plot on standard output (--plot /dev/stdout)
+                    print(summary, file=sys.stderr)
+                else:
+                    say(summary)
             else:
-                print(f"tissue_subscriber: no finite statistics to plot; {args.plot} not written", file=sys.stderr)
+                # The plot asked for is not there (an earlier one stays): 3, as
+                # for any plot that cannot be written, not 0.
+                print(f"tissue_subscriber: cannot write {args.plot}: nothing to plot: none of the {counts['stats']} "
+                      "sim_stats received has a finite time_s", file=sys.stderr)
+                return 3
         except OSError as e:
             print(f"tissue_subscriber: cannot write {args.plot}: {e.strerror or e}", file=sys.stderr)
             return 3

@@ -9,7 +9,14 @@ indices -1 and one past the last vertex; a NaN time_s), and one sim_stats with
 a NaN real-time factor.
 
 stream: sim_stats with time_s = i ms and tet_count = i, about 5000 a second,
-until killed (at most 120 s)."""
+until killed (at most 120 s).
+
+nan_rtf: sim_stats as a daemon sends them before it has measured its
+real-time factor (NaN) but with finite time_s = i ms and tet_count = i,
+about 100 a second, until killed (at most 120 s).
+
+nan_time: the same with a NaN time_s and a finite real-time factor: nothing
+in them can be placed on a time axis."""
 import sys
 import time
 
@@ -48,6 +55,18 @@ if mode == "stream":
             lc.publish("TISSUE_SIM_STATS", m.encode())
             i += 1
         time.sleep(0.002)  # a pace the subscriber keeps up with, not a wait for anything
+    sys.exit(0)
+
+if mode in ("nan_rtf", "nan_time"):
+    m = sim_stats()
+    i, end = 0, time.monotonic() + 120.0
+    while time.monotonic() < end:
+        m.tet_count = i
+        m.time_s = float("nan") if mode == "nan_time" else i * 1e-3
+        m.real_time_factor = float("nan") if mode == "nan_rtf" else 1.0
+        lc.publish("TISSUE_SIM_STATS", m.encode())
+        i += 1
+        time.sleep(0.01)
     sys.exit(0)
 
 time.sleep(1.0)

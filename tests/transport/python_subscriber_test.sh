@@ -14,7 +14,8 @@ if ! python3 -c 'import lcm' 2>/dev/null; then
 fi
 work="$(mktemp -d)"
 stream=""
-trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; rm -rf "$work"' EXIT
+helpers=""  # background listeners and publishers, killed at exit
+trap '[ -z "$stream" ] || kill "$stream" 2>/dev/null; for h in $helpers; do kill "$h" 2>/dev/null || :; done; rm -rf "$work"' EXIT
 "$tissued" --config "$src/config/tissued.yaml" --duration 4 \
   --set "control.unix_socket_path=$work/c.sock" --set "state_dir=$work" \
   --set publish.lcm.enabled=true --set realtime.sched_fifo=false >"$work/daemon.log" 2>&1 &
@@ -62,6 +63,151 @@ python3 "$subscriber" --types "$types" --seconds 0.5 --plot "$work" >"$work/isdi
 [ "$rc" -eq 2 ] || { cat "$work/isdir.log"; fail "--plot at a directory: exit $rc, expected 2"; }
 grep -q -- "--plot $work: is a directory" "$work/isdir.log" || { cat "$work/isdir.log"; fail "--plot at a directory"; }
 
+# --seconds that is not > 0 and --plot-points under 2 are bad arguments (2),
+# said before listening.
+for seconds in 0 -1 nan; do
+  rc=0
+  python3 "$subscriber" --types "$types" --seconds "$seconds" >"$work/seconds.log" 2>&1 || rc=$?
+  [ "$rc" -eq 2 ] || { cat "$work/seconds.log"; fail "--seconds $seconds: exit $rc, expected 2"; }
+  grep -q -- "--seconds must be > 0" "$work/seconds.log" || { cat "$work/seconds.log"; fail "--seconds $seconds: no reason"; }
+  no_traceback "$work/seconds.log"
+done
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --plot-points 1 >"$work/points.log" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/points.log"; fail "--plot-points 1: exit $rc, expected 2"; }
+grep -q -- "--plot-points 1: must be at least 2" "$work/points.log" || { cat "$work/points.log"; fail "--plot-points 1"; }
+
+# Nothing published (the daemon and the foreign publisher are gone): exit 1,
+# said with the URL, and no plot.
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --plot "$work/none.svg" >"$work/none.log" 2>&1 || rc=$?
+[ "$rc" -eq 1 ] || { cat "$work/none.log"; fail "no statistics: exit $rc, expected 1"; }
+grep -q "no sim_stats at udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608 in 0.5 s" "$work/none.log" ||
+  { cat "$work/none.log"; fail "no statistics: not said"; }
+[ ! -e "$work/none.svg" ] || fail "a plot without statistics"
+no_traceback "$work/none.log"
+
+# LCM cannot start: exit 2 naming --url and why. In a network namespace of
+# its own (nested in this one; nothing leaves it) no route covers the
+# multicast group; a scheme LCM does not know is left to LCM's own message.
+if unshare -n true 2>/dev/null; then
+  rc=0
+  unshare -n sh -c 'ip link set lo up && exec "$@"' noroute python3 "$subscriber" --types "$types" --seconds 0.5 \
+    >"$work/noroute.log" 2>&1 || rc=$?
+  [ "$rc" -eq 2 ] || { cat "$work/noroute.log"; fail "no multicast route: exit $rc, expected 2"; }
+  grep -q -- "--url udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608: cannot start LCM: no route covers its multicast group 239.255.76.67 (add one, e.g. \`ip route add 224.0.0.0/4 dev lo\` for this host only)" \
+    "$work/noroute.log" || { cat "$work/noroute.log"; fail "no multicast route: the cause is not said"; }
+  no_traceback "$work/noroute.log"
+else
+  echo "python_subscriber_test: no nested network namespace here; the no-route case is not run"
+fi
+rc=0
+python3 "$subscriber" --types "$types" --seconds 0.5 --url "nosuch://x" >"$work/scheme.log" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/scheme.log"; fail "an unknown scheme: exit $rc, expected 2"; }
+grep -q -- "--url nosuch://x: cannot start LCM (LCM's own message above says why)" "$work/scheme.log" ||
+  { cat "$work/scheme.log"; fail "an unknown scheme: --url not named"; }
+
+# A tcpq:// server that accepts and never greets: LCM's client waits for the
+# greeting without a time limit. The subscriber gives up after
+# min(--seconds, 10) s: exit 2 naming --url and why. A server that greets is
+# listened to for --seconds (nothing arrives: exit 1); one whose answer is not
+# LCM's is exit 2.
+listen() {  # MODE: starts a loopback_tcp_listener.py, sets $port and $listener_log
+  listener_log="$work/listener-$1.log"
+  python3 "$here/loopback_tcp_listener.py" "$1" >"$listener_log" &
+  helpers="$helpers $!"
+  polls=0
+  until [ -s "$listener_log" ]; do
+    polls=$((polls + 1))
+    [ "$polls" -le 100 ] || fail "the $1 listener did not start"
+    sleep 0.1
+  done
+  port="$(head -1 "$listener_log")"
+}
+listen silent
+rc=0
+start="$(date +%s)"
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/silent.log" 2>&1 ||
+  rc=$?
+waited=$(($(date +%s) - start))
+[ "$rc" -eq 2 ] || { cat "$work/silent.log"; fail "a silent tcpq server: exit $rc, expected 2"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: the server did not answer LCM's greeting within 1 s (is it an LCM tcpq server?)" \
+  "$work/silent.log" || { cat "$work/silent.log"; fail "a silent tcpq server: not said"; }
+[ "$waited" -le 10 ] || fail "a silent tcpq server: gave up after $waited s for --seconds 1"
+no_traceback "$work/silent.log"
+# Ctrl-C while it waits for the greeting: stopped before listening, exit 1,
+# no traceback. (SIGINT's default action restored, as below.)
+env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 300 --url "tcpq://127.0.0.1:$port" \
+  >"$work/silent-int.log" 2>&1 &
+waiting=$!
+polls=0
+until [ "$(grep -c accepted "$listener_log")" -ge 2 ]; do
+  polls=$((polls + 1))
+  [ "$polls" -le 300 ] || { kill "$waiting"; fail "the subscriber did not connect to the silent server"; }
+  sleep 0.1
+done
+sleep 0.2
+kill -INT "$waiting"
+polls=0
+while kill -0 "$waiting" 2>/dev/null; do
+  polls=$((polls + 1))
+  [ "$polls" -le 100 ] || { kill -KILL "$waiting"; fail "Ctrl-C while waiting for a tcpq greeting: still running after 10 s"; }
+  sleep 0.1
+done
+rc=0
+wait "$waiting" || rc=$?
+no_traceback "$work/silent-int.log"
+[ "$rc" -eq 1 ] || { cat "$work/silent-int.log"; fail "Ctrl-C while waiting for a tcpq greeting: exit $rc, expected 1"; }
+grep -q "stopped before listening at tcpq://127.0.0.1:$port; no sim_stats" "$work/silent-int.log" ||
+  { cat "$work/silent-int.log"; fail "Ctrl-C while waiting for a tcpq greeting: not said"; }
+listen greet
+rc=0
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/greet.log" 2>&1 ||
+  rc=$?
+[ "$rc" -eq 1 ] || { cat "$work/greet.log"; fail "a tcpq server that greets: exit $rc, expected 1"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/greet.log" || { cat "$work/greet.log"; fail "greet"; }
+listen web
+rc=0
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/web.log" 2>&1 ||
+  rc=$?
+[ "$rc" -eq 2 ] || { cat "$work/web.log"; fail "a web server at tcpq://: exit $rc, expected 2"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: the server's answer is not LCM's" "$work/web.log" ||
+  { cat "$work/web.log"; fail "a web server at tcpq://: not said"; }
+
+# Statistics whose real-time factor is NaN (a daemon before it has measured
+# it) but whose time and tets are finite: printed, their tets plotted (every
+# one: fewer than --plot-points), no NaN in the plot, exit 0.
+python3 "$here/foreign_lcm_publisher.py" "$types" nan_rtf &
+nan=$!
+helpers="$helpers $nan"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1.5 --plot "$work/nanrtf.svg" >"$work/nanrtf.log" 2>"$work/nanrtf.err" ||
+  rc=$?
+kill "$nan"
+[ "$rc" -eq 0 ] || { cat "$work/nanrtf.err"; fail "a NaN real-time factor: exit $rc, expected 0"; }
+lines="$(grep -c '^t .*rtf   nan' "$work/nanrtf.log")"
+[ "$lines" -ge 10 ] || { cat "$work/nanrtf.log" "$work/nanrtf.err"; fail "a NaN real-time factor: $lines lines printed"; }
+[ -f "$work/nanrtf.svg" ] || { cat "$work/nanrtf.err"; fail "a NaN real-time factor: no plot"; }
+points="$(sed -n 's/.*<polyline points="\([^"]*\)".*/\1/p' "$work/nanrtf.svg" | head -1 | wc -w)"
+[ "$points" -eq "$lines" ] || fail "a NaN real-time factor: $points tets points for $lines statistics"
+if grep -qi 'nan' "$work/nanrtf.svg"; then fail "a NaN real-time factor: NaN in the plot"; fi
+grep -q "real-time factor: no finite values" "$work/nanrtf.svg" || fail "a NaN real-time factor: its panel does not say so"
+# Statistics with no finite time: nothing can be plotted, so the plot asked
+# for cannot be written (3, said); an earlier plot stays as it was.
+printf 'an earlier plot\n' >"$work/nantime.svg"
+python3 "$here/foreign_lcm_publisher.py" "$types" nan_time &
+nan=$!
+helpers="$helpers $nan"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1.5 --plot "$work/nantime.svg" >"$work/nantime.log" 2>"$work/nantime.err" ||
+  rc=$?
+kill "$nan"
+lines="$(grep -c '^t ' "$work/nantime.log")"
+[ "$rc" -eq 3 ] || { cat "$work/nantime.err"; fail "statistics without a finite time: exit $rc, expected 3"; }
+grep -q "cannot write $work/nantime.svg: nothing to plot: none of the $lines sim_stats received has a finite time_s" \
+  "$work/nantime.err" || { cat "$work/nantime.err"; fail "statistics without a finite time: not said"; }
+[ "$(cat "$work/nantime.svg")" = "an earlier plot" ] || fail "statistics without a finite time: the earlier plot changed"
+
 # The rest listens to a stream of statistics from the foreign publisher.
 python3 "$here/foreign_lcm_publisher.py" "$types" stream &
 stream=$!
@@ -81,6 +227,78 @@ rc=0
 wait "$term" || rc=$?
 [ "$rc" -eq 0 ] || { cat "$work/term.err"; fail "stopped by SIGTERM: exit $rc, expected 0"; }
 grep -q '<polyline' "$work/term.svg" || fail "no plot after SIGTERM"
+
+# A standard output that closes (| head -1): printing stops, listening goes
+# on, the plot is written, exit 0 without a traceback. A pipe holds a few
+# hundred lines, so 1000 points show listening went on after the close.
+{
+  rc=0
+  python3 "$subscriber" --types "$types" --seconds 3 --plot "$work/pipe.svg" 2>"$work/pipe.err" || rc=$?
+  echo "$rc" >"$work/pipe.rc"
+} | head -1 >"$work/pipe.head"
+rc="$(cat "$work/pipe.rc")"
+no_traceback "$work/pipe.err"
+[ "$rc" -eq 0 ] || { cat "$work/pipe.err"; fail "standard output closed: exit $rc, expected 0"; }
+grep -q '^t ' "$work/pipe.head" || fail "standard output closed: no first line"
+[ -f "$work/pipe.svg" ] || { cat "$work/pipe.err"; fail "standard output closed: no plot"; }
+points="$(sed -n 's/.*<polyline points="\([^"]*\)".*/\1/p' "$work/pipe.svg" | head -1 | wc -w)"
+[ "$points" -ge 1000 ] || fail "standard output closed: $points points in the plot (listening stopped?)"
+
+# What --plot names is written as the C++ tools write their -o
+# (util::PendingOutputFile): a symbolic link stays a link and the file it
+# names is replaced, with that file's permissions; an existing plot keeps its
+# permissions; a FIFO and a file reached through /proc (a link to
+# /proc/self/fd/1, as /dev/stdout is) are written in place, never renamed
+# over. (Never /dev itself here: the test may run as root.)
+mkdir "$work/plots"
+printf 'old\n' >"$work/plots/real.svg"
+chmod 640 "$work/plots/real.svg"
+ln -s plots/real.svg "$work/link.svg"
+printf 'old\n' >"$work/private.svg"
+chmod 600 "$work/private.svg"
+for plot in link.svg private.svg new.svg; do
+  rc=0
+  (umask 022 && exec python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/$plot" >/dev/null 2>"$work/out.err") ||
+    rc=$?
+  [ "$rc" -eq 0 ] || { cat "$work/out.err"; fail "--plot $plot: exit $rc, expected 0"; }
+done
+[ -L "$work/link.svg" ] || fail "--plot at a symbolic link: the link was replaced by a file"
+[ "$(readlink "$work/link.svg")" = plots/real.svg ] || fail "--plot at a symbolic link: it now names $(readlink "$work/link.svg")"
+grep -q '<polyline' "$work/plots/real.svg" || fail "--plot at a symbolic link: the file it names was not written"
+[ "$(stat -c %a "$work/plots/real.svg")" = 640 ] || fail "--plot at a symbolic link: mode $(stat -c %a "$work/plots/real.svg"), expected 640"
+grep -q '<polyline' "$work/private.svg" || fail "--plot at a private file: not written"
+[ "$(stat -c %a "$work/private.svg")" = 600 ] || fail "--plot at a private file: mode $(stat -c %a "$work/private.svg"), expected 600"
+[ "$(stat -c %a "$work/new.svg")" = 644 ] || fail "--plot at a new file: mode $(stat -c %a "$work/new.svg") with umask 022"
+if ls -A "$work" "$work/plots" | grep -q '\.tmp$'; then ls -A "$work" "$work/plots"; fail "a temporary plot was left"; fi
+mkfifo "$work/plot.fifo"
+cat "$work/plot.fifo" >"$work/fifo.out" &
+reader=$!
+helpers="$helpers $reader"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/plot.fifo" >/dev/null 2>"$work/fifo.err" || rc=$?
+[ -p "$work/plot.fifo" ] || fail "--plot at a FIFO: the FIFO was replaced"
+[ "$rc" -eq 0 ] || { cat "$work/fifo.err"; fail "--plot at a FIFO: exit $rc, expected 0"; }
+wait "$reader"
+grep -q '<polyline' "$work/fifo.out" || fail "--plot at a FIFO: nothing came through it"
+ln -s /proc/self/fd/1 "$work/stdout"
+rc=0
+python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stdout" >"$work/stdout.out" 2>"$work/stdout.err" || rc=$?
+[ -L "$work/stdout" ] || fail "--plot through /proc: the link was replaced by a file"
+[ "$rc" -eq 0 ] || { cat "$work/stdout.err"; fail "--plot through /proc: exit $rc, expected 0"; }
+grep -q '^t ' "$work/stdout.out" || fail "--plot through /proc: the statistics printed before it are gone"
+[ "$(tail -1 "$work/stdout.out")" = '</svg>' ] || { tail -2 "$work/stdout.out"; fail "--plot through /proc: the plot does not end standard output"; }
+grep -q "^wrote $work/stdout (" "$work/stdout.err" || { cat "$work/stdout.err"; fail "--plot through /proc: 'wrote' not on stderr"; }
+# ... and when that standard output has closed (| head -1) the plot cannot
+# be written: exit 3, said.
+{
+  rc=0
+  python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stdout" 2>"$work/stdout-closed.err" || rc=$?
+  echo "$rc" >"$work/stdout-closed.rc"
+} | head -1 >/dev/null
+rc="$(cat "$work/stdout-closed.rc")"
+[ "$rc" -eq 3 ] || { cat "$work/stdout-closed.err"; fail "--plot to a closed standard output: exit $rc, expected 3"; }
+grep -q "cannot write $work/stdout: standard output has closed" "$work/stdout-closed.err" ||
+  { cat "$work/stdout-closed.err"; fail "--plot to a closed standard output: not said"; }
 
 # A plot that cannot be written (file size limit): exit 3 with the reason,
 # the earlier plot unchanged, no temporary file left. stdout goes to
