@@ -128,14 +128,23 @@ int poll_timeout_ms(double timeout_s) {
   return ms >= static_cast<double>(INT_MAX) ? INT_MAX : static_cast<int>(ms);
 }
 
-std::string tcpq_server_problem(const std::string& url, double timeout_s) {
-  if (url.rfind("tcpq://", 0) != 0) return {};
+bool tcpq_server(const std::string& url, TcpqServer* out) {
+  if (url.rfind("tcpq://", 0) != 0) return false;
   const std::string rest = url.substr(7);
   const std::string address = rest.substr(0, rest.find('?'));
+  // LCM's default port when none is given: the probe used to skip such a
+  // URL, and LCM then waited on a silent 7700 with no time limit.
   const std::size_t colon = address.rfind(':');
-  if (colon == std::string::npos) return {};  // LCM's default port: left to LCM
-  const std::string host = address.substr(0, colon);
-  const std::string port = address.substr(colon + 1);
+  out->host = address.substr(0, colon);
+  out->port = colon == std::string::npos ? "7700" : address.substr(colon + 1);
+  return true;
+}
+
+std::string tcpq_server_problem(const std::string& url, double timeout_s) {
+  TcpqServer server;
+  if (!tcpq_server(url, &server)) return {};
+  const std::string& host = server.host;
+  const std::string& port = server.port;
   if (!all_digits(port, 5) || std::stoi(port) < 1 || std::stoi(port) > 65535) return "the port must be in [1, 65535]";
   addrinfo hints{};
   hints.ai_family = AF_INET;

@@ -37,6 +37,15 @@ std::string lcm_start_failure(const std::string& url);
 // and the protocol version, big-endian (LCM's lcm_tcpq.c).
 std::string tcpq_server_problem(const std::string& url, double timeout_s);
 
+// The host and port LCM's tcpq client connects to for a tcpq:// URL, as
+// lcm_tcpq.c reads it: "tcpq://" is 127.0.0.1:7700, a host without a port
+// takes port 7700. False when the URL is not tcpq://.
+struct TcpqServer {
+  std::string host;
+  std::string port;
+};
+bool tcpq_server(const std::string& url, TcpqServer* out);
+
 // `timeout_s` as poll(2)'s milliseconds: rounded up (0.0001 s waits 1 ms,
 // not 0), at most INT_MAX (1e7 s overflowed int to a negative timeout, which
 // poll takes as "forever"); 0 for a timeout that is not > 0 (NaN included).

@@ -106,6 +106,23 @@ TEST(LcmUrl, PollTimeoutsRoundUpAndStayInRange) {
   EXPECT_EQ(poll_timeout_ms(std::nan("")), 0);
 }
 
+// LCM's tcpq client connects to 127.0.0.1:7700 for "tcpq://" and to port 7700
+// of a host given without one (lcm_tcpq.c): the probe skipped such URLs, so
+// `tissue x3d --lcm tcpq://127.0.0.1` against a silent port 7700 hung.
+TEST(LcmUrl, ATcpqUrlWithoutAPortIsProbedOnLcmsDefaultPort) {
+  TcpqServer server;
+  ASSERT_TRUE(tcpq_server("tcpq://127.0.0.1", &server));
+  EXPECT_EQ(server.host, "127.0.0.1");
+  EXPECT_EQ(server.port, "7700");
+  ASSERT_TRUE(tcpq_server("tcpq://", &server));
+  EXPECT_EQ(server.host, "");  // the probe connects to 127.0.0.1, as LCM does
+  EXPECT_EQ(server.port, "7700");
+  ASSERT_TRUE(tcpq_server("tcpq://10.0.0.7:7800?x=1", &server));
+  EXPECT_EQ(server.host, "10.0.0.7");
+  EXPECT_EQ(server.port, "7800");
+  EXPECT_FALSE(tcpq_server("udpm://239.255.76.67:7667", &server));
+}
+
 using tissue::testing::LoopbackListener;
 
 std::string server_greeting() {
