@@ -146,8 +146,8 @@ bool UdpDevice::start(std::string* error) {
   reply_from_refused_ = false;
   buttons_.store(0, std::memory_order_relaxed);
   for (auto& r : rejected_) r.store(0, std::memory_order_relaxed);
-  for (auto* c :
-       {&received_, &accepted_, &out_of_order_, &resyncs_, &receive_errors_, &sent_, &send_failures_, &sessions_})
+  for (auto* c : {&received_, &accepted_, &out_of_order_, &resyncs_, &receive_errors_, &sent_, &send_failures_,
+                  &reply_source_fallbacks_, &sessions_})
     c->store(0, std::memory_order_relaxed);
   return true;
 }
@@ -200,6 +200,10 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
     filter_refused_ = false;  // a new sender: it may be reached where the route back leaves from
     reply_from_refused_ = false;
   }
+  // Poses that move to another local address within a session (an unconnected
+  // one: a connected socket hears only its own) name a source not yet tried:
+  // a device that connect()ed to the new address drops forces from the route's.
+  if (reply_from_ != peer_reply_from_) reply_from_refused_ = false;
   peer_ = from_;
   peer_to_ = to_;
   peer_reply_from_ = reply_from_;
@@ -288,7 +292,8 @@ std::size_t UdpDevice::receive(boost::system::error_code& ec) noexcept {
 UdpDevice::SendFrom UdpDevice::send_from_reply_address(std::size_t bytes, boost::system::error_code& ec) noexcept {
   // Connected (filter_to), the socket's local address already is the one the
   // poses came to; not bound to a wildcard, there is only one.
-  if (!wildcard_ || filtered_ || reply_from_refused_ || peer_reply_from_.is_unspecified()) return SendFrom::kNotUsed;
+  if (!wildcard_ || filtered_ || peer_reply_from_.is_unspecified()) return SendFrom::kNotUsed;
+  if (reply_from_refused_) return SendFrom::kRefusedBefore;
   iovec iov{send_buffer_.data(), bytes};
   alignas(cmsghdr) unsigned char control[CMSG_SPACE(sizeof(in6_pktinfo))] = {};
   static_assert(sizeof(in6_pktinfo) >= sizeof(in_pktinfo), "the control buffer holds either");
@@ -402,9 +407,11 @@ void UdpDevice::write(std::int64_t now_ns, const Vec3& force_N) noexcept {
   if (how != SendFrom::kSent) {
     socket_.send_to(boost::asio::buffer(send_buffer_.data(), static_cast<std::size_t>(bytes)), peer_, 0, ec);
     // The route's own source reaches the peer where the named one did not:
-    // use it for the rest of the session (one syscall a tick again). Not when
-    // both failed: that was the network, not the source.
+    // use it while the poses keep coming to that address this session (one
+    // syscall a tick again). Not when both failed: that was the network, not
+    // the source. Counted: a device connect()ed to tissued drops these.
     if (how == SendFrom::kSourceRefused && !ec) reply_from_refused_ = true;
+    if (how != SendFrom::kNotUsed && !ec) bump(reply_source_fallbacks_);
   }
   bump(ec ? send_failures_ : sent_);  // would_block: dropped, the next tick sends a newer force
   last_sent_zero_ = !ec && zero;
@@ -421,6 +428,7 @@ UdpDevice::Stats UdpDevice::stats() const noexcept {
   s.receive_errors = receive_errors_.load(std::memory_order_relaxed);
   s.sent = sent_.load(std::memory_order_relaxed);
   s.send_failures = send_failures_.load(std::memory_order_relaxed);
+  s.reply_source_fallbacks = reply_source_fallbacks_.load(std::memory_order_relaxed);
   s.sessions = sessions_.load(std::memory_order_relaxed);
   return s;
 }

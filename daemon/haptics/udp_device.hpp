@@ -9,7 +9,10 @@
 // address the newest pose came to (sendmsg with IP_PKTINFO / IPV6_PKTINFO),
 // not from whichever address the route back to the device prefers: a device
 // that connect()s its socket to tissued's address takes datagrams only from
-// exactly there.
+// exactly there. When the kernel refuses that source (an address removed
+// since, a subnet broadcast on ::) the force goes from the route's source,
+// counted in reply_source_fallbacks, until the poses come to another local
+// address or a new session starts.
 //
 // Real-time: read() and write() run in the 1 kHz tick. The socket is
 // non-blocking; read() drains at most kMaxDatagramsPerRead waiting datagrams
@@ -88,7 +91,12 @@ class UdpDevice final : public Device {
     std::uint64_t receive_errors = 0;
     std::uint64_t sent = 0;
     std::uint64_t send_failures = 0;  // would block (dropped) or an OS error
-    std::uint64_t sessions = 0;       // times a sender was (re)acquired after silence
+    // Forces sent (counted in `sent` too) from the route's source address
+    // because the local address the poses came to was refused as a source
+    // this session (an address removed since, a subnet broadcast on ::): a
+    // device that connect()ed its socket to tissued drops them.
+    std::uint64_t reply_source_fallbacks = 0;
+    std::uint64_t sessions = 0;  // times a sender was (re)acquired after silence
     std::uint64_t rejected_total() const noexcept {
       std::uint64_t n = 0;
       for (std::uint64_t r : rejected) n += r;
@@ -135,10 +143,12 @@ class UdpDevice final : public Device {
   std::size_t receive(boost::system::error_code& ec) noexcept;
   // Sends send_buffer_[0, bytes) to peer_ from peer_reply_from_ (sendmsg with
   // a PKTINFO control message): kSent (ec says how it went), kNotUsed (not
-  // bound to a wildcard address, connected, no such address, refused earlier
-  // this session) or kSourceRefused (the kernel would not send from it): for
-  // those two the caller sends plainly. One syscall, stack buffers only.
-  enum class SendFrom { kSent, kNotUsed, kSourceRefused };
+  // bound to a wildcard address, connected, no such address), kRefusedBefore
+  // (refused earlier this session, and the poses still come to it) or
+  // kSourceRefused (the kernel would not send from it): for the last three the
+  // caller sends plainly (the last two count as reply_source_fallbacks). One
+  // syscall at most, stack buffers only.
+  enum class SendFrom { kSent, kNotUsed, kRefusedBefore, kSourceRefused };
   SendFrom send_from_reply_address(std::size_t bytes, boost::system::error_code& ec) noexcept;
   static void bump(std::atomic<std::uint64_t>& counter) noexcept {
     counter.store(counter.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // one writer
@@ -178,7 +188,9 @@ class UdpDevice final : public Device {
   boost::asio::ip::address reply_from_;
   boost::asio::ip::address peer_to_;          // to_ of the newest accepted pose (wildcard_ only)
   boost::asio::ip::address peer_reply_from_;  // reply_from_ of the newest accepted pose (wildcard_ only)
-  bool reply_from_refused_ = false;           // peer_reply_from_ failed as a source, the route's did not (this session)
+  // peer_reply_from_ failed as a source and the route's did not: until a new
+  // session, or poses to another local address (a new peer_reply_from_).
+  bool reply_from_refused_ = false;
   std::array<unsigned char, kReceiveBufferBytes> receive_buffer_{};
   std::array<unsigned char, kReceiveBufferBytes> send_buffer_{};
 
@@ -202,6 +214,7 @@ class UdpDevice final : public Device {
   std::atomic<std::uint64_t> receive_errors_{0};
   std::atomic<std::uint64_t> sent_{0};
   std::atomic<std::uint64_t> send_failures_{0};
+  std::atomic<std::uint64_t> reply_source_fallbacks_{0};
   std::atomic<std::uint64_t> sessions_{0};
 };
 

@@ -68,7 +68,8 @@ nlohmann::json udp_link_json(const haptics::UdpDevice::Stats& link) {
           {"sessions", link.sessions},
           {"receive_errors", link.receive_errors},
           {"sent", link.sent},
-          {"send_failures", link.send_failures}};
+          {"send_failures", link.send_failures},
+          {"reply_source_fallbacks", link.reply_source_fallbacks}};
 }
 
 namespace {

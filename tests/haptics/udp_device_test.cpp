@@ -13,10 +13,16 @@
 // (support/allocation_counter, count_this_thread), so the fake device may
 // allocate freely meanwhile.
 #include <gtest/gtest.h>
+#include <net/if.h>
+#include <netinet/in.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/udp.hpp>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -107,6 +113,16 @@ class FakeDevice {
     ASSERT_FALSE(ec) << ec.message();
   }
   void send(const Packet& p) { send_bytes(encode(p)); }
+
+  // Sends to `tissued_address` from now on, from the same socket (so the
+  // same sender to tissued, in the same session); kConnected also connects
+  // the socket to it (from then on only datagrams from there arrive).
+  void retarget(const char* tissued_address, Link link) {
+    tissued_ = ip::udp::endpoint(ip::make_address(tissued_address), tissued_.port());
+    if (link == Link::kConnected) socket_.connect(tissued_);
+  }
+  // The source of the datagram receive() returned last.
+  ip::address last_source() const { return from_.address(); }
 
   // Next datagram tissued sent, decoded; nullopt after timeout.
   std::optional<Packet> receive(std::chrono::milliseconds timeout = std::chrono::milliseconds(2000)) {
@@ -553,13 +569,19 @@ TEST(UdpDevice, ADualStackWildcardBoundDeviceAnswersAnIpv4DeviceFromTheAddressTh
 // Poses sent to a broadcast address (lo's 127.255.255.255), which no force
 // can come from. Bound to 0.0.0.0, the kernel names lo's own address for the
 // reply (in_pktinfo.ipi_spec_dst); bound to ::, the v4-mapped broadcast is
-// refused as a source and the route picks one for the session. Either way
-// every force goes out to the (unconnected) device.
+// refused as a source and the route picks one for the session (both forces
+// count as fallbacks: the second skips the refused source). Either way every
+// force goes out to the (unconnected) device, from 127.0.0.1.
 TEST(UdpDevice, AWildcardBoundDeviceAnswersPosesSentToABroadcastAddress) {
   for (const char* bind_address : {"0.0.0.0", "::"}) {
     SCOPED_TRACE(bind_address);
     WildcardBound w("127.255.255.255", FakeDevice::Link::kUnconnected, bind_address);
     expect_forces_reach_the_fake_device(w);
+    EXPECT_EQ(w.fake.last_source(), ip::make_address("127.0.0.1"));
+    const bool v6_socket = std::string(bind_address) == "::";
+    EXPECT_EQ(w.s.device.stats().reply_source_fallbacks, v6_socket ? 2u : 0u)
+        << (v6_socket ? "the v4-mapped broadcast was never tried (and refused) as the source"
+                      : "lo's own address (ipi_spec_dst) was refused as the source");
   }
 }
 
@@ -662,6 +684,77 @@ TEST(UdpDeviceNetns, AWildcardBoundDeviceRefusesAFloodWhileALinkLocalSenderIsLiv
   EXPECT_EQ(st.received, static_cast<std::uint64_t>(kFlood) + 2u);
   EXPECT_EQ(st.rejected[static_cast<int>(Reject::kOtherSender)], static_cast<std::uint64_t>(kFlood));
   EXPECT_EQ(st.accepted, 2u);
+  EXPECT_EQ(st.sessions, 1u);
+}
+
+// Removes an IPv6 address from lo with the SIOCDIFADDR ioctl (no netlink,
+// no shell): it is gone when the call returns. Needs CAP_NET_ADMIN in the
+// network namespace (in_netns.sh's user namespace gives it).
+bool remove_ipv6_address_from_lo(const char* address, std::uint32_t prefix_length, std::string* error) {
+  struct {  // struct in6_ifreq of <linux/ipv6.h>, which clashes with <netinet/in.h>
+    in6_addr addr;
+    std::uint32_t prefix_length;
+    int ifindex;
+  } request{};
+  const ip::address_v6::bytes_type bytes = ip::make_address_v6(address).to_bytes();
+  std::memcpy(&request.addr, bytes.data(), bytes.size());
+  request.prefix_length = prefix_length;
+  request.ifindex = static_cast<int>(if_nametoindex("lo"));
+  const int fd = ::socket(AF_INET6, SOCK_DGRAM, 0);
+  const bool ok = fd >= 0 && request.ifindex > 0 && ::ioctl(fd, SIOCDIFADDR, &request) == 0;
+  if (!ok) *error = std::string("removing ") + address + " from lo: " + std::strerror(errno);
+  if (fd >= 0) ::close(fd);
+  return ok;
+}
+
+// Bound to :: (never connected), a device on ::1 sends its poses to fd00::3,
+// which is then removed from lo: the kernel refuses it as the source (EINVAL),
+// the force leaves from the route's source (::1) and still reaches the
+// (unconnected) device, counted as a fallback, and the next force goes there
+// straight away. The same device then sends to fd00::2 and connect()s to it:
+// that source is valid and must be tried again. The refusal was kept for the
+// whole session, so every force left from ::1 and the device dropped it.
+TEST(UdpDeviceNetns, ARefusedSourceFallsBackToTheRoutesAndIsTriedAgainWhenThePosesMove) {
+  if (!in_link_local_netns()) GTEST_SKIP() << "run through tests/transport/in_netns.sh (ctest does)";
+  Started s(wildcard_spec("::"));
+  UdpDevice& device = s.device;
+  FakeDevice fake(device.local_port(), "fd00::3", FakeDevice::Link::kUnconnected, "::1");
+  DeviceSample sample;
+  bool live = false;
+  fake.send(pose_packet(1, Vec3(0.01, 0, 0)));
+  ASSERT_TRUE(read_until_received(device, 1, kT0, &sample, &live));
+  ASSERT_TRUE(live);
+  device.write(kT0 + kMs, Vec3(0.5, 0, 0));
+  std::optional<Packet> force = fake.receive();
+  ASSERT_TRUE(force.has_value()) << "no force reached the device";
+  EXPECT_EQ(fake.last_source(), ip::make_address("fd00::3"));
+  EXPECT_EQ(device.stats().reply_source_fallbacks, 0u);
+
+  std::string error;
+  ASSERT_TRUE(remove_ipv6_address_from_lo("fd00::3", 128, &error)) << error;
+  for (int i = 2; i <= 3; ++i) {
+    SCOPED_TRACE("force " + std::to_string(i) + " after fd00::3 was removed");
+    device.write(kT0 + i * kMs, Vec3(0.1 * i, 0, 0));
+    force = fake.receive();
+    ASSERT_TRUE(force.has_value()) << "no force reached the device after its source was removed";
+    EXPECT_EQ(force->force_N[0], 0.1 * i);
+    EXPECT_EQ(fake.last_source(), ip::make_address("::1"));
+    EXPECT_EQ(device.stats().reply_source_fallbacks, static_cast<std::uint64_t>(i - 1));
+  }
+
+  fake.retarget("fd00::2", FakeDevice::Link::kConnected);
+  fake.send(pose_packet(2, Vec3(0.02, 0, 0)));
+  ASSERT_TRUE(read_until_received(device, 2, kT0 + 4 * kMs, &sample, &live));
+  ASSERT_TRUE(live);
+  device.write(kT0 + 5 * kMs, Vec3(0.9, 0, 0));
+  force = fake.receive(std::chrono::milliseconds(500));
+  ASSERT_TRUE(force.has_value()) << "no force reached the device connected to fd00::2 (sent from ::1?)";
+  EXPECT_EQ(force->force_N[0], 0.9);
+  EXPECT_EQ(fake.last_source(), ip::make_address("fd00::2"));
+  const UdpDevice::Stats st = device.stats();
+  EXPECT_EQ(st.reply_source_fallbacks, 2u);
+  EXPECT_EQ(st.sent, 4u);
+  EXPECT_EQ(st.send_failures, 0u);
   EXPECT_EQ(st.sessions, 1u);
 }
 

@@ -75,6 +75,7 @@ TEST(UdpLinkJson, EveryCounterByName) {
   link.resyncs = 1;
   link.sessions = 1;
   link.sent = 9;
+  link.reply_source_fallbacks = 5;
   const nlohmann::json j = udp_link_json(link);
   EXPECT_EQ(j.at("received"), 20);
   EXPECT_EQ(j.at("accepted"), 10);
@@ -87,6 +88,7 @@ TEST(UdpLinkJson, EveryCounterByName) {
   EXPECT_EQ(j.at("receive_errors"), 0);
   EXPECT_EQ(j.at("sent"), 9);
   EXPECT_EQ(j.at("send_failures"), 0);
+  EXPECT_EQ(j.value("reply_source_fallbacks", -1), 5) << "the fallback counter is not in haptics.link";
 }
 
 TEST(HapticSummary, TruncatesToTheBufferAndAlwaysTerminates) {
