@@ -335,5 +335,35 @@ TEST_F(LiveNetns, NothingPublishedIsATimeoutWithItsOwnExitCode) {
   EXPECT_FALSE(std::filesystem::exists(dir_ / "none.png"));
 }
 
+// An output that cannot be written is refused before the collection, not
+// after it: `-o` in a missing directory was found only once --timeout (or
+// --seconds, up to an hour) had passed, and the take was lost. Nothing is
+// published here, so a check made after collecting waits the whole --timeout
+// and exits 4.
+TEST_F(LiveNetns, AnOutputThatCannotBeWrittenIsRefusedBeforeCollecting) {
+  const std::string missing = dir_ / "no/such/dir";
+  const auto refused_at_once = [&](const std::string& args, int exit_code, const std::string& said) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunResult r = cli(args + " --timeout 20");
+    const double took_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_EQ(r.exit_code, exit_code) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(said), std::string::npos) << args << "\n" << r.err;
+    EXPECT_LT(took_s, 10.0) << args << ": waited for frames before checking -o";
+  };
+  const std::string lcm = "--lcm " + quote(url_);
+  refused_at_once("x3d " + lcm + " --animate --seconds 5 -o " + quote(missing + "/a.x3d"), 1,
+                  "tissue x3d: cannot write '" + missing + "/a.x3d': ");
+  refused_at_once("x3d " + lcm + " -o " + quote(missing + "/a.x3d"), 1,
+                  "tissue x3d: cannot write '" + missing + "/a.x3d': ");
+  refused_at_once("x3d " + lcm + " --animate -o ''", 2, "tissue x3d: -o: the output path is empty");
+  // A sequence's first numbered file is what is checked, and named.
+  refused_at_once("render " + lcm + " --sequence --seconds 5 -o " + quote(missing + "/f.png"), 1,
+                  "tissue render: cannot write " + missing + "/f-0000.png: ");
+  refused_at_once("render " + lcm + " -o " + quote(missing + "/f.png"), 1,
+                  "tissue render: cannot write " + missing + "/f.png: ");
+  refused_at_once("render " + lcm + " --sequence -o ''", 2, "tissue render: -o: the output path is empty");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "no"));
+}
+
 }  // namespace
 }  // namespace tissue::replay
