@@ -87,8 +87,10 @@ int run_render(RenderCommandOptions o) {
       std::cerr << "tissue render: cannot write " << first_out << ": " << why << "\n";
       return kExitBadInput;
     }
+    std::string stop_note;
     std::unique_ptr<x3d::FrameSource> source =
-        o.live.live() ? open_live_source(o.live, o.sequence) : x3d::open_session_source(o.session);
+        o.live.live() ? open_live_source(o.live, o.sequence, &stop_note) : x3d::open_session_source(o.session);
+    if (!stop_note.empty()) std::cerr << "tissue render: " << stop_note << "; rendering those\n";
     if (o.image.colour == x3d::ColourMode::kStrain && !source->has_strain()) {
       std::cerr << "tissue render: " << x3d::no_strain_message(*source) << "\n";
       return kExitBadArguments;
@@ -255,8 +257,9 @@ Subcommand add_render_command(CLI::App& parent) {
       "Sources: --session FILE, or live: --lcm [URL] / --dds (the next frame received; --sequence: the frames\n"
       "received for --seconds S).\n"
       "OUT's directory must exist; the first file is checked before any frame is read or collected.\n"
-      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments, 3 LCM/DDS cannot start,\n"
-      "4 live: no surface_mesh within --timeout S.");
+      "Ctrl-C or SIGTERM during a live --sequence ends the collection: the frames so far are rendered.\n"
+      "Exit codes: 0 ok (also when the collection was cut short), 1 unreadable input or unwritable output,\n"
+      "2 bad arguments, 3 LCM/DDS cannot start, 4 live: no surface_mesh within --timeout S (or stopped before one).");
   return Subcommand{cmd, [o] { return run_render(*o); }};
 }
 

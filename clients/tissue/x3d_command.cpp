@@ -176,8 +176,10 @@ int run_x3d(const X3dCommandOptions& o) {
     util::PendingOutputFile out;
     if (const std::string why = out.open(o.out); !why.empty())
       throw x3d::SourceError("cannot write '" + o.out + "': " + why);
+    std::string stop_note;
     std::unique_ptr<x3d::FrameSource> source =
-        o.live.live() ? open_live_source(o.live, o.animate) : x3d::open_session_source(o.session);
+        o.live.live() ? open_live_source(o.live, o.animate, &stop_note) : x3d::open_session_source(o.session);
+    if (!stop_note.empty()) std::cerr << "tissue x3d: " << stop_note << "; exporting those\n";
     if (xo.colour == x3d::ColourMode::kStrain && !source->has_strain())
       throw BadArguments(x3d::no_strain_message(*source));
     xo.title = "tissue: " + (o.live.live() ? source->name() : o.session);
@@ -234,8 +236,9 @@ Subcommand add_x3d_command(CLI::App& parent) {
       "Sources: --session FILE, or live: --lcm [URL] / --dds (a snapshot of the next frame received; --animate:\n"
       "the frames received for --seconds S).\n"
       "OUT's directory must exist; OUT is checked before any frame is read or collected.\n"
-      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments, 3 LCM/DDS cannot start,\n"
-      "4 live: no surface_mesh within --timeout S.");
+      "Ctrl-C or SIGTERM during a live --animate ends the collection: the frames so far are exported.\n"
+      "Exit codes: 0 ok (also when the collection was cut short), 1 unreadable input or unwritable output,\n"
+      "2 bad arguments, 3 LCM/DDS cannot start, 4 live: no surface_mesh within --timeout S (or stopped before one).");
   return Subcommand{cmd, [o] { return run_x3d(*o); }};
 }
 

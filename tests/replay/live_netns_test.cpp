@@ -6,6 +6,7 @@
 // (TISSUE_TEST_LCM_URL / TISSUE_TEST_DDS_DOMAIN unset).
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/wait.h>
 
 #include <atomic>
 #include <chrono>
@@ -363,6 +364,78 @@ TEST_F(LiveNetns, AnOutputThatCannotBeWrittenIsRefusedBeforeCollecting) {
                   "tissue render: cannot write " + missing + "/f.png: ");
   refused_at_once("render " + lcm + " --sequence -o ''", 2, "tissue render: -o: the output path is empty");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "no"));
+}
+
+// Ctrl-C (SIGINT) or SIGTERM during a live --animate / --sequence ends the
+// collection and exports what came so far, saying on stderr that it was cut
+// short; the exit code is a normal finish's. The signal killed the client
+// and every frame collected was lost.
+TEST_F(LiveNetns, AStopSignalDuringACollectionExportsTheFramesSoFar) {
+  // Not BackgroundReplay: its std::system() ignores SIGINT in this process
+  // while the replay runs, and the clients started meanwhile would inherit
+  // that (and keep ignoring SIGINT, as a client started by `cmd &` does).
+  tissue::testing::BackgroundProcess replay({TISSUE_CLI_BINARY, "session", "replay", session_, "--lcm", url_, "--loop"},
+                                            dir_ / "replay.out", dir_ / "replay.err");
+  ASSERT_TRUE(replay.started());
+  struct Case {
+    std::vector<std::string> args;
+    int signo;
+    std::string first_output;
+  };
+  const std::string anim = dir_ / "anim.x3d", seq = dir_ / "seq.png";
+  const std::vector<Case> cases = {
+      {{"x3d", "--lcm", url_, "--animate", "--seconds", "600", "-o", anim}, SIGINT, anim},
+      {{"render", "--lcm", url_, "--sequence", "--seconds", "600", "--width", "64", "--height", "48", "-o", seq},
+       SIGTERM,
+       dir_ / "seq-0000.png"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.args[0] + " stopped by signal " + std::to_string(c.signo));
+    std::vector<std::string> argv = {TISSUE_CLI_BINARY};
+    argv.insert(argv.end(), c.args.begin(), c.args.end());
+    tissue::testing::BackgroundProcess p(argv, dir_ / "out", dir_ / "err");
+    ASSERT_TRUE(p.started());
+    // 2 s of a 30 Hz replay: dozens of frames collected.
+    std::this_thread::sleep_for(std::chrono::seconds(2));
+    ASSERT_TRUE(p.signal(c.signo));
+    const std::optional<int> status = p.wait_for_exit(60.0);
+    ASSERT_TRUE(status.has_value()) << "still collecting 60 s after the signal";
+    ASSERT_TRUE(WIFEXITED(*status)) << "ended by signal " << (WIFSIGNALED(*status) ? WTERMSIG(*status) : 0)
+                                    << ": the frames collected were lost";
+    EXPECT_EQ(WEXITSTATUS(*status), 0) << p.err();
+    EXPECT_NE(p.err().find("tissue " + c.args[0] + ": the collection was cut short by " +
+                           (c.signo == SIGINT ? std::string("SIGINT") : std::string("SIGTERM")) + " after "),
+              std::string::npos)
+        << p.err();
+    EXPECT_TRUE(std::filesystem::exists(c.first_output)) << p.out() << p.err();
+  }
+  EXPECT_GE(x3d::testing::count_elements(record::testing::slurp(anim), "Shape"), 2u) << "several topologies in 2 s";
+  EXPECT_TRUE(is_png(dir_ / "seq-0000.png"));
+  EXPECT_TRUE(is_png(dir_ / "seq-0010.png")) << "30 Hz for 2 s: many frames";
+  ASSERT_TRUE(replay.signal(SIGTERM));
+  const std::optional<int> replayed = replay.wait_for_exit(30.0);
+  ASSERT_TRUE(replayed.has_value());
+  EXPECT_TRUE(WIFEXITED(*replayed) && WEXITSTATUS(*replayed) == 0) << replay.err();
+}
+
+// A stop before the first frame has nothing to export: exit 4 (no
+// surface_mesh), said as a stop, not as a --timeout that never ran out.
+TEST_F(LiveNetns, AStopSignalBeforeTheFirstFrameIsNoLiveData) {
+  tissue::testing::BackgroundProcess p(
+      {TISSUE_CLI_BINARY, "x3d", "--lcm", url_, "--timeout", "600", "-o", dir_ / "none.x3d"}, dir_ / "out",
+      dir_ / "err");
+  ASSERT_TRUE(p.started());
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  ASSERT_TRUE(p.signal(SIGINT));
+  const std::optional<int> status = p.wait_for_exit(60.0);
+  ASSERT_TRUE(status.has_value());
+  ASSERT_TRUE(WIFEXITED(*status)) << WTERMSIG(*status);
+  EXPECT_EQ(WEXITSTATUS(*status), 4) << p.err();
+  EXPECT_EQ(p.err(),
+            "tissue x3d: stopped by SIGINT before any surface_mesh arrived on LCM channel "
+            "TISSUE_SURFACE_MESH on " +
+                url_ + "\n");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "none.x3d"));
 }
 
 }  // namespace
