@@ -216,9 +216,12 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
   // --lcm's URL is optional, so CLI11 takes whatever word follows it: in
   // `--lcm stroke.h5` the session file, which left no FILE ("file is
   // required"). An LCM URL is PROVIDER://...; anything else there is FILE,
-  // published on the default URL (docs/replay-and-live.md).
+  // published on the default URL (docs/replay-and-live.md). `--lcm ''` is
+  // the default URL too, as in x3d and render: to LCM an empty URL is its own
+  // default or $LCM_DEFAULT_URL, not the documented publish.lcm.url.
   cmd->parse_complete_callback([&options, url = defaults.lcm.url] {
     std::optional<std::string>& lcm = options.replay.lcm_url;
+    if (lcm && lcm->empty()) lcm = url;
     if (lcm && !lcm->empty() && lcm->find("://") == std::string::npos) {
       if (!options.file.empty())
         throw CLI::ValidationError("--lcm", "'" + *lcm + "' is not an LCM URL (PROVIDER://...)");

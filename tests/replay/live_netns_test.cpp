@@ -18,6 +18,7 @@
 #include <thread>
 #include <vector>
 
+#include "config/daemon_config.hpp"
 #include "export/export_test_support.hpp"
 #include "record/session_writer.hpp"
 #include "record_test_support.hpp"
@@ -436,6 +437,20 @@ TEST_F(LiveNetns, AStopSignalBeforeTheFirstFrameIsNoLiveData) {
             "TISSUE_SURFACE_MESH on " +
                 url_ + "\n");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "none.x3d"));
+}
+
+// `--lcm ''` is --lcm without a URL: the documented default (as `tissue
+// x3d --lcm ''`), not LCM's own default or $LCM_DEFAULT_URL, which an empty
+// URL means to LCM.
+TEST_F(LiveNetns, ReplayWithAnEmptyLcmUrlPublishesOnTheDefaultUrl) {
+  const std::string other = "udpm://239.255.76.68:7668?ttl=0";
+  const RunResult r = record::testing::run("LCM_DEFAULT_URL=" + quote(other) + " " + tissue() + " session replay " +
+                                               quote(session_) + " --lcm '' --speed 100",
+                                           dir_);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("\n  LCM " + config::LcmPublishSpec{}.url + ": " + std::to_string(kFrames) + " meshes"),
+            std::string::npos)
+      << r.out;
 }
 
 }  // namespace
