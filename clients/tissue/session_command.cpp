@@ -210,7 +210,9 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
   // Not ->required(): `--lcm FILE` may have taken it (below).
   cmd->add_option("file", options.file, "Session file (.h5)");
   cmd->add_option("--lcm", r.lcm_url, "Publish over LCM at URL (publish.lcm.url)")
-      ->check(lcm_url())  // as the daemon's config checks publish.lcm.url
+      // As the daemon's config checks publish.lcm.url; a word without "://"
+      // is FILE (below).
+      ->check(lcm_url(false))
       ->expected(0, 1)
       ->default_str(defaults.lcm.url);
   // --lcm's URL is optional, so CLI11 takes whatever word follows it: in

@@ -453,5 +453,15 @@ TEST_F(LiveNetns, ReplayWithAnEmptyLcmUrlPublishesOnTheDefaultUrl) {
       << r.out;
 }
 
+// An --lcm value that is not PROVIDER://... is a bad argument (exit 2), not
+// an LCM that cannot start (exit 3).
+TEST_F(LiveNetns, AnLcmValueThatIsNotAUrlIsABadArgument) {
+  for (const char* command : {"x3d", "render"}) {
+    const RunResult r = cli(std::string(command) + " --lcm foo --timeout 0.5 -o " + quote(dir_ / "x"));
+    EXPECT_EQ(r.exit_code, 2) << command << ": " << r.err;
+    EXPECT_NE(r.err.find("--lcm: 'foo' is not an LCM URL (PROVIDER://...)"), std::string::npos) << r.err;
+  }
+}
+
 }  // namespace
 }  // namespace tissue::replay
