@@ -125,6 +125,7 @@ Subcommand add_ctl_command(CLI::App& parent) {
   CLI::App* app = parent.add_subcommand("ctl", "Send one command to a running tissued and print the result");
   app->footer(
       "Usage: tissue ctl [--socket PATH | --tcp PORT] [--timeout S] CMD [ARGS...]\n"
+      "The options go before CMD: everything after it is CMD's arguments, verbatim.\n"
       "Commands: status, pause, resume, reset, load_scene PATH, set KEY VALUE, shutdown,\n"
       "          record_start [name=FILE.h5], record_stop, export_x3d [name=FILE.x3d].\n"
       "Exit codes: 0 ok, 1 the daemon answered an error, 2 bad arguments, 3 cannot connect.");
