@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -76,6 +77,15 @@ int run_render(RenderCommandOptions o) {
     }
     if (o.out.empty()) {
       std::cerr << "tissue render: -o: the output path is empty\n";
+      return kExitBadArguments;
+    }
+    // A sequence puts -0000 before OUT's extension: a directory got DIR/-0000,
+    // DIR/-0001, ... with no extension.
+    std::error_code ec;
+    if (o.sequence && (o.out.back() == '/' || std::filesystem::is_directory(o.out, ec))) {
+      std::cerr << "tissue render: -o " << o.out
+                << ": a directory; --sequence numbers a file name in it (-o DIR/frame.png writes DIR/frame-0000.png, "
+                   "DIR/frame-0001.png, ...)\n";
       return kExitBadArguments;
     }
     // Before the frames are read: a live --sequence collects for up to an

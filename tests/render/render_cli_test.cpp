@@ -153,6 +153,34 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   EXPECT_NE(unwritable.err.find("/nonexistent-dir/x.png"), std::string::npos) << unwritable.err;
 }
 
+// A sequence numbers a file name: an OUT that is a directory (or ends in
+// '/') is a bad argument naming -o. `-o DIR/` wrote DIR/-0000, DIR/-0001, ...
+// with no extension. An empty -o is a bad argument too (it was found only
+// when the first picture was written).
+TEST(RenderCli, ASequenceOutputThatIsADirectoryOrEmptyIsABadArgument) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  const std::string frames = dir / "frames";
+  std::filesystem::create_directory(frames);
+  for (const std::string& out : {frames + "/", frames, dir / "new/"}) {
+    const RunResult r =
+        render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 2) << out << "\n" << r.err;
+    EXPECT_EQ(r.err, "tissue render: -o " + out +
+                         ": a directory; --sequence numbers a file name in it (-o DIR/frame.png writes "
+                         "DIR/frame-0000.png, DIR/frame-0001.png, ...)\n")
+        << out;
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(frames));
+  EXPECT_FALSE(std::filesystem::exists(dir / "new"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "frames-0000"));
+  for (const char* sequence : {"", " --sequence"}) {
+    const RunResult r = render(dir, "--session " + quote(session) + sequence + " -o ''");
+    EXPECT_EQ(r.exit_code, 2) << sequence << "\n" << r.err;
+    EXPECT_EQ(r.err, "tissue render: -o: the output path is empty\n") << sequence;
+  }
+}
+
 // Errors about a frame name it by its number and say its time to 9
 // digits; a --time before the first frame names the file and that frame's
 // time (as tissue x3d does). They said "frame (t=0.30000000000000004 s)"
