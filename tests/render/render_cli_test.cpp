@@ -135,8 +135,12 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   TempDir dir;
   const std::string session = write_session(dir);
   EXPECT_EQ(render(dir, "--session " + quote(dir / "missing.h5") + " -o x.png").exit_code, 1);
-  EXPECT_EQ(render(dir, "--session " + quote(session) + " --frame 9 -o x.png").exit_code, 2);
-  EXPECT_EQ(render(dir, "--session " + quote(session) + " --width 3 -o x.png").exit_code, 2);
+  const RunResult past_end = render(dir, "--session " + quote(session) + " --frame 9 -o x.png");
+  EXPECT_EQ(past_end.exit_code, 2);
+  EXPECT_EQ(past_end.err, "tissue render: --frame 9: '" + session + "' has 3 frames\n");
+  const RunResult narrow = render(dir, "--session " + quote(session) + " --width 3 -o x.png");
+  EXPECT_EQ(narrow.exit_code, 2);
+  EXPECT_EQ(narrow.err.rfind("--width: Value 3 not in range 16 to 8192", 0), 0u) << narrow.err;
   const RunResult nan_time = render(dir, "--session " + quote(session) + " --time nan -o x.png");
   EXPECT_EQ(nan_time.exit_code, 2);
   EXPECT_NE(nan_time.err.find("not a finite number"), std::string::npos) << nan_time.err;
