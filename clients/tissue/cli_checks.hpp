@@ -49,10 +49,16 @@ inline CLI::Validator finite_number() {
 }
 
 // An LCM provider URL as the daemon's config checks it (util/lcm_url.hpp):
-// a udpm:// one needs a multicast group, a port and a ttl in range.
-inline CLI::Validator lcm_url() {
+// PROVIDER://..., and a udpm:// one needs a multicast group, a port and a
+// ttl in range. A word without "://" reached LCM, which could not start
+// (exit 3 for a mistyped argument). `provider_required` false lets such a
+// word through for an option whose caller decides what it is (`session
+// replay --lcm FILE`). Empty is allowed: the callers take it as the default.
+inline CLI::Validator lcm_url(bool provider_required = true) {
   return CLI::Validator(
-      [](std::string& v) -> std::string {
+      [provider_required](std::string& v) -> std::string {
+        if (provider_required && !v.empty() && v.find("://") == std::string::npos)
+          return "'" + v + "' is not an LCM URL (PROVIDER://...)";
         if (const std::string why = util::udpm_url_problem(v); !why.empty()) return "'" + v + "': " + why;
         return {};
       },

@@ -1,5 +1,7 @@
 #include "tissue/ctl_command.hpp"
 
+#include <sys/un.h>
+
 #include <CLI/CLI.hpp>
 
 #include <chrono>
@@ -41,7 +43,25 @@ std::pair<std::string, std::string> split_pair(const std::string& word, const st
   return {word.substr(0, eq), word.substr(eq + 1)};
 }
 
+// Why `path` cannot name a Unix socket ("" when it can): a connection to it
+// can only fail, and that failure read "(is tissued running?)", exit 3.
+std::string socket_path_problem(const std::string& path) {
+  constexpr std::size_t kMaxBytes = sizeof(sockaddr_un{}.sun_path) - 1;  // and its terminating NUL
+  static_assert(kMaxBytes == 107, "the message and docs/control-protocol.md name 107");
+  if (path.empty()) return "--socket: the path is empty";
+  if (path.size() > kMaxBytes)
+    return "--socket '" + path + "': " + std::to_string(path.size()) +
+           " bytes, longer than a Unix socket path can be (107 bytes)";
+  return {};
+}
+
 int run_ctl(const CtlOptions& o) {
+  if (o.tcp_port == 0) {
+    if (const std::string why = socket_path_problem(o.socket_path); !why.empty()) {
+      std::cerr << "tissue ctl: " << why << "\n";
+      return kExitBadArguments;
+    }
+  }
   nlohmann::json request;
   try {
     request = build_ctl_request(o.cmd, o.words);
@@ -125,6 +145,7 @@ Subcommand add_ctl_command(CLI::App& parent) {
   CLI::App* app = parent.add_subcommand("ctl", "Send one command to a running tissued and print the result");
   app->footer(
       "Usage: tissue ctl [--socket PATH | --tcp PORT] [--timeout S] CMD [ARGS...]\n"
+      "The options go before CMD: everything after it is CMD's arguments, verbatim.\n"
       "Commands: status, pause, resume, reset, load_scene PATH, set KEY VALUE, shutdown,\n"
       "          record_start [name=FILE.h5], record_stop, export_x3d [name=FILE.x3d].\n"
       "Exit codes: 0 ok, 1 the daemon answered an error, 2 bad arguments, 3 cannot connect.");

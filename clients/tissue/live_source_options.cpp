@@ -4,9 +4,11 @@
 
 #include "export/live_source.hpp"
 #include "tissue/cli_checks.hpp"
+#include "tissue/stop_signals.hpp"
 #include "transport/dds_subscriber.hpp"
 #include "transport/lcm_subscriber.hpp"
 #include "util/lcm_url.hpp"
+#include "util/text.hpp"
 
 namespace tissue::cli {
 
@@ -53,7 +55,13 @@ void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* s
   timeout->excludes(session);
 }
 
-std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, bool many) {
+std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, bool many, std::string* stop_note) {
+  // Ctrl-C during a take of up to an hour ends the take, not the process:
+  // the frames so far are exported (the signal killed the client and lost
+  // them). Made before the subscriber so its transport's threads start with
+  // the signals blocked (stop_signals.hpp); only while collecting: a signal
+  // during the export ends it as usual.
+  const StopSignals stops;
   std::unique_ptr<transport::MeshSubscriber> sub;
   try {
     if (o.lcm_url) {
@@ -73,7 +81,18 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
   c.first_timeout_s = o.timeout_s;
   c.window_s = many ? o.seconds : 0.0;
   c.max_frames = many ? 0 : 1;
-  return std::make_unique<x3d::LiveFrameSource>(*sub, c);
+  auto source = std::make_unique<x3d::LiveFrameSource>(*sub, c, &stops.flag());
+  stop_note->clear();
+  if (stops.stopped()) {
+    if (source->frame_count() == 0)
+      throw x3d::NoLiveFrameError(std::string("stopped by ") + stops.signal_name() +
+                                  " before any surface_mesh arrived on " + source->name());
+    if (many)
+      *stop_note = std::string("the collection was cut short by ") + stops.signal_name() + " after " +
+                   std::to_string(source->frame_count()) + " frames of the " + util::number_text(o.seconds) +
+                   " s window";
+  }
+  return source;
 }
 
 }  // namespace tissue::cli

@@ -43,8 +43,13 @@ struct LiveSourceOptions {
 void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* session, CLI::Option* many);
 
 // Subscribes, collects one frame (or frames for --seconds when `many`) and
-// returns them as a FrameSource. Throws x3d::NoLiveFrameError when nothing
-// arrives within --timeout, LiveStartError when the transport cannot start.
-std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, bool many);
+// returns them as a FrameSource. SIGINT / SIGTERM during the collection end
+// it (the signals are the caller's again afterwards): the frames so far are
+// returned and *stop_note says so ("the collection was cut short by SIGINT
+// after N frames of the S s window"); otherwise it is left empty. Throws
+// x3d::NoLiveFrameError when nothing arrives within --timeout or a signal
+// came before the first frame, LiveStartError when the transport cannot
+// start.
+std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, bool many, std::string* stop_note);
 
 }  // namespace tissue::cli

@@ -1,10 +1,13 @@
 #include "tissue/render_command.hpp"
 
+#include <sys/stat.h>
+
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <array>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -51,6 +54,19 @@ std::string numbered(const std::string& out, std::size_t i) {
   return out.substr(0, dot) + "-" + num + out.substr(dot);
 }
 
+// Why `path` cannot be written ("" when it can), found by making the
+// temporary file util::PendingOutputFile writes through and dropping it:
+// nothing is left behind and PATH is not touched. An existing node that is
+// not a regular file (a FIFO, a device) is not opened: opening a FIFO waits
+// for its reader, and that reader would see the end of the stream when the
+// check closed it.
+std::string output_problem(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) return {};
+  util::PendingOutputFile probe;
+  return probe.open(path);  // abandoned by its destructor
+}
+
 int run_render(RenderCommandOptions o) {
   o.image.legend = !o.no_legend;
   o.image.colour = o.colour == "strain" ? x3d::ColourMode::kStrain : x3d::ColourMode::kLevel;
@@ -59,8 +75,32 @@ int run_render(RenderCommandOptions o) {
       std::cerr << "tissue render: --session is required (or a live source: --lcm [URL] or --dds)\n";
       return kExitBadArguments;
     }
+    if (o.out.empty()) {
+      std::cerr << "tissue render: -o: the output path is empty\n";
+      return kExitBadArguments;
+    }
+    // A sequence puts -0000 before OUT's extension: a directory got DIR/-0000,
+    // DIR/-0001, ... with no extension.
+    std::error_code ec;
+    if (o.sequence && (o.out.back() == '/' || std::filesystem::is_directory(o.out, ec))) {
+      std::cerr << "tissue render: -o " << o.out
+                << ": a directory; --sequence numbers a file name in it (-o DIR/frame.png writes DIR/frame-0000.png, "
+                   "DIR/frame-0001.png, ...)\n";
+      return kExitBadArguments;
+    }
+    // Before the frames are read: a live --sequence collects for up to an
+    // hour, and an OUT that cannot be written (a missing directory) was found
+    // only after it, losing the take. A sequence's files share OUT's
+    // directory: the first one stands for them.
+    const std::string first_out = o.sequence ? numbered(o.out, 0) : o.out;
+    if (const std::string why = output_problem(first_out); !why.empty()) {
+      std::cerr << "tissue render: cannot write " << first_out << ": " << why << "\n";
+      return kExitBadInput;
+    }
+    std::string stop_note;
     std::unique_ptr<x3d::FrameSource> source =
-        o.live.live() ? open_live_source(o.live, o.sequence) : x3d::open_session_source(o.session);
+        o.live.live() ? open_live_source(o.live, o.sequence, &stop_note) : x3d::open_session_source(o.session);
+    if (!stop_note.empty()) std::cerr << "tissue render: " << stop_note << "; rendering those\n";
     if (o.image.colour == x3d::ColourMode::kStrain && !source->has_strain()) {
       std::cerr << "tissue render: " << x3d::no_strain_message(*source) << "\n";
       return kExitBadArguments;
@@ -226,8 +266,10 @@ Subcommand add_render_command(CLI::App& parent) {
       "the frame's min..max (printed; low at the bottom of the legend).\n"
       "Sources: --session FILE, or live: --lcm [URL] / --dds (the next frame received; --sequence: the frames\n"
       "received for --seconds S).\n"
-      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments, 3 LCM/DDS cannot start,\n"
-      "4 live: no surface_mesh within --timeout S.");
+      "OUT's directory must exist; the first file is checked before any frame is read or collected.\n"
+      "Ctrl-C or SIGTERM during a live --sequence ends the collection: the frames so far are rendered.\n"
+      "Exit codes: 0 ok (also when the collection was cut short), 1 unreadable input or unwritable output,\n"
+      "2 bad arguments, 3 LCM/DDS cannot start, 4 live: no surface_mesh within --timeout S (or stopped before one).");
   return Subcommand{cmd, [o] { return run_render(*o); }};
 }
 

@@ -1,6 +1,5 @@
 #include "tissue/session_command.hpp"
 
-#include <signal.h>
 #include <CLI/CLI.hpp>
 
 #include <atomic>
@@ -17,6 +16,7 @@
 #include "replay/session_replay.hpp"
 #include "tissue/cli_checks.hpp"
 #include "tissue/dds_cli.hpp"
+#include "tissue/stop_signals.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 #include "util/lcm_url.hpp"
@@ -50,21 +50,6 @@ struct SessionOptions {
   CLI::App* replay_cmd = nullptr;
 };
 
-// Set by SIGINT / SIGTERM: the replay stops at its next wait (within 20 ms)
-// and prints its summary. A lock-free atomic store is async-signal-safe.
-std::atomic<bool> g_stop_replay{false};
-static_assert(std::atomic<bool>::is_always_lock_free);
-
-extern "C" void on_stop_signal(int) { g_stop_replay.store(true, std::memory_order_relaxed); }
-
-void install_stop_handlers() {
-  struct sigaction sa {};
-  sa.sa_handler = on_stop_signal;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-}
-
 // --speed within replay::kMinSpeed..kMaxSpeed: 1e-300 waited for ever for
 // the second item.
 CLI::Validator replay_speed() {
@@ -90,7 +75,10 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
     std::cerr << "tissue session replay: choose where to publish: --lcm [URL] and/or --dds\n";
     return kExitBadArguments;
   }
-  install_stop_handlers();
+  // SIGINT / SIGTERM: the replay stops at its next wait (within 20 ms) and
+  // prints its summary. Before the publishers, whose threads must start with
+  // the signals blocked (stop_signals.hpp).
+  const StopSignals stops;
   // The file first: a bad file is reported without touching the network.
   std::unique_ptr<x3d::FrameSource> frames;
   replay::SessionRows rows;
@@ -131,15 +119,14 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
     // are lost to them (the mesh topic keeps only the newest for late
     // joiners). Wait a little for a mesh reader; start anyway after that.
     const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.dds_wait_s);
-    while (dds->matched_readers().meshes == 0 && std::chrono::steady_clock::now() < until &&
-           !g_stop_replay.load(std::memory_order_relaxed))
+    while (dds->matched_readers().meshes == 0 && std::chrono::steady_clock::now() < until && !stops.stopped())
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   replay::PublisherSink sink(lcm.get(), dds.get());
   replay::SteadyReplayClock clock;
   replay::ReplaySummary sum;
   try {
-    sum = replay::replay_session(*frames, rows, o.replay, sink, clock, g_stop_replay);
+    sum = replay::replay_session(*frames, rows, o.replay, sink, clock, stops.flag());
   } catch (const replay::ReplayError& e) {
     std::cerr << "tissue session replay: " << e.what() << "\n";
     return kExitBadArguments;  // only options (window, speed, rates) fail here
@@ -223,15 +210,20 @@ void add_replay_command(CLI::App* session, SessionOptions& options) {
   // Not ->required(): `--lcm FILE` may have taken it (below).
   cmd->add_option("file", options.file, "Session file (.h5)");
   cmd->add_option("--lcm", r.lcm_url, "Publish over LCM at URL (publish.lcm.url)")
-      ->check(lcm_url())  // as the daemon's config checks publish.lcm.url
+      // As the daemon's config checks publish.lcm.url; a word without "://"
+      // is FILE (below).
+      ->check(lcm_url(false))
       ->expected(0, 1)
       ->default_str(defaults.lcm.url);
   // --lcm's URL is optional, so CLI11 takes whatever word follows it: in
   // `--lcm stroke.h5` the session file, which left no FILE ("file is
   // required"). An LCM URL is PROVIDER://...; anything else there is FILE,
-  // published on the default URL (docs/replay-and-live.md).
+  // published on the default URL (docs/replay-and-live.md). `--lcm ''` is
+  // the default URL too, as in x3d and render: to LCM an empty URL is its own
+  // default or $LCM_DEFAULT_URL, not the documented publish.lcm.url.
   cmd->parse_complete_callback([&options, url = defaults.lcm.url] {
     std::optional<std::string>& lcm = options.replay.lcm_url;
+    if (lcm && lcm->empty()) lcm = url;
     if (lcm && !lcm->empty() && lcm->find("://") == std::string::npos) {
       if (!options.file.empty())
         throw CLI::ValidationError("--lcm", "'" + *lcm + "' is not an LCM URL (PROVIDER://...)");

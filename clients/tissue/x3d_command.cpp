@@ -50,13 +50,6 @@ std::string given_window_text(const X3dCommandOptions& o) {
   return text.empty() ? "(all frames)" : text;
 }
 
-// Regular files via a temporary and a rename (a failed export never leaves a
-// truncated OUT behind); devices and FIFOs in place (util::write_output_file).
-void write_file(const std::string& path, const std::string& text) {
-  const std::string reason = util::write_output_file(path, text);
-  if (!reason.empty()) throw x3d::SourceError("cannot write '" + path + "': " + reason);
-}
-
 std::string export_snapshot(x3d::FrameSource& source, const X3dCommandOptions& o, const x3d::X3dOptions& xo,
                             std::string* summary) {
   const std::size_t n = source.frame_count();
@@ -170,19 +163,31 @@ int run_x3d(const X3dCommandOptions& o) {
   try {
     if (o.session.empty() && !o.live.live())
       throw BadArguments("--session is required (or a live source: --lcm [URL] or --dds)");
+    if (o.out.empty()) throw BadArguments("-o: the output path is empty");
     // The rename would put the export where the recording was.
     if (!o.live.live() && util::same_file(o.out, o.session))
       throw x3d::SourceError("-o " + o.out + " is the input session " + o.session +
                              ": writing it would destroy the recording; choose another output file");
+    // Opened before the frames are read: a live --animate collects for up to
+    // an hour, and an OUT that cannot be written (a missing directory) was
+    // found only after it, losing the take. Regular files are written via a
+    // temporary and a rename (a failed export never leaves a truncated OUT
+    // behind), devices and FIFOs in place (util::PendingOutputFile).
+    util::PendingOutputFile out;
+    if (const std::string why = out.open(o.out); !why.empty())
+      throw x3d::SourceError("cannot write '" + o.out + "': " + why);
+    std::string stop_note;
     std::unique_ptr<x3d::FrameSource> source =
-        o.live.live() ? open_live_source(o.live, o.animate) : x3d::open_session_source(o.session);
+        o.live.live() ? open_live_source(o.live, o.animate, &stop_note) : x3d::open_session_source(o.session);
+    if (!stop_note.empty()) std::cerr << "tissue x3d: " << stop_note << "; exporting those\n";
     if (xo.colour == x3d::ColourMode::kStrain && !source->has_strain())
       throw BadArguments(x3d::no_strain_message(*source));
     xo.title = "tissue: " + (o.live.live() ? source->name() : o.session);
     std::string summary;
     const std::string text =
         o.animate ? export_animation(*source, o, xo, &summary) : export_snapshot(*source, o, xo, &summary);
-    write_file(o.out, text);
+    if (const std::string why = out.commit(text); !why.empty())
+      throw x3d::SourceError("cannot write '" + o.out + "': " + why);
     util::summary_stream(o.out) << "wrote " << o.out << ": " << summary << "\n";  // not into the X3D
     return kExitOk;
   } catch (const BadArguments& e) {
@@ -230,8 +235,10 @@ Subcommand add_x3d_command(CLI::App& parent) {
   cmd->footer(
       "Sources: --session FILE, or live: --lcm [URL] / --dds (a snapshot of the next frame received; --animate:\n"
       "the frames received for --seconds S).\n"
-      "Exit codes: 0 ok, 1 unreadable input or unwritable output, 2 bad arguments, 3 LCM/DDS cannot start,\n"
-      "4 live: no surface_mesh within --timeout S.");
+      "OUT's directory must exist; OUT is checked before any frame is read or collected.\n"
+      "Ctrl-C or SIGTERM during a live --animate ends the collection: the frames so far are exported.\n"
+      "Exit codes: 0 ok (also when the collection was cut short), 1 unreadable input or unwritable output,\n"
+      "2 bad arguments, 3 LCM/DDS cannot start, 4 live: no surface_mesh within --timeout S (or stopped before one).");
   return Subcommand{cmd, [o] { return run_x3d(*o); }};
 }
 

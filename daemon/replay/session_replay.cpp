@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <thread>
 
 #include "transport/dds_publisher.hpp"
@@ -18,6 +19,29 @@ std::string fmt(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", v);
   return buf;
+}
+
+// Why a timeline came out empty, for the message after "nothing to replay":
+// the window as the user gave it and the span of what the session holds, so
+// the user sees where the window missed it ("in the window --from 5 --to 6:
+// the session's frames and rows are from t=0 s to t=1.47 s"). The span's
+// ends are frame times to 9 digits (x3d::frame_time_text), as the clients
+// say them.
+std::string empty_window_text(const std::vector<double>& frame_t, const std::vector<double>& haptic_t,
+                              const std::vector<double>& sim_t, const TimelineOptions& o) {
+  std::string window;
+  if (o.from_s) window = "--from " + util::number_text(*o.from_s);
+  if (o.to_s) window += (window.empty() ? "" : " ") + std::string("--to ") + util::number_text(*o.to_s);
+  std::optional<double> first_s, last_s;
+  for (const std::vector<double>* times : {&frame_t, &haptic_t, &sim_t})
+    for (const double t : *times) {
+      if (!first_s || t < *first_s) first_s = t;
+      if (!last_s || t > *last_s) last_s = t;
+    }
+  std::string text = window.empty() ? std::string("(no --from/--to given)") : "in the window " + window;
+  if (!first_s) return text + ": the session holds no mesh frame, haptic row or sim row";
+  return text + ": the session's frames and rows are from t=" + x3d::frame_time_text(*first_s) +
+         " s to t=" + x3d::frame_time_text(*last_s) + " s";
 }
 
 }  // namespace
@@ -162,7 +186,8 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
   for (std::size_t i = 0; i < haptic_t.size(); ++i) haptic_t[i] = rows.haptic[i].time_s;
   for (std::size_t i = 0; i < sim_t.size(); ++i) sim_t[i] = rows.sim[i].time_s;
   const std::vector<TimelineItem> items = build_timeline(frame_t, haptic_t, sim_t, o.timeline);
-  if (items.empty()) throw ReplayError(frames.name() + ": nothing to replay (no frame or row in the window)");
+  if (items.empty())
+    throw ReplayError(frames.name() + ": nothing to replay " + empty_window_text(frame_t, haptic_t, sim_t, o.timeline));
   const double t0_s = items.front().time_s;
   const double span_s = items.back().time_s - t0_s;
   // A pass shorter than the clock's rounding (items 1e-12 s apart, a steady

@@ -123,6 +123,29 @@ TEST_F(TissueCli, NoDaemonExitsThreeNamingTheSocket) {
   EXPECT_EQ(r.out, "");
 }
 
+// A socket path that no Unix socket can have (empty, or longer than the 107
+// bytes of sun_path) is a bad argument naming --socket and the limit: it
+// was a connection failure, exit 3, "(is tissued running?)".
+TEST_F(TissueCli, AnImpossibleSocketPathIsABadArgument) {
+  const std::string long_path = "/tmp/" + std::string(103, 's');  // 108 bytes
+  ASSERT_EQ(long_path.size(), 108u);
+  const std::string longest = "/tmp/" + std::string(102, 's');  // 107: may exist, so it is a connect failure
+  struct Case {
+    std::string path, said;
+  };
+  for (const Case& c : {Case{"", "tissue ctl: --socket: the path is empty\n"},
+                        Case{long_path, "tissue ctl: --socket '" + long_path +
+                                            "': 108 bytes, longer than a Unix socket path can be (107 bytes)\n"}}) {
+    const Result r = tissue("ctl --socket '" + c.path + "' status", scratch_);
+    EXPECT_EQ(r.exit_code, 2) << "--socket '" << c.path << "'\n" << r.err;
+    EXPECT_EQ(r.err, c.said);
+  }
+  const Result r = tissue("ctl --socket '" + longest + "' status", scratch_);
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("cannot connect to control socket " + longest + ": "), std::string::npos) << r.err;
+  EXPECT_EQ(server_.handler().call_count(), 0u);
+}
+
 TEST(TissueCliTcp, TalksToTheLoopbackPort) {
   ServerSettings s;
   s.tcp_port = 0;

@@ -318,6 +318,9 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   expect_2(live + " --timeout 5s", "--timeout: '5s' is not a number");
   expect_2("-o " + quote(dir_ / "o.x3d"), "--session is required");
   expect_2("--session " + quote(session_), "--output is required");
+  // An empty -o is a bad argument, said before any work (the export was made
+  // and then failed to be renamed to '').
+  expect_2("--session " + quote(session_) + " -o ''", "tissue x3d: -o: the output path is empty\n");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
 }
 

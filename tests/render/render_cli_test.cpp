@@ -135,8 +135,12 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   TempDir dir;
   const std::string session = write_session(dir);
   EXPECT_EQ(render(dir, "--session " + quote(dir / "missing.h5") + " -o x.png").exit_code, 1);
-  EXPECT_EQ(render(dir, "--session " + quote(session) + " --frame 9 -o x.png").exit_code, 2);
-  EXPECT_EQ(render(dir, "--session " + quote(session) + " --width 3 -o x.png").exit_code, 2);
+  const RunResult past_end = render(dir, "--session " + quote(session) + " --frame 9 -o x.png");
+  EXPECT_EQ(past_end.exit_code, 2);
+  EXPECT_EQ(past_end.err, "tissue render: --frame 9: '" + session + "' has 3 frames\n");
+  const RunResult narrow = render(dir, "--session " + quote(session) + " --width 3 -o x.png");
+  EXPECT_EQ(narrow.exit_code, 2);
+  EXPECT_EQ(narrow.err.rfind("--width: Value 3 not in range 16 to 8192", 0), 0u) << narrow.err;
   const RunResult nan_time = render(dir, "--session " + quote(session) + " --time nan -o x.png");
   EXPECT_EQ(nan_time.exit_code, 2);
   EXPECT_NE(nan_time.err.find("not a finite number"), std::string::npos) << nan_time.err;
@@ -151,6 +155,34 @@ TEST(RenderCli, ErrorsHaveExitCodes) {
   const RunResult unwritable = render(dir, "--session " + quote(session) + " -o /nonexistent-dir/x.png");
   EXPECT_EQ(unwritable.exit_code, 1);
   EXPECT_NE(unwritable.err.find("/nonexistent-dir/x.png"), std::string::npos) << unwritable.err;
+}
+
+// A sequence numbers a file name: an OUT that is a directory (or ends in
+// '/') is a bad argument naming -o. `-o DIR/` wrote DIR/-0000, DIR/-0001, ...
+// with no extension. An empty -o is a bad argument too (it was found only
+// when the first picture was written).
+TEST(RenderCli, ASequenceOutputThatIsADirectoryOrEmptyIsABadArgument) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  const std::string frames = dir / "frames";
+  std::filesystem::create_directory(frames);
+  for (const std::string& out : {frames + "/", frames, dir / "new/"}) {
+    const RunResult r =
+        render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 2) << out << "\n" << r.err;
+    EXPECT_EQ(r.err, "tissue render: -o " + out +
+                         ": a directory; --sequence numbers a file name in it (-o DIR/frame.png writes "
+                         "DIR/frame-0000.png, DIR/frame-0001.png, ...)\n")
+        << out;
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(frames));
+  EXPECT_FALSE(std::filesystem::exists(dir / "new"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "frames-0000"));
+  for (const char* sequence : {"", " --sequence"}) {
+    const RunResult r = render(dir, "--session " + quote(session) + sequence + " -o ''");
+    EXPECT_EQ(r.exit_code, 2) << sequence << "\n" << r.err;
+    EXPECT_EQ(r.err, "tissue render: -o: the output path is empty\n") << sequence;
+  }
 }
 
 // Errors about a frame name it by its number and say its time to 9

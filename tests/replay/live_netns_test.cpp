@@ -6,6 +6,7 @@
 // (TISSUE_TEST_LCM_URL / TISSUE_TEST_DDS_DOMAIN unset).
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/wait.h>
 
 #include <atomic>
 #include <chrono>
@@ -17,6 +18,7 @@
 #include <thread>
 #include <vector>
 
+#include "config/daemon_config.hpp"
 #include "export/export_test_support.hpp"
 #include "record/session_writer.hpp"
 #include "record_test_support.hpp"
@@ -333,6 +335,132 @@ TEST_F(LiveNetns, NothingPublishedIsATimeoutWithItsOwnExitCode) {
             "tissue render: no surface_mesh on DDS topic tissue/surface_mesh (domain " + domain_ + ") within 0.5 s\n");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "none.x3d"));
   EXPECT_FALSE(std::filesystem::exists(dir_ / "none.png"));
+}
+
+// An output that cannot be written is refused before the collection, not
+// after it: `-o` in a missing directory was found only once --timeout (or
+// --seconds, up to an hour) had passed, and the take was lost. Nothing is
+// published here, so a check made after collecting waits the whole --timeout
+// and exits 4.
+TEST_F(LiveNetns, AnOutputThatCannotBeWrittenIsRefusedBeforeCollecting) {
+  const std::string missing = dir_ / "no/such/dir";
+  const auto refused_at_once = [&](const std::string& args, int exit_code, const std::string& said) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunResult r = cli(args + " --timeout 20");
+    const double took_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_EQ(r.exit_code, exit_code) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(said), std::string::npos) << args << "\n" << r.err;
+    EXPECT_LT(took_s, 10.0) << args << ": waited for frames before checking -o";
+  };
+  const std::string lcm = "--lcm " + quote(url_);
+  refused_at_once("x3d " + lcm + " --animate --seconds 5 -o " + quote(missing + "/a.x3d"), 1,
+                  "tissue x3d: cannot write '" + missing + "/a.x3d': ");
+  refused_at_once("x3d " + lcm + " -o " + quote(missing + "/a.x3d"), 1,
+                  "tissue x3d: cannot write '" + missing + "/a.x3d': ");
+  refused_at_once("x3d " + lcm + " --animate -o ''", 2, "tissue x3d: -o: the output path is empty");
+  // A sequence's first numbered file is what is checked, and named.
+  refused_at_once("render " + lcm + " --sequence --seconds 5 -o " + quote(missing + "/f.png"), 1,
+                  "tissue render: cannot write " + missing + "/f-0000.png: ");
+  refused_at_once("render " + lcm + " -o " + quote(missing + "/f.png"), 1,
+                  "tissue render: cannot write " + missing + "/f.png: ");
+  refused_at_once("render " + lcm + " --sequence -o ''", 2, "tissue render: -o: the output path is empty");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "no"));
+}
+
+// Ctrl-C (SIGINT) or SIGTERM during a live --animate / --sequence ends the
+// collection and exports what came so far, saying on stderr that it was cut
+// short; the exit code is a normal finish's. The signal killed the client
+// and every frame collected was lost.
+TEST_F(LiveNetns, AStopSignalDuringACollectionExportsTheFramesSoFar) {
+  // Not BackgroundReplay: its std::system() ignores SIGINT in this process
+  // while the replay runs, and the clients started meanwhile would inherit
+  // that (and keep ignoring SIGINT, as a client started by `cmd &` does).
+  tissue::testing::BackgroundProcess replay({TISSUE_CLI_BINARY, "session", "replay", session_, "--lcm", url_, "--loop"},
+                                            dir_ / "replay.out", dir_ / "replay.err");
+  ASSERT_TRUE(replay.started());
+  struct Case {
+    std::vector<std::string> args;
+    int signo;
+    std::string first_output;
+  };
+  const std::string anim = dir_ / "anim.x3d", seq = dir_ / "seq.png";
+  const std::vector<Case> cases = {
+      {{"x3d", "--lcm", url_, "--animate", "--seconds", "600", "-o", anim}, SIGINT, anim},
+      {{"render", "--lcm", url_, "--sequence", "--seconds", "600", "--width", "64", "--height", "48", "-o", seq},
+       SIGTERM,
+       dir_ / "seq-0000.png"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.args[0] + " stopped by signal " + std::to_string(c.signo));
+    std::vector<std::string> argv = {TISSUE_CLI_BINARY};
+    argv.insert(argv.end(), c.args.begin(), c.args.end());
+    tissue::testing::BackgroundProcess p(argv, dir_ / "out", dir_ / "err");
+    ASSERT_TRUE(p.started());
+    // 2 s of a 30 Hz replay: dozens of frames collected.
+    std::this_thread::sleep_for(std::chrono::seconds(2));
+    ASSERT_TRUE(p.signal(c.signo));
+    const std::optional<int> status = p.wait_for_exit(60.0);
+    ASSERT_TRUE(status.has_value()) << "still collecting 60 s after the signal";
+    ASSERT_TRUE(WIFEXITED(*status)) << "ended by signal " << (WIFSIGNALED(*status) ? WTERMSIG(*status) : 0)
+                                    << ": the frames collected were lost";
+    EXPECT_EQ(WEXITSTATUS(*status), 0) << p.err();
+    EXPECT_NE(p.err().find("tissue " + c.args[0] + ": the collection was cut short by " +
+                           (c.signo == SIGINT ? std::string("SIGINT") : std::string("SIGTERM")) + " after "),
+              std::string::npos)
+        << p.err();
+    EXPECT_TRUE(std::filesystem::exists(c.first_output)) << p.out() << p.err();
+  }
+  EXPECT_GE(x3d::testing::count_elements(record::testing::slurp(anim), "Shape"), 2u) << "several topologies in 2 s";
+  EXPECT_TRUE(is_png(dir_ / "seq-0000.png"));
+  EXPECT_TRUE(is_png(dir_ / "seq-0010.png")) << "30 Hz for 2 s: many frames";
+  ASSERT_TRUE(replay.signal(SIGTERM));
+  const std::optional<int> replayed = replay.wait_for_exit(30.0);
+  ASSERT_TRUE(replayed.has_value());
+  EXPECT_TRUE(WIFEXITED(*replayed) && WEXITSTATUS(*replayed) == 0) << replay.err();
+}
+
+// A stop before the first frame has nothing to export: exit 4 (no
+// surface_mesh), said as a stop, not as a --timeout that never ran out.
+TEST_F(LiveNetns, AStopSignalBeforeTheFirstFrameIsNoLiveData) {
+  tissue::testing::BackgroundProcess p(
+      {TISSUE_CLI_BINARY, "x3d", "--lcm", url_, "--timeout", "600", "-o", dir_ / "none.x3d"}, dir_ / "out",
+      dir_ / "err");
+  ASSERT_TRUE(p.started());
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  ASSERT_TRUE(p.signal(SIGINT));
+  const std::optional<int> status = p.wait_for_exit(60.0);
+  ASSERT_TRUE(status.has_value());
+  ASSERT_TRUE(WIFEXITED(*status)) << WTERMSIG(*status);
+  EXPECT_EQ(WEXITSTATUS(*status), 4) << p.err();
+  EXPECT_EQ(p.err(),
+            "tissue x3d: stopped by SIGINT before any surface_mesh arrived on LCM channel "
+            "TISSUE_SURFACE_MESH on " +
+                url_ + "\n");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "none.x3d"));
+}
+
+// `--lcm ''` is --lcm without a URL: the documented default (as `tissue
+// x3d --lcm ''`), not LCM's own default or $LCM_DEFAULT_URL, which an empty
+// URL means to LCM.
+TEST_F(LiveNetns, ReplayWithAnEmptyLcmUrlPublishesOnTheDefaultUrl) {
+  const std::string other = "udpm://239.255.76.68:7668?ttl=0";
+  const RunResult r = record::testing::run("LCM_DEFAULT_URL=" + quote(other) + " " + tissue() + " session replay " +
+                                               quote(session_) + " --lcm '' --speed 100",
+                                           dir_);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("\n  LCM " + config::LcmPublishSpec{}.url + ": " + std::to_string(kFrames) + " meshes"),
+            std::string::npos)
+      << r.out;
+}
+
+// An --lcm value that is not PROVIDER://... is a bad argument (exit 2), not
+// an LCM that cannot start (exit 3).
+TEST_F(LiveNetns, AnLcmValueThatIsNotAUrlIsABadArgument) {
+  for (const char* command : {"x3d", "render"}) {
+    const RunResult r = cli(std::string(command) + " --lcm foo --timeout 0.5 -o " + quote(dir_ / "x"));
+    EXPECT_EQ(r.exit_code, 2) << command << ": " << r.err;
+    EXPECT_NE(r.err.find("--lcm: 'foo' is not an LCM URL (PROVIDER://...)"), std::string::npos) << r.err;
+  }
 }
 
 }  // namespace

@@ -345,6 +345,33 @@ TEST(ReplayPacing, StopEndsAWaitAndBadOptionsAreRefused) {
   EXPECT_THROW(replay_session(m.frames, m.rows, o, sink, clock, stop), ReplayError);
 }
 
+// A window with nothing in it is said with the window as given and the
+// span of the session's frames and rows, so the user sees where to look. It
+// said only "nothing to replay (no frame or row in the window)".
+TEST(ReplayPacing, AWindowWithNothingInItSaysTheWindowAndTheSessionsSpan) {
+  Material m;  // frames 0 .. 0.9 s, haptic rows 0 .. 0.99 s, sim rows 0 .. 0.95 s
+  FakeClock clock(0.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{false};
+  const auto message = [&](std::optional<double> from_s, std::optional<double> to_s) {
+    ReplayOptions o;
+    o.timeline.from_s = from_s;
+    o.timeline.to_s = to_s;
+    try {
+      replay_session(m.frames, m.rows, o, sink, clock, stop);
+    } catch (const ReplayError& e) {
+      return std::string(e.what());
+    }
+    ADD_FAILURE() << "replayed";
+    return std::string();
+  };
+  const std::string span = ": the session's frames and rows are from t=0 s to t=0.99 s";
+  EXPECT_EQ(message(5.0, 6.0), "'test frames': nothing to replay in the window --from 5 --to 6" + span);
+  EXPECT_EQ(message(5.0, std::nullopt), "'test frames': nothing to replay in the window --from 5" + span);
+  EXPECT_EQ(message(std::nullopt, -1e-7), "'test frames': nothing to replay in the window --to -1e-07" + span);
+  EXPECT_TRUE(sink.sent.empty());
+}
+
 // A loop over a window a picosecond long advanced its due time by nothing
 // (a clock at 1e5 s absorbs 1e-12 s): it published every item at once, for
 // ever. A pass must last 1 ms of wall time.
@@ -604,7 +631,10 @@ TEST(ReplayCli, BadArgumentsExitTwoAndBadTransportsExitThree) {
   EXPECT_NE(r.err.find("--dds-max-mesh-bytes requires --dds"), std::string::npos) << r.err;
   r = replay("--lcm memq:// --from 9 --to 10");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_NE(r.err.find("nothing to replay"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("nothing to replay in the window --from 9 --to 10: the session's frames and rows are from t=0 s "
+                       "to t="),
+            std::string::npos)
+      << r.err;
   // NaN passed --from / --to ("nothing to replay") and CLI::Range on
   // --dds-wait (every comparison with NaN is false, so the wait was skipped).
   for (const char* bad : {"--from nan", "--to nan", "--dds --dds-wait nan", "--haptic-rate nan", "--stats-rate inf"}) {

@@ -34,6 +34,14 @@ TEST(CliChecks, LcmUrlsAreCheckedAsTheDaemonChecksThem) {
   EXPECT_NE(verdict(lcm_url(), "udpm://239.255.76.67:99999").find("port"), std::string::npos);
 }
 
+// A value without PROVIDER:// is no LCM URL: refused as a bad argument (it
+// reached LCM, which could not start, and `tissue x3d --lcm foo` exited 3).
+TEST(CliChecks, AnLcmUrlNeedsAProvider) {
+  for (const char* bad : {"foo", "239.255.76.67:7667", "udpm:/239.255.76.67:7667", "s.h5"})
+    EXPECT_EQ(verdict(lcm_url(), bad), "'" + std::string(bad) + "' is not an LCM URL (PROVIDER://...)") << bad;
+  EXPECT_EQ(verdict(lcm_url(), "tcpq://127.0.0.1:7700"), "");
+}
+
 TEST(CliChecks, FrameIndexRefusesNegatives) {
   EXPECT_EQ(verdict(frame_index(), "3"), "");
   EXPECT_NE(verdict(frame_index(), "-1").find("negative"), std::string::npos);
