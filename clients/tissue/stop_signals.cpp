@@ -19,7 +19,7 @@ StopSignals::StopSignals() {
       const int signo = sigtimedwait(&watched_, nullptr, &wait);
       if (signo > 0 && !stop_.load(std::memory_order_relaxed)) {
         signo_.store(signo, std::memory_order_relaxed);
-        stop_.store(true, std::memory_order_relaxed);
+        stop_.store(true, std::memory_order_release);  // signo_ before the flag: signal_name() after stopped()
       }
     }
   });

@@ -31,7 +31,7 @@ class StopSignals {
   StopSignals& operator=(const StopSignals&) = delete;
 
   const std::atomic<bool>& flag() const { return stop_; }
-  bool stopped() const { return stop_.load(std::memory_order_relaxed); }
+  bool stopped() const { return stop_.load(std::memory_order_acquire); }
   // The signal that set the flag ("SIGINT", "SIGTERM"); "" before one came.
   const char* signal_name() const;
 
