@@ -100,10 +100,14 @@ void ReplayDevice::build_knots() {
   double held_since_s = time_s_.front();
   for (std::size_t i = 1; i < rows; ++i) {
     if (position_m_[i] == position_m_[i - 1]) continue;
-    // With no period known (fewer than two changes) this is the last row
-    // that showed the old pose: row to row, as a 1 kHz track plays anyway.
-    if (time_s_[i] - held_since_s > kStillAfterPeriods * device_period_s_) {
-      const double hold_until_s = std::min(time_s_[i] - device_period_s_, time_s_[i - 1]);
+    // The step is spread over min(gap, kSpreadPeriods periods): a gap of up
+    // to that many periods (late or lost poses) over the whole gap, as the
+    // loop measured it live. With no period known (fewer than two changes)
+    // the hold ends at the last row that showed the old pose: row to row, as
+    // a 1 kHz track plays anyway.
+    const double spread_s = kSpreadPeriods * device_period_s_;
+    if (time_s_[i] - held_since_s > spread_s) {
+      const double hold_until_s = std::min(time_s_[i] - spread_s, time_s_[i - 1]);
       if (hold_until_s > knot_time_s_.back()) add(hold_until_s, position_m_[i - 1]);
     }
     add(time_s_[i], position_m_[i]);
@@ -132,7 +136,8 @@ bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   const std::size_t i = cursor_, j = std::min(cursor_ + 1, n - 1);
   const double dt = knot_time_s_[j] - knot_time_s_[i];
   const double u = dt > 0.0 ? std::clamp((t - knot_time_s_[i]) / dt, 0.0, 1.0) : 0.0;
-  out->position_m = (1.0 - u) * knot_position_m_[i] + u * knot_position_m_[j];
+  // From the knot along the step: a held pose (a step of zero) plays exactly.
+  out->position_m = knot_position_m_[i] + u * (knot_position_m_[j] - knot_position_m_[i]);
   out->velocity_m_per_s = dt > 0.0 ? Vec3(speed_ * (knot_position_m_[j] - knot_position_m_[i]) / dt) : Vec3::Zero();
   return true;
 }
