@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 
 namespace tissue::haptics {
@@ -13,6 +14,26 @@ std::string fmt(double v) {
   char buffer[32];
   std::snprintf(buffer, sizeof buffer, "%.4g", v);
   return buffer;
+}
+
+// The largest speed printed as fmt() prints it (4 significant digits) at
+// which the check in start() (peak * speed > max) passes: the refusal's
+// advice must be accepted when followed. Rounded to nearest, the printed
+// limit could be above the real one and refused in turn.
+std::string fmt_speed_at_most(double max_speed_m_per_s, double peak_m_per_s) {
+  const double limit = max_speed_m_per_s / peak_m_per_s;
+  if (!(limit > 0.0) || !std::isfinite(limit)) return fmt(limit);
+  // One unit in the 4th significant digit of the limit.
+  const double unit = std::pow(10.0, std::floor(std::log10(limit)) - 3.0);
+  // From a unit above the limit (the division rounds too) down a unit while
+  // what is printed, read back, is still refused: the largest accepted.
+  double speed = (std::floor(limit / unit) + 1.0) * unit;
+  for (int step = 0; step < 4; ++step) {
+    const std::string text = fmt(speed);
+    if (!(peak_m_per_s * std::strtod(text.c_str(), nullptr) > max_speed_m_per_s)) return text;
+    speed -= unit;
+  }
+  return fmt(speed);
 }
 
 }  // namespace
@@ -53,7 +74,7 @@ bool ReplayDevice::start(std::string* error) {
                 " m/s (its peak " + fmt(peak_m_per_s) + " m/s in the device frame, times the speed), above " +
                 "device.limits.max_speed_m_per_s " + fmt(max_speed_m_per_s_) +
                 ": the haptic loop would reject the hand as a glitch and ramp the force out; use a speed of at most " +
-                fmt(max_speed_m_per_s_ / peak_m_per_s) + " for this track");
+                fmt_speed_at_most(max_speed_m_per_s_, peak_m_per_s) + " for this track");
   }
   start_ns_ = -1;
   cursor_ = 0;

@@ -85,6 +85,46 @@ TEST(ReplayDevice, ASpeedThatTakesTheTrackPastTheSpeedLimitIsRefusedAtStart) {
   EXPECT_TRUE(at_the_limit.start(&error)) << error;
 }
 
+// The refusal's "use a speed of at most X" is advice to follow: X is printed
+// to 4 significant digits rounded down, so that speed is accepted. Rounded to
+// nearest, a 12.3457 mm step in 7 ms (1.764 m/s) at speed 3 suggested 2.835
+// (the limit is 2.834995...), and that speed was refused in turn.
+// The speed the refusal of a one-step track (step_m in 7 ms) at speed 3 suggests.
+std::string suggested_speed(double step_m) {
+  const std::vector<double> time_s{0.0, 0.007};
+  const std::vector<Vec3> position_m{Vec3::Zero(), Vec3(step_m, 0, 0)};
+  std::string error;
+  ReplayDevice too_fast(time_s, position_m, 3.0, false, 5.0);
+  EXPECT_FALSE(too_fast.start(&error));
+  const std::string at_most = "use a speed of at most ";
+  const std::size_t at = error.find(at_most);
+  EXPECT_NE(at, std::string::npos) << error;
+  if (at == std::string::npos) return "";
+  return error.substr(at + at_most.size(), error.find(' ', at + at_most.size()) - at - at_most.size());
+}
+
+TEST(ReplayDevice, TheSuggestedSpeedIsRoundedDownSoItIsAccepted) {
+  const std::vector<double> time_s{0.0, 0.007};
+  const std::string review = suggested_speed(0.0123457);
+  EXPECT_EQ(review, "2.834");
+  std::string error;
+  ReplayDevice advised(time_s, {Vec3::Zero(), Vec3(0.0123457, 0, 0)}, std::stod(review), false, 5.0);
+  EXPECT_TRUE(advised.start(&error)) << error;
+  // Any step: the advice is accepted, and it is the largest 4-digit speed
+  // that is (one more in the last digit is refused).
+  for (int i = 0; i < 500; ++i) {
+    const double step_m = 0.0120 + 1.37e-5 * i;
+    const std::string text = suggested_speed(step_m);
+    SCOPED_TRACE(std::to_string(step_m) + " m: at most " + text);
+    ASSERT_FALSE(text.empty());
+    const double speed = std::stod(text);
+    ReplayDevice followed(time_s, {Vec3::Zero(), Vec3(step_m, 0, 0)}, speed, false, 5.0);
+    EXPECT_TRUE(followed.start(&error)) << error;
+    ReplayDevice above(time_s, {Vec3::Zero(), Vec3(step_m, 0, 0)}, speed + 1e-3, false, 5.0);  // speeds 2..3
+    EXPECT_FALSE(above.start(&error));
+  }
+}
+
 // Haptic rows are written every tick, so a device slower than the loop (a
 // 250 Hz UDP device) is recorded as a position held for a few rows, then a
 // step. Its speed is the step over the time since that position came, as the
