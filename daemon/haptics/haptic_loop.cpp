@@ -84,26 +84,35 @@ void HapticLoop::start(std::int64_t now_ns) noexcept {
   stopped_.store(false, std::memory_order_release);
 }
 
+SampleVerdict judge_device_sample(const config::ForceLimits& limits, const DeviceSample& sample,
+                                  const DeviceSample* last_accepted, double since_last_accepted_s) noexcept {
+  if (!sample.position_m.allFinite() || !sample.velocity_m_per_s.allFinite()) return SampleVerdict::kNonFinite;
+  if (sample.position_m.norm() > limits.workspace_radius_m) return SampleVerdict::kOutsideWorkspace;
+  if (sample.velocity_m_per_s.norm() > limits.max_speed_m_per_s) return SampleVerdict::kTooFast;
+  // A position jump is a glitch even when the reported velocity looks sane.
+  if (last_accepted && since_last_accepted_s > 0.0 &&
+      (sample.position_m - last_accepted->position_m).norm() > limits.max_speed_m_per_s * since_last_accepted_s)
+    return SampleVerdict::kTooFast;
+  return SampleVerdict::kAccepted;
+}
+
 bool HapticLoop::accept_sample(std::int64_t now_ns, const DeviceSample& s) noexcept {
-  if (!s.position_m.allFinite() || !s.velocity_m_per_s.allFinite()) {
-    bump(rejected_nonfinite_);
-    return false;
+  const double since_s =
+      have_sample_ && now_ns > last_sample_ns_ ? 1e-9 * static_cast<double>(now_ns - last_sample_ns_) : 0.0;
+  switch (judge_device_sample(limits_, s, have_sample_ ? &sample_ : nullptr, since_s)) {
+    case SampleVerdict::kAccepted:
+      return true;
+    case SampleVerdict::kNonFinite:
+      bump(rejected_nonfinite_);
+      return false;
+    case SampleVerdict::kOutsideWorkspace:
+      bump(rejected_workspace_);
+      return false;
+    case SampleVerdict::kTooFast:
+      bump(rejected_speed_);
+      return false;
   }
-  if (s.position_m.norm() > limits_.workspace_radius_m) {
-    bump(rejected_workspace_);
-    return false;
-  }
-  bool too_fast = s.velocity_m_per_s.norm() > limits_.max_speed_m_per_s;
-  if (!too_fast && have_sample_ && now_ns > last_sample_ns_) {
-    // A position jump is a glitch even when the reported velocity looks sane.
-    const double dt_s = 1e-9 * static_cast<double>(now_ns - last_sample_ns_);
-    too_fast = (s.position_m - sample_.position_m).norm() > limits_.max_speed_m_per_s * dt_s;
-  }
-  if (too_fast) {
-    bump(rejected_speed_);
-    return false;
-  }
-  return true;
+  return false;
 }
 
 void HapticLoop::tick(std::int64_t now_ns) noexcept {

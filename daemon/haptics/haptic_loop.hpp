@@ -77,6 +77,16 @@ struct HapticStats {
   double min_passivity_energy_J = 0.0;  // lowest value seen (negative: the rendering gave energy)
 };
 
+// The loop's rule for a device sample, one rule for HapticLoop and the
+// start-time checks that predict it (sim_loop_wrap_warning): rejected when
+// non-finite, farther than limits.workspace_radius_m from the device origin,
+// or faster than limits.max_speed_m_per_s by its reported velocity or by its
+// distance from last_accepted over since_last_accepted_s (that jump check
+// only with a last accepted sample and a positive time since it).
+enum class SampleVerdict { kAccepted, kNonFinite, kOutsideWorkspace, kTooFast };
+SampleVerdict judge_device_sample(const config::ForceLimits& limits, const DeviceSample& sample,
+                                  const DeviceSample* last_accepted, double since_last_accepted_s) noexcept;
+
 class HapticLoop {
  public:
   // The device must already be started; the loop neither starts nor stops

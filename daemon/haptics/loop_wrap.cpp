@@ -1,45 +1,144 @@
 #include "haptics/loop_wrap.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 
+#include "haptics/haptic_loop.hpp"
 #include "haptics/sim_device.hpp"
 
 namespace tissue::haptics {
+namespace {
 
-std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz) {
-  const double per_tick_m = max_speed_m_per_s / rate_hz;
-  if (!(jump_m > per_tick_m)) return {};
+std::string wrap_text(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz) {
   char text[512];
   std::snprintf(text, sizeof text,
                 "%s: the looping track goes from its last point back to its first in one tick, a %.3g m jump "
                 "(device frame), more than the %.3g m a tick the haptic loop accepts (device.limits.max_speed_m_per_s "
                 "%g at haptics.rate_hz %g): the force ramps out and back in at every wrap (inputs rejected as too "
                 "fast, then device lost); end the track where it starts for a seamless loop",
-                key.c_str(), jump_m, per_tick_m, max_speed_m_per_s, rate_hz);
+                key.c_str(), jump_m, max_speed_m_per_s / rate_hz, max_speed_m_per_s, rate_hz);
   return text;
+}
+
+// What the simulated device did as the loop judged it.
+struct Judged {
+  bool rejected = false;
+  double first_rejected_s = 0.0;  // timeline time of the first rejected sample
+  SampleVerdict first_verdict = SampleVerdict::kAccepted;
+  double first_step_m = 0.0;  // its distance from the last accepted sample
+  double peak_m_per_s = 0.0;  // fastest as the loop measures it (velocity or jump), from the first wrap on
+  double farthest_m = 0.0;    // farthest from the origin, from the first wrap on
+  double checked_s = 0.0;
+  int wraps = 0;  // wraps within checked_s
+};
+
+}  // namespace
+
+std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz) {
+  if (!(jump_m > max_speed_m_per_s / rate_hz)) return {};
+  return wrap_text(key, jump_m, max_speed_m_per_s, rate_hz);
 }
 
 std::string sim_loop_wrap_warning(const config::DeviceSpec& device, double rate_hz) {
   const config::SimDeviceSpec& sim = device.sim;
-  if (device.kind != config::DeviceSpec::Kind::kSim || !sim.loop || sim.waypoints.empty()) return {};
+  if (device.kind != config::DeviceSpec::Kind::kSim || !sim.loop || sim.waypoints.size() < 2) return {};
+  const double first_s = sim.waypoints.front().time_s, last_s = sim.waypoints.back().time_s;
+  const double span_s = last_s - first_s;
+  if (!(span_s > 0.0) || !(rate_hz > 0.0) || !std::isfinite(rate_hz)) return {};
+  const bool hand = sim.mode == config::SimDeviceSpec::Mode::kHand;
+  // A copy of the device the loop will read, read as the loop reads it (at
+  // haptics.rate_hz, from the timeline's start, no rendered force: no model
+  // yet) and judged by the loop's own rule, over the first pass and
+  // kWrapsChecked wraps each followed by a whole period: a hand's swings
+  // that add up over wraps (little damping), a wrap while the hand moves, a
+  // read below ~31 Hz that integrates less hand time than wall time all show
+  // as they will live. Bounded to kMaxSubstepsChecked hand sub-steps (reads
+  // for a trajectory) so the start stays fast: a long track gets fewer wraps.
+  constexpr int kWrapsChecked = 3;
+  constexpr double kMaxSubstepsChecked = 1e6;
+  SimDevice copy(sim);
+  if (!copy.start(nullptr)) return {};  // start() itself says why, when the device starts
+  double h_s = 0.0;
+  const double cost_per_read = hand ? std::max(1, SimDevice::hand_substeps(1.0 / rate_hz, &h_s)) : 1;
+  const double wanted_reads = std::ceil((last_s + kWrapsChecked * span_s) * rate_hz) + 1.0;
+  const auto reads = static_cast<std::int64_t>(std::min(wanted_reads, std::floor(kMaxSubstepsChecked / cost_per_read)));
+  const config::ForceLimits& limits = device.limits;
+  Judged judged;
+  DeviceSample last_accepted;
+  bool have_accepted = false;
+  std::int64_t last_accepted_ns = 0;
+  for (std::int64_t k = 0; k < reads; ++k) {
+    const std::int64_t now_ns = std::llround(static_cast<double>(k) * 1e9 / rate_hz);
+    const double t_s = 1e-9 * static_cast<double>(now_ns);
+    DeviceSample s;
+    if (!copy.read(now_ns, &s)) return {};
+    const double since_s = have_accepted ? 1e-9 * static_cast<double>(now_ns - last_accepted_ns) : 0.0;
+    const SampleVerdict verdict = judge_device_sample(limits, s, have_accepted ? &last_accepted : nullptr, since_s);
+    if (t_s > last_s) {
+      double speed_m_per_s = s.velocity_m_per_s.norm();
+      if (have_accepted && since_s > 0.0)
+        speed_m_per_s = std::max(speed_m_per_s, (s.position_m - last_accepted.position_m).norm() / since_s);
+      judged.peak_m_per_s = std::max(judged.peak_m_per_s, speed_m_per_s);
+      judged.farthest_m = std::max(judged.farthest_m, s.position_m.norm());
+    }
+    if (verdict == SampleVerdict::kAccepted) {
+      last_accepted = s;
+      have_accepted = true;
+      last_accepted_ns = now_ns;
+    } else if (!judged.rejected) {
+      judged.rejected = true;
+      judged.first_rejected_s = t_s;
+      judged.first_verdict = verdict;
+      judged.first_step_m = have_accepted ? (s.position_m - last_accepted.position_m).norm() : 0.0;
+    }
+    judged.checked_s = t_s;
+  }
+  if (!judged.rejected) return {};
+  // Wraps at last_s + j * span_s before the last read (less a rounding).
+  judged.wraps =
+      judged.checked_s > last_s ? static_cast<int>(std::ceil((judged.checked_s - last_s) / span_s - 1e-9)) : 0;
+  const char* const what = hand ? "hand (device.sim.mode hand)" : "tip (device.sim.mode trajectory)";
+  char text[1024];
+  const double max_speed_m_per_s = limits.max_speed_m_per_s;
+  if (judged.first_rejected_s <= last_s) {
+    // Not the wrap: the track itself, and so on every pass.
+    std::snprintf(text, sizeof text,
+                  "device.sim.waypoints: the simulated %s is rejected by the haptic loop %.3g s into the track's "
+                  "first pass, before it wraps (%s): the force ramps out and back in on every pass",
+                  what, judged.first_rejected_s,
+                  judged.first_verdict == SampleVerdict::kOutsideWorkspace ? "outside device.limits.workspace_radius_m"
+                  : judged.first_verdict == SampleVerdict::kTooFast ? "faster than device.limits.max_speed_m_per_s"
+                                                                    : "not finite");
+    return text;
+  }
+  if (!hand) return wrap_text("device.sim.waypoints", judged.first_step_m, max_speed_m_per_s, rate_hz);
   const auto& first = sim.waypoints.front().position_m;
   const auto& last = sim.waypoints.back().position_m;
   const double jump_m = Vec3(last[0] - first[0], last[1] - first[1], last[2] - first[2]).norm();
-  if (sim.mode == config::SimDeviceSpec::Mode::kTrajectory)
-    return loop_wrap_warning("device.sim.waypoints", jump_m, device.limits.max_speed_m_per_s, rate_hz);
-  // mode: hand follows the jumped target through its spring: not in one
-  // tick, but a long jump still swings it past the speed the loop accepts.
-  const double peak_m_per_s = SimDevice::hand_jump_peak_speed_m_per_s(sim, jump_m, rate_hz);
-  const double max_speed_m_per_s = device.limits.max_speed_m_per_s;
-  if (!(peak_m_per_s > max_speed_m_per_s)) return {};
-  char text[640];
+  char checked[256];
+  std::snprintf(checked, sizeof checked,
+                " (checked at start: the hand simulated with no rendered force, read at haptics.rate_hz %g over the "
+                "first %.3g s, the first pass and %d wrap%s)",
+                rate_hz, judged.checked_s, judged.wraps, judged.wraps == 1 ? "" : "s");
+  if (judged.first_verdict == SampleVerdict::kOutsideWorkspace) {
+    std::snprintf(text, sizeof text,
+                  "device.sim.waypoints: the looping track's target goes from its last point back to its first in one "
+                  "tick, a %.3g m jump (device frame), and the hand (device.sim.mode hand) follows it through its "
+                  "spring out to %.3g m from the device origin, beyond device.limits.workspace_radius_m %g: the force "
+                  "ramps out and back in at every wrap (inputs rejected outside the workspace, then device lost); end "
+                  "the track where it starts for a seamless loop%s",
+                  jump_m, judged.farthest_m, limits.workspace_radius_m, checked);
+    return text;
+  }
   std::snprintf(text, sizeof text,
                 "device.sim.waypoints: the looping track's target goes from its last point back to its first in one "
                 "tick, a %.3g m jump (device frame), and the hand (device.sim.mode hand) follows it through its "
                 "spring at up to %.3g m/s, more than device.limits.max_speed_m_per_s %g: the force ramps out and "
                 "back in at every wrap (inputs rejected as too fast, then device lost); end the track where it "
-                "starts for a seamless loop, or keep the jump under %.3g m",
-                jump_m, peak_m_per_s, max_speed_m_per_s, jump_m * max_speed_m_per_s / peak_m_per_s);
+                "starts for a seamless loop%s",
+                jump_m, judged.peak_m_per_s, max_speed_m_per_s, checked);
   return text;
 }
 

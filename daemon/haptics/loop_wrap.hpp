@@ -22,8 +22,14 @@ namespace tissue::haptics {
 std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz);
 
 // The warning for a looping simulated device (kind sim, device.sim.loop),
-// blamed on device.sim.waypoints; empty when it does not loop or its wrap is
-// taken smoothly. mode: trajectory jumps with its target (loop_wrap_warning).
+// blamed on device.sim.waypoints; empty when it does not loop or the loop
+// takes it. Both modes, one check: a copy of the SimDevice (same spec) is read
+// at rate_hz over the first pass and three wraps (each followed by a whole
+// period; at most 10^6 hand sub-steps) with no rendered force, and every
+// sample judged by the loop's rule (judge_device_sample), so what the hand
+// does over several wraps, while moving, or read below ~31 Hz is what the
+// loop will see. A rejection before the first wrap is the track's own, and
+// said so. Start-time code: allocates, runs for up to tens of milliseconds.
 std::string sim_loop_wrap_warning(const config::DeviceSpec& device, double rate_hz);
 
 }  // namespace tissue::haptics

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 
 namespace tissue::haptics {
@@ -13,6 +14,26 @@ std::string fmt(double v) {
   char buffer[32];
   std::snprintf(buffer, sizeof buffer, "%.4g", v);
   return buffer;
+}
+
+// The largest speed printed as fmt() prints it (4 significant digits) at
+// which the check in start() (peak * speed > max) passes: the refusal's
+// advice must be accepted when followed. Rounded to nearest, the printed
+// limit could be above the real one and refused in turn.
+std::string fmt_speed_at_most(double max_speed_m_per_s, double peak_m_per_s) {
+  const double limit = max_speed_m_per_s / peak_m_per_s;
+  if (!(limit > 0.0) || !std::isfinite(limit)) return fmt(limit);
+  // One unit in the 4th significant digit of the limit.
+  const double unit = std::pow(10.0, std::floor(std::log10(limit)) - 3.0);
+  // From a unit above the limit (the division rounds too) down a unit while
+  // what is printed, read back, is still refused: the largest accepted.
+  double speed = (std::floor(limit / unit) + 1.0) * unit;
+  for (int step = 0; step < 4; ++step) {
+    const std::string text = fmt(speed);
+    if (!(peak_m_per_s * std::strtod(text.c_str(), nullptr) > max_speed_m_per_s)) return text;
+    speed -= unit;
+  }
+  return fmt(speed);
 }
 
 }  // namespace
@@ -53,7 +74,7 @@ bool ReplayDevice::start(std::string* error) {
                 " m/s (its peak " + fmt(peak_m_per_s) + " m/s in the device frame, times the speed), above " +
                 "device.limits.max_speed_m_per_s " + fmt(max_speed_m_per_s_) +
                 ": the haptic loop would reject the hand as a glitch and ramp the force out; use a speed of at most " +
-                fmt(max_speed_m_per_s_ / peak_m_per_s) + " for this track");
+                fmt_speed_at_most(max_speed_m_per_s_, peak_m_per_s) + " for this track");
   }
   start_ns_ = -1;
   cursor_ = 0;
@@ -100,10 +121,14 @@ void ReplayDevice::build_knots() {
   double held_since_s = time_s_.front();
   for (std::size_t i = 1; i < rows; ++i) {
     if (position_m_[i] == position_m_[i - 1]) continue;
-    // With no period known (fewer than two changes) this is the last row
-    // that showed the old pose: row to row, as a 1 kHz track plays anyway.
-    if (time_s_[i] - held_since_s > kStillAfterPeriods * device_period_s_) {
-      const double hold_until_s = std::min(time_s_[i] - device_period_s_, time_s_[i - 1]);
+    // The step is spread over min(gap, kSpreadPeriods periods): a gap of up
+    // to that many periods (late or lost poses) over the whole gap, as the
+    // loop measured it live. With no period known (fewer than two changes)
+    // the hold ends at the last row that showed the old pose: row to row, as
+    // a 1 kHz track plays anyway.
+    const double spread_s = kSpreadPeriods * device_period_s_;
+    if (time_s_[i] - held_since_s > spread_s) {
+      const double hold_until_s = std::min(time_s_[i] - spread_s, time_s_[i - 1]);
       if (hold_until_s > knot_time_s_.back()) add(hold_until_s, position_m_[i - 1]);
     }
     add(time_s_[i], position_m_[i]);
@@ -132,7 +157,8 @@ bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   const std::size_t i = cursor_, j = std::min(cursor_ + 1, n - 1);
   const double dt = knot_time_s_[j] - knot_time_s_[i];
   const double u = dt > 0.0 ? std::clamp((t - knot_time_s_[i]) / dt, 0.0, 1.0) : 0.0;
-  out->position_m = (1.0 - u) * knot_position_m_[i] + u * knot_position_m_[j];
+  // From the knot along the step: a held pose (a step of zero) plays exactly.
+  out->position_m = knot_position_m_[i] + u * (knot_position_m_[j] - knot_position_m_[i]);
   out->velocity_m_per_s = dt > 0.0 ? Vec3(speed_ * (knot_position_m_[j] - knot_position_m_[i]) / dt) : Vec3::Zero();
   return true;
 }

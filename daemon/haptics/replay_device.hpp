@@ -15,7 +15,8 @@
 // one tick at several times the speed the loop measured live (it saw each
 // pose a device period after the last), and the loop would reject the hand
 // as too fast. So the hand is played through knots: the rows where a new
-// position came, each step spread over the recorded device's sample period.
+// position came, each step spread over the time since the last one came, up
+// to kSpreadPeriods of the recorded device's sample periods.
 #pragma once
 
 #include <limits>
@@ -48,21 +49,30 @@ class ReplayDevice final : public Device {
   // between the track's position changes; 0 with fewer than two changes).
   double device_period_s() const noexcept { return device_period_s_; }
 
-  // A pose that comes more than this many periods after the last one means
-  // the device sent the same pose in between: it stood still. Up to it, the
-  // pose was late (a device's jitter) and the loop measured the step over the
-  // whole gap, as the knots then spread it.
-  static constexpr double kStillAfterPeriods = 1.5;
+  // Each step is spread over at most this many device periods. A recording
+  // cannot tell a late or lost pose from a hand that stood still (the row
+  // holds the old pose either way), and live they differ: with a pose lost,
+  // UdpDevice::read returned false on the ticks without a datagram and the
+  // loop measured the step over the whole gap since the last accepted
+  // sample (2 periods for one lost pose, 3 for two in a row); with the hand
+  // still, the device re-sent the pose and the loop measured the step over
+  // one period. Spreading a gap of up to 3 periods over the whole gap plays
+  // up to two lost poses in a row exactly as live, and a still hand's first
+  // step no faster than live (over 3 periods instead of 1: slower is safe).
+  // Squeezing every gap over 1.5 periods into one period took lost poses for
+  // a still hand and played them at up to twice the speed the loop measured.
+  static constexpr double kSpreadPeriods = 3.0;
 
  private:
   // The knots read() interpolates and start() checks the speed of (one rule
   // for both): the first row; every row whose position differs from the row
   // before (the time a new pose came); before such a row, when the old pose
-  // was held longer than kStillAfterPeriods device periods, a knot holding it
-  // until one period before the change (or the last row that still showed
-  // it, if later), so the hand stands still and then moves over one period;
-  // and the last row. A track whose position changes every row keeps every
-  // row as a knot and replays as it did row to row.
+  // was held longer than kSpreadPeriods device periods, a knot holding it
+  // until kSpreadPeriods periods before the change (or the last row that
+  // still showed it, if earlier), so the hand stands still and then moves
+  // over those periods; and the last row. A shorter hold gets no extra knot:
+  // the step is spread over the whole gap. A track whose position changes
+  // every row keeps every row as a knot and replays as it did row to row.
   void build_knots();
   std::vector<double> time_s_;
   std::vector<Vec3> position_m_;

@@ -97,27 +97,6 @@ void SimDevice::hand_substep(const config::SimDeviceSpec& spec, const Vec3& targ
   *position_m += h_s * *velocity_m_per_s;
 }
 
-double SimDevice::hand_jump_peak_speed_m_per_s(const config::SimDeviceSpec& spec, double jump_m, double rate_hz) {
-  if (!(spec.hand_stiffness_N_per_m > 0.0) || !(spec.hand_mass_kg > 0.0) || !(rate_hz > 0.0) || !(jump_m > 0.0))
-    return 0.0;
-  // The target jumps from the hand at rest to the origin, and holds there.
-  constexpr double kPi = 3.14159265358979323846;
-  const double undamped_period_s = 2.0 * kPi * std::sqrt(spec.hand_mass_kg / spec.hand_stiffness_N_per_m);
-  const double window_s = std::clamp(undamped_period_s, 1.0, 60.0);
-  double h_s = 0.0;
-  const int substeps = hand_substeps(1.0 / rate_hz, &h_s);
-  Vec3 position_m(jump_m, 0.0, 0.0), velocity_m_per_s = Vec3::Zero();
-  double peak_m_per_s = 0.0;
-  const long reads = static_cast<long>(std::ceil(window_s * rate_hz));
-  for (long read = 0; read < reads; ++read) {
-    const Vec3 last_read_m = position_m;
-    for (int k = 0; k < substeps; ++k)
-      hand_substep(spec, Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), h_s, &position_m, &velocity_m_per_s);
-    peak_m_per_s = std::max({peak_m_per_s, velocity_m_per_s.norm(), (position_m - last_read_m).norm() * rate_hz});
-  }
-  return peak_m_per_s;
-}
-
 bool SimDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   if (waypoint_m_.empty()) return false;
   if (!started_clock_) {

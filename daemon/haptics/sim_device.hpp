@@ -40,24 +40,17 @@ class SimDevice final : public Device {
   Vec3 target_m(double t_s) const noexcept;
   // The slope of the timeline at t (zero past the end of a non-looping one).
   Vec3 target_velocity_m_per_s(double t_s) const noexcept;
-  // The fastest the hand (the spec's mass, spring and damper) moves as the
-  // haptic loop sees it, read at rate_hz, after its target jumps by jump_m
-  // from rest: the larger of its velocity and its distance since the last
-  // read times rate_hz (HapticLoop::accept_sample judges both). A looping
-  // track's wrap is such a jump; the hand model is linear, so this is what
-  // the jump adds to the track's own motion. Start-time code: integrates the
-  // same sub-steps read() does for one undamped period of the hand (at least
-  // 1 s, at most 60 s: the first and fastest swing). 0 without a spring.
-  static double hand_jump_peak_speed_m_per_s(const config::SimDeviceSpec& spec, double jump_m, double rate_hz);
+  // The sub-steps a read() integrates over elapsed_s since the last: their
+  // count (at most kMaxSubsteps) and length (at most kMaxSubstep_s) in *h_s.
+  // A read after a longer gap integrates only kMaxSubsteps * kMaxSubstep_s
+  // of hand time (below about 31 Hz, every read).
+  static int hand_substeps(double elapsed_s, double* h_s) noexcept;
 
   // Hand state (kHand) or trajectory point at the last read().
   const Vec3& position_m() const noexcept { return position_m_; }
   const Vec3& velocity_m_per_s() const noexcept { return velocity_m_per_s_; }
 
  private:
-  // The sub-steps read() integrates over elapsed_s: their count (at most
-  // kMaxSubsteps) and length (at most kMaxSubstep_s) in *h_s.
-  static int hand_substeps(double elapsed_s, double* h_s) noexcept;
   // One semi-implicit Euler sub-step of the hand of `spec`.
   static void hand_substep(const config::SimDeviceSpec& spec, const Vec3& target_m, const Vec3& target_velocity_m_per_s,
                            const Vec3& force_N, double h_s, Vec3* position_m, Vec3* velocity_m_per_s) noexcept;

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <memory>
+#include <string>
 
 #include "haptics/haptic_loop.hpp"
 #include "haptics/haptics_test_support.hpp"
@@ -52,24 +54,37 @@ config::DeviceSpec looping_sim(config::SimDeviceSpec::Mode mode, double jump_m) 
   return d;
 }
 
-// The samples the haptic loop rejects as too fast over the first pass and
-// the 0.4 s after the wrap, the device ticked at 1 kHz.
-std::uint64_t rejected_as_too_fast_around_the_wrap(const config::DeviceSpec& device_spec) {
+// The haptic loop's judgement of a simulated device ticked at rate_hz for
+// duration_s (no model: only the device side is judged).
+HapticStats run_the_loop(const config::DeviceSpec& device_spec, double rate_hz, double duration_s) {
   SimDevice device(device_spec.sim);
   EXPECT_TRUE(device.start(nullptr));
   config::HapticSpec haptic_spec;
+  haptic_spec.rate_hz = rate_hz;
   auto models = std::make_unique<LocalModelBuffer>();
   auto samples = std::make_unique<ToolSampleRing>();
   HapticLoop loop(device, device_spec, haptic_spec, *models, *samples);
-  std::int64_t now_ns = 1000 * test::kMs;
-  for (int tick = 0; tick <= 2900; ++tick) {
-    loop.tick(now_ns);
-    now_ns += test::kMs;
+  const long ticks = std::lround(duration_s * rate_hz);
+  for (long tick = 0; tick <= ticks; ++tick) {
+    loop.tick(1000 * test::kMs + std::llround(static_cast<double>(tick) * 1e9 / rate_hz));
     ToolSample drained;
     while (samples->try_pop(drained)) {
     }
   }
-  return loop.stats().rejected_speed;
+  return loop.stats();
+}
+
+// The samples the haptic loop rejects (too fast or outside the workspace)
+// over the first pass and three wraps, each followed by a whole period (what
+// the warning checks), the device ticked at rate_hz.
+std::uint64_t rejected_over_three_wraps(const config::DeviceSpec& device_spec, double rate_hz = 1000.0) {
+  const auto& w = device_spec.sim.waypoints;
+  const HapticStats st =
+      run_the_loop(device_spec, rate_hz, w.back().time_s + 3.0 * (w.back().time_s - w.front().time_s));
+  return st.rejected_speed + st.rejected_workspace;
+}
+std::uint64_t rejected_as_too_fast_around_the_wrap(const config::DeviceSpec& device_spec) {
+  return rejected_over_three_wraps(device_spec);
 }
 
 // mode: trajectory jumps with the target at the wrap: loop_wrap_warning.
@@ -109,17 +124,18 @@ TEST(LoopWrap, ALoopingHandThatFollowsALongWrapTooFastIsWarnedAboutIt) {
   EXPECT_EQ(rejected_as_too_fast_around_the_wrap(looping_sim(config::SimDeviceSpec::Mode::kHand, 0.15)), 0u);
 }
 
-// One rule for the warning and the hand: the jump at which the simulated
-// hand's peak speed reaches device.limits.max_speed_m_per_s splits the wraps
-// the loop rejects from those it takes, within 2 %. The default hand (0.1 kg,
-// 200 N/m, 4 N s/m) peaks at about 26 times the jump per second
-// (docs/daemon-config.md): from about 0.19 m at 5 m/s.
+// One rule for the warning and the loop: the jump from which the warning
+// speaks splits the wraps the loop rejects from those it takes, within 2 %.
+// The default hand (0.1 kg, 200 N/m, 4 N s/m) from about 0.19 m at 5 m/s
+// (docs/daemon-config.md).
 TEST(LoopWrap, TheHandsWrapWarningStartsWhereTheLoopStartsRejecting) {
-  config::SimDeviceSpec hand;
-  const double per_m = SimDevice::hand_jump_peak_speed_m_per_s(hand, 1.0, 1000.0);
-  EXPECT_NEAR(per_m, 26.0, 1.0);
-  EXPECT_NEAR(SimDevice::hand_jump_peak_speed_m_per_s(hand, 0.3, 1000.0), 0.3 * per_m, 1e-9);  // linear
-  const double threshold_m = 5.0 / per_m;
+  double quiet_m = 0.0, warned_m = 0.6;  // bisect the jump at which the warning starts
+  for (int i = 0; i < 30; ++i) {
+    const double mid_m = 0.5 * (quiet_m + warned_m);
+    (sim_loop_wrap_warning(looping_sim(config::SimDeviceSpec::Mode::kHand, mid_m), 1000.0).empty() ? quiet_m
+                                                                                                   : warned_m) = mid_m;
+  }
+  const double threshold_m = warned_m;
   EXPECT_NEAR(threshold_m, 0.19, 0.01);
   const config::DeviceSpec above = looping_sim(config::SimDeviceSpec::Mode::kHand, 1.02 * threshold_m);
   EXPECT_NE(sim_loop_wrap_warning(above, 1000.0), "");
@@ -133,9 +149,109 @@ TEST(LoopWrap, TheHandsWrapWarningStartsWhereTheLoopStartsRejecting) {
   EXPECT_NE(sim_loop_wrap_warning(stiff, 1000.0), "");
   EXPECT_GT(rejected_as_too_fast_around_the_wrap(stiff), 0u);
   // No spring: the hand never follows the jump.
-  config::SimDeviceSpec limp;
-  limp.hand_stiffness_N_per_m = 0.0;
-  EXPECT_EQ(SimDevice::hand_jump_peak_speed_m_per_s(limp, 1.0, 1000.0), 0.0);
+  config::DeviceSpec limp = above;
+  limp.sim.hand_stiffness_N_per_m = 0.0;
+  EXPECT_EQ(sim_loop_wrap_warning(limp, 1000.0), "");
+  EXPECT_EQ(rejected_as_too_fast_around_the_wrap(limp), 0u);
+}
+
+const char* const kHandWrapPrefix =
+    "device.sim.waypoints: the looping track's target goes from its last point back to its first in one tick, a ";
+
+// (a) Without damping the hand's swings do not die out between wraps: they
+// add up. The old check simulated one jump from rest and said nothing of a
+// 0.10 m jump (0.9 of the jump it warned from for this hand), which the loop
+// rejects from the second wrap on.
+TEST(LoopWrap, AnUndampedHandWhoseSwingsAddUpOverTheWrapsIsWarnedAboutIt) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.10);
+  d.sim.hand_damping_N_s_per_m = 0.0;
+  ASSERT_GT(rejected_over_three_wraps(d), 0u);
+  const std::string w = sim_loop_wrap_warning(d, 1000.0);
+  EXPECT_EQ(w.rfind(kHandWrapPrefix, 0), 0u) << w;
+  EXPECT_NE(w.find("0.1 m jump"), std::string::npos) << w;
+}
+
+// (b) A wrap while the hand moves toward the first point: its own speed adds
+// to its answer to the jump. A 0.18 m jump (below the 0.19 m a jump from rest
+// is warned from) that the loop rejects about 20 ms after every wrap.
+TEST(LoopWrap, AWrapWhileTheHandMovesTowardTheFirstPointIsWarnedAboutIt) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.0);
+  d.sim.waypoints = {{0.0, {0.0, 0.0, 0.0}}, {0.1, {-0.1, 0.0, 0.0}}, {0.3, {0.3, 0.0, 0.0}}, {0.4, {0.18, 0.0, 0.0}}};
+  ASSERT_GT(rejected_over_three_wraps(d), 0u);
+  const std::string w = sim_loop_wrap_warning(d, 1000.0);
+  EXPECT_EQ(w.rfind(kHandWrapPrefix, 0), 0u) << w;
+  EXPECT_NE(w.find("0.18 m jump"), std::string::npos) << w;
+}
+
+// (c) Below about 31 Hz a SimDevice read integrates at most 64 sub-steps of
+// 0.5 ms of hand time, however long the tick: the old check's window counted
+// wall time and saw only the start of a slow hand's swing after the wrap. A
+// hand with a 1 s period (damping ratio 0.3), read at 2 Hz under a 1 m/s
+// limit, on a track slow enough that only the wrap is rejected.
+TEST(LoopWrap, AHandReadBelow31HzIsJudgedAsTheLoopReadsIt) {
+  for (const double jump_m : {0.25, 0.3}) {
+    SCOPED_TRACE("jump " + std::to_string(jump_m) + " m");
+    config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, jump_m);
+    d.sim.waypoints = {{0.0, {-0.4, 0.0, 0.0}},
+                       {20.0, {-0.4, 0.0, 0.0}},
+                       {40.0, {-0.4 + jump_m, 0.0, 0.0}},
+                       {60.0, {-0.4 + jump_m, 0.0, 0.0}}};
+    d.sim.hand_mass_kg = 1.0;
+    d.sim.hand_stiffness_N_per_m = 39.5;  // 2 pi sqrt(m / k): 1 s
+    d.sim.hand_damping_N_s_per_m = 3.77;  // damping ratio 0.3
+    d.limits.max_speed_m_per_s = 1.0;
+    EXPECT_GT(rejected_over_three_wraps(d, 2.0), 0u);
+    EXPECT_EQ(run_the_loop(d, 2.0, 59.9).rejected_speed, 0u);  // the first pass is taken
+    const std::string w = sim_loop_wrap_warning(d, 2.0);
+    EXPECT_EQ(w.rfind(kHandWrapPrefix, 0), 0u) << w;
+  }
+}
+
+// The same rule judges the workspace: a hand that swings past
+// device.limits.workspace_radius_m after the wrap (here with a speed limit it
+// never reaches) is warned about as the loop rejects it.
+TEST(LoopWrap, AHandThatSwingsOutOfTheWorkspaceAfterTheWrapIsWarnedAboutIt) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.0);
+  d.sim.waypoints = {{0.0, {-0.9, 0.0, 0.0}}, {0.5, {-0.9, 0.0, 0.0}}, {1.5, {0.0, 0.0, 0.0}}, {2.5, {0.0, 0.0, 0.0}}};
+  d.limits.max_speed_m_per_s = 100.0;
+  const HapticStats st = run_the_loop(d, 1000.0, 10.0);
+  ASSERT_GT(st.rejected_workspace, 0u);
+  EXPECT_EQ(run_the_loop(d, 1000.0, 2.5).rejected_workspace, 0u);  // not on the first pass
+  const std::string w = sim_loop_wrap_warning(d, 1000.0);
+  EXPECT_EQ(w.rfind(std::string(kHandWrapPrefix) + "0.9 m jump (device frame), and the hand (device.sim.mode hand) "
+                                                   "follows it through its spring out to 1.",
+                    0),
+            0u)
+      << w;
+  EXPECT_NE(w.find("m from the device origin, beyond device.limits.workspace_radius_m 1: "), std::string::npos) << w;
+}
+
+// A track whose own motion the loop rejects is not blamed on the wrap: a
+// trajectory segment at 6 m/s is rejected on every pass, wrap or not.
+TEST(LoopWrap, ATrackTheLoopRejectsBeforeItWrapsIsSaidToBeTheTracksOwn) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kTrajectory, 0.0);
+  d.sim.waypoints = {{0.0, {0.0, 0.0, 0.0}}, {0.5, {0.0, 0.0, 0.0}}, {0.55, {0.3, 0.0, 0.0}}, {1.5, {0.0, 0.0, 0.0}}};
+  ASSERT_GT(run_the_loop(d, 1000.0, 1.0).rejected_speed, 0u);
+  EXPECT_EQ(sim_loop_wrap_warning(d, 1000.0),
+            "device.sim.waypoints: the simulated tip (device.sim.mode trajectory) is rejected by the haptic loop "
+            "0.5 s into the track's first pass, before it wraps (faster than device.limits.max_speed_m_per_s): the "
+            "force ramps out and back in on every pass");
+}
+
+// The check is bounded (10^6 hand sub-steps) so the start stays fast: a long
+// track is checked over fewer wraps, and the warning says what it checked.
+TEST(LoopWrap, ALongTracksCheckIsBoundedAndSaysWhatItChecked) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3);
+  d.sim.waypoints = {
+      {0.0, {-0.1, 0.0, 0.0}}, {0.5, {-0.1, 0.0, 0.0}}, {1.5, {0.2, 0.0, 0.0}}, {400.0, {0.2, 0.0, 0.0}}};
+  // At 1 kHz a read is 2 sub-steps: 5 * 10^5 reads, 500 s, the first pass and one wrap.
+  const std::string w = sim_loop_wrap_warning(d, 1000.0);
+  EXPECT_NE(w.find("(checked at start: the hand simulated with no rendered force, read at haptics.rate_hz 1000 over "
+                   "the first 500 s, the first pass and 1 wrap)"),
+            std::string::npos)
+      << w;
+  const std::string short_track = sim_loop_wrap_warning(looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3), 1000.0);
+  EXPECT_NE(short_track.find("over the first 10 s, the first pass and 3 wraps)"), std::string::npos) << short_track;
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <memory>
 
 #include "haptics/haptic_loop.hpp"
@@ -82,6 +83,46 @@ TEST(ReplayDevice, ASpeedThatTakesTheTrackPastTheSpeedLimitIsRefusedAtStart) {
   EXPECT_TRUE(real_time.start(&error)) << error;
   ReplayDevice at_the_limit(time_s, position_m, 8.0, false, max_speed_m_per_s);
   EXPECT_TRUE(at_the_limit.start(&error)) << error;
+}
+
+// The refusal's "use a speed of at most X" is advice to follow: X is printed
+// to 4 significant digits rounded down, so that speed is accepted. Rounded to
+// nearest, a 12.3457 mm step in 7 ms (1.764 m/s) at speed 3 suggested 2.835
+// (the limit is 2.834995...), and that speed was refused in turn.
+// The speed the refusal of a one-step track (step_m in 7 ms) at speed 3 suggests.
+std::string suggested_speed(double step_m) {
+  const std::vector<double> time_s{0.0, 0.007};
+  const std::vector<Vec3> position_m{Vec3::Zero(), Vec3(step_m, 0, 0)};
+  std::string error;
+  ReplayDevice too_fast(time_s, position_m, 3.0, false, 5.0);
+  EXPECT_FALSE(too_fast.start(&error));
+  const std::string at_most = "use a speed of at most ";
+  const std::size_t at = error.find(at_most);
+  EXPECT_NE(at, std::string::npos) << error;
+  if (at == std::string::npos) return "";
+  return error.substr(at + at_most.size(), error.find(' ', at + at_most.size()) - at - at_most.size());
+}
+
+TEST(ReplayDevice, TheSuggestedSpeedIsRoundedDownSoItIsAccepted) {
+  const std::vector<double> time_s{0.0, 0.007};
+  const std::string review = suggested_speed(0.0123457);
+  EXPECT_EQ(review, "2.834");
+  std::string error;
+  ReplayDevice advised(time_s, {Vec3::Zero(), Vec3(0.0123457, 0, 0)}, std::stod(review), false, 5.0);
+  EXPECT_TRUE(advised.start(&error)) << error;
+  // Any step: the advice is accepted, and it is the largest 4-digit speed
+  // that is (one more in the last digit is refused).
+  for (int i = 0; i < 500; ++i) {
+    const double step_m = 0.0120 + 1.37e-5 * i;
+    const std::string text = suggested_speed(step_m);
+    SCOPED_TRACE(std::to_string(step_m) + " m: at most " + text);
+    ASSERT_FALSE(text.empty());
+    const double speed = std::stod(text);
+    ReplayDevice followed(time_s, {Vec3::Zero(), Vec3(step_m, 0, 0)}, speed, false, 5.0);
+    EXPECT_TRUE(followed.start(&error)) << error;
+    ReplayDevice above(time_s, {Vec3::Zero(), Vec3(step_m, 0, 0)}, speed + 1e-3, false, 5.0);  // speeds 2..3
+    EXPECT_FALSE(above.start(&error));
+  }
 }
 
 // Haptic rows are written every tick, so a device slower than the loop (a
@@ -178,10 +219,12 @@ TEST(ReplayDevice, A250HzDeviceAtHalfTheSpeedLimitReplaysWithoutASpeedRejection)
 }
 
 // A recorded hand that stood still for a second and then moved: the replayed
-// hand stands still too, and makes the first step over one of the device's
-// periods (as the loop saw it live: a pose, then the next 4 ms later), not in
-// one tick, and not drifting over the whole second.
-TEST(ReplayDevice, AHandThatStoodStillHoldsUntilOneDevicePeriodBeforeItMoves) {
+// hand stands still too, and makes the first step over three of the device's
+// periods, not in one tick, and not drifting over the whole second. Live the
+// loop saw that step over one period (the device re-sent the still pose), but
+// the recording cannot tell it from up to two lost poses, which the loop
+// measured over the whole gap: three periods is never faster than live.
+TEST(ReplayDevice, AHandThatStoodStillHoldsUntilThreeDevicePeriodsBeforeItMoves) {
   // Still at the origin for rows 0..999, then a 4 mm step every 4 rows
   // (1 m/s): the first new pose shows at row 1004.
   const SlowDeviceTrack track = slow_device_track(Vec3::Zero(), Vec3(0.004, 0, 0), 1000, 20, {4}, 0);
@@ -191,14 +234,14 @@ TEST(ReplayDevice, AHandThatStoodStillHoldsUntilOneDevicePeriodBeforeItMoves) {
   std::string error;
   ASSERT_TRUE(replay.start(&error)) << error;
   DeviceSample s;
-  for (int ms = 0; ms < 1000; ++ms) {  // held exactly, at rest, until one period (4 ms) before the step
+  for (int ms = 0; ms < 992; ++ms) {  // held exactly, at rest, until three periods (12 ms) before the step
     ASSERT_TRUE(replay.read(ms * kMs, &s));
     ASSERT_EQ(s.position_m, Vec3::Zero()) << "at " << ms << " ms";
     ASSERT_EQ(s.velocity_m_per_s, Vec3::Zero()) << "at " << ms << " ms";
   }
-  ASSERT_TRUE(replay.read(1002 * kMs, &s));  // half way through the first step, at the device's speed
+  ASSERT_TRUE(replay.read(998 * kMs, &s));  // half way through the first step: 4 mm over 12 ms
   EXPECT_NEAR((s.position_m - Vec3(0.002, 0, 0)).norm(), 0.0, 1e-12);
-  EXPECT_NEAR((s.velocity_m_per_s - Vec3(1.0, 0, 0)).norm(), 0.0, 1e-9);
+  EXPECT_NEAR((s.velocity_m_per_s - Vec3(0.004 / 0.012, 0, 0)).norm(), 0.0, 1e-9);
   ASSERT_TRUE(replay.read(1004 * kMs, &s));
   EXPECT_NEAR((s.position_m - Vec3(0.004, 0, 0)).norm(), 0.0, 1e-12);
   ASSERT_TRUE(replay.read(1010 * kMs, &s));  // and on at 1 m/s, 1 mm a tick
@@ -206,9 +249,67 @@ TEST(ReplayDevice, AHandThatStoodStillHoldsUntilOneDevicePeriodBeforeItMoves) {
   EXPECT_NEAR((s.velocity_m_per_s - Vec3(1.0, 0, 0)).norm(), 0.0, 1e-9);
 }
 
+// A recording at 1 kHz of a device that sends a pose every period_rows
+// ticks, moving at speed_m_per_s along x from -0.4 m for `rows` rows; the
+// packets of the device samples in `lost` never arrived, so the row holds the
+// last pose that did (as the loop records a tick without a datagram).
+SlowDeviceTrack lost_packet_track(int period_rows, double speed_m_per_s, int rows, const std::vector<int>& lost) {
+  SlowDeviceTrack track;
+  Vec3 held_m(-0.4, 0, 0);
+  for (int row = 0; row < rows; ++row) {
+    const int sample = row / period_rows;
+    if (row % period_rows == 0 && std::find(lost.begin(), lost.end(), sample) == lost.end())
+      held_m = Vec3(-0.4 + speed_m_per_s * 1e-3 * row, 0, 0);
+    track.time_s.push_back(1e-3 * row);
+    track.position_m.push_back(held_m);
+  }
+  return track;
+}
+
+// A lost or late pose is a gap of two (or three) periods, not a hand that
+// stood still: live, UdpDevice::read returned false on the ticks without a
+// datagram and the loop measured the step over the time since the last
+// accepted sample. Taken for a still hand, the replay squeezed the step into
+// one period, at up to twice the speed the loop measured live, and start()
+// refused tracks the live session handled ("plays the track at up to 6 m/s
+// ... use a speed of at most 0.8333" for 3 m/s at 1 kHz with one duplicate
+// row). Up to two lost packets in a row now replay exactly as live.
+TEST(ReplayDevice, LostPacketsReplayAtTheSpeedTheLoopMeasuredLive) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  const double max_speed_m_per_s = spec.limits.max_speed_m_per_s;
+  struct Case {
+    const char* what;
+    int period_rows;
+    std::vector<int> lost;
+  };
+  for (const Case& c : {Case{"1 kHz, one duplicate row", 1, {100}}, Case{"250 Hz, one lost packet", 4, {30}},
+                        Case{"250 Hz, two lost packets in a row", 4, {30, 31}},
+                        Case{"250 Hz, lost packets here and there", 4, {10, 30, 31, 50}}}) {
+    SCOPED_TRACE(c.what);
+    // 3 m/s, 0.78 m in 260 ms: within the 1 m workspace.
+    const SlowDeviceTrack track = lost_packet_track(c.period_rows, 3.0, 261, c.lost);
+    ReplayDevice replay(track.time_s, track.position_m, 1.0, false, max_speed_m_per_s);
+    std::string error;
+    if (!replay.start(&error)) {  // on to the other cases: each says what it refuses
+      ADD_FAILURE() << error;
+      continue;
+    }
+    EXPECT_NEAR(replay.device_period_s(), 1e-3 * c.period_rows, 1e-12);
+    const HapticStats st = replay_through_the_loop(replay, spec, static_cast<int>(track.time_s.size()) + 10);
+    EXPECT_EQ(st.rejected_speed, 0u);
+    EXPECT_EQ(st.device_lost_trips, 0u);
+    // Its peak is the 3 m/s the loop measured live, so it plays up to 5/3 times real time.
+    ReplayDevice faster(track.time_s, track.position_m, 1.01 * max_speed_m_per_s / 3.0, false, max_speed_m_per_s);
+    EXPECT_FALSE(faster.start(&error));
+    EXPECT_NE(error.find("its peak 3 m/s"), std::string::npos) << error;
+  }
+}
+
 // A device as fast as the loop (the simulated hand, a 1 kHz device) changes
 // position every row, now and then holding one for a few rows: its period is
-// one row, and it replays row to row, as before knots.
+// one row, and it replays row to row, as before knots. A pose held 6 rows (a
+// still hand, or lost poses: the recording cannot tell) is held until three
+// rows before the next pose and the step spread over those three.
 TEST(ReplayDevice, A1kHzTrackReplaysRowToRow) {
   std::vector<double> time_s;
   std::vector<Vec3> position_m;
@@ -216,17 +317,29 @@ TEST(ReplayDevice, A1kHzTrackReplaysRowToRow) {
   for (int row = 0; row < 300; ++row) {
     time_s.push_back(1e-3 * row);
     position_m.push_back(p);
-    if (row % 50 < 45) p += Vec3(1e-4 * (1 + row % 7), -2e-5 * (row % 3), 3e-5);  // then 5 rows held
+    if (row % 50 < 45) p += Vec3(1e-4 * (1 + row % 7), -2e-5 * (row % 3), 3e-5);  // rows 45..50 of 50 the same
   }
   ReplayDevice replay(time_s, position_m, 1.0, false, 5.0);
   ASSERT_TRUE(replay.start(nullptr));
   EXPECT_NEAR(replay.device_period_s(), 1e-3, 1e-12);
   DeviceSample s;
-  ASSERT_TRUE(replay.read(0, &s));  // the track's time counts from the first read
+  ASSERT_TRUE(replay.read(0, &s));           // the track's time counts from the first read
   for (int row = 0; row + 1 < 300; ++row) {  // half way between each two rows
     ASSERT_TRUE(replay.read(static_cast<std::int64_t>((row + 0.5) * kMs), &s));
-    ASSERT_NEAR((s.position_m - 0.5 * (position_m[row] + position_m[row + 1])).norm(), 0.0, 1e-12) << row;
-    ASSERT_NEAR((s.velocity_m_per_s - 1e3 * (position_m[row + 1] - position_m[row])).norm(), 0.0, 1e-9) << row;
+    const int into_hold = (row + 5) % 50;  // rows 45..50 of 50: 0..5
+    const int held_from = row - into_hold;
+    if (row < 45 || into_hold > 5) {  // row to row
+      ASSERT_NEAR((s.position_m - 0.5 * (position_m[row] + position_m[row + 1])).norm(), 0.0, 1e-12) << row;
+      ASSERT_NEAR((s.velocity_m_per_s - 1e3 * (position_m[row + 1] - position_m[row])).norm(), 0.0, 1e-9) << row;
+    } else if (into_hold < 3 || held_from + 6 >= 300) {  // held, at rest (to the end for the last)
+      ASSERT_EQ(s.position_m, position_m[held_from]) << row;
+      ASSERT_EQ(s.velocity_m_per_s, Vec3::Zero()) << row;
+    } else {  // the step to row 51 of 50, over rows 48..51
+      const Vec3 step_m = position_m[held_from + 6] - position_m[held_from];
+      const double u = (row + 0.5 - (held_from + 3)) / 3.0;
+      ASSERT_NEAR((s.position_m - (position_m[held_from] + u * step_m)).norm(), 0.0, 1e-12) << row;
+      ASSERT_NEAR((s.velocity_m_per_s - 1e3 / 3.0 * step_m).norm(), 0.0, 1e-9) << row;
+    }
   }
 }
 
