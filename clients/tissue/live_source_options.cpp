@@ -4,10 +4,10 @@
 
 #include "export/live_source.hpp"
 #include "tissue/cli_checks.hpp"
-#include "tissue/stop_signals.hpp"
 #include "transport/dds_subscriber.hpp"
 #include "transport/lcm_subscriber.hpp"
 #include "util/lcm_url.hpp"
+#include "util/stop_signals.hpp"
 #include "util/text.hpp"
 
 namespace tissue::cli {
@@ -59,9 +59,9 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
   // Ctrl-C during a take of up to an hour ends the take, not the process:
   // the frames so far are exported (the signal killed the client and lost
   // them). Made before the subscriber so its transport's threads start with
-  // the signals blocked (stop_signals.hpp); only while collecting: a signal
+  // the signals blocked (util/stop_signals.hpp); only while collecting: a signal
   // during the export ends it as usual.
-  const StopSignals stops;
+  const util::StopOnSignals stops;
   std::unique_ptr<transport::MeshSubscriber> sub;
   try {
     if (o.lcm_url) {
@@ -85,10 +85,10 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
   stop_note->clear();
   if (stops.stopped()) {
     if (source->frame_count() == 0)
-      throw x3d::NoLiveFrameError(std::string("stopped by ") + stops.signal_name() +
+      throw x3d::NoLiveFrameError(std::string("stopped by ") + util::signal_name(stops.signal()) +
                                   " before any surface_mesh arrived on " + source->name());
     if (many)
-      *stop_note = std::string("the collection was cut short by ") + stops.signal_name() + " after " +
+      *stop_note = std::string("the collection was cut short by ") + util::signal_name(stops.signal()) + " after " +
                    std::to_string(source->frame_count()) + " frames of the " + util::number_text(o.seconds) +
                    " s window";
   }

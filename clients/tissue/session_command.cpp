@@ -16,11 +16,11 @@
 #include "replay/session_replay.hpp"
 #include "tissue/cli_checks.hpp"
 #include "tissue/dds_cli.hpp"
-#include "tissue/stop_signals.hpp"
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
 #include "util/lcm_url.hpp"
 #include "util/output_file.hpp"
+#include "util/stop_signals.hpp"
 
 namespace tissue::cli {
 
@@ -77,8 +77,8 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
   }
   // SIGINT / SIGTERM: the replay stops at its next wait (within 20 ms) and
   // prints its summary. Before the publishers, whose threads must start with
-  // the signals blocked (stop_signals.hpp).
-  const StopSignals stops;
+  // the signals blocked (util/stop_signals.hpp).
+  const util::StopOnSignals stops;
   // The file first: a bad file is reported without touching the network.
   std::unique_ptr<x3d::FrameSource> frames;
   replay::SessionRows rows;

@@ -12,12 +12,12 @@
 
 #include "app/batch_record.hpp"
 #include "app/output_file.hpp"
-#include "app/stop_signals.hpp"
 #include "physics/diagnostics.hpp"
 #include "physics/forces.hpp"
 #include "record/record_types.hpp"
 #include "scene/scene_yaml.hpp"
 #include "util/output_file.hpp"
+#include "util/stop_signals.hpp"
 
 namespace tissue::app {
 
@@ -113,7 +113,7 @@ std::string command_text(const BatchOptions& options) {
 
 nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress,
                          const std::function<void(const physics::Simulation&, double step_ms)>& after_step,
-                         const volatile std::sig_atomic_t* stop_signal) {
+                         const std::atomic<int>* stop_signal) {
   const scene::Scene& scene = sim.scene();
   const double dt = scene.integrator.dt_s;
   if (!(dt > 0.0) || !std::isfinite(dt)) throw std::invalid_argument("integrator.dt_s must be a positive number");
@@ -225,7 +225,8 @@ nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, 
       {"rejected_steps", c.rejected_steps},
       {"solver", solver_json(c)},
       {"error", error.empty() ? nlohmann::json(nullptr) : nlohmann::json(error)},
-      {"interrupted_by", interrupted_by == 0 ? nlohmann::json(nullptr) : nlohmann::json(signal_name(interrupted_by))},
+      {"interrupted_by",
+       interrupted_by == 0 ? nlohmann::json(nullptr) : nlohmann::json(util::signal_name(interrupted_by))},
       {"probes", std::move(probes)},
   };
   if (options.timing) {
@@ -410,10 +411,10 @@ int batch_command(const BatchOptions& options) {
     };
     // Until the report and the session are written: a signal during the
     // run ends it there; one after it (while writing) changes nothing.
-    const StopOnSignals stop;
+    const util::StopOnSignals stop;
     const nlohmann::json report =
         run_batch(*sim, options, talk ? talk_to : nullptr,
-                  recorder ? record_step : std::function<void(const physics::Simulation&, double)>(), stop.flag());
+                  recorder ? record_step : std::function<void(const physics::Simulation&, double)>(), &stop.signal());
     const nlohmann::json& result = report["result"];
     const std::string interrupted_by =
         result["interrupted_by"].is_null() ? std::string() : result["interrupted_by"].get<std::string>();
@@ -438,7 +439,7 @@ int batch_command(const BatchOptions& options) {
       if (recorder && record_error.empty()) message += "; session " + options.record_path;
       if (!options.report_path.empty() || recorder) message += " (the run so far)";
       // The flag keeps the first signal, the one that ended the run.
-      const int code = fail(exit_code_for_signal(*stop.flag()), message);
+      const int code = fail(util::exit_code_for_signal(stop.signal()), message);
       if (!write_error.empty()) fail(kExitReport, write_error);
       if (!record_error.empty()) fail(kExitRecord, record_error);
       return code;

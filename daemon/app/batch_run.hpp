@@ -41,10 +41,10 @@
 // the signal) and the exit code is 128 + the signal's number, as a shell
 // reports a process the signal killed. Asked again a second later, it kills;
 // a SIGINT the process was started ignoring (`nohup`, a background job of a
-// script) stays ignored (stop_signals.hpp).
+// script) stays ignored (util/stop_signals.hpp).
 #pragma once
 
-#include <csignal>
+#include <atomic>
 #include <cstdio>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -75,7 +75,7 @@ enum ExitCode : int {
   kExitSimFailed = 3,  // a step failed; the report says why
   kExitReport = 4,     // the report file cannot be written
   kExitRecord = 5,     // the session file (--record) cannot be created or written
-  // 128 + N: stopped by signal N (SIGINT 130, SIGTERM 143; stop_signals.hpp);
+  // 128 + N: stopped by signal N (SIGINT 130, SIGTERM 143; util/stop_signals.hpp);
   // the report and the session are written.
 };
 
@@ -88,11 +88,11 @@ enum ExitCode : int {
 // `after_step`, when given, sees the simulation after every successful step
 // with that step's wall time in ms (the session recorder).
 // `stop_signal`, when given, is read before every step: once it holds a
-// signal number (SIGINT or SIGTERM; set by a handler) the run ends there and
+// signal number (SIGINT or SIGTERM; set by util::StopOnSignals) the run ends there and
 // result.interrupted_by names it.
 nlohmann::json run_batch(physics::Simulation& sim, const BatchOptions& options, std::FILE* progress,
                          const std::function<void(const physics::Simulation&, double step_ms)>& after_step = {},
-                         const volatile std::sig_atomic_t* stop_signal = nullptr);
+                         const std::atomic<int>* stop_signal = nullptr);
 
 // The same on a fresh Simulation of `scene`. Throws std::invalid_argument when
 // the simulation cannot be built from it (mesh limits, a probe outside the

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <ctime>
 
-#include "app/stop_signals.hpp"
+#include "util/stop_signals.hpp"
 
 namespace tissue::app {
 
@@ -21,13 +21,13 @@ double thread_cpu_s() {
 }
 
 bool advance(ph::Simulation& sim, long n, RunStats& st, double cap_s,
-             const std::function<void(const ph::Simulation&)>& after, const volatile std::sig_atomic_t* stop) {
+             const std::function<void(const ph::Simulation&)>& after, const std::atomic<int>* stop) {
   const double dt = sim.scene().integrator.dt_s;
   for (long i = 0; i < n; ++i) {
     if (stop && *stop != 0) {
       st.ok = false;
       st.interrupted_by = *stop;
-      st.error = "interrupted by " + signal_name(st.interrupted_by);
+      st.error = "interrupted by " + util::signal_name(st.interrupted_by);
       st.error_time_s = sim.time_s();
       return false;
     }

@@ -3,9 +3,9 @@
 // Table 1, the beam-theory statics and every point of the sweep run this way.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <csignal>
 #include <functional>
 #include <string>
 
@@ -51,7 +51,6 @@ struct RunStats {
 // successful step. Returns false when a step fails, the cap (on the cost
 // clock: wall, or CPU with --clock cpu) is hit or `stop` holds a signal.
 bool advance(physics::Simulation& sim, long n, RunStats& st, double cap_s = 0.0,
-             const std::function<void(const physics::Simulation&)>& after = {},
-             const volatile std::sig_atomic_t* stop = nullptr);
+             const std::function<void(const physics::Simulation&)>& after = {}, const std::atomic<int>* stop = nullptr);
 
 }  // namespace tissue::app

@@ -57,13 +57,13 @@
 #include <vector>
 
 #include "app/output_file.hpp"
-#include "app/stop_signals.hpp"
 #include "app/trade_beam_theory.hpp"
 #include "app/trade_options.hpp"
 #include "app/trade_run.hpp"
 #include "app/trade_sweep.hpp"
 #include "app/trade_sweep_setup.hpp"
 #include "app/trade_table1.hpp"
+#include "util/stop_signals.hpp"
 
 namespace tissue::app {
 namespace {
@@ -84,8 +84,8 @@ int sweep_exit(const std::string& program, const TradeOptions& o, const SweepEnd
     std::string files;
     for (const std::string* path : {&o.csv_path, &o.svg_path})
       if (!path->empty()) files += (files.empty() ? "; " : ", ") + *path;
-    return fail(program, exit_code_for_signal(signo),
-                "interrupted by " + signal_name(signo) + ": the tables" + (files.empty() ? "" : " and files") +
+    return fail(program, util::exit_code_for_signal(signo),
+                "interrupted by " + util::signal_name(signo) + ": the tables" + (files.empty() ? "" : " and files") +
                     " hold the runs done (the rest say \"not run\")" + files);
   }
   if (!end.any_figures)
@@ -112,8 +112,8 @@ int run_modes(const std::string& program, const TradeOptions& o, std::optional<S
   if (sweep) {
     // Ctrl-C (or SIGTERM) during the sweep, which can take hours, ends it
     // after the step in progress and keeps what it measured.
-    const StopOnSignals stop;
-    sweep->stop = stop.flag();
+    const util::StopOnSignals stop;
+    sweep->stop = &stop.signal();
     if (const int code = sweep_exit(program, o, run_sweep(o, *sweep, csv, svg)); code != kTradeExitOk) return code;
   }
   std::printf("\ntotal wall time %.1f s\n", seconds_between(t0, Clock::now()));

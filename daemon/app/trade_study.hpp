@@ -18,7 +18,7 @@ enum TradeExitCode : int {
   kTradeExitNoRun = 3,   // every run of the sweep failed or was refused: no figure came out
   kTradeExitOutput = 4,  // --csv or --svg cannot be written (checked before any run)
   // 128 + N: the sweep was stopped by signal N (SIGINT 130, SIGTERM 143;
-  // stop_signals.hpp); its tables and files hold the runs done.
+  // util/stop_signals.hpp); its tables and files hold the runs done.
 };
 
 // Runs the study `args` ask for (argv without the program name), printing

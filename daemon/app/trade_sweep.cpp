@@ -8,7 +8,6 @@
 #include <string>
 #include <vector>
 
-#include "app/stop_signals.hpp"
 #include "app/trade_plot_svg.hpp"
 #include "app/trade_run.hpp"
 #include "app/trade_scenes.hpp"
@@ -17,6 +16,7 @@
 #include "app/trade_sweep_report.hpp"
 #include "app/trade_sweep_setup.hpp"
 #include "physics/simulation.hpp"
+#include "util/stop_signals.hpp"
 
 namespace tissue::app {
 namespace {
@@ -86,7 +86,7 @@ std::vector<SweepPoint> run_uniform_levels(const SweepSetup& s, sc::IntegratorKi
   std::vector<SweepPoint> uniform;
   std::string stop_reason;  // set once a level failed or hit the cap: finer ones would too
   for (int level = s.base_depth; level <= deepest; ++level) {
-    if (s.stopped()) stop_reason = "not run: interrupted by " + signal_name(*s.stop);
+    if (s.stopped()) stop_reason = "not run: interrupted by " + util::signal_name(*s.stop);
     if (!stop_reason.empty()) {
       SweepPoint p = not_run_point(kind, dt, stop_reason);
       p.level = level;
@@ -97,7 +97,7 @@ std::vector<SweepPoint> run_uniform_levels(const SweepSetup& s, sc::IntegratorKi
     uniform.push_back(run_point(s, {false, level, 0.0, level}, kind, dt));
     const SweepPoint& p = uniform.back();
     if (!p.st.ok) stop_reason = "not run: uniform L" + std::to_string(level) + " failed or refused";
-    if (p.st.interrupted_by != 0) stop_reason = "not run: interrupted by " + signal_name(p.st.interrupted_by);
+    if (p.st.interrupted_by != 0) stop_reason = "not run: interrupted by " + util::signal_name(p.st.interrupted_by);
     if (p.st.capped) stop_reason = "not run: uniform L" + std::to_string(level) + " already hit the wall cap";
     std::fprintf(stderr, "  sweep: %s dt %g uniform L%d: %s, %.1f s wall\n", integrator_name(kind), dt, level,
                  p.status().c_str(), seconds_between(t0, Clock::now()));
@@ -125,7 +125,7 @@ void add_max_depth_points(const SweepSetup& s, sc::IntegratorKind kind, double d
     if (!ref.captured || s.stopped()) {  // no reference, no error: the point would only cost time
       SweepPoint p = not_run_point(
           kind, dt,
-          s.stopped() ? "not run: interrupted by " + signal_name(*s.stop)
+          s.stopped() ? "not run: interrupted by " + util::signal_name(*s.stop)
                       : "not run: no reference (uniform L" + std::to_string(md) + " " + ref.status() + ")");
       p.adaptive = true;
       p.max_depth = md;
@@ -184,7 +184,7 @@ SweepEnd run_sweep(const TradeOptions& o, const SweepSetup& s, OutputFile& csv, 
   std::printf("\nsweep wall time %.1f s\n", sweep_wall);
   write_files(o, s, points, truth, csv, svg);
   SweepEnd end;
-  end.signal = s.stopped() ? *s.stop : 0;
+  end.signal = s.stopped() ? s.stop->load() : 0;
   end.any_figures = std::any_of(points.begin(), points.end(), [](const SweepPoint& p) {
     const std::string status = p.status();
     return status == "ok" || status == "capped";

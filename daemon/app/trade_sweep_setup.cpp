@@ -99,7 +99,7 @@ void check_runs(const SweepSetup& s) {
 
 }  // namespace
 
-SweepSetup make_sweep_setup(const TradeOptions& o, const volatile std::sig_atomic_t* stop) {
+SweepSetup make_sweep_setup(const TradeOptions& o, const std::atomic<int>* stop) {
   SweepSetup s;
   s.scene = o.sweep_scene;
   s.cost_uses_cpu = o.cpu_clock;

@@ -9,7 +9,7 @@
 // alpha = 30/s (first mode about critical), default 1 s (quick 0.5 s).
 #pragma once
 
-#include <csignal>
+#include <atomic>
 #include <optional>
 #include <string>
 #include <vector>
@@ -35,7 +35,7 @@ struct SweepSetup {
   bool cost_uses_cpu = false;  // --clock cpu: costs, the cap and the plot's axis in thread CPU time
   // Read before every step: a signal number there ends the sweep (the run in
   // progress is marked interrupted, the rest are not run).
-  const volatile std::sig_atomic_t* stop = nullptr;
+  const std::atomic<int>* stop = nullptr;
   bool stopped() const { return stop && *stop != 0; }
   // One of the built-in beams (not a scene file that happens to be named so).
   bool is_builtin_beam() const { return !from_file && (scene == "beam" || scene == "beam-r"); }
@@ -44,7 +44,7 @@ struct SweepSetup {
 // The sweep `o` asks for. Loads --scene-file (with --set); throws
 // std::invalid_argument for a scene that does not load, an unknown
 // integrator or a max depth at or below the scene's min depth.
-SweepSetup make_sweep_setup(const TradeOptions& o, const volatile std::sig_atomic_t* stop);
+SweepSetup make_sweep_setup(const TradeOptions& o, const std::atomic<int>* stop);
 
 // The scene of one run: the setup's scene with mesh `m`, integrator `kind`
 // and step dt_s.

@@ -1,7 +1,7 @@
 // Batch mode: the report (in-process, through run_batch) and the process
 // contract of `tissued --batch` (exit codes, messages, bit-identical files).
 #include "app/batch_run.hpp"
-#include "app/stop_signals.hpp"
+#include "util/stop_signals.hpp"
 
 #include <gtest/gtest.h>
 #include <hdf5.h>
@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -159,7 +160,7 @@ TEST(BatchReport, AStopSignalEndsTheRunBeforeTheNextStep) {
   physics::Simulation sim(scene::load_scene_file(scene_path("beam")));
   BatchOptions options;
   options.duration_s = 1.0;
-  volatile std::sig_atomic_t stop = 0;
+  std::atomic<int> stop{0};
   long long seen = 0;
   const json report = run_batch(
       sim, options, nullptr,
@@ -874,23 +875,23 @@ struct LongBatchRun {
 // signal), and the exit code is 128 + the signal's number.
 TEST_F(TissuedProcess, ASignalStopsTheRunAndKeepsTheReportAndTheSession) {
   for (const int signo : {SIGINT, SIGTERM}) {
-    SCOPED_TRACE(signal_name(signo));
-    LongBatchRun run(dir_, signal_name(signo), /*ignore_sigint=*/false);
+    SCOPED_TRACE(util::signal_name(signo));
+    LongBatchRun run(dir_, util::signal_name(signo), /*ignore_sigint=*/false);
     ASSERT_TRUE(run.process.started());
     EXPECT_TRUE(run.wait_until_stepping()) << run.process.err();
     ASSERT_TRUE(run.process.signal(signo));
     // It stops after the step in progress: a minute means it did not.
     const std::optional<int> status = run.process.wait_for_exit(60.0);
-    ASSERT_TRUE(status.has_value()) << "tissued did not stop within 60 s of " << signal_name(signo);
+    ASSERT_TRUE(status.has_value()) << "tissued did not stop within 60 s of " << util::signal_name(signo);
     const std::string err = run.process.err();
     ASSERT_TRUE(WIFEXITED(*status)) << "killed by signal " << (WIFSIGNALED(*status) ? WTERMSIG(*status) : 0) << err;
     EXPECT_EQ(WEXITSTATUS(*status), 128 + signo) << err;
-    EXPECT_TRUE(contains(err, "interrupted by " + signal_name(signo))) << err;
+    EXPECT_TRUE(contains(err, "interrupted by " + util::signal_name(signo))) << err;
     EXPECT_TRUE(contains(err, "report " + run.report.string())) << err;
     EXPECT_TRUE(contains(err, "session " + run.session.string())) << err;
 
     const json r = json::parse(read_file(run.report));
-    EXPECT_EQ(r["result"]["interrupted_by"], signal_name(signo));
+    EXPECT_EQ(r["result"]["interrupted_by"], util::signal_name(signo));
     EXPECT_TRUE(r["result"]["error"].is_null());
     const double reached_s = r["result"]["sim_time_s"].get<double>();
     EXPECT_GE(reached_s, 0.01);
@@ -902,7 +903,7 @@ TEST_F(TissuedProcess, ASignalStopsTheRunAndKeepsTheReportAndTheSession) {
     EXPECT_NEAR(info.duration_s, reached_s, 1e-12);  // simulated seconds
     const std::vector<std::string> events = event_messages(run.session.string());
     ASSERT_EQ(events.size(), 2u);
-    EXPECT_TRUE(contains(events[1], "interrupted by " + signal_name(signo))) << events[1];
+    EXPECT_TRUE(contains(events[1], "interrupted by " + util::signal_name(signo))) << events[1];
     const auto frames = x3d::open_session_source(run.session.string());
     ASSERT_GT(frames->frame_count(), 0u);
     EXPECT_EQ(frames->frame_time_s(frames->frame_count() - 1), reached_s);
