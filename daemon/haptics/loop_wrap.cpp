@@ -58,43 +58,85 @@ std::string sim_loop_wrap_warning(const config::DeviceSpec& device, double rate_
   // for a trajectory) so the start stays fast: a long track gets fewer wraps.
   constexpr int kWrapsChecked = 3;
   constexpr double kMaxSubstepsChecked = 1e6;
-  SimDevice copy(sim);
-  if (!copy.start(nullptr)) return {};  // start() itself says why, when the device starts
+  // A track whose first pass and kWrapLeadIn_s past its first wrap do not
+  // fit is checked in two windows of half the budget, or its wrap would never
+  // be: the first pass from the start, and the wrap from kWrapLeadIn_s before
+  // it, the copy started there on the track (SimDevice::start_timeline_at).
+  // Exact for a trajectory (no state); a damped hand forgets how it got there
+  // within a few of its time constants (2 m / c: 50 ms for the default hand),
+  // well inside the lead-in; an undamped hand's swings left from earlier in
+  // the track are not seen.
+  constexpr double kWrapLeadIn_s = 10.0;
+  {
+    SimDevice probe(sim);
+    if (!probe.start(nullptr)) return {};  // start() itself says why, when the device starts
+  }
   double h_s = 0.0;
   const double cost_per_read = hand ? std::max(1, SimDevice::hand_substeps(1.0 / rate_hz, &h_s)) : 1;
+  const double budget_reads = std::max(2.0, std::floor(kMaxSubstepsChecked / cost_per_read));
   const double wanted_reads = std::ceil((last_s + kWrapsChecked * span_s) * rate_hz) + 1.0;
-  const auto reads = static_cast<std::int64_t>(std::min(wanted_reads, std::floor(kMaxSubstepsChecked / cost_per_read)));
+  // Reads k = first .. first + count - 1, read k at k / rate_hz of the timeline.
+  struct Window {
+    std::int64_t first = 0;
+    std::int64_t count = 0;
+  };
+  Window first_pass, wrap;
+  if (wanted_reads <= budget_reads || std::ceil((last_s + kWrapLeadIn_s) * rate_hz) + 1.0 <= budget_reads) {
+    // One run from the start reaches the first wrap and a lead-in past it.
+    first_pass.count = static_cast<std::int64_t>(std::min(wanted_reads, budget_reads));
+  } else {
+    const double wrap_reads = std::floor(0.5 * budget_reads);
+    const double lead_in_reads = std::min(std::round(kWrapLeadIn_s * rate_hz), std::floor(0.5 * wrap_reads));
+    wrap.first = static_cast<std::int64_t>(std::max(0.0, std::floor(last_s * rate_hz) - lead_in_reads));
+    wrap.count = static_cast<std::int64_t>(std::min(wrap_reads, wanted_reads - static_cast<double>(wrap.first)));
+    first_pass.count = static_cast<std::int64_t>(
+        std::min(budget_reads - static_cast<double>(wrap.count), static_cast<double>(wrap.first)));
+  }
   const config::ForceLimits& limits = device.limits;
   Judged judged;
-  DeviceSample last_accepted;
-  bool have_accepted = false;
-  std::int64_t last_accepted_ns = 0;
-  for (std::int64_t k = 0; k < reads; ++k) {
-    const std::int64_t now_ns = std::llround(static_cast<double>(k) * 1e9 / rate_hz);
-    const double t_s = 1e-9 * static_cast<double>(now_ns);
-    DeviceSample s;
-    if (!copy.read(now_ns, &s)) return {};
-    const double since_s = have_accepted ? 1e-9 * static_cast<double>(now_ns - last_accepted_ns) : 0.0;
-    const SampleVerdict verdict = judge_device_sample(limits, s, have_accepted ? &last_accepted : nullptr, since_s);
-    if (t_s > last_s) {
-      double speed_m_per_s = s.velocity_m_per_s.norm();
-      if (have_accepted && since_s > 0.0)
-        speed_m_per_s = std::max(speed_m_per_s, (s.position_m - last_accepted.position_m).norm() / since_s);
-      judged.peak_m_per_s = std::max(judged.peak_m_per_s, speed_m_per_s);
-      judged.farthest_m = std::max(judged.farthest_m, s.position_m.norm());
+  double first_pass_checked_s = 0.0;
+  auto check = [&](const Window& window) {
+    SimDevice copy(sim);
+    if (!copy.start(nullptr)) return false;
+    const double start_s = static_cast<double>(window.first) / rate_hz;
+    if (window.first > 0) copy.start_timeline_at(start_s);
+    // The loop's first sample of the window has nothing to be judged against,
+    // as the loop's own first sample.
+    DeviceSample last_accepted;
+    bool have_accepted = false;
+    std::int64_t last_accepted_ns = 0;
+    for (std::int64_t k = 0; k < window.count; ++k) {
+      const std::int64_t now_ns = std::llround(static_cast<double>(k) * 1e9 / rate_hz);
+      const double t_s = start_s + 1e-9 * static_cast<double>(now_ns);  // as SimDevice::read counts it
+      DeviceSample s;
+      if (!copy.read(now_ns, &s)) return false;
+      const double since_s = have_accepted ? 1e-9 * static_cast<double>(now_ns - last_accepted_ns) : 0.0;
+      const SampleVerdict verdict = judge_device_sample(limits, s, have_accepted ? &last_accepted : nullptr, since_s);
+      if (t_s > last_s) {
+        double speed_m_per_s = s.velocity_m_per_s.norm();
+        if (have_accepted && since_s > 0.0)
+          speed_m_per_s = std::max(speed_m_per_s, (s.position_m - last_accepted.position_m).norm() / since_s);
+        judged.peak_m_per_s = std::max(judged.peak_m_per_s, speed_m_per_s);
+        judged.farthest_m = std::max(judged.farthest_m, s.position_m.norm());
+      }
+      if (verdict == SampleVerdict::kAccepted) {
+        last_accepted = s;
+        have_accepted = true;
+        last_accepted_ns = now_ns;
+      } else if (!judged.rejected) {
+        judged.rejected = true;
+        judged.first_rejected_s = t_s;
+        judged.first_verdict = verdict;
+        judged.first_step_m = have_accepted ? (s.position_m - last_accepted.position_m).norm() : 0.0;
+      }
+      judged.checked_s = t_s;
     }
-    if (verdict == SampleVerdict::kAccepted) {
-      last_accepted = s;
-      have_accepted = true;
-      last_accepted_ns = now_ns;
-    } else if (!judged.rejected) {
-      judged.rejected = true;
-      judged.first_rejected_s = t_s;
-      judged.first_verdict = verdict;
-      judged.first_step_m = have_accepted ? (s.position_m - last_accepted.position_m).norm() : 0.0;
-    }
-    judged.checked_s = t_s;
-  }
+    return true;
+  };
+  // The first pass first: a rejection there is the earliest, the track's own.
+  if (!check(first_pass)) return {};
+  first_pass_checked_s = judged.checked_s;
+  if (wrap.count > 0 && !check(wrap)) return {};
   if (!judged.rejected) return {};
   // Wraps at last_s + j * span_s before the last read (less a rounding).
   judged.wraps =
@@ -117,11 +159,19 @@ std::string sim_loop_wrap_warning(const config::DeviceSpec& device, double rate_
   const auto& first = sim.waypoints.front().position_m;
   const auto& last = sim.waypoints.back().position_m;
   const double jump_m = Vec3(last[0] - first[0], last[1] - first[1], last[2] - first[2]).norm();
-  char checked[256];
-  std::snprintf(checked, sizeof checked,
-                " (checked at start: the hand simulated with no rendered force, read at haptics.rate_hz %g over the "
-                "first %.3g s, the first pass and %d wrap%s)",
-                rate_hz, judged.checked_s, judged.wraps, judged.wraps == 1 ? "" : "s");
+  char checked[512];
+  if (wrap.count == 0)
+    std::snprintf(checked, sizeof checked,
+                  " (checked at start: the hand simulated with no rendered force, read at haptics.rate_hz %g over the "
+                  "first %.3g s, the first pass and %d wrap%s)",
+                  rate_hz, judged.checked_s, judged.wraps, judged.wraps == 1 ? "" : "s");
+  else
+    std::snprintf(checked, sizeof checked,
+                  " (checked at start: the hand simulated with no rendered force, read at haptics.rate_hz %g over the "
+                  "first %.3g s of the first pass, then from %.3g s (started there on the track, at its velocity) to "
+                  "%.3g s, %d wrap%s; the whole run would take more than the check's 10^6 hand sub-steps)",
+                  rate_hz, first_pass_checked_s, static_cast<double>(wrap.first) / rate_hz, judged.checked_s,
+                  judged.wraps, judged.wraps == 1 ? "" : "s");
   if (judged.first_verdict == SampleVerdict::kOutsideWorkspace) {
     std::snprintf(text, sizeof text,
                   "device.sim.waypoints: the looping track's target goes from its last point back to its first in one "

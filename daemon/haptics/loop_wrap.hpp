@@ -28,8 +28,12 @@ std::string loop_wrap_warning(const std::string& key, double jump_m, double max_
 // period; at most 10^6 hand sub-steps) with no rendered force, and every
 // sample judged by the loop's rule (judge_device_sample), so what the hand
 // does over several wraps, while moving, or read below ~31 Hz is what the
-// loop will see. A rejection before the first wrap is the track's own, and
-// said so. Start-time code: allocates, runs for up to tens of milliseconds.
+// loop will see. A track too long for that budget to reach its first wrap is
+// checked in two windows of half the budget: the first pass from its start,
+// and the wrap from 10 s before it, the copy started there on the track; so
+// the wrap is always checked. A rejection before the first wrap is the
+// track's own, and said so. Start-time code: allocates, runs for up to tens
+// of milliseconds.
 std::string sim_loop_wrap_warning(const config::DeviceSpec& device, double rate_hz);
 
 }  // namespace tissue::haptics

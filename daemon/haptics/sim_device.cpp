@@ -37,10 +37,18 @@ bool SimDevice::start(std::string* error) {
     return fail("hand mass " + std::to_string(spec_.hand_mass_kg) + " kg is too light for its stiffness and damping (" +
                 "the 0.5 ms sub-steps need at least " + std::to_string(spec_.min_hand_mass_kg()) + " kg)");
   started_clock_ = false;
+  timeline_start_s_ = 0.0;
   position_m_ = waypoint_m_.front();
   velocity_m_per_s_.setZero();
   force_N_.setZero();
   return true;
+}
+
+void SimDevice::start_timeline_at(double t_s) noexcept {
+  if (waypoint_m_.empty() || !std::isfinite(t_s)) return;
+  timeline_start_s_ = t_s;
+  position_m_ = target_m(t_s);
+  velocity_m_per_s_ = spec_.mode == config::SimDeviceSpec::Mode::kHand ? target_velocity_m_per_s(t_s) : Vec3::Zero();
 }
 
 double SimDevice::timeline_time_s(double t_s) const noexcept {
@@ -104,7 +112,7 @@ bool SimDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     t0_ns_ = now_ns;
     last_ns_ = now_ns;
   }
-  const double t_s = 1e-9 * static_cast<double>(now_ns - t0_ns_);
+  const double t_s = timeline_start_s_ + 1e-9 * static_cast<double>(now_ns - t0_ns_);
   if (spec_.mode == config::SimDeviceSpec::Mode::kTrajectory) {
     position_m_ = target_m(t_s);
     velocity_m_per_s_ = target_velocity_m_per_s(t_s);

@@ -36,6 +36,13 @@ class SimDevice final : public Device {
   void write(std::int64_t now_ns, const Vec3& force_N) noexcept override;
   const char* name() const noexcept override { return "sim"; }
 
+  // Start-time checks (sim_loop_wrap_warning) that cannot afford to simulate
+  // a long track from its start: the timeline begins at t_s instead of 0 (the
+  // first read() is at t_s), the hand on the target there and moving with it,
+  // which is where a hand that has followed a straight segment long enough
+  // has settled. Call after start() and before the first read().
+  void start_timeline_at(double t_s) noexcept;
+
   // The waypoint target at t seconds since the timeline started.
   Vec3 target_m(double t_s) const noexcept;
   // The slope of the timeline at t (zero past the end of a non-looping one).
@@ -63,6 +70,7 @@ class SimDevice final : public Device {
   bool started_clock_ = false;
   std::int64_t t0_ns_ = 0;
   std::int64_t last_ns_ = 0;
+  double timeline_start_s_ = 0.0;  // timeline time of the first read (start_timeline_at)
   Vec3 position_m_ = Vec3::Zero();
   Vec3 velocity_m_per_s_ = Vec3::Zero();
   Vec3 force_N_ = Vec3::Zero();  // last rendered force, acts on the hand

@@ -239,7 +239,8 @@ TEST(LoopWrap, ATrackTheLoopRejectsBeforeItWrapsIsSaidToBeTheTracksOwn) {
 }
 
 // The check is bounded (10^6 hand sub-steps) so the start stays fast: a long
-// track is checked over fewer wraps, and the warning says what it checked.
+// track is checked over fewer wraps, and the warning says what it checked
+// (tracks too long for even one wrap: the two tests below).
 TEST(LoopWrap, ALongTracksCheckIsBoundedAndSaysWhatItChecked) {
   config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3);
   d.sim.waypoints = {
@@ -252,6 +253,45 @@ TEST(LoopWrap, ALongTracksCheckIsBoundedAndSaysWhatItChecked) {
       << w;
   const std::string short_track = sim_loop_wrap_warning(looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3), 1000.0);
   EXPECT_NE(short_track.find("over the first 10 s, the first pass and 3 wraps)"), std::string::npos) << short_track;
+}
+
+// A track longer than the check's budget is still checked at its wrap: the
+// first pass no longer spends the 10^6 sub-steps before any wrap. A 1200 s
+// trajectory (10^6 reads at 1 kHz would reach 1000 s) whose 0.2 m wrap the
+// loop rejects is warned about exactly as its 10 s version.
+TEST(LoopWrap, ATrajectoryLongerThanTheChecksBudgetIsStillWarnedAboutItsWrap) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kTrajectory, 0.0);
+  d.sim.waypoints = {{0.0, {-0.1, 0.0, 0.0}}, {1200.0, {0.1, 0.0, 0.0}}};
+  ASSERT_GT(run_the_loop(d, 1000.0, 1201.0).rejected_speed, 0u);
+  EXPECT_EQ(run_the_loop(d, 1000.0, 1199.0).rejected_speed, 0u);  // only the wrap
+  EXPECT_EQ(sim_loop_wrap_warning(d, 1000.0), loop_wrap_warning("device.sim.waypoints", 0.2, 5.0, 1000.0));
+  config::DeviceSpec short_track = d;
+  short_track.sim.waypoints.back().time_s = 10.0;
+  EXPECT_EQ(sim_loop_wrap_warning(short_track, 1000.0), sim_loop_wrap_warning(d, 1000.0));
+}
+
+// The same for the hand: a 600 s track (10^6 sub-steps at 1 kHz are 500 s)
+// with a 0.5 m wrap is warned about, and the warning says what was checked:
+// the start of the first pass, and the wrap from a lead-in before it.
+TEST(LoopWrap, AHandTrackLongerThanTheChecksBudgetIsStillWarnedAboutItsWrap) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.0);
+  d.sim.waypoints = {{0.0, {-0.25, 0.0, 0.0}}, {600.0, {0.25, 0.0, 0.0}}};
+  ASSERT_GT(run_the_loop(d, 1000.0, 601.0).rejected_speed, 0u);
+  EXPECT_EQ(run_the_loop(d, 1000.0, 599.0).rejected_speed, 0u);  // only the wrap
+  const std::string w = sim_loop_wrap_warning(d, 1000.0);
+  EXPECT_EQ(w.rfind(std::string(kHandWrapPrefix) + "0.5 m jump (device frame), and the hand (device.sim.mode hand) "
+                                                   "follows it through its spring at up to ",
+                    0),
+            0u)
+      << w;
+  EXPECT_NE(w.find("(checked at start: the hand simulated with no rendered force, read at haptics.rate_hz 1000 over "
+                   "the first 250 s of the first pass, then from 590 s (started there on the track, at its velocity) "
+                   "to 840 s, 1 wrap; the whole run would take more than the check's 10^6 hand sub-steps)"),
+            std::string::npos)
+      << w;
+  config::DeviceSpec short_track = d;
+  short_track.sim.waypoints.back().time_s = 10.0;
+  EXPECT_NE(sim_loop_wrap_warning(short_track, 1000.0), "");
 }
 
 }  // namespace
