@@ -29,7 +29,9 @@ The plot is written as the C++ tools write their -o files: to a hidden
 temporary file beside it, renamed over it (a failed write leaves an earlier
 plot as it was; its permissions are kept; a symbolic link stays a link and
 its target is replaced), or in place for a FIFO, a device or a file reached
-through /proc (--plot /dev/stdout).
+through /proc (--plot /dev/stdout). A FIFO is given at most 10 s for a
+reader to open it, and SIGINT or SIGTERM ends that wait; with no reader the
+plot is not written (exit 3, "no reader on the FIFO").
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
 2 bad arguments, missing modules or LCM cannot start at --url (said with the
 likely cause: no route for a udpm:// group), 3 statistics arrived but the
@@ -50,6 +52,8 @@ import tempfile
 import time
 
 DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
+# How long a --plot FIFO is given for a reader to open it.
+FIFO_READER_WAIT_S = 10.0
 
 
 def find_types(explicit):
@@ -129,7 +133,32 @@ def plot_path_error(path):
     return None
 
 
-def write_output_file(path, text):
+def open_fifo_for_writing(path, stop):
+    """A descriptor writing to the FIFO at path, once a reader has it open.
+    Not a blocking open: that waits for a reader for ever, and Python retries
+    an open that a signal interrupts (PEP 475), so Ctrl-C could not end it.
+    Tried without blocking (ENXIO: no reader yet) every 50 ms for at most
+    FIFO_READER_WAIT_S; a signal added to `stop` meanwhile ends the wait.
+    OSError(ENXIO) saying which when no reader came."""
+    signals_before = len(stop)
+    deadline = time.monotonic() + FIFO_READER_WAIT_S
+    while True:
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+        except OSError as e:
+            if e.errno != errno.ENXIO:
+                raise
+        else:
+            os.set_blocking(fd, True)  # the reader is there: the plot is written whole
+            return fd
+        if len(stop) > signals_before:
+            raise OSError(errno.ENXIO, f"no reader on the FIFO (stopped by {signal.Signals(stop[-1]).name})")
+        if time.monotonic() >= deadline:
+            raise OSError(errno.ENXIO, f"no reader on the FIFO within {FIFO_READER_WAIT_S:g} s")
+        time.sleep(0.05)
+
+
+def write_output_file(path, text, stop=()):
     """Writes `text` to `path` whole or not at all, by the rules of the C++
     tools' output files (daemon/util/output_file.hpp PendingOutputFile).
     A regular file (or a new name) is written to a hidden temporary file
@@ -140,7 +169,9 @@ def write_output_file(path, text):
     private stays private); a new file is 0666 less the umask. Written in
     place instead, never renamed over: an existing node that is not a regular
     file (a FIFO, a device) and a file reached through /proc (appended to:
-    its holder opened it, `>` truncated it already). OSError when it fails."""
+    its holder opened it, `>` truncated it already); a FIFO waits for its
+    reader as open_fifo_for_writing says (`stop`: the signal list). OSError
+    when it fails."""
     data = text.encode()
     try:
         st = os.stat(path)
@@ -149,7 +180,10 @@ def write_output_file(path, text):
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), path)
     if st is not None and writes_in_place(st, path):
-        fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
+        if stat.S_ISFIFO(st.st_mode):
+            fd = open_fifo_for_writing(path, stop)
+        else:
+            fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         return
@@ -218,11 +252,12 @@ def fraction(x, lo, hi):
     return (x / 2 - lo / 2) / span if span > 0 else 0.0
 
 
-def write_svg(path, samples):
+def write_svg(path, samples, stop=()):
     """A two-panel line plot (tets, real-time factor vs sim time), no matplotlib,
     written by write_output_file's rules: a failure (full disk, file size
     limit) leaves an existing plot intact. False when there is nothing to plot
-    (no sample with a finite time); OSError when writing fails."""
+    (no sample with a finite time); OSError when writing fails. `stop`: the
+    signal list, which ends the wait for a FIFO's reader."""
     width, height, pad = 640, 400, 50
     # A point needs a finite time; a NaN or infinite value leaves out its own
     # point only (a NaN would break the polyline), so the tets of a sample
@@ -251,7 +286,7 @@ def write_svg(path, samples):
         out.append(f'<text x="{pad}" y="{top - 6}" font-size="12">{name}: {lo:g} .. {hi:g}</text>')
     out.append(f'<text x="{pad}" y="{height - 12}" font-size="12">sim time {t0:.6g} .. {t1:.6g} s</text>')
     out.append("</svg>")
-    write_output_file(path, "\n".join(out) + "\n")
+    write_output_file(path, "\n".join(out) + "\n", stop)
     return True
 
 
@@ -562,7 +597,7 @@ def main():
             print(f"tissue_subscriber: cannot write {args.plot}: standard output has closed", file=sys.stderr)
             return 3
         try:
-            if write_svg(args.plot, plot.points):
+            if write_svg(args.plot, plot.points, stop):
                 summary = f"wrote {args.plot} ({len(plot.points)} of {plot.seen} points)"
                 if plot_is_stdout:  # not after the plot on standard output (--plot /dev/stdout)
                     print(summary, file=sys.stderr)

@@ -1,6 +1,8 @@
 // Option checks the `tissue` subcommands share.
 #pragma once
 
+#include <sys/stat.h>
+
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <charconv>
@@ -10,6 +12,7 @@
 #include <string>
 
 #include "util/lcm_url.hpp"
+#include "util/output_file.hpp"
 #include "util/text.hpp"
 
 namespace tissue::cli {
@@ -99,6 +102,24 @@ inline CLI::Validator frame_index() {
         return detail::decimal_digits(v);
       },
       "K >= 0");
+}
+
+// Why the -o file `path` cannot be written ("" when it can), for the check
+// `tissue x3d` and `tissue render` make before reading or collecting frames
+// (a live collection runs up to an hour; an OUT in a missing directory was
+// found only after it). Made by creating the temporary file
+// util::PendingOutputFile writes through and dropping it at once: nothing
+// is left behind, PATH is not touched, and no file is held while the frames
+// are collected (a signal that kills the client then leaves nothing; the
+// real PendingOutputFile is opened just before writing). An existing node
+// that is neither a regular file nor a directory (a FIFO, a device) is not
+// opened: opening a FIFO waits for its reader, and that reader would see the
+// end of the stream when the check closed it.
+inline std::string output_problem(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) return {};
+  util::PendingOutputFile probe;
+  return probe.open(path);  // abandoned by its destructor
 }
 
 }  // namespace tissue::cli

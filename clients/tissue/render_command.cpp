@@ -1,7 +1,5 @@
 #include "tissue/render_command.hpp"
 
-#include <sys/stat.h>
-
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -52,19 +50,6 @@ std::string numbered(const std::string& out, std::size_t i) {
   const auto slash = out.rfind('/');
   if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return out + "-" + num;
   return out.substr(0, dot) + "-" + num + out.substr(dot);
-}
-
-// Why `path` cannot be written ("" when it can), found by making the
-// temporary file util::PendingOutputFile writes through and dropping it:
-// nothing is left behind and PATH is not touched. An existing node that is
-// not a regular file (a FIFO, a device) is not opened: opening a FIFO waits
-// for its reader, and that reader would see the end of the stream when the
-// check closed it.
-std::string output_problem(const std::string& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) return {};
-  util::PendingOutputFile probe;
-  return probe.open(path);  // abandoned by its destructor
 }
 
 int run_render(RenderCommandOptions o) {

@@ -168,13 +168,13 @@ int run_x3d(const X3dCommandOptions& o) {
     if (!o.live.live() && util::same_file(o.out, o.session))
       throw x3d::SourceError("-o " + o.out + " is the input session " + o.session +
                              ": writing it would destroy the recording; choose another output file");
-    // Opened before the frames are read: a live --animate collects for up to
+    // Checked before the frames are read: a live --animate collects for up to
     // an hour, and an OUT that cannot be written (a missing directory) was
-    // found only after it, losing the take. Regular files are written via a
-    // temporary and a rename (a failed export never leaves a truncated OUT
-    // behind), devices and FIFOs in place (util::PendingOutputFile).
-    util::PendingOutputFile out;
-    if (const std::string why = out.open(o.out); !why.empty())
+    // found only after it, losing the take. Only checked (output_problem):
+    // the file opened here was held through the collection, so a signal
+    // that killed the client left its temporary file behind, and a FIFO's
+    // open waited for its reader before collecting began.
+    if (const std::string why = output_problem(o.out); !why.empty())
       throw x3d::SourceError("cannot write '" + o.out + "': " + why);
     std::string stop_note;
     std::unique_ptr<x3d::FrameSource> source =
@@ -186,8 +186,13 @@ int run_x3d(const X3dCommandOptions& o) {
     std::string summary;
     const std::string text =
         o.animate ? export_animation(*source, o, xo, &summary) : export_snapshot(*source, o, xo, &summary);
-    if (const std::string why = out.commit(text); !why.empty())
-      throw x3d::SourceError("cannot write '" + o.out + "': " + why);
+    // Regular files are written via a temporary and a rename (a failed
+    // export never leaves a truncated OUT behind), devices and FIFOs in place
+    // (util::PendingOutputFile).
+    util::PendingOutputFile out;
+    std::string why = out.open(o.out);
+    if (why.empty()) why = out.commit(text);
+    if (!why.empty()) throw x3d::SourceError("cannot write '" + o.out + "': " + why);
     util::summary_stream(o.out) << "wrote " << o.out << ": " << summary << "\n";  // not into the X3D
     return kExitOk;
   } catch (const BadArguments& e) {

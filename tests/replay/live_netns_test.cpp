@@ -6,6 +6,7 @@
 // (TISSUE_TEST_LCM_URL / TISSUE_TEST_DDS_DOMAIN unset).
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <atomic>
@@ -437,6 +438,45 @@ TEST_F(LiveNetns, AStopSignalBeforeTheFirstFrameIsNoLiveData) {
             "TISSUE_SURFACE_MESH on " +
                 url_ + "\n");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "none.x3d"));
+}
+
+// While a live collection waits, OUT is only checked, not held open: the
+// temporary file the export is written through (.NAME.tmp-PID-N) was made
+// before collecting, so a signal that killed the client (SIGHUP from a
+// closed terminal, during an hour's --animate) left it behind. And a FIFO
+// is not opened before collecting: the open waited for the FIFO's reader,
+// so `tissue x3d --lcm --animate -o FIFO & ...; cat FIFO` collected only
+// from when cat opened it. Nothing is published: each run waits for its
+// first frame until SIGINT stops it (exit 4).
+TEST_F(LiveNetns, WhileCollectingNoTemporaryFileExistsAndAFifoIsNotOpened) {
+  const std::filesystem::path out_dir = dir_ / "take";
+  std::filesystem::create_directory(out_dir);
+  const std::string fifo = out_dir / "take.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const auto listing = [&] {
+    std::string names;
+    for (const auto& e : std::filesystem::directory_iterator(out_dir)) names += e.path().filename().string() + " ";
+    return names;
+  };
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--animate", "--seconds", "600", "-o", out_dir / "take.x3d"},
+        std::vector<std::string>{"-o", out_dir / "snap.x3d"}, std::vector<std::string>{"--animate", "-o", fifo}}) {
+    std::vector<std::string> argv = {TISSUE_CLI_BINARY, "x3d", "--lcm", url_, "--timeout", "600"};
+    argv.insert(argv.end(), args.begin(), args.end());
+    SCOPED_TRACE("x3d ... -o " + args.back());
+    tissue::testing::BackgroundProcess p(argv, dir_ / "out", dir_ / "err");
+    ASSERT_TRUE(p.started());
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+    EXPECT_EQ(listing(), "take.fifo ") << "while collecting";
+    ASSERT_TRUE(p.signal(SIGINT));
+    const std::optional<int> status = p.wait_for_exit(10.0);
+    ASSERT_TRUE(status.has_value()) << "still running 10 s after SIGINT (waiting for the FIFO's reader?)";
+    ASSERT_TRUE(WIFEXITED(*status)) << "ended by signal " << WTERMSIG(*status) << " (waiting for the FIFO's reader?)";
+    EXPECT_EQ(WEXITSTATUS(*status), 4) << p.err();
+    EXPECT_NE(p.err().find("tissue x3d: stopped by SIGINT before any surface_mesh arrived"), std::string::npos)
+        << p.err();
+    EXPECT_EQ(listing(), "take.fifo ") << "after the stop";
+  }
 }
 
 // `--lcm ''` is --lcm without a URL: the documented default (as `tissue

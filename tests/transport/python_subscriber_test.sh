@@ -280,6 +280,48 @@ python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/plot.fifo" >/de
 [ "$rc" -eq 0 ] || { cat "$work/fifo.err"; fail "--plot at a FIFO: exit $rc, expected 0"; }
 wait "$reader"
 grep -q '<polyline' "$work/fifo.out" || fail "--plot at a FIFO: nothing came through it"
+# A FIFO that nobody reads: the plot waits for a reader for at most 10 s,
+# and a stop signal during that wait ends it: exit 3 (the plot was not
+# written), said. It waited in open() for ever, and Python retries an open
+# that a signal interrupts (PEP 475), so only SIGKILL ended it. (SIGINT's
+# default action restored, as below.)
+mkfifo "$work/lonely.fifo"
+env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 300 --plot "$work/lonely.fifo" \
+  >"$work/lonely.log" 2>"$work/lonely.err" &
+lonely=$!
+helpers="$helpers $lonely"
+polls=0
+until grep -q '^t ' "$work/lonely.log"; do
+  polls=$((polls + 1))
+  [ "$polls" -le 600 ] || fail "--plot at a FIFO without a reader: no statistics in 60 s"
+  sleep 0.1
+done
+kill -INT "$lonely"  # ends the listening: the plot now waits for a reader
+sleep 1
+kill -INT "$lonely"
+polls=0
+while kill -0 "$lonely" 2>/dev/null; do
+  polls=$((polls + 1))
+  [ "$polls" -le 50 ] || { kill -KILL "$lonely"; fail "--plot at a FIFO without a reader: still running 5 s after a second SIGINT"; }
+  sleep 0.1
+done
+rc=0
+wait "$lonely" || rc=$?
+no_traceback "$work/lonely.err"
+[ "$rc" -eq 3 ] || { cat "$work/lonely.err"; fail "--plot at a FIFO without a reader, stopped: exit $rc, expected 3"; }
+grep -q "cannot write $work/lonely.fifo: no reader on the FIFO (stopped by SIGINT)" "$work/lonely.err" ||
+  { cat "$work/lonely.err"; fail "--plot at a FIFO without a reader, stopped: not said"; }
+# ... and without a signal the wait ends after 10 s, said the same way.
+start="$(date +%s)"
+rc=0
+timeout 60 python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/lonely.fifo" >/dev/null 2>"$work/lonely.err" ||
+  rc=$?
+waited=$(($(date +%s) - start))
+[ "$rc" -eq 3 ] || { cat "$work/lonely.err"; fail "--plot at a FIFO without a reader: exit $rc, expected 3"; }
+grep -q "cannot write $work/lonely.fifo: no reader on the FIFO within 10 s" "$work/lonely.err" ||
+  { cat "$work/lonely.err"; fail "--plot at a FIFO without a reader: not said"; }
+[ "$waited" -ge 10 ] && [ "$waited" -le 20 ] || fail "--plot at a FIFO without a reader: gave up after $waited s, expected 10"
+[ -p "$work/lonely.fifo" ] || fail "--plot at a FIFO without a reader: the FIFO was replaced"
 ln -s /proc/self/fd/1 "$work/stdout"
 rc=0
 python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stdout" >"$work/stdout.out" 2>"$work/stdout.err" || rc=$?

@@ -1,7 +1,15 @@
 #include "tissue/cli_checks.hpp"
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <future>
 #include <string>
 
 namespace tissue::cli {
@@ -66,6 +74,65 @@ TEST(CliChecks, IntegerOptionsAreDecimalAndFitIn64Bits) {
   EXPECT_NE(verdict(frame_index(), "0x10").find("decimal digits"), std::string::npos);
   EXPECT_NE(verdict(frame_index(), "99999999999999999999").find("too large"), std::string::npos);
   EXPECT_EQ(verdict(frame_index(), "18446744073709551615"), "");
+}
+
+// A fresh directory under $TMPDIR, removed with what is in it.
+struct ScratchDir {
+  ScratchDir() {
+    std::string name = (std::filesystem::temp_directory_path() / "cli_checks-XXXXXX").string();
+    if (::mkdtemp(name.data()) != nullptr) path = name;
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    if (!path.empty()) std::filesystem::remove_all(path, ec);
+  }
+  std::string names() const {
+    std::string all;
+    for (const auto& e : std::filesystem::directory_iterator(path)) all += e.path().filename().string() + " ";
+    return all;
+  }
+  std::filesystem::path path;
+};
+
+// The early check of `tissue x3d|render -o` leaves nothing behind (a
+// temporary file held through a live collection was left by a signal that
+// killed the client), touches no existing OUT, and says why a path in a
+// missing directory cannot be written.
+TEST(OutputProblem, ChecksWithoutLeavingOrChangingAFile) {
+  const ScratchDir dir;
+  ASSERT_FALSE(dir.path.empty());
+  EXPECT_EQ(output_problem(dir.path / "new.x3d"), "");
+  EXPECT_EQ(dir.names(), "") << "the check left a file";
+  std::ofstream(dir.path / "old.x3d") << "earlier";
+  EXPECT_EQ(output_problem(dir.path / "old.x3d"), "");
+  EXPECT_EQ(dir.names(), "old.x3d ");
+  std::ifstream in(dir.path / "old.x3d");
+  const std::string kept((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(kept, "earlier");
+  EXPECT_NE(output_problem(dir.path / "no" / "a.x3d").find("No such file or directory"), std::string::npos)
+      << output_problem(dir.path / "no" / "a.x3d");
+  EXPECT_EQ(dir.names(), "old.x3d ");
+}
+
+// A FIFO is not opened by the check: the open waited for a reader, so
+// `tissue x3d --lcm --animate -o FIFO & ...; cat FIFO` collected only from
+// when cat opened it.
+TEST(OutputProblem, AFifoIsNotOpenedSoTheCheckReturnsAtOnce) {
+  const ScratchDir dir;
+  ASSERT_FALSE(dir.path.empty());
+  const std::string fifo = dir.path / "out.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  std::future<std::string> checked = std::async(std::launch::async, [&] { return output_problem(fifo); });
+  const bool returned = checked.wait_for(std::chrono::seconds(5)) == std::future_status::ready;
+  if (!returned) {
+    // A reader releases the blocked open, so the test ends.
+    const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+    checked.wait();
+    if (reader >= 0) ::close(reader);
+  }
+  EXPECT_TRUE(returned) << "the check waited for the FIFO's reader";
+  EXPECT_EQ(checked.get(), "");
+  EXPECT_EQ(dir.names(), "out.fifo ");
 }
 
 }  // namespace
