@@ -31,6 +31,9 @@ struct LiveSourceOptions {
   DdsCliOptions dds;
   double seconds = 2.0;     // frames collected for an animation / sequence (wall)
   double timeout_s = 10.0;  // wait for the first frame
+  // Frames a collection cut short by a signal must hold to be exported: 2
+  // for --animate, else 1 (set by add_live_source_options).
+  std::size_t frames_needed = 1;
   CLI::Option* lcm_option = nullptr;
   CLI::Option* dds_option = nullptr;
 

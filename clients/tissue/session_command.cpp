@@ -104,9 +104,15 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
   try {
     if (o.lcm_url) {
       // LCM waits for a tcpq:// server's greeting without a time limit: a
-      // port that accepts and says nothing hung the replay for ever.
-      if (const std::string why = util::tcpq_server_problem(*o.lcm_url, kLcmServerWait_s); !why.empty())
-        throw std::runtime_error(why);
+      // port that accepts and says nothing hung the replay for ever. A stop
+      // request ends the probe's wait at once (it waited the 10 s out).
+      const util::TcpqProbe probe = util::probe_tcpq_server(*o.lcm_url, kLcmServerWait_s, &stops.flag());
+      if (!probe.problem.empty()) throw std::runtime_error(probe.problem);
+      if (probe.stopped) {
+        std::cout << "stopped: " << file << ": by " << util::signal_name(stops.signal())
+                  << " while waiting for the tcpq server at '" << *o.lcm_url << "' to answer; nothing was sent\n";
+        return 0;  // stopped as asked, as a replay stopped later
+      }
       lcm = std::make_unique<transport::LcmPublisher>(*o.lcm_url);
     }
     if (o.dds.enabled) dds = std::make_unique<transport::DdsPublisher>(o.dds.options());

@@ -40,8 +40,9 @@
 // report and the session cover the run so far (result.interrupted_by names
 // the signal) and the exit code is 128 + the signal's number, as a shell
 // reports a process the signal killed. Asked again a second later, it kills;
-// a SIGINT the process was started ignoring (`nohup`, a background job of a
-// script) stays ignored (util/stop_signals.hpp).
+// a SIGINT the process was started ignoring (a background job `&` of a
+// script) stays ignored, a SIGTERM is honoured even then
+// (util/stop_signals.hpp).
 #pragma once
 
 #include <atomic>

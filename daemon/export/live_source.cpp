@@ -30,7 +30,10 @@ LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const Li
   Clock::time_point first{};
   std::size_t kept_bytes = 0;
   for (;;) {
-    if (stopped()) break;
+    if (stopped()) {
+      stopped_by_request_ = true;
+      break;
+    }
     if (frames_.empty()) {
       if (seconds_since(start) >= o.first_timeout_s) break;
     } else if (seconds_since(first) >= o.window_s || (o.max_frames > 0 && frames_.size() >= o.max_frames)) {
@@ -60,7 +63,7 @@ LiveFrameSource::LiveFrameSource(transport::MeshSubscriber& subscriber, const Li
     frames_.push_back(std::move(*f));
   }
   receive_counts_ = subscriber.counts();
-  if (frames_.empty() && !stopped()) {
+  if (frames_.empty() && !stopped_by_request_) {
     std::string why = "no surface_mesh on " + name_ + " within " + fmt_s(o.first_timeout_s) + " s";
     const transport::MeshReceiveCounts& c = receive_counts_;
     if (c.rejected > 0)

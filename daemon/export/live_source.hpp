@@ -68,12 +68,16 @@ class LiveFrameSource final : public FrameSource {
   std::size_t dropped_backwards() const { return dropped_backwards_; }
   // Whether collection stopped at options.max_bytes before the window ended.
   bool stopped_at_budget() const { return !budget_note_.empty(); }
+  // Whether `stop` ended the collection (before the window, the first-frame
+  // timeout or max_frames did). A stop raised after it ended is not seen.
+  bool stopped_by_request() const { return stopped_by_request_; }
 
  private:
   std::string name_;
   std::vector<SurfaceFrame> frames_;
   std::size_t skipped_empty_ = 0, dropped_backwards_ = 0;
-  std::string budget_note_;                      // "" unless max_bytes stopped the collection
+  std::string budget_note_;  // "" unless max_bytes stopped the collection
+  bool stopped_by_request_ = false;
   transport::MeshReceiveCounts receive_counts_;  // the subscriber's, when collection ended
 };
 

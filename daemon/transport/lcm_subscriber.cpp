@@ -69,8 +69,10 @@ LcmMeshSubscriber::LcmMeshSubscriber(const std::string& url) : url_(url), lcm_(s
 
 LcmMeshSubscriber::~LcmMeshSubscriber() = default;
 
-std::string LcmMeshSubscriber::name() const {
-  return std::string("LCM channel ") + kSurfaceMeshChannel + " on " + url_;
+std::string LcmMeshSubscriber::name() const { return name_for(url_); }
+
+std::string LcmMeshSubscriber::name_for(const std::string& url) {
+  return std::string("LCM channel ") + kSurfaceMeshChannel + " on " + url;
 }
 
 void LcmMeshSubscriber::on_message(const void* data, std::size_t size) {

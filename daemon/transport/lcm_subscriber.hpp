@@ -40,6 +40,9 @@ class LcmMeshSubscriber final : public MeshSubscriber {
   LcmMeshSubscriber& operator=(const LcmMeshSubscriber&) = delete;
 
   std::string name() const override;
+  // name() of a subscriber at `url`, for a message about one not opened
+  // (a stop request during the tcpq probe).
+  static std::string name_for(const std::string& url);
   std::optional<x3d::SurfaceFrame> next_frame(double timeout_s) override;
   const MeshReceiveCounts& counts() const override { return counts_; }
 

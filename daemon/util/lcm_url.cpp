@@ -6,7 +6,9 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <climits>
 #include <cmath>
 #include <cstdio>
@@ -141,30 +143,52 @@ bool tcpq_server(const std::string& url, TcpqServer* out) {
 }
 
 std::string tcpq_server_problem(const std::string& url, double timeout_s) {
+  return probe_tcpq_server(url, timeout_s, nullptr).problem;
+}
+
+TcpqProbe probe_tcpq_server(const std::string& url, double timeout_s, const std::atomic<bool>* stop) {
   TcpqServer server;
   if (!tcpq_server(url, &server)) return {};
   const std::string& host = server.host;
   const std::string& port = server.port;
-  if (!all_digits(port, 5) || std::stoi(port) < 1 || std::stoi(port) > 65535) return "the port must be in [1, 65535]";
+  if (!all_digits(port, 5) || std::stoi(port) < 1 || std::stoi(port) > 65535) return {"the port must be in [1, 65535]"};
   addrinfo hints{};
   hints.ai_family = AF_INET;
   hints.ai_socktype = SOCK_STREAM;
   addrinfo* found = nullptr;
   if (::getaddrinfo(host.empty() ? "127.0.0.1" : host.c_str(), port.c_str(), &hints, &found) != 0 || !found)
-    return "cannot resolve '" + host + "'";
+    return {"cannot resolve '" + host + "'"};
   const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
   std::string why;
   char seconds[32];
   std::snprintf(seconds, sizeof seconds, "%g s", timeout_s);
+  const auto stopped = [&] { return stop && stop->load(std::memory_order_acquire); };
+  // Up to timeout_s, in slices so that a stop request is seen within one.
   const auto wait_for = [&](short events) {
-    pollfd p{fd, events, 0};
-    return ::poll(&p, 1, poll_timeout_ms(timeout_s)) == 1 && (p.revents & events) != 0;
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    for (;;) {
+      if (stopped()) return false;
+      const double left_s = std::chrono::duration<double>(end - std::chrono::steady_clock::now()).count();
+      pollfd p{fd, events, 0};
+      // A timeout used up (or 0) still looks once: poll_timeout_ms gives 0.
+      const int ready = ::poll(&p, 1, poll_timeout_ms(stop ? std::min(left_s, kTcpqProbeSlice_s) : left_s));
+      if (ready == 1) return (p.revents & events) != 0;
+      if (ready < 0 && errno != EINTR) return false;
+      if (std::chrono::steady_clock::now() >= end) return false;
+    }
   };
+  const auto stop_result = [&] {
+    if (fd >= 0) ::close(fd);
+    ::freeaddrinfo(found);
+    return TcpqProbe{"", true};
+  };
+  if (stopped()) return stop_result();
   if (fd < 0) {
     why = std::string("cannot create a socket: ") + std::strerror(errno);
   } else if (::connect(fd, found->ai_addr, found->ai_addrlen) != 0 && errno != EINPROGRESS) {
     why = std::string("cannot connect: ") + std::strerror(errno);
   } else if (!wait_for(POLLOUT)) {
+    if (stopped()) return stop_result();
     why = std::string("no connection within ") + seconds;
   } else {
     int err = 0;
@@ -183,6 +207,7 @@ std::string tcpq_server_problem(const std::string& url, double timeout_s) {
         if (n <= 0) break;
         got += static_cast<std::size_t>(n);
       }
+      if (got < sizeof reply && stopped()) return stop_result();
       if (got < sizeof reply)
         why =
             std::string("the server did not answer LCM's greeting within ") + seconds + " (is it an LCM tcpq server?)";
@@ -192,7 +217,7 @@ std::string tcpq_server_problem(const std::string& url, double timeout_s) {
   }
   if (fd >= 0) ::close(fd);
   ::freeaddrinfo(found);
-  return why.empty() ? why : "tcpq server at '" + url + "': " + why;
+  return {why.empty() ? why : "tcpq server at '" + url + "': " + why};
 }
 
 }  // namespace tissue::util

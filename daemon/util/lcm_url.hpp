@@ -4,6 +4,7 @@
 // LCM's failures, the clients probe a tcpq:// server before LCM waits on it.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <string_view>
@@ -36,6 +37,19 @@ std::string lcm_start_failure(const std::string& url);
 // clients past their --timeout. Both sides' first words are a magic number
 // and the protocol version, big-endian (LCM's lcm_tcpq.c).
 std::string tcpq_server_problem(const std::string& url, double timeout_s);
+
+// The same probe, which also gives up when *stop (when not null) turns true:
+// it waits in slices of kTcpqProbeSlice_s and looks at the flag between them,
+// so a Ctrl-C during `tissue x3d --timeout 600` against a silent server ends
+// the wait at once (it waited up to twice --timeout, connection and greeting,
+// and only then saw the request). `stopped` says the flag ended it; `problem`
+// is then "" (the server's state is unknown, not wrong).
+struct TcpqProbe {
+  std::string problem;
+  bool stopped = false;
+};
+inline constexpr double kTcpqProbeSlice_s = 0.05;
+TcpqProbe probe_tcpq_server(const std::string& url, double timeout_s, const std::atomic<bool>* stop);
 
 // The host and port LCM's tcpq client connects to for a tcpq:// URL, as
 // lcm_tcpq.c reads it: "tcpq://" is 127.0.0.1:7700, a host without a port

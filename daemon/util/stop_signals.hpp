@@ -35,8 +35,18 @@ inline constexpr double kRepeatWindow_s = 1.0;
 //   enough; within the window it is the same request delivered twice
 //   (timeout(1) signals the command and then its whole process group) and
 //   changes nothing.
-// - A SIGINT ignored from the start (nohup, `cmd &` in a script) stays
-//   ignored, as the shell meant.
+// - A SIGINT ignored from the start stays ignored, as the shell meant: a
+//   non-interactive shell starts `cmd &` with SIGINT ignored, so Ctrl-C in
+//   the terminal of a script that started it is not for it (nohup ignores
+//   SIGHUP, not SIGINT).
+// - SIGTERM is honoured even when it was ignored at start (`trap '' TERM`
+//   in the parent), as daemon/app/stop_signals.cpp did on purpose before
+//   (keep_if_ignored=false): it is how kill, timeout(1) and a service
+//   manager ask a run to stop, and a run deaf to it could only be SIGKILLed,
+//   losing the report, the session's close or the frames collected.
+// - SIGHUP is not taken: a closed terminal ends the process as before
+//   (`nohup` or tmux for a long take). tissued as a service reloads on
+//   SIGHUP with its own asio signal_set (service/service.cpp), not this.
 // - The dispositions and the creating thread's mask before it are restored
 //   after: a signal after that (during an export) acts as usual.
 // Signals are process-wide: one at a time per process. A signal sent to the

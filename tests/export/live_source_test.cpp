@@ -176,6 +176,27 @@ TEST(LiveFrameSource, CollectionStopsAtTheByteBudgetAndSaysSo) {
   EXPECT_EQ(all.dropped_note(), "");
 }
 
+// Whether the stop request ended the collection, not whether the flag is
+// up by now: a signal that lands after the collection ended on its own (the
+// window, max_frames) made the client call a complete take "cut short".
+TEST(LiveFrameSource, ItSaysWhetherTheStopRequestEndedTheCollection) {
+  std::atomic<bool> stop{false};
+  EndlessSubscriber asks_to_stop(5, &stop);  // raises the flag after 5 frames
+  LiveCollectOptions o;
+  o.window_s = 1e9;
+  const LiveFrameSource stopped(asks_to_stop, o, &stop);
+  EXPECT_EQ(stopped.frame_count(), 5u);
+  EXPECT_TRUE(stopped.stopped_by_request());
+
+  std::atomic<bool> later{false};
+  EndlessSubscriber endless(100, &later);
+  o.max_frames = 3;
+  const LiveFrameSource complete(endless, o, &later);
+  later = true;  // the signal after the collection ended
+  EXPECT_EQ(complete.frame_count(), 3u);
+  EXPECT_FALSE(complete.stopped_by_request());
+}
+
 TEST(LiveFrameSource, NothingWithinTheTimeoutIsANamedError) {
   ScriptedSubscriber sub({empty_frame(0.1)});
   sub.counts_.rejected = 2;

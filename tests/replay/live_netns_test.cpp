@@ -420,6 +420,34 @@ TEST_F(LiveNetns, AStopSignalDuringACollectionExportsTheFramesSoFar) {
   EXPECT_TRUE(WIFEXITED(*replayed) && WEXITSTATUS(*replayed) == 0) << replay.err();
 }
 
+// A stop after one frame leaves an --animate nothing to animate: said as a
+// stop (exit 4, as a stop before the first frame), not as "its 1 frames are
+// all at t=... (a paused simulation sends the same time)", exit 1.
+TEST_F(LiveNetns, AStopSignalAfterOneFrameIsNotAnAnimation) {
+  const std::string anim = dir_ / "one.x3d";
+  tissue::testing::BackgroundProcess p(
+      {TISSUE_CLI_BINARY, "x3d", "--lcm", url_, "--animate", "--seconds", "600", "--timeout", "600", "-o", anim},
+      dir_ / "out", dir_ / "err");
+  ASSERT_TRUE(p.started());
+  std::this_thread::sleep_for(std::chrono::seconds(1));  // subscribed
+  // 100x slower than recorded: the frames 3.3 s apart, the first at once.
+  tissue::testing::BackgroundProcess replay(
+      {TISSUE_CLI_BINARY, "session", "replay", session_, "--lcm", url_, "--speed", "0.01"}, dir_ / "replay.out",
+      dir_ / "replay.err");
+  ASSERT_TRUE(replay.started());
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  ASSERT_TRUE(p.signal(SIGINT));
+  const std::optional<int> status = p.wait_for_exit(60.0);
+  ASSERT_TRUE(status.has_value()) << "still collecting 60 s after the signal";
+  ASSERT_TRUE(WIFEXITED(*status)) << WTERMSIG(*status);
+  EXPECT_EQ(WEXITSTATUS(*status), 4) << p.err();
+  EXPECT_EQ(p.err(), "tissue x3d: stopped by SIGINT after 1 frame on LCM channel TISSUE_SURFACE_MESH on " + url_ +
+                         ": an animation needs 2\n");
+  EXPECT_FALSE(std::filesystem::exists(anim));
+  ASSERT_TRUE(replay.signal(SIGTERM));
+  EXPECT_TRUE(replay.wait_for_exit(30.0).has_value());
+}
+
 // A stop before the first frame has nothing to export: exit 4 (no
 // surface_mesh), said as a stop, not as a --timeout that never ran out.
 TEST_F(LiveNetns, AStopSignalBeforeTheFirstFrameIsNoLiveData) {

@@ -9,12 +9,17 @@
 
 #include <gtest/gtest.h>
 
+#include <signal.h>
+#include <sys/wait.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <lcm/lcm-cpp.hpp>
 #include <limits>
+#include <optional>
 #include <thread>
 
 #include "record_test_support.hpp"
@@ -572,6 +577,50 @@ TEST(ReplayCli, ASilentTcpqServerIsACannotConnectExitNotAHang) {
       record::testing::run("timeout 60 " + tissue() + " session replay " + quote(path) + " --lcm " + silent.url(), dir);
   EXPECT_EQ(r.exit_code, 3) << r.err;
   EXPECT_NE(r.err.find(silent.url()), std::string::npos) << r.err;
+}
+
+// Ctrl-C while the probe waits for a silent tcpq:// server's greeting is a
+// stop request like any other: the replay ends at once, exit 0, and says it
+// stopped (it waited out the 10 s greeting wait and exited 3).
+TEST(ReplayCli, AStopSignalWhileWaitingForATcpqServerStopsTheReplayAtOnce) {
+  TempDir dir;
+  const std::string path = testing::write_session(dir / "s.h5", 3);
+  tissue::testing::LoopbackListener silent("");
+  ASSERT_TRUE(silent.ok());
+  tissue::testing::BackgroundProcess p({TISSUE_CLI_BINARY, "session", "replay", path, "--lcm", silent.url()},
+                                       dir / "out", dir / "err");
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  ASSERT_TRUE(p.signal(SIGINT));
+  const std::optional<int> status = p.wait_for_exit(60.0);
+  ASSERT_TRUE(status.has_value());
+  ASSERT_TRUE(WIFEXITED(*status)) << WTERMSIG(*status);
+  EXPECT_EQ(WEXITSTATUS(*status), 0) << p.err();
+  EXPECT_EQ(p.out(), "stopped: " + path + ": by SIGINT while waiting for the tcpq server at '" + silent.url() +
+                         "' to answer; nothing was sent\n")
+      << p.err();
+}
+
+// The same for a live `tissue x3d --timeout 600` against a silent tcpq://
+// server: it waited out connection and greeting (up to 20 minutes) before
+// it saw the request. A stop before the first frame: exit 4.
+TEST(LiveCli, AStopSignalWhileWaitingForATcpqServerIsAStopBeforeTheFirstFrame) {
+  TempDir dir;
+  tissue::testing::LoopbackListener silent("");
+  ASSERT_TRUE(silent.ok());
+  tissue::testing::BackgroundProcess p(
+      {TISSUE_CLI_BINARY, "x3d", "--lcm", silent.url(), "--timeout", "600", "-o", dir / "none.x3d"}, dir / "out",
+      dir / "err");
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  ASSERT_TRUE(p.signal(SIGINT));
+  const std::optional<int> status = p.wait_for_exit(30.0);
+  ASSERT_TRUE(status.has_value()) << "still waiting 30 s after SIGINT";
+  ASSERT_TRUE(WIFEXITED(*status)) << WTERMSIG(*status);
+  EXPECT_EQ(WEXITSTATUS(*status), 4) << p.err();
+  EXPECT_EQ(p.err(),
+            "tissue x3d: stopped by SIGINT before any surface_mesh arrived on LCM channel "
+            "TISSUE_SURFACE_MESH on " +
+                silent.url() + "\n");
+  EXPECT_FALSE(std::filesystem::exists(dir / "none.x3d"));
 }
 
 TEST(ReplayCli, BadFilesExitOneWithOneLineNamingTheFile) {

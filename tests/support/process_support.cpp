@@ -80,7 +80,14 @@ BackgroundProcess::BackgroundProcess(const std::vector<std::string>& argv, const
   std::fflush(nullptr);  // nothing buffered is written twice
   pid_ = ::fork();
   if (pid_ != 0) return;
-  if (ignore_sigint) std::signal(SIGINT, SIG_IGN);
+  // exec keeps an ignored disposition and the signal mask: ctest started by
+  // a script with `&` runs with SIGINT ignored, and a test may run with
+  // signals blocked (a StopOnSignals alive); the child would then ignore or
+  // hold the SIGINT the test sends. It starts as from a terminal unless asked.
+  std::signal(SIGINT, ignore_sigint ? SIG_IGN : SIG_DFL);
+  sigset_t none;
+  sigemptyset(&none);
+  ::sigprocmask(SIG_SETMASK, &none, nullptr);
   if (!std::freopen(out_path_.c_str(), "w", stdout) || !std::freopen(err_path_.c_str(), "w", stderr)) ::_exit(120);
   ::execv(args[0], args.data());
   ::_exit(121);

@@ -47,7 +47,8 @@ void write_text(const std::string& path, const std::string& text);
 class BackgroundProcess {
  public:
   // `argv[0]` is the program's path. `ignore_sigint`: the child starts with
-  // SIGINT ignored, as `nohup` or `cmd &` in a script would start it.
+  // SIGINT ignored, as `cmd &` in a script would start it; otherwise at its
+  // default action (whatever the test process has), no signal blocked.
   BackgroundProcess(const std::vector<std::string>& argv, const std::string& out_path, const std::string& err_path,
                     bool ignore_sigint = false);
   ~BackgroundProcess();

@@ -6,10 +6,14 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <climits>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <future>
 #include <string>
 #include <thread>
 #include <utility>
@@ -153,6 +157,41 @@ TEST(LcmUrl, ATcpqServerThatNeverGreetsIsFoundWithinTheTimeout) {
 
   EXPECT_EQ(tcpq_server_problem("udpm://239.255.76.67:7667", 0.1), "");  // not tcpq: not probed
   EXPECT_NE(tcpq_server_problem("tcpq://127.0.0.1:99999", 0.1).find("port"), std::string::npos);
+}
+
+// A stop request (Ctrl-C: util::StopOnSignals's flag) during the probe ends
+// it: `tissue x3d --timeout 600` against a silent listener waited out
+// connection and greeting (up to 20 minutes) before it saw the request.
+TEST(LcmUrl, ATcpqProbeGivesUpWhenItsStopFlagIsRaised) {
+  LoopbackListener silent("");
+  ASSERT_TRUE(silent.ok());
+  std::atomic<bool> stop{false};
+  auto probe = std::async(std::launch::async, [&] { return probe_tcpq_server(silent.url(), 600.0, &stop); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  stop.store(true);
+  // The watchdog: a probe that ignores the flag would hold the test for
+  // 600 s; well before that, fail and leave (the future would block the
+  // destructor until the probe ended).
+  if (probe.wait_for(std::chrono::seconds(20)) != std::future_status::ready) {
+    ADD_FAILURE() << "the probe did not return within 20 s of its stop flag (timeout 600 s)";
+    std::fflush(nullptr);
+    std::_Exit(1);
+  }
+  const TcpqProbe got = probe.get();
+  EXPECT_TRUE(got.stopped);
+  EXPECT_EQ(got.problem, "");
+
+  // Raised before it starts: no connection is waited for at all.
+  EXPECT_TRUE(probe_tcpq_server(silent.url(), 600.0, &stop).stopped);
+  // Not tcpq: nothing to probe, nothing stopped.
+  EXPECT_FALSE(probe_tcpq_server("udpm://239.255.76.67:7667", 600.0, &stop).stopped);
+  // A flag never raised changes nothing: the answer as without one.
+  std::atomic<bool> never{false};
+  LoopbackListener lcm(server_greeting());
+  ASSERT_TRUE(lcm.ok());
+  const TcpqProbe answered = probe_tcpq_server(lcm.url(), 2.0, &never);
+  EXPECT_FALSE(answered.stopped);
+  EXPECT_EQ(answered.problem, "");
 }
 
 }  // namespace
