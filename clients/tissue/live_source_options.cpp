@@ -45,10 +45,6 @@ void add_live_source_options(CLI::App* cmd, LiveSourceOptions& o, CLI::Option* s
           ->check(at_most_an_hour())
           ->capture_default_str();
   if (many) seconds->needs(many);
-  // An X3D animation needs frames at 2 times (x3d_command.cpp); a PNG
-  // sequence of one frame is whole. Told by the flag's name so that a stop
-  // after one frame is said as such (open_live_source).
-  o.frames_needed = many && many->check_name("--animate") ? 2 : 1;
   CLI::Option* timeout = cmd->add_option("--timeout", o.timeout_s, "Live: wait at most S seconds for the first frame")
                              ->check(finite_positive())
                              ->capture_default_str();
@@ -108,7 +104,7 @@ std::unique_ptr<x3d::FrameSource> open_live_source(const LiveSourceOptions& o, b
     // One frame is no animation (x3d_command.cpp would blame a paused
     // simulation: "its 1 frames are all at t=..."): a stop before enough
     // frames, exit 4 as a stop before the first.
-    if (source->frame_count() < o.frames_needed)
+    if (many && source->frame_count() < o.frames_needed)
       throw x3d::NoLiveFrameError(stopped_by() + " after " + std::to_string(source->frame_count()) + " frame" +
                                   (source->frame_count() == 1 ? "" : "s") + " on " + source->name() +
                                   ": an animation needs " + std::to_string(o.frames_needed));

@@ -31,8 +31,9 @@ struct LiveSourceOptions {
   DdsCliOptions dds;
   double seconds = 2.0;     // frames collected for an animation / sequence (wall)
   double timeout_s = 10.0;  // wait for the first frame
-  // Frames a collection cut short by a signal must hold to be exported: 2
-  // for --animate, else 1 (set by add_live_source_options).
+  // Frames a collection of many (--animate, --sequence) cut short by a
+  // signal must hold to be exported: an X3D animation needs frames at 2 times
+  // (x3d_command.cpp sets 2), a PNG sequence of one frame is whole.
   std::size_t frames_needed = 1;
   CLI::Option* lcm_option = nullptr;
   CLI::Option* dds_option = nullptr;

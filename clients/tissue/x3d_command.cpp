@@ -233,6 +233,7 @@ Subcommand add_x3d_command(CLI::App& parent) {
       ->capture_default_str();
   cmd->add_option("-o,--output", o->out, "Output file (.x3d)")->required();
   add_live_source_options(cmd, o->live, session, animate);
+  o->live.frames_needed = 2;  // an animation: frames at 2 times at least (a stop after one is said as such)
   // Frame numbers and session times select among a session's frames only.
   for (CLI::Option* opt : {time, frame}) opt->excludes(o->live.lcm_option)->excludes(o->live.dds_option);
   cmd->get_option("--from")->needs(session);

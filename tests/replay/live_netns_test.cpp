@@ -374,8 +374,9 @@ TEST_F(LiveNetns, AnOutputThatCannotBeWrittenIsRefusedBeforeCollecting) {
 // and every frame collected was lost.
 TEST_F(LiveNetns, AStopSignalDuringACollectionExportsTheFramesSoFar) {
   // Not BackgroundReplay: its std::system() ignores SIGINT in this process
-  // while the replay runs, and the clients started meanwhile would inherit
-  // that (and keep ignoring SIGINT, as a client started by `cmd &` does).
+  // while the replay runs (the clients started meanwhile restore SIGINT's
+  // default since process_support's child does, but this test should not
+  // depend on that).
   tissue::testing::BackgroundProcess replay({TISSUE_CLI_BINARY, "session", "replay", session_, "--lcm", url_, "--loop"},
                                             dir_ / "replay.out", dir_ / "replay.err");
   ASSERT_TRUE(replay.started());
