@@ -49,6 +49,16 @@ grep '^t ' "$work/sub.log" | tail -1 | grep -q 'meshes [1-9][0-9]*, haptic state
 
 fail() { echo "python_subscriber_test: $*"; exit 1; }
 no_traceback() { if grep -q Traceback "$1"; then cat "$1"; fail "a traceback in $1"; fi; }
+# PID SECONDS MESSAGE: waits for a signalled process to end; still running
+# after SECONDS, it is killed and the test fails with MESSAGE.
+ends_within() {
+  polls=0
+  while kill -0 "$1" 2>/dev/null; do
+    polls=$((polls + 1))
+    [ "$polls" -le $(($2 * 10)) ] || { kill -KILL "$1"; fail "$3"; }
+    sleep 0.1
+  done
+}
 
 # --plot is checked before listening: a missing directory or a directory is
 # a bad argument (2), named with the reason, without a traceback.
@@ -148,12 +158,7 @@ until [ "$(grep -c accepted "$listener_log")" -ge 2 ]; do
 done
 sleep 0.2
 kill -INT "$waiting"
-polls=0
-while kill -0 "$waiting" 2>/dev/null; do
-  polls=$((polls + 1))
-  [ "$polls" -le 100 ] || { kill -KILL "$waiting"; fail "Ctrl-C while waiting for a tcpq greeting: still running after 10 s"; }
-  sleep 0.1
-done
+ends_within "$waiting" 10 "Ctrl-C while waiting for a tcpq greeting: still running after 10 s"
 rc=0
 wait "$waiting" || rc=$?
 no_traceback "$work/silent-int.log"
@@ -299,12 +304,7 @@ done
 kill -INT "$lonely"  # ends the listening: the plot now waits for a reader
 sleep 1
 kill -INT "$lonely"
-polls=0
-while kill -0 "$lonely" 2>/dev/null; do
-  polls=$((polls + 1))
-  [ "$polls" -le 50 ] || { kill -KILL "$lonely"; fail "--plot at a FIFO without a reader: still running 5 s after a second SIGINT"; }
-  sleep 0.1
-done
+ends_within "$lonely" 5 "--plot at a FIFO without a reader: still running 5 s after a second SIGINT"
 rc=0
 wait "$lonely" || rc=$?
 no_traceback "$work/lonely.err"
