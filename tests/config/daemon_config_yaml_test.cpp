@@ -4,6 +4,8 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -496,6 +498,88 @@ TEST(DaemonConfigYaml, ValidateCatchesProgrammaticConfigs) {
   c = parse_daemon_config(kBase, kSource);
   c.device.kind = static_cast<DeviceSpec::Kind>(42);
   EXPECT_THROW(validate_daemon_config(c), ConfigError);
+}
+
+// ------------------------------------------------------------------- fuzz
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// Every number of the shipped config and of kBase, one at a time, replaced by
+// an extreme (NaN, infinities, 0, -0, negatives, the largest and smallest
+// doubles, integers past 32 and 64 bits, a fraction where an integer goes, a
+// bool, a string, a list, null): each copy either loads with every check
+// passed or is refused with a ConfigError naming the source and the key that
+// holds the replaced number. A non-number or a non-finite number is always
+// refused: no key takes NaN or infinity. Never a crash, an exception of
+// another type, or an error blaming another key.
+TEST(DaemonConfigYamlFuzz, EveryNumberReplacedByAnExtremeIsReadOrRefusedNamingItsKey) {
+  const std::vector<std::string> extremes = {".nan",
+                                             ".inf",
+                                             "-.inf",
+                                             "0",
+                                             "-0",
+                                             "-1",
+                                             "1e308",
+                                             "-1e308",
+                                             "5e-324",
+                                             "2147483648",
+                                             "4294967296",
+                                             "9223372036854775808",
+                                             "-9223372036854775809",
+                                             "18446744073709551616",
+                                             "0.5",
+                                             "1e-9",
+                                             "true",
+                                             "'x'",
+                                             "[]",
+                                             "{}",
+                                             "~"};
+  const std::regex number(R"((:\s+|\[\s*|,\s*)(-?[0-9][0-9.eE+-]*))");
+  const std::regex key_before(R"(([A-Za-z_][A-Za-z_0-9]*):)");
+  int documents = 0, accepted = 0, refused = 0;
+  for (const std::string& original : {read_text(kShipped), kBase}) {
+    ASSERT_FALSE(original.empty());
+    ++documents;
+    for (auto it = std::sregex_iterator(original.begin(), original.end(), number); it != std::sregex_iterator(); ++it) {
+      const std::size_t at = static_cast<std::size_t>(it->position(2)), length = it->length(2);
+      // Skip numbers inside comments and keys' names.
+      const std::size_t line_start = original.rfind('\n', at) + 1;
+      const std::string line_before = original.substr(line_start, at - line_start);
+      if (line_before.find('#') != std::string::npos) continue;
+      std::string key;
+      for (auto k = std::sregex_iterator(line_before.begin(), line_before.end(), key_before);
+           k != std::sregex_iterator(); ++k)
+        key = (*k)[1];
+      ASSERT_FALSE(key.empty()) << "test bug: no key before the number at " << at << " in: " << line_before;
+      for (const std::string& extreme : extremes) {
+        const bool must_refuse = extreme.find_first_of("0123456789") == std::string::npos;
+        std::string text = original;
+        text.replace(at, length, extreme);
+        const std::string what = key + ": " + it->str(2) + " -> " + extreme;
+        try {
+          const DaemonConfig c = parse_daemon_config(text, kSource);
+          EXPECT_NO_THROW(validate_daemon_config(c)) << what;
+          EXPECT_FALSE(must_refuse) << what << ": accepted";
+          ++accepted;
+        } catch (const ConfigError& e) {
+          EXPECT_EQ(e.source(), kSource) << what << ": " << e.what();
+          // A rule between two keys blames the one it bounds and names the other.
+          EXPECT_TRUE(e.key_path().find(key) != std::string::npos || e.reason().find(key) != std::string::npos)
+              << what << ": " << e.what();
+          EXPECT_FALSE(e.reason().empty()) << what;
+          ++refused;
+        } catch (const std::exception& e) {
+          ADD_FAILURE() << what << ": not a ConfigError: " << e.what();
+        }
+      }
+    }
+  }
+  EXPECT_EQ(documents, 2);
+  EXPECT_GT(accepted, 0);
+  EXPECT_GT(refused, 0);
 }
 
 TEST(DaemonConfigYaml, DaemonKeysAreTellableFromSceneKeys) {
