@@ -23,8 +23,10 @@ class EnergyBudget {
   explicit EnergyBudget(const Simulation& sim);
   double budget_J(const Simulation& sim) const;
   // E / budget − 1 for the state `sim` is in now: <= 0 while the body holds no
-  // more than was put in. 0 while E is rounding noise of a body at rest;
-  // +inf when E or the budget is not finite (never NaN).
+  // more than was put in. 0 while E is rounding noise: of a body at rest, or
+  // of one so stiff that its deformation is below what its coordinates
+  // resolve (E at most 1/2 Σ k (4 ε max|x|)²); +inf when E or the budget is
+  // not finite (never NaN).
   double excess(const Simulation& sim) const;
 
  private:
