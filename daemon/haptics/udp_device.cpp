@@ -204,6 +204,10 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
   // one: a connected socket hears only its own) name a source not yet tried:
   // a device that connect()ed to the new address drops forces from the route's.
   if (reply_from_ != peer_reply_from_) reply_from_refused_ = false;
+  // The same for the filter: refused because the poses came to an address
+  // other than the route back's source, it may fit the new one (read() tries
+  // it again; one connect, and a disconnect if refused again, per move).
+  if (to_ != peer_to_) filter_refused_ = false;
   peer_ = from_;
   peer_to_ = to_;
   peer_reply_from_ = reply_from_;

@@ -136,7 +136,8 @@ class UdpDevice final : public Device {
   // (any address may start the next session). One syscall, no allocation.
   // Bound to 0.0.0.0, it connects only if the local address the connect
   // picks is the one peer_'s poses came to (else disconnects again and sets
-  // filter_refused_ for the session). IPv4 sockets only (connectable_).
+  // filter_refused_ until the poses come to another local address or a new
+  // session starts). IPv4 sockets only (connectable_).
   void filter_to(const boost::asio::ip::udp::endpoint* peer) noexcept;
   // One datagram into receive_buffer_, its source into from_ and, when bound
   // to a wildcard address, its destination into to_ and reply_from_.
@@ -175,8 +176,10 @@ class UdpDevice final : public Device {
   // (asio's register_descriptor takes a mutex). Such a socket refuses other
   // senders in userspace only (consider(), other_sender).
   bool connectable_ = false;
-  bool wildcard_ = false;        // bound to 0.0.0.0 or ::
-  bool filter_refused_ = false;  // this session's poses come to another local address: no connect
+  bool wildcard_ = false;  // bound to 0.0.0.0 or ::
+  // The poses come to a local address other than the route back's source:
+  // no connect, until they come to another (a new peer_to_) or a new session.
+  bool filter_refused_ = false;
   // Destination of the datagram in receive_buffer_ (wildcard_ only); an IPv6
   // link-local one carries the scope id of the interface it came in on, which
   // write() names as the source's interface (IPV6_PKTINFO).

@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "haptics/haptic_loop.hpp"
@@ -292,6 +294,208 @@ TEST(LoopWrap, AHandTrackLongerThanTheChecksBudgetIsStillWarnedAboutItsWrap) {
   config::DeviceSpec short_track = d;
   short_track.sim.waypoints.back().time_s = 10.0;
   EXPECT_NE(sim_loop_wrap_warning(short_track, 1000.0), "");
+}
+
+// The three steps of sim_loop_wrap_warning, each on its own.
+
+// (a) The plan: one window from the start while the budget reaches the first
+// wrap and 10 s past it; the reads it takes are the first pass and three
+// wraps, each followed by a whole period, when they fit.
+TEST(LoopWrapPlan, AShortTrackIsOneWindowOverTheFirstPassAndThreeWraps) {
+  // 2.5 s track at 1 kHz: 10 s, reads 0 .. 10000.
+  const SimLoopPlan p = plan_sim_loop_check(0.0, 2.5, 1000.0, true);
+  EXPECT_EQ(p.first_pass.first_read, 0);
+  EXPECT_EQ(p.first_pass.reads, 10001);
+  EXPECT_EQ(p.wrap.reads, 0);
+  // The span counts from the first waypoint: 1 s to 3.5 s repeats every 2.5 s too.
+  EXPECT_EQ(plan_sim_loop_check(1.0, 3.5, 1000.0, false).first_pass.reads, 11001);
+}
+
+// A hand read costs its sub-steps: 2 at 1 kHz (1 ms / 0.5 ms), 64 below about
+// 31 Hz; a trajectory read costs 1. A track whose three wraps do not fit but
+// whose first wrap and 10 s past it do is one window of the whole budget.
+TEST(LoopWrapPlan, TheBudgetIsHandSubStepsOrTrajectoryReads) {
+  const SimLoopPlan hand = plan_sim_loop_check(0.0, 400.0, 1000.0, true);
+  EXPECT_EQ(hand.first_pass.reads, 500000);
+  EXPECT_EQ(hand.wrap.reads, 0);
+  const SimLoopPlan tip = plan_sim_loop_check(0.0, 400.0, 1000.0, false);
+  EXPECT_EQ(tip.first_pass.reads, 1000000);
+  EXPECT_EQ(tip.wrap.reads, 0);
+  const SimLoopPlan slow = plan_sim_loop_check(0.0, 5000.0, 2.0, true);  // 10^6 / 64 reads
+  EXPECT_EQ(slow.first_pass.reads, 15625);
+  EXPECT_EQ(slow.wrap.reads, 0);
+  // 10 s track: 40001 reads wanted, the first wrap and 10 s past it 20001.
+  const SimLoopPlan small = plan_sim_loop_check(0.0, 10.0, 1000.0, false, 20001.0);
+  EXPECT_EQ(small.first_pass.reads, 20001);
+  EXPECT_EQ(small.wrap.reads, 0);
+}
+
+// Too long for that: two windows of half the budget, the first pass from its
+// start and the wrap from 10 s before it (reads at 1 kHz). The first pass
+// between them is not read (the documented limit).
+TEST(LoopWrapPlan, ATrackTooLongForItsFirstWrapIsTwoWindowsOfHalfTheBudget) {
+  const SimLoopPlan hand = plan_sim_loop_check(0.0, 600.0, 1000.0, true);
+  EXPECT_EQ(hand.first_pass.first_read, 0);
+  EXPECT_EQ(hand.first_pass.reads, 250000);
+  EXPECT_EQ(hand.wrap.first_read, 590000);
+  EXPECT_EQ(hand.wrap.reads, 250000);
+  EXPECT_LT(hand.first_pass.reads, hand.wrap.first_read) << "the windows met: the hand could be carried over";
+  const SimLoopPlan tip = plan_sim_loop_check(0.0, 1200.0, 1000.0, false);
+  EXPECT_EQ(tip.first_pass.reads, 500000);
+  EXPECT_EQ(tip.wrap.first_read, 1190000);
+  EXPECT_EQ(tip.wrap.reads, 500000);
+  // A lead-in longer than a quarter of the budget is cut to it: 10000 reads
+  // of budget, the wrap at read 2500, a 5000-read wrap window from read
+  // 2500 - 2500; the first pass gets what is left up to the wrap window's
+  // start: nothing, the wrap window reads it.
+  const SimLoopPlan cut = plan_sim_loop_check(0.0, 2.5, 1000.0, false, 10000.0);
+  EXPECT_EQ(cut.wrap.first_read, 0);
+  EXPECT_EQ(cut.wrap.reads, 5000);
+  EXPECT_EQ(cut.first_pass.reads, 0);
+  const SimLoopPlan tight = plan_sim_loop_check(0.0, 2.5, 1000.0, false, 1000.0);
+  EXPECT_EQ(tight.wrap.first_read, 2250);  // lead-in 250 reads, a quarter of the budget
+  EXPECT_EQ(tight.wrap.reads, 500);
+  EXPECT_EQ(tight.first_pass.reads, 500);
+}
+
+TEST(LoopWrapPlan, NoWindowsForATrackOrRateThatCannotBeRead) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  for (const SimLoopPlan& p :
+       {plan_sim_loop_check(0.0, 0.0, 1000.0, true), plan_sim_loop_check(1.0, 0.5, 1000.0, true),
+        plan_sim_loop_check(0.0, 2.5, 0.0, true), plan_sim_loop_check(0.0, 2.5, std::nan(""), false),
+        plan_sim_loop_check(0.0, 2.5, kInf, false), plan_sim_loop_check(0.0, kInf, 1000.0, false),
+        plan_sim_loop_check(0.0, 2.5, 1000.0, false, 0.0)}) {
+    EXPECT_EQ(p.first_pass.reads, 0);
+    EXPECT_EQ(p.wrap.reads, 0);
+  }
+}
+
+// (b) The check of one window: the trajectory's 0.3 m wrap at 2.5 s is the
+// first rejection (too fast, a 0.3 m step), at the first read after it; the
+// window of 10001 reads ends at 10 s, three wraps.
+TEST(LoopWrapJudge, AWindowFromTheStartFindsTheFirstRejectionAndCountsTheWraps) {
+  const config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kTrajectory, 0.3);
+  const std::optional<SimLoopJudged> j = judge_sim_loop_window(d, 1000.0, {0, 10001});
+  ASSERT_TRUE(j.has_value());
+  EXPECT_TRUE(j->rejected);
+  EXPECT_NEAR(j->first_rejected_s, 2.501, 1e-9);
+  EXPECT_EQ(j->first_verdict, SampleVerdict::kTooFast);
+  EXPECT_NEAR(j->first_step_m, 0.3, 1e-9);
+  EXPECT_NEAR(j->peak_m_per_s, 300.0, 1e-6);  // 0.3 m in 1 ms
+  EXPECT_NEAR(j->farthest_m, 0.2, 1e-9);      // the last point, 0.2 m from the origin
+  EXPECT_NEAR(j->checked_s, 10.0, 1e-9);
+  EXPECT_EQ(j->wraps, 3);
+  // Before the wrap: nothing rejected, nothing measured (peaks count from the first wrap on).
+  const std::optional<SimLoopJudged> before = judge_sim_loop_window(d, 1000.0, {0, 2501});
+  ASSERT_TRUE(before.has_value());
+  EXPECT_FALSE(before->rejected);
+  EXPECT_EQ(before->peak_m_per_s, 0.0);
+  EXPECT_EQ(before->wraps, 0);
+  EXPECT_NEAR(before->checked_s, 2.5, 1e-9);
+}
+
+// A window that starts later starts the copy there on the track, and its
+// first sample is judged against nothing: a window from just after the wrap
+// sees no jump until the next wrap at 5 s.
+TEST(LoopWrapJudge, AWindowStartedLaterStartsThereAndJudgesItsFirstSampleAlone) {
+  const config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kTrajectory, 0.3);
+  const std::optional<SimLoopJudged> quiet = judge_sim_loop_window(d, 1000.0, {2501, 2000});
+  ASSERT_TRUE(quiet.has_value());
+  EXPECT_FALSE(quiet->rejected);
+  EXPECT_NEAR(quiet->checked_s, 4.5, 1e-9);
+  EXPECT_EQ(quiet->wraps, 1);
+  const std::optional<SimLoopJudged> next = judge_sim_loop_window(d, 1000.0, {2501, 3000});
+  ASSERT_TRUE(next.has_value());
+  EXPECT_TRUE(next->rejected);
+  EXPECT_NEAR(next->first_rejected_s, 5.0, 1.5e-3);
+  EXPECT_NEAR(next->first_step_m, 0.3, 1e-9);
+}
+
+// Windows fold: an earlier window's rejection stays the first, peaks are the
+// larger of both, checked_s and wraps are the later window's.
+TEST(LoopWrapJudge, ALaterWindowKeepsAnEarlierWindowsFirstRejection) {
+  const config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kTrajectory, 0.3);
+  SimLoopJudged earlier;
+  earlier.rejected = true;
+  earlier.first_rejected_s = 1.0;
+  earlier.first_verdict = SampleVerdict::kOutsideWorkspace;
+  earlier.first_step_m = 0.01;
+  earlier.peak_m_per_s = 1000.0;
+  const std::optional<SimLoopJudged> j = judge_sim_loop_window(d, 1000.0, {2000, 3000}, earlier);
+  ASSERT_TRUE(j.has_value());
+  EXPECT_EQ(j->first_rejected_s, 1.0);
+  EXPECT_EQ(j->first_verdict, SampleVerdict::kOutsideWorkspace);
+  EXPECT_EQ(j->first_step_m, 0.01);
+  EXPECT_EQ(j->peak_m_per_s, 1000.0);
+  EXPECT_NEAR(j->farthest_m, 0.2, 1e-9);  // measured after the wrap, in this window
+  EXPECT_NEAR(j->checked_s, 4.999, 1e-9);
+  EXPECT_EQ(j->wraps, 1);
+}
+
+TEST(LoopWrapJudge, ADeviceThatDoesNotStartIsNoResult) {
+  config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3);
+  d.sim.hand_mass_kg = 0.0;
+  EXPECT_FALSE(judge_sim_loop_window(d, 1000.0, {0, 10}).has_value());
+  EXPECT_FALSE(judge_sim_loop_window(looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3), 0.0, {0, 10}).has_value());
+}
+
+// (c) The message, from a result made up here.
+TEST(LoopWrapMessage, NothingRejectedIsNoMessage) {
+  const config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3);
+  SimLoopJudged j;
+  j.peak_m_per_s = 100.0;
+  j.checked_s = 10.0;
+  EXPECT_EQ(sim_loop_wrap_message(d, 1000.0, plan_sim_loop_check(0.0, 2.5, 1000.0, true), 10.0, j), "");
+}
+
+TEST(LoopWrapMessage, ATrajectoryWrapIsTheJumpRejected) {
+  const config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kTrajectory, 0.3);
+  SimLoopJudged j;
+  j.rejected = true;
+  j.first_rejected_s = 2.501;
+  j.first_verdict = SampleVerdict::kTooFast;
+  j.first_step_m = 0.25;  // the step the loop rejected, not the waypoints' jump
+  EXPECT_EQ(sim_loop_wrap_message(d, 1000.0, {}, 0.0, j), loop_wrap_warning("device.sim.waypoints", 0.25, 5.0, 1000.0));
+  j.first_rejected_s = 0.75;
+  j.first_verdict = SampleVerdict::kOutsideWorkspace;
+  EXPECT_EQ(sim_loop_wrap_message(d, 1000.0, {}, 0.0, j),
+            "device.sim.waypoints: the simulated tip (device.sim.mode trajectory) is rejected by the haptic loop "
+            "0.75 s into the track's first pass, before it wraps (outside device.limits.workspace_radius_m): the "
+            "force ramps out and back in on every pass");
+}
+
+TEST(LoopWrapMessage, AHandSaysHowFastOrHowFarAndWhatWasChecked) {
+  const config::DeviceSpec d = looping_sim(config::SimDeviceSpec::Mode::kHand, 0.3);
+  SimLoopJudged j;
+  j.rejected = true;
+  j.first_rejected_s = 2.52;
+  j.first_verdict = SampleVerdict::kTooFast;
+  j.peak_m_per_s = 6.5;
+  j.farthest_m = 1.25;
+  j.checked_s = 10.0;
+  j.wraps = 3;
+  EXPECT_EQ(sim_loop_wrap_message(d, 1000.0, plan_sim_loop_check(0.0, 2.5, 1000.0, true), 10.0, j),
+            std::string(kHandWrapPrefix) +
+                "0.3 m jump (device frame), and the hand (device.sim.mode hand) follows it through its spring at up "
+                "to 6.5 m/s, more than device.limits.max_speed_m_per_s 5: the force ramps out and back in at every "
+                "wrap (inputs rejected as too fast, then device lost); end the track where it starts for a seamless "
+                "loop (checked at start: the hand simulated with no rendered force, read at haptics.rate_hz 1000 "
+                "over the first 10 s, the first pass and 3 wraps)");
+  j.first_verdict = SampleVerdict::kOutsideWorkspace;
+  j.checked_s = 840.0;
+  j.wraps = 1;
+  SimLoopPlan two;
+  two.first_pass = {0, 250000};
+  two.wrap = {590000, 250000};
+  EXPECT_EQ(sim_loop_wrap_message(d, 1000.0, two, 250.0, j),
+            std::string(kHandWrapPrefix) +
+                "0.3 m jump (device frame), and the hand (device.sim.mode hand) follows it through its spring out "
+                "to 1.25 m from the device origin, beyond device.limits.workspace_radius_m 1: the force ramps out "
+                "and back in at every wrap (inputs rejected outside the workspace, then device lost); end the track "
+                "where it starts for a seamless loop (checked at start: the hand simulated with no rendered force, "
+                "read at haptics.rate_hz 1000 over the first 250 s of the first pass, then from 590 s (started "
+                "there on the track, at its velocity) to 840 s, 1 wrap; the whole run would take more than the "
+                "check's 10^6 hand sub-steps)");
 }
 
 }  // namespace

@@ -523,6 +523,50 @@ TEST(UdpDevice, AWildcardBoundDeviceStillFiltersAFloodFromElsewhere) {
   expect_a_flood_from_elsewhere_is_filtered(w, flood);
 }
 
+// Bound to 0.0.0.0, a session whose poses come to a local address other than
+// the route back's source stays unconnected (filter_to). When the same
+// sender's poses move to another local address within the session, the
+// filter is tried again for it: refused again for another such address (the
+// poses keep coming, the sender is kept), taken for the route's own source
+// (a flood from elsewhere no longer reaches the socket). The refusal was
+// kept for the whole session: the kernel's flood defence stayed off until
+// the sender was lost.
+TEST(UdpDevice, AWildcardBoundDeviceTriesTheFilterAgainWhenThePosesMoveToAnotherLocalAddress) {
+  WildcardBound w("127.0.0.2");
+  UdpDevice& device = w.s.device;
+  FakeDevice flood(device.local_port(), "127.0.0.1");
+  constexpr int kFlood = 20;  // fits one read (64) and the socket's buffer: exact counts
+  std::int64_t now_ns = kT0;
+  std::uint64_t received = 0, refused = 0, seq = 0;
+  auto poses_to = [&](const char* to_address, bool filtered) {
+    SCOPED_TRACE(std::string("poses to ") + to_address);
+    w.fake.retarget(to_address, FakeDevice::Link::kUnconnected);
+    DeviceSample sample;
+    bool live = false;
+    ++seq;
+    w.fake.send(pose_packet(static_cast<std::int64_t>(seq), Vec3(0.001 * static_cast<double>(seq), 0, 0)));
+    ASSERT_TRUE(read_until_received(device, ++received, now_ns += kMs, &sample, &live));
+    ASSERT_TRUE(live);
+    for (int i = 0; i < kFlood; ++i) flood.send(pose_packet(1000 + i, Vec3(0.5, 0, 0)));
+    ++seq;
+    w.fake.send(pose_packet(static_cast<std::int64_t>(seq), Vec3(0.001 * static_cast<double>(seq), 0, 0)));
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // everything sent has arrived
+    ASSERT_TRUE(device.read(now_ns += kMs, &sample)) << "the device's pose was not read on the next tick";
+    EXPECT_EQ(sample.position_m.x(), 0.001 * static_cast<double>(seq));
+    received += 1 + (filtered ? 0 : kFlood);
+    refused += filtered ? 0 : kFlood;
+    const UdpDevice::Stats st = device.stats();
+    EXPECT_EQ(st.received, received) << (filtered ? "the flood reached the socket: not filtered"
+                                                  : "the flood did not reach the socket");
+    EXPECT_EQ(st.rejected[static_cast<int>(Reject::kOtherSender)], refused);
+    EXPECT_EQ(st.accepted, seq);
+    EXPECT_EQ(st.sessions, 1u);
+  };
+  poses_to("127.0.0.2", false);  // the route back leaves from 127.0.0.1: unconnected
+  poses_to("127.0.0.3", false);  // tried again, refused again: the poses must keep coming
+  poses_to("127.0.0.1", true);   // the route's own source: connected, filtered by the kernel
+}
+
 // Sends a pose, reads it, writes a force: the fake device must get the force,
 // also after the sender is lost (the socket is disconnected then, and the
 // ramped-out force still goes).
