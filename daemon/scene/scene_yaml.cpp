@@ -339,7 +339,9 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     positive(o.cube_size_m, "object.cube_size_m");
     for (int a = 0; a < 3; ++a) {
       extent_[a] = o.cubes[a] * o.cube_size_m;
-      if (!std::isfinite(extent_[a])) fail("object", "the object's size overflows");
+      if (!std::isfinite(extent_[a]))
+        fail("object.cube_size_m", "the object's size (object.cubes x cube_size_m) overflows: " +
+                                       std::to_string(o.cubes[a]) + " x " + fmt_num(o.cube_size_m) + " m");
     }
     // Probes and regions may lie outside the box by rounding (probes.hpp).
     tolerance_ = physics::kProbeOutsideBoxTolerance * std::max({extent_[0], extent_[1], extent_[2]});

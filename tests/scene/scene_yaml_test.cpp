@@ -398,6 +398,9 @@ TEST(SceneYamlErrors, PhysicallyMeaninglessValues) {
   expect_error(base_with("dt_s: 0.001", "dt_s: 2"), "integrator.dt_s", "must be <= 1");
   expect_error(base_with("cubes: [4, 4, 4]", "cubes: [4, -4, 4]"), "object.cubes[1]", "must be >= 1 (got -4)");
   expect_error(base_with("cube_size_m: 0.025", "cube_size_m: 0"), "object.cube_size_m", "must be > 0");
+  // The object's extent overflows: the cube size is to blame, not "object".
+  expect_error(base_with("cube_size_m: 0.025", "cube_size_m: 1e308"), "object.cube_size_m",
+               "the object's size (object.cubes x cube_size_m) overflows: 4 x 1e+308 m");
   expect_error(base_with("rayleigh_beta_s: 0.003", "rayleigh_beta_s: -0.1"), "material.rayleigh_beta_s", ">= 0");
   expect_error(base_with("radius_m: 0.001", "radius_m: -0.001"), "prescribed[0].region.sphere.radius_m", ">= 0");
   expect_error(base_with("ramp_s: 0.5", "ramp_s: -0.5"), "prescribed[0].profile.ramp_s", ">= 0");
