@@ -60,6 +60,9 @@ constexpr long long kMaxTotalCubes = kMaxTets / 6;
 // density x six-volume; cube_size_m 2e-108 made every tet's volume, and so
 // every stiffness, 0).
 constexpr double kMinCubeScale = 1e-100, kMaxCubeScale = 1e100;
+// Diamond, the stiffest solid, has E = 1.05e12 Pa; osmium, the densest,
+// 22,590 kg/m³.
+constexpr double kMaxYoungsModulus_Pa = 1e13, kMaxDensity_kg_per_m3 = 1e5;
 // The float explicit rung keeps lengths, masses, 1/mass and stiffnesses in
 // float: E = 1e48 Pa with density 1e48 passed the double range above, 1/m
 // rounded to 0.0f and every free node froze (taken for kinematic) while the
@@ -365,6 +368,18 @@ class Validator : private yaml_util::ValueChecks<Validator> {
                   "a cube's mass in kg");
     representable(m.youngs_modulus_Pa * o.cube_size_m, m.youngs_modulus_Pa, "material.youngs_modulus_Pa",
                   "the cube's spring stiffness scale (E x cube size) in N/m");
+    // Past any real material (a typo, or units not SI). Representable, but a
+    // load strains so stiff a body less than its coordinates resolve and so
+    // heavy a one moves less than that in a step: the state is rounding, and
+    // the projective rung, whose velocities are position differences, turned
+    // it into energy (density 1.8e19: kinetic energy 1e5 times the work done,
+    // and growing).
+    if (m.youngs_modulus_Pa > kMaxYoungsModulus_Pa)
+      fail("material.youngs_modulus_Pa", "must be <= " + fmt_num(kMaxYoungsModulus_Pa) +
+                                             " Pa (ten times diamond's; got " + fmt_num(m.youngs_modulus_Pa) + ")");
+    if (m.density_kg_per_m3 > kMaxDensity_kg_per_m3)
+      fail("material.density_kg_per_m3", "must be <= " + fmt_num(kMaxDensity_kg_per_m3) +
+                                             " kg/m³ (four times osmium's; got " + fmt_num(m.density_kg_per_m3) + ")");
     enumerator(static_cast<int>(m.stiffness), 2, "material.stiffness");
     enumerator(static_cast<int>(m.damping), 2, "material.damping");
     non_negative(m.rayleigh_alpha_per_s, "material.rayleigh_alpha_per_s");

@@ -93,8 +93,10 @@ TEST(Diagnostics, ExcessIsMeasuredFromTheEnergyAndWorkAtTheAuditsStart) {
   EXPECT_TRUE(audit.within_energy_bound(2.0 * expected));
 }
 
-// The shipped cantilever made 3.6e14 times stiffer (E = 1.8e19 Pa): its 5 N
-// tip load strains it ~1e-17, below what coordinates of 0.1 m resolve, so its
+// The shipped cantilever made 3.6e14 times stiffer (E = 1.8e19 Pa, past the
+// loader's 1e13 cap, set here directly; a load of a millinewton on a body of
+// 1e13 Pa gets there too): its 5 N tip load strains it ~1e-17, below what
+// coordinates of 0.1 m resolve, so its
 // elastic energy is rounding (1.7e-15 J against 4.8e-17 J of work) and no
 // step gains anything. The audit read 0.185 "excess" there (found by
 // tests/physics/scene_extremes_test.cpp); a real gain at that stiffness, a

@@ -326,21 +326,28 @@ TEST(SceneYamlErrors, MessageFormatIsSourceKeyPathReason) {
 // free node, 1/m rounding to 0.0f, while the steps said ok), and accepted in
 // double or by the other integrators.
 TEST(SceneYamlErrors, FloatExplicitPrecisionRefusesQuantitiesBeyondFloat) {
-  const auto scene_with = [](const std::string& integrator, const std::string& modulus, const std::string& density) {
+  // Within the loader's material bounds (E <= 1e13 Pa, density <= 1e5 kg/m³)
+  // and float's lengths, the springs leave float's range at the soft end and
+  // the masses at the large end: cubes of 1e12 m weigh 1e41 kg.
+  const auto scene_with = [](const std::string& integrator, const std::string& modulus, const std::string& density,
+                             const std::string& cube_size = "0.025") {
     std::string yaml = base_with("kind: implicit", integrator);
     yaml.replace(yaml.find("youngs_modulus_Pa: 5.0e4"), 24, "youngs_modulus_Pa: " + modulus);
     yaml.replace(yaml.find("density_kg_per_m3: 100"), 22, "density_kg_per_m3: " + density);
+    yaml.replace(yaml.find("cube_size_m: 0.025"), 18, "cube_size_m: " + cube_size);
     return yaml;
   };
   const std::string in_float = "kind: explicit\n  explicit_precision: float";
   const std::string in_double = "kind: explicit\n  explicit_precision: double";
-  const std::string what = expect_error(scene_with(in_float, "1e48", "1e48"), "integrator.explicit_precision", "float");
+  const std::string what = expect_error(scene_with(in_float, "1e-30", "100"), "integrator.explicit_precision", "float");
   EXPECT_NE(what.find("N/m"), std::string::npos) << what;  // names the quantity out of range
-  EXPECT_NO_THROW(parse_scene(scene_with(in_double, "1e48", "1e48"), "test.yaml"));
-  EXPECT_NO_THROW(parse_scene(scene_with("kind: implicit", "1e48", "1e48"), "test.yaml"));
+  EXPECT_NO_THROW(parse_scene(scene_with(in_double, "1e-30", "100"), "test.yaml"));
+  EXPECT_NO_THROW(parse_scene(scene_with("kind: implicit", "1e-30", "100"), "test.yaml"));
   // The mass alone: 1/m would round to 0.0f.
-  const std::string mass = expect_error(scene_with(in_float, "5.0e4", "1e48"), "integrator.explicit_precision", "kg");
+  const std::string mass =
+      expect_error(scene_with(in_float, "5.0e4", "1e5", "1e12"), "integrator.explicit_precision", "kg");
   EXPECT_NE(mass.find("masses"), std::string::npos) << mass;
+  EXPECT_NO_THROW(parse_scene(scene_with(in_double, "5.0e4", "1e5", "1e12"), "test.yaml"));
   EXPECT_NO_THROW(parse_scene(scene_with(in_float, "5.0e4", "100"), "test.yaml"));  // an ordinary scene
 }
 
@@ -1085,6 +1092,17 @@ TEST(SceneYamlErrors, RemainingNumericBoundsAreChecked) {
                {"material.youngs_modulus_Pa=1e-300"});
   EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml",
                                              {"material.youngs_modulus_Pa=1e12", "material.density_kg_per_m3=2e4"}));
+  // Past any real material (a typo, or units not SI): representable, but a
+  // load strains so stiff a body less than its coordinates resolve, and so
+  // heavy a one moves by less than that a step; the projective rung then
+  // turned rounding into energy (kinetic energy 1e5x the work done at
+  // density 1.8e19, growing; found by tests/physics/scene_extremes_test.cpp).
+  expect_error(kBase, "material.youngs_modulus_Pa", "must be <= 1e+13 Pa (ten times diamond's; got 1.8e+19)",
+               {"material.youngs_modulus_Pa=1.8e19"});
+  expect_error(kBase, "material.density_kg_per_m3", "must be <= 1e+05 kg/m³ (four times osmium's; got 1.8e+19)",
+               {"material.density_kg_per_m3=1.8e19"});
+  EXPECT_NO_THROW(parse_scene_with_overrides(kBase, "ok.yaml",
+                                             {"material.youngs_modulus_Pa=1e13", "material.density_kg_per_m3=1e5"}));
   // The mass and stiffness scales were in range, but not the factors the
   // body multiplies on the way: density x six-volume overflowed (inf masses),
   // cube_size_m³ / 2^30 underflowed (every tet's volume and stiffness 0).
@@ -1270,9 +1288,12 @@ TEST(SceneYamlErrors, EveryScaleTheCheckAcceptsGivesOrdinaryMassesAndStiffnesses
         }
         if (!all_ok) return;  // one scene's failures are enough to read
       }
-  // The sweep reached the corners: cube sizes 1.5e-30..1.5e30 m, each with
-  // 10 densities and 10 moduli in range (the three that broke the body: none).
-  EXPECT_EQ(accepted, 7 * 10 * 10);
+  // The sweep reached the corners: cube sizes 1.5e-30..1.5e30 m, with the
+  // densities and moduli in range, up to the material caps (1e5 kg/m³,
+  // 1e13 Pa: 1.5e0 and 1.5e0 are the largest of the sweep's decades below
+  // them) (the three cube sizes that broke the body: none). 700 before the
+  // caps.
+  EXPECT_EQ(accepted, 250);
 }
 
 }  // namespace
