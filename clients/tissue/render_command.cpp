@@ -64,13 +64,18 @@ int run_render(RenderCommandOptions o) {
       std::cerr << "tissue render: -o: the output path is empty\n";
       return kExitBadArguments;
     }
-    // A sequence puts -0000 before OUT's extension: a directory got DIR/-0000,
-    // DIR/-0001, ... with no extension.
+    // An OUT that names a directory is a mistaken argument, exit 2 as the
+    // rest: one picture was exit 1 ("cannot write DIR: is a directory"), the
+    // code of an output that fails; a sequence put -0000 before OUT's
+    // extension, so a directory got DIR/-0000, DIR/-0001, ... with no
+    // extension.
     std::error_code ec;
-    if (o.sequence && (o.out.back() == '/' || std::filesystem::is_directory(o.out, ec))) {
-      std::cerr << "tissue render: -o " << o.out
-                << ": a directory; --sequence numbers a file name in it (-o DIR/frame.png writes DIR/frame-0000.png, "
-                   "DIR/frame-0001.png, ...)\n";
+    if (o.out.back() == '/' || std::filesystem::is_directory(o.out, ec)) {
+      std::cerr << "tissue render: -o " << o.out << ": a directory; "
+                << (o.sequence ? "--sequence numbers a file name in it (-o DIR/frame.png writes DIR/frame-0000.png, "
+                                 "DIR/frame-0001.png, ...)"
+                               : "name the PNG file to write in it (-o DIR/frame.png)")
+                << "\n";
       return kExitBadArguments;
     }
     // Before the frames are read: a live --sequence collects for up to an
@@ -251,7 +256,8 @@ Subcommand add_render_command(CLI::App& parent) {
       "the frame's min..max (printed; low at the bottom of the legend).\n"
       "Sources: --session FILE, or live: --lcm [URL] / --dds (the next frame received; --sequence: the frames\n"
       "received for --seconds S).\n"
-      "OUT's directory must exist; the first file is checked before any frame is read or collected.\n"
+      "OUT's directory must exist (an OUT that is a directory is a bad argument); the first file is checked\n"
+      "before any frame is read or collected.\n"
       "Ctrl-C or SIGTERM during a live --sequence ends the collection: the frames so far are rendered.\n"
       "Exit codes: 0 ok (also when the collection was cut short), 1 unreadable input or unwritable output,\n"
       "2 bad arguments, 3 LCM/DDS cannot start, 4 live: no surface_mesh within --timeout S (or stopped before one).");

@@ -185,6 +185,26 @@ TEST(RenderCli, ASequenceOutputThatIsADirectoryOrEmptyIsABadArgument) {
   }
 }
 
+// One picture to an OUT that is a directory (or ends in '/') is a bad
+// argument naming -o, as for a sequence: exit 2 before any frame is read. It
+// was exit 1 ("cannot write DIR: is a directory"), the code of an output
+// that fails, where every other mistaken argument is 2.
+TEST(RenderCli, AnOutputThatIsADirectoryIsABadArgument) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  const std::string frames = dir / "frames";
+  std::filesystem::create_directory(frames);
+  for (const std::string& out : {frames, frames + "/", dir / "new/"}) {
+    const RunResult r = render(dir, "--session " + quote(session) + " --width 64 --height 48 -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 2) << out << "\n" << r.err;
+    EXPECT_EQ(r.err,
+              "tissue render: -o " + out + ": a directory; name the PNG file to write in it (-o DIR/frame.png)\n")
+        << out;
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(frames));
+  EXPECT_FALSE(std::filesystem::exists(dir / "new"));
+}
+
 // Errors about a frame name it by its number and say its time to 9
 // digits; a --time before the first frame names the file and that frame's
 // time (as tissue x3d does). They said "frame (t=0.30000000000000004 s)"
