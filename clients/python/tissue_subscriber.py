@@ -5,7 +5,7 @@ Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
 writes an SVG of tets and real-time factor over time when it stops: after
 --seconds, or on SIGINT (Ctrl-C) or SIGTERM. A tcpq:// server is first asked
 for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for
-ever). A standard output that closes (| head) ends only the printing. Mesh
+ever), and LCM's own connection after it gets the same limit. A standard output that closes (| head) ends only the printing. Mesh
 and haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE);
 see proto/README.md for every field.
 
@@ -496,13 +496,39 @@ def main():
     if why:
         print(f"tissue_subscriber: --url {args.url}: {why}", file=sys.stderr)
         return 2
+    # LCM's own tcpq connection, made after the probe, waits for the greeting
+    # without a time limit too: a server that answered the probe and then
+    # stops answering (one client at a time, overloaded, paused) held
+    # lcm.LCM() for ever. It gets the probe's limit: from then on SIGALRM
+    # every 50 ms interrupts its connect() or recv() (Python installs its
+    # handlers without SA_RESTART, and LCM gives up on EINTR, leaving no
+    # socket), as SIGINT and SIGTERM do; repeated, so an alarm that lands
+    # just before LCM enters recv() is followed by another.
+    timed_out = []
+    connect_limit_s = min(args.seconds, TCPQ_GREETING_WAIT_S)
+    tcpq = args.url.startswith("tcpq://")
+    if tcpq:
+        signal.signal(signal.SIGALRM, lambda signum, frame: timed_out.append(signum))
+        signal.setitimer(signal.ITIMER_REAL, connect_limit_s, 0.05)
     try:
-        lc = lcm.LCM(args.url)
+        try:
+            lc = lcm.LCM(args.url)
+        finally:
+            if tcpq:
+                signal.setitimer(signal.ITIMER_REAL, 0)
         # A tcpq server that went away since it greeted leaves LCM without a
         # socket (fileno -1), which select() would refuse.
-        if lc.fileno() < 0 and not stop:
+        if lc.fileno() < 0:
             raise RuntimeError("no socket")
     except (IOError, RuntimeError):  # its text is only "Couldn't create LCM"
+        if stop:
+            print(f"tissue_subscriber: stopped before listening at {args.url}; no sim_stats", file=sys.stderr)
+            return 1
+        if timed_out:
+            print(f"tissue_subscriber: --url {args.url}: LCM's own connection got no greeting within "
+                  f"{connect_limit_s:g} s (the server answered the probe before it; is it still serving?)",
+                  file=sys.stderr)
+            return 2
         print(f"tissue_subscriber: --url {args.url}: {lcm_start_failure(args.url)}", file=sys.stderr)
         return 2
     stdout_closed = []

@@ -171,6 +171,21 @@ timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.
   rc=$?
 [ "$rc" -eq 1 ] || { cat "$work/greet.log"; fail "a tcpq server that greets: exit $rc, expected 1"; }
 grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/greet.log" || { cat "$work/greet.log"; fail "greet"; }
+# A server that greets the probe and not LCM's own connection after it:
+# LCM's client waited for that greeting for ever. Given min(--seconds, 10) s
+# as the probe is: exit 2 naming --url and why, without a traceback.
+listen greet-once
+rc=0
+start="$(date +%s)"
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/once.log" 2>&1 ||
+  rc=$?
+waited=$(($(date +%s) - start))
+[ "$rc" -eq 2 ] || { cat "$work/once.log"; fail "a tcpq server that greets the probe only: exit $rc, expected 2"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: LCM's own connection got no greeting within 1 s (the server answered the probe before it; is it still serving?)" \
+  "$work/once.log" || { cat "$work/once.log"; fail "a tcpq server that greets the probe only: not said"; }
+[ "$waited" -le 10 ] || fail "a tcpq server that greets the probe only: gave up after $waited s for --seconds 1"
+[ "$(grep -c accepted "$listener_log")" -eq 2 ] || fail "a tcpq server that greets the probe only: LCM did not connect"
+no_traceback "$work/once.log"
 listen web
 rc=0
 timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/web.log" 2>&1 ||
