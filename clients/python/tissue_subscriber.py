@@ -5,7 +5,7 @@ Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
 writes an SVG of tets and real-time factor over time when it stops: after
 --seconds, or on SIGINT (Ctrl-C) or SIGTERM. A tcpq:// server is first asked
 for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for
-ever). A standard output that closes (| head) ends only the printing. Mesh
+ever), and LCM's own connection after it gets the same limit. A standard output that closes (| head) ends only the printing. Mesh
 and haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE);
 see proto/README.md for every field.
 
@@ -31,7 +31,9 @@ plot as it was; its permissions are kept; a symbolic link stays a link and
 its target is replaced), or in place for a FIFO, a device or a file reached
 through /proc (--plot /dev/stdout). A FIFO is given at most 10 s for a
 reader to open it, and SIGINT or SIGTERM ends that wait; with no reader the
-plot is not written (exit 3, "no reader on the FIFO").
+plot is not written (exit 3, "no reader on the FIFO"). The reader is then
+given at most 10 s to take the whole plot (a signal ends that wait too):
+one that stopped reading is exit 3, "the FIFO took N of M bytes".
 Exit codes: 0 received at least one sim_stats message, 1 none arrived,
 2 bad arguments, missing modules or LCM cannot start at --url (said with the
 likely cause: no route for a udpm:// group), 3 statistics arrived but the
@@ -52,8 +54,10 @@ import tempfile
 import time
 
 DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
-# How long a --plot FIFO is given for a reader to open it.
+# How long a --plot FIFO is given for a reader to open it, and then for the
+# reader to take the whole plot.
 FIFO_READER_WAIT_S = 10.0
+FIFO_WRITE_WAIT_S = 10.0
 
 
 def find_types(explicit):
@@ -149,13 +153,39 @@ def open_fifo_for_writing(path, stop):
             if e.errno != errno.ENXIO:
                 raise
         else:
-            os.set_blocking(fd, True)  # the reader is there: the plot is written whole
-            return fd
+            return fd  # left non-blocking: write_to_fifo bounds the write
         if len(stop) > signals_before:
             raise OSError(errno.ENXIO, f"no reader on the FIFO (stopped by {signal.Signals(stop[-1]).name})")
         if time.monotonic() >= deadline:
             raise OSError(errno.ENXIO, f"no reader on the FIFO within {FIFO_READER_WAIT_S:g} s")
         time.sleep(0.05)
+
+
+def write_to_fifo(fd, data, stop):
+    """Writes all of `data` to the FIFO open without blocking at `fd`, for at
+    most FIFO_WRITE_WAIT_S. A blocking write waited for ever once a reader
+    that opened the FIFO stopped reading with the pipe full (64 KiB; a plot
+    of a few thousand points is more), and Python retries a write that a
+    signal interrupts (PEP 475), so Ctrl-C could not end it either. Written
+    as the pipe takes it, waiting in 50 ms slices; a signal added to `stop`
+    meanwhile ends the wait. OSError(EAGAIN) saying how much the FIFO took
+    when it did not take it all (it then has part of the plot)."""
+    signals_before = len(stop)
+    deadline = time.monotonic() + FIFO_WRITE_WAIT_S
+    view, written = memoryview(data), 0
+    while written < len(data):
+        try:
+            written += os.write(fd, view[written:])
+            continue
+        except BlockingIOError:
+            pass
+        took = f"the FIFO took {written} of {len(data)} bytes"
+        if len(stop) > signals_before:
+            raise OSError(errno.EAGAIN, f"{took} (stopped by {signal.Signals(stop[-1]).name})")
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise OSError(errno.EAGAIN, f"{took} in {FIFO_WRITE_WAIT_S:g} s (has its reader stopped reading?)")
+        select.select([], [fd], [], min(left, 0.05))
 
 
 def write_output_file(path, text, stop=()):
@@ -170,8 +200,9 @@ def write_output_file(path, text, stop=()):
     place instead, never renamed over: an existing node that is not a regular
     file (a FIFO, a device) and a file reached through /proc (appended to:
     its holder opened it, `>` truncated it already); a FIFO waits for its
-    reader as open_fifo_for_writing says (`stop`: the signal list). OSError
-    when it fails."""
+    reader as open_fifo_for_writing says and its reader is given at most
+    FIFO_WRITE_WAIT_S to take the text (write_to_fifo; `stop`: the signal
+    list ends either wait). OSError when it fails."""
     data = text.encode()
     try:
         st = os.stat(path)
@@ -182,8 +213,12 @@ def write_output_file(path, text, stop=()):
     if st is not None and writes_in_place(st, path):
         if stat.S_ISFIFO(st.st_mode):
             fd = open_fifo_for_writing(path, stop)
-        else:
-            fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
+            try:
+                write_to_fifo(fd, data, stop)
+            finally:
+                os.close(fd)
+            return
+        fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         return
@@ -496,13 +531,39 @@ def main():
     if why:
         print(f"tissue_subscriber: --url {args.url}: {why}", file=sys.stderr)
         return 2
+    # LCM's own tcpq connection, made after the probe, waits for the greeting
+    # without a time limit too: a server that answered the probe and then
+    # stops answering (one client at a time, overloaded, paused) held
+    # lcm.LCM() for ever. It gets the probe's limit: from then on SIGALRM
+    # every 50 ms interrupts its connect() or recv() (Python installs its
+    # handlers without SA_RESTART, and LCM gives up on EINTR, leaving no
+    # socket), as SIGINT and SIGTERM do; repeated, so an alarm that lands
+    # just before LCM enters recv() is followed by another.
+    timed_out = []
+    connect_limit_s = min(args.seconds, TCPQ_GREETING_WAIT_S)
+    tcpq = args.url.startswith("tcpq://")
+    if tcpq:
+        signal.signal(signal.SIGALRM, lambda signum, frame: timed_out.append(signum))
+        signal.setitimer(signal.ITIMER_REAL, connect_limit_s, 0.05)
     try:
-        lc = lcm.LCM(args.url)
+        try:
+            lc = lcm.LCM(args.url)
+        finally:
+            if tcpq:
+                signal.setitimer(signal.ITIMER_REAL, 0)
         # A tcpq server that went away since it greeted leaves LCM without a
         # socket (fileno -1), which select() would refuse.
-        if lc.fileno() < 0 and not stop:
+        if lc.fileno() < 0:
             raise RuntimeError("no socket")
     except (IOError, RuntimeError):  # its text is only "Couldn't create LCM"
+        if stop:
+            print(f"tissue_subscriber: stopped before listening at {args.url}; no sim_stats", file=sys.stderr)
+            return 1
+        if timed_out:
+            print(f"tissue_subscriber: --url {args.url}: LCM's own connection got no greeting within "
+                  f"{connect_limit_s:g} s (the server answered the probe before it; is it still serving?)",
+                  file=sys.stderr)
+            return 2
         print(f"tissue_subscriber: --url {args.url}: {lcm_start_failure(args.url)}", file=sys.stderr)
         return 2
     stdout_closed = []

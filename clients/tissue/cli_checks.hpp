@@ -8,8 +8,12 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <optional>
+#include <set>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "util/lcm_url.hpp"
 #include "util/output_file.hpp"
@@ -120,6 +124,30 @@ inline std::string output_problem(const std::string& path) {
   if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) return {};
   util::PendingOutputFile probe;
   return probe.open(path);  // abandoned by its destructor
+}
+
+// The first of `paths` that output_problem refuses, and why; nullopt when
+// all can be written. For the many files of `tissue render --sequence`,
+// checked before any frame is read: with %04d in a directory name each file
+// has a directory of its own, and a file's name may be taken (by a
+// directory), so the first file did not stand for the rest. A name with no
+// node yet, or a regular file, is written through a temporary file in its
+// directory and renamed: one probe per directory answers for all of them (an
+// hour at 30 Hz is 108 000 names in one). Any other node (a directory, a
+// link, a FIFO) is checked by its own name.
+struct OutputProblem {
+  std::string path, why;
+};
+inline std::optional<OutputProblem> first_output_problem(const std::vector<std::string>& paths) {
+  std::set<std::string> probed_directories;
+  for (const std::string& path : paths) {
+    struct stat st {};
+    if (::lstat(path.c_str(), &st) != 0 || S_ISREG(st.st_mode)) {
+      if (!probed_directories.insert(std::filesystem::path(path).parent_path().string()).second) continue;
+    }
+    if (std::string why = output_problem(path); !why.empty()) return OutputProblem{path, std::move(why)};
+  }
+  return std::nullopt;
 }
 
 }  // namespace tissue::cli

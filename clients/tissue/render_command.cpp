@@ -52,6 +52,13 @@ std::string numbered(const std::string& out, std::size_t i) {
   return out.substr(0, dot) + "-" + num + out.substr(dot);
 }
 
+// Whether numbered() puts each frame in a directory of its own (%04d in a
+// directory name of OUT, e.g. run%04d/frame.png).
+bool numbers_a_directory(const std::string& out) {
+  const auto p = out.find("%04d");
+  return p != std::string::npos && out.find('/', p) != std::string::npos;
+}
+
 int run_render(RenderCommandOptions o) {
   o.image.legend = !o.no_legend;
   o.image.colour = o.colour == "strain" ? x3d::ColourMode::kStrain : x3d::ColourMode::kLevel;
@@ -64,19 +71,34 @@ int run_render(RenderCommandOptions o) {
       std::cerr << "tissue render: -o: the output path is empty\n";
       return kExitBadArguments;
     }
-    // A sequence puts -0000 before OUT's extension: a directory got DIR/-0000,
-    // DIR/-0001, ... with no extension.
+    // An OUT that names a directory is a mistaken argument, exit 2 as the
+    // rest: one picture was exit 1 ("cannot write DIR: is a directory"), the
+    // code of an output that fails; a sequence put -0000 before OUT's
+    // extension, so a directory got DIR/-0000, DIR/-0001, ... with no
+    // extension.
     std::error_code ec;
-    if (o.sequence && (o.out.back() == '/' || std::filesystem::is_directory(o.out, ec))) {
+    if (o.out.back() == '/' || std::filesystem::is_directory(o.out, ec)) {
+      std::cerr << "tissue render: -o " << o.out << ": a directory; "
+                << (o.sequence ? "--sequence numbers a file name in it (-o DIR/frame.png writes DIR/frame-0000.png, "
+                                 "DIR/frame-0001.png, ...)"
+                               : "name the PNG file to write in it (-o DIR/frame.png)")
+                << "\n";
+      return kExitBadArguments;
+    }
+    // A live collection's frames are counted only once it is over, so the
+    // directories of run%04d/frame.png could not all be checked before it
+    // (below), and a missing one would lose the take.
+    if (o.sequence && o.live.live() && numbers_a_directory(o.out)) {
       std::cerr << "tissue render: -o " << o.out
-                << ": a directory; --sequence numbers a file name in it (-o DIR/frame.png writes DIR/frame-0000.png, "
-                   "DIR/frame-0001.png, ...)\n";
+                << ": %04d in a directory name; a live --sequence numbers the file name only (the directories its "
+                   "frames would need cannot be checked before the collection)\n";
       return kExitBadArguments;
     }
     // Before the frames are read: a live --sequence collects for up to an
     // hour, and an OUT that cannot be written (a missing directory) was found
-    // only after it, losing the take. A sequence's files share OUT's
-    // directory: the first one stands for them.
+    // only after it, losing the take. A live sequence's files share OUT's
+    // directory (above): the first one stands for them here, and every file
+    // is checked once the frames are counted (a session's before any is read).
     const std::string first_out = o.sequence ? numbered(o.out, 0) : o.out;
     if (const std::string why = output_problem(first_out); !why.empty()) {
       std::cerr << "tissue render: cannot write " << first_out << ": " << why << "\n";
@@ -110,6 +132,17 @@ int run_render(RenderCommandOptions o) {
                                         x3d::window_text(o.from_s, o.to_s, t0_s, t1_s))
                   << "\n";
         return kExitBadArguments;
+      }
+      // Every file the window's frames may need (empty frames, skipped,
+      // leave the last numbers unused), before any is written: a later file
+      // that could not be written (its own %04d directory missing, its name
+      // taken by a directory) was found after the earlier pictures were.
+      std::vector<std::string> outs;
+      outs.reserve(frames.size());
+      for (std::size_t i = 0; i < frames.size(); ++i) outs.push_back(numbered(o.out, i));
+      if (const std::optional<OutputProblem> bad = first_output_problem(outs)) {
+        std::cerr << "tissue render: cannot write " << bad->path << ": " << bad->why << "\n";
+        return kExitBadInput;
       }
     } else if (o.frame) {
       if (*o.frame >= n) {
@@ -251,7 +284,9 @@ Subcommand add_render_command(CLI::App& parent) {
       "the frame's min..max (printed; low at the bottom of the legend).\n"
       "Sources: --session FILE, or live: --lcm [URL] / --dds (the next frame received; --sequence: the frames\n"
       "received for --seconds S).\n"
-      "OUT's directory must exist; the first file is checked before any frame is read or collected.\n"
+      "OUT's directory must exist (an OUT that is a directory is a bad argument); every file is checked\n"
+      "before any frame is read (live: the first before the collection, every one before any is written;\n"
+      "%04d in a directory name gives each frame its own directory, session sequences only).\n"
       "Ctrl-C or SIGTERM during a live --sequence ends the collection: the frames so far are rendered.\n"
       "Exit codes: 0 ok (also when the collection was cut short), 1 unreadable input or unwritable output,\n"
       "2 bad arguments, 3 LCM/DDS cannot start, 4 live: no surface_mesh within --timeout S (or stopped before one).");

@@ -185,6 +185,70 @@ TEST(RenderCli, ASequenceOutputThatIsADirectoryOrEmptyIsABadArgument) {
   }
 }
 
+// One picture to an OUT that is a directory (or ends in '/') is a bad
+// argument naming -o, as for a sequence: exit 2 before any frame is read. It
+// was exit 1 ("cannot write DIR: is a directory"), the code of an output
+// that fails, where every other mistaken argument is 2.
+TEST(RenderCli, AnOutputThatIsADirectoryIsABadArgument) {
+  TempDir dir;
+  const std::string session = write_session(dir);
+  const std::string frames = dir / "frames";
+  std::filesystem::create_directory(frames);
+  for (const std::string& out : {frames, frames + "/", dir / "new/"}) {
+    const RunResult r = render(dir, "--session " + quote(session) + " --width 64 --height 48 -o " + quote(out));
+    EXPECT_EQ(r.exit_code, 2) << out << "\n" << r.err;
+    EXPECT_EQ(r.err,
+              "tissue render: -o " + out + ": a directory; name the PNG file to write in it (-o DIR/frame.png)\n")
+        << out;
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(frames));
+  EXPECT_FALSE(std::filesystem::exists(dir / "new"));
+}
+
+// Every file of a sequence is checked before a frame is read: with %04d in
+// a directory name each file has a directory of its own, and a file's name
+// may be taken by a directory. Only the first file was checked, so a later
+// one failed after the earlier pictures were written (a live collection,
+// after the take).
+TEST(RenderCli, EveryFileOfASequenceIsCheckedBeforeAnyIsWritten) {
+  TempDir dir;
+  const std::string session = write_session(dir);  // 3 frames
+  std::filesystem::create_directory(dir / "run0000");
+  std::filesystem::create_directory(dir / "run0001");
+  const std::string numbered_dirs = dir / "run%04d/f.png";
+  RunResult r =
+      render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(numbered_dirs));
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_EQ(r.err, "tissue render: cannot write " + (dir / "run0002/f.png") + ": cannot create a temporary file in '" +
+                       (dir / "run0002") + "': No such file or directory\n");
+  EXPECT_FALSE(std::filesystem::exists(dir / "run0000/f.png")) << "written before the check";
+  std::filesystem::create_directory(dir / "g-0001.png");  // a file's name taken by a directory
+  r = render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(dir / "g.png"));
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_EQ(r.err, "tissue render: cannot write " + (dir / "g-0001.png") + ": is a directory\n");
+  EXPECT_FALSE(std::filesystem::exists(dir / "g-0000.png")) << "written before the check";
+  // With every directory there, each file goes to its own.
+  std::filesystem::create_directory(dir / "run0002");
+  r = render(dir, "--session " + quote(session) + " --sequence --width 64 --height 48 -o " + quote(numbered_dirs));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* name : {"run0000/f.png", "run0001/f.png", "run0002/f.png"})
+    EXPECT_TRUE(std::filesystem::exists(dir / name)) << name;
+}
+
+// A live collection's frames are counted only once it is over, so the
+// directories a %04d in a directory name would need cannot be checked before
+// it: refused before LCM starts (memq://: in-process, no network either way).
+TEST(RenderCli, ALiveSequenceNumbersTheFileNameOnly) {
+  TempDir dir;
+  const std::string out = dir / "run%04d/f.png";
+  const RunResult r =
+      render(dir, "--lcm memq:// --timeout 1 --seconds 1 --sequence --width 64 --height 48 -o " + quote(out));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(r.err, "tissue render: -o " + out +
+                       ": %04d in a directory name; a live --sequence numbers the file name only (the directories "
+                       "its frames would need cannot be checked before the collection)\n");
+}
+
 // Errors about a frame name it by its number and say its time to 9
 // digits; a --time before the first frame names the file and that frame's
 // time (as tissue x3d does). They said "frame (t=0.30000000000000004 s)"

@@ -9,7 +9,10 @@ service that waits for its client to speak first).
 greet: answers each connection with an LCM tcpq server's greeting (magic
 0x287617fa, protocol version 0x0100, big-endian; LCM's lcm_tcpq.c), then is
 silent: a server that never forwards a message.
-web: answers with an HTTP error, as a web server would."""
+web: answers with an HTTP error, as a web server would.
+greet-once: greets the first connection only (the subscriber's probe), then
+is silent: a server that stops answering between the probe and LCM's own
+connection (one client at a time, overloaded, or stopped with SIGSTOP)."""
 import socket
 import struct
 import sys
@@ -17,7 +20,8 @@ import time
 
 answers = {"silent": b"", "greet": struct.pack(">II", 0x287617FA, 0x0100),
            "web": b"HTTP/1.1 400 Bad Request\r\n\r\n"}
-answer = answers[sys.argv[1]]
+mode = sys.argv[1]
+answer = answers["greet" if mode == "greet-once" else mode]
 listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
 listener.bind(("127.0.0.1", 0))
 listener.listen(8)
@@ -32,4 +36,6 @@ while (left := end - time.monotonic()) > 0:
     held.append(connection)  # held open: closing would tell the client at once
     if answer:
         connection.sendall(answer)
+    if mode == "greet-once":
+        answer = b""
     print("accepted", flush=True)

@@ -171,6 +171,21 @@ timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.
   rc=$?
 [ "$rc" -eq 1 ] || { cat "$work/greet.log"; fail "a tcpq server that greets: exit $rc, expected 1"; }
 grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/greet.log" || { cat "$work/greet.log"; fail "greet"; }
+# A server that greets the probe and not LCM's own connection after it:
+# LCM's client waited for that greeting for ever. Given min(--seconds, 10) s
+# as the probe is: exit 2 naming --url and why, without a traceback.
+listen greet-once
+rc=0
+start="$(date +%s)"
+timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/once.log" 2>&1 ||
+  rc=$?
+waited=$(($(date +%s) - start))
+[ "$rc" -eq 2 ] || { cat "$work/once.log"; fail "a tcpq server that greets the probe only: exit $rc, expected 2"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: LCM's own connection got no greeting within 1 s (the server answered the probe before it; is it still serving?)" \
+  "$work/once.log" || { cat "$work/once.log"; fail "a tcpq server that greets the probe only: not said"; }
+[ "$waited" -le 10 ] || fail "a tcpq server that greets the probe only: gave up after $waited s for --seconds 1"
+[ "$(grep -c accepted "$listener_log")" -eq 2 ] || fail "a tcpq server that greets the probe only: LCM did not connect"
+no_traceback "$work/once.log"
 listen web
 rc=0
 timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/web.log" 2>&1 ||
@@ -322,6 +337,49 @@ grep -q "cannot write $work/lonely.fifo: no reader on the FIFO within 10 s" "$wo
   { cat "$work/lonely.err"; fail "--plot at a FIFO without a reader: not said"; }
 [ "$waited" -ge 10 ] && [ "$waited" -le 20 ] || fail "--plot at a FIFO without a reader: gave up after $waited s, expected 10"
 [ -p "$work/lonely.fifo" ] || fail "--plot at a FIFO without a reader: the FIFO was replaced"
+# A reader that opens the FIFO and stops reading: the plot (more than the
+# pipe's 64 KiB: a second of the stream is thousands of points) is given
+# 10 s to go through, then exit 3, said with how much the FIFO took. A
+# blocking write waited for ever, and Ctrl-C could not end it.
+mkfifo "$work/stall.fifo"
+sleep 120 <"$work/stall.fifo" &
+staller=$!
+helpers="$helpers $staller"
+start="$(date +%s)"
+rc=0
+timeout -k 5 60 python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stall.fifo" >/dev/null 2>"$work/stall.err" ||
+  rc=$?
+waited=$(($(date +%s) - start))
+kill "$staller" 2>/dev/null || :  # gone if the reader was given its 120 s
+no_traceback "$work/stall.err"
+[ "$rc" -eq 3 ] || { cat "$work/stall.err"; fail "--plot at a FIFO whose reader stops reading: exit $rc, expected 3"; }
+grep -q "cannot write $work/stall.fifo: the FIFO took [0-9]* of [0-9]* bytes in 10 s (has its reader stopped reading?)" \
+  "$work/stall.err" || { cat "$work/stall.err"; fail "--plot at a FIFO whose reader stops reading: not said"; }
+[ "$waited" -ge 10 ] && [ "$waited" -le 20 ] || fail "--plot at a FIFO whose reader stops reading: gave up after $waited s, expected 10"
+# ... and a stop signal during that wait ends it at once, said the same way.
+sleep 120 <"$work/stall.fifo" &
+staller=$!
+helpers="$helpers $staller"
+env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stall.fifo" \
+  >"$work/stall-int.log" 2>"$work/stall-int.err" &
+stalled=$!
+helpers="$helpers $stalled"
+polls=0
+until grep -q '^t ' "$work/stall-int.log"; do
+  polls=$((polls + 1))
+  [ "$polls" -le 600 ] || fail "--plot at a stalled FIFO: no statistics in 60 s"
+  sleep 0.1
+done
+sleep 3  # the rest of its second of listening; then the plot waits on the full pipe
+kill -INT "$stalled"
+ends_within "$stalled" 3 "--plot at a FIFO whose reader stops reading: still running 3 s after SIGINT"
+rc=0
+wait "$stalled" || rc=$?
+kill "$staller" 2>/dev/null || :  # gone if the reader was given its 120 s
+no_traceback "$work/stall-int.err"
+[ "$rc" -eq 3 ] || { cat "$work/stall-int.err"; fail "--plot at a stalled FIFO, stopped: exit $rc, expected 3"; }
+grep -q "cannot write $work/stall.fifo: the FIFO took [0-9]* of [0-9]* bytes (stopped by SIGINT)" \
+  "$work/stall-int.err" || { cat "$work/stall-int.err"; fail "--plot at a stalled FIFO, stopped: not said"; }
 ln -s /proc/self/fd/1 "$work/stdout"
 rc=0
 python3 "$subscriber" --types "$types" --seconds 1 --plot "$work/stdout" >"$work/stdout.out" 2>"$work/stdout.err" || rc=$?

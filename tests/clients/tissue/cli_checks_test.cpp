@@ -135,5 +135,28 @@ TEST(OutputProblem, AFifoIsNotOpenedSoTheCheckReturnsAtOnce) {
   EXPECT_EQ(dir.names(), "out.fifo ");
 }
 
+// The files of a sequence: the first one that cannot be written is named
+// with why, wherever it is in the list (its own directory missing, its name
+// taken by a directory); a directory is probed once for all the new names in
+// it, but a name taken by a directory is found even after that probe.
+TEST(OutputProblem, TheFirstOfManyThatCannotBeWrittenIsNamed) {
+  const ScratchDir dir;
+  ASSERT_FALSE(dir.path.empty());
+  std::filesystem::create_directory(dir.path / "a");
+  const std::string in_a = dir.path / "a" / "f.png", in_missing = dir.path / "b" / "f.png";
+  EXPECT_FALSE(first_output_problem({in_a, dir.path / "g-0000.png", dir.path / "g-0001.png"}));
+  std::optional<OutputProblem> bad = first_output_problem({in_a, in_missing, dir.path / "c" / "f.png"});
+  ASSERT_TRUE(bad);
+  EXPECT_EQ(bad->path, in_missing);
+  EXPECT_NE(bad->why.find("'" + (dir.path / "b").string() + "': No such file or directory"), std::string::npos)
+      << bad->why;
+  std::filesystem::create_directory(dir.path / "g-0001.png");
+  bad = first_output_problem({dir.path / "g-0000.png", dir.path / "g-0001.png"});
+  ASSERT_TRUE(bad);
+  EXPECT_EQ(bad->path, (dir.path / "g-0001.png").string());
+  EXPECT_EQ(bad->why, "is a directory");
+  EXPECT_EQ(dir.names().find(".tmp"), std::string::npos) << "a probe left its file: " << dir.names();
+}
+
 }  // namespace
 }  // namespace tissue::cli
