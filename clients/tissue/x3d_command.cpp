@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -164,6 +165,12 @@ int run_x3d(const X3dCommandOptions& o) {
     if (o.session.empty() && !o.live.live())
       throw BadArguments("--session is required (or a live source: --lcm [URL] or --dds)");
     if (o.out.empty()) throw BadArguments("-o: the output path is empty");
+    // A mistaken argument, as in tissue render, not an output that fails
+    // (exit 1, "cannot write 'DIR': is a directory").
+    std::error_code ec;
+    if (o.out.back() == '/' || std::filesystem::is_directory(o.out, ec))
+      throw BadArguments("-o " + o.out + ": a directory; name the X3D file to write in it (-o " +
+                         (o.out.back() == '/' ? o.out.substr(0, o.out.size() - 1) : o.out) + "/scene.x3d)");
     // The rename would put the export where the recording was.
     if (!o.live.live() && util::same_file(o.out, o.session))
       throw x3d::SourceError("-o " + o.out + " is the input session " + o.session +
@@ -241,7 +248,8 @@ Subcommand add_x3d_command(CLI::App& parent) {
   cmd->footer(
       "Sources: --session FILE, or live: --lcm [URL] / --dds (a snapshot of the next frame received; --animate:\n"
       "the frames received for --seconds S).\n"
-      "OUT's directory must exist; OUT is checked before any frame is read or collected.\n"
+      "OUT's directory must exist (an OUT that is a directory is a bad argument); OUT is checked before any\n"
+      "frame is read or collected.\n"
       "Ctrl-C or SIGTERM during a live --animate ends the collection: the frames so far are exported.\n"
       "Exit codes: 0 ok (also when the collection was cut short), 1 unreadable input or unwritable output,\n"
       "2 bad arguments, 3 LCM/DDS cannot start, 4 live: no surface_mesh within --timeout S (or stopped before one).");

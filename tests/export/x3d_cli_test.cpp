@@ -322,6 +322,16 @@ TEST_F(X3dCli, BadArgumentsExitTwo) {
   // and then failed to be renamed to '').
   expect_2("--session " + quote(session_) + " -o ''", "tissue x3d: -o: the output path is empty\n");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.x3d"));
+  // An OUT that is a directory is a mistaken argument, as in tissue render
+  // (it was exit 1, "cannot write 'DIR': is a directory", the code of an
+  // output that fails), and so is one ending in '/'.
+  std::filesystem::create_directory(dir_ / "exports");
+  expect_2("--session " + quote(session_) + " -o " + quote(dir_ / "exports"),
+           "tissue x3d: -o " + (dir_ / "exports") + ": a directory; name the X3D file to write in it (-o " +
+               (dir_ / "exports") + "/scene.x3d)\n");
+  expect_2("--session " + quote(session_) + " -o " + quote(dir_ / "new/"), ": a directory; name the X3D file");
+  expect_2("--lcm memq:// -o " + quote(dir_ / "exports"), ": a directory; name the X3D file");  // before any wait
+  EXPECT_TRUE(std::filesystem::is_empty(dir_ / "exports"));
 }
 
 // Frame times in messages have 9 significant digits, as docs/x3d-export.md
