@@ -149,6 +149,20 @@ void default_modes(TradeOptions& o) {
     o.sweep = true;
 }
 
+// A value given twice in a list (or across repeats of its option) ran its
+// points twice: twice the time, duplicate rows in the CSV and points drawn
+// over each other in the plot.
+template <class T>
+void no_repeats(const std::string& option, const std::vector<T>& values) {
+  for (std::size_t i = 0; i < values.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (values[j] == values[i]) {
+        std::ostringstream text;
+        text << values[i];
+        throw std::invalid_argument(option + ": " + text.str() + " is given twice (each point of the sweep runs once)");
+      }
+}
+
 // What no single option shows wrong: names out of their lists, options for
 // a mode or a file that is not asked for (`given`: the options on the
 // command line, in order), both files at one path.
@@ -180,6 +194,10 @@ void check_together(const TradeOptions& o, const std::vector<std::string>& given
   if (o.metric != "rms" && o.metric != "max" && o.metric != "tip" && o.metric != "path")
     throw std::invalid_argument("--metric must be rms, max, tip or path");
   if (o.beam_max_depth >= 0) check_beam_depth(o.beam_max_depth);
+  no_repeats("--th", o.th_Pa);
+  no_repeats("--depths", o.max_depths);
+  no_repeats("--integrators", o.integrators);
+  no_repeats("--dts", o.dts_s);
 }
 
 }  // namespace

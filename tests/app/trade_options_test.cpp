@@ -95,16 +95,16 @@ TEST(TradeOptions, EachErrorNamesTheOptionOrTheConflict) {
   EXPECT_EQ(parse_error({"--table1", "--scene-file", "mine.yaml", "--set", "a=1"}),
             "--scene-file is the sweep's option (Table 1 and beam theory do not read it): add --sweep");
   for (const std::vector<std::string>& option : {std::vector<std::string>{"--scene", "beam"},
-                                                {"--th", "20"},
-                                                {"--depths", "3"},
-                                                {"--integrators", "implicit"},
-                                                {"--dts", "0.001"},
-                                                {"--duration", "0.2"},
-                                                {"--run-cap", "5"},
-                                                {"--clock", "wall"},
-                                                {"--metric", "rms"},
-                                                {"--preconditioner", "jacobi"},
-                                                {"--explicit-precision", "float"}}) {
+                                                 {"--th", "20"},
+                                                 {"--depths", "3"},
+                                                 {"--integrators", "implicit"},
+                                                 {"--dts", "0.001"},
+                                                 {"--duration", "0.2"},
+                                                 {"--run-cap", "5"},
+                                                 {"--clock", "wall"},
+                                                 {"--metric", "rms"},
+                                                 {"--preconditioner", "jacobi"},
+                                                 {"--explicit-precision", "float"}}) {
     std::vector<std::string> args = {"--beam-theory", "--quick"};
     args.insert(args.end(), option.begin(), option.end());
     EXPECT_EQ(parse_error(args),
@@ -117,6 +117,17 @@ TEST(TradeOptions, EachErrorNamesTheOptionOrTheConflict) {
   // The sweep runs one scene: a built-in one or a file, not both.
   EXPECT_EQ(parse_error({"--sweep", "--scene", "beam", "--scene-file", "mine.yaml"}),
             "--scene and --scene-file both name the sweep's scene: give one");
+  // A value given twice ran its points twice (duplicate CSV rows, points
+  // drawn over each other), by value and across repeats of the option.
+  EXPECT_EQ(parse_error({"--sweep", "--depths", "3,3"}),
+            "--depths: 3 is given twice (each point of the sweep runs once)");
+  EXPECT_EQ(parse_error({"--sweep", "--th", "5,20", "--th", "5.0"}),
+            "--th: 5 is given twice (each point of the sweep runs once)");
+  EXPECT_EQ(parse_error({"--sweep", "--dts", "0.001,1e-3"}),
+            "--dts: 0.001 is given twice (each point of the sweep runs once)");
+  EXPECT_EQ(parse_error({"--sweep", "--integrators", "implicit,explicit,implicit"}),
+            "--integrators: implicit is given twice (each point of the sweep runs once)");
+  EXPECT_EQ(parse_error({"--sweep", "--depths", "3,6", "--th", "5,20", "--dts", "0.001,0.005"}), "");
 }
 
 }  // namespace
