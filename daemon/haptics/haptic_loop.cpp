@@ -125,6 +125,7 @@ void HapticLoop::tick(std::int64_t now_ns) noexcept {
 
   // 1. Device input.
   DeviceSample raw;
+  bool device_fresh = false;  // a new sample accepted this tick: the session records it
   if (device_.read(now_ns, &raw)) {
     if (accept_sample(now_ns, raw)) {
       if (have_energy_position_) {
@@ -136,6 +137,7 @@ void HapticLoop::tick(std::int64_t now_ns) noexcept {
       sample_ = raw;
       have_sample_ = true;
       last_sample_ns_ = now_ns;
+      device_fresh = true;
     }
   } else {
     bump(missing_samples_);
@@ -223,6 +225,7 @@ void HapticLoop::tick(std::int64_t now_ns) noexcept {
   s.contact_node = render.contact ? render.contact_node : std::array<std::uint32_t, 3>{};
   s.contact_weight = render.contact ? render.contact_weight : std::array<double, 3>{};
   s.model_version = have_model_ ? model.version : 0;
+  s.device_fresh = device_fresh;
   samples_.try_push(s);
 
   // 6. Counters.

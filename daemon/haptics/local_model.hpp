@@ -67,6 +67,11 @@ struct ToolSample {
   std::array<double, 3> contact_weight{};       // barycentric weights, sum 1 (0 when not in contact)
   bool contact = false;
   std::uint64_t model_version = 0;  // LocalModel version the tick rendered against
+  // The device delivered a new sample this tick and the loop accepted it, so
+  // device_position_m is that sample and not the last one held (no sample,
+  // or a rejected one). Recorded (/haptic/device_fresh) so that a replay
+  // spreads each step over the time the loop measured it over live.
+  bool device_fresh = false;
 
   // Fixed-size Eigen members never throw on copy, but do not say so; the
   // lock-free ring requires it to be stated.

@@ -39,9 +39,10 @@ std::string fmt_speed_at_most(double max_speed_m_per_s, double peak_m_per_s) {
 }  // namespace
 
 ReplayDevice::ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
-                           double max_speed_m_per_s)
+                           double max_speed_m_per_s, std::vector<std::uint8_t> device_fresh)
     : time_s_(std::move(time_s)),
       position_m_(std::move(position_m)),
+      device_fresh_(std::move(device_fresh)),
       speed_(speed),
       loop_(loop),
       max_speed_m_per_s_(max_speed_m_per_s) {}
@@ -53,6 +54,9 @@ bool ReplayDevice::start(std::string* error) {
   };
   if (time_s_.empty() || time_s_.size() != position_m_.size()) return fail("the track is empty or inconsistent");
   if (!(speed_ > 0.0) || !std::isfinite(speed_)) return fail("speed must be a positive number");
+  if (!device_fresh_.empty() && device_fresh_.size() != time_s_.size())
+    return fail("the track is inconsistent: " + std::to_string(device_fresh_.size()) + " device_fresh flags for " +
+                std::to_string(time_s_.size()) + " rows");
   for (std::size_t i = 0; i < time_s_.size(); ++i) {
     if (!std::isfinite(time_s_[i]) || (i > 0 && time_s_[i] < time_s_[i - 1]))
       return fail("track times must be finite and non-decreasing (row " + std::to_string(i) + ")");
@@ -81,7 +85,81 @@ bool ReplayDevice::start(std::string* error) {
   return true;
 }
 
+void ReplayDevice::add_knot(double t_s, const Vec3& p_m) {
+  if (knot_time_s_.empty() || t_s > knot_time_s_.back()) {
+    knot_time_s_.push_back(t_s);
+    knot_position_m_.push_back(p_m);
+  } else {
+    knot_position_m_.back() = p_m;  // rows at the same time: the later one holds
+  }
+}
+
 void ReplayDevice::build_knots() {
+  knot_time_s_.clear();
+  knot_position_m_.clear();
+  if (device_fresh_.empty())
+    build_knots_by_guess();
+  else
+    build_knots_from_flags();
+}
+
+namespace {
+
+// The median of `gaps_s` (reordered), 0 when empty.
+double median_s(std::vector<double>& gaps_s) {
+  if (gaps_s.empty()) return 0.0;
+  const auto middle = gaps_s.begin() + static_cast<std::ptrdiff_t>(gaps_s.size() / 2);
+  std::nth_element(gaps_s.begin(), middle, gaps_s.end());
+  return *middle;
+}
+
+}  // namespace
+
+void ReplayDevice::build_knots_from_flags() {
+  const std::size_t rows = time_s_.size();
+  // A row is a new sample when its flag says so, or when its position
+  // changed: the recorder drops rows when its ring overflows, and the
+  // flagged row may be among them (the step then spreads from the sample
+  // before it, slower than live, never faster).
+  const auto is_sample = [&](std::size_t i) {
+    return device_fresh_[i] != 0 || (i > 0 && position_m_[i] != position_m_[i - 1]);
+  };
+  std::size_t samples = 0, first = rows;
+  for (std::size_t i = 0; i < rows; ++i) {
+    if (!is_sample(i)) continue;
+    ++samples;
+    if (first == rows) first = i;
+  }
+  // For device_period_s(): the median time between flagged rows.
+  std::vector<double> gaps_s;
+  gaps_s.reserve(samples);
+  bool have_fresh = false;
+  double last_fresh_s = 0.0;
+  for (std::size_t i = 0; i < rows; ++i) {
+    if (device_fresh_[i] == 0) continue;
+    if (have_fresh) gaps_s.push_back(time_s_[i] - last_fresh_s);
+    have_fresh = true;
+    last_fresh_s = time_s_[i];
+  }
+  device_period_s_ = median_s(gaps_s);
+
+  knot_time_s_.reserve(samples + 2);
+  knot_position_m_.reserve(samples + 2);
+  // Before the first sample the loop had no hand: it rendered nothing, judged
+  // that sample against nothing, and the rows hold the device origin. Held
+  // at the first sample's pose from the first row, the replay does not
+  // invent a sweep from the origin (which could be too fast to play at all).
+  add_knot(time_s_.front(), first < rows ? position_m_[first] : position_m_.front());
+  // Each sample a knot: the step to it spreads over the time since the
+  // sample before, the time the loop measured it over live (a lost sample
+  // is a longer gap; a still hand whose device re-sends its pose is a run
+  // of knots at that pose, held until the last one before it moves).
+  for (std::size_t i = first; i < rows; ++i)
+    if (is_sample(i)) add_knot(time_s_[i], position_m_[i]);
+  if (time_s_.back() > knot_time_s_.back()) add_knot(time_s_.back(), position_m_.back());
+}
+
+void ReplayDevice::build_knots_by_guess() {
   const std::size_t rows = time_s_.size();
   // The device's sample period: the median time between position changes
   // (robust to the long gaps where the hand stood still, and to jitter).
@@ -97,27 +175,12 @@ void ReplayDevice::build_knots() {
     have_change = true;
     last_change_s = time_s_[i];
   }
-  device_period_s_ = 0.0;
-  if (!gaps_s.empty()) {
-    const auto middle = gaps_s.begin() + static_cast<std::ptrdiff_t>(gaps_s.size() / 2);
-    std::nth_element(gaps_s.begin(), middle, gaps_s.end());
-    device_period_s_ = *middle;
-  }
+  device_period_s_ = median_s(gaps_s);
 
-  knot_time_s_.clear();
-  knot_position_m_.clear();
   knot_time_s_.reserve(2 * changes + 2);
   knot_position_m_.reserve(2 * changes + 2);
-  auto add = [&](double t_s, const Vec3& p_m) {
-    if (t_s > knot_time_s_.back()) {
-      knot_time_s_.push_back(t_s);
-      knot_position_m_.push_back(p_m);
-    } else {
-      knot_position_m_.back() = p_m;  // rows at the same time: the later one holds
-    }
-  };
-  knot_time_s_.push_back(time_s_.front());
-  knot_position_m_.push_back(position_m_.front());
+  auto add = [&](double t_s, const Vec3& p_m) { add_knot(t_s, p_m); };
+  add(time_s_.front(), position_m_.front());
   double held_since_s = time_s_.front();
   for (std::size_t i = 1; i < rows; ++i) {
     if (position_m_[i] == position_m_[i - 1]) continue;

@@ -13,12 +13,16 @@
 // (a 250 Hz UDP device) is recorded as a pose held for a few rows, then a
 // step. Played row to row, the whole motion between two poses would come in
 // one tick at several times the speed the loop measured live (it saw each
-// pose a device period after the last), and the loop would reject the hand
-// as too fast. So the hand is played through knots: the rows where a new
-// position came, each step spread over the time since the last one came, up
-// to kSpreadPeriods of the recorded device's sample periods.
+// pose some time after the last), and the loop would reject the hand as too
+// fast. So the hand is played through knots: the rows where a new sample
+// came, each step spread over the time since the one before came, which is
+// what the loop measured it over live. Sessions of format version 3 and
+// later say which rows those are (/haptic/device_fresh); for older ones the
+// time is guessed from the position changes, at most kSpreadPeriods of the
+// recorded device's sample periods.
 #pragma once
 
+#include <cstdint>
 #include <limits>
 #include <vector>
 
@@ -31,8 +35,12 @@ class ReplayDevice final : public Device {
   // time_s non-decreasing, the same length as position_m, at least one row.
   // max_speed_m_per_s: device.limits.max_speed_m_per_s (device frame, as
   // position_m): start() refuses a speed that plays the track faster.
+  // device_fresh: the session's /haptic/device_fresh, one 0/1 per row (1:
+  // a new device sample came that tick), or empty when the session did not
+  // record it (format version < 3: the knots are guessed, see build_knots).
   ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
-               double max_speed_m_per_s = std::numeric_limits<double>::infinity());
+               double max_speed_m_per_s = std::numeric_limits<double>::infinity(),
+               std::vector<std::uint8_t> device_fresh = {});
 
   bool start(std::string* error) override;
   void stop() noexcept override {}
@@ -45,11 +53,13 @@ class ReplayDevice final : public Device {
 
   double duration_s() const noexcept { return time_s_.back() - time_s_.front(); }
   const Vec3& last_force_N() const noexcept { return last_force_N_; }
-  // The recorded device's sample period start() found (the median time
-  // between the track's position changes; 0 with fewer than two changes).
+  // The recorded device's sample period start() found: the median time
+  // between the rows where a new sample came (with device_fresh flags), or
+  // between the track's position changes (without); 0 with fewer than two.
   double device_period_s() const noexcept { return device_period_s_; }
 
-  // Each step is spread over at most this many device periods. A recording
+  // Without device_fresh flags (a session of format version < 3), each step
+  // is spread over at most this many device periods. Such a recording
   // cannot tell a late or lost pose from a hand that stood still (the row
   // holds the old pose either way), and live they differ: with a pose lost,
   // UdpDevice::read returned false on the ticks without a datagram and the
@@ -65,17 +75,27 @@ class ReplayDevice final : public Device {
 
  private:
   // The knots read() interpolates and start() checks the speed of (one rule
-  // for both): the first row; every row whose position differs from the row
-  // before (the time a new pose came); before such a row, when the old pose
-  // was held longer than kSpreadPeriods device periods, a knot holding it
-  // until kSpreadPeriods periods before the change (or the last row that
-  // still showed it, if earlier), so the hand stands still and then moves
-  // over those periods; and the last row. A shorter hold gets no extra knot:
-  // the step is spread over the whole gap. A track whose position changes
-  // every row keeps every row as a knot and replays as it did row to row.
+  // for both). With device_fresh flags (build_knots_from_flags): every row
+  // where a new sample came, so each step is spread over the time since the
+  // sample before it, as the loop measured it live (a still hand whose
+  // device re-sends its pose is held, and its first step takes one period);
+  // see there for the first and last rows. Without (build_knots_by_guess):
+  // the first row; every row whose position differs from the row before (the
+  // time a new pose came); before such a row, when the old pose was held
+  // longer than kSpreadPeriods device periods, a knot holding it until
+  // kSpreadPeriods periods before the change (or the last row that still
+  // showed it, if earlier), so the hand stands still and then moves over
+  // those periods; and the last row. A shorter hold gets no extra knot: the
+  // step is spread over the whole gap. Either way a track that has a new
+  // position every row keeps every row as a knot and replays row to row.
   void build_knots();
+  void build_knots_from_flags();
+  void build_knots_by_guess();
+  // Appends a knot; a row at the time of the last knot replaces its position.
+  void add_knot(double t_s, const Vec3& p_m);
   std::vector<double> time_s_;
   std::vector<Vec3> position_m_;
+  std::vector<std::uint8_t> device_fresh_;  // empty: not recorded
   double speed_;
   bool loop_;
   double max_speed_m_per_s_;

@@ -29,6 +29,11 @@ struct HapticRow {
   std::array<double, 3> force_N{};  // force rendered on the device (after safety)
   std::uint8_t contact = 0;         // 1 while the proxy touches the surface
   std::uint64_t model_version = 0;  // LocalModel version the tick rendered against
+  // 1 when the device delivered a new sample this tick and the loop accepted
+  // it (device_position_m is that sample); 0 when the tick held the last one.
+  // Also 0 in rows read from files of format version < 3, which did not
+  // record it (SessionInfo::has_device_fresh).
+  std::uint8_t device_fresh = 0;
 };
 
 // One simulation statistics sample.

@@ -15,9 +15,10 @@
 
 namespace tissue::record {
 
-// Version 2 added /mesh/triangle_strain_energy_J_per_m3. Readers accept
-// every version from 1 (a dataset's since_version says which files have it).
-inline constexpr std::int64_t kSessionFormatVersion = 2;
+// Version 2 added /mesh/triangle_strain_energy_J_per_m3, version 3
+// /haptic/device_fresh. Readers accept every version from 1 (a dataset's
+// since_version says which files have it).
+inline constexpr std::int64_t kSessionFormatVersion = 3;
 inline constexpr std::int64_t kOldestReadableFormatVersion = 1;
 
 enum class ElementType : std::uint8_t { kF64, kF32, kU8, kI32, kU64, kI64, kString };
@@ -47,6 +48,7 @@ enum DatasetId : std::size_t {
   kHapticForce,
   kHapticContact,
   kHapticModelVersion,
+  kHapticDeviceFresh,
   kHapticTime,
   kSimSimTime,
   kSimRealTimeFactor,
@@ -82,6 +84,11 @@ inline constexpr std::array<DatasetSpec, kDatasetCount> kDatasets = {{
     {"/haptic/force_N", Group::kHaptic, ElementType::kF64, 3, "N", 1024},
     {"/haptic/contact", Group::kHaptic, ElementType::kU8, 1, "1 (0/1)", 1024},
     {"/haptic/model_version", Group::kHaptic, ElementType::kU64, 1, "1 (counter)", 1024},
+    // 1: the device delivered a new sample that tick and the loop accepted
+    // it. A replay spreads each step over the time since the last such row,
+    // as the loop measured it live (without it, a held pose is a lost
+    // sample or a still hand, and the replay can only guess which).
+    {"/haptic/device_fresh", Group::kHaptic, ElementType::kU8, 1, "1 (0/1: a new device sample that tick)", 1024, 3},
     {"/haptic/time_s", Group::kHaptic, ElementType::kF64, 1, "s (session time)", 1024},
     {"/sim/sim_time_s", Group::kSim, ElementType::kF64, 1, "s (simulated)", 512},
     {"/sim/real_time_factor", Group::kSim, ElementType::kF64, 1, "1", 512},

@@ -484,6 +484,7 @@ SessionInfo info_of(hid_t file, const std::string& path, const Preamble& pre, Co
                        " is not supported (this tool reads " + std::to_string(kOldestReadableFormatVersion) + " to " +
                        std::to_string(kSessionFormatVersion) + ")");
   info.has_strain = dataset_in_version(kDatasets[kMeshTriangleStrain], info.format_version);
+  info.has_device_fresh = dataset_in_version(kDatasets[kHapticDeviceFresh], info.format_version);
   std::int64_t clean = 0;  // missing: a file from before the mark was created with it
   if (integer_attribute(kAttrClosedCleanly, &clean) && clean != 0 && clean != 1)
     bad_file(path, std::string("root attribute ") + kAttrClosedCleanly + " is " + std::to_string(clean) +
@@ -702,6 +703,17 @@ std::vector<HapticRow> read_haptic_rows(const SessionFile& f) {
   read_into(f, kHapticForce, rows, &HapticRow::force_N);
   read_into(f, kHapticContact, rows, &HapticRow::contact);
   read_into(f, kHapticModelVersion, rows, &HapticRow::model_version);
+  // Files of format version < 3 did not record it: 0 there, and
+  // read_haptic_track says the flags are unknown.
+  if (f.info().has_device_fresh) {
+    read_into(f, kHapticDeviceFresh, rows, &HapticRow::device_fresh);
+    // The replay device spreads each step over the time since the last
+    // flagged row: a damaged value must not become a guess at which.
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      if (rows[i].device_fresh > 1)
+        f.fail(std::string(kDatasets[kHapticDeviceFresh].path) + " is " + std::to_string(rows[i].device_fresh) +
+               " at row " + std::to_string(i) + ": a flag is 0 or 1");
+  }
   require_finite(f, kHapticDevicePosition, rows, &HapticRow::device_position_m);
   require_finite(f, kHapticProxyPosition, rows, &HapticRow::proxy_position_m);
   require_finite(f, kHapticForce, rows, &HapticRow::force_N);
@@ -749,6 +761,7 @@ HapticTrack read_haptic_track(const std::string& path) {
   track.time_s.reserve(rows.size());
   track.device_position_m.reserve(rows.size());
   track.force_N.reserve(rows.size());
+  if (f.info().has_device_fresh) track.device_fresh.reserve(rows.size());
   for (std::size_t i = 0; i < rows.size(); ++i) {
     // The device drives the haptic loop with these: a NaN would reach the
     // force renderer.
@@ -757,6 +770,7 @@ HapticTrack read_haptic_track(const std::string& path) {
     track.time_s.push_back(rows[i].time_s);
     track.device_position_m.push_back(rows[i].device_position_m);
     track.force_N.push_back(rows[i].force_N);
+    if (f.info().has_device_fresh) track.device_fresh.push_back(rows[i].device_fresh);
   }
   return track;
 }
@@ -796,7 +810,12 @@ std::string format_session_info(const SessionInfo& info) {
   o << "software version: " << shown(info.software_version) << "\n";
   o << "format version:   " << info.format_version << "\n";
   o << "rows:\n";
-  o << "  /haptic         " << info.rows.haptic_rows << " ticks\n";
+  // Whether a replay of the hand knows when each new device sample came
+  // (device.replay: exact) or has to guess it from the positions.
+  o << "  /haptic         " << info.rows.haptic_rows << " ticks"
+    << (info.has_device_fresh ? ", each flagged when a new device sample came"
+                              : ", no device_fresh flags (format version " + std::to_string(info.format_version) + ")")
+    << "\n";
   o << "  /sim            " << info.rows.sim_rows << " samples\n";
   o << "  /mesh           " << info.rows.mesh_frames << " frames (" << info.rows.mesh_vertices << " vertices, "
     << info.rows.mesh_triangles << " triangles"

@@ -29,6 +29,9 @@ struct SessionInfo {
   // Format version 2 and later store per-triangle strain energy density
   // (/mesh/triangle_strain_energy_J_per_m3); version 1 files do not.
   bool has_strain = false;
+  // Format version 3 and later record per haptic tick whether the device
+  // delivered a new sample (/haptic/device_fresh); older files do not.
+  bool has_device_fresh = false;
   bool closed_cleanly = false;
   // The superblock still says "open for (SWMR) writing": the writer crashed
   // (or is still running). Ordinary readers refuse such a file until it is
@@ -169,9 +172,13 @@ struct HapticTrack {
   std::vector<double> time_s;                            // session time, non-decreasing
   std::vector<std::array<double, 3>> device_position_m;  // scene frame
   std::vector<std::array<double, 3>> force_N;            // rendered on the device
+  // /haptic/device_fresh, one 0/1 per row; empty for a file of format
+  // version < 3, which did not record it (the replay then guesses).
+  std::vector<std::uint8_t> device_fresh;
 };
 // Throws RecordError naming the file and what is wrong (not a session, no
-// haptic rows, times not increasing or not finite, positions not finite).
+// haptic rows, times not increasing or not finite, positions not finite, a
+// device_fresh flag other than 0 or 1).
 HapticTrack read_haptic_track(const std::string& path);
 
 struct RepairReport {

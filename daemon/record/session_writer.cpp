@@ -458,6 +458,8 @@ void SessionWriter::append_haptic(std::span<const HapticRow> rows) {
   u64_.resize(n);
   for (std::size_t i = 0; i < n; ++i) u64_[i] = rows[i].model_version;
   append(kHapticModelVersion, u64_.data(), n);
+  for (std::size_t i = 0; i < n; ++i) u8_[i] = rows[i].device_fresh;
+  append(kHapticDeviceFresh, u8_.data(), n);
   f64_.resize(n);
   for (std::size_t i = 0; i < n; ++i) f64_[i] = rows[i].time_s;
   append(kHapticTime, f64_.data(), n);

@@ -93,9 +93,11 @@ class HapticSideImpl final : public HapticSide {
       if (config.device.replay.loop && !positions.empty())
         wrap_warning = haptics::loop_wrap_warning("device.replay.loop", (positions.back() - positions.front()).norm(),
                                                   config.device.limits.max_speed_m_per_s, config.haptics.rate_hz);
-      device_ =
-          std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
-                                                  config.device.replay.loop, config.device.limits.max_speed_m_per_s);
+      // With the session's device_fresh flags (empty for a file from before
+      // them) the replay spreads each step exactly as the loop measured it.
+      device_ = std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
+                                                        config.device.replay.loop,
+                                                        config.device.limits.max_speed_m_per_s, track.device_fresh);
     } else {
       device_ = haptics::make_device(config.device, &error);
       wrap_warning = haptics::sim_loop_wrap_warning(config.device, config.haptics.rate_hz);

@@ -129,6 +129,7 @@ void SimThread::record_haptic(record::Recorder& recorder) {
     row.force_N = {s.force_on_device_N.x(), s.force_on_device_N.y(), s.force_on_device_N.z()};
     row.contact = s.contact ? 1 : 0;
     row.model_version = s.model_version;
+    row.device_fresh = s.device_fresh ? 1 : 0;
     recorder.push_haptic(row);
   }
 }

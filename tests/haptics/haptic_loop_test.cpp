@@ -210,6 +210,41 @@ TEST(HapticLoop, DeviceTimeoutRampsTheForceOut) {
   EXPECT_EQ(st.device_lost_trips, 1u);
 }
 
+// Each tick's sample says whether the device delivered a new sample the loop
+// accepted (the session records it, so a replay knows a held pose from a new
+// one): not on a tick without one, nor on one whose sample was rejected
+// (the tick holds the last accepted pose), but on a re-sent, unchanged pose.
+TEST(HapticLoop, EachSampleSaysWhetherANewDeviceSampleWasAccepted) {
+  Rig rig;
+  rig.device_spec.limits.stale_model_s = 10.0;
+  rig.build();
+  const auto tick = [&] {
+    rig.tick();
+    ToolSample s;
+    EXPECT_TRUE(rig.samples->try_pop(s));
+    return s;
+  };
+  rig.device.position_m = Vec3(0, 0, 0.01);
+  ToolSample s = tick();
+  EXPECT_TRUE(s.device_fresh) << "the first sample";
+  rig.device.available = false;
+  s = tick();
+  EXPECT_FALSE(s.device_fresh) << "no sample this tick";
+  EXPECT_EQ(s.device_position_m, Vec3(0, 0, 0.01));
+  rig.device.available = true;
+  rig.device.position_m = Vec3(0, 0, 0.011);
+  s = tick();
+  EXPECT_TRUE(s.device_fresh) << "a new pose";
+  rig.device.position_m = Vec3(0, 0, 0.5);  // 489 mm in 1 ms: too fast
+  s = tick();
+  EXPECT_FALSE(s.device_fresh) << "a rejected sample";
+  EXPECT_EQ(s.device_position_m, Vec3(0, 0, 0.011));
+  EXPECT_EQ(rig.loop->stats().rejected_speed, 1u);
+  rig.device.position_m = Vec3(0, 0, 0.011);
+  s = tick();
+  EXPECT_TRUE(s.device_fresh) << "the same pose, sent again";
+}
+
 TEST(HapticLoop, NonFiniteAndOutOfRangeInputIsRejectedAndCounted) {
   Rig rig;
   rig.device_spec.limits.stale_model_s = 10.0;

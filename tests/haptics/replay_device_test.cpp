@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdint>
+#include <functional>
 #include <memory>
+#include <vector>
 
 #include "haptics/haptic_loop.hpp"
 
@@ -364,6 +367,159 @@ TEST(ReplayDevice, StartRefusesExactlyTheSpeedsAtWhichReadIsTooFast) {
   const HapticStats st = replay_through_the_loop(below, spec, static_cast<int>(duration_ticks) + 10);
   EXPECT_EQ(st.rejected_speed, 0u);
   EXPECT_EQ(st.device_lost_trips, 0u);
+}
+
+// A session of format version 3 records on which ticks the device
+// delivered a new sample (/haptic/device_fresh). A device that sends a
+// sample every `period_rows` rows (at 1 kHz), `pose(k)` for sample k, whose
+// samples in `lost` never arrived: the row holds the last sample that did,
+// and is flagged only where one came (as HapticLoop records it).
+struct FlaggedTrack {
+  std::vector<double> time_s;
+  std::vector<Vec3> position_m;
+  std::vector<std::uint8_t> fresh;
+};
+FlaggedTrack flagged_track(int period_rows, int rows, const std::function<Vec3(int)>& pose,
+                           const std::vector<int>& lost = {}) {
+  FlaggedTrack track;
+  Vec3 held_m = pose(0);
+  for (int row = 0; row < rows; ++row) {
+    const int sample = row / period_rows;
+    const bool came = row % period_rows == 0 && std::find(lost.begin(), lost.end(), sample) == lost.end();
+    if (came) held_m = pose(sample);
+    track.time_s.push_back(1e-3 * row);
+    track.position_m.push_back(held_m);
+    track.fresh.push_back(came ? 1 : 0);
+  }
+  return track;
+}
+
+// Four packets lost in a row from a 250 Hz device at 3 m/s: live the loop
+// held the last sample for 20 ms and then measured the 60 mm step over those
+// 20 ms (3 m/s). Guessed from the positions alone, the step was squeezed into
+// 3 periods (12 ms: 5 m/s, faster than live, and start() refused speeds the
+// live session allowed). With the flags the step is spread over the whole
+// gap, and the speed check measures that.
+TEST(ReplayDevice, WithFreshFlagsFourLostPacketsInARowReplayOverTheWholeGap) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  const double max_speed_m_per_s = spec.limits.max_speed_m_per_s;
+  // Samples 30..33 lost: sample 29 at row 116, the next (34) at row 136.
+  const FlaggedTrack track =
+      flagged_track(4, 261, [](int k) { return Vec3(-0.4 + 3.0 * 4e-3 * k, 0, 0); }, {30, 31, 32, 33});
+  ASSERT_EQ(track.position_m[135], track.position_m[116]);
+  ASSERT_EQ(track.fresh[136], 1);
+  ReplayDevice replay(track.time_s, track.position_m, 1.0, false, max_speed_m_per_s, track.fresh);
+  std::string error;
+  ASSERT_TRUE(replay.start(&error)) << error;
+  EXPECT_NEAR(replay.device_period_s(), 4e-3, 1e-12);
+  DeviceSample s;
+  ASSERT_TRUE(replay.read(0, &s));
+  for (const int ms : {117, 120, 126, 131, 135}) {  // through the gap at the live 3 m/s
+    ASSERT_TRUE(replay.read(ms * kMs, &s));
+    EXPECT_NEAR(s.position_m.x(), -0.4 + 3e-3 * ms, 1e-12) << "at " << ms << " ms";
+    EXPECT_NEAR(s.velocity_m_per_s.x(), 3.0, 1e-9) << "at " << ms << " ms";
+  }
+  // Its peak is the 3 m/s the loop measured live: at most 5/3 times real time.
+  ReplayDevice faster(track.time_s, track.position_m, 1.01 * max_speed_m_per_s / 3.0, false, max_speed_m_per_s,
+                      track.fresh);
+  EXPECT_FALSE(faster.start(&error));
+  EXPECT_NE(error.find("its peak 3 m/s"), std::string::npos) << error;
+  ReplayDevice allowed(track.time_s, track.position_m, 0.99 * max_speed_m_per_s / 3.0, false, max_speed_m_per_s,
+                       track.fresh);
+  ASSERT_TRUE(allowed.start(&error)) << error;
+  const HapticStats st = replay_through_the_loop(allowed, spec, 170);
+  EXPECT_EQ(st.rejected_speed, 0u);
+  EXPECT_EQ(st.device_lost_trips, 0u);
+}
+
+// A still hand on a 250 Hz device: the device re-sent the same pose every
+// 4 ms, so live the loop measured the first step over one period. With the
+// flags the replay holds the pose exactly until the last re-sent sample and
+// makes the first step over that one period; the same track without flags (a
+// file from before them) keeps the old rule, three periods.
+TEST(ReplayDevice, WithFreshFlagsAStillHandsFirstStepPlaysOverOnePeriod) {
+  // Still at the origin for samples 0..250 (rows 0..1000), then 4 mm a
+  // sample (1 m/s): the first new pose at row 1004.
+  const FlaggedTrack track =
+      flagged_track(4, 1081, [](int k) { return k <= 250 ? Vec3::Zero() : Vec3(0.004 * (k - 250), 0, 0); });
+  ASSERT_EQ(track.position_m[1003], Vec3::Zero());
+  ASSERT_EQ(track.position_m[1004], Vec3(0.004, 0, 0));
+  ASSERT_EQ(track.fresh[1000], 1);
+  ReplayDevice replay(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh);
+  std::string error;
+  ASSERT_TRUE(replay.start(&error)) << error;
+  DeviceSample s;
+  for (int ms = 0; ms < 1000; ++ms) {  // held exactly, at rest, until the last still sample
+    ASSERT_TRUE(replay.read(ms * kMs, &s));
+    ASSERT_EQ(s.position_m, Vec3::Zero()) << "at " << ms << " ms";
+    ASSERT_EQ(s.velocity_m_per_s, Vec3::Zero()) << "at " << ms << " ms";
+  }
+  ASSERT_TRUE(replay.read(1000 * kMs, &s));  // where the step starts
+  EXPECT_EQ(s.position_m, Vec3::Zero());
+  ASSERT_TRUE(replay.read(1002 * kMs, &s));  // half way through the first step: 4 mm over 4 ms
+  EXPECT_NEAR((s.position_m - Vec3(0.002, 0, 0)).norm(), 0.0, 1e-12);
+  EXPECT_NEAR((s.velocity_m_per_s - Vec3(1.0, 0, 0)).norm(), 0.0, 1e-9);
+  ASSERT_TRUE(replay.read(1010 * kMs, &s));  // and on at 1 m/s
+  EXPECT_NEAR((s.position_m - Vec3(0.010, 0, 0)).norm(), 0.0, 1e-12);
+
+  ReplayDevice unflagged(track.time_s, track.position_m, 1.0, false, 5.0);  // an old file: three periods
+  ASSERT_TRUE(unflagged.start(&error)) << error;
+  ASSERT_TRUE(unflagged.read(0, &s));
+  ASSERT_TRUE(unflagged.read(1000 * kMs, &s));
+  EXPECT_NEAR((s.position_m - Vec3(0.004 * 8.0 / 12.0, 0, 0)).norm(), 0.0, 1e-12);
+  EXPECT_NEAR((s.velocity_m_per_s - Vec3(0.004 / 0.012, 0, 0)).norm(), 0.0, 1e-9);
+}
+
+// Before the device's first sample the loop had no hand (it renders nothing
+// and judges the first sample against nothing); the rows hold the device
+// origin. The replay holds the first sample's pose from the first row: it
+// does not invent a sweep from the origin, which could be too fast to play.
+TEST(ReplayDevice, WithFreshFlagsTheRowsBeforeTheFirstSampleHoldItsPose) {
+  FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(0.3 + 1e-3 * k, 0, 0); });
+  for (int row = 0; row < 52; ++row) {  // the device came at row 52
+    track.position_m[row] = Vec3::Zero();
+    track.fresh[row] = 0;
+  }
+  ReplayDevice replay(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh);
+  std::string error;
+  ASSERT_TRUE(replay.start(&error)) << error;  // 0.313 m in 52 ms would be 6 m/s
+  DeviceSample s;
+  ASSERT_TRUE(replay.read(0, &s));
+  EXPECT_EQ(s.position_m, track.position_m[52]);
+  ASSERT_TRUE(replay.read(30 * kMs, &s));  // held, at rest
+  EXPECT_EQ(s.position_m, track.position_m[52]);
+  EXPECT_EQ(s.velocity_m_per_s, Vec3::Zero());
+  ASSERT_TRUE(replay.read(52 * kMs, &s));
+  EXPECT_EQ(s.position_m, track.position_m[52]);
+  ASSERT_TRUE(replay.read(58 * kMs, &s));
+  EXPECT_NEAR(s.position_m.x(), 0.3 + 1e-3 * 14.5, 1e-12);
+}
+
+// A row whose position changed is a new sample whatever its flag says: the
+// recorder drops rows when its ring overflows, and the flagged row may be
+// among them. The step to it is spread over the time since the last sample.
+TEST(ReplayDevice, WithFreshFlagsAPositionChangeOnAnUnflaggedRowIsStillASample) {
+  // One 10 mm step, at sample 5 (row 20).
+  FlaggedTrack track = flagged_track(4, 41, [](int k) { return Vec3(k >= 5 ? 0.01 : 0.0, 0, 0); });
+  track.fresh[20] = 0;  // its flag lost: the change at row 20 still counts
+  ReplayDevice replay(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh);
+  std::string error;
+  ASSERT_TRUE(replay.start(&error)) << error;
+  DeviceSample s;
+  ASSERT_TRUE(replay.read(0, &s));
+  ASSERT_TRUE(replay.read(18 * kMs, &s));  // from the sample at row 16, over 4 ms (not on to row 24)
+  EXPECT_NEAR(s.position_m.x(), 0.005, 1e-12);
+  ASSERT_TRUE(replay.read(20 * kMs, &s));
+  EXPECT_NEAR(s.position_m.x(), 0.01, 1e-12);
+}
+
+TEST(ReplayDevice, FreshFlagsOfAnotherLengthThanTheTrackAreRefusedAtStart) {
+  std::string error;
+  ReplayDevice d({0.0, 1e-3, 2e-3}, {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()}, 1.0, false, 5.0, {1, 0});
+  EXPECT_FALSE(d.start(&error));
+  EXPECT_NE(error.find("2 device_fresh flags for 3 rows"), std::string::npos) << error;
+  DeviceSample s;
+  EXPECT_FALSE(d.read(0, &s)) << "not started";
 }
 
 }  // namespace

@@ -34,6 +34,7 @@ HapticRow haptic_row(std::uint64_t i) {
   r.force_N = {0.5 * std::sin(x), -0.25 * x * 1e-3, 3.0};
   r.contact = static_cast<std::uint8_t>(i % 3 == 0);
   r.model_version = i / 7 + (std::uint64_t{1} << 40);
+  r.device_fresh = static_cast<std::uint8_t>(i % 4 == 1);  // a 250 Hz device's cadence
   return r;
 }
 
@@ -83,7 +84,7 @@ TestFrame test_frame(std::uint64_t f) {
 bool same_row(const HapticRow& a, const HapticRow& b) {
   return a.time_s == b.time_s && a.device_position_m == b.device_position_m &&
          a.proxy_position_m == b.proxy_position_m && a.force_N == b.force_N && a.contact == b.contact &&
-         a.model_version == b.model_version;
+         a.model_version == b.model_version && a.device_fresh == b.device_fresh;
 }
 
 bool same_row(const SimRow& a, const SimRow& b) {
@@ -282,18 +283,20 @@ int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, 
     const auto frc = read_f64(file, "/haptic/force_N");
     const auto con = read_u8(file, "/haptic/contact");
     const auto ver = read_u64(file, "/haptic/model_version");
+    const auto fresh = read_u8(file, "/haptic/device_fresh");
     EXPECT_EQ(t.size(), haptic);
     EXPECT_EQ(dev.size(), 3 * haptic);
     EXPECT_EQ(prx.size(), 3 * haptic);
     EXPECT_EQ(frc.size(), 3 * haptic);
     EXPECT_EQ(con.size(), haptic);
     EXPECT_EQ(ver.size(), haptic);
+    EXPECT_EQ(fresh.size(), haptic);
     if (t.size() != haptic || dev.size() != 3 * haptic || prx.size() != 3 * haptic || frc.size() != 3 * haptic ||
-        con.size() != haptic || ver.size() != haptic)
+        con.size() != haptic || ver.size() != haptic || fresh.size() != haptic)
       return 1;
     for (std::uint64_t i = 0; i < haptic; ++i) {
       const HapticRow r = haptic_row(i);
-      bool ok = t[i] == r.time_s && con[i] == r.contact && ver[i] == r.model_version;
+      bool ok = t[i] == r.time_s && con[i] == r.contact && ver[i] == r.model_version && fresh[i] == r.device_fresh;
       for (int k = 0; k < 3; ++k)
         ok = ok && dev[3 * i + k] == r.device_position_m[k] && prx[3 * i + k] == r.proxy_position_m[k] &&
              frc[3 * i + k] == r.force_N[k];
@@ -393,8 +396,18 @@ void make_version_1(const std::string& path) {
   const hid_t file = open_for_edit(path);
   ASSERT_GE(file, 0) << path;
   EXPECT_GE(H5Ldelete(file, kDatasets[kMeshTriangleStrain].path, H5P_DEFAULT), 0);
+  EXPECT_GE(H5Ldelete(file, kDatasets[kHapticDeviceFresh].path, H5P_DEFAULT), 0);
   EXPECT_GE(H5Adelete(file, kAttrFormatVersion), 0);
   h5::write_i64_attribute(file, kAttrFormatVersion, 1);
+  H5Fclose(file);
+}
+
+void make_version_2(const std::string& path) {
+  const hid_t file = open_for_edit(path);
+  ASSERT_GE(file, 0) << path;
+  EXPECT_GE(H5Ldelete(file, kDatasets[kHapticDeviceFresh].path, H5P_DEFAULT), 0);
+  EXPECT_GE(H5Adelete(file, kAttrFormatVersion), 0);
+  h5::write_i64_attribute(file, kAttrFormatVersion, 2);
   H5Fclose(file);
 }
 

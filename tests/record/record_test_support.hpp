@@ -22,7 +22,8 @@ using tissue::testing::RunResult;
 using tissue::testing::slurp;
 using tissue::testing::TempDir;
 
-// Row i of a deterministic session (time_s = i ms).
+// Row i of a deterministic session (time_s = i ms; device_fresh on every
+// fourth row, from row 1).
 HapticRow haptic_row(std::uint64_t i);
 SimRow sim_row(std::uint64_t i);
 Event event_row(std::uint64_t i);
@@ -100,8 +101,11 @@ int expect_session_content(hid_t file, std::uint64_t haptic, std::uint64_t sim, 
 // an older version of it. Returns a negative id on failure.
 hid_t open_for_edit(const std::string& path);
 // Turns a closed session into what the version-1 writer made: no
-// /mesh/triangle_strain_energy_J_per_m3, format_version 1. Fails the test on error.
+// /mesh/triangle_strain_energy_J_per_m3, no /haptic/device_fresh,
+// format_version 1. Fails the test on error.
 void make_version_1(const std::string& path);
+// The same for the version-2 writer: no /haptic/device_fresh, format_version 2.
+void make_version_2(const std::string& path);
 // Overwrites element [row] (1-D) or [row][column] (2-D) of a dataset of a
 // closed session with *value, of HDF5 memory type `mem_type`.
 void overwrite_element(const std::string& path, const char* dataset, std::uint64_t row, std::uint64_t column,

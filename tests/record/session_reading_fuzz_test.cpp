@@ -365,10 +365,10 @@ std::string error_of(Fn&& fn) {
 TEST(SessionReading, AHapticExtentTheFileCannotHoldIsAnErrorNotAnAllocation) {
   TempDir dir;
   const std::string path = testing::write_test_session(dir / "s.h5", small_session());
-  set_rows(
-      path,
-      {kHapticTime, kHapticDevicePosition, kHapticProxyPosition, kHapticForce, kHapticContact, kHapticModelVersion},
-      10'000'000'000);
+  set_rows(path,
+           {kHapticTime, kHapticDevicePosition, kHapticProxyPosition, kHapticForce, kHapticContact, kHapticModelVersion,
+            kHapticDeviceFresh},
+           10'000'000'000);
   for (int reader = 0; reader < 2; ++reader) {
     const std::string what = error_of<RecordError>([&] {
       if (reader == 0) read_session_rows(path);

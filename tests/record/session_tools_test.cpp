@@ -606,10 +606,11 @@ TEST(SessionReader, HapticTrackIsTheRecordedHandMotion) {
   ASSERT_EQ(track.time_s.size(), 1500u);
   ASSERT_EQ(track.device_position_m.size(), 1500u);
   ASSERT_EQ(track.force_N.size(), 1500u);
+  ASSERT_EQ(track.device_fresh.size(), 1500u) << "format version 3 records which ticks had a new device sample";
   for (std::uint64_t i = 0; i < 1500; ++i) {
     const HapticRow r = testing::haptic_row(i);
     ASSERT_TRUE(track.time_s[i] == r.time_s && track.device_position_m[i] == r.device_position_m &&
-                track.force_N[i] == r.force_N)
+                track.force_N[i] == r.force_N && track.device_fresh[i] == r.device_fresh)
         << "row " << i;
   }
   testing::TestSession no_hand;
@@ -621,6 +622,127 @@ TEST(SessionReader, HapticTrackIsTheRecordedHandMotion) {
   } catch (const RecordError& e) {
     EXPECT_NE(std::string(e.what()).find(empty), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("no haptic rows"), std::string::npos) << e.what();
+  }
+}
+
+// /haptic/device_fresh (format version 3) says on which ticks the device
+// delivered a new sample: written from each row's flag and read back as
+// written, by the row readers and the replay device's track; info says the
+// file has it.
+TEST(SessionReader, TheDeviceFreshFlagRoundTrips) {
+  TempDir dir;
+  const std::string path = testing::write_test_session(dir / "s.h5");
+  const SessionInfo info = read_session_info(path);
+  EXPECT_EQ(info.format_version, 3);
+  EXPECT_TRUE(info.has_device_fresh);
+  EXPECT_NE(format_session_info(info).find("1500 ticks, each flagged when a new device sample came"), std::string::npos)
+      << format_session_info(info);
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const std::vector<std::uint8_t> stored = testing::read_u8(file, kDatasets[kHapticDeviceFresh].path);
+  H5Fclose(file);
+  ASSERT_EQ(stored.size(), 1500u);
+  const SessionRows rows = read_session_rows(path);
+  const HapticTrack track = read_haptic_track(path);
+  ASSERT_EQ(rows.haptic.size(), 1500u);
+  ASSERT_EQ(track.device_fresh.size(), 1500u);
+  std::uint64_t fresh = 0;
+  for (std::uint64_t i = 0; i < 1500; ++i) {
+    const std::uint8_t want = testing::haptic_row(i).device_fresh;
+    ASSERT_EQ(stored[i], want) << "row " << i;
+    ASSERT_EQ(rows.haptic[i].device_fresh, want) << "row " << i;
+    ASSERT_EQ(track.device_fresh[i], want) << "row " << i;
+    fresh += want;
+  }
+  EXPECT_EQ(fresh, 375u) << "every fourth row: the flag is not all 0 or all 1";
+}
+
+// A session of format version 2 (or 1) has no /haptic/device_fresh: it
+// still reads, its track says the flags are unknown (empty: the replay
+// device keeps its old rule for it), and info says what it lacks.
+TEST(SessionReader, AFileWithoutTheDeviceFreshColumnStillReads) {
+  TempDir dir;
+  for (const int version : {1, 2}) {
+    SCOPED_TRACE(version);
+    const std::string path = dir / ("v" + std::to_string(version) + ".h5");
+    testing::write_test_session(path);
+    if (version == 1) testing::make_version_1(path);
+    if (version == 2) testing::make_version_2(path);
+    const SessionInfo info = read_session_info(path);
+    EXPECT_EQ(info.format_version, version);
+    EXPECT_FALSE(info.has_device_fresh);
+    EXPECT_EQ(info.rows.haptic_rows, 1500u);
+    EXPECT_NE(format_session_info(info).find("1500 ticks, no device_fresh flags (format version " +
+                                             std::to_string(version) + ")"),
+              std::string::npos)
+        << format_session_info(info);
+    const SessionRows rows = read_session_rows(path);
+    ASSERT_EQ(rows.haptic.size(), 1500u);
+    for (const HapticRow& r : rows.haptic) ASSERT_EQ(r.device_fresh, 0) << "not recorded: 0";
+    const HapticTrack track = read_haptic_track(path);
+    ASSERT_EQ(track.time_s.size(), 1500u);
+    EXPECT_TRUE(track.device_fresh.empty()) << "unknown, not 'never fresh'";
+    for (std::uint64_t i = 0; i < 1500; ++i)
+      ASSERT_EQ(track.device_position_m[i], testing::haptic_row(i).device_position_m) << "row " << i;
+    EXPECT_FALSE(repair_session(path).repair_needed);
+  }
+}
+
+// A damaged /haptic/device_fresh is an error naming the file and the dataset
+// (and the row, for a value): stored as floating point, as a table instead
+// of a column, missing from a version-3 file, or holding a value that is not
+// a flag. A replay must not guess from a column it cannot trust.
+TEST(SessionReader, ADamagedDeviceFreshColumnIsAClearError) {
+  TempDir dir;
+  const std::string fresh = kDatasets[kHapticDeviceFresh].path;
+  struct Case {
+    const char* name;
+    const char* says;
+    bool every_tool;  // or only the row readers (info and repair do not read values)
+  };
+  for (const Case& c :
+       {Case{"float", "dataset /haptic/device_fresh stores floating-point values, expected integer", true},
+        Case{"table", "dataset /haptic/device_fresh has shape (1500 x 2), rank 2, expected rank 1", true},
+        Case{"missing", "dataset /haptic/device_fresh is missing", true},
+        Case{"value", "/haptic/device_fresh is 7 at row 42: a flag is 0 or 1", false}}) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir / (std::string(c.name) + ".h5");
+    testing::write_test_session(path);
+    if (std::string(c.name) == "value") {
+      const std::uint8_t seven = 7;
+      testing::overwrite_element(path, fresh.c_str(), 42, 0, H5T_NATIVE_UINT8, &seven);
+    } else {
+      const hid_t file = testing::open_for_edit(path);
+      ASSERT_GE(file, 0);
+      ASSERT_GE(H5Ldelete(file, fresh.c_str(), H5P_DEFAULT), 0);
+      if (std::string(c.name) != "missing") {
+        const bool table = std::string(c.name) == "table";
+        const hsize_t dims[2] = {1500, 2};
+        const hid_t space = H5Screate_simple(table ? 2 : 1, dims, nullptr);
+        const hid_t ds = H5Dcreate2(file, fresh.c_str(), table ? H5T_STD_U8LE : H5T_IEEE_F64LE, space, H5P_DEFAULT,
+                                    H5P_DEFAULT, H5P_DEFAULT);
+        ASSERT_GE(ds, 0);
+        H5Dclose(ds);
+        H5Sclose(space);
+      }
+      H5Fclose(file);
+    }
+    if (c.every_tool) {
+      expect_every_tool_refuses(path, dir, c.says);
+      const auto cli = run(tissue() + " session info " + quote(path), dir);
+      EXPECT_EQ(cli.exit_code, 1) << cli.out;
+      EXPECT_NE(cli.err.find("'" + path + "': " + c.says), std::string::npos) << cli.err;
+      EXPECT_EQ(cli.err.find("HDF5-DIAG"), std::string::npos) << cli.err;
+    }
+    for (int reader = 0; reader < 2; ++reader) {
+      try {
+        if (reader == 0) read_session_rows(path);
+        if (reader == 1) read_haptic_track(path);
+        ADD_FAILURE() << "reader " << reader << " accepted it";
+      } catch (const RecordError& e) {
+        EXPECT_NE(std::string(e.what()).find("'" + path + "': " + c.says), std::string::npos) << e.what();
+      }
+    }
   }
 }
 
@@ -1441,7 +1563,7 @@ TEST(SessionTools, XdmfOfASessionRecordedWithoutStrainHasNoStrainAttribute) {
   without.frames = 4;
   without.strain = false;
   const std::string none = testing::write_test_session(dir / "none.h5", without);
-  ASSERT_TRUE(read_session_info(none).has_strain) << "format version 2: the dataset is there, all NaN";
+  ASSERT_TRUE(read_session_info(none).has_strain) << "format version 2 and later: the dataset is there, all NaN";
   const XdmfReport report = write_xdmf(none, "");
   EXPECT_EQ(report.frames, 4u);
   const std::string xml = testing::slurp(report.out_path);

@@ -372,7 +372,7 @@ TEST(SessionWriter, StrainIsStoredPerTriangleAndAFrameWithoutItHoldsNaN) {
   for (std::size_t t = with.triangles.size(); t < strain.size(); ++t) EXPECT_TRUE(std::isnan(strain[t])) << t;
   H5Fclose(file);
   const SessionInfo info = read_session_info(dir / "s.h5");
-  EXPECT_EQ(info.format_version, 2);
+  EXPECT_EQ(info.format_version, kSessionFormatVersion);
   EXPECT_TRUE(info.has_strain);
 }
 
@@ -464,7 +464,8 @@ TEST(SessionWriter, TheFormatDocsPythonExampleReadsAFrame) {
   ASSERT_NE(name, std::string::npos) << script;
   script.replace(name, 12, "sys.argv[1]");
   script = "import sys\n" + script +
-           "print('%d %d %.6f %d' % (len(vertices), len(triangles), float(vertices.sum()), len(strain)))\n";
+           "print('%d %d %.6f %d' % (len(vertices), len(triangles), float(vertices.sum()), len(strain)))\n"
+           "print('%d of %d ticks fresh' % (int(fresh.sum()), len(fresh)))\n";
   const testing::RunResult py =
       testing::run("/usr/bin/python3 -c " + testing::quote(script) + " " + testing::quote(path), dir);
   ASSERT_EQ(py.exit_code, 0) << py.err << script;
@@ -472,8 +473,8 @@ TEST(SessionWriter, TheFormatDocsPythonExampleReadsAFrame) {
   double sum_m = 0.0;
   for (const auto& v : frame.vertices_m) sum_m += v[0] + v[1] + v[2];
   char expected[128];
-  std::snprintf(expected, sizeof expected, "%zu %zu %.6f %zu\n", frame.vertices_m.size(), frame.triangles.size(), sum_m,
-                frame.triangles.size());
+  std::snprintf(expected, sizeof expected, "%zu %zu %.6f %zu\n375 of 1500 ticks fresh\n", frame.vertices_m.size(),
+                frame.triangles.size(), sum_m, frame.triangles.size());
   EXPECT_EQ(py.out, expected) << script;
 }
 

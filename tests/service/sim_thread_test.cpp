@@ -449,6 +449,34 @@ TEST(SimThread, HapticRowsDrainedInALoopWhoseStepThrowsAreRecorded) {
   EXPECT_EQ(recorded_s, pushed_s);
 }
 
+// Each tick's device_fresh (a new device sample accepted that tick) is
+// recorded as its row's /haptic/device_fresh: the replay device spreads each
+// step over the time since the row before that had one.
+TEST(SimThread, EachTicksDeviceFreshFlagIsRecorded) {
+  const tissue::testing::TempDir scratch;
+  const std::string& dir = scratch.path();
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, fast_status());
+  auto recorder = record::Recorder::start(dir, "fresh.h5", record::SessionMetadata{});
+  ASSERT_TRUE(thread.set_recorder(recorder.get()));
+  std::vector<std::uint8_t> pushed;
+  const std::int64_t t0_ns = now_ns();
+  for (int k = 0; k < 40; ++k) {
+    haptics::ToolSample s = hovering_over_the_free_end();
+    s.time_ns = t0_ns + k * 1000000;
+    s.device_fresh = k % 4 == 1 || k == 6;  // a 250 Hz device, and one stray
+    ASSERT_TRUE(samples.try_push(s));
+    pushed.push_back(s.device_fresh ? 1 : 0);
+  }
+  thread.start();
+  ASSERT_TRUE(wait_for([&] { return samples.size() == 0; }));
+  ASSERT_TRUE(thread.set_recorder(nullptr));
+  thread.stop();
+  recorder->stop();
+  EXPECT_EQ(record::read_haptic_track(dir + "/fresh.h5").device_fresh, pushed);
+}
+
 // The status carries the solver's work: CG iterations per step and the
 // steps that stopped at cg_max_iterations (none with the shipped tolerance;
 // every one when one iteration must reach 1e-12).
