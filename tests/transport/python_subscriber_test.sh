@@ -124,6 +124,7 @@ grep -q -- "--url nosuch://x: cannot start LCM (LCM's own message above says why
 # LCM's is exit 2.
 listen() {  # MODE: starts a loopback_tcp_listener.py, sets $port and $listener_log
   listener_log="$work/listener-$1.log"
+  rm -f "$listener_log"  # a MODE's second listener: its port, not the first one's
   python3 "$here/loopback_tcp_listener.py" "$1" >"$listener_log" &
   helpers="$helpers $!"
   polls=0
@@ -193,6 +194,46 @@ timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.
 [ "$rc" -eq 2 ] || { cat "$work/web.log"; fail "a web server at tcpq://: exit $rc, expected 2"; }
 grep -q -- "--url tcpq://127.0.0.1:$port: the server's answer is not LCM's" "$work/web.log" ||
   { cat "$work/web.log"; fail "a web server at tcpq://: not said"; }
+
+# A tcpq server that greets and then stops in the middle of a message (the
+# stall listener hangs: it answers no later connection either). LCM's client
+# reads a message whole with a blocking recv(), which held the subscriber
+# past --seconds for ever. The read is given until --seconds ends: exit 1 (no
+# statistics), said with --url and why, without a traceback; LCM, its
+# connection lost, is closed without waiting for the hung server again.
+listen stall
+rc=0
+start="$(date +%s)"
+timeout -k 5 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" \
+  >"$work/midmsg.log" 2>&1 || rc=$?
+waited=$(($(date +%s) - start))
+no_traceback "$work/midmsg.log"
+[ "$rc" -eq 1 ] || { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: a message from the server was still incomplete when --seconds ended ([0-9.]* s after it began; has the server stalled?); it is dropped" \
+  "$work/midmsg.log" || { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: not said"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/midmsg.log" ||
+  { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: no summary"; }
+[ "$waited" -le 5 ] || fail "a tcpq server that stalls mid-message: ended after $waited s for --seconds 1"
+# ... and SIGTERM during that read ends it at once, said, exit 1.
+listen stall
+python3 "$subscriber" --types "$types" --seconds 300 --url "tcpq://127.0.0.1:$port" >"$work/midmsg-term.log" 2>&1 &
+midmsg=$!
+helpers="$helpers $midmsg"
+polls=0
+until [ "$(grep -c accepted "$listener_log")" -ge 2 ]; do
+  polls=$((polls + 1))
+  [ "$polls" -le 300 ] || fail "the subscriber did not connect to the stalling server"
+  sleep 0.1
+done
+sleep 1  # LCM's connection is made: it subscribes, and then waits in recv() for the rest of the message
+kill -TERM "$midmsg"
+ends_within "$midmsg" 5 "SIGTERM during a tcpq message that stalled: still running after 5 s"
+rc=0
+wait "$midmsg" || rc=$?
+no_traceback "$work/midmsg-term.log"
+[ "$rc" -eq 1 ] || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: stopped by SIGTERM in the middle of a message from the server; it is dropped" \
+  "$work/midmsg-term.log" || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: not said"; }
 
 # Statistics whose real-time factor is NaN (a daemon before it has measured
 # it) but whose time and tets are finite: printed, their tets plotted (every
