@@ -5,7 +5,11 @@ Prints one line per sim_stats message (TISSUE_SIM_STATS) and, with --plot,
 writes an SVG of tets and real-time factor over time when it stops: after
 --seconds, or on SIGINT (Ctrl-C) or SIGTERM. A tcpq:// server is first asked
 for LCM's greeting, for at most min(--seconds, 10) s (LCM would wait for
-ever), and LCM's own connection after it gets the same limit. A standard output that closes (| head) ends only the printing. Mesh
+ever), and LCM's own connection after it gets the same limit. Once
+listening, a tcpq:// message that stops arriving midway (LCM reads it whole,
+blocking) is waited for until --seconds ends, or a stop signal; it is then
+dropped, said, and the run ends as after any listening. A standard output
+that closes (| head) ends only the printing. Mesh
 and haptic messages are counted (TISSUE_SURFACE_MESH, TISSUE_HAPTIC_STATE);
 see proto/README.md for every field.
 
@@ -40,6 +44,7 @@ likely cause: no route for a udpm:// group), 3 statistics arrived but the
 plot could not be written.
 """
 import argparse
+import contextlib
 import errno
 import io
 import math
@@ -446,6 +451,33 @@ def tcpq_server_problem(url, timeout_s, stop):
     return None
 
 
+@contextlib.contextmanager
+def lost_lcm_teardown():
+    """Around dropping the last reference to an LCM whose tcpq:// connection
+    is lost: its teardown then does not wait for the server. LCM's teardown
+    unsubscribes each channel, and with no socket that reconnects first: a
+    blocking connect() and a wait for the greeting with no time limit, for
+    ever against a server that hung (its kernel still accepts). Here under
+    SIGALRM every 50 ms (LCM gives up on EINTR, as in its first connection in
+    main) and with standard error silenced: those attempts' own lines ("LCM
+    tcpq: connecting...", "Unable to connect to server") would follow the
+    one that says what happened."""
+    sys.stderr.flush()
+    saved_stderr = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    previous = signal.signal(signal.SIGALRM, lambda signum, frame: None)
+    signal.setitimer(signal.ITIMER_REAL, 0.05, 0.05)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+        os.dup2(saved_stderr, 2)
+        os.close(saved_stderr)
+        os.close(devnull)
+
+
 def mesh_error(m, left_bytes):
     """Why the decoded surface_mesh `m`, followed by `left_bytes` undecoded
     bytes, is not a usable mesh: (reason, text), or None. The rules of the
@@ -639,10 +671,54 @@ def main():
     lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
     lc.subscribe("TISSUE_HAPTIC_STATE", on_haptic)
     end = time.monotonic() + args.seconds
+    lost = None  # why LCM's connection ended before --seconds did, or None
     while not stop and (left := end - time.monotonic()) > 0:
         ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))
-        if ready and not stop:
+        if not ready or stop:
+            continue
+        # tcpq:// is a stream: once its first bytes are there, handle() reads
+        # the whole message with blocking recv()s, and a server that stops
+        # in the middle of one held it (and the subscriber) for ever. The read
+        # is given until --seconds ends: from then SIGALRM every 50 ms
+        # interrupts it, as it does LCM's connect() above (repeated for the
+        # same reason). Never sooner: LCM drops its connection on any
+        # interrupted recv(), so a read still going well must not be cut.
+        # SIGINT and SIGTERM interrupt it too (no SA_RESTART; one that lands
+        # in the instant before the recv() starts is left to that alarm).
+        if tcpq:
+            began = time.monotonic()
+            signal.setitimer(signal.ITIMER_REAL, max(end - began, 0.001), 0.05)
+        try:
             lc.handle()
+        except OSError:  # only "lcm_handle() returned -1": our callbacks catch their own
+            # LCM has closed its socket (fileno() is now -1, which select()
+            # refuses) and would reconnect, without a time limit, on the
+            # next handle(): listening ends here. Whether a stop signal
+            # interrupted it: its Python handler has not run yet (it runs
+            # at some later instruction); pthread_sigmask runs pending
+            # handlers before it returns (PyErr_CheckSignals), changing no
+            # mask here. The deadline is read from the clock: SIGALRM is not
+            # sent before it.
+            signal.pthread_sigmask(signal.SIG_BLOCK, [])
+            if stop:
+                lost = (f"stopped by {signal.Signals(stop[-1]).name} in the middle of a message from the server; "
+                        "it is dropped")
+            elif tcpq and time.monotonic() >= end:
+                lost = (f"a message from the server was still incomplete when --seconds ended "
+                        f"({time.monotonic() - began:.1f} s after it began; has the server stalled?); it is dropped")
+            else:
+                cause = "the server closed it, or a read failed" if tcpq else "lcm_handle() failed"
+                lost = (f"LCM lost its connection {args.seconds - (end - time.monotonic()):.1f} s into --seconds "
+                        f"({cause}); listening ended there")
+            break
+        finally:
+            if tcpq:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+    if lost:
+        print(f"tissue_subscriber: --url {args.url}: {lost}", file=sys.stderr, flush=True)
+        if tcpq:
+            with lost_lcm_teardown():
+                lc = None  # the last reference: LCM is destroyed here
     for channel, n in sorted(undecodable.items()):
         print(f"tissue_subscriber: {n} undecodable message(s) dropped on {channel}", file=sys.stderr)
     if bad_meshes:

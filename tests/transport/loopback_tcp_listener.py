@@ -12,16 +12,26 @@ silent: a server that never forwards a message.
 web: answers with an HTTP error, as a web server would.
 greet-once: greets the first connection only (the subscriber's probe), then
 is silent: a server that stops answering between the probe and LCM's own
-connection (one client at a time, overloaded, or stopped with SIGSTOP)."""
+connection (one client at a time, overloaded, or stopped with SIGSTOP).
+stall: greets the first connection (the probe) and the second (LCM's own),
+sends the second the first part of a message on TISSUE_SIM_STATS (its
+header, which says 64 bytes follow, and 8 of them), then is silent, to any
+later connection too: a server that hangs mid-message (its kernel still
+accepts connections; it answers none). LCM's client reads a message whole,
+with a blocking recv()."""
 import socket
 import struct
 import sys
 import time
 
-answers = {"silent": b"", "greet": struct.pack(">II", 0x287617FA, 0x0100),
-           "web": b"HTTP/1.1 400 Bad Request\r\n\r\n"}
-mode = sys.argv[1]
-answer = answers["greet" if mode == "greet-once" else mode]
+GREETING = struct.pack(">II", 0x287617FA, 0x0100)
+CHANNEL = b"TISSUE_SIM_STATS"
+# A tcpq message: type (1: publish), channel length, channel, data length,
+# data (lcm_tcpq.c); here only 8 of the 64 data bytes it announces.
+PARTIAL = struct.pack(">II", 1, len(CHANNEL)) + CHANNEL + struct.pack(">I", 64) + bytes(8)
+# What each mode sends its 1st, 2nd, ... connection; the last, all the rest.
+answers = {"silent": [b""], "greet": [GREETING], "web": [b"HTTP/1.1 400 Bad Request\r\n\r\n"],
+           "greet-once": [GREETING, b""], "stall": [GREETING, GREETING + PARTIAL, b""]}[sys.argv[1]]
 listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
 listener.bind(("127.0.0.1", 0))
 listener.listen(8)
@@ -34,8 +44,7 @@ while (left := end - time.monotonic()) > 0:
     except socket.timeout:
         break
     held.append(connection)  # held open: closing would tell the client at once
+    answer = answers[min(len(held), len(answers)) - 1]
     if answer:
         connection.sendall(answer)
-    if mode == "greet-once":
-        answer = b""
     print("accepted", flush=True)

@@ -48,6 +48,11 @@ grep -q '<polyline' "$work/stats.svg" || { echo "no plot"; exit 1; }
 grep '^t ' "$work/sub.log" | tail -1 | grep -q 'meshes [1-9][0-9]*, haptic states [1-9]' || { tail -3 "$work/sub.log"; exit 1; }
 
 fail() { echo "python_subscriber_test: $*"; exit 1; }
+# FILE: how many statistics lines FILE holds. 0 while it does not exist: a
+# background subscriber's `>FILE` is opened by its shell, which may not have
+# run yet (grep said "No such file or directory" then, and `[ "" -gt N ]`
+# "Illegal number"; noise, not a failure, but noise that hides real ones).
+stats_lines() { if [ -f "$1" ]; then grep -c '^t ' "$1" || :; else echo 0; fi; }
 no_traceback() { if grep -q Traceback "$1"; then cat "$1"; fail "a traceback in $1"; fi; }
 # PID SECONDS MESSAGE: waits for a signalled process to end; still running
 # after SECONDS, it is killed and the test fails with MESSAGE.
@@ -124,6 +129,7 @@ grep -q -- "--url nosuch://x: cannot start LCM (LCM's own message above says why
 # LCM's is exit 2.
 listen() {  # MODE: starts a loopback_tcp_listener.py, sets $port and $listener_log
   listener_log="$work/listener-$1.log"
+  rm -f "$listener_log"  # a MODE's second listener: its port, not the first one's
   python3 "$here/loopback_tcp_listener.py" "$1" >"$listener_log" &
   helpers="$helpers $!"
   polls=0
@@ -194,6 +200,46 @@ timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.
 grep -q -- "--url tcpq://127.0.0.1:$port: the server's answer is not LCM's" "$work/web.log" ||
   { cat "$work/web.log"; fail "a web server at tcpq://: not said"; }
 
+# A tcpq server that greets and then stops in the middle of a message (the
+# stall listener hangs: it answers no later connection either). LCM's client
+# reads a message whole with a blocking recv(), which held the subscriber
+# past --seconds for ever. The read is given until --seconds ends: exit 1 (no
+# statistics), said with --url and why, without a traceback; LCM, its
+# connection lost, is closed without waiting for the hung server again.
+listen stall
+rc=0
+start="$(date +%s)"
+timeout -k 5 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" \
+  >"$work/midmsg.log" 2>&1 || rc=$?
+waited=$(($(date +%s) - start))
+no_traceback "$work/midmsg.log"
+[ "$rc" -eq 1 ] || { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: a message from the server was still incomplete when --seconds ended ([0-9.]* s after it began; has the server stalled?); it is dropped" \
+  "$work/midmsg.log" || { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: not said"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/midmsg.log" ||
+  { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: no summary"; }
+[ "$waited" -le 5 ] || fail "a tcpq server that stalls mid-message: ended after $waited s for --seconds 1"
+# ... and SIGTERM during that read ends it at once, said, exit 1.
+listen stall
+python3 "$subscriber" --types "$types" --seconds 300 --url "tcpq://127.0.0.1:$port" >"$work/midmsg-term.log" 2>&1 &
+midmsg=$!
+helpers="$helpers $midmsg"
+polls=0
+until [ "$(grep -c accepted "$listener_log")" -ge 2 ]; do
+  polls=$((polls + 1))
+  [ "$polls" -le 300 ] || fail "the subscriber did not connect to the stalling server"
+  sleep 0.1
+done
+sleep 1  # LCM's connection is made: it subscribes, and then waits in recv() for the rest of the message
+kill -TERM "$midmsg"
+ends_within "$midmsg" 5 "SIGTERM during a tcpq message that stalled: still running after 5 s"
+rc=0
+wait "$midmsg" || rc=$?
+no_traceback "$work/midmsg-term.log"
+[ "$rc" -eq 1 ] || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: stopped by SIGTERM in the middle of a message from the server; it is dropped" \
+  "$work/midmsg-term.log" || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: not said"; }
+
 # Statistics whose real-time factor is NaN (a daemon before it has measured
 # it) but whose time and tets are finite: printed, their tets plotted (every
 # one: fewer than --plot-points), no NaN in the plot, exit 0.
@@ -237,7 +283,7 @@ stream=$!
 python3 "$subscriber" --types "$types" --seconds 300 --plot "$work/term.svg" >"$work/term.log" 2>"$work/term.err" &
 term=$!
 polls=0
-until grep -q '^t ' "$work/term.log"; do
+until [ "$(stats_lines "$work/term.log")" -ge 1 ]; do
   polls=$((polls + 1))
   [ "$polls" -le 600 ] || { kill "$term"; fail "no statistics in 60 s"; }
   sleep 0.1
@@ -311,7 +357,7 @@ env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 300 --
 lonely=$!
 helpers="$helpers $lonely"
 polls=0
-until grep -q '^t ' "$work/lonely.log"; do
+until [ "$(stats_lines "$work/lonely.log")" -ge 1 ]; do
   polls=$((polls + 1))
   [ "$polls" -le 600 ] || fail "--plot at a FIFO without a reader: no statistics in 60 s"
   sleep 0.1
@@ -365,7 +411,7 @@ env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 1 --pl
 stalled=$!
 helpers="$helpers $stalled"
 polls=0
-until grep -q '^t ' "$work/stall-int.log"; do
+until [ "$(stats_lines "$work/stall-int.log")" -ge 1 ]; do
   polls=$((polls + 1))
   [ "$polls" -le 600 ] || fail "--plot at a stalled FIFO: no statistics in 60 s"
   sleep 0.1
@@ -420,7 +466,7 @@ env --default-signal=INT python3 "$subscriber" --types "$types" --seconds 300 --
   >"$work/many.log" 2>"$work/many.err" &
 many=$!
 polls=0
-until [ "$(grep -c '^t ' "$work/many.log")" -gt 10000 ]; do
+until [ "$(stats_lines "$work/many.log")" -gt 10000 ]; do
   polls=$((polls + 1))
   [ "$polls" -le 1200 ] || { kill "$many"; fail "fewer than 10001 statistics in 120 s"; }
   sleep 0.1
