@@ -38,7 +38,12 @@ namespace tissue::service {
 namespace {
 
 nlohmann::json status_json(const SimStatus& s) {
-  return {{"sim_time_s", s.sim_time_s},
+  return {// Goes up when the sim thread starts a new scene (after a reset,
+          // load_scene, set or reload): a client waiting for the new scene's
+          // steps tells them from the old one's (a status read just after the
+          // change may still be the old scene's).
+          {"generation", s.generation},
+          {"sim_time_s", s.sim_time_s},
           {"steps", s.steps},
           {"nodes", s.nodes},
           {"tets", s.tets},

@@ -329,10 +329,21 @@ TEST(Service, SceneChangesUnderLoadKeepServing) {
   TempDir dir;
   Running run(write_config(dir, scene_file("cantilever.yaml")));
   ControlClient client = connect(dir / "ctl.sock");
+  // Each new runner the sim thread takes bumps `generation`: a client tells
+  // the new scene's status from the old one's by it (one read just after a
+  // change may still be the old scene's).
+  const auto generation = [&] {
+    const nlohmann::json g = client.call("status")["result"]["generation"];
+    EXPECT_TRUE(g.is_number_unsigned()) << g.dump();
+    return g.is_number_unsigned() ? g.get<std::uint64_t>() : 0;
+  };
+  const std::uint64_t first = generation();
   for (int i = 0; i < 10; ++i) {
     ASSERT_TRUE(client.call("reset")["ok"].get<bool>());
     ASSERT_TRUE(client.call("load_scene", {{"path", scene_file("cantilever.yaml")}})["ok"].get<bool>());
   }
+  for (int i = 0; i < 500 && generation() == first; ++i) std::this_thread::sleep_for(10ms);
+  EXPECT_GT(generation(), first) << "10 resets and 10 loads, none taken";
   const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 8e4}});
   EXPECT_TRUE(set["ok"].get<bool>()) << set.dump();
   const nlohmann::json bad = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", -1}});
