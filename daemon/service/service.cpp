@@ -155,6 +155,18 @@ std::string_view override_key(std::string_view text) {
   key.remove_prefix(first);
   return key.substr(0, key.find_last_not_of(" \t") + 1);
 }
+
+// A refused `set`, naming the override: the running scene took every value
+// before it, so this one broke the scene. The loader blames it itself when
+// the error is at its key ("(set by the override '...')"); an error at
+// another key (a load region the new cube size leaves outside the object) or
+// at the trial step (a gravity of 1e308: "its first step fails") said neither
+// the key nor the value the client had sent.
+std::string naming_the_override(const std::string& error, const std::string& override) {
+  const std::string named = yaml_util::printable(override);
+  if (error.find(named) != std::string::npos) return error;
+  return error + " (caused by the override " + named + ")";
+}
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -1088,7 +1100,7 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
     scene = scene::parse_scene_with_overrides(scene_.source_text, scene_path_, overrides);
     device_problem = apply_scene(std::move(scene));
   } catch (const std::exception& e) {
-    throw control::ControlError(e.what());
+    throw control::ControlError(naming_the_override(e.what(), override));
   }
   scene_sets_ = std::move(sets);
   record_event(static_cast<int>(record::EventKind::kParameterChanged), override + " (scene restarted)");
