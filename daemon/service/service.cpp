@@ -38,7 +38,12 @@ namespace tissue::service {
 namespace {
 
 nlohmann::json status_json(const SimStatus& s) {
-  return {{"sim_time_s", s.sim_time_s},
+  return {// Goes up when the sim thread starts a new scene (after a reset,
+          // load_scene, set or reload): a client waiting for the new scene's
+          // steps tells them from the old one's (a status read just after the
+          // change may still be the old scene's).
+          {"generation", s.generation},
+          {"sim_time_s", s.sim_time_s},
           {"steps", s.steps},
           {"nodes", s.nodes},
           {"tets", s.tets},
@@ -149,6 +154,18 @@ std::string_view override_key(std::string_view text) {
   if (first == std::string_view::npos) return {};
   key.remove_prefix(first);
   return key.substr(0, key.find_last_not_of(" \t") + 1);
+}
+
+// A refused `set`, naming the override: the running scene took every value
+// before it, so this one broke the scene. The loader blames it itself when
+// the error is at its key ("(set by the override '...')"); an error at
+// another key (a load region the new cube size leaves outside the object) or
+// at the trial step (a gravity of 1e308: "its first step fails") said neither
+// the key nor the value the client had sent.
+std::string naming_the_override(const std::string& error, const std::string& override) {
+  const std::string named = yaml_util::printable(override);
+  if (error.find(named) != std::string::npos) return error;
+  return error + " (caused by the override " + named + ")";
 }
 }  // namespace
 
@@ -1083,7 +1100,7 @@ nlohmann::json Service::set(const std::string& key, const nlohmann::json& value)
     scene = scene::parse_scene_with_overrides(scene_.source_text, scene_path_, overrides);
     device_problem = apply_scene(std::move(scene));
   } catch (const std::exception& e) {
-    throw control::ControlError(e.what());
+    throw control::ControlError(naming_the_override(e.what(), override));
   }
   scene_sets_ = std::move(sets);
   record_event(static_cast<int>(record::EventKind::kParameterChanged), override + " (scene restarted)");

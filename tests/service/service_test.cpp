@@ -14,15 +14,18 @@
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <yaml-cpp/yaml.h>
 #include <boost/asio/ip/tcp.hpp>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <set>
 #include <thread>
 
 #include "control/control_client.hpp"
@@ -329,10 +332,21 @@ TEST(Service, SceneChangesUnderLoadKeepServing) {
   TempDir dir;
   Running run(write_config(dir, scene_file("cantilever.yaml")));
   ControlClient client = connect(dir / "ctl.sock");
+  // Each new runner the sim thread takes bumps `generation`: a client tells
+  // the new scene's status from the old one's by it (one read just after a
+  // change may still be the old scene's).
+  const auto generation = [&] {
+    const nlohmann::json g = client.call("status")["result"]["generation"];
+    EXPECT_TRUE(g.is_number_unsigned()) << g.dump();
+    return g.is_number_unsigned() ? g.get<std::uint64_t>() : 0;
+  };
+  const std::uint64_t first = generation();
   for (int i = 0; i < 10; ++i) {
     ASSERT_TRUE(client.call("reset")["ok"].get<bool>());
     ASSERT_TRUE(client.call("load_scene", {{"path", scene_file("cantilever.yaml")}})["ok"].get<bool>());
   }
+  for (int i = 0; i < 500 && generation() == first; ++i) std::this_thread::sleep_for(10ms);
+  EXPECT_GT(generation(), first) << "10 resets and 10 loads, none taken";
   const nlohmann::json set = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", 8e4}});
   EXPECT_TRUE(set["ok"].get<bool>()) << set.dump();
   const nlohmann::json bad = client.call("set", {{"key", "material.youngs_modulus_Pa"}, {"value", -1}});
@@ -363,6 +377,164 @@ TEST(Service, SceneChangesUnderLoadKeepServing) {
   EXPECT_FALSE(client.call("resume")["result"]["paused"].get<bool>());
   client.call("shutdown");
   EXPECT_EQ(run.wait(), kServiceOk);
+}
+
+// A number of a scene file: the key path `set` takes
+// ("loads[0].total_force_N[2]") and its value as written (an integer stays
+// one: object.cubes takes no 4.0).
+struct SceneNumber {
+  std::string key;
+  nlohmann::json value;
+};
+
+void collect_numbers(const YAML::Node& node, const std::string& path, std::vector<SceneNumber>& out) {
+  if (node.IsMap()) {
+    for (const auto& entry : node) {
+      const std::string key = entry.first.as<std::string>();
+      collect_numbers(entry.second, path.empty() ? key : path + "." + key, out);
+    }
+  } else if (node.IsSequence()) {
+    for (std::size_t i = 0; i < node.size(); ++i) collect_numbers(node[i], path + "[" + std::to_string(i) + "]", out);
+  } else if (node.IsScalar() && node.Tag() != "!") {  // "!": a quoted scalar, a string
+    const std::string& text = node.Scalar();
+    const char* end = text.data() + text.size();
+    long long whole = 0;
+    double number = 0.0;
+    if (const auto r = std::from_chars(text.data(), end, whole); r.ec == std::errc() && r.ptr == end)
+      out.push_back({path, whole});
+    else if (const auto d = std::from_chars(text.data(), end, number); d.ec == std::errc() && d.ptr == end)
+      out.push_back({path, number});
+  }
+}
+
+// Where `status` holds a null or a non-finite number (nlohmann writes NaN
+// and infinities as null) outside the fields that are null by design:
+// real_time_factor before its first one-second window, last_error with no
+// failed step, no recording, a transport that is off.
+void status_holes(const nlohmann::json& j, const std::string& pointer, std::vector<std::string>& holes) {
+  static const std::set<std::string> kMayBeNull = {"/real_time_factor", "/last_error", "/recording", "/publishing/lcm",
+                                                   "/publishing/dds"};
+  if (j.is_null()) {
+    if (!kMayBeNull.count(pointer)) holes.push_back(pointer + " is null");
+  } else if (j.is_number_float()) {
+    if (!std::isfinite(j.get<double>())) holes.push_back(pointer + " = " + j.dump());
+  } else if (j.is_object()) {
+    for (const auto& [key, value] : j.items()) status_holes(value, pointer + "/" + key, holes);
+  } else if (j.is_array()) {
+    for (std::size_t i = 0; i < j.size(); ++i) status_holes(j[i], pointer + "/" + std::to_string(i), holes);
+  }
+}
+
+// Every number of the shipped cantilever (read from the file: material,
+// object, regions, loads, adaptivity, integrator, gravity, probes, tool) set
+// over the control socket, one at a time, to each of a few extremes, a
+// string and a bool. Each reply is "ok" or an error naming the key, never an
+// internal error, a timeout or a dead service; an accepted scene is stepped
+// a few times and the key set back. Throughout, `status` answers with no
+// null or non-finite number where a number belongs (a NaN reaches a client
+// as null), and the haptic loop keeps ticking.
+TEST(Service, EveryNumberOfTheRunningSceneSetToAnExtremeIsRefusedNamingItOrRuns) {
+  const std::string path = scene_file("cantilever.yaml");
+  std::vector<SceneNumber> numbers;
+  collect_numbers(YAML::LoadFile(path), "", numbers);
+  ASSERT_GT(numbers.size(), 40u) << "test bug: the scene's numbers were not found";
+  const std::vector<nlohmann::json> extremes = {1e308, 1e9, 1e-9, 5e-324, 0, -1, "extreme", true};
+
+  TempDir dir;
+  Running run(write_config(dir, path));
+  ControlClient client = connect(dir / "ctl.sock");
+  // A reply, or a failure saying why there is none (a timeout, the
+  // connection gone with the service).
+  bool answered = true;
+  const auto ask = [&](const std::string& what, const std::string& cmd, const nlohmann::json& args) {
+    try {
+      return client.call(cmd, args);
+    } catch (const control::ControlClientError& e) {
+      ADD_FAILURE() << what << ": no answer to " << cmd << ": " << e.what();
+      answered = false;
+      return nlohmann::json();
+    }
+  };
+  // The status result, checked for holes.
+  const auto status = [&](const std::string& what) {
+    const nlohmann::json r = ask(what, "status", nlohmann::json::object());
+    if (!answered) return nlohmann::json();
+    EXPECT_TRUE(r["ok"].get<bool>()) << what << ": " << r.dump();
+    std::vector<std::string> holes;
+    status_holes(r["result"], "", holes);
+    for (const std::string& h : holes) ADD_FAILURE() << what << ": status " << h << " in " << r["result"].dump();
+    EXPECT_TRUE(r["result"]["haptics"].is_object()) << what << ": the haptic side is gone";
+    return r["result"];
+  };
+  const auto ticks = [](const nlohmann::json& st) { return st["haptics"].value("ticks", std::uint64_t{0}); };
+
+  int accepted = 0, refused = 0;
+  for (const SceneNumber& number : numbers) {
+    const auto key_start = std::chrono::steady_clock::now();
+    const nlohmann::json at_start = status(number.key);
+    if (!answered) break;
+    for (const nlohmann::json& extreme : extremes) {
+      const std::string what = number.key + " = " + extreme.dump();
+      const nlohmann::json before = status(what);
+      if (!answered) break;
+      const nlohmann::json r = ask(what, "set", {{"key", number.key}, {"value", extreme}});
+      if (!answered) break;
+      if (!r["ok"].get<bool>()) {
+        ++refused;
+        const std::string error = r.value("error", "");
+        EXPECT_EQ(error.find("internal error"), std::string::npos) << what << ": " << error;
+        EXPECT_NE(error.find(number.key), std::string::npos) << what << ": the error does not name the key: " << error;
+        continue;
+      }
+      ++accepted;
+      // The new scene's steps (a status of the same generation is the old
+      // scene's); 3 failing ones end the wait too, and fail the check below
+      // with their reason (last_error).
+      const auto deadline = std::chrono::steady_clock::now() + 10s;
+      nlohmann::json st = status(what);
+      while (answered && std::chrono::steady_clock::now() < deadline &&
+             !(st["generation"].get<std::uint64_t>() > before["generation"].get<std::uint64_t>() &&
+               (st["steps"].get<std::int64_t>() >= 3 ||
+                st["failed_steps"].get<std::int64_t>() >= before["failed_steps"].get<std::int64_t>() + 3))) {
+        std::this_thread::sleep_for(5ms);
+        st = status(what);
+      }
+      if (!answered) break;
+      EXPECT_TRUE(st["generation"].get<std::uint64_t>() > before["generation"].get<std::uint64_t>() &&
+                  st["steps"].get<std::int64_t>() >= 3)
+          << what << ": accepted, but the new scene took no 3 steps in 10 s: " << st.dump();
+      EXPECT_EQ(st["failed_steps"], before["failed_steps"]) << what << ": accepted, and its steps fail: " << st.dump();
+      const nlohmann::json back = ask(what, "set", {{"key", number.key}, {"value", number.value}});
+      if (!answered) break;
+      ASSERT_TRUE(back["ok"].get<bool>()) << what << ": set back to " << number.value.dump() << ": " << back.dump();
+    }
+    if (!answered) break;
+    // The next key starts from the file as written (no value set is kept).
+    const nlohmann::json loaded = ask(number.key, "load_scene", {{"path", path}});
+    if (!answered) break;
+    ASSERT_TRUE(loaded["ok"].get<bool>()) << number.key << ": " << loaded.dump();
+    // 20 ms at least: a loop that ticks at 1 kHz has ticked by then.
+    std::this_thread::sleep_until(key_start + 20ms);
+    EXPECT_GT(ticks(status(number.key)), ticks(at_start)) << number.key << ": the haptic loop stopped ticking";
+  }
+  ASSERT_TRUE(answered);
+  // 134 accepted and 210 refused of 43 keys x 8 values (2026-11-28): the
+  // sweep reached both sides.
+  EXPECT_GT(accepted, 100);
+  EXPECT_GT(refused, 150);
+
+  // At the end: the shipped scene again, stepping, the loop ticking.
+  const nlohmann::json end = status("end");
+  ASSERT_TRUE(ask("end", "load_scene", {{"path", path}})["ok"].get<bool>());
+  std::this_thread::sleep_for(200ms);
+  const nlohmann::json later = status("end, 200 ms later");
+  EXPECT_GT(later["generation"].get<std::uint64_t>(), end["generation"].get<std::uint64_t>()) << later.dump();
+  EXPECT_GT(later["steps"].get<std::int64_t>(), 0) << later.dump();
+  EXPECT_EQ(later["failed_steps"], end["failed_steps"]) << later.dump();
+  EXPECT_GT(ticks(later), ticks(end) + 50) << "200 ms at 1 kHz, generous for a loaded machine";
+  ask("end", "shutdown", nlohmann::json::object());
+  EXPECT_EQ(run.wait(), kServiceOk);
+  EXPECT_EQ(run.err_text().find("internal error"), std::string::npos) << run.err_text();
 }
 
 // `set` changes the running scene's keys only, one value per key; a
