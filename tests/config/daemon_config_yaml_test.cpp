@@ -5,12 +5,12 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <regex>
 #include <string>
 #include <vector>
 
 #include "control/temp_dir.hpp"
 #include "scene/scene_yaml.hpp"
+#include "support/yaml_numbers.hpp"
 
 namespace tissue::config {
 namespace {
@@ -537,28 +537,20 @@ TEST(DaemonConfigYamlFuzz, EveryNumberReplacedByAnExtremeIsReadOrRefusedNamingIt
                                              "[]",
                                              "{}",
                                              "~"};
-  const std::regex number(R"((:\s+|\[\s*|,\s*)(-?[0-9][0-9.eE+-]*))");
-  const std::regex key_before(R"(([A-Za-z_][A-Za-z_0-9]*):)");
   int documents = 0, accepted = 0, refused = 0;
   for (const std::string& original : {read_text(kShipped), kBase}) {
     ASSERT_FALSE(original.empty());
     ++documents;
-    for (auto it = std::sregex_iterator(original.begin(), original.end(), number); it != std::sregex_iterator(); ++it) {
-      const std::size_t at = static_cast<std::size_t>(it->position(2)), length = it->length(2);
-      // Skip numbers inside comments and keys' names.
-      const std::size_t line_start = original.rfind('\n', at) + 1;
-      const std::string line_before = original.substr(line_start, at - line_start);
-      if (line_before.find('#') != std::string::npos) continue;
-      std::string key;
-      for (auto k = std::sregex_iterator(line_before.begin(), line_before.end(), key_before);
-           k != std::sregex_iterator(); ++k)
-        key = (*k)[1];
-      ASSERT_FALSE(key.empty()) << "test bug: no key before the number at " << at << " in: " << line_before;
+    const std::vector<tissue::testing::YamlNumber> numbers = tissue::testing::yaml_numbers(original);
+    ASSERT_GT(numbers.size(), 10u);
+    for (const tissue::testing::YamlNumber& number : numbers) {
+      const std::size_t at = number.offset, length = number.length;
+      const std::string& key = number.key;
       for (const std::string& extreme : extremes) {
         const bool must_refuse = extreme.find_first_of("0123456789") == std::string::npos;
         std::string text = original;
         text.replace(at, length, extreme);
-        const std::string what = key + ": " + it->str(2) + " -> " + extreme;
+        const std::string what = key + ": " + number.text + " -> " + extreme;
         try {
           const DaemonConfig c = parse_daemon_config(text, kSource);
           EXPECT_NO_THROW(validate_daemon_config(c)) << what;
