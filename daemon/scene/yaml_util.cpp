@@ -47,11 +47,12 @@ KeyPathError::KeyPathError(const std::string& source, const std::string& key_pat
 
 std::string fmt_num(double v) { return util::number_text(v); }
 
-std::string printable_bare(std::string_view s) {
+namespace {
+std::string printable_up_to(std::string_view s, std::size_t max_chars) {
   std::string out;
   std::size_t n = 0;
   for (const char ch : s) {
-    if (n++ == 40) {
+    if (n++ == max_chars) {
       out += "...";
       break;
     }
@@ -67,7 +68,17 @@ std::string printable_bare(std::string_view s) {
   return out;
 }
 
+}  // namespace
+
+std::string printable_bare(std::string_view s) { return printable_up_to(s, 40); }
+
 std::string printable(std::string_view s) { return "'" + printable_bare(s) + "'"; }
+
+std::string printable_override(std::string_view text) {
+  const std::size_t eq = text.find('=');
+  if (eq == std::string_view::npos) return printable(text);
+  return "'" + printable_up_to(text.substr(0, eq), 120) + "=" + printable_bare(text.substr(eq + 1)) + "'";
+}
 
 bool plain_name(std::string_view s) {
   if (s.empty() || s.size() > 64) return false;
@@ -382,7 +393,7 @@ YAML::Node set_path(const YAML::Node& node, bool present, const Override& ov, st
   const Override::Part& part = ov.parts[i];
   // Overrides come from --set and from the control socket's `set`: the
   // words name neither.
-  const std::string shown = "the override " + printable(ov.text);
+  const std::string shown = "the override " + printable_override(ov.text);
   if (part.is_index) {
     const std::string here = join_index(done, part.index);
     if (!present || !node.IsSequence())
@@ -466,7 +477,7 @@ YAML::Node load_document(const std::string& text, const std::string& source, con
 }
 
 Override parse_override(const std::string& text, const std::string& source, const DocumentKind& doc) {
-  const std::string shown = "the override " + printable(text);
+  const std::string shown = "the override " + printable_override(text);
   const auto eq = text.find('=');
   if (eq == std::string::npos)
     throw PathError(source, "", shown + " is malformed: expected key.path=value (no '=' found)");
@@ -532,7 +543,8 @@ Document load_with_overrides(const std::string& text, const std::string& source,
 std::string blame_override(const std::vector<Override>& overrides, const std::string& key_path,
                            const std::string& reason) {
   for (auto it = overrides.rbegin(); it != overrides.rend(); ++it)
-    if (paths_related(it->path, key_path)) return reason + " (set by the override " + printable(it->text) + ")";
+    if (paths_related(it->path, key_path))
+      return reason + " (set by the override " + printable_override(it->text) + ")";
   return reason;
 }
 

@@ -63,6 +63,9 @@ class PathError : public KeyPathError {
 std::string fmt_num(double v);                   // shortest round-trip text; nan, inf, -inf
 std::string printable_bare(std::string_view s);  // printable ASCII, \xNN otherwise, at most 40 chars
 std::string printable(std::string_view s);       // the same in single quotes
+// An override "key.path=value" in single quotes: the key up to 120
+// characters (a key path is what the user must find), the value up to 40.
+std::string printable_override(std::string_view text);
 using KeyList = std::span<const std::string_view>;
 std::string join_list(KeyList items);
 std::string join_key(const std::string& path, std::string_view key);

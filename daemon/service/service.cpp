@@ -163,7 +163,7 @@ std::string_view override_key(std::string_view text) {
 // at the trial step (a gravity of 1e308: "its first step fails") said neither
 // the key nor the value the client had sent.
 std::string naming_the_override(const std::string& error, const std::string& override) {
-  const std::string named = yaml_util::printable(override);
+  const std::string named = yaml_util::printable_override(override);
   if (error.find(named) != std::string::npos) return error;
   return error + " (caused by the override " + named + ")";
 }
@@ -208,7 +208,7 @@ scene::Scene Service::load_config_scene(const config::DaemonConfig& config) cons
     // the file and key themselves.
     std::string blame;
     for (const std::string& o : config_overrides())
-      if (override_key(o) == "scene") blame = " (set by the override " + yaml_util::printable(o) + ")";
+      if (override_key(o) == "scene") blame = " (set by the override " + yaml_util::printable_override(o) + ")";
     throw config::ConfigError(config.source, "scene", e.source() + ": " + e.reason() + blame);
   }
 }

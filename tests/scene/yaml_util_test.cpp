@@ -110,6 +110,14 @@ TEST(YamlUtil, PrintableEscapesControlBytesAndStopsAfterFortyCharacters) {
   const std::string forty(40, 'x');
   EXPECT_EQ(printable_bare(forty), forty);
   EXPECT_EQ(printable_bare(forty + "y"), forty + "...");
+  // An override is shown with its key whole (keys reach 45 characters:
+  // 'adaptivity.simplify_min_age_steps=...' was cut inside the key) and its
+  // value cut at 40, in quotes.
+  EXPECT_EQ(printable_override("material.youngs_modulus_Pa=-1000000000000000"),
+            "'material.youngs_modulus_Pa=-1000000000000000'");
+  EXPECT_EQ(printable_override("a=" + forty + "y"), "'a=" + forty + "...'");
+  EXPECT_EQ(printable_override("no equals sign"), "'no equals sign'");
+  EXPECT_EQ(printable_override(std::string(300, 'k') + "=1"), "'" + std::string(120, 'k') + "...=1'");
   EXPECT_EQ(printable_bare(std::string(1000, 'q')).size(), 43u);
   EXPECT_EQ(printable("it's"), "'it's'");
   EXPECT_EQ(printable(""), "''");
