@@ -89,7 +89,7 @@ bool read_numbers(const std::string& a, const NextValue& value, TradeOptions& o)
   } else if (a == "--depths") {
     for (const auto& t : split_list(value())) o.max_depths.push_back(depth("--depths", t));
   } else if (a == "--integrators") {
-    o.integrators = split_list(value());
+    for (auto& name : split_list(value())) o.integrators.push_back(std::move(name));  // repeats add, as the other lists
   } else if (a == "--dts") {
     for (const auto& t : split_list(value())) o.dts_s.push_back(positive_number("--dts", t));
   } else if (a == "--duration") {

@@ -127,6 +127,12 @@ TEST(TradeOptions, EachErrorNamesTheOptionOrTheConflict) {
             "--dts: 0.001 is given twice (each point of the sweep runs once)");
   EXPECT_EQ(parse_error({"--sweep", "--integrators", "implicit,explicit,implicit"}),
             "--integrators: implicit is given twice (each point of the sweep runs once)");
+  // Repeating --integrators adds to the list, as the other lists do (a
+  // second one replaced the first, silently running only its integrators).
+  EXPECT_EQ(parse_error({"--sweep", "--integrators", "implicit", "--integrators", "implicit"}),
+            "--integrators: implicit is given twice (each point of the sweep runs once)");
+  EXPECT_EQ(parse_trade_options({"--sweep", "--integrators", "implicit", "--integrators", "explicit"}).integrators,
+            (std::vector<std::string>{"implicit", "explicit"}));
   EXPECT_EQ(parse_error({"--sweep", "--depths", "3,6", "--th", "5,20", "--dts", "0.001,0.005"}), "");
 }
 
