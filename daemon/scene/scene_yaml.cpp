@@ -55,7 +55,8 @@ constexpr long long kMaxTotalCubes = kMaxTets / 6;
 // forms density x six-volume x unit x unit x unit and six-volume x unit³ left
 // to right, each step between its first factor and the result, so with the
 // volume in range the density is within [1e-200, 1e200] and E within about
-// [1e-134, 1e134], and every step stays an ordinary double (cube_size_m
+// [1e-134, 1e134] as far as doubles go (the material caps below bound both
+// from above far sooner), and every step stays an ordinary double (cube_size_m
 // 1e-80 with density 1e308 passed the mass check and overflowed at
 // density x six-volume; cube_size_m 2e-108 made every tet's volume, and so
 // every stiffness, 0).
@@ -564,7 +565,7 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     // beta is the dampers' only when they follow Rayleigh's law (material.damping).
     if (m.damping == DampingLaw::kRayleigh) {
       const int depth = std::max(s_.adaptivity.min_depth, s_.adaptivity.max_depth);
-      // sqrt of each: E / density can overflow (E up to ~1e134, density down to ~1e-200).
+      // sqrt of each: E / density can overflow (E up to 1e13, density down to ~1e-200).
       const double leaf_m = s_.object.cube_size_m * std::exp2(-static_cast<double>(depth));
       const double omega_per_s = std::sqrt(m.youngs_modulus_Pa) / std::sqrt(m.density_kg_per_m3) / leaf_m;
       const std::string omega = "omega = sqrt(E / density) / leaf size = " + said(omega_per_s) +

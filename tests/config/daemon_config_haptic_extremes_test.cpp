@@ -124,6 +124,12 @@ TEST(DaemonConfigHapticExtremes, EveryAcceptedExtremeRendersFiniteForcesWithinTh
       "haptics.crossfade_s",
   };
   const std::vector<std::string> extremes = {"1e308", "1.8e19", "1e9", "1e4", "1", "1e-9", "5e-324", "0", "-1e308"};
+  // The harness renders contact at all: the base config presses 2 mm into
+  // the 600 N/m patch and swings through it (a regression that rendered no
+  // force would pass every check below).
+  const Rendered base = render(parse_daemon_config(kConfig, "extremes.yaml"), true);
+  EXPECT_GT(base.peak_N, 0.5);
+  EXPECT_EQ(base.nonfinite_written, 0);
   int accepted = 0, refused = 0;
   for (const std::string& key : keys) {
     for (const std::string& value : extremes) {
