@@ -141,6 +141,7 @@ bool UdpDevice::start(std::string* error) {
   peer_ = ip::udp::endpoint();
   filtered_ = false;  // a new socket: not connected
   filter_refused_ = false;
+  filter_route_source_ = ip::address();
   peer_to_ = ip::address();
   peer_reply_from_ = ip::address();
   reply_from_refused_ = false;
@@ -198,16 +199,18 @@ UdpDevice::Verdict UdpDevice::consider(std::size_t bytes, std::int64_t now_ns) n
   if (!live) {
     bump(sessions_);
     filter_refused_ = false;  // a new sender: it may be reached where the route back leaves from
+    filter_route_source_ = ip::address();
     reply_from_refused_ = false;
   }
   // Poses that move to another local address within a session (an unconnected
   // one: a connected socket hears only its own) name a source not yet tried:
   // a device that connect()ed to the new address drops forces from the route's.
   if (reply_from_ != peer_reply_from_) reply_from_refused_ = false;
-  // The same for the filter: refused because the poses came to an address
-  // other than the route back's source, it may fit the new one (read() tries
-  // it again; one connect, and a disconnect if refused again, per move).
-  if (to_ != peer_to_) filter_refused_ = false;
+  // The same for the filter, refused because the poses came to an address
+  // other than the route back's source: poses that move to that source fit
+  // it (read() tries it again). Moves between other addresses do not: each
+  // try would cost a connect and a disconnect in the tick, for nothing.
+  if (filter_refused_ && to_ != peer_to_ && to_ == filter_route_source_) filter_refused_ = false;
   peer_ = from_;
   peer_to_ = to_;
   peer_reply_from_ = reply_from_;
@@ -242,6 +245,7 @@ void UdpDevice::filter_to(const ip::udp::endpoint* peer) noexcept {
   ::connect(socket_.native_handle(), &unspecified, sizeof unspecified);
   filtered_ = false;
   filter_refused_ = true;
+  filter_route_source_ = ec ? ip::address() : local.address();
 }
 
 std::size_t UdpDevice::receive(boost::system::error_code& ec) noexcept {

@@ -136,7 +136,7 @@ class UdpDevice final : public Device {
   // (any address may start the next session). One syscall, no allocation.
   // Bound to 0.0.0.0, it connects only if the local address the connect
   // picks is the one peer_'s poses came to (else disconnects again and sets
-  // filter_refused_ until the poses come to another local address or a new
+  // filter_refused_ until the poses come to the route's source or a new
   // session starts). IPv4 sockets only (connectable_).
   void filter_to(const boost::asio::ip::udp::endpoint* peer) noexcept;
   // One datagram into receive_buffer_, its source into from_ and, when bound
@@ -178,8 +178,11 @@ class UdpDevice final : public Device {
   bool connectable_ = false;
   bool wildcard_ = false;  // bound to 0.0.0.0 or ::
   // The poses come to a local address other than the route back's source:
-  // no connect, until they come to another (a new peer_to_) or a new session.
+  // no connect, until they come to that source (filter_route_source_) or a
+  // new session starts. Only that address can pass filter_to's check, so a
+  // sender alternating between two others costs no connect at each move.
   bool filter_refused_ = false;
+  boost::asio::ip::address filter_route_source_;  // the route back's source, learnt by the refused try
   // Destination of the datagram in receive_buffer_ (wildcard_ only); an IPv6
   // link-local one carries the scope id of the interface it came in on, which
   // write() names as the source's interface (IPV6_PKTINFO).
