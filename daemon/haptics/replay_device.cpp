@@ -200,6 +200,12 @@ void ReplayDevice::build_knots_by_guess() {
   if (time_s_.back() > knot_time_s_.back()) add(time_s_.back(), position_m_.back());
 }
 
+double ReplayDevice::loop_wrap_jump_m() const noexcept {
+  // Knot times are strictly increasing, so two knots are a track read() wraps.
+  if (!loop_ || knot_time_s_.size() < 2) return 0.0;
+  return (knot_position_m_.back() - knot_position_m_.front()).norm();
+}
+
 bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   if (knot_time_s_.empty()) return false;  // not started
   if (start_ns_ < 0) start_ns_ = now_ns;

@@ -57,6 +57,14 @@ class ReplayDevice final : public Device {
   // between the rows where a new sample came (with device_fresh flags), or
   // between the track's position changes (without); 0 with fewer than two.
   double device_period_s() const noexcept { return device_period_s_; }
+  // The jump (device frame) read() makes in one tick at each wrap of a
+  // looping replay: from the last position it plays to the first, i.e. the
+  // last knot to the first (see build_knots), not the track's raw last and
+  // first rows: a recording that began before the device's first sample
+  // plays from that sample's pose, not from the device origin its first rows
+  // hold. 0 when read() never wraps: not looping, a track of no duration (it
+  // holds its one position), or not started.
+  double loop_wrap_jump_m() const noexcept;
 
   // Without device_fresh flags (a session of format version < 3), each step
   // is spread over at most this many device periods. Such a recording

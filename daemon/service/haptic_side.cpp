@@ -80,6 +80,7 @@ class HapticSideImpl final : public HapticSide {
                  std::FILE* out) {
     std::string error;
     std::string wrap_warning;  // a looping track's wrap the loop will take as a glitch
+    const haptics::ReplayDevice* replay = nullptr;
     if (config.device.kind == config::DeviceSpec::Kind::kReplay) {
       const record::HapticTrack track = record::read_haptic_track(config.device.replay.session);  // names the file
       std::vector<haptics::Vec3> positions;
@@ -90,14 +91,13 @@ class HapticSideImpl final : public HapticSide {
       const haptics::FrameTransform frame = haptics::FrameTransform::from(config.device.offset_m, config.device.scale);
       for (const auto& p : track.device_position_m)
         positions.push_back(frame.position_to_device(haptics::Vec3(p[0], p[1], p[2])));
-      if (config.device.replay.loop && !positions.empty())
-        wrap_warning = haptics::loop_wrap_warning("device.replay.loop", (positions.back() - positions.front()).norm(),
-                                                  config.device.limits.max_speed_m_per_s, config.haptics.rate_hz);
       // With the session's device_fresh flags (empty for a file from before
       // them) the replay spreads each step exactly as the loop measured it.
-      device_ = std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions), config.device.replay.speed,
-                                                        config.device.replay.loop,
-                                                        config.device.limits.max_speed_m_per_s, track.device_fresh);
+      auto device = std::make_unique<haptics::ReplayDevice>(track.time_s, std::move(positions),
+                                                            config.device.replay.speed, config.device.replay.loop,
+                                                            config.device.limits.max_speed_m_per_s, track.device_fresh);
+      replay = device.get();
+      device_ = std::move(device);
     } else {
       device_ = haptics::make_device(config.device, &error);
       wrap_warning = haptics::sim_loop_wrap_warning(config.device, config.haptics.rate_hz);
@@ -106,6 +106,14 @@ class HapticSideImpl final : public HapticSide {
     udp_ = dynamic_cast<const haptics::UdpDevice*>(device_.get());
     if (!device_->start(&error))
       throw std::runtime_error(std::string("haptic device ") + device_->name() + ": " + error);
+    // The wrap as the replay plays it (start() built its knots): from its last
+    // played position to its first, which is the device's first sample when
+    // the recording began before it, not the track's first row (the device
+    // origin): judged on the raw rows, a seamless loop was warned about and a
+    // real jump missed.
+    if (replay)
+      wrap_warning = haptics::loop_wrap_warning("device.replay.loop", replay->loop_wrap_jump_m(),
+                                                config.device.limits.max_speed_m_per_s, config.haptics.rate_hz);
     memory_ = haptics::lock_memory(config.realtime.lock_memory);
     loop_ = std::make_unique<haptics::HapticLoop>(*device_, config.device, config.haptics, models, samples);
     thread_ = std::make_unique<haptics::HapticThread>(*loop_, config.haptics, config.realtime);

@@ -522,5 +522,41 @@ TEST(ReplayDevice, FreshFlagsOfAnotherLengthThanTheTrackAreRefusedAtStart) {
   EXPECT_FALSE(d.read(0, &s)) << "not started";
 }
 
+// A looping replay jumps, in one tick at each wrap, from the last position it
+// plays to the first (the daemon warns when the loop would reject that jump).
+// With the rows before the device's first sample held at that sample's pose,
+// the jump starts there, not at the device origin those rows hold: the jump
+// loop_wrap_jump_m() reports is the one read() makes across the wrap.
+TEST(ReplayDevice, TheLoopWrapJumpIsFromTheLastPlayedPositionToTheFirstSample) {
+  // 250 Hz, along y at 0.25 m/s from x = 0.3 m; the device came at row 52.
+  FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(0.3, 1e-3 * k, 0); });
+  for (int row = 0; row < 52; ++row) {
+    track.position_m[row] = Vec3::Zero();
+    track.fresh[row] = 0;
+  }
+  const Vec3 first_sample_m = track.position_m[52], last_m = track.position_m.back();
+  ASSERT_GT((last_m - track.position_m.front()).norm(), 0.3) << "the raw rows' wrap, from the origin";
+  ReplayDevice looping(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh);
+  EXPECT_EQ(looping.loop_wrap_jump_m(), 0.0) << "not started: no knots, nothing played";
+  std::string error;
+  ASSERT_TRUE(looping.start(&error)) << error;
+  EXPECT_NEAR(looping.loop_wrap_jump_m(), (last_m - first_sample_m).norm(), 1e-15);
+  EXPECT_NEAR(looping.loop_wrap_jump_m(), 0.036, 1e-12);  // sample 49 back to sample 13
+  DeviceSample before, after;
+  ASSERT_TRUE(looping.read(0, &before));
+  ASSERT_TRUE(looping.read(199 * kMs, &before));  // the last row
+  ASSERT_TRUE(looping.read(200 * kMs, &after));   // wrapped to 1 ms into the track: held at the first sample
+  EXPECT_EQ(before.position_m, last_m);
+  EXPECT_EQ(after.position_m, first_sample_m);
+  EXPECT_NEAR((after.position_m - before.position_m).norm(), looping.loop_wrap_jump_m(), 1e-15);
+
+  ReplayDevice once(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh);
+  ASSERT_TRUE(once.start(&error)) << error;
+  EXPECT_EQ(once.loop_wrap_jump_m(), 0.0) << "it holds the last position: no wrap";
+  ReplayDevice still({0.0, 0.0}, {Vec3(0.1, 0, 0), Vec3(0.2, 0, 0)}, 1.0, true);
+  ASSERT_TRUE(still.start(&error)) << error;
+  EXPECT_EQ(still.loop_wrap_jump_m(), 0.0) << "no duration: read() holds one position, never wraps";
+}
+
 }  // namespace
 }  // namespace tissue::haptics

@@ -18,6 +18,7 @@
 #include <boost/asio/ip/tcp.hpp>
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -25,6 +26,7 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <numbers>
 #include <set>
 #include <thread>
 
@@ -34,6 +36,7 @@
 #include "record/record_test_support.hpp"
 #include "record/session_layout.hpp"
 #include "record/session_tools.hpp"
+#include "record/session_writer.hpp"
 #include "scene/scene_yaml.hpp"
 #include "support/process_support.hpp"
 
@@ -1718,6 +1721,75 @@ TEST(Service, ReplayDeviceReproducesTheRecordedForces) {
     expect_same_force_profile(record::read_haptic_track(dir / "original.h5"),
                               record::read_haptic_track(dir / "replayed.h5"));
   }
+}
+
+// A session's /haptic rows at 1 kHz: `before` rows at the scene origin with
+// no device sample yet (what the loop records before the device's first
+// sample), then one new sample a row along `path` (path[0] is the first).
+std::string write_replay_session(const std::string& path, std::size_t before,
+                                 const std::vector<std::array<double, 3>>& samples_m) {
+  record::SessionMetadata metadata;
+  metadata.scene_name = "cantilever";
+  metadata.software_version = "test";
+  auto writer = record::SessionWriter::create(path, metadata);
+  std::vector<record::HapticRow> rows(before + samples_m.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    rows[i].time_s = 1e-3 * static_cast<double>(i);
+    if (i < before) continue;
+    rows[i].device_position_m = samples_m[i - before];
+    rows[i].device_fresh = 1;
+  }
+  writer->append_haptic(rows);
+  writer->close();
+  return path;
+}
+
+// `device.replay.loop`'s warning is about the wrap the replay plays: from the
+// last position it plays to the first, which for a recording that began
+// before the device's first sample is that sample's pose, not the first row
+// (the device origin). Judged on the raw rows, a track that ends on its first
+// sample was warned about (a jump back to the origin that never happens) and
+// one that ends at the origin was not (the jump from there to the first
+// sample does happen, every wrap).
+TEST(Service, ReplayLoopWarnsAboutTheWrapAsPlayedFromTheFirstSample) {
+  TempDir dir;
+  const std::array<double, 3> first_m{0.03, 0.04, 0.0};  // 5 cm from the origin (scene frame)
+  const auto run_replay = [&](const std::string& session, double scale) {
+    const std::string config = dir / "replay-loop.yaml";
+    std::ofstream(config) << "scene: " << scene_file("cantilever.yaml") << "\n"
+                          << "state_dir: " << dir.path() << "\n"
+                          << "device: {kind: replay, scale: " << scale << ", replay: {session: " << session
+                          << ", loop: true}}\n"
+                          << "realtime: {sched_fifo: false, lock_memory: false}\n"
+                          << "control: {unix_socket_path: " << (dir / "ctl-loop.sock") << "}\n";
+    Running run(config, 0.3, {"loads=[]"});
+    EXPECT_EQ(run.wait(), kServiceOk) << run.err_text();
+    return file_text(run.out);
+  };
+  // Out 1 cm in z and back over 0.3 s, ending exactly on the first sample:
+  // played, the wrap is seamless (the rows before the first sample hold it).
+  std::vector<std::array<double, 3>> there_and_back;
+  for (int i = 0; i <= 300; ++i)
+    there_and_back.push_back({first_m[0], first_m[1], 0.01 * std::sin(std::numbers::pi * i / 300.0)});
+  there_and_back.push_back(first_m);
+  const std::string seamless = run_replay(write_replay_session(dir / "seamless.h5", 20, there_and_back), 1.0);
+  EXPECT_EQ(seamless.find("warning: device.replay.loop"), std::string::npos)
+      << "the replay ends where it starts, on the first sample:\n"
+      << seamless;
+  // From the first sample back to the origin over 0.2 s: it ends on the
+  // first row, but plays from the first sample, 5 cm (scene frame) from
+  // where it ends; 10 cm in the device frame at scale 0.5.
+  std::vector<std::array<double, 3>> to_origin;
+  for (int i = 0; i <= 200; ++i) {
+    const double u = 1.0 - i / 200.0;
+    to_origin.push_back({u * first_m[0], u * first_m[1], 0.0});
+  }
+  const std::string jumping = run_replay(write_replay_session(dir / "jumping.h5", 20, to_origin), 0.5);
+  EXPECT_NE(jumping.find("tissued: warning: device.replay.loop: the looping track goes from its last point back to "
+                         "its first in one tick, a 0.1 m jump (device frame)"),
+            std::string::npos)
+      << "the wrap from the origin to the first sample is not warned about:\n"
+      << jumping;
 }
 
 void expect_same_force_profile(const record::HapticTrack& original, const record::HapticTrack& replayed) {
