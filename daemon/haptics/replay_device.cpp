@@ -39,13 +39,14 @@ std::string fmt_speed_at_most(double max_speed_m_per_s, double peak_m_per_s) {
 }  // namespace
 
 ReplayDevice::ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
-                           double max_speed_m_per_s, std::vector<std::uint8_t> device_fresh)
+                           double max_speed_m_per_s, std::vector<std::uint8_t> device_fresh, double device_timeout_s)
     : time_s_(std::move(time_s)),
       position_m_(std::move(position_m)),
       device_fresh_(std::move(device_fresh)),
       speed_(speed),
       loop_(loop),
-      max_speed_m_per_s_(max_speed_m_per_s) {}
+      max_speed_m_per_s_(max_speed_m_per_s),
+      device_timeout_s_(device_timeout_s) {}
 
 bool ReplayDevice::start(std::string* error) {
   auto fail = [&](const std::string& why) {
@@ -66,12 +67,15 @@ bool ReplayDevice::start(std::string* error) {
   // a glitch: a replay sped up past it would lose the hand on the track's
   // fast strokes and ramp the force out mid-replay, with no word why.
   // Measured on the knots read() plays, segment by segment, so a speed is
-  // refused exactly when read() would hand the loop a too-fast sample.
+  // refused exactly when read() would hand the loop a too-fast sample. A gap
+  // played as no samples is no segment: the loop has lost the device by its
+  // end and judges the next sample over the whole gap, as it did live.
   build_knots();
   double peak_m_per_s = 0.0;
   for (std::size_t k = 1; k < knot_time_s_.size(); ++k)
-    peak_m_per_s = std::max(
-        peak_m_per_s, (knot_position_m_[k] - knot_position_m_[k - 1]).norm() / (knot_time_s_[k] - knot_time_s_[k - 1]));
+    if (!knot_after_gap_[k])
+      peak_m_per_s = std::max(peak_m_per_s, (knot_position_m_[k] - knot_position_m_[k - 1]).norm() /
+                                                (knot_time_s_[k] - knot_time_s_[k - 1]));
   if (peak_m_per_s * speed_ > max_speed_m_per_s_) {
     knot_time_s_.clear();  // not started: read() says so
     return fail("device.replay.speed " + fmt(speed_) + " plays the track at up to " + fmt(peak_m_per_s * speed_) +
@@ -85,10 +89,11 @@ bool ReplayDevice::start(std::string* error) {
   return true;
 }
 
-void ReplayDevice::add_knot(double t_s, const Vec3& p_m) {
+void ReplayDevice::add_knot(double t_s, const Vec3& p_m, bool after_gap) {
   if (knot_time_s_.empty() || t_s > knot_time_s_.back()) {
     knot_time_s_.push_back(t_s);
     knot_position_m_.push_back(p_m);
+    knot_after_gap_.push_back(after_gap ? 1 : 0);
   } else {
     knot_position_m_.back() = p_m;  // rows at the same time: the later one holds
   }
@@ -97,6 +102,7 @@ void ReplayDevice::add_knot(double t_s, const Vec3& p_m) {
 void ReplayDevice::build_knots() {
   knot_time_s_.clear();
   knot_position_m_.clear();
+  knot_after_gap_.clear();
   if (device_fresh_.empty())
     build_knots_by_guess();
   else
@@ -145,6 +151,7 @@ void ReplayDevice::build_knots_from_flags() {
 
   knot_time_s_.reserve(samples + 2);
   knot_position_m_.reserve(samples + 2);
+  knot_after_gap_.reserve(samples + 2);
   // Before the first sample the loop had no hand: it rendered nothing, judged
   // that sample against nothing, and the rows hold the device origin. Held
   // at the first sample's pose from the first row, the replay does not
@@ -153,9 +160,14 @@ void ReplayDevice::build_knots_from_flags() {
   // Each sample a knot: the step to it spreads over the time since the
   // sample before, the time the loop measured it over live (a lost sample
   // is a longer gap; a still hand whose device re-sends its pose is a run
-  // of knots at that pose, held until the last one before it moves).
-  for (std::size_t i = first; i < rows; ++i)
-    if (is_sample(i)) add_knot(time_s_[i], position_m_[i]);
+  // of knots at that pose, held until the last one before it moves). A gap
+  // that plays longer than the device timeout is no step: live the loop
+  // lost the device over it (see the header).
+  for (std::size_t i = first; i < rows; ++i) {
+    if (!is_sample(i)) continue;
+    const bool lost = i > first && (time_s_[i] - knot_time_s_.back()) / speed_ > device_timeout_s_;
+    add_knot(time_s_[i], position_m_[i], lost);
+  }
   if (time_s_.back() > knot_time_s_.back()) add_knot(time_s_.back(), position_m_.back());
 }
 
@@ -179,6 +191,7 @@ void ReplayDevice::build_knots_by_guess() {
 
   knot_time_s_.reserve(2 * changes + 2);
   knot_position_m_.reserve(2 * changes + 2);
+  knot_after_gap_.reserve(2 * changes + 2);
   auto add = [&](double t_s, const Vec3& p_m) { add_knot(t_s, p_m); };
   add(time_s_.front(), position_m_.front());
   double held_since_s = time_s_.front();
@@ -203,7 +216,14 @@ void ReplayDevice::build_knots_by_guess() {
 double ReplayDevice::loop_wrap_jump_m() const noexcept {
   // Knot times are strictly increasing, so two knots are a track read() wraps.
   if (!loop_ || knot_time_s_.size() < 2) return 0.0;
+  // Ending on a gap played as no samples, read() has none before the wrap:
+  // the loop has lost the device and judges the first sample over the gap.
+  if (knot_after_gap_.back()) return 0.0;
   return (knot_position_m_.back() - knot_position_m_.front()).norm();
+}
+
+std::size_t ReplayDevice::lost_gaps() const noexcept {
+  return static_cast<std::size_t>(std::count(knot_after_gap_.begin(), knot_after_gap_.end(), std::uint8_t{1}));
 }
 
 bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
@@ -224,6 +244,9 @@ bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   const std::size_t n = knot_time_s_.size();
   while (cursor_ + 1 < n && knot_time_s_[cursor_ + 1] <= t) ++cursor_;
   const std::size_t i = cursor_, j = std::min(cursor_ + 1, n - 1);
+  // Inside a gap the device sent nothing for longer than its timeout: no
+  // sample, so the loop loses the device as it did live.
+  if (j > i && knot_after_gap_[j]) return false;
   const double dt = knot_time_s_[j] - knot_time_s_[i];
   const double u = dt > 0.0 ? std::clamp((t - knot_time_s_[i]) / dt, 0.0, 1.0) : 0.0;
   // From the knot along the step: a held pose (a step of zero) plays exactly.

@@ -20,6 +20,15 @@
 // later say which rows those are (/haptic/device_fresh); for older ones the
 // time is guessed from the position changes, at most kSpreadPeriods of the
 // recorded device's sample periods.
+//
+// With the flags, a gap between two samples that plays longer than
+// device.limits.device_timeout_s is not a step: live the device sent nothing
+// for that long, the loop declared it lost, ramped the force out and took
+// the next sample whatever the jump (judged over the whole gap). Spread
+// over the gap, a minute's outage with a 0.2 m move played as a minute's
+// sweep at full force (possibly through the object) and no lost device. So
+// read() returns no sample over such a gap, then the next sample, and the
+// loop loses the device exactly as live.
 #pragma once
 
 #include <cstdint>
@@ -38,15 +47,20 @@ class ReplayDevice final : public Device {
   // device_fresh: the session's /haptic/device_fresh, one 0/1 per row (1:
   // a new device sample came that tick), or empty when the session did not
   // record it (format version < 3: the knots are guessed, see build_knots).
+  // device_timeout_s: device.limits.device_timeout_s; with device_fresh, a
+  // gap between samples whose playback (gap / speed) is longer plays as no
+  // samples (see above). Infinite: every gap is spread.
   ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
                double max_speed_m_per_s = std::numeric_limits<double>::infinity(),
-               std::vector<std::uint8_t> device_fresh = {});
+               std::vector<std::uint8_t> device_fresh = {},
+               double device_timeout_s = std::numeric_limits<double>::infinity());
 
   bool start(std::string* error) override;
   void stop() noexcept override {}
   // The position at (now - first read) * speed into the track: linear between
   // the knots (see build_knots), held at the end (or wrapped when looping).
-  // Velocity by the slope. False before start().
+  // Velocity by the slope. False before start(), and inside a gap longer
+  // than the device timeout (up to, not at, the sample that ends it).
   bool read(std::int64_t now_ns, DeviceSample* out) noexcept override;
   void write(std::int64_t /*now_ns*/, const Vec3& force_N) noexcept override { last_force_N_ = force_N; }
   const char* name() const noexcept override { return "replay"; }
@@ -63,8 +77,13 @@ class ReplayDevice final : public Device {
   // first rows: a recording that began before the device's first sample
   // plays from that sample's pose, not from the device origin its first rows
   // hold. 0 when read() never wraps: not looping, a track of no duration (it
-  // holds its one position), or not started.
+  // holds its one position), or not started. Also 0 when the track ends on
+  // a sample after a gap played as no samples: read() gives nothing before
+  // the wrap, the loop has lost the device, and judges the first sample
+  // against the last before the gap over the whole gap, not over one tick.
   double loop_wrap_jump_m() const noexcept;
+  // The gaps played as no samples (see device_timeout_s), after start().
+  std::size_t lost_gaps() const noexcept;
 
   // Without device_fresh flags (a session of format version < 3), each step
   // is spread over at most this many device periods. Such a recording
@@ -96,19 +115,24 @@ class ReplayDevice final : public Device {
   // those periods; and the last row. A shorter hold gets no extra knot: the
   // step is spread over the whole gap. Either way a track that has a new
   // position every row keeps every row as a knot and replays row to row.
+  // knot_after_gap_[k] marks a knot reached over a gap played as no samples
+  // (flags only): not a segment the hand moves along, so read() has no
+  // sample before it and start() does not measure its speed.
   void build_knots();
   void build_knots_from_flags();
   void build_knots_by_guess();
   // Appends a knot; a row at the time of the last knot replaces its position.
-  void add_knot(double t_s, const Vec3& p_m);
+  void add_knot(double t_s, const Vec3& p_m, bool after_gap = false);
   std::vector<double> time_s_;
   std::vector<Vec3> position_m_;
   std::vector<std::uint8_t> device_fresh_;  // empty: not recorded
   double speed_;
   bool loop_;
   double max_speed_m_per_s_;
+  double device_timeout_s_;
   std::vector<double> knot_time_s_;  // strictly increasing, from time_s_.front() to time_s_.back()
   std::vector<Vec3> knot_position_m_;
+  std::vector<std::uint8_t> knot_after_gap_;  // one per knot
   double device_period_s_ = 0.0;
   std::int64_t start_ns_ = -1;
   std::size_t cursor_ = 0;  // knot at or before the last time read (monotone search)

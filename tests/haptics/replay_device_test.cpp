@@ -399,7 +399,9 @@ FlaggedTrack flagged_track(int period_rows, int rows, const std::function<Vec3(i
 // 20 ms (3 m/s). Guessed from the positions alone, the step was squeezed into
 // 3 periods (12 ms: 5 m/s, faster than live, and start() refused speeds the
 // live session allowed). With the flags the step is spread over the whole
-// gap, and the speed check measures that.
+// gap, and the speed check measures that. (No device timeout is given: with
+// device.limits.device_timeout_s below the 20 ms gap, live and replayed, the
+// device is lost over it instead, see ...AGapLongerThanTheDeviceTimeout....)
 TEST(ReplayDevice, WithFreshFlagsFourLostPacketsInARowReplayOverTheWholeGap) {
   const config::DeviceSpec spec = no_model_device_spec();
   const double max_speed_m_per_s = spec.limits.max_speed_m_per_s;
@@ -556,6 +558,117 @@ TEST(ReplayDevice, TheLoopWrapJumpIsFromTheLastPlayedPositionToTheFirstSample) {
   ReplayDevice still({0.0, 0.0}, {Vec3(0.1, 0, 0), Vec3(0.2, 0, 0)}, 1.0, true);
   ASSERT_TRUE(still.start(&error)) << error;
   EXPECT_EQ(still.loop_wrap_jump_m(), 0.0) << "no duration: read() holds one position, never wraps";
+}
+
+// A 250 Hz device that sent nothing for 2 s (samples 26..524 lost), the hand
+// 0.2 m away when it came back. Live the loop lost the device 10 ms into the
+// gap (device.limits.device_timeout_s), ramped the force out, and took the
+// next sample whatever the jump. Spread over the gap, the replay swept the
+// hand those 0.2 m over 2 s at full force and never lost the device.
+FlaggedTrack two_second_outage() {
+  return flagged_track(
+      4, 2400, [](int k) { return k <= 25 ? Vec3(0.1, 0, 0) : Vec3(0.1, 0.2, 0); },
+      [] {
+        std::vector<int> lost;
+        for (int k = 26; k <= 524; ++k) lost.push_back(k);
+        return lost;
+      }());
+}
+
+TEST(ReplayDevice, WithFreshFlagsAGapLongerThanTheDeviceTimeoutPlaysAsNoSamples) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  const FlaggedTrack track = two_second_outage();
+  ASSERT_EQ(track.fresh[100], 1);   // sample 25, the last before the gap
+  ASSERT_EQ(track.fresh[2100], 1);  // sample 525, the first after it
+  ASSERT_EQ(std::count(track.fresh.begin() + 101, track.fresh.begin() + 2100, 1), 0);
+  ReplayDevice replay(track.time_s, track.position_m, 1.0, false, spec.limits.max_speed_m_per_s, track.fresh,
+                      spec.limits.device_timeout_s);
+  std::string error;
+  ASSERT_TRUE(replay.start(&error)) << error;
+  EXPECT_EQ(replay.lost_gaps(), 1u);
+  DeviceSample s;
+  ASSERT_TRUE(replay.read(0, &s));
+  ASSERT_TRUE(replay.read(99 * kMs, &s));
+  EXPECT_EQ(s.position_m, Vec3(0.1, 0, 0));
+  for (const int ms : {101, 500, 1100, 2099})
+    EXPECT_FALSE(replay.read(ms * kMs, &s)) << "inside the 2 s gap, at " << ms << " ms: " << s.position_m.transpose();
+  ASSERT_TRUE(replay.read(2101 * kMs, &s)) << "the sample after the gap";
+  EXPECT_EQ(s.position_m, Vec3(0.1, 0.2, 0));
+  EXPECT_TRUE(s.velocity_m_per_s.isZero(0.0));
+
+  // Through the loop: the device is lost over the gap, as live, and the jump
+  // after it is taken (judged over the whole gap), not rejected.
+  ReplayDevice driven(track.time_s, track.position_m, 1.0, false, spec.limits.max_speed_m_per_s, track.fresh,
+                      spec.limits.device_timeout_s);
+  ASSERT_TRUE(driven.start(&error)) << error;
+  const HapticStats st = replay_through_the_loop(driven, spec, 2300);
+  EXPECT_GE(st.device_lost_trips, 1u);
+  EXPECT_GE(st.missing_samples, 1900u);
+  EXPECT_EQ(st.rejected_speed, 0u);
+}
+
+// One lost packet at 250 Hz is 8 ms without a sample: under the 10 ms device
+// timeout the loop kept the device live and measured the step over the 8 ms,
+// so the replay still spreads it over the gap. Played at half speed the same
+// gap lasts 16 ms, longer than the timeout: the loop would lose the device,
+// and the replay plays it as no samples.
+TEST(ReplayDevice, WithFreshFlagsAGapShorterThanTheDeviceTimeoutStillGlides) {
+  const FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(1e-3 * k, 0, 0); }, {25});
+  ASSERT_EQ(track.fresh[96], 1);
+  ASSERT_EQ(track.fresh[100], 0);
+  ASSERT_EQ(track.fresh[104], 1);
+  ReplayDevice real_time(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh, 0.01);
+  std::string error;
+  ASSERT_TRUE(real_time.start(&error)) << error;
+  EXPECT_EQ(real_time.lost_gaps(), 0u);
+  DeviceSample s;
+  ASSERT_TRUE(real_time.read(0, &s));
+  ASSERT_TRUE(real_time.read(100 * kMs, &s)) << "half way through the 8 ms gap";
+  EXPECT_NEAR(s.position_m.x(), 0.025, 1e-12);  // sample 24 (24 mm) to 26 (26 mm) over 96..104 ms
+  EXPECT_NEAR(s.velocity_m_per_s.x(), 0.25, 1e-9);
+
+  ReplayDevice half_speed(track.time_s, track.position_m, 0.5, false, 5.0, track.fresh, 0.01);
+  ASSERT_TRUE(half_speed.start(&error)) << error;
+  EXPECT_EQ(half_speed.lost_gaps(), 1u);
+  ASSERT_TRUE(half_speed.read(0, &s));
+  EXPECT_FALSE(half_speed.read(200 * kMs, &s)) << "100 ms into the track, 16 ms of playback without a sample";
+  ASSERT_TRUE(half_speed.read(209 * kMs, &s));  // 104.5 ms in: an eighth of the way from sample 26 to 27
+  EXPECT_NEAR(s.position_m.x(), 0.026125, 1e-12);
+}
+
+// A gap played as no samples is no segment the hand moves along: start()'s
+// speed check does not measure the jump over it (the loop judges that jump
+// over the whole gap after losing the device, as live), and a looping track
+// that ends on such a gap makes no one-tick jump at the wrap.
+TEST(ReplayDevice, AGapPlayedAsNoSamplesIsNotMeasuredBySpeedOrTheLoopWrap) {
+  // 0.12 m in the 20 ms of four lost packets: 6 m/s if glided, above 5.
+  const FlaggedTrack track =
+      flagged_track(4, 141, [](int k) { return k < 30 ? Vec3(0, 0, 0) : Vec3(0.12, 0, 0); }, {30, 31, 32, 33});
+  std::string error;
+  ReplayDevice glided(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh);
+  EXPECT_FALSE(glided.start(&error)) << "without a timeout the gap is a 6 m/s segment";
+  EXPECT_NE(error.find("its peak 6 m/s"), std::string::npos) << error;
+  ReplayDevice lost(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh, 0.01);
+  ASSERT_TRUE(lost.start(&error)) << error;
+  EXPECT_EQ(lost.lost_gaps(), 1u);
+  EXPECT_NEAR(lost.loop_wrap_jump_m(), 0.12, 1e-15) << "the last sample back to the first";
+
+  // The track ends on the sample after the gap: read() gives nothing before
+  // the wrap, so no jump happens in one tick.
+  FlaggedTrack ends_on_gap = track;
+  ends_on_gap.time_s.resize(137);
+  ends_on_gap.position_m.resize(137);
+  ends_on_gap.fresh.resize(137);
+  ASSERT_EQ(ends_on_gap.fresh.back(), 1);
+  ReplayDevice wraps_after_gap(ends_on_gap.time_s, ends_on_gap.position_m, 1.0, true, 5.0, ends_on_gap.fresh, 0.01);
+  ASSERT_TRUE(wraps_after_gap.start(&error)) << error;
+  EXPECT_EQ(wraps_after_gap.loop_wrap_jump_m(), 0.0);
+  DeviceSample s;
+  ASSERT_TRUE(wraps_after_gap.read(0, &s));
+  EXPECT_FALSE(wraps_after_gap.read(135 * kMs, &s)) << "the last milliseconds before the wrap are the gap";
+  ASSERT_TRUE(wraps_after_gap.read(137 * kMs, &s)) << "wrapped to 1 ms in";
+  EXPECT_EQ(s.position_m, Vec3::Zero());
 }
 
 }  // namespace

@@ -1,0 +1,106 @@
+// The replay device as the service builds it (HapticSide): the session's
+// /haptic/device_fresh flags and the config's device.limits.device_timeout_s
+// must reach the ReplayDevice. Each case is told by start(): HapticSide::start
+// throws, naming device.replay.speed, when the replay would play the track
+// faster than device.limits.max_speed_m_per_s.
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "config/daemon_config.hpp"
+#include "record/record_test_support.hpp"
+#include "record/session_writer.hpp"
+#include "service/haptic_side.hpp"
+
+namespace tissue::service {
+namespace {
+
+// A 250 Hz device recorded at 1 kHz (a sample every 4th row, flagged), along
+// x: pose(k) for sample k; the samples in `lost` never came (their rows hold
+// the last one, unflagged).
+template <typename Pose>
+std::string write_250hz_session(const std::string& path, int rows, Pose pose, int lost_from, int lost_to) {
+  record::SessionMetadata meta;
+  meta.scene_name = "replay";
+  meta.software_version = "test";
+  auto writer = record::SessionWriter::create(path, meta);
+  std::vector<record::HapticRow> haptic;
+  double held_x_m = pose(0);
+  for (int row = 0; row < rows; ++row) {
+    const int sample = row / 4;
+    const bool came = row % 4 == 0 && (sample < lost_from || sample > lost_to);
+    if (came) held_x_m = pose(sample);
+    record::HapticRow r;
+    r.time_s = 1e-3 * row;
+    r.device_position_m = {held_x_m, 0.0, 0.0};
+    r.device_fresh = came ? 1 : 0;
+    haptic.push_back(r);
+  }
+  writer->append_haptic(haptic);
+  writer->close();
+  return path;
+}
+
+config::DaemonConfig replay_config(const std::string& session, double speed) {
+  config::DaemonConfig config;
+  config.device.kind = config::DeviceSpec::Kind::kReplay;
+  config.device.replay.session = session;
+  config.device.replay.speed = speed;
+  config.realtime.sched_fifo = false;
+  config.realtime.lock_memory = false;
+  return config;
+}
+
+// Starts the haptic side; "" when it started, else why it did not.
+std::string start_error(const config::DaemonConfig& config) {
+  auto samples = std::make_unique<ToolSampleRing>();
+  auto models = std::make_unique<LocalModelChannel>();
+  try {
+    auto side = HapticSide::start(config, *samples, *models, nullptr);
+    side->stop();
+    return "";
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+}
+
+// Four packets lost in a row at 3 m/s: with the flags the 60 mm step spreads
+// over the 20 ms gap (3 m/s), so 1.5 times real time plays at 4.5 m/s; the
+// rule for files without flags squeezes it into 3 periods (5 m/s) and refuses
+// 1.5 (7.5 m/s). The device timeout is set above the gap so it glides.
+TEST(ReplayHapticSide, TheSessionsFreshFlagsReachTheReplayDevice) {
+  record::testing::TempDir dir;
+  const std::string path = write_250hz_session(
+      dir / "v3.h5", 261, [](int k) { return -0.4 + 3.0 * 4e-3 * k; }, 30, 33);
+  config::DaemonConfig config = replay_config(path, 1.5);
+  config.device.limits.device_timeout_s = 0.05;
+  EXPECT_EQ(start_error(config), "");
+
+  record::testing::make_version_2(path);  // the same rows without the flags
+  const std::string error = start_error(config);
+  EXPECT_NE(error.find("device.replay.speed 1.5"), std::string::npos) << error;
+}
+
+// 0.12 m in the 20 ms of four lost packets (6 m/s if spread over the gap).
+// With the default 10 ms device timeout the gap plays as no samples (the loop
+// loses the device, as live) and no segment is too fast; with a 50 ms
+// timeout it is a 6 m/s glide and refused.
+TEST(ReplayHapticSide, TheDeviceTimeoutReachesTheReplayDevice) {
+  record::testing::TempDir dir;
+  const std::string path = write_250hz_session(
+      dir / "gap.h5", 261, [](int k) { return k < 30 ? 0.0 : 0.12; }, 30, 33);
+  config::DaemonConfig config = replay_config(path, 1.0);
+  ASSERT_EQ(config.device.limits.device_timeout_s, 0.01);
+  EXPECT_EQ(start_error(config), "");
+
+  config.device.limits.device_timeout_s = 0.05;
+  const std::string error = start_error(config);
+  EXPECT_NE(error.find("its peak 6 m/s"), std::string::npos) << error;
+}
+
+}  // namespace
+}  // namespace tissue::service
