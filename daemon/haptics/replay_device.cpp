@@ -161,11 +161,19 @@ void ReplayDevice::build_knots_from_flags() {
   // sample before, the time the loop measured it over live (a lost sample
   // is a longer gap; a still hand whose device re-sends its pose is a run
   // of knots at that pose, held until the last one before it moves). A gap
-  // that plays longer than the device timeout is no step: live the loop
-  // lost the device over it (see the header).
+  // in which the live loop lost the device is no step (see the header): the
+  // loop declared it lost at a tick more than the device timeout after the
+  // last sample, so the gap was lost iff its last row (the last tick without
+  // a sample) is past the timeout. That is what happened live, so it holds
+  // at any speed: judged on the playback gap (gap / speed), every sample
+  // period became a lost gap at slow speeds. The row times are the loop's
+  // integer-nanosecond ticks in seconds: differences of them round either
+  // way, so a gap of exactly the timeout (not lost live) must not count as
+  // past it by a rounding error; the slack is well under a nanosecond.
+  constexpr double kRoundingSlackS = 1e-10;
   for (std::size_t i = first; i < rows; ++i) {
     if (!is_sample(i)) continue;
-    const bool lost = i > first && (time_s_[i] - knot_time_s_.back()) / speed_ > device_timeout_s_;
+    const bool lost = i > first && time_s_[i - 1] - knot_time_s_.back() > device_timeout_s_ + kRoundingSlackS;
     add_knot(time_s_[i], position_m_[i], lost);
   }
   if (time_s_.back() > knot_time_s_.back()) add_knot(time_s_.back(), position_m_.back());

@@ -21,10 +21,14 @@
 // time is guessed from the position changes, at most kSpreadPeriods of the
 // recorded device's sample periods.
 //
-// With the flags, a gap between two samples that plays longer than
-// device.limits.device_timeout_s is not a step: live the device sent nothing
-// for that long, the loop declared it lost, ramped the force out and took
-// the next sample whatever the jump (judged over the whole gap). Spread
+// With the flags, a gap between two samples in which the live loop lost the
+// device (its last row, the last tick without a sample, is more than
+// device.limits.device_timeout_s after the sample before) is not a step:
+// live the device sent nothing for that long, the loop declared it lost,
+// ramped the force out and took the next sample whatever the jump (judged
+// over the whole gap). That is decided on the recorded times, so the same
+// gaps are lost at any speed: on the playback gap (gap / speed), every
+// sample period of a 250 Hz device was "lost" at a quarter speed. Spread
 // over the gap, a minute's outage with a 0.2 m move played as a minute's
 // sweep at full force (possibly through the object) and no lost device. So
 // read() returns no sample over such a gap, then the next sample, and the
@@ -48,8 +52,9 @@ class ReplayDevice final : public Device {
   // a new device sample came that tick), or empty when the session did not
   // record it (format version < 3: the knots are guessed, see build_knots).
   // device_timeout_s: device.limits.device_timeout_s; with device_fresh, a
-  // gap between samples whose playback (gap / speed) is longer plays as no
-  // samples (see above). Infinite: every gap is spread.
+  // gap between samples whose last row is more than this after the sample
+  // before plays as no samples, at any speed (see above). Infinite: every
+  // gap is spread.
   ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
                double max_speed_m_per_s = std::numeric_limits<double>::infinity(),
                std::vector<std::uint8_t> device_fresh = {},

@@ -93,8 +93,9 @@ class HapticSideImpl final : public HapticSide {
         positions.push_back(frame.position_to_device(haptics::Vec3(p[0], p[1], p[2])));
       // With the session's device_fresh flags (empty for a file from before
       // them) the replay spreads each step exactly as the loop measured it,
-      // and a gap that plays longer than this config's device timeout gives
-      // no samples, so the loop loses the device over it as it did live.
+      // and a gap over which the live loop lost the device (judged with this
+      // config's device timeout on the recorded times) gives no samples, so
+      // the loop loses the device over it as it did live.
       auto device = std::make_unique<haptics::ReplayDevice>(
           track.time_s, std::move(positions), config.device.replay.speed, config.device.replay.loop,
           config.device.limits.max_speed_m_per_s, track.device_fresh, config.device.limits.device_timeout_s);

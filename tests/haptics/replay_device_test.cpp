@@ -611,8 +611,9 @@ TEST(ReplayDevice, WithFreshFlagsAGapLongerThanTheDeviceTimeoutPlaysAsNoSamples)
 // One lost packet at 250 Hz is 8 ms without a sample: under the 10 ms device
 // timeout the loop kept the device live and measured the step over the 8 ms,
 // so the replay still spreads it over the gap. Played at half speed the same
-// gap lasts 16 ms, longer than the timeout: the loop would lose the device,
-// and the replay plays it as no samples.
+// gap lasts 16 ms, longer than the timeout, and still glides: the gap was not
+// lost live, so it is lost at no speed (the glide gives the loop a sample
+// every tick, so it never loses the device over it).
 TEST(ReplayDevice, WithFreshFlagsAGapShorterThanTheDeviceTimeoutStillGlides) {
   const FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(1e-3 * k, 0, 0); }, {25});
   ASSERT_EQ(track.fresh[96], 1);
@@ -630,11 +631,72 @@ TEST(ReplayDevice, WithFreshFlagsAGapShorterThanTheDeviceTimeoutStillGlides) {
 
   ReplayDevice half_speed(track.time_s, track.position_m, 0.5, false, 5.0, track.fresh, 0.01);
   ASSERT_TRUE(half_speed.start(&error)) << error;
-  EXPECT_EQ(half_speed.lost_gaps(), 1u);
+  EXPECT_EQ(half_speed.lost_gaps(), 0u);
   ASSERT_TRUE(half_speed.read(0, &s));
-  EXPECT_FALSE(half_speed.read(200 * kMs, &s)) << "100 ms into the track, 16 ms of playback without a sample";
-  ASSERT_TRUE(half_speed.read(209 * kMs, &s));  // 104.5 ms in: an eighth of the way from sample 26 to 27
+  ASSERT_TRUE(half_speed.read(200 * kMs, &s)) << "100 ms into the track, half way through the gap";
+  EXPECT_NEAR(s.position_m.x(), 0.025, 1e-12);
+  EXPECT_NEAR(s.velocity_m_per_s.x(), 0.125, 1e-9);  // 0.25 m/s at half speed
+  ASSERT_TRUE(half_speed.read(209 * kMs, &s));       // 104.5 ms in: an eighth of the way from sample 26 to 27
   EXPECT_NEAR(s.position_m.x(), 0.026125, 1e-12);
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  ReplayDevice driven(track.time_s, track.position_m, 0.5, false, 5.0, track.fresh, spec.limits.device_timeout_s);
+  ASSERT_TRUE(driven.start(&error)) << error;
+  const HapticStats st = replay_through_the_loop(driven, spec, 2 * 200 + 10);
+  EXPECT_EQ(st.device_lost_trips, 0u);
+  EXPECT_EQ(st.missing_samples, 0u);
+}
+
+// Whether a gap was lost is what the live loop saw, whatever the replay's
+// speed: a 250 Hz device with no lost packets kept the device at every tick
+// live. Judged on the playback gap (gap / speed), every 4 ms sample period
+// played at a quarter speed was a 16 ms "outage", longer than the 10 ms
+// timeout, and the replay played with no device at all.
+TEST(ReplayDevice, WithFreshFlagsASlowReplayOfA250HzTrackKeepsTheDevice) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  // 1 m/s: 4 mm a sample, 0.2 m in 50 samples, none lost.
+  const FlaggedTrack track = flagged_track(4, 201, [](int k) { return Vec3(-0.1 + 4e-3 * k, 0, 0); });
+  ReplayDevice replay(track.time_s, track.position_m, 0.25, false, spec.limits.max_speed_m_per_s, track.fresh,
+                      spec.limits.device_timeout_s);
+  std::string error;
+  ASSERT_TRUE(replay.start(&error)) << error;
+  EXPECT_EQ(replay.lost_gaps(), 0u);
+  const HapticStats st = replay_through_the_loop(replay, spec, 4 * 201 + 10);
+  EXPECT_EQ(st.device_lost_trips, 0u);
+  EXPECT_EQ(st.missing_samples, 0u);
+  EXPECT_EQ(st.rejected_speed, 0u);
+}
+
+// The boundary, on a 1 kHz device: live the loop declared the device lost at
+// a tick more than device_timeout_s after the last sample. Ten samples lost
+// in a row is an 11 ms gap, but its last tick without a sample came 10 ms
+// after the last one, not more: the loop kept the device, and the replay
+// glides. Eleven lost samples: 11 ms without one at the last tick, lost.
+TEST(ReplayDevice, WithFreshFlagsAGapIsLostWhenItsLastTickWithoutASampleWasPastTheTimeout) {
+  const auto lost_run = [](int from, int count) {
+    std::vector<int> lost;
+    for (int k = from; k < from + count; ++k) lost.push_back(k);
+    return lost;
+  };
+  const auto pose = [](int k) { return Vec3(1e-4 * k, 0, 0); };  // 0.1 m/s
+  std::string error;
+  DeviceSample s;
+  for (const int first : {50, 1003, 2717}) {  // where 1e-3 * rows rounds either way
+    const FlaggedTrack ten = flagged_track(1, first + 40, pose, lost_run(first, 10));
+    ReplayDevice kept(ten.time_s, ten.position_m, 1.0, false, 5.0, ten.fresh, 0.01);
+    ASSERT_TRUE(kept.start(&error)) << error;
+    EXPECT_EQ(kept.lost_gaps(), 0u) << "ten lost from sample " << first;
+    ASSERT_TRUE(kept.read(0, &s));
+    EXPECT_TRUE(kept.read((first + 5) * kMs, &s)) << "inside the 11 ms gap: glided, from sample " << first;
+
+    const FlaggedTrack eleven = flagged_track(1, first + 40, pose, lost_run(first, 11));
+    ReplayDevice lost(eleven.time_s, eleven.position_m, 1.0, false, 5.0, eleven.fresh, 0.01);
+    ASSERT_TRUE(lost.start(&error)) << error;
+    EXPECT_EQ(lost.lost_gaps(), 1u) << "eleven lost from sample " << first;
+    ASSERT_TRUE(lost.read(0, &s));
+    EXPECT_FALSE(lost.read((first + 5) * kMs, &s)) << "inside the 12 ms gap: no samples, from sample " << first;
+  }
 }
 
 // A gap played as no samples is no segment the hand moves along: start()'s
