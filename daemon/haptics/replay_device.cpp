@@ -68,14 +68,17 @@ bool ReplayDevice::start(std::string* error) {
   // fast strokes and ramp the force out mid-replay, with no word why.
   // Measured on the knots read() plays, segment by segment, so a speed is
   // refused exactly when read() would hand the loop a too-fast sample. A gap
-  // played as no samples is no segment: the loop has lost the device by its
-  // end and judges the next sample over the whole gap, as it did live.
+  // played as no samples counts too, by the same formula: the loop judges
+  // the sample that ends it against the last one it accepted, the sample
+  // before the gap, over the wall time since (the gap / speed), whether or
+  // not it lost the device meanwhile. Left out, a speed was accepted at
+  // which the loop rejects that sample (and the ones after it, until the
+  // time since the last accepted one has grown long enough).
   build_knots();
   double peak_m_per_s = 0.0;
   for (std::size_t k = 1; k < knot_time_s_.size(); ++k)
-    if (!knot_after_gap_[k])
-      peak_m_per_s = std::max(peak_m_per_s, (knot_position_m_[k] - knot_position_m_[k - 1]).norm() /
-                                                (knot_time_s_[k] - knot_time_s_[k - 1]));
+    peak_m_per_s = std::max(
+        peak_m_per_s, (knot_position_m_[k] - knot_position_m_[k - 1]).norm() / (knot_time_s_[k] - knot_time_s_[k - 1]));
   if (peak_m_per_s * speed_ > max_speed_m_per_s_) {
     knot_time_s_.clear();  // not started: read() says so
     return fail("device.replay.speed " + fmt(speed_) + " plays the track at up to " + fmt(peak_m_per_s * speed_) +

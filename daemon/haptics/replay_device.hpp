@@ -47,7 +47,9 @@ class ReplayDevice final : public Device {
  public:
   // time_s non-decreasing, the same length as position_m, at least one row.
   // max_speed_m_per_s: device.limits.max_speed_m_per_s (device frame, as
-  // position_m): start() refuses a speed that plays the track faster.
+  // position_m): start() refuses a speed that plays the track faster (a gap
+  // played as no samples included: the loop judges the sample after it over
+  // the gap / speed).
   // device_fresh: the session's /haptic/device_fresh, one 0/1 per row (1:
   // a new device sample came that tick), or empty when the session did not
   // record it (format version < 3: the knots are guessed, see build_knots).
@@ -122,7 +124,8 @@ class ReplayDevice final : public Device {
   // position every row keeps every row as a knot and replays row to row.
   // knot_after_gap_[k] marks a knot reached over a gap played as no samples
   // (flags only): not a segment the hand moves along, so read() has no
-  // sample before it and start() does not measure its speed.
+  // sample before it; start() still measures its speed (the loop judges the
+  // knot's sample against the one before the gap over the gap / speed).
   void build_knots();
   void build_knots_from_flags();
   void build_knots_by_guess();

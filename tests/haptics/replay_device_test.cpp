@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -699,22 +700,39 @@ TEST(ReplayDevice, WithFreshFlagsAGapIsLostWhenItsLastTickWithoutASampleWasPastT
   }
 }
 
-// A gap played as no samples is no segment the hand moves along: start()'s
-// speed check does not measure the jump over it (the loop judges that jump
-// over the whole gap after losing the device, as live), and a looping track
-// that ends on such a gap makes no one-tick jump at the wrap.
-TEST(ReplayDevice, AGapPlayedAsNoSamplesIsNotMeasuredBySpeedOrTheLoopWrap) {
-  // 0.12 m in the 20 ms of four lost packets: 6 m/s if glided, above 5.
+// A gap played as no samples is measured by start()'s speed check as the
+// loop judges the sample that ends it: against the last sample before the
+// gap, over the wall time since (gap / speed), the same as a glide over it.
+// Left out, a speed at which the loop rejects that sample was accepted. A
+// looping track that ends on such a gap makes no one-tick jump at the wrap.
+TEST(ReplayDevice, AGapPlayedAsNoSamplesIsMeasuredOverTheWholeGapNotByTheLoopWrap) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.max_speed_m_per_s, 5.0);
+  // 0.08 m in the 20 ms of four lost packets: 4 m/s, which the live loop took.
   const FlaggedTrack track =
-      flagged_track(4, 141, [](int k) { return k < 30 ? Vec3(0, 0, 0) : Vec3(0.12, 0, 0); }, {30, 31, 32, 33});
+      flagged_track(4, 141, [](int k) { return k < 30 ? Vec3(0, 0, 0) : Vec3(0.08, 0, 0); }, {30, 31, 32, 33});
   std::string error;
-  ReplayDevice glided(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh);
-  EXPECT_FALSE(glided.start(&error)) << "without a timeout the gap is a 6 m/s segment";
-  EXPECT_NE(error.find("its peak 6 m/s"), std::string::npos) << error;
   ReplayDevice lost(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh, 0.01);
   ASSERT_TRUE(lost.start(&error)) << error;
   EXPECT_EQ(lost.lost_gaps(), 1u);
-  EXPECT_NEAR(lost.loop_wrap_jump_m(), 0.12, 1e-15) << "the last sample back to the first";
+  EXPECT_NEAR(lost.loop_wrap_jump_m(), 0.08, 1e-15) << "the last sample back to the first";
+  // At 1.5 times real time the sample after the gap comes 13.3 ms of wall
+  // time after the one before: 6 m/s. Refused, lost or glided alike.
+  for (const double timeout_s : {0.01, std::numeric_limits<double>::infinity()}) {
+    ReplayDevice fast(track.time_s, track.position_m, 1.5, false, 5.0, track.fresh, timeout_s);
+    EXPECT_FALSE(fast.start(&error)) << "timeout " << timeout_s;
+    EXPECT_NE(error.find("its peak 4 m/s"), std::string::npos) << error;
+  }
+  // ... which is exactly when the loop rejects it.
+  ReplayDevice unchecked(track.time_s, track.position_m, 1.5, false, std::numeric_limits<double>::infinity(),
+                         track.fresh, 0.01);
+  ASSERT_TRUE(unchecked.start(&error)) << error;
+  EXPECT_GE(replay_through_the_loop(unchecked, spec, 120).rejected_speed, 1u);
+  ReplayDevice allowed(track.time_s, track.position_m, 1.2, false, 5.0, track.fresh, 0.01);
+  ASSERT_TRUE(allowed.start(&error)) << error;
+  const HapticStats st = replay_through_the_loop(allowed, spec, 130);
+  EXPECT_EQ(st.rejected_speed, 0u);
+  EXPECT_GE(st.device_lost_trips, 1u) << "16.7 ms of wall time without a sample";
 
   // The track ends on the sample after the gap: read() gives nothing before
   // the wrap, so no jump happens in one tick.
