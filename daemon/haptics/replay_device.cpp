@@ -106,6 +106,7 @@ void ReplayDevice::build_knots() {
   knot_time_s_.clear();
   knot_position_m_.clear();
   knot_after_gap_.clear();
+  ends_without_sample_ = false;
   if (device_fresh_.empty())
     build_knots_by_guess();
   else
@@ -179,7 +180,15 @@ void ReplayDevice::build_knots_from_flags() {
     const bool lost = i > first && time_s_[i - 1] - knot_time_s_.back() > device_timeout_s_ + kRoundingSlackS;
     add_knot(time_s_[i], position_m_[i], lost);
   }
-  if (time_s_.back() > knot_time_s_.back()) add_knot(time_s_.back(), position_m_.back());
+  // The rows after the last sample, by the same rule: when the track ends
+  // more than the timeout after it, live the device had stopped and the loop
+  // lost it for the rest of the track, so that tail plays as no samples (to
+  // the end, and held there), not as a live hand held at the last pose.
+  if (time_s_.back() > knot_time_s_.back()) {
+    const bool lost = first < rows && time_s_.back() - knot_time_s_.back() > device_timeout_s_ + kRoundingSlackS;
+    add_knot(time_s_.back(), position_m_.back(), lost);
+    ends_without_sample_ = lost;
+  }
 }
 
 void ReplayDevice::build_knots_by_guess() {
@@ -227,8 +236,9 @@ void ReplayDevice::build_knots_by_guess() {
 double ReplayDevice::loop_wrap_jump_m() const noexcept {
   // Knot times are strictly increasing, so two knots are a track read() wraps.
   if (!loop_ || knot_time_s_.size() < 2) return 0.0;
-  // Ending on a gap played as no samples, read() has none before the wrap:
-  // the loop has lost the device and judges the first sample over the gap.
+  // Ending on a gap played as no samples (or on a tail of rows after the
+  // last sample played so), read() has none before the wrap: the loop has
+  // lost the device and judges the first sample over the gap.
   if (knot_after_gap_.back()) return 0.0;
   return (knot_position_m_.back() - knot_position_m_.front()).norm();
 }
@@ -248,6 +258,7 @@ bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     if (t < knot_time_s_[cursor_]) cursor_ = 0;
   }
   if (t >= last_s) {
+    if (ends_without_sample_) return false;  // past a tail played as no samples
     out->position_m = knot_position_m_.back();
     out->velocity_m_per_s.setZero();
     return true;

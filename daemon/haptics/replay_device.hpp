@@ -32,7 +32,10 @@
 // over the gap, a minute's outage with a 0.2 m move played as a minute's
 // sweep at full force (possibly through the object) and no lost device. So
 // read() returns no sample over such a gap, then the next sample, and the
-// loop loses the device exactly as live.
+// loop loses the device exactly as live. Likewise a track that ends more
+// than the timeout after its last sample: live the device had stopped, so
+// read() returns no sample from there to the end (not a live hand held at
+// the last pose).
 #pragma once
 
 #include <cstdint>
@@ -66,8 +69,9 @@ class ReplayDevice final : public Device {
   void stop() noexcept override {}
   // The position at (now - first read) * speed into the track: linear between
   // the knots (see build_knots), held at the end (or wrapped when looping).
-  // Velocity by the slope. False before start(), and inside a gap longer
-  // than the device timeout (up to, not at, the sample that ends it).
+  // Velocity by the slope. False before start(), inside a gap played as no
+  // samples (up to, not at, the sample that ends it), and from the last
+  // sample on when the track ends more than the device timeout after it.
   bool read(std::int64_t now_ns, DeviceSample* out) noexcept override;
   void write(std::int64_t /*now_ns*/, const Vec3& force_N) noexcept override { last_force_N_ = force_N; }
   const char* name() const noexcept override { return "replay"; }
@@ -85,11 +89,13 @@ class ReplayDevice final : public Device {
   // plays from that sample's pose, not from the device origin its first rows
   // hold. 0 when read() never wraps: not looping, a track of no duration (it
   // holds its one position), or not started. Also 0 when the track ends on
-  // a sample after a gap played as no samples: read() gives nothing before
+  // a sample after a gap played as no samples, or on a tail after its last
+  // sample played as no samples (see build_knots): read() gives nothing before
   // the wrap, the loop has lost the device, and judges the first sample
   // against the last before the gap over the whole gap, not over one tick.
   double loop_wrap_jump_m() const noexcept;
-  // The gaps played as no samples (see device_timeout_s), after start().
+  // The gaps played as no samples (see device_timeout_s), after start(),
+  // counting a tail after the last sample played so.
   std::size_t lost_gaps() const noexcept;
 
   // Without device_fresh flags (a session of format version < 3), each step
@@ -141,6 +147,9 @@ class ReplayDevice final : public Device {
   std::vector<double> knot_time_s_;  // strictly increasing, from time_s_.front() to time_s_.back()
   std::vector<Vec3> knot_position_m_;
   std::vector<std::uint8_t> knot_after_gap_;  // one per knot
+  // The last knot is the track's end after a tail played as no samples (flags
+  // only): not a sample, so read() has none there either (see build_knots).
+  bool ends_without_sample_ = false;
   double device_period_s_ = 0.0;
   std::int64_t start_ns_ = -1;
   std::size_t cursor_ = 0;  // knot at or before the last time read (monotone search)

@@ -700,6 +700,60 @@ TEST(ReplayDevice, WithFreshFlagsAGapIsLostWhenItsLastTickWithoutASampleWasPastT
   }
 }
 
+// A track that ends more than the device timeout after its last sample: live
+// the device had stopped, and the loop lost it for the rest of the track.
+// Held at the last pose, the replay played a live hand there (forces on a
+// hand that was gone) to the end. It plays that tail as no samples, and a
+// looping replay makes no one-tick jump at the wrap (the loop has lost the
+// device by then and judges the first sample over the whole tail).
+TEST(ReplayDevice, WithFreshFlagsATailLongerThanTheDeviceTimeoutPlaysAsNoSamples) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  const auto pose = [](int k) { return Vec3(-0.1 + 4e-3 * k, 0, 0); };  // 1 m/s
+  std::vector<int> stopped;
+  for (int k = 26; k < 50; ++k) stopped.push_back(k);
+  // The last sample (25) at row 100, the track on to row 199.
+  const FlaggedTrack track = flagged_track(4, 200, pose, stopped);
+  ReplayDevice once(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh, spec.limits.device_timeout_s);
+  std::string error;
+  ASSERT_TRUE(once.start(&error)) << error;
+  EXPECT_EQ(once.lost_gaps(), 1u);
+  DeviceSample s;
+  ASSERT_TRUE(once.read(0, &s));
+  ASSERT_TRUE(once.read(99 * kMs, &s));
+  EXPECT_NEAR(s.position_m.x(), -0.1 + 4e-3 * 24.75, 1e-12);
+  for (const int ms : {101, 150, 199, 250})
+    EXPECT_FALSE(once.read(ms * kMs, &s)) << "in the tail, at " << ms << " ms: " << s.position_m.transpose();
+  ReplayDevice driven(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh, spec.limits.device_timeout_s);
+  ASSERT_TRUE(driven.start(&error)) << error;
+  const HapticStats st = replay_through_the_loop(driven, spec, 300);
+  EXPECT_GE(st.device_lost_trips, 1u);
+  EXPECT_GE(st.missing_samples, 199u);
+
+  ReplayDevice looping(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh, spec.limits.device_timeout_s);
+  ASSERT_TRUE(looping.start(&error)) << error;
+  EXPECT_EQ(looping.loop_wrap_jump_m(), 0.0);
+  ASSERT_TRUE(looping.read(0, &s));
+  EXPECT_FALSE(looping.read(150 * kMs, &s));
+  ASSERT_TRUE(looping.read(200 * kMs, &s)) << "wrapped to 1 ms in";
+  EXPECT_NEAR(s.position_m.x(), -0.1 + 1e-3, 1e-12);
+
+  // Ending 10 ms after the last sample, the loop still had the device at the
+  // last tick: held. 11 ms after: lost.
+  for (const int rows : {111, 112}) {
+    FlaggedTrack cut = track;
+    cut.time_s.resize(rows);
+    cut.position_m.resize(rows);
+    cut.fresh.resize(rows);
+    ReplayDevice replay(cut.time_s, cut.position_m, 1.0, false, 5.0, cut.fresh, spec.limits.device_timeout_s);
+    ASSERT_TRUE(replay.start(&error)) << error;
+    EXPECT_EQ(replay.lost_gaps(), rows == 111 ? 0u : 1u) << rows << " rows";
+    ASSERT_TRUE(replay.read(0, &s));
+    EXPECT_EQ(replay.read(105 * kMs, &s), rows == 111) << rows << " rows";
+    EXPECT_EQ(replay.read(200 * kMs, &s), rows == 111) << rows << " rows, past the end";
+  }
+}
+
 // A gap played as no samples is measured by start()'s speed check as the
 // loop judges the sample that ends it: against the last sample before the
 // gap, over the wall time since (gap / speed), the same as a glide over it.
