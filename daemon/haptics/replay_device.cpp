@@ -63,6 +63,19 @@ bool ReplayDevice::start(std::string* error) {
       return fail("track times must be finite and non-decreasing (row " + std::to_string(i) + ")");
     if (!position_m_[i].allFinite()) return fail("non-finite position at row " + std::to_string(i));
   }
+  // With the flags, a track without one device sample is a session whose
+  // device never delivered any: live the loop never had a hand. Played, the
+  // rows' device origin would be a live hand for the whole track.
+  if (!device_fresh_.empty()) {
+    bool any_sample = false;
+    for (std::size_t i = 0; i < time_s_.size() && !any_sample; ++i) any_sample = is_sample(i);
+    if (!any_sample) {
+      knot_time_s_.clear();  // not started: read() says so
+      return fail(
+          "the track has no device sample (its /haptic/device_fresh flags are all 0 and its position never "
+          "changes): the device delivered none while the session recorded, so there is no hand to replay");
+    }
+  }
   // The loop rejects a sample faster than device.limits.max_speed_m_per_s as
   // a glitch: a replay sped up past it would lose the hand on the track's
   // fast strokes and ramp the force out mid-replay, with no word why.
@@ -125,15 +138,16 @@ double median_s(std::vector<double>& gaps_s) {
 
 }  // namespace
 
-void ReplayDevice::build_knots_from_flags() {
-  const std::size_t rows = time_s_.size();
+bool ReplayDevice::is_sample(std::size_t i) const noexcept {
   // A row is a new sample when its flag says so, or when its position
   // changed: the recorder drops rows when its ring overflows, and the
   // flagged row may be among them (the step then spreads from the sample
   // before it, slower than live, never faster).
-  const auto is_sample = [&](std::size_t i) {
-    return device_fresh_[i] != 0 || (i > 0 && position_m_[i] != position_m_[i - 1]);
-  };
+  return device_fresh_[i] != 0 || (i > 0 && position_m_[i] != position_m_[i - 1]);
+}
+
+void ReplayDevice::build_knots_from_flags() {
+  const std::size_t rows = time_s_.size();
   std::size_t samples = 0, first = rows;
   for (std::size_t i = 0; i < rows; ++i) {
     if (!is_sample(i)) continue;

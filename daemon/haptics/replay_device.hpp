@@ -56,6 +56,8 @@ class ReplayDevice final : public Device {
   // device_fresh: the session's /haptic/device_fresh, one 0/1 per row (1:
   // a new device sample came that tick), or empty when the session did not
   // record it (format version < 3: the knots are guessed, see build_knots).
+  // With flags, a track without one sample is refused at start() (the
+  // device never delivered one: there is no hand to replay).
   // device_timeout_s: device.limits.device_timeout_s; with device_fresh, a
   // gap between samples whose last row is more than this after the sample
   // before plays as no samples, at any speed (see above). Infinite: every
@@ -135,6 +137,8 @@ class ReplayDevice final : public Device {
   void build_knots();
   void build_knots_from_flags();
   void build_knots_by_guess();
+  // With device_fresh flags: row i brought a new device sample.
+  bool is_sample(std::size_t i) const noexcept;
   // Appends a knot; a row at the time of the last knot replaces its position.
   void add_knot(double t_s, const Vec3& p_m, bool after_gap = false);
   std::vector<double> time_s_;

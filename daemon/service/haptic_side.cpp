@@ -107,8 +107,12 @@ class HapticSideImpl final : public HapticSide {
     }
     if (!device_) throw std::runtime_error("haptic device: " + (error.empty() ? "none configured" : error));
     udp_ = dynamic_cast<const haptics::UdpDevice*>(device_.get());
-    if (!device_->start(&error))
-      throw std::runtime_error(std::string("haptic device ") + device_->name() + ": " + error);
+    if (!device_->start(&error)) {
+      // A replay's refusal is about the session's track: name the file.
+      const std::string which =
+          replay ? std::string(" (device.replay.session ") + config.device.replay.session + ")" : std::string();
+      throw std::runtime_error(std::string("haptic device ") + device_->name() + which + ": " + error);
+    }
     // The wrap as the replay plays it (start() built its knots): from its last
     // played position to its first, which is the device's first sample when
     // the recording began before it, not the track's first row (the device

@@ -525,6 +525,26 @@ TEST(ReplayDevice, FreshFlagsOfAnotherLengthThanTheTrackAreRefusedAtStart) {
   EXPECT_FALSE(d.read(0, &s)) << "not started";
 }
 
+// A session whose device never delivered a sample (every device_fresh flag
+// 0, the rows holding the device origin): live the loop never had a hand.
+// Played, the origin was a live hand for the whole track; start() refuses it.
+TEST(ReplayDevice, WithFreshFlagsATrackWithNoSampleIsRefusedAtStart) {
+  const std::vector<double> time_s{0.0, 1e-3, 2e-3, 3e-3};
+  const std::vector<Vec3> position_m(4, Vec3::Zero());
+  ReplayDevice replay(time_s, position_m, 1.0, false, 5.0, {0, 0, 0, 0}, 0.01);
+  std::string error;
+  EXPECT_FALSE(replay.start(&error));
+  EXPECT_NE(error.find("replay device: the track has no device sample"), std::string::npos) << error;
+  EXPECT_NE(error.find("/haptic/device_fresh"), std::string::npos) << error;
+  DeviceSample s;
+  EXPECT_FALSE(replay.read(0, &s)) << "not started";
+  // One flagged row is enough; without flags (an old file) the rule is unchanged.
+  ReplayDevice one(time_s, position_m, 1.0, false, 5.0, {0, 0, 1, 0}, 0.01);
+  EXPECT_TRUE(one.start(&error)) << error;
+  ReplayDevice unflagged(time_s, position_m, 1.0, false, 5.0);
+  EXPECT_TRUE(unflagged.start(&error)) << error;
+}
+
 // A looping replay jumps, in one tick at each wrap, from the last position it
 // plays to the first (the daemon warns when the loop would reject that jump).
 // With the rows before the device's first sample held at that sample's pose,

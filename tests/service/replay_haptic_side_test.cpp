@@ -119,5 +119,19 @@ TEST(ReplayHapticSide, TheDeviceTimeoutReachesTheReplayDevice) {
   EXPECT_NE(printed.find("tissued: warning: device.replay.loop"), std::string::npos) << printed;
 }
 
+// A session whose device never delivered a sample (every flag 0, the rows at
+// the device origin) has no hand to replay: refused, naming the file.
+TEST(ReplayHapticSide, ASessionWithNoDeviceSampleIsRefusedNamingIt) {
+  record::testing::TempDir dir;
+  const std::string path = write_250hz_session(
+      dir / "nodevice.h5", 40, [](int) { return 0.0; }, 0, 1000);
+  const std::string error = start_error(replay_config(path, 1.0));
+  EXPECT_NE(error.find("haptic device replay (device.replay.session " + path +
+                       "): replay device: the track has no "
+                       "device sample"),
+            std::string::npos)
+      << error;
+}
+
 }  // namespace
 }  // namespace tissue::service
