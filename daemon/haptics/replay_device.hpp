@@ -25,8 +25,8 @@
 // device (its last row, the last tick without a sample, is more than
 // device.limits.device_timeout_s after the sample before) is not a step:
 // live the device sent nothing for that long, the loop declared it lost,
-// ramped the force out and took the next sample whatever the jump (judged
-// over the whole gap). That is decided on the recorded times, so the same
+// ramped the force out and judged the next sample against the last one it
+// accepted over the whole gap (so start() measures that jump too). That is decided on the recorded times, so the same
 // gaps are lost at any speed: on the playback gap (gap / speed), every
 // sample period of a 250 Hz device was "lost" at a quarter speed. Spread
 // over the gap, a minute's outage with a 0.2 m move played as a minute's
