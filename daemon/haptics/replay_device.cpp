@@ -102,6 +102,8 @@ bool ReplayDevice::start(std::string* error) {
   }
   start_ns_ = -1;
   cursor_ = 0;
+  gap_start_given_ = kNoKnot;
+  last_read_s_ = knot_time_s_.front();
   return true;
 }
 
@@ -166,6 +168,12 @@ void ReplayDevice::build_knots_from_flags() {
     last_fresh_s = time_s_[i];
   }
   device_period_s_ = median_s(gaps_s);
+  // The recording's tick (a row per haptic tick): how late after a sample
+  // that starts a lost gap a read may still be its tick (read()).
+  std::vector<double> rows_s;
+  rows_s.reserve(rows);
+  for (std::size_t i = 1; i < rows; ++i) rows_s.push_back(time_s_[i] - time_s_[i - 1]);
+  row_period_s_ = median_s(rows_s);
 
   knot_time_s_.reserve(samples + 2);
   knot_position_m_.reserve(samples + 2);
@@ -271,6 +279,8 @@ bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
     t = first_s + std::fmod(t - first_s, span);
     if (t < knot_time_s_[cursor_]) cursor_ = 0;
   }
+  if (t < last_read_s_) gap_start_given_ = kNoKnot;  // wrapped: the next pass hands its samples over again
+  last_read_s_ = t;
   if (t >= last_s) {
     if (ends_without_sample_) return false;  // past a tail played as no samples
     out->position_m = knot_position_m_.back();
@@ -281,8 +291,17 @@ bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   while (cursor_ + 1 < n && knot_time_s_[cursor_ + 1] <= t) ++cursor_;
   const std::size_t i = cursor_, j = std::min(cursor_ + 1, n - 1);
   // Inside a gap the device sent nothing for longer than its timeout: no
-  // sample, so the loop loses the device as it did live.
-  if (j > i && knot_after_gap_[j]) return false;
+  // sample, so the loop loses the device as it did live. The sample that
+  // starts the gap came at its own tick: the first read at or after it,
+  // within one recorded tick, gets it (once), so the loop is not a tick
+  // short of it.
+  if (j > i && knot_after_gap_[j]) {
+    if (gap_start_given_ == i || !(t - knot_time_s_[i] < row_period_s_)) return false;
+    gap_start_given_ = i;
+    out->position_m = knot_position_m_[i];
+    out->velocity_m_per_s.setZero();
+    return true;
+  }
   const double dt = knot_time_s_[j] - knot_time_s_[i];
   const double u = dt > 0.0 ? std::clamp((t - knot_time_s_[i]) / dt, 0.0, 1.0) : 0.0;
   // From the knot along the step: a held pose (a step of zero) plays exactly.

@@ -31,8 +31,10 @@
 // sample period of a 250 Hz device was "lost" at a quarter speed. Spread
 // over the gap, a minute's outage with a 0.2 m move played as a minute's
 // sweep at full force (possibly through the object) and no lost device. So
-// read() returns no sample over such a gap, then the next sample, and the
-// loop loses the device exactly as live. Likewise a track that ends more
+// read() returns the sample that starts such a gap at the first read within
+// one recorded tick of it (once), no sample over the rest of the gap, then
+// the next sample, and the loop loses the device exactly as live (a tick
+// early, when the first sample was withheld too). Likewise a track that ends more
 // than the timeout after its last sample: live the device had stopped, so
 // read() returns no sample from there to the end (not a live hand held at
 // the last pose).
@@ -157,6 +159,13 @@ class ReplayDevice final : public Device {
   double device_period_s_ = 0.0;
   std::int64_t start_ns_ = -1;
   std::size_t cursor_ = 0;  // knot at or before the last time read (monotone search)
+  // The knot that starts a lost gap (or tail), once read() has handed it to
+  // the loop at the first read at or after its time; kNoKnot otherwise. Reset
+  // when the track time goes back (a wrap).
+  static constexpr std::size_t kNoKnot = static_cast<std::size_t>(-1);
+  std::size_t gap_start_given_ = kNoKnot;
+  double last_read_s_ = 0.0;   // track time of the last read
+  double row_period_s_ = 0.0;  // the recording's tick (median time between rows; flags only)
   Vec3 last_force_N_ = Vec3::Zero();
 };
 

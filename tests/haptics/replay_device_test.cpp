@@ -612,6 +612,12 @@ TEST(ReplayDevice, WithFreshFlagsAGapLongerThanTheDeviceTimeoutPlaysAsNoSamples)
   ASSERT_TRUE(replay.read(0, &s));
   ASSERT_TRUE(replay.read(99 * kMs, &s));
   EXPECT_EQ(s.position_m, Vec3(0.1, 0, 0));
+  // The sample that starts the gap came live at its tick: the first read at
+  // or after it hands it over (once), then nothing (it was withheld: the
+  // loop lost the device one tick early).
+  ASSERT_TRUE(replay.read(100 * kMs + kMs / 2, &s)) << "the sample that starts the gap";
+  EXPECT_EQ(s.position_m, Vec3(0.1, 0, 0));
+  EXPECT_FALSE(replay.read(100 * kMs + 3 * kMs / 4, &s)) << "that sample is handed over once";
   for (const int ms : {101, 500, 1100, 2099})
     EXPECT_FALSE(replay.read(ms * kMs, &s)) << "inside the 2 s gap, at " << ms << " ms: " << s.position_m.transpose();
   ASSERT_TRUE(replay.read(2101 * kMs, &s)) << "the sample after the gap";
