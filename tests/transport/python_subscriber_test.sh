@@ -239,6 +239,22 @@ no_traceback "$work/midmsg-term.log"
 [ "$rc" -eq 1 ] || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: exit $rc, expected 1"; }
 grep -q -- "--url tcpq://127.0.0.1:$port: stopped by SIGTERM in the middle of a message from the server; it is dropped" \
   "$work/midmsg-term.log" || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: not said"; }
+# A tcpq server that closes LCM's connection 1 s into listening: LCM has no
+# socket then (and would reconnect, without a time limit, on the next
+# handle()), so listening ends there, said with --url and when, without a
+# traceback; exit 1 (no statistics), long before --seconds 10.
+listen close
+rc=0
+start="$(date +%s)"
+timeout -k 5 30 python3 "$subscriber" --types "$types" --seconds 10 --url "tcpq://127.0.0.1:$port" \
+  >"$work/closed.log" 2>&1 || rc=$?
+waited=$(($(date +%s) - start))
+no_traceback "$work/closed.log"
+grep -q closed "$listener_log" || { cat "$work/closed.log"; fail "the close listener did not close LCM's connection"; }
+[ "$rc" -eq 1 ] || { cat "$work/closed.log"; fail "a tcpq server that closes the connection: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: LCM lost its connection [0-9.]* s into --seconds (the server closed it, or a read failed); listening ended there" \
+  "$work/closed.log" || { cat "$work/closed.log"; fail "a tcpq server that closes the connection: not said"; }
+[ "$waited" -le 5 ] || fail "a tcpq server that closes the connection: ended after $waited s, 1 s after the close expected"
 
 # Statistics whose real-time factor is NaN (a daemon before it has measured
 # it) but whose time and tets are finite: printed, their tets plotted (every
