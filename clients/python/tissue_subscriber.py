@@ -549,9 +549,18 @@ def main():
     # KeyboardInterrupt traceback. (A SIGINT the parent ignores, as a shell
     # does for a background job, stays ignored.)
     stop = []
+    reading = []  # non-empty while lc.handle() reads a tcpq:// message (the listening loop)
 
     def on_signal(signum, frame):
         stop.append(signum)
+        if reading:
+            # Python runs this between its own instructions, never inside
+            # LCM's blocking recv() (a signal there makes it fail at once,
+            # EINTR): the signal landed after the loop last looked at `stop`
+            # and before LCM's recv(), which would wait for a stalled
+            # message's rest until the deadline alarm. An alarm 50 ms from
+            # now (repeated) interrupts it instead.
+            signal.setitimer(signal.ITIMER_REAL, 0.05, 0.05)
 
     signal.signal(signal.SIGTERM, on_signal)
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
@@ -687,12 +696,19 @@ def main():
         # interrupts it, as it does LCM's connect() above (repeated for the
         # same reason). Never sooner: LCM drops its connection on any
         # interrupted recv(), so a read still going well must not be cut.
-        # SIGINT and SIGTERM interrupt it too (no SA_RESTART; one that lands
-        # in the instant before the recv() starts is left to that alarm).
+        # SIGINT and SIGTERM interrupt it too (Python installs its handlers
+        # without SA_RESTART); one whose handler runs before the read starts
+        # is seen by the `stop` check below or, once `reading` is set, arms
+        # that alarm for 50 ms from then (on_signal). Left to the deadline:
+        # only a signal that lands where no Python code runs, entering
+        # handle() or between LCM's recv()s (microseconds a message).
         if tcpq:
             began = time.monotonic()
             signal.setitimer(signal.ITIMER_REAL, max(end - began, 0.001), 0.05)
+            reading.append(True)
         try:
+            if stop:  # landed since select() returned, before `reading` was set
+                continue
             lc.handle()
         except OSError:  # only "lcm_handle() returned -1": our callbacks catch their own
             # LCM has closed its socket (fileno() is now -1, which select()
@@ -718,11 +734,13 @@ def main():
             break
         finally:
             if tcpq:
+                reading.clear()  # first: a stop from here on arms no alarm
                 signal.setitimer(signal.ITIMER_REAL, 0)
     # The time it listened, for a summary after a stop or a lost connection:
     # not the --seconds asked.
-    listened_s = min(time.monotonic(), end) - started
-    if stop and cut_short is None:
+    ended_at = time.monotonic()
+    listened_s = min(ended_at, end) - started
+    if stop and cut_short is None and ended_at < end:
         cut_short = f"stopped by {signal.Signals(stop[-1]).name}"
     if lost:
         print(f"tissue_subscriber: --url {args.url}: {lost}", file=sys.stderr, flush=True)

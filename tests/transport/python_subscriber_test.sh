@@ -270,6 +270,20 @@ grep -q "no sim_stats at tcpq://127.0.0.1:$port in [0-9.]* s (stopped by SIGTERM
   "$work/midmsg-term.log" || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: no summary"; }
 within "$(summary_s "$work/midmsg-term.log")" 0.5 10 ||
   { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: the summary does not name the time listened"; }
+# ... and a SIGTERM that lands after the subscriber's select() and before
+# LCM's recv() (signal_before_lcm_read.py sends it there) ends that read
+# within moments too, not at the end of --seconds 30.
+listen stall
+rc=0
+start="$(date +%s)"
+timeout -k 5 60 python3 "$here/signal_before_lcm_read.py" "$subscriber" --types "$types" --seconds 30 \
+  --url "tcpq://127.0.0.1:$port" >"$work/before-read.log" 2>&1 || rc=$?
+waited=$(($(date +%s) - start))
+no_traceback "$work/before-read.log"
+[ "$rc" -eq 1 ] || { cat "$work/before-read.log"; fail "SIGTERM just before LCM's read: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: stopped by SIGTERM in the middle of a message from the server; it is dropped" \
+  "$work/before-read.log" || { cat "$work/before-read.log"; fail "SIGTERM just before LCM's read: not said"; }
+[ "$waited" -le 5 ] || { cat "$work/before-read.log"; fail "SIGTERM just before LCM's read: ended after $waited s"; }
 # A tcpq server that closes LCM's connection 1 s into listening: LCM has no
 # socket then (and would reconnect, without a time limit, on the next
 # handle()), so listening ends there, said with --url and when, without a
