@@ -38,7 +38,9 @@ reader to open it, and SIGINT or SIGTERM ends that wait; with no reader the
 plot is not written (exit 3, "no reader on the FIFO"). The reader is then
 given at most 10 s to take the whole plot (a signal ends that wait too):
 one that stopped reading is exit 3, "the FIFO took N of M bytes".
-Exit codes: 0 received at least one sim_stats message, 1 none arrived,
+Exit codes: 0 received at least one sim_stats message, 1 none arrived
+(said with the time it listened: --seconds, or less after a stop or a lost
+connection),
 2 bad arguments, missing modules or LCM cannot start at --url (said with the
 likely cause: no route for a udpm:// group), 3 statistics arrived but the
 plot could not be written.
@@ -547,9 +549,18 @@ def main():
     # KeyboardInterrupt traceback. (A SIGINT the parent ignores, as a shell
     # does for a background job, stays ignored.)
     stop = []
+    reading = []  # non-empty while lc.handle() reads a tcpq:// message (the listening loop)
 
     def on_signal(signum, frame):
         stop.append(signum)
+        if reading:
+            # Python runs this between its own instructions, never inside
+            # LCM's blocking recv() (a signal there makes it fail at once,
+            # EINTR): the signal landed after the loop last looked at `stop`
+            # and before LCM's recv(), which would wait for a stalled
+            # message's rest until the deadline alarm. An alarm 50 ms from
+            # now (repeated) interrupts it instead.
+            signal.setitimer(signal.ITIMER_REAL, 0.05, 0.05)
 
     signal.signal(signal.SIGTERM, on_signal)
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
@@ -670,8 +681,10 @@ def main():
     lc.subscribe("TISSUE_SIM_STATS", on_stats)
     lc.subscribe("TISSUE_SURFACE_MESH", on_mesh)
     lc.subscribe("TISSUE_HAPTIC_STATE", on_haptic)
-    end = time.monotonic() + args.seconds
+    started = time.monotonic()
+    end = started + args.seconds
     lost = None  # why LCM's connection ended before --seconds did, or None
+    cut_short = None  # why listening ended before --seconds did, or None
     while not stop and (left := end - time.monotonic()) > 0:
         ready, _, _ = select.select([lc.fileno()], [], [], min(left, 0.1))
         if not ready or stop:
@@ -683,12 +696,19 @@ def main():
         # interrupts it, as it does LCM's connect() above (repeated for the
         # same reason). Never sooner: LCM drops its connection on any
         # interrupted recv(), so a read still going well must not be cut.
-        # SIGINT and SIGTERM interrupt it too (no SA_RESTART; one that lands
-        # in the instant before the recv() starts is left to that alarm).
+        # SIGINT and SIGTERM interrupt it too (Python installs its handlers
+        # without SA_RESTART); one whose handler runs before the read starts
+        # is seen by the `stop` check below or, once `reading` is set, arms
+        # that alarm for 50 ms from then (on_signal). Left to the deadline:
+        # only a signal that lands where no Python code runs, entering
+        # handle() or between LCM's recv()s (microseconds a message).
         if tcpq:
             began = time.monotonic()
             signal.setitimer(signal.ITIMER_REAL, max(end - began, 0.001), 0.05)
+            reading.append(True)
         try:
+            if stop:  # landed since select() returned, before `reading` was set
+                continue
             lc.handle()
         except OSError:  # only "lcm_handle() returned -1": our callbacks catch their own
             # LCM has closed its socket (fileno() is now -1, which select()
@@ -708,12 +728,20 @@ def main():
                         f"({time.monotonic() - began:.1f} s after it began; has the server stalled?); it is dropped")
             else:
                 cause = "the server closed it, or a read failed" if tcpq else "lcm_handle() failed"
-                lost = (f"LCM lost its connection {args.seconds - (end - time.monotonic()):.1f} s into --seconds "
+                lost = (f"LCM lost its connection {time.monotonic() - started:.1f} s into --seconds "
                         f"({cause}); listening ended there")
+                cut_short = "LCM lost its connection"
             break
         finally:
             if tcpq:
+                reading.clear()  # first: a stop from here on arms no alarm
                 signal.setitimer(signal.ITIMER_REAL, 0)
+    # The time it listened, for a summary after a stop or a lost connection:
+    # not the --seconds asked.
+    ended_at = time.monotonic()
+    listened_s = min(ended_at, end) - started
+    if stop and cut_short is None and ended_at < end:
+        cut_short = f"stopped by {signal.Signals(stop[-1]).name}"
     if lost:
         print(f"tissue_subscriber: --url {args.url}: {lost}", file=sys.stderr, flush=True)
         if tcpq:
@@ -726,8 +754,13 @@ def main():
         print(f"tissue_subscriber: {sum(bad_meshes.values())} malformed surface_mesh message(s) dropped ({reasons})",
               file=sys.stderr)
     if not counts["stats"]:
-        print(f"tissue_subscriber: no sim_stats at {args.url} in {args.seconds:g} s (is publish.lcm.enabled on?)",
-              file=sys.stderr)
+        if cut_short is None:
+            print(f"tissue_subscriber: no sim_stats at {args.url} in {args.seconds:g} s (is publish.lcm.enabled on?)",
+                  file=sys.stderr)
+        else:
+            hint = "; is publish.lcm.enabled on?" if stop else ""  # not for a lost connection
+            print(f"tissue_subscriber: no sim_stats at {args.url} in {listened_s:.1f} s "
+                  f"({cut_short} before --seconds {args.seconds:g} ended{hint})", file=sys.stderr)
         return 1
     if plot is not None:
         if stdout_closed and plot_is_stdout:

@@ -54,6 +54,10 @@ fail() { echo "python_subscriber_test: $*"; exit 1; }
 # "Illegal number"; noise, not a failure, but noise that hides real ones).
 stats_lines() { if [ -f "$1" ]; then grep -c '^t ' "$1" || :; else echo 0; fi; }
 no_traceback() { if grep -q Traceback "$1"; then cat "$1"; fail "a traceback in $1"; fi; }
+# FILE: the N s of the "no sim_stats at URL in N s (...)" summary in FILE.
+summary_s() { sed -n 's/.*: no sim_stats at .* in \([0-9.]*\) s (.*/\1/p' "$1" | head -1; }
+# X LO HI: whether the number X lies in [LO, HI] (false for an empty X).
+within() { awk -v x="$1" -v lo="$2" -v hi="$3" 'BEGIN { exit !(x != "" && x + 0 >= lo && x + 0 <= hi) }'; }
 # PID SECONDS MESSAGE: waits for a signalled process to end; still running
 # after SECONDS, it is killed and the test fails with MESSAGE.
 ends_within() {
@@ -176,7 +180,30 @@ rc=0
 timeout 30 python3 "$subscriber" --types "$types" --seconds 1 --url "tcpq://127.0.0.1:$port" >"$work/greet.log" 2>&1 ||
   rc=$?
 [ "$rc" -eq 1 ] || { cat "$work/greet.log"; fail "a tcpq server that greets: exit $rc, expected 1"; }
-grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/greet.log" || { cat "$work/greet.log"; fail "greet"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s (is publish.lcm.enabled on?)" "$work/greet.log" ||
+  { cat "$work/greet.log"; fail "greet"; }
+# ... and SIGTERM while it listens to that server (nothing arrives): exit 1,
+# and the summary names the time it listened, not the --seconds asked.
+python3 "$subscriber" --types "$types" --seconds 300 --url "tcpq://127.0.0.1:$port" >"$work/greet-term.log" 2>&1 &
+listening=$!
+helpers="$helpers $listening"
+polls=0
+until [ "$(grep -c accepted "$listener_log")" -ge 4 ]; do  # the first run's two, then this one's
+  polls=$((polls + 1))
+  [ "$polls" -le 300 ] || fail "the subscriber did not connect to the greeting server"
+  sleep 0.1
+done
+sleep 1
+kill -TERM "$listening"
+ends_within "$listening" 5 "SIGTERM while listening to a tcpq server: still running after 5 s"
+rc=0
+wait "$listening" || rc=$?
+no_traceback "$work/greet-term.log"
+[ "$rc" -eq 1 ] || { cat "$work/greet-term.log"; fail "SIGTERM while listening to a tcpq server: exit $rc, expected 1"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in [0-9.]* s (stopped by SIGTERM before --seconds 300 ended; is publish.lcm.enabled on?)" \
+  "$work/greet-term.log" || { cat "$work/greet-term.log"; fail "SIGTERM while listening to a tcpq server: no summary"; }
+within "$(summary_s "$work/greet-term.log")" 0.5 10 ||
+  { cat "$work/greet-term.log"; fail "SIGTERM while listening to a tcpq server: the summary does not name the time listened"; }
 # A server that greets the probe and not LCM's own connection after it:
 # LCM's client waited for that greeting for ever. Given min(--seconds, 10) s
 # as the probe is: exit 2 naming --url and why, without a traceback.
@@ -216,7 +243,7 @@ no_traceback "$work/midmsg.log"
 [ "$rc" -eq 1 ] || { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: exit $rc, expected 1"; }
 grep -q -- "--url tcpq://127.0.0.1:$port: a message from the server was still incomplete when --seconds ended ([0-9.]* s after it began; has the server stalled?); it is dropped" \
   "$work/midmsg.log" || { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: not said"; }
-grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s" "$work/midmsg.log" ||
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in 1 s (is publish.lcm.enabled on?)" "$work/midmsg.log" ||
   { cat "$work/midmsg.log"; fail "a tcpq server that stalls mid-message: no summary"; }
 [ "$waited" -le 5 ] || fail "a tcpq server that stalls mid-message: ended after $waited s for --seconds 1"
 # ... and SIGTERM during that read ends it at once, said, exit 1.
@@ -239,6 +266,44 @@ no_traceback "$work/midmsg-term.log"
 [ "$rc" -eq 1 ] || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: exit $rc, expected 1"; }
 grep -q -- "--url tcpq://127.0.0.1:$port: stopped by SIGTERM in the middle of a message from the server; it is dropped" \
   "$work/midmsg-term.log" || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: not said"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in [0-9.]* s (stopped by SIGTERM before --seconds 300 ended; is publish.lcm.enabled on?)" \
+  "$work/midmsg-term.log" || { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: no summary"; }
+within "$(summary_s "$work/midmsg-term.log")" 0.5 10 ||
+  { cat "$work/midmsg-term.log"; fail "SIGTERM during a tcpq message that stalled: the summary does not name the time listened"; }
+# ... and a SIGTERM that lands after the subscriber's select() and before
+# LCM's recv() (signal_before_lcm_read.py sends it there) ends that read
+# within moments too, not at the end of --seconds 30.
+listen stall
+rc=0
+start="$(date +%s)"
+timeout -k 5 60 python3 "$here/signal_before_lcm_read.py" "$subscriber" --types "$types" --seconds 30 \
+  --url "tcpq://127.0.0.1:$port" >"$work/before-read.log" 2>&1 || rc=$?
+waited=$(($(date +%s) - start))
+no_traceback "$work/before-read.log"
+[ "$rc" -eq 1 ] || { cat "$work/before-read.log"; fail "SIGTERM just before LCM's read: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: stopped by SIGTERM in the middle of a message from the server; it is dropped" \
+  "$work/before-read.log" || { cat "$work/before-read.log"; fail "SIGTERM just before LCM's read: not said"; }
+[ "$waited" -le 5 ] || { cat "$work/before-read.log"; fail "SIGTERM just before LCM's read: ended after $waited s"; }
+# A tcpq server that closes LCM's connection 1 s into listening: LCM has no
+# socket then (and would reconnect, without a time limit, on the next
+# handle()), so listening ends there, said with --url and when, without a
+# traceback; exit 1 (no statistics), long before --seconds 10.
+listen close
+rc=0
+start="$(date +%s)"
+timeout -k 5 30 python3 "$subscriber" --types "$types" --seconds 10 --url "tcpq://127.0.0.1:$port" \
+  >"$work/closed.log" 2>&1 || rc=$?
+waited=$(($(date +%s) - start))
+no_traceback "$work/closed.log"
+grep -q closed "$listener_log" || { cat "$work/closed.log"; fail "the close listener did not close LCM's connection"; }
+[ "$rc" -eq 1 ] || { cat "$work/closed.log"; fail "a tcpq server that closes the connection: exit $rc, expected 1"; }
+grep -q -- "--url tcpq://127.0.0.1:$port: LCM lost its connection [0-9.]* s into --seconds (the server closed it, or a read failed); listening ended there" \
+  "$work/closed.log" || { cat "$work/closed.log"; fail "a tcpq server that closes the connection: not said"; }
+grep -q "no sim_stats at tcpq://127.0.0.1:$port in [0-9.]* s (LCM lost its connection before --seconds 10 ended)" \
+  "$work/closed.log" || { cat "$work/closed.log"; fail "a tcpq server that closes the connection: no summary"; }
+within "$(summary_s "$work/closed.log")" 0.5 5 ||
+  { cat "$work/closed.log"; fail "a tcpq server that closes the connection: the summary does not name the time listened"; }
+[ "$waited" -le 5 ] || fail "a tcpq server that closes the connection: ended after $waited s, 1 s after the close expected"
 
 # Statistics whose real-time factor is NaN (a daemon before it has measured
 # it) but whose time and tets are finite: printed, their tets plotted (every
