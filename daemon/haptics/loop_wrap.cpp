@@ -23,9 +23,27 @@ std::string wrap_text(const std::string& key, double jump_m, double max_speed_m_
 
 }  // namespace
 
-std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz) {
-  if (!(jump_m > max_speed_m_per_s / rate_hz)) return {};
-  return wrap_text(key, jump_m, max_speed_m_per_s, rate_hz);
+std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz,
+                              double no_sample_s) {
+  if (!(no_sample_s > 0.0)) {
+    if (!(jump_m > max_speed_m_per_s / rate_hz)) return {};
+    return wrap_text(key, jump_m, max_speed_m_per_s, rate_hz);
+  }
+  // The loop judges the first sample after the wrap against the last one it
+  // accepted before it over the wall time between them: the time without
+  // samples, and never less than the tick between two reads.
+  const double judged_over_s = std::max(no_sample_s, 1.0 / rate_hz);
+  if (!(jump_m > max_speed_m_per_s * judged_over_s)) return {};
+  char text[768];
+  std::snprintf(text, sizeof text,
+                "%s: the looping track goes from its last sample back to its first through %.3g s (wall time) "
+                "without samples, a %.3g m jump (device frame) the haptic loop judges over that time: %.3g m/s, "
+                "more than device.limits.max_speed_m_per_s %g: it rejects the samples after every wrap as too fast "
+                "until %.3g s after the last one it accepted, so the force stays out (device lost) that much longer "
+                "at every wrap; end the track where it starts for a seamless loop",
+                key.c_str(), no_sample_s, jump_m, jump_m / judged_over_s, max_speed_m_per_s,
+                jump_m / max_speed_m_per_s);
+  return text;
 }
 
 SimLoopPlan plan_sim_loop_check(double first_s, double last_s, double rate_hz, bool hand, double max_substeps) {

@@ -22,7 +22,14 @@ namespace tissue::haptics {
 // The warning for a looping track whose wrap jumps jump_m (device frame) in
 // one tick, when that is more than max_speed_m_per_s / rate_hz; empty
 // otherwise. `key` is the config key to blame (e.g. "device.replay.loop").
-std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz);
+// no_sample_s > 0: the wrap is no jump in one tick but passes through that
+// much wall time without samples (a replay's rows before the device's first
+// sample, or a tail after its last played as no samples,
+// ReplayDevice::loop_wrap_no_sample_s): the loop judges the first sample
+// after it against the last one before it over that time (at least a tick),
+// so the warning comes when jump_m is more than max_speed_m_per_s times it.
+std::string loop_wrap_warning(const std::string& key, double jump_m, double max_speed_m_per_s, double rate_hz,
+                              double no_sample_s = 0.0);
 
 // The warning for a looping simulated device (kind sim, device.sim.loop),
 // blamed on device.sim.waypoints; empty when it does not loop or the loop

@@ -121,6 +121,7 @@ void ReplayDevice::build_knots() {
   knot_time_s_.clear();
   knot_position_m_.clear();
   knot_after_gap_.clear();
+  starts_without_sample_ = false;
   ends_without_sample_ = false;
   if (device_fresh_.empty())
     build_knots_by_guess();
@@ -178,11 +179,18 @@ void ReplayDevice::build_knots_from_flags() {
   knot_time_s_.reserve(samples + 2);
   knot_position_m_.reserve(samples + 2);
   knot_after_gap_.reserve(samples + 2);
-  // Before the first sample the loop had no hand: it rendered nothing, judged
-  // that sample against nothing, and the rows hold the device origin. Held
-  // at the first sample's pose from the first row, the replay does not
-  // invent a sweep from the origin (which could be too fast to play at all).
+  // Before the first sample the loop had no hand: it read no sample (the
+  // device lost from its first tick, no force), judged that sample against
+  // nothing, and the rows hold the device origin. So those rows play as no
+  // samples, as a lost gap whatever its length (live the loop had never had
+  // the device, timeout or not), up to the first sample: a first knot that
+  // is no sample (read() never plays it; at the first sample's pose, so
+  // start()'s speed check measures nothing over it, as the loop judged the
+  // first sample against nothing), then the first sample, reached over a
+  // gap. Not held at the first sample's pose (a live hand the loop never
+  // had, with forces), nor a sweep from the origin (too fast to play).
   add_knot(time_s_.front(), first < rows ? position_m_[first] : position_m_.front());
+  starts_without_sample_ = first < rows && time_s_[first] > time_s_.front();
   // Each sample a knot: the step to it spreads over the time since the
   // sample before, the time the loop measured it over live (a lost sample
   // is a longer gap; a still hand whose device re-sends its pose is a run
@@ -199,7 +207,8 @@ void ReplayDevice::build_knots_from_flags() {
   constexpr double kRoundingSlackS = 1e-10;
   for (std::size_t i = first; i < rows; ++i) {
     if (!is_sample(i)) continue;
-    const bool lost = i > first && time_s_[i - 1] - knot_time_s_.back() > device_timeout_s_ + kRoundingSlackS;
+    const bool lost =
+        i > first ? time_s_[i - 1] - knot_time_s_.back() > device_timeout_s_ + kRoundingSlackS : starts_without_sample_;
     add_knot(time_s_[i], position_m_[i], lost);
   }
   // The rows after the last sample, by the same rule: when the track ends
@@ -255,14 +264,34 @@ void ReplayDevice::build_knots_by_guess() {
   if (time_s_.back() > knot_time_s_.back()) add(time_s_.back(), position_m_.back());
 }
 
+std::size_t ReplayDevice::last_played_knot() const noexcept {
+  // Ending on a gap played as no samples (or on a tail of rows after the
+  // last sample played so), read() gives nothing from the sample before it
+  // to the wrap (the last knot itself only at exactly the track's end).
+  const std::size_t n = knot_time_s_.size();
+  return knot_after_gap_.back() ? n - 2 : n - 1;
+}
+
+std::size_t ReplayDevice::first_played_knot() const noexcept { return starts_without_sample_ ? 1 : 0; }
+
 double ReplayDevice::loop_wrap_jump_m() const noexcept {
   // Knot times are strictly increasing, so two knots are a track read() wraps.
   if (!loop_ || knot_time_s_.size() < 2) return 0.0;
-  // Ending on a gap played as no samples (or on a tail of rows after the
-  // last sample played so), read() has none before the wrap: the loop has
-  // lost the device and judges the first sample over the gap.
-  if (knot_after_gap_.back()) return 0.0;
-  return (knot_position_m_.back() - knot_position_m_.front()).norm();
+  const std::size_t last = last_played_knot(), first = first_played_knot();
+  // Nothing played before the wrap (the track's only sample on its last row):
+  // the loop has nothing to judge the first sample against.
+  if (last < first) return 0.0;
+  return (knot_position_m_[last] - knot_position_m_[first]).norm();
+}
+
+double ReplayDevice::loop_wrap_no_sample_s() const noexcept {
+  if (!loop_ || knot_time_s_.size() < 2) return 0.0;
+  const std::size_t last = last_played_knot(), first = first_played_knot();
+  if (last < first) return 0.0;
+  // Track time from the last sample played before the wrap to its end, then
+  // from the start to the first sample played after it; wall time at speed.
+  const double track_s = (knot_time_s_.back() - knot_time_s_[last]) + (knot_time_s_[first] - knot_time_s_.front());
+  return track_s / speed_;
 }
 
 std::size_t ReplayDevice::lost_gaps() const noexcept {
@@ -296,6 +325,9 @@ bool ReplayDevice::read(std::int64_t now_ns, DeviceSample* out) noexcept {
   // within one recorded tick, gets it (once), so the loop is not a tick
   // short of it.
   if (j > i && knot_after_gap_[j]) {
+    // The first knot of a track that starts before the device's first
+    // sample is no sample: nothing to hand over.
+    if (i == 0 && starts_without_sample_) return false;
     if (gap_start_given_ == i || !(t - knot_time_s_[i] < row_period_s_)) return false;
     gap_start_given_ = i;
     out->position_m = knot_position_m_[i];

@@ -37,7 +37,13 @@
 // early, when the first sample was withheld too). Likewise a track that ends more
 // than the timeout after its last sample: live the device had stopped, so
 // read() returns no sample from there to the end (not a live hand held at
-// the last pose).
+// the last pose). And the rows before the device's first sample: live the
+// loop had no device yet (lost from its first tick, no force), so read()
+// returns no sample until that sample's time, however short (not a live hand
+// held at its pose). A looping replay goes through them again at each wrap:
+// the loop holds the last sample it accepted, loses the device once the
+// timeout passes, and judges the first sample against that last one over the
+// wall time without samples (see loop_wrap_jump_m), as after a lost gap.
 #pragma once
 
 #include <cstdint>
@@ -74,7 +80,8 @@ class ReplayDevice final : public Device {
   // The position at (now - first read) * speed into the track: linear between
   // the knots (see build_knots), held at the end (or wrapped when looping).
   // Velocity by the slope. False before start(), inside a gap played as no
-  // samples (up to, not at, the sample that ends it), and from the last
+  // samples (up to, not at, the sample that ends it), before the device's
+  // first sample (with flags: up to, not at, its time), and from the last
   // sample on when the track ends more than the device timeout after it.
   bool read(std::int64_t now_ns, DeviceSample* out) noexcept override;
   void write(std::int64_t /*now_ns*/, const Vec3& force_N) noexcept override { last_force_N_ = force_N; }
@@ -86,20 +93,29 @@ class ReplayDevice final : public Device {
   // between the rows where a new sample came (with device_fresh flags), or
   // between the track's position changes (without); 0 with fewer than two.
   double device_period_s() const noexcept { return device_period_s_; }
-  // The jump (device frame) read() makes in one tick at each wrap of a
-  // looping replay: from the last position it plays to the first, i.e. the
-  // last knot to the first (see build_knots), not the track's raw last and
-  // first rows: a recording that began before the device's first sample
-  // plays from that sample's pose, not from the device origin its first rows
-  // hold. 0 when read() never wraps: not looping, a track of no duration (it
-  // holds its one position), or not started. Also 0 when the track ends on
-  // a sample after a gap played as no samples, or on a tail after its last
-  // sample played as no samples (see build_knots): read() gives nothing before
-  // the wrap, the loop has lost the device, and judges the first sample
-  // against the last before the gap over the whole gap, not over one tick.
+  // The jump (device frame) the haptic loop judges at each wrap of a looping
+  // replay: from the last sample read() plays before the wrap (the last knot,
+  // or the sample before a tail or a gap that ends the track, played as no
+  // samples) to the first it plays after it (the first knot, or the device's
+  // first sample when the recording began before it), not the track's raw
+  // last and first rows (the first may hold the device origin). With
+  // loop_wrap_no_sample_s() 0 the jump comes in one tick; otherwise read()
+  // gives no sample for that long across the wrap, and the loop judges the
+  // first sample after it against the last before it over that time (as the
+  // sample after a lost gap). 0 when read() never wraps: not looping, a track
+  // of no duration (it holds its one position), or not started; and when it
+  // plays no sample before the wrap (a flagged track's only sample on its
+  // last row).
   double loop_wrap_jump_m() const noexcept;
+  // The wall time (track time / speed) read() gives no sample across each
+  // wrap of a looping replay: a tail (or a gap that ends the track) played as
+  // no samples, plus the rows before the device's first sample. 0: the wrap
+  // jumps in one tick, or read() never wraps (as loop_wrap_jump_m).
+  // loop_wrap_warning takes both.
+  double loop_wrap_no_sample_s() const noexcept;
   // The gaps played as no samples (see device_timeout_s), after start(),
-  // counting a tail after the last sample played so.
+  // counting a tail after the last sample played so, and the rows before the
+  // device's first sample.
   std::size_t lost_gaps() const noexcept;
 
   // Without device_fresh flags (a session of format version < 3), each step
@@ -135,7 +151,10 @@ class ReplayDevice final : public Device {
   // knot_after_gap_[k] marks a knot reached over a gap played as no samples
   // (flags only): not a segment the hand moves along, so read() has no
   // sample before it; start() still measures its speed (the loop judges the
-  // knot's sample against the one before the gap over the gap / speed).
+  // knot's sample against the one before the gap over the gap / speed). The
+  // device's first sample, when the recording began before it, is such a
+  // knot too, after a first knot at its own pose that is no sample (the
+  // loop judged it against nothing: start() measures no speed there).
   void build_knots();
   void build_knots_from_flags();
   void build_knots_by_guess();
@@ -156,6 +175,15 @@ class ReplayDevice final : public Device {
   // The last knot is the track's end after a tail played as no samples (flags
   // only): not a sample, so read() has none there either (see build_knots).
   bool ends_without_sample_ = false;
+  // The first knot is the track's start before the device's first sample
+  // (flags only): not a sample, and knot 1 (that first sample) is reached
+  // over a gap, so read() has none before it (see build_knots_from_flags).
+  bool starts_without_sample_ = false;
+  // The knots of the last sample read() plays before a wrap and of the first
+  // it plays after one (see loop_wrap_jump_m); the first is after the last
+  // only for a track whose one sample is on its last row.
+  std::size_t last_played_knot() const noexcept;
+  std::size_t first_played_knot() const noexcept;
   double device_period_s_ = 0.0;
   std::int64_t start_ns_ = -1;
   std::size_t cursor_ = 0;  // knot at or before the last time read (monotone search)

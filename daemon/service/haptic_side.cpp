@@ -113,14 +113,17 @@ class HapticSideImpl final : public HapticSide {
           replay ? std::string(" (device.replay.session ") + config.device.replay.session + ")" : std::string();
       throw std::runtime_error(std::string("haptic device ") + device_->name() + which + ": " + error);
     }
-    // The wrap as the replay plays it (start() built its knots): from its last
-    // played position to its first, which is the device's first sample when
+    // The wrap as the replay plays it (start() built its knots): from the last
+    // sample it plays to the first, which is the device's first sample when
     // the recording began before it, not the track's first row (the device
     // origin): judged on the raw rows, a seamless loop was warned about and a
-    // real jump missed.
+    // real jump missed. Through the time it plays no samples across the wrap
+    // (the rows before that first sample, a tail after the last): the loop
+    // judges the jump over that time, not over one tick.
     if (replay)
       wrap_warning = haptics::loop_wrap_warning("device.replay.loop", replay->loop_wrap_jump_m(),
-                                                config.device.limits.max_speed_m_per_s, config.haptics.rate_hz);
+                                                config.device.limits.max_speed_m_per_s, config.haptics.rate_hz,
+                                                replay->loop_wrap_no_sample_s());
     memory_ = haptics::lock_memory(config.realtime.lock_memory);
     loop_ = std::make_unique<haptics::HapticLoop>(*device_, config.device, config.haptics, models, samples);
     thread_ = std::make_unique<haptics::HapticThread>(*loop_, config.haptics, config.realtime);

@@ -38,6 +38,28 @@ TEST(LoopWrap, AWrapWithinATickIsNoWarning) {
   EXPECT_EQ(loop_wrap_warning("device.sim.waypoints", 0.3, 5.0, 10.0), "");  // 0.5 m a tick at 10 Hz
 }
 
+// A looping replay whose wrap plays as no samples (the rows before the
+// device's first sample, a tail after its last played so): the loop holds
+// the last sample it accepted and judges the first one after the wrap
+// against it over the wall time without samples, not over one tick. Warned
+// about exactly when that is faster than device.limits.max_speed_m_per_s,
+// saying how long the loop keeps rejecting (jump / max speed after the last
+// accepted sample).
+TEST(LoopWrap, AWrapThroughNoSamplesIsJudgedOverThatTime) {
+  EXPECT_EQ(loop_wrap_warning("device.replay.loop", 0.3, 5.0, 1000.0, 0.07), "");         // 4.3 m/s
+  const std::string w = loop_wrap_warning("device.replay.loop", 0.3, 5.0, 1000.0, 0.05);  // 6 m/s
+  EXPECT_EQ(w.rfind("device.replay.loop: the looping track goes from its last sample back to its first through "
+                    "0.05 s (wall time) without samples, a 0.3 m jump (device frame) the haptic loop judges over "
+                    "that time: 6 m/s, more than device.limits.max_speed_m_per_s 5: it rejects the samples after "
+                    "every wrap as too fast until 0.06 s after the last one it accepted",
+                    0),
+            0u)
+      << w;
+  // The loop reads once a tick: a shorter time is still a tick.
+  EXPECT_EQ(loop_wrap_warning("device.replay.loop", 0.004, 5.0, 1000.0, 1e-4), "");
+  EXPECT_NE(loop_wrap_warning("device.replay.loop", 0.006, 5.0, 1000.0, 1e-4), "");
+}
+
 // A looping simulated device whose last waypoint is jump_m from its first:
 // it holds the first point for 0.5 s, moves to the last over 1 s, holds it
 // for 1 s (the hand settles), then wraps at 2.5 s and holds the first point

@@ -7,9 +7,11 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "haptics/haptic_loop.hpp"
+#include "haptics/loop_wrap.hpp"
 
 namespace tissue::haptics {
 namespace {
@@ -473,29 +475,129 @@ TEST(ReplayDevice, WithFreshFlagsAStillHandsFirstStepPlaysOverOnePeriod) {
   EXPECT_NEAR((s.velocity_m_per_s - Vec3(0.004 / 0.012, 0, 0)).norm(), 0.0, 1e-9);
 }
 
-// Before the device's first sample the loop had no hand (it renders nothing
-// and judges the first sample against nothing); the rows hold the device
-// origin. The replay holds the first sample's pose from the first row: it
-// does not invent a sweep from the origin, which could be too fast to play.
-TEST(ReplayDevice, WithFreshFlagsTheRowsBeforeTheFirstSampleHoldItsPose) {
+// Before the device's first sample the loop had no hand: it read no sample
+// (the device was lost from its first tick, no force) and judged the first
+// one against nothing; the rows hold the device origin. The replay plays
+// those rows as no samples, as it plays a lost gap, up to the first sample:
+// held at that sample's pose from the first row, they played a live hand the
+// loop never had, with forces. Nor does it invent a sweep from the origin
+// (0.313 m in 52 ms would be 6 m/s, too fast to play at all).
+TEST(ReplayDevice, WithFreshFlagsTheRowsBeforeTheFirstSamplePlayAsNoSamples) {
+  const config::DeviceSpec spec = no_model_device_spec();
   FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(0.3 + 1e-3 * k, 0, 0); });
   for (int row = 0; row < 52; ++row) {  // the device came at row 52
     track.position_m[row] = Vec3::Zero();
     track.fresh[row] = 0;
   }
-  ReplayDevice replay(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh);
+  ReplayDevice replay(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh, spec.limits.device_timeout_s);
   std::string error;
-  ASSERT_TRUE(replay.start(&error)) << error;  // 0.313 m in 52 ms would be 6 m/s
+  ASSERT_TRUE(replay.start(&error)) << error;
+  EXPECT_EQ(replay.lost_gaps(), 1u) << "the rows before the first sample";
   DeviceSample s;
-  ASSERT_TRUE(replay.read(0, &s));
-  EXPECT_EQ(s.position_m, track.position_m[52]);
-  ASSERT_TRUE(replay.read(30 * kMs, &s));  // held, at rest
-  EXPECT_EQ(s.position_m, track.position_m[52]);
-  EXPECT_EQ(s.velocity_m_per_s, Vec3::Zero());
-  ASSERT_TRUE(replay.read(52 * kMs, &s));
+  for (const std::int64_t ns : {std::int64_t{0}, kMs, 30 * kMs, 51 * kMs, 52 * kMs - 1})
+    EXPECT_FALSE(replay.read(ns, &s)) << "before the first sample, at " << ns << " ns: " << s.position_m.transpose();
+  ASSERT_TRUE(replay.read(52 * kMs, &s)) << "the first sample";
   EXPECT_EQ(s.position_m, track.position_m[52]);
   ASSERT_TRUE(replay.read(58 * kMs, &s));
   EXPECT_NEAR(s.position_m.x(), 0.3 + 1e-3 * 14.5, 1e-12);
+
+  // Through the loop: no sample on its first 52 ticks (row 0..51), then the
+  // hand, none of it rejected.
+  ReplayDevice driven(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh, spec.limits.device_timeout_s);
+  ASSERT_TRUE(driven.start(&error)) << error;
+  const HapticStats st = replay_through_the_loop(driven, spec, 250);
+  EXPECT_EQ(st.missing_samples, 52u);
+  EXPECT_EQ(st.rejected_speed, 0u);
+}
+
+// A looping replay whose recording began before the device's first sample:
+// at each wrap it goes from the last position it plays to no samples (the
+// rows before the first sample, as on the first pass), then to the first
+// sample. The loop holds the last sample it accepted (and loses the device
+// once the timeout passes) and judges that first sample against it over the
+// wall time since: the rows without a sample / speed. Not a one-tick jump
+// (held at the first sample from the first row, it was one, and warned
+// about as one), and not nothing (the loop's very first sample, judged
+// against nothing, comes on the first pass only).
+TEST(ReplayDevice, AWrapThroughTheRowsBeforeTheFirstSampleIsJudgedOverThem) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.max_speed_m_per_s, 5.0);
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  // 250 Hz, along y at 1.25 m/s from x = 0.3 m; the device came at row 52
+  // (sample 13), the last sample (49) at row 196, held to row 199.
+  FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(0.3, 5e-3 * k, 0); });
+  for (int row = 0; row < 52; ++row) {
+    track.position_m[row] = Vec3::Zero();
+    track.fresh[row] = 0;
+  }
+  const Vec3 first_sample_m = track.position_m[52], last_m = track.position_m.back();
+  ASSERT_GT((last_m - track.position_m.front()).norm(), 0.3) << "the raw rows' wrap, from the origin";
+  ReplayDevice looping(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh, spec.limits.device_timeout_s);
+  EXPECT_EQ(looping.loop_wrap_jump_m(), 0.0) << "not started: no knots, nothing played";
+  EXPECT_EQ(looping.loop_wrap_no_sample_s(), 0.0) << "not started";
+  std::string error;
+  ASSERT_TRUE(looping.start(&error)) << error;
+  // From the last sample, held to the end, back to the first sample (not to
+  // the origin), over the 52 ms before it.
+  EXPECT_NEAR(looping.loop_wrap_jump_m(), (last_m - first_sample_m).norm(), 1e-15);
+  EXPECT_NEAR(looping.loop_wrap_jump_m(), 0.18, 1e-12);
+  EXPECT_NEAR(looping.loop_wrap_no_sample_s(), 0.052, 1e-12);
+  DeviceSample s;
+  EXPECT_FALSE(looping.read(0, &s)) << "the first pass starts without a sample too";
+  ASSERT_TRUE(looping.read(199 * kMs, &s));  // the last row
+  EXPECT_EQ(s.position_m, last_m);
+  for (const int ms : {200, 225, 250})  // wrapped to 1, 26 and 51 ms into the track
+    EXPECT_FALSE(looping.read(ms * kMs, &s))
+        << "wrapped to before the first sample, at " << ms << " ms: " << s.position_m.transpose();
+  ASSERT_TRUE(looping.read(252 * kMs + kMs / 2, &s)) << "53.5 ms into the track";
+  EXPECT_NEAR((s.position_m - Vec3(0.3, 5e-3 * (13 + 1.5 / 4), 0)).norm(), 0.0, 1e-12);
+
+  // 0.18 m over 52 ms is 3.5 m/s: the loop takes it, and the daemon does
+  // not warn (in one tick it would be 180 m/s).
+  EXPECT_EQ(
+      loop_wrap_warning("device.replay.loop", looping.loop_wrap_jump_m(), 5.0, 1000.0, looping.loop_wrap_no_sample_s()),
+      "");
+  ReplayDevice driven(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh, spec.limits.device_timeout_s);
+  ASSERT_TRUE(driven.start(&error)) << error;
+  const HapticStats st = replay_through_the_loop(driven, spec, 4 * 199 + 60);  // five passes, four wraps
+  EXPECT_EQ(st.rejected_speed, 0u);
+  EXPECT_GE(st.missing_samples, 5u * 51u) << "the rows before the first sample, on every pass";
+  EXPECT_EQ(st.device_lost_trips, 5u) << "52 ms without a sample is past the 10 ms timeout, on every pass";
+
+  // At twice the speed the 52 ms pass in 26 ms of wall time: 6.9 m/s. The
+  // daemon warns, and the loop does reject the sample after the wrap.
+  ReplayDevice twice(track.time_s, track.position_m, 2.0, true, 5.0, track.fresh, spec.limits.device_timeout_s);
+  ASSERT_TRUE(twice.start(&error)) << error;  // the hand itself: 2.5 m/s
+  EXPECT_NEAR(twice.loop_wrap_no_sample_s(), 0.026, 1e-12) << "wall time";
+  EXPECT_NE(
+      loop_wrap_warning("device.replay.loop", twice.loop_wrap_jump_m(), 5.0, 1000.0, twice.loop_wrap_no_sample_s()),
+      "");
+  EXPECT_GE(replay_through_the_loop(twice, spec, 2 * 100 + 10).rejected_speed, 1u);
+
+  ReplayDevice once(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh, spec.limits.device_timeout_s);
+  ASSERT_TRUE(once.start(&error)) << error;
+  EXPECT_EQ(once.loop_wrap_jump_m(), 0.0) << "it holds the last position: no wrap";
+  EXPECT_EQ(once.loop_wrap_no_sample_s(), 0.0) << "no wrap";
+  ReplayDevice still({0.0, 0.0}, {Vec3(0.1, 0, 0), Vec3(0.2, 0, 0)}, 1.0, true);
+  ASSERT_TRUE(still.start(&error)) << error;
+  EXPECT_EQ(still.loop_wrap_jump_m(), 0.0) << "no duration: read() holds one position, never wraps";
+}
+
+// A looping track with a sample on its first row wraps in one tick, from the
+// last position read() plays to that sample, as ever.
+TEST(ReplayDevice, TheLoopWrapJumpIsFromTheLastPlayedPositionToTheFirstSample) {
+  const FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(0.3, 1e-3 * k, 0); });
+  ReplayDevice looping(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh, 0.01);
+  std::string error;
+  ASSERT_TRUE(looping.start(&error)) << error;
+  EXPECT_NEAR(looping.loop_wrap_jump_m(), 0.049, 1e-12);  // sample 49 back to sample 0
+  EXPECT_EQ(looping.loop_wrap_no_sample_s(), 0.0) << "in one tick";
+  DeviceSample before, after;
+  ASSERT_TRUE(looping.read(0, &before));
+  ASSERT_TRUE(looping.read(199 * kMs, &before));  // the last row
+  ASSERT_TRUE(looping.read(200 * kMs, &after));   // wrapped to 1 ms into the track
+  EXPECT_EQ(before.position_m, track.position_m.back());
+  EXPECT_NEAR((after.position_m - Vec3(0.3, 0.25e-3, 0)).norm(), 0.0, 1e-12);
 }
 
 // A row whose position changed is a new sample whatever its flag says: the
@@ -543,42 +645,6 @@ TEST(ReplayDevice, WithFreshFlagsATrackWithNoSampleIsRefusedAtStart) {
   EXPECT_TRUE(one.start(&error)) << error;
   ReplayDevice unflagged(time_s, position_m, 1.0, false, 5.0);
   EXPECT_TRUE(unflagged.start(&error)) << error;
-}
-
-// A looping replay jumps, in one tick at each wrap, from the last position it
-// plays to the first (the daemon warns when the loop would reject that jump).
-// With the rows before the device's first sample held at that sample's pose,
-// the jump starts there, not at the device origin those rows hold: the jump
-// loop_wrap_jump_m() reports is the one read() makes across the wrap.
-TEST(ReplayDevice, TheLoopWrapJumpIsFromTheLastPlayedPositionToTheFirstSample) {
-  // 250 Hz, along y at 0.25 m/s from x = 0.3 m; the device came at row 52.
-  FlaggedTrack track = flagged_track(4, 200, [](int k) { return Vec3(0.3, 1e-3 * k, 0); });
-  for (int row = 0; row < 52; ++row) {
-    track.position_m[row] = Vec3::Zero();
-    track.fresh[row] = 0;
-  }
-  const Vec3 first_sample_m = track.position_m[52], last_m = track.position_m.back();
-  ASSERT_GT((last_m - track.position_m.front()).norm(), 0.3) << "the raw rows' wrap, from the origin";
-  ReplayDevice looping(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh);
-  EXPECT_EQ(looping.loop_wrap_jump_m(), 0.0) << "not started: no knots, nothing played";
-  std::string error;
-  ASSERT_TRUE(looping.start(&error)) << error;
-  EXPECT_NEAR(looping.loop_wrap_jump_m(), (last_m - first_sample_m).norm(), 1e-15);
-  EXPECT_NEAR(looping.loop_wrap_jump_m(), 0.036, 1e-12);  // sample 49 back to sample 13
-  DeviceSample before, after;
-  ASSERT_TRUE(looping.read(0, &before));
-  ASSERT_TRUE(looping.read(199 * kMs, &before));  // the last row
-  ASSERT_TRUE(looping.read(200 * kMs, &after));   // wrapped to 1 ms into the track: held at the first sample
-  EXPECT_EQ(before.position_m, last_m);
-  EXPECT_EQ(after.position_m, first_sample_m);
-  EXPECT_NEAR((after.position_m - before.position_m).norm(), looping.loop_wrap_jump_m(), 1e-15);
-
-  ReplayDevice once(track.time_s, track.position_m, 1.0, false, 5.0, track.fresh);
-  ASSERT_TRUE(once.start(&error)) << error;
-  EXPECT_EQ(once.loop_wrap_jump_m(), 0.0) << "it holds the last position: no wrap";
-  ReplayDevice still({0.0, 0.0}, {Vec3(0.1, 0, 0), Vec3(0.2, 0, 0)}, 1.0, true);
-  ASSERT_TRUE(still.start(&error)) << error;
-  EXPECT_EQ(still.loop_wrap_jump_m(), 0.0) << "no duration: read() holds one position, never wraps";
 }
 
 // A 250 Hz device that sent nothing for 2 s (samples 26..524 lost), the hand
@@ -758,7 +824,10 @@ TEST(ReplayDevice, WithFreshFlagsATailLongerThanTheDeviceTimeoutPlaysAsNoSamples
 
   ReplayDevice looping(track.time_s, track.position_m, 1.0, true, 5.0, track.fresh, spec.limits.device_timeout_s);
   ASSERT_TRUE(looping.start(&error)) << error;
-  EXPECT_EQ(looping.loop_wrap_jump_m(), 0.0);
+  // At the wrap the loop judges the first sample against the last one over
+  // the tail (99 ms), not over one tick.
+  EXPECT_NEAR(looping.loop_wrap_jump_m(), 0.1, 1e-12) << "the last sample (25) back to the first";
+  EXPECT_NEAR(looping.loop_wrap_no_sample_s(), 0.099, 1e-12);
   ASSERT_TRUE(looping.read(0, &s));
   EXPECT_FALSE(looping.read(150 * kMs, &s));
   ASSERT_TRUE(looping.read(200 * kMs, &s)) << "wrapped to 1 ms in";
@@ -796,6 +865,7 @@ TEST(ReplayDevice, AGapPlayedAsNoSamplesIsMeasuredOverTheWholeGapNotByTheLoopWra
   ASSERT_TRUE(lost.start(&error)) << error;
   EXPECT_EQ(lost.lost_gaps(), 1u);
   EXPECT_NEAR(lost.loop_wrap_jump_m(), 0.08, 1e-15) << "the last sample back to the first";
+  EXPECT_EQ(lost.loop_wrap_no_sample_s(), 0.0) << "in one tick: the track ends on a sample, held";
   // At 1.5 times real time the sample after the gap comes 13.3 ms of wall
   // time after the one before: 6 m/s. Refused, lost or glided alike.
   for (const double timeout_s : {0.01, std::numeric_limits<double>::infinity()}) {
@@ -823,7 +893,11 @@ TEST(ReplayDevice, AGapPlayedAsNoSamplesIsMeasuredOverTheWholeGapNotByTheLoopWra
   ASSERT_EQ(ends_on_gap.fresh.back(), 1);
   ReplayDevice wraps_after_gap(ends_on_gap.time_s, ends_on_gap.position_m, 1.0, true, 5.0, ends_on_gap.fresh, 0.01);
   ASSERT_TRUE(wraps_after_gap.start(&error)) << error;
+  // The loop judges the first sample against the one before the gap (both
+  // at the origin) over the 20 ms gap: read() never plays the sample that
+  // ends it, on the last row.
   EXPECT_EQ(wraps_after_gap.loop_wrap_jump_m(), 0.0);
+  EXPECT_NEAR(wraps_after_gap.loop_wrap_no_sample_s(), 0.020, 1e-12);
   DeviceSample s;
   ASSERT_TRUE(wraps_after_gap.read(0, &s));
   EXPECT_FALSE(wraps_after_gap.read(135 * kMs, &s)) << "the last milliseconds before the wrap are the gap";

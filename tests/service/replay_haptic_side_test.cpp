@@ -3,7 +3,8 @@
 // must reach the ReplayDevice. Each case is told by start(): HapticSide::start
 // throws, naming device.replay.speed, when the replay would play the track
 // faster than device.limits.max_speed_m_per_s, and warns (device.replay.loop)
-// when a looping replay jumps too far in one tick at the wrap.
+// when a looping replay jumps too far at the wrap, in one tick or over the
+// time it plays no samples across it.
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -117,6 +118,31 @@ TEST(ReplayHapticSide, TheDeviceTimeoutReachesTheReplayDevice) {
   config.device.limits.device_timeout_s = 0.05;
   EXPECT_EQ(start_error(config, &printed), "");
   EXPECT_NE(printed.find("tissued: warning: device.replay.loop"), std::string::npos) << printed;
+}
+
+// A looping session whose device came at row 52 (samples 0..12 never came,
+// the rows before at the origin), then along x at 1.25 m/s to 0.245 m: at
+// each wrap the replay plays those 52 ms as no samples, and the loop judges
+// the first sample (0.065 m) against the last over them: 0.18 m in 52 ms,
+// 3.5 m/s, taken, no warning (warned before as a one-tick jump). At twice
+// the speed, 26 ms of wall time: 6.9 m/s, rejected, and the daemon says so.
+TEST(ReplayHapticSide, TheWrapThroughTheRowsBeforeTheFirstSampleIsJudgedOverThem) {
+  record::testing::TempDir dir;
+  const std::string path = write_250hz_session(
+      dir / "late.h5", 200, [](int k) { return k < 13 ? 0.0 : 5e-3 * k; }, 0, 12);
+  config::DaemonConfig config = replay_config(path, 1.0);
+  config.device.replay.loop = true;
+  ASSERT_EQ(config.device.limits.max_speed_m_per_s, 5.0);
+  std::string printed;
+  EXPECT_EQ(start_error(config, &printed), "");
+  EXPECT_EQ(printed.find("device.replay.loop"), std::string::npos) << printed;
+
+  config.device.replay.speed = 2.0;
+  EXPECT_EQ(start_error(config, &printed), "");
+  EXPECT_NE(printed.find("tissued: warning: device.replay.loop: the looping track goes from its last sample back to "
+                         "its first through 0.026 s (wall time) without samples, a 0.18 m jump"),
+            std::string::npos)
+      << printed;
 }
 
 // A session whose device never delivered a sample (every flag 0, the rows at

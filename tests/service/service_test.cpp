@@ -1750,7 +1750,9 @@ std::string write_replay_session(const std::string& path, std::size_t before,
 // (the device origin). Judged on the raw rows, a track that ends on its first
 // sample was warned about (a jump back to the origin that never happens) and
 // one that ends at the origin was not (the jump from there to the first
-// sample does happen, every wrap).
+// sample does happen, every wrap). The rows before the first sample play as
+// no samples, at every wrap too, so the loop judges that jump over them, not
+// over one tick: warned when it is too fast over that time, and only then.
 TEST(Service, ReplayLoopWarnsAboutTheWrapAsPlayedFromTheFirstSample) {
   TempDir dir;
   const std::array<double, 3> first_m{0.03, 0.04, 0.0};  // 5 cm from the origin (scene frame)
@@ -1767,7 +1769,8 @@ TEST(Service, ReplayLoopWarnsAboutTheWrapAsPlayedFromTheFirstSample) {
     return file_text(run.out);
   };
   // Out 1 cm in z and back over 0.3 s, ending exactly on the first sample:
-  // played, the wrap is seamless (the rows before the first sample hold it).
+  // played, the wrap makes no jump (it passes through the 20 rows without a
+  // sample, as the first pass began).
   std::vector<std::array<double, 3>> there_and_back;
   for (int i = 0; i <= 300; ++i)
     there_and_back.push_back({first_m[0], first_m[1], 0.01 * std::sin(std::numbers::pi * i / 300.0)});
@@ -1778,18 +1781,25 @@ TEST(Service, ReplayLoopWarnsAboutTheWrapAsPlayedFromTheFirstSample) {
       << seamless;
   // From the first sample back to the origin over 0.2 s: it ends on the
   // first row, but plays from the first sample, 5 cm (scene frame) from
-  // where it ends; 10 cm in the device frame at scale 0.5.
+  // where it ends; 10 cm in the device frame at scale 0.5. After 10 rows
+  // without a sample that is 10 m/s, above device.limits.max_speed_m_per_s
+  // 5: warned.
   std::vector<std::array<double, 3>> to_origin;
   for (int i = 0; i <= 200; ++i) {
     const double u = 1.0 - i / 200.0;
     to_origin.push_back({u * first_m[0], u * first_m[1], 0.0});
   }
-  const std::string jumping = run_replay(write_replay_session(dir / "jumping.h5", 20, to_origin), 0.5);
-  EXPECT_NE(jumping.find("tissued: warning: device.replay.loop: the looping track goes from its last point back to "
-                         "its first in one tick, a 0.1 m jump (device frame)"),
+  const std::string jumping = run_replay(write_replay_session(dir / "jumping.h5", 10, to_origin), 0.5);
+  EXPECT_NE(jumping.find("tissued: warning: device.replay.loop: the looping track goes from its last sample back to "
+                         "its first through 0.01 s (wall time) without samples, a 0.1 m jump (device frame)"),
             std::string::npos)
       << "the wrap from the origin to the first sample is not warned about:\n"
       << jumping;
+  // After 40 rows without a sample, 2.5 m/s: the loop takes it.
+  const std::string taken = run_replay(write_replay_session(dir / "taken.h5", 40, to_origin), 0.5);
+  EXPECT_EQ(taken.find("warning: device.replay.loop"), std::string::npos)
+      << "the wrap is judged over the rows without a sample:\n"
+      << taken;
 }
 
 void expect_same_force_profile(const record::HapticTrack& original, const record::HapticTrack& replayed) {
