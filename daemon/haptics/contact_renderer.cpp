@@ -22,6 +22,9 @@ constexpr double kDegenerateArea2_m4 = 1e-30;
 // behind the surface did not meet it; it is left free, as one that starts
 // inside.
 constexpr double kCaptureDepth_m = 0.005;
+// A device this close (sideways) to the line through a patch border point
+// along its normal is still over the patch: rounding, far below any tool.
+constexpr double kFootprintTolerance_m = 1e-7;
 // A patch vertex, its velocity and the contact reference are bounded, not just
 // finite: the closest-point and normal arithmetic takes products of squared
 // coordinates, and 1e80 m made them inf - inf = NaN, which became a NaN proxy
@@ -188,6 +191,43 @@ Vec3 ContactRenderer::pseudo_normal(const Closest& c) const noexcept {
   return norm > 1e-12 ? Vec3(sum / norm) : face_normal;
 }
 
+bool ContactRenderer::surrounded(const Closest& c) const noexcept {
+  if (c.feature_a < 0) return true;  // a face
+  // Topology only, so degenerate triangles count: they close a fan though
+  // they add nothing to its normal.
+  if (c.feature_b >= 0) {
+    int faces = 0;  // sharing the edge
+    for (int t = 0; t < model_->triangle_count; ++t) {
+      const auto& tri = model_->triangle[t];
+      const bool has_a = tri[0] == c.feature_a || tri[1] == c.feature_a || tri[2] == c.feature_a;
+      const bool has_b = tri[0] == c.feature_b || tri[1] == c.feature_b || tri[2] == c.feature_b;
+      faces += has_a && has_b ? 1 : 0;
+    }
+    return faces >= 2;
+  }
+  // A vertex: every edge out of it is shared by two of its triangles (a
+  // closed fan). Its triangles first, on the stack, so the pairing is over
+  // them only.
+  std::array<int, LocalModel::kMaxPatchTriangles> fan;
+  int fan_size = 0;
+  for (int t = 0; t < model_->triangle_count; ++t) {
+    const auto& tri = model_->triangle[t];
+    if (tri[0] == c.feature_a || tri[1] == c.feature_a || tri[2] == c.feature_a) fan[fan_size++] = t;
+  }
+  for (int i = 0; i < fan_size; ++i) {
+    for (const std::int32_t x : model_->triangle[fan[i]]) {
+      if (x == c.feature_a) continue;
+      bool shared = false;
+      for (int j = 0; j < fan_size && !shared; ++j) {
+        const auto& other = model_->triangle[fan[j]];
+        shared = j != i && (other[0] == x || other[1] == x || other[2] == x);
+      }
+      if (!shared) return false;
+    }
+  }
+  return fan_size > 0;
+}
+
 Vec3 ContactRenderer::surface_velocity(const Closest& c) const noexcept {
   if (!surface_moving_) return Vec3::Zero();  // extrapolation has stopped: the patch is held still
   const auto& tri = model_->triangle[c.triangle];
@@ -273,15 +313,40 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
   // The device's signed height above the patch (along the pseudo-normal at
   // its closest point; NaN without a triangle), found at most once a tick.
   Closest nearest;
+  Vec3 nearest_normal = Vec3::Zero();
   double height_m = std::numeric_limits<double>::quiet_NaN();
   bool have_height = false;
   const auto device_height_m = [&]() noexcept {
     if (!have_height) {
       nearest = closest_facing(device_m, device_m, false);
-      if (nearest.triangle >= 0) height_m = pseudo_normal(nearest).dot(device_m - nearest.point);
+      if (nearest.triangle >= 0) {
+        nearest_normal = pseudo_normal(nearest);
+        height_m = nearest_normal.dot(device_m - nearest.point);
+      }
       have_height = true;
     }
     return height_m;
+  };
+  // Whether the device is over the patch (top of the header): its closest
+  // point has patch triangles all around it, or the device is right above or
+  // below that point. Beside the patch the height is only that above the
+  // plane of a border face, which says nothing of the surface under the
+  // device: the sim did not hand that part over. Found at most once a tick,
+  // and only where a contact could start or the side the device is on could
+  // change. Without a triangle there is nothing to be beside.
+  bool over_patch = true;
+  bool have_over_patch = false;
+  const auto device_over_patch = [&]() noexcept {
+    if (!have_over_patch) {
+      device_height_m();
+      if (nearest.triangle >= 0 && !surrounded(nearest)) {
+        const Vec3 d = device_m - nearest.point;
+        over_patch =
+            (d - nearest_normal.dot(d) * nearest_normal).squaredNorm() <= kFootprintTolerance_m * kFootprintTolerance_m;
+      }
+      have_over_patch = true;
+    }
+    return over_patch;
   };
 
   Vec3 reference_m = Vec3::Zero();
@@ -297,9 +362,13 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
       // move with; (b) at a patch vertex or edge, where the segment's face
       // plane and the pseudo-normal below disagree by a fraction of a
       // micrometre (the shipped demo's hand lands on a lattice node). Both
-      // lost the whole press: the tool went on inside with no force.
+      // lost the whole press: the tool went on inside with no force. Only
+      // over the patch: beside it, behind a border face's plane, the device
+      // was captured on the border edge and pulled in sideways with up to
+      // the device's whole force (30 mm beside a cube's top edge: 12 N asked),
+      // touching nothing.
       const double h_m = device_height_m();
-      if (h_m < 0.0 && h_m >= -kCaptureDepth_m) {
+      if (h_m < 0.0 && h_m >= -kCaptureDepth_m && device_over_patch()) {
         touching_ = true;
         reference_m = nearest.point;
       }
@@ -310,11 +379,11 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
       // met there, where its force is still zero, not on the patch, where it
       // would start at k_v f0 / (k_v + k). Only coming from clear of that
       // region, as the segment test needs a crossing: a device that starts
-      // inside it feels no sudden force.
+      // inside it feels no sudden force. Over the patch only, as above.
       const double h_m = device_height_m();
       Vec3 unused_proxy_m;
-      in_reach =
-          h_m >= 0.0 && h_m <= kMaxHeldHeight_m && compliant_proxy(device_m, pseudo_normal(nearest), &unused_proxy_m);
+      in_reach = h_m >= 0.0 && h_m <= kMaxHeldHeight_m && device_over_patch() &&
+                 compliant_proxy(device_m, nearest_normal, &unused_proxy_m);
       if (in_reach && clear_) {
         touching_ = true;
         reference_m = nearest.point;
@@ -355,7 +424,12 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     contact_triangle_ = -1;
     proxy_m_ = device_m;
     out.proxy_m = device_m;
-    outside_ = device_height_m() > 0.0;  // NaN (no triangle): not known to be outside
+    // NaN (no triangle): not known to be outside. In front of any face's
+    // plane is outside, but behind a border face's plane beside the patch
+    // is not known to be inside: the device stays outside until the next
+    // model, built around it, says where the surface is (a device that went
+    // below the plane of a surface that goes on is met then).
+    outside_ = device_height_m() > 0.0 || (outside_ && !device_over_patch());
     clear_ = outside_ && !in_reach;
     return out;
   }

@@ -9,7 +9,19 @@
 //     side to its back side. The test runs in each triangle's own moving frame
 //     (start point shifted by the triangle's motion since the last tick), so a
 //     fast device (5 mm per 1 ms tick) or a moving surface cannot tunnel
-//     through a thin patch between two ticks.
+//     through a thin patch between two ticks. A device in front of the patch
+//     at the last tick and at most a few millimetres behind it now has met
+//     it too (a surface that moved past it between two models), but only
+//     over the patch: where its closest patch point has patch triangles all
+//     around, or the device is right above or below that point. The patch is
+//     the piece of the surface the sim handed over (a closed surface's patch
+//     has a border only where the sim stopped); beside it, behind a border
+//     face's plane, the device is not under the patch and may be beside the
+//     object (30 mm beside a cube's top edge the sim hands over the nearest
+//     triangle alone, maybe a top one): it was captured on the border edge
+//     and pulled in sideways with the device's whole force. So no contact
+//     starts beside the patch, and a device that was in front is held to be
+//     outside there until a model built around it says where the surface is.
 //   - Touching: the proxy is the point of the patch closest to the device,
 //     searched only over triangles whose front side faces the previous contact
 //     point (so the proxy cannot jump to the far side of a thin object), with
@@ -17,9 +29,9 @@
 //     with a rigid patch ends when the device is on the outer side of that
 //     feature, judged with the angle-weighted pseudo-normal (Baerentzen &
 //     Aanaes 2005), which is well defined on edges and vertices too (a
-//     deformed patch holds it a little longer, see below). Past the patch
-//     border the proxy stays on the border edge (the sim re-centres the patch
-//     on the tool).
+//     deformed patch holds it a little longer, see below). A contact that
+//     started over the patch goes on past its border: the proxy stays on the
+//     border edge (the sim re-centres the patch on the tool every step).
 //
 // Deformable object (LocalModel::in_contact): the patch is the surface as the
 // sim last left it under force_ref; pushing harder displaces the contact point
@@ -138,6 +150,10 @@ class ContactRenderer {
   bool find_entry(const Vec3& from_m, const Vec3& to_m, Vec3* hit_m) const noexcept;
   Closest closest_facing(const Vec3& device_m, const Vec3& reference_m, bool filter) const noexcept;
   Vec3 pseudo_normal(const Closest& c) const noexcept;
+  // Whether the patch has triangles all around c's feature (a face, an edge
+  // two triangles share, a vertex with a closed fan), i.e. it is not on the
+  // patch's border, where the pseudo-normal lacks the faces beyond it.
+  bool surrounded(const Closest& c) const noexcept;
   Vec3 surface_velocity(const Closest& c) const noexcept;
   // The deformable proxy (top of the file) for contact normal n: true, with
   // *proxy_m, when the model is in contact and the solve pushes into the

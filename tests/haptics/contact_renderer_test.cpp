@@ -449,6 +449,97 @@ TEST(ContactRenderer, AToolThatIsBehindTheSurfaceNowAndWasInFrontIsMetWithinAMod
   EXPECT_GT(out.force_on_device_N.z(), 0.0);
 }
 
+// The patch is only the piece of the surface the sim handed over: beside it
+// the renderer knows nothing of the surface. A free hand 30 mm beyond a
+// patch's border that dips 0.5 mm below the patch's plane is behind the
+// border face but not under the patch (beside a box's top edge it is beside
+// the object). It was captured there as a tool that had met the surface,
+// with the proxy on the border edge, and pulled in sideways with
+// k_v * 30 mm = 12 N (the device's whole max_force_N after the safety
+// clamp). A deformed patch likewise pushed such a hand up from beside it.
+TEST(ContactRenderer, AHandBesideThePatchIsNotCapturedByItsBorder) {
+  const LocalModel rigid = test::make_flat_patch(0.02, 2);  // z = 0 for |x|, |y| <= 20 mm
+  LocalModel deformed = test::make_flat_patch(0.02, 2);
+  test::set_linear_contact(deformed, 900.0, Vec3(0.0, 0.0, -0.8), Vec3::Zero());
+  for (const LocalModel* patch : {&rigid, static_cast<const LocalModel*>(&deformed)}) {
+    // Beside an edge, beside a corner, and just beyond an edge.
+    for (const Vec3& beside : {Vec3(0.05, 0.005, 0.0), Vec3(0.04, -0.035, 0.0), Vec3(0.0201, 0.01, 0.0)}) {
+      ContactRenderer r(params());
+      r.set_model(patch);
+      std::int64_t now_ns = 0;
+      // Down from 50 mm above the plane to 4.5 mm below it in 0.5 mm steps
+      // (none exactly on the plane), through the deformed patch's reach.
+      ASSERT_FALSE(r.render(now_ns += kMs, beside + Vec3(0, 0, 0.0502), Vec3::Zero()).contact);
+      sweep(r, now_ns, beside + Vec3(0, 0, 0.0502), beside + Vec3(0, 0, -0.0045), 109,
+            [&](const Vec3& device, const RenderOutput& out) {
+              EXPECT_FALSE(out.contact) << "device at " << device.transpose() << ", in_contact " << patch->in_contact;
+              EXPECT_EQ(out.force_on_device_N, Vec3::Zero())
+                  << "device at " << device.transpose() << ", in_contact " << patch->in_contact;
+            });
+    }
+  }
+}
+
+// ... but the hand is not forgotten there either: one that was in front of
+// the surface and went below its plane beside the patch is met by the next
+// model, which the sim builds around it (a window on a surface that goes
+// on), as any hand the surface passed within one model.
+TEST(ContactRenderer, AHandThatDippedBesideThePatchIsMetByTheNextModelAroundIt) {
+  const LocalModel first = test::make_flat_patch(0.02, 2);
+  LocalModel around = test::make_grid_patch(0.02, 2, Vec3(0.03, 0.0, 0.0));
+  around.version = 2;
+  ContactRenderer r(params());
+  r.set_model(&first);
+  std::int64_t now_ns = 0;
+  ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0.03, 0.0, 0.001), Vec3::Zero()).contact);
+  ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0.03, 0.0, -0.0005), Vec3::Zero()).contact);
+  ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0.03, 0.0, -0.001), Vec3::Zero()).contact);
+  ContactRenderer next(params());
+  next.set_model(&around);
+  next.carry_state_from(r);
+  const RenderOutput out = next.render(now_ns += kMs, Vec3(0.03, 0.0, -0.001), Vec3::Zero());
+  EXPECT_TRUE(out.contact);
+  EXPECT_TRUE(out.proxy_m.isApprox(Vec3(0.03, 0.0, 0.0), 1e-12)) << out.proxy_m.transpose();
+  EXPECT_TRUE(out.force_on_device_N.isApprox(Vec3(0.0, 0.0, kCouplingStiffness_N_per_m * 0.001), 1e-9))
+      << out.force_on_device_N.transpose();
+}
+
+// Over the patch is not only right above a face: a device whose closest
+// point is an inner edge or vertex (patch triangles all around it) is over
+// the patch however far off that feature's normal it lies, so a surface that
+// moves past it between two models meets it there: here a valley's floor
+// line and a pit's bottom vertex, each rising 2.5 mm past a still tool
+// 0.2 mm off the line / vertex.
+TEST(ContactRenderer, ASurfaceMeetsAStillToolAtAnInnerEdgeOrVertexOffItsNormal) {
+  const LocalModel valley = test::make_ridge(0.05, -0.5);  // floor line x = 0, z = 0
+  LocalModel pit = test::make_flat_patch();                // 25 mm cells
+  for (int i = 0; i < pit.vertex_count; ++i)
+    if (pit.vertex_m[i].norm() < 1e-12) pit.vertex_m[i].z() = -0.005;  // the centre vertex, 5 mm down
+  struct Case {
+    const LocalModel* surface;
+    Vec3 tool_m;
+    Vec3 feature_m;  // the edge or vertex point the proxy lands on
+  };
+  for (const Case& c : {Case{&valley, Vec3(0.0002, 0.003, -0.002), Vec3(0.0, 0.003, 0.0)},
+                        Case{&pit, Vec3(0.0002, 0.0001, -0.007), Vec3(0.0, 0.0, -0.005)}}) {
+    LocalModel low = *c.surface, high = *c.surface;
+    for (int i = 0; i < low.vertex_count; ++i) low.vertex_m[i].z() -= 0.0025;  // the tool 0.5 mm above the feature
+    low.version = 1;
+    high.version = 2;
+    ContactRenderer r(params());
+    r.set_model(&low);
+    ASSERT_FALSE(r.render(kMs, c.tool_m, Vec3::Zero()).contact);
+    ContactRenderer next(params());
+    next.set_model(&high);
+    next.carry_state_from(r);
+    const RenderOutput out = next.render(2 * kMs, c.tool_m, Vec3::Zero());
+    EXPECT_TRUE(out.contact) << "tool at " << c.tool_m.transpose();
+    EXPECT_TRUE(out.proxy_m.isApprox(c.feature_m, 1e-12)) << out.proxy_m.transpose();
+    EXPECT_TRUE(out.force_on_device_N.isApprox(kCouplingStiffness_N_per_m * (c.feature_m - c.tool_m), 1e-9))
+        << out.force_on_device_N.transpose();
+  }
+}
+
 // A tool that starts inside the object, or that the surface passed by more
 // than a few millimetres in one model, is not pulled out by a model switch.
 TEST(ContactRenderer, AModelSwitchDoesNotCaptureAToolThatWasNotOutside) {
