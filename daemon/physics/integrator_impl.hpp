@@ -505,6 +505,9 @@ class ImplicitIntegrator final : public Integrator {
   std::vector<double> mass_;
   std::vector<Pad3> diag_inv_, rhs_, dv_, r_, z_, p_, ap_;
   std::vector<Vec3> dv_by_node_;  // warm start: last step's solution
+  // Rest position of each node id at the last layout: a node whose id now
+  // stands elsewhere (reused after a merge) drops its warm start.
+  std::vector<Vec3> warm_start_rest_m_;
   // Assembled block-CSR (kAssembledBlockCsr): per unknown its diagonal block,
   // then its off-diagonal blocks −B with their column.
   std::vector<Eigen::Matrix3d> diag_block_, off_block_;
