@@ -34,14 +34,32 @@ class Body {
   const scene::Scene& scene() const { return scene_; }
 
   // Splits / merges one diamond (closure included for split) and carries the
-  // state across: a new free node takes its edge's mean position and velocity
-  // (a split adds no momentum or kinetic energy to the free nodes), a new
-  // fixed or prescribed one its target (place_kinematic_node); a merged node
-  // gives half its momentum to each end of its edge (kinetic energy can only
-  // drop). The elastic energy does change with the springs (SimCounters::
-  // adaptation_energy_J). Returns diamonds split / 1 for merge. A key the
-  // mesh refuses (KuhnMesh::split, require_can_merge) throws
-  // std::invalid_argument with the body unchanged.
+  // state across. Mass moves with its momentum: a split's node z takes half
+  // its mass from each end of its edge, a merge gives half of z's to each
+  // end, and that mass keeps the velocity it had where it came from (a fixed
+  // node's is zero, a prescribed node's its driver's). A free node joins the
+  // mass it takes to its own, an inelastic collision (momentum kept, kinetic
+  // energy can only drop): a new free node takes its edge's mean position and
+  // velocity, a free end of a merged node v_e ← (m_e v_e + m_z v_z / 2) /
+  // (m_e + m_z / 2). A fixed or prescribed node moves as its driver says
+  // whatever mass it gains or loses: a new one takes its target
+  // (place_kinematic_node). So:
+  //  - where the nodes a change touches are all free, their momentum is
+  //    kept and their kinetic energy can only drop (a split's by
+  //    m_z |v_a − v_b|² / 8);
+  //  - the free nodes gain momentum and kinetic energy only as mass that
+  //    moved with a moving prescribed node becomes theirs (a split next to
+  //    it, a merge of one): its momentum, and at most its kinetic energy
+  //    (m |v_driver|² / 2 for the mass m); none where no driver moves (mass
+  //    taken from a fixed node arrives at rest: it slows the node it joins,
+  //    momentum unchanged);
+  //  - what a kinematic node gains or loses (a free node's half merged into
+  //    it, mass at its driver's velocity) is the world's.
+  // The elastic energy does change with the springs (SimCounters::
+  // adaptation_energy_J, which books the change in kinetic + elastic energy
+  // of all nodes). Returns diamonds split / 1 for merge. A key the mesh
+  // refuses (KuhnMesh::split, require_can_merge) throws std::invalid_argument
+  // with the body unchanged.
   int split(mesh::Key diamond);
   void merge(mesh::Key diamond);
 

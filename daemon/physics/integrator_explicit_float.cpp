@@ -254,16 +254,31 @@ void ExplicitFloatState::load(const Body& body, const std::vector<Vec3>& f_ext_N
   }
 }
 
+FloatMassDamping::FloatMassDamping(double h_s, double alpha_per_s) {
+  const double h_alpha = h_s * alpha_per_s;
+  if (!(h_alpha > 0.0)) return;  // no mass damping: divisor 1, nothing left over
+  log_factor = std::log1p(h_alpha);
+  // Capped far beyond any sub-step count (max_substeps): the whole step's
+  // share is then left to store().
+  every = h_alpha >= kMinDecay ? 1 : static_cast<int>(std::min(std::ceil(kMinDecay / h_alpha), 1e9));
+  divisor = static_cast<float>(std::exp(every * log_factor));
+}
+
 void ExplicitFloatState::substeps(Simd simd, double h_s, double alpha_per_s, int count) {
   h_s_ = h_s;
   count_ = count;
   const float h = static_cast<float>(h_s);
-  const float divisor = static_cast<float>(1.0 + h_s * alpha_per_s);
+  const FloatMassDamping damping(h_s, alpha_per_s);
+  leftover_divisor_ = damping.leftover_divisor(count);
   const std::size_t nodes = u_.size();
+  int since_division = 0;
   for (int s = 0; s < count; ++s) {
     explicit_spring_forces_float(simd, batches_.data(), batches_.size(), u_.data(), damped_ ? v_.data() : nullptr,
                                  f_.data());
-    update_float(h, divisor, inv_mass_.data(), f_ext_.data(), u_.data(), v_.data(), f_.data(), nodes);
+    const bool divide = ++since_division == damping.every;
+    if (divide) since_division = 0;
+    update_float(h, divide ? damping.divisor : 1.0f, inv_mass_.data(), f_ext_.data(), u_.data(), v_.data(), f_.data(),
+                 nodes);
   }
 }
 
@@ -293,7 +308,8 @@ void ExplicitFloatState::store(Body& body) const {
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
     const float u[3] = {u_[n].v[0], u_[n].v[1], u_[n].v[2]}, v[3] = {v_[n].v[0], v_[n].v[1], v_[n].v[2]};
     const float u0[3] = {u0_[n].v[0], u0_[n].v[1], u0_[n].v[2]}, v0[3] = {v0_[n].v[0], v0_[n].v[1], v0_[n].v[2]};
-    store_float_stepped_node(body, static_cast<NodeId>(n), inv_mass_[n] == 0.0f, u, v, u0, v0, h_s_, count_);
+    store_float_stepped_node(body, static_cast<NodeId>(n), inv_mass_[n] == 0.0f, u, v, u0, v0, h_s_, count_,
+                             leftover_divisor_);
   }
 }
 

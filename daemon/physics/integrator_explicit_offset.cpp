@@ -766,15 +766,28 @@ void ExplicitOffsetState<Real>::substeps(Simd simd, double h_s, double alpha_per
   h_s_ = h_s;
   count_ = count;
   const auto h = static_cast<Real>(h_s);
-  const auto divisor = static_cast<Real>(1.0 + h_s * alpha_per_s);
+  // Double divides every sub-step; float on FloatMassDamping's schedule, the
+  // rest left to store().
+  int every = 1;
+  auto divisor = static_cast<Real>(1.0 + h_s * alpha_per_s);
+  if constexpr (std::is_same_v<Real, float>) {
+    const FloatMassDamping damping(h_s, alpha_per_s);
+    every = damping.every;
+    divisor = damping.divisor;
+    leftover_divisor_ = damping.leftover_divisor(count);
+  }
   const Real* rest = std::is_same_v<Real, double> ? rest_.data() : nullptr;
   Real worst = 0;
+  int since_division = 0;
   for (int s = 0; s < count; ++s) {
     const bool measure = end_displacement_ratio != nullptr && s + 1 == count;
     offset_spring_forces<Real>(simd, batches_.data(), groups_.data(), groups_.size(), stride_, x_.data(),
                                damped_ ? v_.data() : nullptr, rest_by_position_.data(), f_.data(), rest,
                                measure ? &worst : nullptr);
-    offset_update<Real>(simd, h, divisor, inv_mass_.data(), stride_, f_ext_.data(), x_.data(), v_.data(), f_.data());
+    const bool divide = ++since_division == every;
+    if (divide) since_division = 0;
+    offset_update<Real>(simd, h, divide ? divisor : Real(1), inv_mass_.data(), stride_, f_ext_.data(), x_.data(),
+                        v_.data(), f_.data());
   }
   if (end_displacement_ratio) *end_displacement_ratio = std::sqrt(static_cast<double>(worst));
 }
@@ -828,7 +841,7 @@ void ExplicitOffsetState<Real>::store(Body& body) const {
       const float v[3] = {v_[p], v_[stride_ + p], v_[2 * stride_ + p]};
       const float u0[3] = {x0_[p], x0_[stride_ + p], x0_[2 * stride_ + p]};
       const float v0[3] = {v0_[p], v0_[stride_ + p], v0_[2 * stride_ + p]};
-      store_float_stepped_node(body, n, inv_mass_[p] == 0.0f, u, v, u0, v0, h_s_, count_);
+      store_float_stepped_node(body, n, inv_mass_[p] == 0.0f, u, v, u0, v0, h_s_, count_, leftover_divisor_);
     }
   }
 }

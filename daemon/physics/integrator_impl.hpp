@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <type_traits>
@@ -72,13 +73,39 @@ struct ExplicitSpringBatchF {
 void explicit_spring_forces_float(Simd simd, const ExplicitSpringBatchF* batches, std::size_t count, const Pad3f* u,
                                   const Pad3f* v, Pad3f* f);
 
+// Mass damping v ← v / (1 + h α) for a state in float (both float layouts).
+// Stiff bodies take short sub-steps: at h α below 6e-8, 1 + h α is 1 in
+// float (α was dropped), near it a multiple of 1.2e-7 (α 0.01/s at 51
+// sub-steps per ms: 18% too strong); and even an exact divisor cannot move
+// a float velocity by less than half its last digit (h α 2e-7 at |v| just
+// below 1: 3.3 last digits, rounded to 3). So the float sub-steps divide
+// once every `every` of them, by (1 + h α)^every, which is at least
+// 1 + kMinDecay: the divisor and the division then each round to within
+// 2^-24 / kMinDecay = 2^-11 of the decay they apply (1e-3 together at
+// most). The step's last `count % every` sub-steps' share (all of it when
+// every > count) is applied in double by store(): leftover_divisor. α is
+// then held to 0.1% however short h is, and the damping is late by at most
+// `every` sub-steps (velocity off by less than 2 kMinDecay relative
+// meanwhile). At h α >= kMinDecay: every sub-step, as before.
+struct FloatMassDamping {
+  static constexpr double kMinDecay = 0x1p-13;  // 1.2e-4
+  double log_factor = 0.0;                      // ln(1 + h α)
+  int every = 1;                                // sub-steps per division in float
+  float divisor = 1.0f;                         // (1 + h α)^every, rounded to float
+  FloatMassDamping(double h_s, double alpha_per_s);
+  // (1 + h α)^(count % every): what store() divides by, in double.
+  double leftover_divisor(int count) const { return std::exp((count % every) * log_factor); }
+};
+
 // Writes back one node stepped in float (both float layouts): a kinematic
 // node moves in double by `count` sub-steps of h_s at its velocity; a free
 // one takes its increments u − u0, v − v0 (u0, v0 its state as loaded, u the
-// displacement from rest), exact in double.
+// displacement from rest), exact in double, and the step's mass damping the
+// float sub-steps left to it (velocity / leftover_divisor, in double).
 // Inline: it runs once per node per step, from both layouts' store loops.
 inline void store_float_stepped_node(Body& body, NodeId n, bool kinematic, const float (&u)[3], const float (&v)[3],
-                                     const float (&u0)[3], const float (&v0)[3], double h_s, int count) {
+                                     const float (&u0)[3], const float (&v0)[3], double h_s, int count,
+                                     double leftover_divisor) {
   if (kinematic) {
     // Moved in double with its (unchanged) velocity, sub-step by sub-step as
     // the double path does, so a prescribed displacement lands exactly where
@@ -95,6 +122,7 @@ inline void store_float_stepped_node(Body& body, NodeId n, bool kinematic, const
     body.x_m[n][k] += static_cast<double>(u[k]) - static_cast<double>(u0[k]);
     body.v_m_per_s[n][k] += static_cast<double>(v[k]) - static_cast<double>(v0[k]);
   }
+  if (leftover_divisor != 1.0) body.v_m_per_s[n] /= leftover_divisor;
 }
 
 // The explicit integrator's state and spring stream in single precision.
@@ -104,7 +132,8 @@ class ExplicitFloatState {
   void build(const Body& body);
   // Copies positions (as displacements), velocities and external forces in.
   void load(const Body& body, const std::vector<Vec3>& f_ext_N);
-  // `count` sub-steps of h (mass damping α taken implicitly, as in double).
+  // `count` sub-steps of h (mass damping α taken implicitly, as in double,
+  // on FloatMassDamping's schedule).
   void substeps(Simd simd, double h_s, double alpha_per_s, int count);
   // Every live node's displacement and velocity finite and below 1e30.
   bool finite(const Body& body) const;
@@ -126,6 +155,7 @@ class ExplicitFloatState {
   std::vector<float> inv_mass_;
   double h_s_ = 0.0;  // the last substeps() call's, for store()
   int count_ = 0;
+  double leftover_divisor_ = 1.0;  // FloatMassDamping::leftover_divisor of that call
 };
 
 // The offset layout of the explicit sub-steps (integrator_explicit_offset.cpp):
@@ -238,6 +268,7 @@ class ExplicitOffsetState {
   std::vector<Real> inv_mass_;           // stride
   double h_s_ = 0.0;                     // the last substeps() call's, for store()
   int count_ = 0;
+  double leftover_divisor_ = 1.0;  // float: FloatMassDamping::leftover_divisor of that call
 };
 extern template class ExplicitOffsetState<double>;
 extern template class ExplicitOffsetState<float>;
@@ -505,6 +536,9 @@ class ImplicitIntegrator final : public Integrator {
   std::vector<double> mass_;
   std::vector<Pad3> diag_inv_, rhs_, dv_, r_, z_, p_, ap_;
   std::vector<Vec3> dv_by_node_;  // warm start: last step's solution
+  // Rest position of each node id at the last layout: a node whose id now
+  // stands elsewhere (reused after a merge) drops its warm start.
+  std::vector<Vec3> warm_start_rest_m_;
   // Assembled block-CSR (kAssembledBlockCsr): per unknown its diagonal block,
   // then its off-diagonal blocks −B with their column.
   std::vector<Eigen::Matrix3d> diag_block_, off_block_;

@@ -317,7 +317,8 @@ TISSUE_AVX2 void setup_avx2(const SetupInput& in, const EdgeId* live, std::size_
         _mm256_setr_pd(in.rest_length[e[0]], in.rest_length[e[1]], in.rest_length[e[2]], in.rest_length[e[3]]);
     const __m256d length = _mm256_sqrt_pd(lane_sums_avx2(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1]),
                                                          _mm256_mul_pd(d[2], d[2]), _mm256_mul_pd(d[3], d[3])));
-    if (_mm256_movemask_pd(_mm256_cmp_pd(length, _mm256_mul_pd(_mm256_set1_pd(kCollapsedSpringRatio), rest), _CMP_GT_OQ)) != 0xF) {
+    if (_mm256_movemask_pd(
+            _mm256_cmp_pd(length, _mm256_mul_pd(_mm256_set1_pd(kCollapsedSpringRatio), rest), _CMP_GT_OQ)) != 0xF) {
       for (int j = 0; j < 4; ++j) setup_spring_scalar(in, e[j], rhs_pad, diag_pad, records + i + j);  // collapsed: rare
       continue;
     }
@@ -518,6 +519,17 @@ void ImplicitIntegrator::build_layout(const Body& body) {
   const std::uint32_t sink = unknowns_;
   for (auto& u : unknown_of_node_)
     if (u == kNone) u = sink;
+  // The warm start is kept by node id, and the mesh reuses a merged node's id
+  // for a later split's node: without this, that node started CG from the Δv
+  // of the dead one, somewhere else on the body. A node starts from zero
+  // unless it is free and stands where it stood at the last layout (the
+  // lattice holds one node per point); a kinematic or dead one holds zero.
+  dv_by_node_.resize(nodes, Vec3::Zero());
+  warm_start_rest_m_.resize(nodes, Vec3::Zero());
+  for (NodeId n = 0; n < nodes; ++n) {
+    if (unknown_of_node_[n] == sink || body.rest_m[n] != warm_start_rest_m_[n]) dv_by_node_[n].setZero();
+    warm_start_rest_m_[n] = body.rest_m[n];
+  }
 
   // The springs the system needs, in edge order. Visiting them sorted by
   // node, or dealt round-robin from 8 node-sorted chunks so consecutive

@@ -620,44 +620,151 @@ TEST(Body, ANodeInTwoPrescribedRegionsFollowsTheFirstListed) {
   EXPECT_EQ(second_only, 6);
 }
 
-// Merge hands the vanishing node's momentum to the free ends of its edge
-// only: a fixed end stays at rest (its support takes that half), and a
-// prescribed node's motion is its driver's, so merging one changes no free
-// node's velocity.
-TEST(Body, MergeGivesMomentumOnlyFromAFreeNodeToAFreeEnd) {
-  // The corner cube's diagonal runs from a = (0, 0, 0) to b = (h, h, h),
-  // h = 0.05 m; its node z sits at h/2 (x, y, z).
+// Kinetic energy and momentum of the free nodes alone.
+double free_kinetic_energy_J(const Body& body) {
+  double e = 0.0;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if (body.kind[n] == NodeKind::kFree) e += 0.5 * body.mass_kg[n] * body.v_m_per_s[n].squaredNorm();
+  });
+  return e;
+}
+Vec3 free_momentum_kg_m_per_s(const Body& body) {
+  Vec3 p = Vec3::Zero();
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if (body.kind[n] == NodeKind::kFree) p += body.mass_kg[n] * body.v_m_per_s[n];
+  });
+  return p;
+}
+
+// The corner cube's diagonal a = (0, 0, 0) to b = (h, h, h), h = 0.05 m, split
+// once: its node z sits at h/2 (x, y, z). Returns {a, b}; the diamond's key
+// in *diamond.
+std::pair<NodeId, NodeId> corner_diagonal(Body& body, mesh::Key* diamond) {
+  NodeId a = mesh::kInvalidId, b = mesh::kInvalidId;
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if (body.rest_m[n].isZero(0.0)) a = n;
+    if ((body.rest_m[n] - Vec3(0.05, 0.05, 0.05)).isZero(1e-12)) b = n;
+  });
+  EXPECT_NE(a, mesh::kInvalidId);
+  EXPECT_NE(b, mesh::kInvalidId);
+  *diamond = mesh::edge_key(body.mesh().node(a).lattice, body.mesh().node(b).lattice);
+  return {a, b};
+}
+
+// A merge moves the vanishing node's mass to the ends of its edge, half to
+// each, with the velocity it had there: a free end joins that mass to its own
+// (momentum kept, kinetic energy can only drop), whatever the node's kind. A
+// fixed node is at rest (held by the world), so a free end that takes over
+// its mass slows down and keeps its momentum; a prescribed node moves with
+// its driver, so a free end takes over the driver's momentum in that mass
+// (a body the driver moves as a whole keeps moving as a whole). It used to
+// keep its velocity with the mass added: momentum and kinetic energy from
+// nothing. A kinematic end keeps its driver's velocity (its support takes the
+// half of a free node's momentum it is given).
+TEST(Body, MergeGivesTheVanishingNodesMassAndMomentumToItsEnds) {
   for (const bool prescribed_node : {false, true}) {
-    SCOPED_TRACE(prescribed_node ? "prescribed node and end a" : "free node, fixed end a");
+    SCOPED_TRACE(prescribed_node ? "prescribed node and end a" : "fixed node and end a");
     scene::Scene s = adaptive_cube();
+    const auto corner = scene::Region::box({0, 0, 0}, {0.03, 0.03, 0.03});
     if (prescribed_node)
-      s.prescribed.push_back({"push", scene::Region::box({0, 0, 0}, {0.03, 0.03, 0.03}), {0, 0, 0.001}, {}});
+      s.prescribed.push_back({"push", corner, {0, 0, 0.001}, {}});
     else
-      s.fixed.push_back({scene::Region::box({0, 0, 0}, {0.01, 0.01, 0.01})});
-    Body body(s);
-    NodeId a = mesh::kInvalidId, b = mesh::kInvalidId;
-    body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
-      if (body.rest_m[n].isZero(0.0)) a = n;
-      if ((body.rest_m[n] - Vec3(0.05, 0.05, 0.05)).isZero(1e-12)) b = n;
-    });
-    ASSERT_NE(a, mesh::kInvalidId);
-    ASSERT_NE(b, mesh::kInvalidId);
-    const mesh::Key d = mesh::edge_key(body.mesh().node(a).lattice, body.mesh().node(b).lattice);
-    ASSERT_EQ(body.split(d), 1);
-    const NodeId z = body.mesh().find_node(d);
-    ASSERT_EQ(body.kind[z], prescribed_node ? NodeKind::kPrescribed : NodeKind::kFree);
-    ASSERT_EQ(body.kind[a], prescribed_node ? NodeKind::kPrescribed : NodeKind::kFixed);
-    ASSERT_EQ(body.kind[b], NodeKind::kFree);
-    const Vec3 v_z(1.0, 2.0, 3.0);
-    body.v_m_per_s[z] = v_z;
-    body.merge(d);
-    EXPECT_EQ(body.v_m_per_s[a], Vec3::Zero());
-    if (prescribed_node) {
-      EXPECT_EQ(body.v_m_per_s[b], Vec3::Zero());
-    } else {
-      EXPECT_GT(body.v_m_per_s[b].dot(v_z), 0.0) << "the free end takes its half";
+      s.fixed.push_back({corner});
+    const NodeKind kinematic = prescribed_node ? NodeKind::kPrescribed : NodeKind::kFixed;
+    // The drivers' velocity at a and z (a fixed node's is zero), and the free
+    // nodes': uniform, then each its own.
+    const Vec3 v_driver = prescribed_node ? Vec3(0.0, 0.0, 1.0) : Vec3::Zero();
+    for (const bool uniform : {true, false}) {
+      SCOPED_TRACE(uniform ? "every node at the driver's velocity" : "free nodes at their own velocities");
+      Body body(s);
+      mesh::Key d;
+      const auto [a, b] = corner_diagonal(body, &d);
+      ASSERT_EQ(body.split(d), 1);
+      const NodeId z = body.mesh().find_node(d);
+      ASSERT_EQ(body.kind[z], kinematic);
+      ASSERT_EQ(body.kind[a], kinematic);
+      ASSERT_EQ(body.kind[b], NodeKind::kFree);
+      std::mt19937 rng(4);
+      std::uniform_real_distribution<double> u(-1.0, 1.0);
+      body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+        body.v_m_per_s[n] = body.kind[n] == NodeKind::kFree && !uniform ? Vec3(u(rng), u(rng), u(rng)) : v_driver;
+      });
+      const double m_z = body.mass_kg[z], m_b = body.mass_kg[b];
+      const Vec3 v_b = body.v_m_per_s[b], p_free = free_momentum_kg_m_per_s(body);
+      const Vec3 p_all = body.momentum_kg_m_per_s();
+      const double ke_free = free_kinetic_energy_J(body), ke_all = kinetic_energy_J(body);
+      body.merge(d);
+      ASSERT_NEAR(body.mass_kg[b], m_b + 0.5 * m_z, 1e-12 * m_b);
+      // b, the one free end, took over half of z's mass at z's velocity.
+      const Vec3 expected_v_b = (m_b * v_b + 0.5 * m_z * v_driver) / (m_b + 0.5 * m_z);
+      EXPECT_LT((body.v_m_per_s[b] - expected_v_b).norm(), 1e-12 * (1.0 + v_b.norm() + v_driver.norm()));
+      const double p_scale = p_all.norm() + m_z;
+      EXPECT_LT((free_momentum_kg_m_per_s(body) - (p_free + 0.5 * m_z * v_driver)).norm(), 1e-12 * p_scale);
+      // a and z move with one driver: the momentum of all nodes is kept, and
+      // their kinetic energy can only drop.
+      EXPECT_LT((body.momentum_kg_m_per_s() - p_all).norm(), 1e-12 * p_scale);
+      EXPECT_LE(kinetic_energy_J(body), ke_all * (1 + 1e-12));
+      if (!prescribed_node) {
+        EXPECT_LE(free_kinetic_energy_J(body), ke_free * (1 + 1e-12));
+      }
+      if (uniform) {
+        EXPECT_LT((body.v_m_per_s[b] - v_driver).norm(), 1e-12) << "a body moving as a whole still does";
+      }
+      EXPECT_EQ(body.v_m_per_s[a], v_driver);
     }
   }
+  // A free node merging into a fixed end: the end stays at rest (the support
+  // takes that half); the free end takes the other.
+  scene::Scene s = adaptive_cube();
+  s.fixed.push_back({scene::Region::box({0, 0, 0}, {0.01, 0.01, 0.01})});
+  Body body(s);
+  mesh::Key d;
+  const auto [a, b] = corner_diagonal(body, &d);
+  ASSERT_EQ(body.split(d), 1);
+  const NodeId z = body.mesh().find_node(d);
+  ASSERT_EQ(body.kind[z], NodeKind::kFree);
+  ASSERT_EQ(body.kind[a], NodeKind::kFixed);
+  const Vec3 v_z(1.0, 2.0, 3.0);
+  body.v_m_per_s[z] = v_z;
+  const double m_z = body.mass_kg[z], m_b = body.mass_kg[b];
+  body.merge(d);
+  EXPECT_EQ(body.v_m_per_s[a], Vec3::Zero());
+  EXPECT_LT((body.v_m_per_s[b] - 0.5 * m_z * v_z / (m_b + 0.5 * m_z)).norm(), 1e-12);
+}
+
+// A split next to a moving prescribed node: the new free node takes half its
+// mass from each end at that end's velocity, so its velocity is the ends'
+// mean and the free nodes gain the driver's momentum in the half it took from
+// the driven end (mass that moved with the driver now moves freely). The
+// momentum of all nodes is kept and their kinetic energy drops by
+// m_z |v_a − v_b|² / 8 (an inelastic join of the two halves). The free nodes'
+// kinetic energy can rise, by at most the driven half's m_z |v_a|² / 4: what
+// that mass carried as part of the driven node's.
+TEST(Body, ASplitNextToAMovingPrescribedNodeKeepsTheMomentumOfAllNodes) {
+  scene::Scene s = adaptive_cube();
+  s.prescribed.push_back({"push", scene::Region::box({0, 0, 0}, {0.01, 0.01, 0.01}), {0.001, 0, 0}, {}});
+  Body body(s);
+  mesh::Key d;
+  const auto [a, b] = corner_diagonal(body, &d);
+  ASSERT_EQ(body.kind[a], NodeKind::kPrescribed);
+  ASSERT_EQ(body.kind[b], NodeKind::kFree);
+  const Vec3 v_a(1.0, 0.0, 0.0), v_b(-0.2, 0.5, 0.3);
+  body.v_m_per_s[a] = v_a;  // the driver's velocity this step
+  body.v_m_per_s[b] = v_b;
+  const Vec3 p_all = body.momentum_kg_m_per_s(), p_free = free_momentum_kg_m_per_s(body);
+  const double ke_all = kinetic_energy_J(body), ke_free = free_kinetic_energy_J(body);
+  ASSERT_EQ(body.split(d), 1);
+  const NodeId z = body.mesh().find_node(d);
+  ASSERT_EQ(body.kind[z], NodeKind::kFree);
+  const double m_z = body.mass_kg[z];
+  EXPECT_LT((body.v_m_per_s[z] - 0.5 * (v_a + v_b)).norm(), 1e-15);
+  EXPECT_EQ(body.v_m_per_s[a], v_a);
+  EXPECT_EQ(body.v_m_per_s[b], v_b);
+  const double p_scale = p_all.norm() + m_z;
+  EXPECT_LT((body.momentum_kg_m_per_s() - p_all).norm(), 1e-12 * p_scale);
+  EXPECT_LT((free_momentum_kg_m_per_s(body) - (p_free + 0.5 * m_z * v_a)).norm(), 1e-12 * p_scale);
+  EXPECT_NEAR(kinetic_energy_J(body), ke_all - m_z * (v_a - v_b).squaredNorm() / 8.0, 1e-12 * ke_all);
+  EXPECT_LE(free_kinetic_energy_J(body), ke_free + m_z * v_a.squaredNorm() / 4.0 + 1e-12 * ke_all);
 }
 
 }  // namespace

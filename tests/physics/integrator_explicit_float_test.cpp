@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <vector>
 
@@ -176,6 +177,54 @@ TEST(ExplicitFloat, TrajectoryTracksDoubleAndIsBitIdenticalAcrossInstructionSets
     if (n < shape.inv_mass_per_kg.size() && shape.inv_mass_per_kg[n] == 0.0) {
       EXPECT_EQ(finals[1][n], finals[0][n]) << "kinematic node " << n;
     }
+}
+
+// Mass damping (material.rayleigh_alpha_per_s) divides a free node's
+// velocity by 1 + h α each sub-step. Stiff bodies take short sub-steps, and
+// in float 1 + h α was 1 for h α below 6e-8 (α dropped: a stiff cube drifting
+// at 1 m/s, α 0.002/s, 51 sub-steps per 1 ms: no decay at all) and rounded
+// to a multiple of 1.2e-7 above (α 0.01/s: 18% too strong). Even with the
+// divisor exact, a velocity in float cannot move by less than half its last
+// digit per sub-step. A drifting body whose springs stay at rest feels mass
+// damping alone: float must decay it as double does, on both layouts, for
+// h α from far below float's last digit to well above it.
+TEST(ExplicitFloat, MassDampingDecaysAsInDoubleHoweverShortTheSubSteps) {
+  scene::Scene s = testing::free_cube_scene(2, 1);
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.material.rayleigh_beta_s = 0.0;  // no spring dampers: α alone
+  const Vec3 v0_m_per_s(1.0, -0.5, 0.25);
+  const double h_s = 1e-3 / 51;
+  const int count = 51, steps = 40;
+  for (const double h_alpha : {2e-9, 3.9e-8, 2e-7, 1e-6, 1e-5, 1e-4, 1e-3}) {
+    s.material.rayleigh_alpha_per_s = h_alpha / h_s;
+    for (const auto layout : {ExplicitIntegrator::Layout::kGathered, ExplicitIntegrator::Layout::kOffset}) {
+      char trace[64];
+      std::snprintf(trace, sizeof trace, "h alpha %g, %s layout", h_alpha,
+                    layout == ExplicitIntegrator::Layout::kOffset ? "offset" : "gathered");
+      SCOPED_TRACE(trace);
+      std::vector<double> decay;  // 1 − |v| / |v0| of the slowest node: double, float
+      for (const auto precision : {scene::ExplicitPrecision::kDouble, scene::ExplicitPrecision::kFloat}) {
+        scene::Scene t = s;
+        t.integrator.explicit_precision = precision;
+        Body body(t);
+        body.mesh().for_each_node([&](NodeId n, const mesh::Node&) { body.v_m_per_s[n] = v0_m_per_s; });
+        ExplicitIntegrator integrator(t.integrator, t.material);
+        integrator.set_layout(layout);
+        const std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
+        for (int i = 0; i < steps; ++i) integrator.run_substeps(body, f, h_s, count);
+        double slowest = v0_m_per_s.norm(), fastest = 0.0;
+        body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+          slowest = std::min(slowest, body.v_m_per_s[n].norm());
+          fastest = std::max(fastest, body.v_m_per_s[n].norm());
+        });
+        EXPECT_LE(fastest - slowest, 1e-6 * (v0_m_per_s.norm() - slowest)) << "the body drifts as a whole";
+        decay.push_back(1.0 - slowest / v0_m_per_s.norm());
+      }
+      const double exact = 1.0 - std::pow(1.0 + h_alpha, -count * steps);
+      EXPECT_NEAR(decay[0], exact, 1e-6 * exact);
+      EXPECT_NEAR(decay[1], decay[0], 2e-3 * decay[0]);
+    }
+  }
 }
 
 }  // namespace
