@@ -39,10 +39,12 @@ std::string fmt_speed_at_most(double max_speed_m_per_s, double peak_m_per_s) {
 }  // namespace
 
 ReplayDevice::ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
-                           double max_speed_m_per_s, std::vector<std::uint8_t> device_fresh, double device_timeout_s)
+                           double max_speed_m_per_s, std::vector<std::uint8_t> device_fresh, double device_timeout_s,
+                           std::vector<std::size_t> rows_after_holes)
     : time_s_(std::move(time_s)),
       position_m_(std::move(position_m)),
       device_fresh_(std::move(device_fresh)),
+      rows_after_holes_(std::move(rows_after_holes)),
       speed_(speed),
       loop_(loop),
       max_speed_m_per_s_(max_speed_m_per_s),
@@ -58,6 +60,13 @@ bool ReplayDevice::start(std::string* error) {
   if (!device_fresh_.empty() && device_fresh_.size() != time_s_.size())
     return fail("the track is inconsistent: " + std::to_string(device_fresh_.size()) + " device_fresh flags for " +
                 std::to_string(time_s_.size()) + " rows");
+  for (std::size_t k = 0; k < rows_after_holes_.size(); ++k) {
+    const std::size_t row = rows_after_holes_[k];
+    if (row == 0 || row >= time_s_.size() || (k > 0 && row <= rows_after_holes_[k - 1]))
+      return fail("the track's recorder holes are inconsistent: hole " + std::to_string(k) + " is before row " +
+                  std::to_string(row) + ", not one of rows 1 to " + std::to_string(time_s_.size() - 1) +
+                  " after the hole before it");
+  }
   for (std::size_t i = 0; i < time_s_.size(); ++i) {
     if (!std::isfinite(time_s_[i]) || (i > 0 && time_s_[i] < time_s_[i - 1]))
       return fail("track times must be finite and non-decreasing (row " + std::to_string(i) + ")");
@@ -143,9 +152,9 @@ double median_s(std::vector<double>& gaps_s) {
 
 bool ReplayDevice::is_sample(std::size_t i) const noexcept {
   // A row is a new sample when its flag says so, or when its position
-  // changed: the recorder drops rows when its ring overflows, and the
-  // flagged row may be among them (the step then spreads from the sample
-  // before it, slower than live, never faster).
+  // changed: the recorder drops rows when its ring overflows (a hole,
+  // rows_after_holes_), and the flagged row may be among them (the step then
+  // spreads from the sample before it, slower than live, never faster).
   return device_fresh_[i] != 0 || (i > 0 && position_m_[i] != position_m_[i - 1]);
 }
 
@@ -205,18 +214,44 @@ void ReplayDevice::build_knots_from_flags() {
   // way, so a gap of exactly the timeout (not lost live) must not count as
   // past it by a rounding error; the slack is well under a nanosecond.
   constexpr double kRoundingSlackS = 1e-10;
-  for (std::size_t i = first; i < rows; ++i) {
-    if (!is_sample(i)) continue;
-    const bool lost =
-        i > first ? time_s_[i - 1] - knot_time_s_.back() > device_timeout_s_ + kRoundingSlackS : starts_without_sample_;
+  //
+  // A hole the recorder left (rows_after_holes_: its ring overflowed and the
+  // ticks between row h - 1 and row h are not in the file) is no time
+  // without a sample: what the device sent then is unknown, and a healthy
+  // device sent samples all through it. So the time between the rows on
+  // either side of a hole does not count toward the timeout; only the rows
+  // present are judged, so a loss beside a hole, or around it (the rows
+  // present on both sides without a sample for longer than the timeout),
+  // still plays as one. Counted, a 50 ms hole in a still hand's 250 Hz track
+  // played as a lost device whenever a row without a sample followed it.
+  // Within a gap kept, the hole glides with the rest of it (or holds a still
+  // hand), as any gap between samples.
+  if (first < rows) add_knot(time_s_[first], position_m_[first], starts_without_sample_);
+  std::size_t hole = 0;  // the next of rows_after_holes_ to pass
+  while (hole < rows_after_holes_.size() && rows_after_holes_[hole] <= first) ++hole;
+  double hole_s = 0.0;  // time in holes from the last sample to the row before i
+  for (std::size_t i = first + 1; i < rows; ++i) {
+    const bool after_hole = hole < rows_after_holes_.size() && rows_after_holes_[hole] == i;
+    if (after_hole) ++hole;
+    if (!is_sample(i)) {
+      // The hole before this row is inside the gap up to the next sample.
+      if (after_hole) hole_s += time_s_[i] - time_s_[i - 1];
+      continue;
+    }
+    // (A hole just before a sample is outside the gap measured, which ends
+    // at the row before it.)
+    const bool lost = time_s_[i - 1] - knot_time_s_.back() - hole_s > device_timeout_s_ + kRoundingSlackS;
     add_knot(time_s_[i], position_m_[i], lost);
+    hole_s = 0.0;
   }
   // The rows after the last sample, by the same rule: when the track ends
-  // more than the timeout after it, live the device had stopped and the loop
-  // lost it for the rest of the track, so that tail plays as no samples (to
-  // the end, and held there), not as a live hand held at the last pose.
+  // more than the timeout after it (holes not counted), live the device had
+  // stopped and the loop lost it for the rest of the track, so that tail
+  // plays as no samples (to the end, and held there), not as a live hand
+  // held at the last pose.
   if (time_s_.back() > knot_time_s_.back()) {
-    const bool lost = first < rows && time_s_.back() - knot_time_s_.back() > device_timeout_s_ + kRoundingSlackS;
+    const bool lost =
+        first < rows && time_s_.back() - knot_time_s_.back() - hole_s > device_timeout_s_ + kRoundingSlackS;
     add_knot(time_s_.back(), position_m_.back(), lost);
     ends_without_sample_ = lost;
   }

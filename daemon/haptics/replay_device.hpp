@@ -44,6 +44,10 @@
 // the loop holds the last sample it accepted, loses the device once the
 // timeout passes, and judges the first sample against that last one over the
 // wall time without samples (see loop_wrap_jump_m), as after a lost gap.
+// A hole the recorder left (rows it dropped when its ring overflowed, named
+// by the session's hole events) is no time without a sample: the device's
+// ticks there are unknown, so only the rows present are judged, and a
+// stretch lost on them (beside a hole, or around it) still plays as lost.
 #pragma once
 
 #include <cstdint>
@@ -70,10 +74,18 @@ class ReplayDevice final : public Device {
   // gap between samples whose last row is more than this after the sample
   // before plays as no samples, at any speed (see above). Infinite: every
   // gap is spread.
+  // rows_after_holes: the rows that follow a hole the recorder left (its
+  // ring overflowed: the ticks between row h - 1 and row h are not in the
+  // file; record::HapticTrack::rows_after_holes), increasing, each in
+  // [1, rows); start() refuses others. With device_fresh, the time between
+  // the rows on either side of a hole does not count toward
+  // device_timeout_s: only the rows present are judged (see
+  // build_knots_from_flags). Without flags no gap is judged lost anyway.
   ReplayDevice(std::vector<double> time_s, std::vector<Vec3> position_m, double speed, bool loop,
                double max_speed_m_per_s = std::numeric_limits<double>::infinity(),
                std::vector<std::uint8_t> device_fresh = {},
-               double device_timeout_s = std::numeric_limits<double>::infinity());
+               double device_timeout_s = std::numeric_limits<double>::infinity(),
+               std::vector<std::size_t> rows_after_holes = {});
 
   bool start(std::string* error) override;
   void stop() noexcept override {}
@@ -165,6 +177,7 @@ class ReplayDevice final : public Device {
   std::vector<double> time_s_;
   std::vector<Vec3> position_m_;
   std::vector<std::uint8_t> device_fresh_;  // empty: not recorded
+  std::vector<std::size_t> rows_after_holes_;
   double speed_;
   bool loop_;
   double max_speed_m_per_s_;

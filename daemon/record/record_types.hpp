@@ -5,8 +5,10 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -70,6 +72,38 @@ struct Event {
   // Never allocates: safe on the real-time threads.
   static Event make(double time_s, EventKind kind, std::string_view text) noexcept;
 };
+
+// A stretch of haptic ticks the recorder dropped: its ring was full (the
+// disk stalled longer than the ring holds), so the rows between two recorded
+// ones are missing. Without a record of it, the jump in /haptic/time_s looked
+// like the haptic loop skipping ticks, and a replay took the stretch for the
+// device sending nothing (docs/session-format.md, "Holes"). The recorder
+// writes one as a warning event (haptic_hole_message); readers take it back
+// with parse_haptic_hole. No format change: old readers see a warning.
+struct HapticHole {
+  std::uint64_t ticks_lost = 0;  // rows dropped, > 0
+  // The /haptic row that follows the hole (row_after - 1 precedes it). With
+  // no row after it (the recording stopped while rows were being dropped)
+  // time_after_s is NaN and row_after is the row count at that time.
+  std::uint64_t row_after = 0;
+  double time_before_s = std::numeric_limits<double>::quiet_NaN();  // NaN: no row before it
+  double time_after_s = std::numeric_limits<double>::quiet_NaN();   // NaN: no row after it
+  bool has_row_before() const noexcept { return !std::isnan(time_before_s); }
+  bool has_row_after() const noexcept { return !std::isnan(time_after_s); }
+};
+
+// Every hole event's message starts with this (kind warning).
+inline constexpr std::string_view kHapticHolePrefix = "haptic rows dropped by the recorder (ring full): ";
+
+// The event text of `hole`, e.g. "haptic rows dropped by the recorder (ring
+// full): 50 ticks between /haptic rows 8191 (8.191000000 s) and 8192
+// (8.242000000 s)"; "... 7 ticks after /haptic row 9 (0.009000000 s), the last
+// recorded" when no row follows. Times to the nanosecond (a tick's clock).
+// Well under the 255 bytes of an event.
+std::string haptic_hole_message(const HapticHole& hole);
+// Reads back what haptic_hole_message wrote: false for any other text
+// (another event, or a damaged one that no longer reads as a hole).
+bool parse_haptic_hole(std::string_view message, HapticHole* hole);
 
 // A borrowed view of one surface mesh frame. Triangle indices are local to
 // the frame (0 .. vertices_m.size()-1). vertex_level may be empty (all 0) or

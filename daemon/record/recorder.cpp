@@ -96,7 +96,9 @@ bool Recorder::push_haptic(const HapticRow& row) noexcept {
     refused_haptic_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
-  return haptic_ring_.try_push(row);
+  // The drop count so far goes with the row: the ring's own counter, which
+  // only this thread writes (a relaxed load, no wait).
+  return haptic_ring_.try_push(HapticSlot{row, haptic_ring_.drops()});
 }
 
 bool Recorder::push_sim(const SimRow& row) noexcept {
@@ -256,7 +258,7 @@ void Recorder::count_unwritten_as_drops() {
   pending_haptic_.clear();
   pending_sim_.clear();
   pending_events_.clear();
-  haptic += haptic_ring_.drain([](const HapticRow&) {});
+  haptic += haptic_ring_.drain([](const HapticSlot&) {});
   sim += sim_ring_.drain([](const SimRow&) {});
   for (auto& ring : event_rings_) events += ring.drain([](const Event&) {});
   // Frames appended since the last successful flush are not in the file.
@@ -287,12 +289,40 @@ std::string Recorder::free_space_shortfall() {
          std::to_string(options_.min_free_bytes >> 20) + " MiB): recording stopped and the file closed";
 }
 
+// A hole's event goes out with the next flush, beside the rows around it.
+void Recorder::note_haptic_hole(std::uint64_t drops, const HapticRow* next) {
+  HapticHole hole;
+  hole.ticks_lost = drops - haptic_drops_in_holes_;
+  hole.row_after = haptic_rows_drained_;
+  // The ring refuses rows only when it is full, so a row always comes before
+  // a hole; the other cases are written all the same, never left out.
+  if (haptic_rows_drained_ > 0) hole.time_before_s = last_haptic_time_s_;
+  if (next) hole.time_after_s = next->time_s;
+  const double time_s = hole.has_row_before()  ? hole.time_before_s
+                        : hole.has_row_after() ? hole.time_after_s
+                                               : session_time_s_now();
+  pending_events_.push_back(Event::make(time_s, EventKind::kWarning, haptic_hole_message(hole)));
+  haptic_drops_in_holes_ = drops;
+}
+
 // Returns false once recording has failed. Mesh frames are written as soon as
 // they are drained (their buffers go straight back to the sim thread); rows
 // are batched and written with the flush. Frames, like rows, count as
 // written once a flush after them succeeds.
 bool Recorder::drain_and_write(bool force_flush) {
-  haptic_ring_.drain([&](const HapticRow& r) { pending_haptic_.push_back(r); });
+  haptic_ring_.drain([&](const HapticSlot& s) {
+    if (s.drops_before != haptic_drops_in_holes_) note_haptic_hole(s.drops_before, &s.row);
+    pending_haptic_.push_back(s.row);
+    ++haptic_rows_drained_;
+    last_haptic_time_s_ = s.row.time_s;
+  });
+  // The last drain (closed to producers: no push is under way, so the
+  // count is final): rows refused after the last one recorded, which no row
+  // follows.
+  if (closing_.load(std::memory_order_relaxed)) {
+    const std::uint64_t drops = haptic_ring_.drops();
+    if (drops != haptic_drops_in_holes_) note_haptic_hole(drops, nullptr);
+  }
   sim_ring_.drain([&](const SimRow& r) { pending_sim_.push_back(r); });
   for (auto& ring : event_rings_) ring.drain([&](const Event& e) { pending_events_.push_back(e); });
 

@@ -15,6 +15,13 @@
 // session grow and a crash loses at most about one flush interval (a power
 // cut too: each flush ends with an fdatasync of the file).
 //
+// Haptic rows the ring refuses (it is full: the disk stalled longer than the
+// ring holds) are also written into the file, as a hole: a warning event
+// naming the recorded rows on either side and how many ticks are missing
+// (HapticHole, docs/session-format.md). Each row carries the ring's drop
+// count into the ring (one load of a counter its own thread writes), so the
+// recorder thread knows exactly which two rows a run of drops fell between.
+//
 // Every push is either written or counted as a drop, also when producers
 // keep pushing while the recorder stops or fails (a retired recorder whose
 // sim thread has not let go of it yet): a push that returned true is in the
@@ -193,7 +200,16 @@ class Recorder {
   std::string path_;
   std::chrono::steady_clock::time_point start_;
 
-  concurrency::SpscRing<HapticRow, kHapticRingRows> haptic_ring_;
+  // A haptic row in its ring, with the ring's drop count when it was
+  // pushed: a count above the row before's means the ring refused rows
+  // between the two, a hole the recorder thread writes into the file
+  // (HapticHole) so a reader does not take it for the haptic loop skipping
+  // ticks or the device sending nothing.
+  struct HapticSlot {
+    HapticRow row;
+    std::uint64_t drops_before = 0;
+  };
+  concurrency::SpscRing<HapticSlot, kHapticRingRows> haptic_ring_;
   concurrency::SpscRing<SimRow, kSimRingRows> sim_ring_;
   concurrency::SpscRing<Event, kEventRingRows> event_rings_[kEventSourceCount];
   // Frame buffers move between the sim thread and the recorder thread by
@@ -219,6 +235,17 @@ class Recorder {
   // recorder thread, before its last drain.
   std::atomic<bool> closing_{false};
   PushFlag haptic_push_, sim_push_, frame_push_, event_push_[kEventSourceCount];
+
+  // Recorder thread only: the haptic rows drained so far (so the next one's
+  // row in /haptic: every row drained is written, or recording fails), the
+  // last one's session time, and the ring drops already written as holes.
+  std::uint64_t haptic_rows_drained_ = 0;
+  double last_haptic_time_s_ = 0.0;
+  std::uint64_t haptic_drops_in_holes_ = 0;
+  // Queues the hole event for the rows the ring refused since the last hole
+  // (its drop count is now `drops`), before `next` (nullptr: none follows,
+  // the recording stops).
+  void note_haptic_hole(std::uint64_t drops, const HapticRow* next);
 
   // Recorder-thread batch buffers (reserved at start).
   std::vector<HapticRow> pending_haptic_;

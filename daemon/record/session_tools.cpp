@@ -235,17 +235,21 @@ hid_t memory_type() {
     static_assert(sizeof(T) == 0, "no HDF5 memory type for this element type");
 }
 
-// Rows [first, first+count) of a dataset with 1 or 3 columns, flattened.
+// Rows [first, first+count) of a dataset, opened and selected for a read
+// into `memory` (count x columns values).
+struct RowSelection {
+  Handle dataset, file_space, memory;
+};
+
 // Every reader of a session goes through here, so the shape and range
 // checks (a damaged index must not read past a dataset) are in one place.
-template <typename T>
-std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, std::uint64_t first,
-                           std::uint64_t count) {
+// count > 0.
+RowSelection select_rows(hid_t file, const std::string& path, DatasetId id, std::uint64_t first, std::uint64_t count) {
   const DatasetSpec& spec = kDatasets[id];
   const hsize_t columns = static_cast<hsize_t>(spec.columns);
-  if (count == 0) return {};
-  Handle d = open_dataset(file, path, spec.path);
-  checked_rows(d.get(), path, id);
+  RowSelection r;
+  r.dataset = open_dataset(file, path, spec.path);
+  checked_rows(r.dataset.get(), path, id);
   // A damaged extent (1e8 rows in a 1 MB file: chunks never written read as
   // fill values) must not become a gigabyte allocation or a bare bad_alloc.
   // Session datasets are stored unfiltered, so every row that was written
@@ -257,7 +261,7 @@ std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, st
   // columns and metadata.
   hsize_t file_bytes = 0;
   if (H5Fget_filesize(file, &file_bytes) < 0) bad_file(path, h5::describe("cannot read the file size"));
-  Handle stored(H5Dget_type(d.get()));
+  Handle stored(H5Dget_type(r.dataset.get()));
   const std::size_t element_bytes = stored ? H5Tget_size(stored.get()) : 0;
   const long double want_bytes = static_cast<long double>(count) * columns * std::max<std::size_t>(element_bytes, 1);
   if (want_bytes > static_cast<long double>(file_bytes))
@@ -265,18 +269,54 @@ std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, st
                        std::to_string(first + count) + " would take " + std::to_string(count) + " x " +
                        std::to_string(columns * element_bytes) + " bytes, more than the whole file (" +
                        std::to_string(file_bytes) + " bytes): its extent is corrupt");
-  std::vector<T> out(count * columns);
-  Handle space(H5Dget_space(d.get()));
+  r.file_space = Handle(H5Dget_space(r.dataset.get()));
   const int rank = columns == 1 ? 1 : 2;
   const hsize_t start[2] = {first, 0}, n[2] = {count, columns};
-  Handle mem(H5Screate_simple(rank, n, nullptr));
-  if (!space || !mem || H5Sget_simple_extent_ndims(space.get()) != rank ||
-      H5Sselect_hyperslab(space.get(), H5S_SELECT_SET, start, nullptr, n, nullptr) < 0 ||
-      H5Sselect_valid(space.get()) <= 0)
+  r.memory = Handle(H5Screate_simple(rank, n, nullptr));
+  if (!r.file_space || !r.memory || H5Sget_simple_extent_ndims(r.file_space.get()) != rank ||
+      H5Sselect_hyperslab(r.file_space.get(), H5S_SELECT_SET, start, nullptr, n, nullptr) < 0 ||
+      H5Sselect_valid(r.file_space.get()) <= 0)
     bad_file(path, std::string("unexpected shape of ") + spec.path + " (rows " + std::to_string(first) + " to " +
                        std::to_string(first + count) + " not inside it)");
-  if (H5Dread(d.get(), memory_type<T>(), mem.get(), space.get(), H5P_DEFAULT, out.data()) < 0)
-    bad_file(path, h5::describe(std::string("cannot read ") + spec.path));
+  return r;
+}
+
+// Rows [first, first+count) of a dataset with 1 or 3 columns, flattened.
+template <typename T>
+std::vector<T> read_column(hid_t file, const std::string& path, DatasetId id, std::uint64_t first,
+                           std::uint64_t count) {
+  if (count == 0) return {};
+  const RowSelection r = select_rows(file, path, id, first, count);
+  std::vector<T> out(count * static_cast<std::size_t>(kDatasets[id].columns));
+  if (H5Dread(r.dataset.get(), memory_type<T>(), r.memory.get(), r.file_space.get(), H5P_DEFAULT, out.data()) < 0)
+    bad_file(path, h5::describe(std::string("cannot read ") + kDatasets[id].path));
+  return out;
+}
+
+// Rows [first, first+count) of a fixed-size string column (/events/message),
+// each cut at its first NUL. HDF5 converts another fixed size to ours
+// (longer strings are cut); a variable-length one is refused by H5Dread.
+std::vector<std::string> read_strings(hid_t file, const std::string& path, DatasetId id, std::uint64_t first,
+                                      std::uint64_t count) {
+  if (count == 0) return {};
+  const RowSelection r = select_rows(file, path, id, first, count);
+  // HDF5 converts no character sets: read in the stored one (the writer's
+  // is UTF-8).
+  Handle stored(H5Dget_type(r.dataset.get()));
+  const H5T_cset_t cset = stored ? H5Tget_cset(stored.get()) : H5T_CSET_ERROR;
+  Handle type(H5Tcopy(H5T_C_S1));
+  if (cset == H5T_CSET_ERROR || !type || H5Tset_size(type.get(), kEventMessageBytes) < 0 ||
+      H5Tset_strpad(type.get(), H5T_STR_NULLTERM) < 0 || H5Tset_cset(type.get(), cset) < 0)
+    bad_file(path, h5::describe(std::string("cannot read ") + kDatasets[id].path));
+  std::vector<char> bytes(count * kEventMessageBytes, '\0');
+  if (H5Dread(r.dataset.get(), type.get(), r.memory.get(), r.file_space.get(), H5P_DEFAULT, bytes.data()) < 0)
+    bad_file(path, h5::describe(std::string("cannot read ") + kDatasets[id].path));
+  std::vector<std::string> out;
+  out.reserve(count);
+  for (std::uint64_t i = 0; i < count; ++i) {
+    const char* text = bytes.data() + i * kEventMessageBytes;
+    out.emplace_back(text, ::strnlen(text, kEventMessageBytes));
+  }
   return out;
 }
 
@@ -583,9 +623,51 @@ template std::vector<std::int32_t> SessionFile::rows(DatasetId, std::uint64_t, s
 template std::vector<std::uint64_t> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
 template std::vector<std::int64_t> SessionFile::rows(DatasetId, std::uint64_t, std::uint64_t) const;
 
+std::vector<std::string> SessionFile::event_messages(std::uint64_t first, std::uint64_t count) const {
+  h5::QuietErrors quiet;
+  return read_strings(impl_->file.get(), impl_->path, kEventMessage, first, count);
+}
+
 void SessionFile::fail(const std::string& what) const { bad_file(impl_->path, what); }
 
-SessionInfo read_session_info(const std::string& path) { return SessionFile(path).info(); }
+std::vector<HapticHole> read_haptic_holes(const SessionFile& f) {
+  const std::uint64_t events = f.info().rows.events, rows = f.info().rows.haptic_rows;
+  if (events == 0) return {};
+  const std::vector<std::int32_t> kinds = f.rows<std::int32_t>(kEventKind, 0, events);
+  const std::vector<std::string> messages = f.event_messages(0, events);
+  std::vector<HapticHole> holes;
+  for (std::uint64_t e = 0; e < events; ++e) {
+    HapticHole hole;
+    if (kinds[e] != static_cast<std::int32_t>(EventKind::kWarning) || !parse_haptic_hole(messages[e], &hole)) continue;
+    // The rows it names, where the file holds them, must be the rows around
+    // the hole: the replay skips the device's judgement there, and a hole
+    // in the wrong place (a damaged number) would skip a real device loss.
+    const auto check = [&](std::uint64_t row, double t_s, const char* side) {
+      if (row >= rows) return;
+      const double recorded_s = f.rows<double>(kHapticTime, row, 1)[0];
+      if (!(std::abs(recorded_s - t_s) <= 1e-6))
+        f.fail(std::string(kDatasets[kEventMessage].path) + "[" + std::to_string(e) + "] says the recorder dropped " +
+               "haptic rows " + side + " /haptic row " + std::to_string(row) + " at " + std::to_string(t_s) +
+               " s, but that row is at " + std::to_string(recorded_s) + " s: corrupt session file");
+    };
+    if (hole.has_row_before()) check(hole.row_after - 1, hole.time_before_s, "after");
+    if (hole.has_row_after()) check(hole.row_after, hole.time_after_s, "before");
+    holes.push_back(hole);
+  }
+  std::stable_sort(holes.begin(), holes.end(),
+                   [](const HapticHole& a, const HapticHole& b) { return a.row_after < b.row_after; });
+  return holes;
+}
+
+SessionInfo read_session_info(const std::string& path) {
+  const SessionFile f(path);
+  SessionInfo info = f.info();
+  for (const HapticHole& hole : read_haptic_holes(f)) {
+    ++info.haptic_holes;
+    info.haptic_ticks_lost += hole.ticks_lost;
+  }
+  return info;
+}
 
 namespace {
 
@@ -772,6 +854,11 @@ HapticTrack read_haptic_track(const std::string& path) {
     track.force_N.push_back(rows[i].force_N);
     if (f.info().has_device_fresh) track.device_fresh.push_back(rows[i].device_fresh);
   }
+  // Only holes between two rows of the track change how it plays.
+  for (const HapticHole& hole : read_haptic_holes(f))
+    if (hole.row_after > 0 && hole.row_after < rows.size() &&
+        (track.rows_after_holes.empty() || track.rows_after_holes.back() != hole.row_after))
+      track.rows_after_holes.push_back(static_cast<std::size_t>(hole.row_after));
   return track;
 }
 
@@ -821,6 +908,12 @@ std::string format_session_info(const SessionInfo& info) {
     << info.rows.mesh_triangles << " triangles"
     << (info.has_strain ? ", strain energy density per triangle" : ", no strain (format version 1)") << ")\n";
   o << "  /events         " << info.rows.events << " events\n";
+  // Ticks the recorder dropped (its ring full: the disk stalled) are not in
+  // /haptic; a hole is otherwise just a jump in /haptic/time_s.
+  if (info.haptic_holes > 0)
+    o << "haptic holes:     " << info.haptic_holes << (info.haptic_holes == 1 ? " hole, " : " holes, ")
+      << info.haptic_ticks_lost << (info.haptic_ticks_lost == 1 ? " tick" : " ticks")
+      << " the recorder dropped (its ring was full); a warning event each names the rows on either side\n";
   if (std::any_of(info.unreferenced_rows.begin(), info.unreferenced_rows.end(),
                   [](std::uint64_t n) { return n > 0; })) {
     o << "unreferenced rows (past the shortest column of their group, or in no frame of the index; no tool reads "

@@ -62,6 +62,11 @@ struct SessionInfo {
   // the last complete frame. `tissue session repair` trims them; info and
   // list say so.
   bool crash_tail = false;
+  // Holes the recorder left in /haptic (HapticHole: ticks it dropped when
+  // its ring was full, one warning event each) and the ticks they lost in
+  // all. Filled by read_session_info (so `info` and `list`); SessionFile's
+  // info() leaves them 0 (read_haptic_holes reads them).
+  std::uint64_t haptic_holes = 0, haptic_ticks_lost = 0;
 };
 
 // Opens read-only (SWMR read when the superblock says it is still open for
@@ -123,6 +128,9 @@ class SessionFile {
   // outside the dataset is an error naming it (never a read past its end).
   template <typename T>
   std::vector<T> rows(DatasetId id, std::uint64_t first, std::uint64_t count) const;
+  // Rows [first, first + count) of /events/message, each cut at its first
+  // NUL (at most kEventMessageBytes - 1 bytes), with the same checks.
+  std::vector<std::string> event_messages(std::uint64_t first, std::uint64_t count) const;
 
   // Throws RecordError "'FILE': what".
   [[noreturn]] void fail(const std::string& what) const;
@@ -175,11 +183,26 @@ struct HapticTrack {
   // /haptic/device_fresh, one 0/1 per row; empty for a file of format
   // version < 3, which did not record it (the replay then guesses).
   std::vector<std::uint8_t> device_fresh;
+  // The rows that follow a hole the recorder left (read_haptic_holes):
+  // ticks between row r - 1 and row r are missing, so the replay does not
+  // judge the device over them. Increasing, each in [1, rows).
+  std::vector<std::size_t> rows_after_holes;
 };
 // Throws RecordError naming the file and what is wrong (not a session, no
 // haptic rows, times not increasing or not finite, positions not finite, a
-// device_fresh flag other than 0 or 1).
+// device_fresh flag other than 0 or 1, a hole event that does not match the
+// rows it names: see read_haptic_holes).
 HapticTrack read_haptic_track(const std::string& path);
+
+// The holes the recorder left in /haptic (its warning events that
+// parse_haptic_hole reads; other events are not holes), by row_after. Each
+// is checked against the rows it names: a row before or after it that the
+// file holds must be at the time the event gives (within 1 us: the text has
+// nanoseconds), else the file is refused naming the event row. A hole whose
+// next row is past the rows readers use (a crash's last write, trimmed by
+// repair) is kept: its ticks were lost all the same. Files written before
+// the recorder recorded holes have none.
+std::vector<HapticHole> read_haptic_holes(const SessionFile& f);
 
 struct RepairReport {
   bool repair_needed = false;      // false: the file was already fine; nothing changed

@@ -95,10 +95,13 @@ class HapticSideImpl final : public HapticSide {
       // them) the replay spreads each step exactly as the loop measured it,
       // and a gap over which the live loop lost the device (judged with this
       // config's device timeout on the recorded times) gives no samples, so
-      // the loop loses the device over it as it did live.
+      // the loop loses the device over it as it did live. The holes the
+      // recorder left (rows it dropped) are not judged as time without a
+      // sample: the device's ticks there are unknown.
       auto device = std::make_unique<haptics::ReplayDevice>(
           track.time_s, std::move(positions), config.device.replay.speed, config.device.replay.loop,
-          config.device.limits.max_speed_m_per_s, track.device_fresh, config.device.limits.device_timeout_s);
+          config.device.limits.max_speed_m_per_s, track.device_fresh, config.device.limits.device_timeout_s,
+          track.rows_after_holes);
       replay = device.get();
       device_ = std::move(device);
     } else {

@@ -905,5 +905,140 @@ TEST(ReplayDevice, AGapPlayedAsNoSamplesIsMeasuredOverTheWholeGapNotByTheLoopWra
   EXPECT_EQ(s.position_m, Vec3::Zero());
 }
 
+// A hole the recorder left (record::HapticHole): `track` without its rows
+// [first, first + count), dropped when the recorder's ring overflowed. The
+// rows that remain keep their times, so the hole is a jump in them, and the
+// session's hole event names the row after it (rows_after_holes).
+struct HoledTrack {
+  FlaggedTrack track;
+  std::vector<std::size_t> rows_after_holes;
+};
+HoledTrack with_hole(const FlaggedTrack& full, int first, int count) {
+  HoledTrack holed;
+  for (int row = 0; row < static_cast<int>(full.time_s.size()); ++row) {
+    if (row >= first && row < first + count) continue;
+    holed.track.time_s.push_back(full.time_s[row]);
+    holed.track.position_m.push_back(full.position_m[row]);
+    holed.track.fresh.push_back(full.fresh[row]);
+  }
+  holed.rows_after_holes = {static_cast<std::size_t>(first)};
+  return holed;
+}
+
+// A still hand on a healthy 250 Hz device (the pose re-sent every 4 ms),
+// recorded while the disk stalled: the recorder dropped 50 ms of rows. Live
+// the loop had a sample every 4 ms throughout. The rows after the hole until
+// the next flagged one made the gap look like 50-odd ms without a sample, so
+// the replay played it as a lost device (a device-lost trip, the force
+// ramped out) whenever the row after the hole was not flagged: 3 of the 4
+// places the hole can fall in the device's cadence. The ticks in the hole
+// are unknown, so only the rows present are judged.
+TEST(ReplayDevice, AHoleTheRecorderLeftIsNotPlayedAsALostDevice) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  const Vec3 still_m(0.05, 0.02, -0.01);
+  const FlaggedTrack full = flagged_track(4, 400, [&](int) { return still_m; });
+  std::string error;
+  DeviceSample s;
+  int lost_without_holes = 0;
+  for (const int first : {200, 201, 202, 203}) {
+    SCOPED_TRACE("the hole from row " + std::to_string(first));
+    const HoledTrack holed = with_hole(full, first, 50);
+    const FlaggedTrack& t = holed.track;
+    ReplayDevice unaware(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s);
+    ASSERT_TRUE(unaware.start(&error)) << error;
+    lost_without_holes += static_cast<int>(unaware.lost_gaps());
+
+    ReplayDevice replay(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s,
+                        holed.rows_after_holes);
+    ASSERT_TRUE(replay.start(&error)) << error;
+    EXPECT_EQ(replay.lost_gaps(), 0u);
+    // Every tick has the still pose: held across the hole as across any
+    // gap between samples the loop kept the device over.
+    for (int ms = 0; ms < 400; ++ms) {
+      ASSERT_TRUE(replay.read(ms * kMs, &s)) << "at " << ms << " ms";
+      ASSERT_EQ(s.position_m, still_m) << "at " << ms << " ms";
+    }
+    ReplayDevice driven(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s,
+                        holed.rows_after_holes);
+    ASSERT_TRUE(driven.start(&error)) << error;
+    const HapticStats st = replay_through_the_loop(driven, spec, 410);
+    EXPECT_EQ(st.device_lost_trips, 0u);
+    EXPECT_EQ(st.missing_samples, 0u);
+  }
+  // The scenario is the one that went wrong: without the holes, the replay
+  // took 3 of the 4 for a lost device.
+  EXPECT_EQ(lost_without_holes, 3);
+}
+
+// A real device loss beside a hole is still one: the rows present without a
+// sample count, only the time in the hole does not. The still hand of the
+// test above, its device lost before the hole (a sample right after it),
+// after it, and on both sides, 9 ms before and 7 ms after (16 ms without a
+// sample on the rows present, over the 10 ms timeout, though each side alone
+// is under it). The hole lies inside each loss, so it plays as no samples
+// too. (A moving hand whose samples came in the hole shows a new position on
+// the row after it: a sample, so a loss after the hole starts there.)
+TEST(ReplayDevice, ADeviceLossBesideAHoleIsStillPlayedAsALoss) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  const Vec3 still_m(0.05, 0.02, -0.01);
+  const auto pose = [&](int) { return still_m; };
+  const auto samples = [](int from, int to) {
+    std::vector<int> lost;
+    for (int k = from; k <= to; ++k) lost.push_back(k);
+    return lost;
+  };
+  struct Case {
+    const char* name;
+    std::vector<int> lost;  // samples (every 4th row) that never came
+    int no_sample_ms;       // a tick without a sample on the rows present
+    int next_sample_ms;     // the sample that ends the loss
+  };
+  // The hole: rows 202..251 (a sample was due at 204 ... 248).
+  const Case cases[] = {
+      {"before the hole", samples(45, 50), 190, 252},
+      {"after the hole", samples(63, 67), 260, 272},
+      {"across the hole", samples(49, 64), 199, 260},
+  };
+  std::string error;
+  DeviceSample s;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const HoledTrack holed = with_hole(flagged_track(4, 400, pose, c.lost), 202, 50);
+    const FlaggedTrack& t = holed.track;
+    ReplayDevice replay(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s,
+                        holed.rows_after_holes);
+    ASSERT_TRUE(replay.start(&error)) << error;
+    EXPECT_EQ(replay.lost_gaps(), 1u);
+    ASSERT_TRUE(replay.read(0, &s));
+    // In time order (read() plays forwards): a tick of the loss on a row
+    // present, and one in the hole, inside the loss.
+    for (const int ms : {std::min(c.no_sample_ms, 230), std::max(c.no_sample_ms, 230)})
+      EXPECT_FALSE(replay.read(ms * kMs, &s)) << "at " << ms << " ms";
+    ASSERT_TRUE(replay.read(c.next_sample_ms * kMs, &s)) << "the sample after the loss";
+    EXPECT_EQ(s.position_m, still_m);
+    ReplayDevice driven(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s,
+                        holed.rows_after_holes);
+    ASSERT_TRUE(driven.start(&error)) << error;
+    EXPECT_GE(replay_through_the_loop(driven, spec, 410).device_lost_trips, 1u);
+  }
+}
+
+// The holes are rows of the track: one outside it, or out of order, is a
+// caller's mistake, refused at start().
+TEST(ReplayDevice, HolesOutsideTheTrackAreRefusedAtStart) {
+  const FlaggedTrack t = flagged_track(4, 40, [](int) { return Vec3::Zero(); });
+  std::string error;
+  for (const std::vector<std::size_t>& holes : {std::vector<std::size_t>{0}, std::vector<std::size_t>{40},
+                                                std::vector<std::size_t>{20, 10}, std::vector<std::size_t>{10, 10}}) {
+    ReplayDevice replay(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, 0.01, holes);
+    EXPECT_FALSE(replay.start(&error)) << ::testing::PrintToString(holes);
+    EXPECT_NE(error.find("recorder hole"), std::string::npos) << error;
+  }
+  ReplayDevice fine(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, 0.01, {1, 39});
+  EXPECT_TRUE(fine.start(&error)) << error;
+}
+
 }  // namespace
 }  // namespace tissue::haptics

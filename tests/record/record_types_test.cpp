@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -114,6 +116,52 @@ TEST(RecordTypes, EventKindNamesListEveryKindInOrderAsTheFormatDocumentSays) {
   ASSERT_FALSE(doc.empty());
   EXPECT_NE(doc.find("| `/events/kind` | E | int32 | enum | " + documented), std::string::npos)
       << "docs/session-format.md does not list the kinds as '" << documented << "'";
+}
+
+// A hole the recorder left in /haptic is a warning event whose text names
+// the rows around it; readers take it back from that text alone. Each form
+// (rows on both sides, none after it, none before it, no row at all) reads
+// back as written, and what is not exactly such a text is no hole.
+TEST(RecordTypes, AHapticHoleMessageReadsBackAsWritten) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const HapticHole forms[] = {
+      {50, 8192, 8.191, 8.242}, {7, 16384, 16.433, nan},  {3, 0, nan, 0.004},
+      {12, 0, nan, nan},        {1, 1, 1e9 - 0.001, 1e9},
+  };
+  for (const HapticHole& hole : forms) {
+    const std::string text = haptic_hole_message(hole);
+    SCOPED_TRACE(text);
+    EXPECT_LT(text.size(), kEventMessageBytes);
+    EXPECT_EQ(text.rfind(kHapticHolePrefix, 0), 0u);
+    HapticHole back;
+    ASSERT_TRUE(parse_haptic_hole(text, &back));
+    EXPECT_EQ(back.ticks_lost, hole.ticks_lost);
+    EXPECT_EQ(back.row_after, hole.row_after);
+    EXPECT_EQ(back.has_row_before(), hole.has_row_before());
+    EXPECT_EQ(back.has_row_after(), hole.has_row_after());
+    // To the nanosecond printed (and the double's own rounding near 1e9 s).
+    if (hole.has_row_before()) {
+      EXPECT_NEAR(back.time_before_s, hole.time_before_s, 1e-9 + 1e-15 * hole.time_before_s);
+    }
+    if (hole.has_row_after()) {
+      EXPECT_NEAR(back.time_after_s, hole.time_after_s, 1e-9 + 1e-15 * hole.time_after_s);
+    }
+  }
+  EXPECT_EQ(haptic_hole_message(forms[0]),
+            "haptic rows dropped by the recorder (ring full): 50 ticks between /haptic rows 8191 (8.191000000 s) and "
+            "8192 (8.242000000 s)");
+  const std::string good = haptic_hole_message(forms[0]);
+  HapticHole h;
+  for (const std::string& not_a_hole :
+       {good + " ", good.substr(0, good.size() - 1), std::string("x") + good, std::string("recording started"),
+        std::string(kHapticHolePrefix) + "0 ticks between /haptic rows 1 (0.001000000 s) and 2 (0.003000000 s)",
+        std::string(kHapticHolePrefix) + "-5 ticks between /haptic rows 1 (0.001000000 s) and 2 (0.003000000 s)",
+        std::string(kHapticHolePrefix) + "5 ticks between /haptic rows 1 (0.001000000 s) and 3 (0.003000000 s)",
+        std::string(kHapticHolePrefix) + "5 ticks between /haptic rows 1 (nan s) and 2 (0.003000000 s)",
+        std::string(kHapticHolePrefix) + "5 ticks before /haptic row 4 (0.004000000 s), the first recorded",
+        std::string(kHapticHolePrefix) + "5 ticks after /haptic row 18446744073709551615 (1.000000000 s), the last "
+                                         "recorded"})
+    EXPECT_FALSE(parse_haptic_hole(not_a_hole, &h)) << not_a_hole;
 }
 
 }  // namespace

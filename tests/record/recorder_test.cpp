@@ -53,8 +53,15 @@ TEST(Recorder, ThreeProducerThreadsEverythingPushedIsInTheFile) {
   auto rec = Recorder::start(dir.path(), "s.h5", meta(), fast_options());
   constexpr std::uint64_t kHaptic = 20000, kSim = 200, kFrames = 12, kEvents = 20;
   std::thread haptic([&] {
-    for (std::uint64_t i = 0; i < kHaptic; ++i)
+    for (std::uint64_t i = 0; i < kHaptic; ++i) {
+      // A real producer drops a refused row; this one retries it, so its
+      // ring must not overflow: the recorder records every refusal as a hole
+      // in /haptic (HapticHole), which here would be none. Half a ring ahead
+      // of what is written at most, it never fills.
+      while (i - rec->stats().haptic_rows_written >= Recorder::kHapticRingRows / 2)
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
       push_until_accepted([&] { return rec->push_haptic(testing::haptic_row(i)); });
+    }
   });
   std::thread sim([&] {
     for (std::uint64_t i = 0; i < kSim; ++i) push_until_accepted([&] { return rec->push_sim(testing::sim_row(i)); });
@@ -289,18 +296,98 @@ TEST(Recorder, PushesRacingStopAreWrittenOrCountedNeverLost) {
     EXPECT_EQ(s.haptic_rows_written, haptic.accepted) << "accepted haptic rows lost";
     EXPECT_EQ(s.sim_rows_written, sim.accepted) << "accepted sim rows lost";
     EXPECT_EQ(s.mesh_frames_written, frames.accepted) << "accepted mesh frames lost";
-    EXPECT_EQ(s.events_written, events_accepted) << "accepted events lost";
+    // The haptic ring may overflow at this push rate: each run of rows it
+    // refused is recorded as a hole, an event of the recorder's own.
+    const SessionInfo info = read_session_info(dir / "s.h5");
+    const std::uint64_t holes = info.haptic_holes;
+    EXPECT_LE(info.haptic_ticks_lost, s.haptic_drops);
+    EXPECT_EQ(s.events_written, events_accepted + holes) << "accepted events lost";
     EXPECT_EQ(s.haptic_rows_written + s.haptic_drops, haptic.attempts);
     EXPECT_EQ(s.sim_rows_written + s.sim_drops, sim.attempts);
     EXPECT_EQ(s.mesh_frames_written + s.mesh_frame_drops, frames.attempts);
-    EXPECT_EQ(s.events_written + s.event_drops, event_attempts);
-    const SessionInfo info = read_session_info(dir / "s.h5");
+    EXPECT_EQ(s.events_written - holes + s.event_drops, event_attempts);
     EXPECT_TRUE(info.closed_cleanly);
     EXPECT_EQ(info.rows.haptic_rows, haptic.accepted);
     EXPECT_EQ(info.rows.sim_rows, sim.accepted);
     EXPECT_EQ(info.rows.mesh_frames, frames.accepted);
-    EXPECT_EQ(info.rows.events, events_accepted);
+    EXPECT_EQ(info.rows.events, events_accepted + holes);
   }
+}
+
+// The recorder's haptic ring overflows (the disk stalls longer than the ring
+// holds; here the recorder thread's first poll is a second away): the rows
+// refused are dropped, and the file says so. Each run of them is a hole, a
+// warning event naming the recorded rows on either side, their times and the
+// ticks lost; a run that nothing follows (the recording stopped during it)
+// names the last row. Before, the drops were counted only in memory (the
+// status's `drops`): in the file a hole was a jump in /haptic/time_s, like
+// the haptic loop skipping ticks, and a replay took it for a lost device.
+TEST(Recorder, RowsDroppedWhenTheHapticRingOverflowsLeaveAHoleInTheFile) {
+  TempDir dir;
+  RecorderOptions o = fast_options();
+  o.flush_interval_s = 1.0;
+  o.poll_interval_s = 1.0;
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  constexpr std::uint64_t kRing = Recorder::kHapticRingRows;
+  // Row i is haptic_row(i) (time i ms); accepted[i]: the push returned true.
+  std::vector<bool> accepted;
+  const auto push = [&](std::uint64_t n) {
+    for (std::uint64_t k = 0; k < n; ++k) accepted.push_back(rec->push_haptic(testing::haptic_row(accepted.size())));
+  };
+  push(kRing + 50);  // the ring holds kRing: 50 dropped
+  ASSERT_EQ(std::count(accepted.begin(), accepted.end(), true), static_cast<std::ptrdiff_t>(kRing))
+      << "the recorder drained before the ring was full: no overflow to check";
+  // The first poll drains the ring and writes at once (a ring's worth).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (rec->stats().haptic_rows_written < kRing && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_EQ(rec->stats().haptic_rows_written, kRing);
+  push(kRing + 7);  // full again: 7 dropped, and the recording stops before another row
+  ASSERT_EQ(std::count(accepted.begin() + kRing + 50, accepted.end(), true), static_cast<std::ptrdiff_t>(kRing))
+      << "the recorder drained again before the ring was full: no second overflow to check";
+  rec->stop();
+  ASSERT_EQ(rec->state(), RecorderState::kStopped) << rec->error();
+  EXPECT_EQ(rec->stats().haptic_drops, 57u);
+  EXPECT_EQ(rec->stats().haptic_rows_written, 2 * kRing);
+
+  const std::string path = dir / "s.h5";
+  const SessionFile f(path);
+  const std::vector<HapticHole> holes = read_haptic_holes(f);
+  ASSERT_EQ(holes.size(), 2u);
+  // Rows 0 .. kRing-1 recorded, pushes kRing .. kRing+49 dropped, then push
+  // kRing+50 recorded as row kRing.
+  EXPECT_EQ(holes[0].ticks_lost, 50u);
+  EXPECT_EQ(holes[0].row_after, kRing);
+  EXPECT_EQ(holes[0].time_before_s, testing::haptic_row(kRing - 1).time_s);
+  EXPECT_EQ(holes[0].time_after_s, testing::haptic_row(kRing + 50).time_s);
+  // The last kRing rows recorded, then 7 dropped and nothing after them.
+  EXPECT_EQ(holes[1].ticks_lost, 7u);
+  EXPECT_EQ(holes[1].row_after, 2 * kRing);
+  EXPECT_EQ(holes[1].time_before_s, testing::haptic_row(2 * kRing + 50 - 1).time_s);
+  EXPECT_FALSE(holes[1].has_row_after());
+  // As warning events, in words a person reads too.
+  const std::vector<std::string> messages = testing::event_messages(path);
+  const std::vector<std::int32_t> kinds = f.rows<std::int32_t>(kEventKind, 0, f.info().rows.events);
+  ASSERT_EQ(messages.size(), 2u) << ::testing::PrintToString(messages);
+  EXPECT_EQ(messages[0],
+            "haptic rows dropped by the recorder (ring full): 50 ticks between /haptic rows 8191 (8.191000000 s) and "
+            "8192 (8.242000000 s)");
+  EXPECT_EQ(messages[1],
+            "haptic rows dropped by the recorder (ring full): 7 ticks after /haptic row 16383 (16.433000000 s), the "
+            "last recorded");
+  EXPECT_EQ(kinds, (std::vector<std::int32_t>(2, static_cast<std::int32_t>(EventKind::kWarning))));
+  const std::vector<double> event_times = f.rows<double>(kEventTime, 0, 2);
+  EXPECT_EQ(event_times[0], holes[0].time_before_s);
+  EXPECT_EQ(event_times[1], holes[1].time_before_s);
+
+  // `tissue session info` reports them; the replay device gets the hole
+  // between two rows (the last one ends the track: nothing to play there).
+  const SessionInfo info = read_session_info(path);
+  EXPECT_EQ(info.haptic_holes, 2u);
+  EXPECT_EQ(info.haptic_ticks_lost, 57u);
+  const std::string text = format_session_info(info);
+  EXPECT_NE(text.find("haptic holes:     2 holes, 57 ticks the recorder dropped"), std::string::npos) << text;
+  EXPECT_EQ(read_haptic_track(path).rows_after_holes, (std::vector<std::size_t>{kRing}));
 }
 
 // What a recording's on_error said: how often, and the last message (read

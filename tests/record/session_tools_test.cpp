@@ -1800,5 +1800,71 @@ TEST(SessionTools, XdmfIntoADirectorySaysWhy) {
   EXPECT_EQ(cli.err.find("Success"), std::string::npos) << cli.err;
 }
 
+// The holes the recorder left in /haptic (warning events naming the rows on
+// either side, HapticHole) are read back by every reader that needs them:
+// info counts them, the replay device's track gets the rows after the holes
+// between two of its rows. Only warnings in exactly that form are holes. A
+// hole event whose rows are not at the times it gives is damage (the replay
+// would skip the device's judgement in the wrong place): refused, naming the
+// file and the event row.
+TEST(SessionReader, HoleEventsAreReadBackAndCheckedAgainstTheRows) {
+  TempDir dir;
+  const auto write = [&](const std::string& path, const std::vector<Event>& events) {
+    auto w = SessionWriter::create(path, SessionMetadata{});
+    std::vector<HapticRow> rows;
+    for (std::uint64_t i = 0; i < 100; ++i) rows.push_back(testing::haptic_row(i < 50 ? i : i + 30));
+    w->append_haptic(rows);
+    w->append_events(events);
+    w->close();
+    return path;
+  };
+  const auto hole_event = [](EventKind kind, const HapticHole& hole) {
+    return Event::make(hole.has_row_before() ? hole.time_before_s : 0.0, kind, haptic_hole_message(hole));
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const HapticHole between{30, 50, testing::haptic_row(49).time_s, testing::haptic_row(80).time_s};
+  const HapticHole at_end{4, 100, testing::haptic_row(129).time_s, nan};
+  const std::string path =
+      write(dir / "holes.h5", {testing::event_row(0), hole_event(EventKind::kWarning, at_end),
+                               hole_event(EventKind::kInfo, between),  // not a warning: no hole
+                               hole_event(EventKind::kWarning, between),
+                               Event::make(0.5, EventKind::kWarning, std::string(kHapticHolePrefix) + "a few ticks")});
+  const SessionInfo info = read_session_info(path);
+  EXPECT_EQ(info.haptic_holes, 2u);
+  EXPECT_EQ(info.haptic_ticks_lost, 34u);
+  EXPECT_NE(format_session_info(info).find("haptic holes:     2 holes, 34 ticks the recorder dropped"),
+            std::string::npos)
+      << format_session_info(info);
+  const std::vector<HapticHole> holes = read_haptic_holes(SessionFile(path));
+  ASSERT_EQ(holes.size(), 2u);
+  EXPECT_EQ(holes[0].row_after, 50u);
+  EXPECT_EQ(holes[0].ticks_lost, 30u);
+  EXPECT_EQ(holes[1].row_after, 100u);
+  EXPECT_FALSE(holes[1].has_row_after());
+  EXPECT_EQ(read_haptic_track(path).rows_after_holes, (std::vector<std::size_t>{50}));
+  // The CLI prints it.
+  const RunResult cli = run(quote(TISSUE_CLI_BINARY) + " session info " + quote(path), dir);
+  EXPECT_EQ(cli.exit_code, 0) << cli.err;
+  EXPECT_NE(cli.out.find("haptic holes:     2 holes, 34 ticks"), std::string::npos) << cli.out;
+  // A session without holes says nothing of them.
+  EXPECT_EQ(format_session_info(read_session_info(testing::write_test_session(dir / "plain.h5"))).find("holes"),
+            std::string::npos);
+
+  // Rows 49 and 50 are at 49 and 80 ms, not at 49 and 50.
+  const HapticHole misplaced{1, 50, testing::haptic_row(49).time_s, testing::haptic_row(50).time_s};
+  const std::string bad = write(dir / "bad.h5", {testing::event_row(0), hole_event(EventKind::kWarning, misplaced)});
+  for (int reader = 0; reader < 2; ++reader) {
+    try {
+      if (reader == 0) read_session_info(bad);
+      if (reader == 1) read_haptic_track(bad);
+      ADD_FAILURE() << "reader " << reader << " took a hole that is not where its rows are";
+    } catch (const RecordError& e) {
+      EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("/events/message[1]"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("/haptic row 50"), std::string::npos) << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tissue::record
