@@ -394,6 +394,10 @@ void ExplicitIntegrator::build_layout(const Body& body) {
   rest_bound_per_s2_ = bounds_.rest_per_s2;
   stable_ = stable_step_at(0.0);
   end_displacement_ratio_ = -1.0;
+  r_rise_bound_ = 0.0;
+  shortest_rest_m_ = INFINITY;
+  for (const EdgeId e : moving_springs(body))
+    if (body.stiffness_N_per_m[e] > 0.0) shortest_rest_m_ = std::min(shortest_rest_m_, body.rest_length_m[e]);
   tightened_ = false;
   lanczos_.reset();
   lanczos_credit_ = 0.0;
@@ -606,10 +610,13 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   // measuring pass costs 0.4-0.8 of a sub-step.
   // Beyond r = ½ the deformed bound is only a cap (a spring may collapse), so
   // r is measured every step there and the shortest spring sets the count.
-  if (end_displacement_ratio_ < 0.0 || end_displacement_ratio_ >= 0.5 || steps_since_measured_ >= kRemeasureSteps) {
+  // Also as soon as r may have reached ½ since it was measured (r_rise_bound_).
+  if (end_displacement_ratio_ < 0.0 || end_displacement_ratio_ + r_rise_bound_ >= 0.5 ||
+      steps_since_measured_ >= kRemeasureSteps) {
     end_displacement_ratio_ = measure_end_displacement_ratio(body);
     growth_per_step_ = 0.0;
     steps_since_measured_ = 0;
+    r_rise_bound_ = 0.0;
   }
   ++steps_since_measured_;
   if (end_displacement_ratio_ >= 0.5) {
@@ -649,6 +656,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     if (verified_substeps(dt_s, reached) <= fewer) {
       growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
       end_displacement_ratio_ = reached;
+      r_rise_bound_ = 0.0;
       ++verified_steps_;
       out.substeps = fewer;
       out.verified_substeps = true;
@@ -676,7 +684,14 @@ StepOutcome ExplicitIntegrator::run_and_accept(Body& body, double dt_s, int coun
     out.error = kNonFiniteRejected;
     return out;
   }
+  // How far the step moved the nodes bounds how far r rose (r_rise_bound_):
+  // a copy and a pass over the nodes, no square root per spring.
+  x_start_m_.assign(body.x_m.begin(), body.x_m.end());
   store(body);
+  double moved2_m2 = 0.0;
+  for (std::size_t n = 0; n < x_start_m_.size(); ++n)
+    moved2_m2 = std::max(moved2_m2, (body.x_m[n] - x_start_m_[n]).squaredNorm());
+  r_rise_bound_ += 2.0 * std::sqrt(moved2_m2) / shortest_rest_m_;
   spend_on_estimate(body, out.substeps);
   return out;
 }

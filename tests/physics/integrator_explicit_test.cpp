@@ -86,6 +86,56 @@ TEST(ExplicitIntegrator, ACollapsingSpringIsSubSteppedOrRefusedNotRunAtTheCap) {
   }
 }
 
+// The collapse check above runs when r, the largest displacement of a
+// spring's ends relative to each other (a share of its rest length), is at
+// least 1/2 at the step's start. r was measured again only when the last
+// value was < 0 or >= 1/2, on a shortened (verified) step, or every
+// kRemeasureSteps = 64 steps: a body crushed on the plain margin path ran on
+// a stale r. A 2x2x2 cube, its x = 0 face fixed and its x = 0.1 face pushed
+// 0.08 m in over 20 ms, had its shortest spring go from 0.50 to 0.004 of its
+// rest length over steps 11-64 at 1 sub-step per step with r still 0. Every
+// step whose start has r >= 1/2 takes the sub-steps the collapse factor of
+// its shortest spring asks for (or is refused naming the cap).
+TEST(ExplicitIntegrator, ACrushedBodyIsCollapseCheckedAtEveryStepNotOnAStaleRatio) {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.integrator.dt_s = 1e-3;
+  s.material.rayleigh_beta_s = 0.0;
+  s.fixed.push_back({scene::Region::box({0, 0, 0}, {0, 0.1, 0.1})});
+  scene::TimeProfile push;
+  push.ramp_s = 0.02;
+  s.prescribed.push_back({"push", scene::Region::box({0.1, 0, 0}, {0.1, 0.1, 0.1}), {-0.08, 0, 0}, push});
+  Simulation sim(s);
+  int crushed_steps = 0;
+  for (int i = 0; i < 100; ++i) {
+    const Body& body = sim.body();
+    double r_start = 0.0;  // as the integrator measures it: springs with a free end
+    for (std::size_t e = 0; e < body.edge_a.size(); ++e) {
+      const NodeId a = body.edge_a[e], b = body.edge_b[e];
+      if (!(body.stiffness_N_per_m[e] > 0.0)) continue;
+      if (body.inv_mass_per_kg[a] == 0.0 && body.inv_mass_per_kg[b] == 0.0) continue;
+      const Vec3 du = (body.x_m[b] - body.rest_m[b]) - (body.x_m[a] - body.rest_m[a]);
+      r_start = std::max(r_start, du.norm() / body.rest_length_m[e]);
+    }
+    const ShortestSpring shortest = shortest_spring(body);
+    const double needed =
+        std::ceil(s.integrator.dt_s /
+                  (s.integrator.substep_safety *
+                   collapsed_stable_step(explicit_bounds(body), collapse_factor(shortest.length_ratio)).dt_s));
+    const StepResult r = sim.step();
+    if (!r.ok) {
+      EXPECT_NE(r.error.find("integrator.max_substeps"), std::string::npos) << r.error;
+      break;
+    }
+    if (r_start >= 0.5) {
+      ++crushed_steps;
+      EXPECT_GE(r.substeps, needed) << "step " << i + 1 << ": r " << r_start << ", shortest spring at "
+                                    << shortest.length_ratio << " of its rest length";
+    }
+  }
+  EXPECT_GT(crushed_steps, 10) << "the body was crushed";
+}
+
 TEST(ExplicitIntegrator, RefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
   scene::Scene s = beam_scene();
   s.integrator.kind = scene::IntegratorKind::kExplicit;
