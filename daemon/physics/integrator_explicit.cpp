@@ -559,12 +559,16 @@ namespace {
 constexpr const char* kNonFiniteRejected =
     "explicit integrator: state became non-finite; step rejected, previous state kept";
 
-// The refusal when a step needs more than max_substeps.
-std::string too_many_substeps(double dt_s, double needed, double limit_s, const ExplicitStableStep& stable,
-                              int max_substeps, bool paper_damping) {
+// The refusal when a step needs more than max_substeps. `limit_s` is the
+// sub-step taken, `fraction` of the stable bound (substep_safety on the
+// margin path; it was printed as "stable sub-step", which it is not).
+std::string too_many_substeps(double dt_s, double needed, double limit_s, double fraction,
+                              const ExplicitStableStep& stable, int max_substeps, bool paper_damping,
+                              const char* bound_at = "") {
   std::ostringstream os;
-  os << "explicit integrator: dt_s = " << dt_s << " needs " << needed << " sub-steps (stable sub-step " << limit_s
-     << " s), more than integrator.max_substeps = " << max_substeps
+  os << "explicit integrator: dt_s = " << dt_s << " needs " << needed << " sub-steps (sub-step " << limit_s
+     << " s = " << fraction << " x the stable bound" << bound_at
+     << "), more than integrator.max_substeps = " << max_substeps
      << "; lower dt_s, raise max_substeps, or use the implicit integrator";
   // Stiffness-proportional (or the paper's) spring dampers are explicit
   // here: say so when they, not the springs, set the sub-step.
@@ -579,9 +583,7 @@ std::string too_many_substeps(double dt_s, double needed, double limit_s, const 
 }  // namespace
 
 int ExplicitIntegrator::verified_substeps(double dt_s, double end_displacement_ratio) const {
-  // Capped: with substep_safety above 16/19 the ratio alone would take
-  // sub-steps longer than the stable bound itself.
-  const double fraction = std::min(kVerifiedSafetyPerSafety * spec_.substep_safety, kVerifiedSafetyMax);
+  const double fraction = verified_fraction();
   const double limit = fraction * stable_step_at(end_displacement_ratio).dt_s;
   const double needed = std::ceil(dt_s / limit);
   return needed <= spec_.max_substeps ? std::max(1, static_cast<int>(needed)) : spec_.max_substeps + 1;
@@ -598,7 +600,8 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   const double needed = std::ceil(dt_s / limit);
   if (!(needed <= spec_.max_substeps)) {
     out.ok = false;
-    out.error = too_many_substeps(dt_s, needed, limit, stable_, spec_.max_substeps, paper_damping_);
+    out.error =
+        too_many_substeps(dt_s, needed, limit, spec_.substep_safety, stable_, spec_.max_substeps, paper_damping_);
     return out;
   }
   int count = std::max(1, static_cast<int>(needed));
@@ -670,7 +673,18 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     end_displacement_ratio_ = reached;
     ++rerun_steps_;
     out.rerun = true;
-    count = std::max(count, std::min(verified_substeps(dt_s, reached), spec_.max_substeps));
+    // Within its bound or refused: where the bound there asks for more than
+    // max_substeps, the step is refused (it was run at the cap).
+    const int asked = verified_substeps(dt_s, reached);
+    if (asked > spec_.max_substeps) {
+      const ExplicitStableStep at_reached = stable_step_at(reached);
+      const double limit_s = verified_fraction() * at_reached.dt_s;
+      out.ok = false;
+      out.error = too_many_substeps(dt_s, std::ceil(dt_s / limit_s), limit_s, verified_fraction(), at_reached,
+                                    spec_.max_substeps, paper_damping_, " at the deformation the step reached");
+      return out;
+    }
+    count = std::max(count, asked);
     load(body, f_ext_N);
   }
   return run_and_accept(body, dt_s, count, out);

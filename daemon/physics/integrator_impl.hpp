@@ -342,6 +342,12 @@ class ExplicitIntegrator final : public Integrator {
   // Sub-steps for dt_s at relative end displacement r with the verified
   // margin (max_substeps + 1 when more than that).
   int verified_substeps(double dt_s, double end_displacement_ratio) const;
+  // The share of the stable bound a verified sub-step takes: capped, as with
+  // substep_safety above 16/19 the ratio alone would take sub-steps longer
+  // than the stable bound itself.
+  double verified_fraction() const {
+    return std::min(kVerifiedSafetyPerSafety * spec_.substep_safety, kVerifiedSafetyMax);
+  }
   // Runs `count` sub-steps from the loaded state and stores the result in the
   // body, or rejects a non-finite one (the body untouched).
   StepOutcome run_and_accept(Body& body, double dt_s, int count, StepOutcome out);

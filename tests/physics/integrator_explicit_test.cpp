@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <map>
 #include <random>
+#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -146,6 +147,13 @@ TEST(ExplicitIntegrator, RefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
   const StepResult r = sim.step();
   EXPECT_FALSE(r.ok);
   EXPECT_NE(r.error.find("max_substeps"), std::string::npos);
+  // The sub-step it names is substep_safety of the stable bound, and says so
+  // (it was called the "stable sub-step").
+  const double limit_s = s.integrator.substep_safety * explicit_stable_dt_s(sim.body());
+  std::ostringstream says;
+  says << "(sub-step " << limit_s << " s = 0.8 x the stable bound)";
+  EXPECT_NE(r.error.find(says.str()), std::string::npos) << r.error;
+  EXPECT_EQ(r.error.find("(stable sub-step "), std::string::npos) << r.error;
   EXPECT_EQ(sim.body().x_m, x_before);
   EXPECT_EQ(sim.time_s(), 0.0);
   EXPECT_EQ(sim.counters().rejected_steps, 1);
@@ -369,6 +377,43 @@ TEST(ExplicitIntegrator, RerunsAStepWhoseDeformationOutgrewItsSubsteps) {
   other.run_substeps(direct, f, dt_s / out.substeps, out.substeps);
   EXPECT_EQ(direct.x_m, body.x_m);
   EXPECT_EQ(direct.v_m_per_s, body.v_m_per_s);
+}
+
+// The step run again takes what the bound at the state reached asks for;
+// where that is more than integrator.max_substeps it is refused (the body
+// untouched), not run at the cap: within its bound or refused. Before, the
+// rerun took min(asked, max_substeps) sub-steps and was accepted.
+TEST(ExplicitIntegrator, ARerunNeedingMoreThanMaxSubstepsIsRefusedNotCapped) {
+  scene::Scene s = beam_scene();
+  s.material.rayleigh_beta_s = 0.0;
+  s.adaptivity.min_depth = 1;
+  Body body(s);
+  testing::jiggle_free_nodes(body, 7, 0.0, 5.0);  // at rest (r = 0) but fast, as above
+  const std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
+  const double dt_s = 20.0 * s.integrator.substep_safety * explicit_stable_dt_s(body);
+  const int margin = static_cast<int>(std::ceil(dt_s / (s.integrator.substep_safety * explicit_stable_dt_s(body))));
+  // With room, the rerun takes more than the margin's count: the case exists.
+  {
+    Body room = body;
+    ExplicitIntegrator integrator(s.integrator, s.material);
+    const StepOutcome out = integrator.step(room, f, dt_s);
+    ASSERT_TRUE(out.ok) << out.error;
+    ASSERT_TRUE(out.rerun);
+    ASSERT_GT(out.substeps, margin);
+  }
+  // Capped at the margin's count: refused, the body untouched.
+  scene::IntegratorSpec capped = s.integrator;
+  capped.max_substeps = margin;
+  ExplicitIntegrator integrator(capped, s.material);
+  const Body before = body;
+  const StepOutcome out = integrator.step(body, f, dt_s);
+  EXPECT_FALSE(out.ok) << out.substeps << " sub-steps taken";
+  EXPECT_NE(out.error.find("more than integrator.max_substeps = " + std::to_string(margin)), std::string::npos)
+      << out.error;
+  EXPECT_NE(out.error.find(" s = 0.95 x the stable bound at the deformation the step reached)"), std::string::npos)
+      << out.error;
+  EXPECT_EQ(body.x_m, before.x_m);
+  EXPECT_EQ(body.v_m_per_s, before.v_m_per_s);
 }
 
 // The explicit sub-step tightens to the Lanczos bound once the mesh has
