@@ -102,7 +102,8 @@ int main(int argc, char** argv) {
                       a.worst_excess, a.inverted_tets, explicit_rung ? (tight ? "yes" : "no") : "-", outcome.c_str());
         }
   std::printf(
-      "\n%d cases (%d steps each): %d ok, %d refused (explicit above max_substeps), %d failed; %d explicit runs "
+      "\n%d cases (%d steps each): %d ok, %d refused (explicit above max_substeps or its energy bound), %d failed; %d "
+      "explicit runs "
       "reached the tightened sub-step\n",
       cases, steps, passed, refused, failed, tightened);
   return failed == 0 ? 0 : 1;
