@@ -84,11 +84,14 @@ int main(int argc, char** argv) {
           std::string outcome = a.nonfinite ? "NON-FINITE" : a.worst_excess > slack ? "ENERGY-GROWTH" : "ok";
           if (a.refused)  // any other refusal is a fault: its message says what (e.g. a rejected non-finite step)
             outcome = verdict == physics::AuditOutcome::kFailed ? "FAILED, refused: " + a.error
-                                                                : std::string("refused above max_substeps");
+                      : verdict == physics::AuditOutcome::kRefusedAboveEnergyBound
+                          ? std::string("refused above its energy bound")
+                          : std::string("refused above max_substeps");
           ++cases;
           if (verdict == physics::AuditOutcome::kFailed)
             ++failed;
-          else if (verdict == physics::AuditOutcome::kRefusedAboveMaxSubsteps)
+          else if (verdict == physics::AuditOutcome::kRefusedAboveMaxSubsteps ||
+                   verdict == physics::AuditOutcome::kRefusedAboveEnergyBound)
             ++refused;
           else
             ++passed;
@@ -99,7 +102,8 @@ int main(int argc, char** argv) {
                       a.worst_excess, a.inverted_tets, explicit_rung ? (tight ? "yes" : "no") : "-", outcome.c_str());
         }
   std::printf(
-      "\n%d cases (%d steps each): %d ok, %d refused (explicit above max_substeps), %d failed; %d explicit runs "
+      "\n%d cases (%d steps each): %d ok, %d refused (explicit above max_substeps or its energy bound), %d failed; %d "
+      "explicit runs "
       "reached the tightened sub-step\n",
       cases, steps, passed, refused, failed, tightened);
   return failed == 0 ? 0 : 1;

@@ -38,7 +38,10 @@ double EnergyBudget::budget_J(const Simulation& sim) const {
 }
 
 double EnergyBudget::excess(const Simulation& sim) const {
-  const double energy = energy_J(sim), budget = budget_J(sim);
+  return energy_excess(energy_J(sim), budget_J(sim), sim.body());
+}
+
+double energy_excess(double energy, double budget, const Body& body) {
   // A non-finite energy or budget (an infinite mass, a NaN work) says nothing
   // is within bound: a NaN would read as "no excess" below, and std::max and
   // `>` drop it where the worst excess is kept.
@@ -51,7 +54,7 @@ double EnergyBudget::excess(const Simulation& sim) const {
   constexpr double kRestNoise_J = 1e-15;
   if (!(energy > kRestNoise_J)) return 0.0;
   if (energy <= budget) return energy / std::max(budget, kRestNoise_J) - 1.0;
-  const double noise_J = std::max(kRestNoise_J, rounding_energy_J(sim.body()));
+  const double noise_J = std::max(kRestNoise_J, rounding_energy_J(body));
   return energy > noise_J ? energy / std::max(budget, noise_J) - 1.0 : 0.0;
 }
 
@@ -85,8 +88,13 @@ AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit
   // blow-up arrives here as a refusal, never as a non-finite state. The
   // explicit rung's refusals above its cap name the key (the step needs more
   // sub-steps, or a collapsing spring no stable sub-step within it).
-  const bool above_cap = audit.error.find("integrator.max_substeps") != std::string::npos;
-  return explicit_rung && above_cap ? AuditOutcome::kRefusedAboveMaxSubsteps : AuditOutcome::kFailed;
+  if (!explicit_rung) return AuditOutcome::kFailed;
+  if (audit.error.find("integrator.max_substeps") != std::string::npos) return AuditOutcome::kRefusedAboveMaxSubsteps;
+  // Its energy bound ("within its bound or refused"): the step that would
+  // have ended above it was refused (Simulation::step).
+  if (audit.error.find("integrator.explicit_energy_slack") != std::string::npos)
+    return AuditOutcome::kRefusedAboveEnergyBound;
+  return AuditOutcome::kFailed;
 }
 
 }  // namespace tissue::physics

@@ -33,6 +33,12 @@ class EnergyBudget {
   double energy0_J_, work0_J_, adaptation0_J_;
 };
 
+// EnergyBudget::excess's arithmetic for an energy and a budget already
+// taken (the explicit rung's bound in Simulation::step judges the same way):
+// E / budget − 1, 0 while E is rounding noise of `body`, +inf when either is
+// not finite.
+double energy_excess(double energy_J, double budget_J, const Body& body);
+
 struct EnergyAudit {
   int steps_taken = 0;
   bool refused = false;  // a step was refused or rejected (see error)
@@ -54,6 +60,7 @@ EnergyAudit audit_steps(Simulation& sim, int steps);
 enum class AuditOutcome {
   kOk,                       // every step taken, finite, within the slack
   kRefusedAboveMaxSubsteps,  // the explicit rung refused a step needing more than integrator.max_substeps
+  kRefusedAboveEnergyBound,  // the explicit rung refused a step ending above integrator.explicit_energy_slack
   kFailed,                   // anything else
 };
 AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit_rung);

@@ -394,6 +394,10 @@ void ExplicitIntegrator::build_layout(const Body& body) {
   rest_bound_per_s2_ = bounds_.rest_per_s2;
   stable_ = stable_step_at(0.0);
   end_displacement_ratio_ = -1.0;
+  r_rise_bound_ = 0.0;
+  shortest_rest_m_ = INFINITY;
+  for (const EdgeId e : moving_springs(body))
+    if (body.stiffness_N_per_m[e] > 0.0) shortest_rest_m_ = std::min(shortest_rest_m_, body.rest_length_m[e]);
   tightened_ = false;
   lanczos_.reset();
   lanczos_credit_ = 0.0;
@@ -555,12 +559,16 @@ namespace {
 constexpr const char* kNonFiniteRejected =
     "explicit integrator: state became non-finite; step rejected, previous state kept";
 
-// The refusal when a step needs more than max_substeps.
-std::string too_many_substeps(double dt_s, double needed, double limit_s, const ExplicitStableStep& stable,
-                              int max_substeps, bool paper_damping) {
+// The refusal when a step needs more than max_substeps. `limit_s` is the
+// sub-step taken, `fraction` of the stable bound (substep_safety on the
+// margin path; it was printed as "stable sub-step", which it is not).
+std::string too_many_substeps(double dt_s, double needed, double limit_s, double fraction,
+                              const ExplicitStableStep& stable, int max_substeps, bool paper_damping,
+                              const char* bound_at = "") {
   std::ostringstream os;
-  os << "explicit integrator: dt_s = " << dt_s << " needs " << needed << " sub-steps (stable sub-step " << limit_s
-     << " s), more than integrator.max_substeps = " << max_substeps
+  os << "explicit integrator: dt_s = " << dt_s << " needs " << needed << " sub-steps (sub-step " << limit_s
+     << " s = " << fraction << " x the stable bound" << bound_at
+     << "), more than integrator.max_substeps = " << max_substeps
      << "; lower dt_s, raise max_substeps, or use the implicit integrator";
   // Stiffness-proportional (or the paper's) spring dampers are explicit
   // here: say so when they, not the springs, set the sub-step.
@@ -575,9 +583,7 @@ std::string too_many_substeps(double dt_s, double needed, double limit_s, const 
 }  // namespace
 
 int ExplicitIntegrator::verified_substeps(double dt_s, double end_displacement_ratio) const {
-  // Capped: with substep_safety above 16/19 the ratio alone would take
-  // sub-steps longer than the stable bound itself.
-  const double fraction = std::min(kVerifiedSafetyPerSafety * spec_.substep_safety, kVerifiedSafetyMax);
+  const double fraction = verified_fraction();
   const double limit = fraction * stable_step_at(end_displacement_ratio).dt_s;
   const double needed = std::ceil(dt_s / limit);
   return needed <= spec_.max_substeps ? std::max(1, static_cast<int>(needed)) : spec_.max_substeps + 1;
@@ -594,7 +600,8 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   const double needed = std::ceil(dt_s / limit);
   if (!(needed <= spec_.max_substeps)) {
     out.ok = false;
-    out.error = too_many_substeps(dt_s, needed, limit, stable_, spec_.max_substeps, paper_damping_);
+    out.error =
+        too_many_substeps(dt_s, needed, limit, spec_.substep_safety, stable_, spec_.max_substeps, paper_damping_);
     return out;
   }
   int count = std::max(1, static_cast<int>(needed));
@@ -606,10 +613,13 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
   // measuring pass costs 0.4-0.8 of a sub-step.
   // Beyond r = ½ the deformed bound is only a cap (a spring may collapse), so
   // r is measured every step there and the shortest spring sets the count.
-  if (end_displacement_ratio_ < 0.0 || end_displacement_ratio_ >= 0.5 || steps_since_measured_ >= kRemeasureSteps) {
+  // Also as soon as r may have reached ½ since it was measured (r_rise_bound_).
+  if (end_displacement_ratio_ < 0.0 || end_displacement_ratio_ + r_rise_bound_ >= 0.5 ||
+      steps_since_measured_ >= kRemeasureSteps) {
     end_displacement_ratio_ = measure_end_displacement_ratio(body);
     growth_per_step_ = 0.0;
     steps_since_measured_ = 0;
+    r_rise_bound_ = 0.0;
   }
   ++steps_since_measured_;
   if (end_displacement_ratio_ >= 0.5) {
@@ -649,6 +659,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     if (verified_substeps(dt_s, reached) <= fewer) {
       growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
       end_displacement_ratio_ = reached;
+      r_rise_bound_ = 0.0;
       ++verified_steps_;
       out.substeps = fewer;
       out.verified_substeps = true;
@@ -662,7 +673,18 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     end_displacement_ratio_ = reached;
     ++rerun_steps_;
     out.rerun = true;
-    count = std::max(count, std::min(verified_substeps(dt_s, reached), spec_.max_substeps));
+    // Within its bound or refused: where the bound there asks for more than
+    // max_substeps, the step is refused (it was run at the cap).
+    const int asked = verified_substeps(dt_s, reached);
+    if (asked > spec_.max_substeps) {
+      const ExplicitStableStep at_reached = stable_step_at(reached);
+      const double limit_s = verified_fraction() * at_reached.dt_s;
+      out.ok = false;
+      out.error = too_many_substeps(dt_s, std::ceil(dt_s / limit_s), limit_s, verified_fraction(), at_reached,
+                                    spec_.max_substeps, paper_damping_, " at the deformation the step reached");
+      return out;
+    }
+    count = std::max(count, asked);
     load(body, f_ext_N);
   }
   return run_and_accept(body, dt_s, count, out);
@@ -676,7 +698,14 @@ StepOutcome ExplicitIntegrator::run_and_accept(Body& body, double dt_s, int coun
     out.error = kNonFiniteRejected;
     return out;
   }
+  // How far the step moved the nodes bounds how far r rose (r_rise_bound_):
+  // a copy and a pass over the nodes, no square root per spring.
+  x_start_m_.assign(body.x_m.begin(), body.x_m.end());
   store(body);
+  double moved2_m2 = 0.0;
+  for (std::size_t n = 0; n < x_start_m_.size(); ++n)
+    moved2_m2 = std::max(moved2_m2, (body.x_m[n] - x_start_m_[n]).squaredNorm());
+  r_rise_bound_ += 2.0 * std::sqrt(moved2_m2) / shortest_rest_m_;
   spend_on_estimate(body, out.substeps);
   return out;
 }

@@ -328,7 +328,7 @@ class ExplicitIntegrator final : public Integrator {
   // see whether it would.
   static constexpr double kVerifiedSafetyPerSafety = 19.0 / 16.0;  // 0.8 -> 0.95
   static constexpr double kVerifiedSafetyMax = 0.95;               // never nearer the stable bound than this
-  static constexpr int kRemeasureSteps = 64;
+  static constexpr int kRemeasureSteps = 64;                       // or sooner: r_rise_bound_
   // r of the last state measured; steps taken with fewer sub-steps, and
   // steps run again. For tests and the benchmark.
   double end_displacement_ratio() const { return end_displacement_ratio_; }
@@ -373,6 +373,12 @@ class ExplicitIntegrator final : public Integrator {
   // Sub-steps for dt_s at relative end displacement r with the verified
   // margin (max_substeps + 1 when more than that).
   int verified_substeps(double dt_s, double end_displacement_ratio) const;
+  // The share of the stable bound a verified sub-step takes: capped, as with
+  // substep_safety above 16/19 the ratio alone would take sub-steps longer
+  // than the stable bound itself.
+  double verified_fraction() const {
+    return std::min(kVerifiedSafetyPerSafety * spec_.substep_safety, kVerifiedSafetyMax);
+  }
   // Runs `count` sub-steps from the loaded state and stores the result in the
   // body, or rejects a non-finite one (the body untouched).
   StepOutcome run_and_accept(Body& body, double dt_s, int count, StepOutcome out);
@@ -395,6 +401,15 @@ class ExplicitIntegrator final : public Integrator {
   double end_displacement_ratio_ = -1.0;  // of the last state measured; < 0: not measured on this layout
   double growth_per_step_ = 0.0;          // r's rise over the last verified step (≥ 0)
   int steps_since_measured_ = 0;
+  // An upper bound on r's rise since it was last measured: a step moving
+  // every node by at most d moves a spring's ends relative to each other by
+  // at most 2 d, so r rises by at most 2 d / (the shortest moving spring's
+  // rest length). When r + this bound reaches 1/2, r is measured again
+  // before the step (the collapse check needs it; the steps on the plain
+  // margin path measured it only every kRemeasureSteps).
+  double r_rise_bound_ = 0.0;
+  double shortest_rest_m_ = 0.0;  // of a spring with a free end, on this layout
+  std::vector<Vec3> x_start_m_;   // the body's positions before a stored step
   std::int64_t verified_steps_ = 0;
   const Vec3* rest_m_ = nullptr;  // the body's rest positions, for the double stream's collapsed springs
   std::int64_t rerun_steps_ = 0;

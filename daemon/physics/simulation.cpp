@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 
+#include "physics/diagnostics.hpp"
 #include "physics/forces.hpp"
 
 namespace tissue::physics {
@@ -40,6 +42,7 @@ Simulation::Simulation(const scene::Scene& scene)
     }
   }
   limits_energy_ = scene.integrator.kind == scene::IntegratorKind::kImplicit;
+  checks_explicit_energy_ = scene.integrator.kind == scene::IntegratorKind::kExplicit;
   counters_.peak_nodes = body_.mesh().node_count();
   counters_.peak_tets = body_.mesh().tet_count();
   counters_.peak_springs = body_.mesh().edge_count();
@@ -73,6 +76,22 @@ StepResult Simulation::step() {
   // the last step was (their kinetic energy change is in the step's work).
   if (limits_energy_ && !energy_known_) energy_J_ = kinetic_energy_J() + elastic_energy_J();
   const double energy_before_J = energy_J_;
+  // The explicit bound's base: the state as built or as a caller last set it.
+  if (checks_explicit_energy_ && !energy_base_known_) {
+    base_energy_J_ = kinetic_energy_J() + elastic_energy_J();
+    base_work_J_ = counters_.external_work_J + counters_.prescribed_work_J;
+    base_adaptation_J_ = counters_.adaptation_energy_J;
+    energy_base_known_ = true;
+    substeps_since_energy_check_ = kEnergyCheckSubsteps;  // the first step is checked
+  }
+  // Checked when this step (taken to need as many sub-steps as the last)
+  // brings the sub-steps since the last check to kEnergyCheckSubsteps.
+  const bool check_energy =
+      checks_explicit_energy_ && substeps_since_energy_check_ + last_substeps_ >= kEnergyCheckSubsteps;
+  if (check_energy) {  // before the drivers set their velocities: all of it is restored on a refusal
+    x_before_m_.assign(body_.x_m.begin(), body_.x_m.end());
+    v_before_m_per_s_.assign(body_.v_m_per_s.begin(), body_.v_m_per_s.end());
+  }
   // A driver also gives its node the velocity of the track (kinematic nodes
   // keep their mass): that kinetic energy is its work too.
   const double driven_kinetic_before_J = prescribed_kinetic_energy_J();
@@ -106,6 +125,25 @@ StepResult Simulation::step() {
   }
   if (limits_energy_) limit_energy(energy_before_J, driven_kinetic_before_J);
   const StepWork work = step_work(driven_kinetic_before_J);
+  if (checks_explicit_energy_) {
+    last_substeps_ = out.substeps;
+    substeps_since_energy_check_ += out.substeps;
+  }
+  if (check_energy) {
+    substeps_since_energy_check_ = 0;
+    if (std::string refusal = explicit_energy_refusal(work); !refusal.empty()) {
+      result.ok = false;
+      result.error = std::move(refusal);
+      ++counters_.rejected_steps;
+      // The step asked again is checked again: the state kept is where the
+      // last refusal came from, not one known to be within the bound.
+      substeps_since_energy_check_ = kEnergyCheckSubsteps;
+      std::copy(x_before_m_.begin(), x_before_m_.end(), body_.x_m.begin());
+      std::copy(v_before_m_per_s_.begin(), v_before_m_per_s_.end(), body_.v_m_per_s.begin());
+      energy_known_ = false;
+      return result;
+    }
+  }
   counters_.external_work_J += work.external_J;
   counters_.prescribed_work_J += work.prescribed_J;
 
@@ -152,6 +190,25 @@ Simulation::StepWork Simulation::step_work(double driven_kinetic_before_J) const
       work.prescribed_J += on_a_N.dot(body_.x_m[body_.edge_b[d.edge]] - prescribed_before_m_[d.b_slot]);
   }
   return work;
+}
+
+std::string Simulation::explicit_energy_refusal(const StepWork& work) const {
+  const double energy_J = kinetic_energy_J() + elastic_energy_J();
+  const double work_J =
+      counters_.external_work_J + counters_.prescribed_work_J + work.external_J + work.prescribed_J - base_work_J_;
+  const double adaptation_J = counters_.adaptation_energy_J - base_adaptation_J_;
+  // As EnergyBudget::budget_J: the work taken as 0 while negative.
+  const double budget_J = base_energy_J_ + std::max(0.0, work_J) + adaptation_J;
+  const double excess = energy_excess(energy_J, budget_J, body_);
+  const double slack = scene().integrator.explicit_energy_slack;
+  if (excess <= slack) return {};  // a NaN excess (never given: +inf instead) would be refused too
+  std::ostringstream os;
+  os.precision(3);
+  os << "explicit integrator: energy " << energy_J << " J is " << 100.0 * excess << " % above its budget " << budget_J
+     << " J (start + work + mesh changes), more than integrator.explicit_energy_slack = " << slack
+     << " allows; step refused, previous state kept: lower integrator.substep_safety, add damping "
+     << "(material.rayleigh_beta_s) or use the implicit integrator";
+  return os.str();
 }
 
 void Simulation::limit_energy(double energy_before_J, double driven_kinetic_before_J) {

@@ -296,12 +296,13 @@ class Converter : public yaml_util::Reader {
 
   void integrator(const YAML::Node& n, const std::string& p, IntegratorSpec& g) const {
     const FieldMap f = fields(n, p,
-                              {"kind", "dt_s", "max_substeps", "substep_safety", "explicit_precision", "cg_tolerance",
-                               "cg_max_iterations", "cg_preconditioner"});
+                              {"kind", "dt_s", "max_substeps", "substep_safety", "explicit_energy_slack",
+                               "explicit_precision", "cg_tolerance", "cg_max_iterations", "cg_preconditioner"});
     opt_choice<IntegratorKind>(f, "kind", p, kIntegratorNames, g.kind);
     opt(f, "dt_s", p, g.dt_s);
     opt(f, "max_substeps", p, g.max_substeps);
     opt(f, "substep_safety", p, g.substep_safety);
+    opt(f, "explicit_energy_slack", p, g.explicit_energy_slack);
     opt_choice<ExplicitPrecision>(f, "explicit_precision", p, kExplicitPrecisionNames, g.explicit_precision);
     opt(f, "cg_tolerance", p, g.cg_tolerance);
     opt(f, "cg_max_iterations", p, g.cg_max_iterations);
@@ -477,6 +478,11 @@ class Validator : private yaml_util::ValueChecks<Validator> {
     finite(g.substep_safety, "integrator.substep_safety");
     if (!(g.substep_safety > 0.0 && g.substep_safety <= 1.0))
       fail("integrator.substep_safety", "must be in (0, 1] (got " + fmt_num(g.substep_safety) + ")");
+    // Above 0 so that the swing symplectic Euler makes on a legitimate run
+    // (O(h ω), 0.37 in the churn test) is never refused; finite so that
+    // the bound exists ("within its bound or refused").
+    finite(g.explicit_energy_slack, "integrator.explicit_energy_slack");
+    positive(g.explicit_energy_slack, "integrator.explicit_energy_slack");
     open_unit(g.cg_tolerance, "integrator.cg_tolerance");
     at_least(g.cg_max_iterations, 1, "integrator.cg_max_iterations");
     if (g.kind == IntegratorKind::kExplicit && g.explicit_precision == ExplicitPrecision::kFloat) float_range();

@@ -329,11 +329,12 @@ TEST(BatchReport, ProgressLinesEveryIntervalOfSimTime) {
 // says that in words. It said "the body held inf % more energy than it
 // started with plus the work done on it". A fixed node given an infinite
 // mass: at rest, its kinetic energy is inf x 0 = NaN from the start, while
-// the explicit rung, which never moves it, takes every step.
+// the implicit rung, which never moves it, takes every step (the explicit
+// rung refuses the first: a NaN energy is not within its energy bound).
 TEST(BatchReport, ANonFiniteEnergyIsWarnedOfInWords) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   const scene::Scene scene = scene::load_scene_file_with_overrides(
-      scene_path("cantilever"), {"integrator.kind=explicit", "adaptivity.enabled=false"});
+      scene_path("cantilever"), {"integrator.kind=implicit", "adaptivity.enabled=false"});
   physics::Simulation sim(scene);
   physics::Body& body = sim.mutable_body();
   physics::NodeId held = 0;
@@ -565,6 +566,28 @@ TEST_F(TissuedProcess, RefusedExplicitStepExits3WithTheReasonInTheReport) {
   ASSERT_EQ(events.size(), 2u);
   EXPECT_TRUE(contains(events[1], "batch run failed at t = 0 s after 0 steps")) << events[1];
   EXPECT_TRUE(contains(events[1], "max_substeps")) << events[1];
+}
+
+// The explicit rung's energy bound refuses as its sub-step cap does: exit 3,
+// one line naming the key, the report's error and rejected_steps. The
+// undamped cantilever swings by up to 0.11 of its budget (at the default
+// slack of 1 it runs its 2 s); a slack of 0.01 refuses it within 20 ms.
+TEST_F(TissuedProcess, ExplicitStepAboveItsEnergyBoundExits3WithTheReasonInTheReport) {
+  const fs::path report = dir_ / "r.json";
+  const Process p = run({"--batch", "--scene", scene_path("cantilever"), "--duration", "0.1", "--set",
+                         "integrator.kind=explicit", "--set", "material.rayleigh_beta_s=0", "--set",
+                         "integrator.explicit_energy_slack=0.01", "--report", report.string()});
+  EXPECT_EQ(p.exit_code, 3) << p.err;
+  EXPECT_TRUE(contains(p.err, "more than integrator.explicit_energy_slack = 0.01 allows")) << p.err;
+  EXPECT_EQ(std::count(p.err.begin(), p.err.end(), '\n'), 1) << p.err;  // one line
+  ASSERT_TRUE(fs::exists(report));
+  const json r = json::parse(read_file(report));
+  ASSERT_TRUE(r["result"]["error"].is_string());
+  EXPECT_TRUE(contains(r["result"]["error"].get<std::string>(), "step refused, previous state kept"));
+  EXPECT_GT(r["result"]["steps"].get<long long>(), 0);
+  EXPECT_LT(r["result"]["steps"].get<long long>(), 20);
+  EXPECT_EQ(r["result"]["rejected_steps"].get<long long>(), 1);
+  EXPECT_EQ(r["result"]["nonfinite_events"].get<long long>(), 0);
 }
 
 // A run whose solver stops at cg_max_iterations still succeeds (exit 0), but

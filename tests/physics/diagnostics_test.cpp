@@ -162,6 +162,15 @@ TEST(Diagnostics, OnlyTheExplicitRungsRefusalAboveMaxSubstepsIsNotAFailure) {
   ASSERT_TRUE(above_cap.refused);
   EXPECT_EQ(audit_outcome(above_cap, 0.05, true), AuditOutcome::kRefusedAboveMaxSubsteps) << above_cap.error;
   EXPECT_EQ(audit_outcome(above_cap, 1e-6, false), AuditOutcome::kFailed) << "only the explicit rung may refuse";
+  // Its energy bound's refusal likewise (the step itself is in
+  // Stability.UndampedYankOnExplicitEndsRefusedAtItsEnergyBound).
+  EnergyAudit above_bound = clean;
+  above_bound.refused = true;
+  above_bound.error =
+      "explicit integrator: energy 3 J is 200 % above its budget 1 J (start + work + mesh changes), "
+      "more than integrator.explicit_energy_slack = 1 allows; step refused, previous state kept";
+  EXPECT_EQ(audit_outcome(above_bound, 0.05, true), AuditOutcome::kRefusedAboveEnergyBound);
+  EXPECT_EQ(audit_outcome(above_bound, 1e-6, false), AuditOutcome::kFailed) << "only the explicit rung may refuse";
 
   // A rejected blow-up, whichever rung: a failure.
   for (const char* rejected : {"explicit integrator: state became non-finite; step rejected, previous state kept",
@@ -203,14 +212,25 @@ TEST(Diagnostics, ANonFiniteEnergyOrBudgetIsNeverWithinTheBound) {
   ASSERT_TRUE(std::isfinite(sim.kinetic_energy_J()));
   EXPECT_EQ(nan_budget.excess(sim), kInf) << "a NaN budget";
 
-  // Through the audit: every step is taken (the fixed node's mass is never
-  // used by the explicit rung), but the energy is NaN throughout.
+  // Through the audit: the explicit rung refuses the first step, as its
+  // energy is not a finite number and so not within its bound
+  // (integrator.explicit_energy_slack)...
   body.mass_kg[held] = kInf;
-  const EnergyAudit audit = audit_steps(sim, 5);
+  const EnergyAudit refused = audit_steps(sim, 5);
+  EXPECT_EQ(refused.steps_taken, 0);
+  EXPECT_NE(refused.error.find("nan J is inf % above its budget"), std::string::npos) << refused.error;
+  EXPECT_EQ(audit_outcome(refused, 1e9, true), AuditOutcome::kRefusedAboveEnergyBound) << refused.error;
+  // ... and the implicit rung takes every step (the fixed node's mass is
+  // never used), but the energy is NaN throughout.
+  s.integrator.kind = scene::IntegratorKind::kImplicit;
+  Simulation implicit_sim(s);
+  testing::jiggle_free_nodes(implicit_sim.mutable_body(), 23, 0.001, 0.05);
+  implicit_sim.mutable_body().mass_kg[held] = kInf;
+  const EnergyAudit audit = audit_steps(implicit_sim, 5);
   ASSERT_EQ(audit.steps_taken, 5) << audit.error;
   EXPECT_FALSE(audit.worst_excess <= 0.0) << audit.worst_excess;
   EXPECT_FALSE(audit.within_energy_bound(1e9));
-  EXPECT_EQ(audit_outcome(audit, 1e9, true), AuditOutcome::kFailed);
+  EXPECT_EQ(audit_outcome(audit, 1e9, false), AuditOutcome::kFailed);
 
   // A NaN worst excess (from any source) is not within any slack either.
   EnergyAudit nan_excess;

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <map>
 #include <random>
+#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -86,6 +87,56 @@ TEST(ExplicitIntegrator, ACollapsingSpringIsSubSteppedOrRefusedNotRunAtTheCap) {
   }
 }
 
+// The collapse check above runs when r, the largest displacement of a
+// spring's ends relative to each other (a share of its rest length), is at
+// least 1/2 at the step's start. r was measured again only when the last
+// value was < 0 or >= 1/2, on a shortened (verified) step, or every
+// kRemeasureSteps = 64 steps: a body crushed on the plain margin path ran on
+// a stale r. A 2x2x2 cube, its x = 0 face fixed and its x = 0.1 face pushed
+// 0.08 m in over 20 ms, had its shortest spring go from 0.50 to 0.004 of its
+// rest length over steps 11-64 at 1 sub-step per step with r still 0. Every
+// step whose start has r >= 1/2 takes the sub-steps the collapse factor of
+// its shortest spring asks for (or is refused naming the cap).
+TEST(ExplicitIntegrator, ACrushedBodyIsCollapseCheckedAtEveryStepNotOnAStaleRatio) {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.integrator.dt_s = 1e-3;
+  s.material.rayleigh_beta_s = 0.0;
+  s.fixed.push_back({scene::Region::box({0, 0, 0}, {0, 0.1, 0.1})});
+  scene::TimeProfile push;
+  push.ramp_s = 0.02;
+  s.prescribed.push_back({"push", scene::Region::box({0.1, 0, 0}, {0.1, 0.1, 0.1}), {-0.08, 0, 0}, push});
+  Simulation sim(s);
+  int crushed_steps = 0;
+  for (int i = 0; i < 100; ++i) {
+    const Body& body = sim.body();
+    double r_start = 0.0;  // as the integrator measures it: springs with a free end
+    for (std::size_t e = 0; e < body.edge_a.size(); ++e) {
+      const NodeId a = body.edge_a[e], b = body.edge_b[e];
+      if (!(body.stiffness_N_per_m[e] > 0.0)) continue;
+      if (body.inv_mass_per_kg[a] == 0.0 && body.inv_mass_per_kg[b] == 0.0) continue;
+      const Vec3 du = (body.x_m[b] - body.rest_m[b]) - (body.x_m[a] - body.rest_m[a]);
+      r_start = std::max(r_start, du.norm() / body.rest_length_m[e]);
+    }
+    const ShortestSpring shortest = shortest_spring(body);
+    const double needed =
+        std::ceil(s.integrator.dt_s /
+                  (s.integrator.substep_safety *
+                   collapsed_stable_step(explicit_bounds(body), collapse_factor(shortest.length_ratio)).dt_s));
+    const StepResult r = sim.step();
+    if (!r.ok) {
+      EXPECT_NE(r.error.find("integrator.max_substeps"), std::string::npos) << r.error;
+      break;
+    }
+    if (r_start >= 0.5) {
+      ++crushed_steps;
+      EXPECT_GE(r.substeps, needed) << "step " << i + 1 << ": r " << r_start << ", shortest spring at "
+                                    << shortest.length_ratio << " of its rest length";
+    }
+  }
+  EXPECT_GT(crushed_steps, 10) << "the body was crushed";
+}
+
 TEST(ExplicitIntegrator, RefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
   scene::Scene s = beam_scene();
   s.integrator.kind = scene::IntegratorKind::kExplicit;
@@ -96,6 +147,13 @@ TEST(ExplicitIntegrator, RefusesWhenTheSubstepCapIsTooLowAndKeepsTheState) {
   const StepResult r = sim.step();
   EXPECT_FALSE(r.ok);
   EXPECT_NE(r.error.find("max_substeps"), std::string::npos);
+  // The sub-step it names is substep_safety of the stable bound, and says so
+  // (it was called the "stable sub-step").
+  const double limit_s = s.integrator.substep_safety * explicit_stable_dt_s(sim.body());
+  std::ostringstream says;
+  says << "(sub-step " << limit_s << " s = 0.8 x the stable bound)";
+  EXPECT_NE(r.error.find(says.str()), std::string::npos) << r.error;
+  EXPECT_EQ(r.error.find("(stable sub-step "), std::string::npos) << r.error;
   EXPECT_EQ(sim.body().x_m, x_before);
   EXPECT_EQ(sim.time_s(), 0.0);
   EXPECT_EQ(sim.counters().rejected_steps, 1);
@@ -319,6 +377,43 @@ TEST(ExplicitIntegrator, RerunsAStepWhoseDeformationOutgrewItsSubsteps) {
   other.run_substeps(direct, f, dt_s / out.substeps, out.substeps);
   EXPECT_EQ(direct.x_m, body.x_m);
   EXPECT_EQ(direct.v_m_per_s, body.v_m_per_s);
+}
+
+// The step run again takes what the bound at the state reached asks for;
+// where that is more than integrator.max_substeps it is refused (the body
+// untouched), not run at the cap: within its bound or refused. Before, the
+// rerun took min(asked, max_substeps) sub-steps and was accepted.
+TEST(ExplicitIntegrator, ARerunNeedingMoreThanMaxSubstepsIsRefusedNotCapped) {
+  scene::Scene s = beam_scene();
+  s.material.rayleigh_beta_s = 0.0;
+  s.adaptivity.min_depth = 1;
+  Body body(s);
+  testing::jiggle_free_nodes(body, 7, 0.0, 5.0);  // at rest (r = 0) but fast, as above
+  const std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
+  const double dt_s = 20.0 * s.integrator.substep_safety * explicit_stable_dt_s(body);
+  const int margin = static_cast<int>(std::ceil(dt_s / (s.integrator.substep_safety * explicit_stable_dt_s(body))));
+  // With room, the rerun takes more than the margin's count: the case exists.
+  {
+    Body room = body;
+    ExplicitIntegrator integrator(s.integrator, s.material);
+    const StepOutcome out = integrator.step(room, f, dt_s);
+    ASSERT_TRUE(out.ok) << out.error;
+    ASSERT_TRUE(out.rerun);
+    ASSERT_GT(out.substeps, margin);
+  }
+  // Capped at the margin's count: refused, the body untouched.
+  scene::IntegratorSpec capped = s.integrator;
+  capped.max_substeps = margin;
+  ExplicitIntegrator integrator(capped, s.material);
+  const Body before = body;
+  const StepOutcome out = integrator.step(body, f, dt_s);
+  EXPECT_FALSE(out.ok) << out.substeps << " sub-steps taken";
+  EXPECT_NE(out.error.find("more than integrator.max_substeps = " + std::to_string(margin)), std::string::npos)
+      << out.error;
+  EXPECT_NE(out.error.find(" s = 0.95 x the stable bound at the deformation the step reached)"), std::string::npos)
+      << out.error;
+  EXPECT_EQ(body.x_m, before.x_m);
+  EXPECT_EQ(body.v_m_per_s, before.v_m_per_s);
 }
 
 // The explicit sub-step tightens to the Lanczos bound once the mesh has

@@ -78,6 +78,7 @@ integrator:
   dt_s: 0.001
   max_substeps: 1000
   substep_safety: 0.8
+  explicit_energy_slack: 1.0
   cg_tolerance: 1.0e-6
   cg_max_iterations: 100
 probes:
@@ -425,6 +426,16 @@ TEST(SceneYamlErrors, PhysicallyMeaninglessValues) {
   expect_error(base_with("stretch_ratio: 1.05", "stretch_ratio: 1"), "adaptivity.stretch_ratio", "> 1");
   expect_error(base_with("every_steps: 5", "every_steps: 0"), "adaptivity.every_steps", ">= 1");
   expect_error(base_with("substep_safety: 0.8", "substep_safety: 1.5"), "integrator.substep_safety", "(0, 1]");
+  // The explicit rung's energy bound: a fraction above the budget, > 0 so
+  // that its O(h omega) swing is never refused, finite so that it bounds.
+  expect_error(base_with("explicit_energy_slack: 1.0", "explicit_energy_slack: 0"), "integrator.explicit_energy_slack",
+               "must be > 0 (got 0)");
+  expect_error(base_with("explicit_energy_slack: 1.0", "explicit_energy_slack: -0.5"),
+               "integrator.explicit_energy_slack", "must be > 0");
+  expect_error(base_with("explicit_energy_slack: 1.0", "explicit_energy_slack: .inf"),
+               "integrator.explicit_energy_slack", "finite");
+  expect_error(base_with("explicit_energy_slack: 1.0", "explicit_energy_slack: many"),
+               "integrator.explicit_energy_slack", "");
   expect_error(base_with("cg_tolerance: 1.0e-6", "cg_tolerance: 1"), "integrator.cg_tolerance", "(0, 1)");
 }
 
@@ -1038,6 +1049,8 @@ TEST(SceneYaml, EachNumericKeyLandsInItsOwnField) {
       {"max_substeps: 1000", "max_substeps: 999", [](const Scene& s) { return double(s.integrator.max_substeps); },
        999.0},
       {"substep_safety: 0.8", "substep_safety: 0.7", [](const Scene& s) { return s.integrator.substep_safety; }, 0.7},
+      {"explicit_energy_slack: 1.0", "explicit_energy_slack: 0.25",
+       [](const Scene& s) { return s.integrator.explicit_energy_slack; }, 0.25},
       {"cg_tolerance: 1.0e-6", "cg_tolerance: 3.0e-6", [](const Scene& s) { return s.integrator.cg_tolerance; },
        3.0e-6},
       {"cg_max_iterations: 100", "cg_max_iterations: 77",

@@ -415,6 +415,53 @@ TEST(SimThread, AStepThatThrowsHaltsTheRunnerAndTheThreadKeepsServing) {
   recorder->stop();
 }
 
+// The explicit rung's energy bound refuses a step as its sub-step cap does:
+// the thread neither spins nor halts. Each refused step is counted with its
+// reason, at the thread's pace, time stands, models keep being built from
+// the state kept, and a new runner steps again.
+TEST(SimThread, AStepRefusedAtTheExplicitEnergyBoundIsCountedAtThePaceAndTheThreadKeepsServing) {
+  scene::Scene s = cantilever_with_tool();
+  s.integrator.kind = scene::IntegratorKind::kExplicit;
+  s.material.rayleigh_beta_s = 0.0;           // undamped: its energy swings by up to ~0.1 of the budget
+  s.integrator.explicit_energy_slack = 1e-3;  // so the bound refuses within a few steps
+  ToolSampleRing samples;
+  LocalModelChannel models;
+  SimThreadOptions options;
+  options.status_every_s = 0.002;
+  SimThread thread(std::make_unique<SimRunner>(s), &samples, &models, options);
+  thread.start();
+  haptics::ToolSample hover;
+  hover.proxy_position_m = haptics::Vec3(0.05, 0.05, 0.102);
+  const auto feed = [&](std::chrono::milliseconds how_long) {
+    const auto end = std::chrono::steady_clock::now() + how_long;
+    while (std::chrono::steady_clock::now() < end) {
+      samples.try_push(hover);
+      std::this_thread::sleep_for(1ms);
+    }
+  };
+  ASSERT_TRUE(wait_for([&] { return thread.status().failed_steps > 0; })) << thread.status().steps << " steps";
+  const SimStatus first = thread.status();
+  const std::uint64_t version = models.read().value->version;
+  const auto t0 = std::chrono::steady_clock::now();
+  feed(200ms);
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const SimStatus later = thread.status();
+  EXPECT_FALSE(later.halted);
+  EXPECT_NE(std::string(later.last_error).find("integrator.explicit_energy_slack = 0.001"), std::string::npos)
+      << later.last_error;
+  EXPECT_EQ(later.steps, first.steps);  // refused again at every try: time stands
+  EXPECT_EQ(later.sim_time_s, first.sim_time_s);
+  // Paced: about one try per dt (1 ms), not a spin (generous: shared machine).
+  EXPECT_GT(later.failed_steps, first.failed_steps + 20);
+  EXPECT_LT(static_cast<double>(later.failed_steps - first.failed_steps), 1e3 * wall_s * 1.5 + 10);
+  EXPECT_GT(models.read().value->version, version);  // models still built, from the state kept
+
+  thread.replace_runner(std::make_unique<SimRunner>(cantilever_with_tool()));
+  EXPECT_TRUE(wait_for([&] { return thread.status().generation == 1 && thread.status().steps > 20; }));
+  EXPECT_STREQ(thread.status().last_error, "");
+  thread.stop();
+}
+
 // The haptic rows drained in the loop whose step throws are written like
 // any others: they were recorded only after the step, inside the exception
 // barrier, so the throw lost them.
