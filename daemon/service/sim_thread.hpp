@@ -78,7 +78,10 @@ struct SimStatus {
   std::array<double, 3> device_position_m{}, proxy_position_m{}, force_on_device_N{};
   std::uint64_t tick_model_version = 0;
   bool tool_contact = false;
-  char last_error[256] = {};  // the newest failed step's reason (NUL-terminated)
+  // The newest failed step's reason (NUL-terminated). Room for the longest
+  // the integrators give (the explicit refusals with their advice run to ~300
+  // characters; 256 cut the advice off).
+  char last_error[1024] = {};
 };
 
 struct SimThreadOptions {

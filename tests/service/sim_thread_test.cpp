@@ -449,6 +449,9 @@ TEST(SimThread, AStepRefusedAtTheExplicitEnergyBoundIsCountedAtThePaceAndTheThre
   EXPECT_FALSE(later.halted);
   EXPECT_NE(std::string(later.last_error).find("integrator.explicit_energy_slack = 0.001"), std::string::npos)
       << later.last_error;
+  // Whole, with its advice: the status's buffer cut it at 255 characters.
+  EXPECT_NE(std::string(later.last_error).find("or use the implicit integrator"), std::string::npos)
+      << later.last_error;
   EXPECT_EQ(later.steps, first.steps);  // refused again at every try: time stands
   EXPECT_EQ(later.sim_time_s, first.sim_time_s);
   // Paced: about one try per dt (1 ms), not a spin (generous: shared machine).
