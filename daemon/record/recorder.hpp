@@ -130,8 +130,10 @@ class Recorder {
   Recorder& operator=(const Recorder&) = delete;
 
   // ---- producer side: wait-free, no allocation, no lock ----------------
-  bool push_haptic(const HapticRow& row) noexcept;  // haptic thread only
-  bool push_sim(const SimRow& row) noexcept;        // sim thread only
+  // One producer thread each. In the daemon both are the sim thread: it
+  // drains the haptic loop's tool samples and pushes them as haptic rows.
+  bool push_haptic(const HapticRow& row) noexcept;
+  bool push_sim(const SimRow& row) noexcept;
   bool push_event(EventSource source, const Event& event) noexcept;
   // Sim thread only: true when a frame is wanted at `time_s` (session time),
   // so the surface is extracted only when it will be recorded.
