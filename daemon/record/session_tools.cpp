@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string_view>
@@ -664,7 +665,10 @@ SessionInfo read_session_info(const std::string& path) {
   SessionInfo info = f.info();
   for (const HapticHole& hole : read_haptic_holes(f)) {
     ++info.haptic_holes;
-    info.haptic_ticks_lost += hole.ticks_lost;
+    // Saturated: a damaged or forged count must not wrap to a small one.
+    info.haptic_ticks_lost = hole.ticks_lost > std::numeric_limits<std::uint64_t>::max() - info.haptic_ticks_lost
+                                 ? std::numeric_limits<std::uint64_t>::max()
+                                 : info.haptic_ticks_lost + hole.ticks_lost;
   }
   return info;
 }

@@ -1866,5 +1866,23 @@ TEST(SessionReader, HoleEventsAreReadBackAndCheckedAgainstTheRows) {
   }
 }
 
+// Hole events whose ticks add up past what a count holds (damage, or a forged
+// file) show the largest count, not a small number that wrapped.
+TEST(SessionReader, TheTicksLostInHolesSaturate) {
+  TempDir dir;
+  auto w = SessionWriter::create(dir / "s.h5", SessionMetadata{});
+  const std::vector<HapticRow> rows = {testing::haptic_row(0)};
+  w->append_haptic(rows);
+  const std::string huge = std::string(kHapticHolePrefix) + std::to_string(std::numeric_limits<std::uint64_t>::max()) +
+                           " ticks before any /haptic row was recorded";
+  const std::vector<Event> events = {Event::make(0.0, EventKind::kWarning, huge),
+                                     Event::make(0.0, EventKind::kWarning, huge)};
+  w->append_events(events);
+  w->close();
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  EXPECT_EQ(info.haptic_holes, 2u);
+  EXPECT_EQ(info.haptic_ticks_lost, std::numeric_limits<std::uint64_t>::max());
+}
+
 }  // namespace
 }  // namespace tissue::record
