@@ -717,8 +717,9 @@ def main():
             # interrupted it: its Python handler has not run yet (it runs
             # at some later instruction); pthread_sigmask runs pending
             # handlers before it returns (PyErr_CheckSignals), changing no
-            # mask here. The deadline is read from the clock: SIGALRM is not
-            # sent before it.
+            # mask here. The deadline is read from the clock, not from the
+            # signal: SIGALRM also comes before it when on_signal armed the
+            # 50 ms alarm for a stop, and that case is the `stop` one first.
             signal.pthread_sigmask(signal.SIG_BLOCK, [])
             if stop:
                 lost = (f"stopped by {signal.Signals(stop[-1]).name} in the middle of a message from the server; "

@@ -185,9 +185,12 @@ void ReplayDevice::build_knots_from_flags() {
   for (std::size_t i = 1; i < rows; ++i) rows_s.push_back(time_s_[i] - time_s_[i - 1]);
   row_period_s_ = median_s(rows_s);
 
-  knot_time_s_.reserve(samples + 2);
-  knot_position_m_.reserve(samples + 2);
-  knot_after_gap_.reserve(samples + 2);
+  // A knot per sample, the first and last rows, and one held over the holes
+  // of each lost gap (at most one per hole).
+  const std::size_t knots = samples + 2 + rows_after_holes_.size();
+  knot_time_s_.reserve(knots);
+  knot_position_m_.reserve(knots);
+  knot_after_gap_.reserve(knots);
   // Before the first sample the loop had no hand: it read no sample (the
   // device lost from its first tick, no force), judged that sample against
   // nothing, and the rows hold the device origin. So those rows play as no
@@ -226,35 +229,52 @@ void ReplayDevice::build_knots_from_flags() {
   // played as a lost device whenever a row without a sample followed it.
   // Within a gap kept, the hole glides with the rest of it (or holds a still
   // hand), as any gap between samples.
+  //
+  // A lost gap with holes before its loss point (the first row present past
+  // the timeout, holes not counted) is held at the last sample for as long
+  // as those holes last, then played as no samples: the loop loses the
+  // device a timeout after the last sample read() hands over, so it does at
+  // that point, as live. Played as no samples from the sample on, the loss
+  // began up to a hole's length early, inside the hole, where the device
+  // was fine as far as anyone knows. (The loop then judges the sample that
+  // ends the gap against the held one over the rest of the gap.)
   if (first < rows) add_knot(time_s_[first], position_m_[first], starts_without_sample_);
   std::size_t hole = 0;  // the next of rows_after_holes_ to pass
   while (hole < rows_after_holes_.size() && rows_after_holes_[hole] <= first) ++hole;
-  double hole_s = 0.0;  // time in holes from the last sample to the row before i
+  double hole_s = 0.0;   // time in holes from the last sample to row i
+  double held_s = -1.0;  // hole_s at the loss point; < 0 while the gap is kept
+  // Ends the gap since the last sample at a knot at row `end`: held over the
+  // holes before the loss point when it was lost.
+  const auto end_gap = [&](std::size_t end) {
+    const bool lost = held_s >= 0.0;
+    if (held_s > 0.0) add_knot(knot_time_s_.back() + held_s, knot_position_m_.back());
+    add_knot(time_s_[end], position_m_[end], lost);
+    hole_s = 0.0;
+    held_s = -1.0;
+    return lost;
+  };
   for (std::size_t i = first + 1; i < rows; ++i) {
     const bool after_hole = hole < rows_after_holes_.size() && rows_after_holes_[hole] == i;
     if (after_hole) ++hole;
-    if (!is_sample(i)) {
-      // The hole before this row is inside the gap up to the next sample.
-      if (after_hole) hole_s += time_s_[i] - time_s_[i - 1];
+    if (is_sample(i)) {
+      // (A hole just before a sample is outside the gap measured, which
+      // ends at the row before it.)
+      end_gap(i);
       continue;
     }
-    // (A hole just before a sample is outside the gap measured, which ends
-    // at the row before it.)
-    const bool lost = time_s_[i - 1] - knot_time_s_.back() - hole_s > device_timeout_s_ + kRoundingSlackS;
-    add_knot(time_s_[i], position_m_[i], lost);
-    hole_s = 0.0;
+    // The hole before this row is inside the gap up to the next sample. The
+    // time counted only grows row by row, so the first row past the timeout
+    // is the loss point.
+    if (after_hole) hole_s += time_s_[i] - time_s_[i - 1];
+    if (held_s < 0.0 && time_s_[i] - knot_time_s_.back() - hole_s > device_timeout_s_ + kRoundingSlackS)
+      held_s = hole_s;
   }
   // The rows after the last sample, by the same rule: when the track ends
   // more than the timeout after it (holes not counted), live the device had
   // stopped and the loop lost it for the rest of the track, so that tail
   // plays as no samples (to the end, and held there), not as a live hand
   // held at the last pose.
-  if (time_s_.back() > knot_time_s_.back()) {
-    const bool lost =
-        first < rows && time_s_.back() - knot_time_s_.back() - hole_s > device_timeout_s_ + kRoundingSlackS;
-    add_knot(time_s_.back(), position_m_.back(), lost);
-    ends_without_sample_ = lost;
-  }
+  if (time_s_.back() > knot_time_s_.back()) ends_without_sample_ = end_gap(rows - 1);
 }
 
 void ReplayDevice::build_knots_by_guess() {

@@ -47,7 +47,9 @@
 // A hole the recorder left (rows it dropped when its ring overflowed, named
 // by the session's hole events) is no time without a sample: the device's
 // ticks there are unknown, so only the rows present are judged, and a
-// stretch lost on them (beside a hole, or around it) still plays as lost.
+// stretch lost on them (beside a hole, or around it) still plays as lost,
+// from where live it was: the last sample is held for as long as the holes
+// before the point where the rows present pass the timeout.
 #pragma once
 
 #include <cstdint>

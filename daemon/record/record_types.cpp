@@ -78,9 +78,10 @@ bool parse_haptic_hole(std::string_view message, HapticHole* hole) {
     return false;
   std::uint64_t before = 0;
   if (r.literal("between /haptic rows ")) {
-    if (!r.number(&before) || !r.literal(" (") || !r.seconds(&h.time_before_s) || !r.literal(" s) and ") ||
-        !r.number(&h.row_after) || h.row_after != before + 1 || !r.literal(" (") || !r.seconds(&h.time_after_s) ||
-        !r.literal(" s)"))
+    // No row follows the largest row number (before + 1 would wrap to 0).
+    if (!r.number(&before) || before == UINT64_MAX || !r.literal(" (") || !r.seconds(&h.time_before_s) ||
+        !r.literal(" s) and ") || !r.number(&h.row_after) || h.row_after != before + 1 || !r.literal(" (") ||
+        !r.seconds(&h.time_after_s) || !r.literal(" s)"))
       return false;
   } else if (r.literal("after /haptic row ")) {
     if (!r.number(&before) || before == UINT64_MAX || !r.literal(" (") || !r.seconds(&h.time_before_s) ||

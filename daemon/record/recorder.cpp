@@ -195,7 +195,8 @@ RecorderStats Recorder::stats() const noexcept {
   s.sim_rows_written = sim_written_.load(std::memory_order_relaxed);
   s.mesh_frames_written = frames_written_.load(std::memory_order_relaxed);
   s.events_written = events_written_.load(std::memory_order_relaxed);
-  s.haptic_drops = haptic_ring_.drops() + refused_haptic_.load(std::memory_order_relaxed);
+  s.haptic_drops_ring_full = haptic_ring_.drops();
+  s.haptic_drops = s.haptic_drops_ring_full + refused_haptic_.load(std::memory_order_relaxed);
   s.sim_drops = sim_ring_.drops() + refused_sim_.load(std::memory_order_relaxed);
   s.mesh_frame_drops = mesh_frame_drops_.load(std::memory_order_relaxed);
   s.event_drops = refused_events_.load(std::memory_order_relaxed);

@@ -105,6 +105,10 @@ inline constexpr int kEventSourceCount = 3;
 struct RecorderStats {
   std::uint64_t haptic_rows_written = 0, sim_rows_written = 0, mesh_frames_written = 0, events_written = 0;
   std::uint64_t haptic_drops = 0, sim_drops = 0, mesh_frame_drops = 0, event_drops = 0;
+  // Of haptic_drops, the rows the haptic ring refused because it was full
+  // (the rest were pushed after the recording closed): once stopped, exactly
+  // the ticks the file's hole events name (HapticHole).
+  std::uint64_t haptic_drops_ring_full = 0;
   std::uint64_t mesh_frames_too_big = 0;  // refused at push: over the buffer capacity (also in drops)
   std::uint64_t mesh_frames_invalid = 0;  // refused by the writer: bad indices, levels, strain, coordinates
   std::uint64_t bytes_written = 0;        // payload bytes handed to HDF5

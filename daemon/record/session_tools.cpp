@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string_view>
@@ -630,7 +631,7 @@ std::vector<std::string> SessionFile::event_messages(std::uint64_t first, std::u
 
 void SessionFile::fail(const std::string& what) const { bad_file(impl_->path, what); }
 
-std::vector<HapticHole> read_haptic_holes(const SessionFile& f) {
+std::vector<HapticHole> read_haptic_holes(const SessionFile& f, std::vector<std::string>* damaged) {
   const std::uint64_t events = f.info().rows.events, rows = f.info().rows.haptic_rows;
   if (events == 0) return {};
   const std::vector<std::int32_t> kinds = f.rows<std::int32_t>(kEventKind, 0, events);
@@ -642,17 +643,25 @@ std::vector<HapticHole> read_haptic_holes(const SessionFile& f) {
     // The rows it names, where the file holds them, must be the rows around
     // the hole: the replay skips the device's judgement there, and a hole
     // in the wrong place (a damaged number) would skip a real device loss.
-    const auto check = [&](std::uint64_t row, double t_s, const char* side) {
-      if (row >= rows) return;
+    // Returns what is wrong ("" when the row matches).
+    const auto check = [&](std::uint64_t row, double t_s, const char* side) -> std::string {
+      if (row >= rows) return {};
       const double recorded_s = f.rows<double>(kHapticTime, row, 1)[0];
-      if (!(std::abs(recorded_s - t_s) <= 1e-6))
-        f.fail(std::string(kDatasets[kEventMessage].path) + "[" + std::to_string(e) + "] says the recorder dropped " +
-               "haptic rows " + side + " /haptic row " + std::to_string(row) + " at " + std::to_string(t_s) +
-               " s, but that row is at " + std::to_string(recorded_s) + " s: corrupt session file");
+      if (std::abs(recorded_s - t_s) <= 1e-6) return {};
+      return std::string(kDatasets[kEventMessage].path) + "[" + std::to_string(e) + "] says the recorder dropped " +
+             "haptic rows " + side + " /haptic row " + std::to_string(row) + " at " + std::to_string(t_s) +
+             " s, but that row is at " + std::to_string(recorded_s) + " s";
     };
-    if (hole.has_row_before()) check(hole.row_after - 1, hole.time_before_s, "after");
-    if (hole.has_row_after()) check(hole.row_after, hole.time_after_s, "before");
-    holes.push_back(hole);
+    std::string wrong;
+    if (hole.has_row_before()) wrong = check(hole.row_after - 1, hole.time_before_s, "after");
+    if (wrong.empty() && hole.has_row_after()) wrong = check(hole.row_after, hole.time_after_s, "before");
+    if (wrong.empty()) {
+      holes.push_back(hole);
+    } else if (damaged) {
+      damaged->push_back("hole event " + std::to_string(e) + " does not match its rows (damaged): " + wrong);
+    } else {
+      f.fail(wrong + ": corrupt session file");
+    }
   }
   std::stable_sort(holes.begin(), holes.end(),
                    [](const HapticHole& a, const HapticHole& b) { return a.row_after < b.row_after; });
@@ -662,9 +671,14 @@ std::vector<HapticHole> read_haptic_holes(const SessionFile& f) {
 SessionInfo read_session_info(const std::string& path) {
   const SessionFile f(path);
   SessionInfo info = f.info();
-  for (const HapticHole& hole : read_haptic_holes(f)) {
+  // A damaged hole event is reported, not a reason to hide the rest: repair
+  // does not touch events, so the file could never be summarised again.
+  for (const HapticHole& hole : read_haptic_holes(f, &info.damaged_hole_events)) {
     ++info.haptic_holes;
-    info.haptic_ticks_lost += hole.ticks_lost;
+    // Saturated: a damaged or forged count must not wrap to a small one.
+    info.haptic_ticks_lost = hole.ticks_lost > std::numeric_limits<std::uint64_t>::max() - info.haptic_ticks_lost
+                                 ? std::numeric_limits<std::uint64_t>::max()
+                                 : info.haptic_ticks_lost + hole.ticks_lost;
   }
   return info;
 }
@@ -914,6 +928,10 @@ std::string format_session_info(const SessionInfo& info) {
     o << "haptic holes:     " << info.haptic_holes << (info.haptic_holes == 1 ? " hole, " : " holes, ")
       << info.haptic_ticks_lost << (info.haptic_ticks_lost == 1 ? " tick" : " ticks")
       << " the recorder dropped (its ring was full); a warning event each names the rows on either side\n";
+  // The replay refuses the file while one is there (it would skip the
+  // device's judgement in the wrong place); everything else reads.
+  for (const std::string& damaged : info.damaged_hole_events)
+    o << "damaged:          " << shown(damaged) << "; not counted as a hole, and device.replay refuses the file\n";
   if (std::any_of(info.unreferenced_rows.begin(), info.unreferenced_rows.end(),
                   [](std::uint64_t n) { return n > 0; })) {
     o << "unreferenced rows (past the shortest column of their group, or in no frame of the index; no tool reads "
@@ -1027,6 +1045,9 @@ std::string format_session_listing(const SessionListing& listing) {
         shown(s.scene_name));
   }
   for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << shown(u.reason) << "\n";
+  for (const SessionInfo& s : listing.sessions)
+    for (const std::string& damaged : s.damaged_hole_events)
+      o << "damaged: " << shown(std::filesystem::path(s.path).filename().string()) << ": " << shown(damaged) << "\n";
   for (const std::string& f : listing.unfinished)
     o << "unfinished: " << shown(f)
       << ": a session being created right now, or left by a recorder that stopped while creating it (not a "

@@ -67,6 +67,12 @@ struct SessionInfo {
   // all. Filled by read_session_info (so `info` and `list`); SessionFile's
   // info() leaves them 0 (read_haptic_holes reads them).
   std::uint64_t haptic_holes = 0, haptic_ticks_lost = 0;
+  // Hole events that do not match the rows they name (damage), one line each
+  // naming the event row; not counted above. Filled by read_session_info:
+  // info and list report them and show the rest of the file (repair does not
+  // touch events, so refusing the file would hide it for good); the replay
+  // refuses such a file (read_haptic_track).
+  std::vector<std::string> damaged_hole_events;
 };
 
 // Opens read-only (SWMR read when the superblock says it is still open for
@@ -201,8 +207,11 @@ HapticTrack read_haptic_track(const std::string& path);
 // nanoseconds), else the file is refused naming the event row. A hole whose
 // next row is past the rows readers use (a crash's last write, trimmed by
 // repair) is kept: its ticks were lost all the same. Files written before
-// the recorder recorded holes have none.
-std::vector<HapticHole> read_haptic_holes(const SessionFile& f);
+// the recorder recorded holes have none. With `damaged`, a hole event that
+// does not match its rows is left out and described there (one line each,
+// "hole event N does not match its rows (damaged): ...") instead: for info
+// and list, which show the rest of the file.
+std::vector<HapticHole> read_haptic_holes(const SessionFile& f, std::vector<std::string>* damaged = nullptr);
 
 struct RepairReport {
   bool repair_needed = false;      // false: the file was already fine; nothing changed

@@ -976,9 +976,12 @@ TEST(ReplayDevice, AHoleTheRecorderLeftIsNotPlayedAsALostDevice) {
 // test above, its device lost before the hole (a sample right after it),
 // after it, and on both sides, 9 ms before and 7 ms after (16 ms without a
 // sample on the rows present, over the 10 ms timeout, though each side alone
-// is under it). The hole lies inside each loss, so it plays as no samples
-// too. (A moving hand whose samples came in the hole shows a new position on
-// the row after it: a sample, so a loss after the hole starts there.)
+// is under it). Each loss comes where the rows present pass the timeout:
+// before the hole, the hole lies inside the loss and plays as no samples;
+// after it or across it, the last sample is held over the hole (its time
+// does not count) and the loss comes after it. (A moving hand whose samples
+// came in the hole shows a new position on the row after it: a sample, so a
+// loss after the hole starts there.)
 TEST(ReplayDevice, ADeviceLossBesideAHoleIsStillPlayedAsALoss) {
   const config::DeviceSpec spec = no_model_device_spec();
   ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
@@ -992,14 +995,18 @@ TEST(ReplayDevice, ADeviceLossBesideAHoleIsStillPlayedAsALoss) {
   struct Case {
     const char* name;
     std::vector<int> lost;  // samples (every 4th row) that never came
-    int no_sample_ms;       // a tick without a sample on the rows present
+    int no_sample_ms;       // a tick of the loss on the rows present
     int next_sample_ms;     // the sample that ends the loss
+    bool hole_in_loss;      // the rows before the hole passed the timeout
   };
-  // The hole: rows 202..251 (a sample was due at 204 ... 248).
+  // The hole: rows 202..251 (a sample was due at 204 ... 248); 51 ms between
+  // rows 201 and 252, left out. After it the last sample (200 ms) is held
+  // to 251 ms, lost from 261 ms; across it (192 ms) held to 243, lost from
+  // 253 ms, as the rows present pass the timeout at 262 and 254 ms.
   const Case cases[] = {
-      {"before the hole", samples(45, 50), 190, 252},
-      {"after the hole", samples(63, 67), 260, 272},
-      {"across the hole", samples(49, 64), 199, 260},
+      {"before the hole", samples(45, 50), 190, 252, true},
+      {"after the hole", samples(63, 67), 260, 272, false},
+      {"across the hole", samples(49, 64), 255, 260, false},
   };
   std::string error;
   DeviceSample s;
@@ -1013,15 +1020,82 @@ TEST(ReplayDevice, ADeviceLossBesideAHoleIsStillPlayedAsALoss) {
     EXPECT_EQ(replay.lost_gaps(), 1u);
     ASSERT_TRUE(replay.read(0, &s));
     // In time order (read() plays forwards): a tick of the loss on a row
-    // present, and one in the hole, inside the loss.
-    for (const int ms : {std::min(c.no_sample_ms, 230), std::max(c.no_sample_ms, 230)})
-      EXPECT_FALSE(replay.read(ms * kMs, &s)) << "at " << ms << " ms";
+    // present, and one in the hole, inside the loss or held.
+    for (const int ms : {std::min(c.no_sample_ms, 230), std::max(c.no_sample_ms, 230)}) {
+      if (ms == 230)
+        EXPECT_EQ(replay.read(ms * kMs, &s), !c.hole_in_loss) << "in the hole";
+      else
+        EXPECT_FALSE(replay.read(ms * kMs, &s)) << "at " << ms << " ms";
+    }
     ASSERT_TRUE(replay.read(c.next_sample_ms * kMs, &s)) << "the sample after the loss";
     EXPECT_EQ(s.position_m, still_m);
     ReplayDevice driven(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s,
                         holed.rows_after_holes);
     ASSERT_TRUE(driven.start(&error)) << error;
     EXPECT_GE(replay_through_the_loop(driven, spec, 410).device_lost_trips, 1u);
+  }
+}
+
+// A loss across a hole starts where live it did, not a hole's length early.
+// The time in a hole does not count toward the timeout, so live the loop
+// lost the device once the rows present without a sample passed it; the
+// replay, which loses the device a timeout after the last sample read()
+// hands over, must hand the pose over for as long as the holes before that
+// point last. Before, read() gave nothing from just after the sample that
+// starts the gap: the loss began inside the hole, up to a hole's length
+// early. A 1 kHz device (a sample every row), timeout 10 ms, sample at 0 ms,
+// the rows of its later samples lost up to `next_sample_ms`, and 50 rows
+// dropped (the hole: 51 ms between the rows on either side, all left out).
+TEST(ReplayDevice, ALossAcrossAHoleStartsWhereTheRowsPresentPassTheTimeout) {
+  const config::DeviceSpec spec = no_model_device_spec();
+  ASSERT_EQ(spec.limits.device_timeout_s, 0.01);
+  const Vec3 still_m(0.05, 0.02, -0.01);
+  struct Case {
+    const char* name;
+    int hole_first_row;  // rows [first, first + 50) dropped
+    int next_sample_ms;  // the sample that ends the loss
+    int live_lost_ms;    // the first row present past the timeout, holes left out
+  };
+  const Case cases[] = {
+      // Rows 51..62 present without a sample: 11 ms counted at 62.
+      {"the sample right before the hole", 1, 63, 62},
+      // Rows 1..5 and 56..70 without a sample: 5 + 6 = 11 ms counted at 62.
+      {"rows without a sample before the hole too", 6, 71, 62},
+  };
+  std::string error;
+  DeviceSample s;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    std::vector<int> lost;
+    for (int k = 1; k < c.next_sample_ms; ++k) lost.push_back(k);
+    const HoledTrack holed = with_hole(flagged_track(
+                                           1, 200, [&](int) { return still_m; }, lost),
+                                       c.hole_first_row, 50);
+    const FlaggedTrack& t = holed.track;
+    ReplayDevice replay(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s,
+                        holed.rows_after_holes);
+    ASSERT_TRUE(replay.start(&error)) << error;
+    EXPECT_EQ(replay.lost_gaps(), 1u);
+    // The loop loses the device the timeout after the last sample handed
+    // over; live that was at live_lost_ms, so the pose comes up to the
+    // timeout before it and nothing from the tick after until the next
+    // sample.
+    const int last_given_ms = c.live_lost_ms - 11;
+    int no_sample_ticks = 0, first_no_sample_ms = -1;
+    for (int ms = 0; ms < 200; ++ms) {
+      if (replay.read(ms * kMs, &s)) {
+        EXPECT_EQ(s.position_m, still_m) << "at " << ms << " ms";
+        continue;
+      }
+      if (first_no_sample_ms < 0) first_no_sample_ms = ms;
+      ++no_sample_ticks;
+    }
+    EXPECT_EQ(first_no_sample_ms, last_given_ms + 1);
+    EXPECT_EQ(no_sample_ticks, c.next_sample_ms - last_given_ms - 1);
+    ReplayDevice driven(t.time_s, t.position_m, 1.0, false, 5.0, t.fresh, spec.limits.device_timeout_s,
+                        holed.rows_after_holes);
+    ASSERT_TRUE(driven.start(&error)) << error;
+    EXPECT_EQ(replay_through_the_loop(driven, spec, 210).device_lost_trips, 1u);
   }
 }
 

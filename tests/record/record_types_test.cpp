@@ -160,7 +160,10 @@ TEST(RecordTypes, AHapticHoleMessageReadsBackAsWritten) {
         std::string(kHapticHolePrefix) + "5 ticks between /haptic rows 1 (nan s) and 2 (0.003000000 s)",
         std::string(kHapticHolePrefix) + "5 ticks before /haptic row 4 (0.004000000 s), the first recorded",
         std::string(kHapticHolePrefix) + "5 ticks after /haptic row 18446744073709551615 (1.000000000 s), the last "
-                                         "recorded"})
+                                         "recorded",
+        // No row follows the largest row number: row_after would wrap to 0.
+        std::string(kHapticHolePrefix) + "5 ticks between /haptic rows 18446744073709551615 (1.000000000 s) and 0 "
+                                         "(1.006000000 s)"})
     EXPECT_FALSE(parse_haptic_hole(not_a_hole, &h)) << not_a_hole;
 }
 

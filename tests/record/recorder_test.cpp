@@ -300,7 +300,10 @@ TEST(Recorder, PushesRacingStopAreWrittenOrCountedNeverLost) {
     // refused is recorded as a hole, an event of the recorder's own.
     const SessionInfo info = read_session_info(dir / "s.h5");
     const std::uint64_t holes = info.haptic_holes;
-    EXPECT_LE(info.haptic_ticks_lost, s.haptic_drops);
+    // Exactly the rows the ring refused while open: a hole missed or
+    // miscounted shows here (the rest were refused after the close).
+    EXPECT_EQ(info.haptic_ticks_lost, s.haptic_drops_ring_full);
+    EXPECT_LE(s.haptic_drops_ring_full, s.haptic_drops);
     EXPECT_EQ(s.events_written, events_accepted + holes) << "accepted events lost";
     EXPECT_EQ(s.haptic_rows_written + s.haptic_drops, haptic.attempts);
     EXPECT_EQ(s.sim_rows_written + s.sim_drops, sim.attempts);
@@ -347,7 +350,11 @@ TEST(Recorder, RowsDroppedWhenTheHapticRingOverflowsLeaveAHoleInTheFile) {
       << "the recorder drained again before the ring was full: no second overflow to check";
   rec->stop();
   ASSERT_EQ(rec->state(), RecorderState::kStopped) << rec->error();
-  EXPECT_EQ(rec->stats().haptic_drops, 57u);
+  // Pushes after the stop are refused and counted, but are no hole: the
+  // recording had ended.
+  for (std::uint64_t k = 0; k < 3; ++k) EXPECT_FALSE(rec->push_haptic(testing::haptic_row(2 * kRing + 57 + k)));
+  EXPECT_EQ(rec->stats().haptic_drops, 60u);
+  EXPECT_EQ(rec->stats().haptic_drops_ring_full, 57u);
   EXPECT_EQ(rec->stats().haptic_rows_written, 2 * kRing);
 
   const std::string path = dir / "s.h5";
@@ -385,6 +392,8 @@ TEST(Recorder, RowsDroppedWhenTheHapticRingOverflowsLeaveAHoleInTheFile) {
   const SessionInfo info = read_session_info(path);
   EXPECT_EQ(info.haptic_holes, 2u);
   EXPECT_EQ(info.haptic_ticks_lost, 57u);
+  // Every row the ring refused is in a hole, and nothing else is.
+  EXPECT_EQ(info.haptic_ticks_lost, rec->stats().haptic_drops_ring_full);
   const std::string text = format_session_info(info);
   EXPECT_NE(text.find("haptic holes:     2 holes, 57 ticks the recorder dropped"), std::string::npos) << text;
   EXPECT_EQ(read_haptic_track(path).rows_after_holes, (std::vector<std::size_t>{kRing}));
