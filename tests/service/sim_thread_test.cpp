@@ -43,6 +43,18 @@ bool wait_for(Pred pred, std::chrono::milliseconds timeout = 5000ms) {
   return pred();
 }
 
+// Tool samples of a proxy hovering 2 mm above the cantilever's top face, one
+// a millisecond for `how_long`, as the haptic thread would push them.
+void hover_over_the_top_face(ToolSampleRing& samples, std::chrono::milliseconds how_long) {
+  haptics::ToolSample hover;
+  hover.proxy_position_m = haptics::Vec3(0.05, 0.05, 0.102);
+  const auto end = std::chrono::steady_clock::now() + how_long;
+  while (std::chrono::steady_clock::now() < end) {
+    samples.try_push(hover);
+    std::this_thread::sleep_for(1ms);
+  }
+}
+
 // Paced to the wall clock: over ~0.3 s of wall time it simulates about as
 // much (a generous band: the machine is shared), and models flow out with
 // increasing versions.
@@ -364,15 +376,7 @@ TEST(SimThread, AStepThatThrowsHaltsTheRunnerAndTheThreadKeepsServing) {
   SimThread thread(std::make_unique<SimRunner>(cantilever_with_tool()), &samples, &models, options);
   thread.start();
   ASSERT_TRUE(thread.set_recorder(recorder.get()));
-  haptics::ToolSample hover;
-  hover.proxy_position_m = haptics::Vec3(0.05, 0.05, 0.102);
-  const auto feed = [&](std::chrono::milliseconds how_long) {
-    const auto end = std::chrono::steady_clock::now() + how_long;
-    while (std::chrono::steady_clock::now() < end) {
-      samples.try_push(hover);
-      std::this_thread::sleep_for(1ms);
-    }
-  };
+  const auto feed = [&](std::chrono::milliseconds how_long) { hover_over_the_top_face(samples, how_long); };
   ASSERT_TRUE(wait_for([&] { return thread.status().steps > 20 && models.read().value->version > 0; }));
   EXPECT_FALSE(thread.status().halted);
 
@@ -430,15 +434,7 @@ TEST(SimThread, AStepRefusedAtTheExplicitEnergyBoundIsCountedAtThePaceAndTheThre
   options.status_every_s = 0.002;
   SimThread thread(std::make_unique<SimRunner>(s), &samples, &models, options);
   thread.start();
-  haptics::ToolSample hover;
-  hover.proxy_position_m = haptics::Vec3(0.05, 0.05, 0.102);
-  const auto feed = [&](std::chrono::milliseconds how_long) {
-    const auto end = std::chrono::steady_clock::now() + how_long;
-    while (std::chrono::steady_clock::now() < end) {
-      samples.try_push(hover);
-      std::this_thread::sleep_for(1ms);
-    }
-  };
+  const auto feed = [&](std::chrono::milliseconds how_long) { hover_over_the_top_face(samples, how_long); };
   ASSERT_TRUE(wait_for([&] { return thread.status().failed_steps > 0; })) << thread.status().steps << " steps";
   const SimStatus first = thread.status();
   const std::uint64_t version = models.read().value->version;
