@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <regex>
 
 #include "app/trade_format.hpp"
 
@@ -71,22 +72,49 @@ void print_sweep_table(const std::vector<SweepPoint>& points, const std::map<int
   for (const auto& p : points) print_point_row(p);
 }
 
+namespace {
+
+// `message` with each number in it (12, -0.5, 1.5e-05, and nan or inf, as a
+// non-finite energy prints) as "#": two refusals with the same cause then
+// read the same. Only whole numbers are masked, not digits within a name
+// (explicit_f32, L2): the character before a number is no letter, digit,
+// '_' or '.', and the one after it no letter, digit or '_'.
+std::string mask_numbers(const std::string& message) {
+  static const std::regex number(R"((^|[^\w.])[-+]?(nan|inf|(\d+(\.\d+)?|\.\d+)([eE][-+]?\d+)?)(?!\w))");
+  return std::regex_replace(message, number, "$1#");
+}
+
+}  // namespace
+
 void print_refusals(const std::vector<SweepPoint>& points) {
-  std::map<std::string, std::vector<std::string>> refusals;
+  // Grouped by cause, i.e. by the message with its numbers masked: the
+  // explicit rung's energy refusal gives each run's energy and budget, and
+  // grouped by the whole message every refused run was a group of its own.
+  // A group shows its first run's message whole (the advice is at its end).
+  struct Group {
+    std::string example;
+    bool numbers_differ = false;
+    std::vector<std::string> runs;
+  };
+  std::map<std::string, Group> refusals;
   for (const auto& p : points)
     if (!p.st.ok) {
       const std::string who = std::string(p.integrator) + " dt " + format_number("%g", p.dt_s * 1e3) + " ms " +
                               (p.adaptive ? "Th " + format_number("%g", p.th_Pa) + " md " + std::to_string(p.max_depth)
                                           : level_name(p.level)) +
                               (p.skipped ? "" : " at t=" + format_number("%.3g", p.st.error_time_s) + " s");
-      auto& list = refusals[shorten(p.st.error, 200)];
-      if (std::find(list.begin(), list.end(), who) == list.end()) list.push_back(who);
+      auto [it, first] = refusals.try_emplace(mask_numbers(p.st.error));
+      Group& group = it->second;
+      if (first) group.example = p.st.error;
+      group.numbers_differ = group.numbers_differ || p.st.error != group.example;
+      if (std::find(group.runs.begin(), group.runs.end(), who) == group.runs.end()) group.runs.push_back(who);
     }
   if (refusals.empty()) return;
   std::printf("\nRefusals / failures:\n");
-  for (const auto& [msg, who] : refusals) {
-    std::printf("- %s\n  runs:", msg.c_str());
-    for (const auto& w : who) std::printf(" [%s]", w.c_str());
+  for (const auto& [cause, group] : refusals) {
+    std::printf("- %s\n  runs%s:", group.example.c_str(),
+                group.numbers_differ ? " (the numbers above are the first run's)" : "");
+    for (const auto& w : group.runs) std::printf(" [%s]", w.c_str());
     std::printf("\n");
   }
 }

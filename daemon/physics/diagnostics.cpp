@@ -80,10 +80,11 @@ EnergyAudit audit_steps(Simulation& sim, int steps) {
   return audit;
 }
 
-AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit_rung) {
-  // !(<=): a NaN excess is not within the slack.
-  if (audit.nonfinite || !(audit.worst_excess <= slack)) return AuditOutcome::kFailed;
-  if (!audit.refused) return AuditOutcome::kOk;
+namespace {
+
+// What a refusal of an audited run was, apart from the energy: the explicit
+// rung's documented limits, or a fault (kFailed).
+AuditOutcome refusal_outcome(const EnergyAudit& audit, bool explicit_rung) {
   // Every integrator rejects a non-finite step and keeps the old state: a
   // blow-up arrives here as a refusal, never as a non-finite state. The
   // explicit rung's refusals above its cap name the key (the step needs more
@@ -95,6 +96,31 @@ AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit
   if (audit.error.find("integrator.explicit_energy_slack") != std::string::npos)
     return AuditOutcome::kRefusedAboveEnergyBound;
   return AuditOutcome::kFailed;
+}
+
+}  // namespace
+
+AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit_rung) {
+  if (!audit.within_energy_bound(slack)) return AuditOutcome::kFailed;
+  return audit.refused ? refusal_outcome(audit, explicit_rung) : AuditOutcome::kOk;
+}
+
+std::string audit_outcome_label(const EnergyAudit& audit, double slack, bool explicit_rung) {
+  // What failed the case comes first. The matrix's slack for the explicit
+  // rung (0.05) is far below the bound at which the rung refuses (its
+  // integrator.explicit_energy_slack, 1), and energy grows over many steps:
+  // a run refused at that bound has nearly always exceeded the slack on an
+  // accepted step before, and that growth is the failure, not the refusal.
+  // !(<=): a NaN excess is not within the slack (audit_outcome fails it).
+  const std::string energy = audit.nonfinite ? "NON-FINITE" : !(audit.worst_excess <= slack) ? "ENERGY-GROWTH" : "";
+  if (!audit.refused) return energy.empty() ? "ok" : energy;
+  const AuditOutcome refusal = refusal_outcome(audit, explicit_rung);
+  // A fault's message says what broke (e.g. a rejected non-finite step).
+  const std::string refused = refusal == AuditOutcome::kRefusedAboveEnergyBound   ? "refused above its energy bound"
+                              : refusal == AuditOutcome::kRefusedAboveMaxSubsteps ? "refused above max_substeps"
+                                                                                  : "refused: " + audit.error;
+  if (!energy.empty()) return energy + ", then " + refused;
+  return refusal == AuditOutcome::kFailed ? "FAILED, " + refused : refused;
 }
 
 }  // namespace tissue::physics

@@ -65,4 +65,12 @@ enum class AuditOutcome {
 };
 AuditOutcome audit_outcome(const EnergyAudit& audit, double slack, bool explicit_rung);
 
+// The stability matrix's outcome column for an audited run judged at
+// `slack`: "ok", "NON-FINITE" or "ENERGY-GROWTH" for a run that took every
+// step; a refusal as "refused above max_substeps", "refused above its energy
+// bound" or "FAILED, refused: <message>"; and when the energy had failed the
+// run before it was refused, that failure first: "ENERGY-GROWTH, then
+// refused above its energy bound" (or "..., then refused: <message>").
+std::string audit_outcome_label(const EnergyAudit& audit, double slack, bool explicit_rung);
+
 }  // namespace tissue::physics

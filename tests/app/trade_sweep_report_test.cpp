@@ -116,5 +116,57 @@ TEST(TradeSweepReport, TheHeaderGivesTheRunCapAndItsClock) {
   EXPECT_NE(out.find("; per-run cap 0.4 s of thread CPU time ("), std::string::npos) << out;
 }
 
+// Refusals are grouped by cause. The explicit rung's energy refusal embeds
+// each run's energy, budget and excess, so grouped by the full message every
+// refused point was its own group, and each was cut at 200 characters,
+// before its advice. Numbers apart, the same message is one group, shown in
+// full once (the first run's), with every run it ended.
+TEST(TradeSweepReport, RefusalsDifferingOnlyInTheirNumbersAreOneGroupShownInFull) {
+  const auto energy_refusal = [](const char* energy_J, const char* percent, const char* budget_J) {
+    return std::string("explicit integrator: energy ") + energy_J + " J is " + percent + " % above its budget " +
+           budget_J +
+           " J (start + work + mesh changes), more than integrator.explicit_energy_slack = 1 allows; step "
+           "refused, previous state kept: lower integrator.substep_safety, add damping (material.rayleigh_beta_s) "
+           "or use the implicit integrator";
+  };
+  const auto refused = [](int level, double at_s, const std::string& error) {
+    SweepPoint p = uniform_point(level, 1.0, 0.01);
+    p.integrator = "explicit";
+    p.st.ok = false;
+    p.st.error = error;
+    p.st.error_time_s = at_s;
+    return p;
+  };
+  const std::string first = energy_refusal("0.0123", "104", "0.00603");
+  const std::vector<SweepPoint> points = {
+      refused(0, 0.125, first),
+      refused(1, 0.25, energy_refusal("1.5e-05", "inf", "7.25e-06")),
+      refused(2, 0.5, energy_refusal("nan", "inf", "0.002")),
+      refused(1, 0.75, "explicit integrator: state became non-finite; step rejected, previous state kept"),
+      uniform_point(0, 1.0, 0.01),  // ok: not listed
+  };
+  ASSERT_GT(first.size(), 200u);
+  ::testing::internal::CaptureStdout();
+  print_refusals(points);
+  const std::string out = ::testing::internal::GetCapturedStdout();
+  const auto count = [&out](const std::string& what) {
+    int n = 0;
+    for (auto at = out.find(what); at != std::string::npos; at = out.find(what, at + 1)) ++n;
+    return n;
+  };
+  EXPECT_EQ(count("\n- "), 2) << out;  // two causes
+  EXPECT_EQ(count("explicit integrator: energy"), 1) << out;
+  EXPECT_NE(out.find("- " + first + "\n"), std::string::npos) << "the first run's message, whole:\n" << out;
+  EXPECT_EQ(count("numbers above are the first run's"), 1) << out;  // only where the numbers differ
+  EXPECT_NE(out.find(" [explicit dt 1 ms L0 at t=0.125 s] [explicit dt 1 ms L1 at t=0.25 s] [explicit dt 1 ms "
+                     "L2 at t=0.5 s]"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("- explicit integrator: state became non-finite; step rejected, previous state kept\n  runs: "
+                     "[explicit dt 1 ms L1 at t=0.75 s]"),
+            std::string::npos)
+      << out;
+}
+
 }  // namespace
 }  // namespace tissue::app

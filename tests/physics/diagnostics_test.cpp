@@ -184,6 +184,50 @@ TEST(Diagnostics, OnlyTheExplicitRungsRefusalAboveMaxSubstepsIsNotAFailure) {
   }
 }
 
+// The matrix's outcome column names what failed the case. It judges the
+// explicit rung at a slack of 0.05 but the rung refuses only above its own
+// integrator.explicit_energy_slack (1), and energy grows gradually: a run
+// that ends at the energy bound's refusal has nearly always grown past 0.05
+// on an accepted step first. That failure is the growth, so the label leads
+// with it and names the refusal second; it printed "FAILED, refused: ...".
+TEST(Diagnostics, TheMatrixLabelsEnergyGrowthBeforeTheRefusalThatFollowedIt) {
+  EnergyAudit grown_then_refused;
+  grown_then_refused.steps_taken = 40;
+  grown_then_refused.worst_excess = 0.3;
+  grown_then_refused.refused = true;
+  grown_then_refused.error =
+      "explicit integrator: energy 3 J is 200 % above its budget 1 J (start + work + mesh changes), "
+      "more than integrator.explicit_energy_slack = 1 allows; step refused, previous state kept";
+  ASSERT_EQ(audit_outcome(grown_then_refused, 0.05, true), AuditOutcome::kFailed);
+  EXPECT_EQ(audit_outcome_label(grown_then_refused, 0.05, true), "ENERGY-GROWTH, then refused above its energy bound");
+  // A rejected blow-up after the growth keeps its message (it says what broke).
+  EnergyAudit grown_then_rejected = grown_then_refused;
+  grown_then_rejected.error = "explicit integrator: state became non-finite; step rejected, previous state kept";
+  EXPECT_EQ(audit_outcome_label(grown_then_rejected, 0.05, true),
+            "ENERGY-GROWTH, then refused: " + grown_then_rejected.error);
+  EnergyAudit grown_then_capped = grown_then_refused;
+  grown_then_capped.error = "explicit integrator: step needs 2000 sub-steps, more than integrator.max_substeps = 1000";
+  EXPECT_EQ(audit_outcome_label(grown_then_capped, 0.05, true), "ENERGY-GROWTH, then refused above max_substeps");
+
+  // Within the slack the refusal is the whole story, as before.
+  EnergyAudit refused_within = grown_then_refused;
+  refused_within.worst_excess = 0.01;
+  EXPECT_EQ(audit_outcome_label(refused_within, 0.05, true), "refused above its energy bound");
+  refused_within.error = grown_then_rejected.error;
+  EXPECT_EQ(audit_outcome_label(refused_within, 0.05, true), "FAILED, refused: " + refused_within.error);
+  EXPECT_EQ(audit_outcome_label(refused_within, 0.05, false), "FAILED, refused: " + refused_within.error);
+  // Runs that took every step.
+  EnergyAudit clean;
+  clean.steps_taken = 40;
+  EXPECT_EQ(audit_outcome_label(clean, 0.05, true), "ok");
+  clean.worst_excess = 0.3;
+  EXPECT_EQ(audit_outcome_label(clean, 0.05, true), "ENERGY-GROWTH");
+  clean.worst_excess = std::numeric_limits<double>::quiet_NaN();  // not within any slack: audit_outcome fails it
+  EXPECT_EQ(audit_outcome_label(clean, 0.05, true), "ENERGY-GROWTH");
+  clean.nonfinite = true;
+  EXPECT_EQ(audit_outcome_label(clean, 0.05, true), "NON-FINITE");
+}
+
 // A non-finite energy or budget is no health: an infinite mass at a node at
 // rest makes the kinetic energy NaN (inf × 0), which read as an excess of 0,
 // and a budget taken from such a state made the excess NaN, which std::max
