@@ -673,11 +673,20 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
       steps_since_measured_ = 0;
       growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
       end_displacement_ratio_ = reached;
-      r_rise_bound_ = 0.0;
       ++verified_steps_;
       out.substeps = fewer;
       out.verified_substeps = true;
       store(body);
+      // On the offset layout r was measured at the last sub-step's forces,
+      // i.e. at its start: its move (h times the velocity it ended with, the
+      // drift of symplectic Euler) is added as r_rise_bound_ is in
+      // run_and_accept. The gathered streams measured the state reached.
+      r_rise_bound_ = 0.0;
+      if (offset_) {
+        double v2_m2_per_s2 = 0.0;
+        for (const Vec3& v : body.v_m_per_s) v2_m2_per_s2 = std::max(v2_m2_per_s2, v.squaredNorm());
+        r_rise_bound_ = 2.0 * (dt_s / fewer) * std::sqrt(v2_m2_per_s2) / shortest_rest_m_;
+      }
       spend_on_estimate(body, out.substeps);
       return out;
     }

@@ -332,6 +332,8 @@ class ExplicitIntegrator final : public Integrator {
   // r of the last state measured; steps taken with fewer sub-steps, and
   // steps run again. For tests and the benchmark.
   double end_displacement_ratio() const { return end_displacement_ratio_; }
+  // How far r may have risen since it was measured (see r_rise_bound_).
+  double r_rise_bound() const { return r_rise_bound_; }
   std::int64_t verified_steps() const { return verified_steps_; }
   std::int64_t rerun_steps() const { return rerun_steps_; }
   // The stable step at relative end displacement r on the current mesh.
@@ -406,7 +408,9 @@ class ExplicitIntegrator final : public Integrator {
   // at most 2 d, so r rises by at most 2 d / (the shortest moving spring's
   // rest length). When r + this bound reaches 1/2, r is measured again
   // before the step (the collapse check needs it; the steps on the plain
-  // margin path measured it only every kRemeasureSteps).
+  // margin path measured it only every kRemeasureSteps). A verified step on
+  // the offset layout measures r at its last sub-step's start, so the bound
+  // starts from that sub-step's move, not 0.
   double r_rise_bound_ = 0.0;
   double shortest_rest_m_ = 0.0;  // of a spring with a free end, on this layout
   std::vector<Vec3> x_start_m_;   // the body's positions before a stored step
