@@ -279,6 +279,13 @@ class ExplicitIntegrator final : public Integrator {
                      Simd simd = detected_simd());
   StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) override;
   void mesh_changed() override { layout_version_ = 0; }
+  // r measured afresh at the next step (not the r, growth and rise bound of
+  // a state the body no longer holds: they might ask for too few sub-steps).
+  void state_restored() override {
+    end_displacement_ratio_ = -1.0;
+    growth_per_step_ = 0.0;
+    r_rise_bound_ = 0.0;
+  }
   const char* name() const override { return single_precision() ? "explicit float" : "explicit"; }
 
   // Which spring stream the sub-steps run on: kAuto takes the offset layout
@@ -330,7 +337,9 @@ class ExplicitIntegrator final : public Integrator {
   static constexpr double kVerifiedSafetyMax = 0.95;               // never nearer the stable bound than this
   static constexpr int kRemeasureSteps = 64;                       // or sooner: r_rise_bound_
   // r of the last state measured; steps taken with fewer sub-steps, and
-  // steps run again. For tests and the benchmark.
+  // steps run again (steps the integrator accepted: a step the Simulation
+  // then refuses at its energy bound is counted, one refused here is not).
+  // For tests and the benchmark.
   double end_displacement_ratio() const { return end_displacement_ratio_; }
   // How far r may have risen since it was measured (see r_rise_bound_).
   double r_rise_bound() const { return r_rise_bound_; }

@@ -140,6 +140,7 @@ StepResult Simulation::step() {
       substeps_since_energy_check_ = kEnergyCheckSubsteps;
       std::copy(x_before_m_.begin(), x_before_m_.end(), body_.x_m.begin());
       std::copy(v_before_m_per_s_.begin(), v_before_m_per_s_.end(), body_.v_m_per_s.begin());
+      integrator_->state_restored();  // r and its growth were of the refused state
       energy_known_ = false;
       return result;
     }
