@@ -50,6 +50,10 @@ class Integrator {
   virtual StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) = 0;
   // The mesh changed (split/merge): drop cached bounds and factorizations.
   virtual void mesh_changed() = 0;
+  // The body's positions or velocities were set from outside the step (a
+  // refused step's state restored, initial conditions): drop what was
+  // measured on the state the integrator last left (the explicit rung's r).
+  virtual void state_restored() {}
   virtual const char* name() const = 0;
 };
 

@@ -605,6 +605,20 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
     return out;
   }
   int count = std::max(1, static_cast<int>(needed));
+  // What a refusal below restores: the body is untouched then, so the
+  // integrator must be too, or the step asked again (the service retries)
+  // would run on r and growth from a run thrown away and be accepted.
+  const double r_before = end_displacement_ratio_, growth_before = growth_per_step_, rise_before = r_rise_bound_;
+  const int since_before = steps_since_measured_;
+  const auto refuse = [&](std::string error) {
+    end_displacement_ratio_ = r_before;
+    growth_per_step_ = growth_before;
+    r_rise_bound_ = rise_before;
+    steps_since_measured_ = since_before;
+    out.ok = false;
+    out.error = std::move(error);
+    return out;
+  };
   // The sub-steps run on the integrator's own copy: the body changes only
   // when a result is accepted (no save and restore of the body needed).
   load(body, f_ext_N);
@@ -655,37 +669,60 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
       out.error = kNonFiniteRejected;
       return out;
     }
-    steps_since_measured_ = 0;
     if (verified_substeps(dt_s, reached) <= fewer) {
+      steps_since_measured_ = 0;
       growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
       end_displacement_ratio_ = reached;
-      r_rise_bound_ = 0.0;
       ++verified_steps_;
       out.substeps = fewer;
       out.verified_substeps = true;
       store(body);
+      // On the offset layout r was measured at the last sub-step's forces,
+      // i.e. at its start: its move (h times the velocity it ended with, the
+      // drift of symplectic Euler) is added as r_rise_bound_ is in
+      // run_and_accept. The gathered streams measured the state reached.
+      r_rise_bound_ = 0.0;
+      if (offset_) {
+        double v2_m2_per_s2 = 0.0;
+        for (const Vec3& v : body.v_m_per_s) v2_m2_per_s2 = std::max(v2_m2_per_s2, v.squaredNorm());
+        r_rise_bound_ = 2.0 * (dt_s / fewer) * std::sqrt(v2_m2_per_s2) / shortest_rest_m_;
+      }
       spend_on_estimate(body, out.substeps);
       return out;
     }
-    // The state reached needs more: run the step again from the body, with
-    // the margin as before or what the bound asks there, whichever is more.
-    growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
-    end_displacement_ratio_ = reached;
-    ++rerun_steps_;
-    out.rerun = true;
-    // Within its bound or refused: where the bound there asks for more than
-    // max_substeps, the step is refused (it was run at the cap).
+    // Within its bound or refused: where the bound at the state reached asks
+    // for more than max_substeps, the step is refused (it was run at the
+    // cap), the integrator's r left as it was so that asked again it is
+    // refused again.
     const int asked = verified_substeps(dt_s, reached);
     if (asked > spec_.max_substeps) {
       const ExplicitStableStep at_reached = stable_step_at(reached);
       const double limit_s = verified_fraction() * at_reached.dt_s;
-      out.ok = false;
-      out.error = too_many_substeps(dt_s, std::ceil(dt_s / limit_s), limit_s, verified_fraction(), at_reached,
-                                    spec_.max_substeps, paper_damping_, " at the deformation the step reached");
-      return out;
+      return refuse(too_many_substeps(dt_s, std::ceil(dt_s / limit_s), limit_s, verified_fraction(), at_reached,
+                                      spec_.max_substeps, paper_damping_, " at the deformation the step reached"));
     }
+    // The state reached needs more: run the step again from the body, with
+    // the margin as before or what the bound asks there, whichever is more.
+    steps_since_measured_ = 0;
+    growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
+    end_displacement_ratio_ = reached;
+    ++rerun_steps_;
+    out.rerun = true;
     count = std::max(count, asked);
     load(body, f_ext_N);
+  } else if (verified_substeps(dt_s, end_displacement_ratio_) > spec_.max_substeps) {
+    // The margin's count fits, but r, measured, asks for more than
+    // max_substeps: within its bound or refused, as a rerun is. On an r
+    // measured before this step (the body may have relaxed since) the step
+    // is taken again on a fresh measurement first (once: it is fresh then).
+    if (steps_since_measured_ > 1) {
+      end_displacement_ratio_ = -1.0;
+      return step(body, f_ext_N, dt_s);
+    }
+    const ExplicitStableStep at_r = stable_step_at(end_displacement_ratio_);
+    const double limit_s = verified_fraction() * at_r.dt_s;
+    return refuse(too_many_substeps(dt_s, std::ceil(dt_s / limit_s), limit_s, verified_fraction(), at_r,
+                                    spec_.max_substeps, paper_damping_, " at the deformation measured"));
   }
   return run_and_accept(body, dt_s, count, out);
 }

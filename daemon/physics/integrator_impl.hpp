@@ -279,6 +279,13 @@ class ExplicitIntegrator final : public Integrator {
                      Simd simd = detected_simd());
   StepOutcome step(Body& body, const std::vector<Vec3>& f_ext_N, double dt_s) override;
   void mesh_changed() override { layout_version_ = 0; }
+  // r measured afresh at the next step (not the r, growth and rise bound of
+  // a state the body no longer holds: they might ask for too few sub-steps).
+  void state_restored() override {
+    end_displacement_ratio_ = -1.0;
+    growth_per_step_ = 0.0;
+    r_rise_bound_ = 0.0;
+  }
   const char* name() const override { return single_precision() ? "explicit float" : "explicit"; }
 
   // Which spring stream the sub-steps run on: kAuto takes the offset layout
@@ -330,8 +337,12 @@ class ExplicitIntegrator final : public Integrator {
   static constexpr double kVerifiedSafetyMax = 0.95;               // never nearer the stable bound than this
   static constexpr int kRemeasureSteps = 64;                       // or sooner: r_rise_bound_
   // r of the last state measured; steps taken with fewer sub-steps, and
-  // steps run again. For tests and the benchmark.
+  // steps run again (steps the integrator accepted: a step the Simulation
+  // then refuses at its energy bound is counted, one refused here is not).
+  // For tests and the benchmark.
   double end_displacement_ratio() const { return end_displacement_ratio_; }
+  // How far r may have risen since it was measured (see r_rise_bound_).
+  double r_rise_bound() const { return r_rise_bound_; }
   std::int64_t verified_steps() const { return verified_steps_; }
   std::int64_t rerun_steps() const { return rerun_steps_; }
   // The stable step at relative end displacement r on the current mesh.
@@ -406,7 +417,9 @@ class ExplicitIntegrator final : public Integrator {
   // at most 2 d, so r rises by at most 2 d / (the shortest moving spring's
   // rest length). When r + this bound reaches 1/2, r is measured again
   // before the step (the collapse check needs it; the steps on the plain
-  // margin path measured it only every kRemeasureSteps).
+  // margin path measured it only every kRemeasureSteps). A verified step on
+  // the offset layout measures r at its last sub-step's start, so the bound
+  // starts from that sub-step's move, not 0.
   double r_rise_bound_ = 0.0;
   double shortest_rest_m_ = 0.0;  // of a spring with a free end, on this layout
   std::vector<Vec3> x_start_m_;   // the body's positions before a stored step

@@ -84,11 +84,13 @@ StepResult Simulation::step() {
     energy_base_known_ = true;
     substeps_since_energy_check_ = kEnergyCheckSubsteps;  // the first step is checked
   }
-  // Checked when this step (taken to need as many sub-steps as the last)
-  // brings the sub-steps since the last check to kEnergyCheckSubsteps.
-  const bool check_energy =
-      checks_explicit_energy_ && substeps_since_energy_check_ + last_substeps_ >= kEnergyCheckSubsteps;
-  if (check_energy) {  // before the drivers set their velocities: all of it is restored on a refusal
+  // Whether the step is checked is known after it (its sub-steps bring
+  // those since the last check to kEnergyCheckSubsteps), so the state is
+  // kept before every step: a step taking far more sub-steps than the last
+  // (a rerun, a collapsing spring) is checked too. Two copies of the nodes,
+  // a few % of a sub-step (docs/scene-format.md). Taken before the drivers
+  // set their velocities: all of it is restored on a refusal.
+  if (checks_explicit_energy_) {
     x_before_m_.assign(body_.x_m.begin(), body_.x_m.end());
     v_before_m_per_s_.assign(body_.v_m_per_s.begin(), body_.v_m_per_s.end());
   }
@@ -125,11 +127,8 @@ StepResult Simulation::step() {
   }
   if (limits_energy_) limit_energy(energy_before_J, driven_kinetic_before_J);
   const StepWork work = step_work(driven_kinetic_before_J);
-  if (checks_explicit_energy_) {
-    last_substeps_ = out.substeps;
-    substeps_since_energy_check_ += out.substeps;
-  }
-  if (check_energy) {
+  if (checks_explicit_energy_) substeps_since_energy_check_ += out.substeps;
+  if (checks_explicit_energy_ && substeps_since_energy_check_ >= kEnergyCheckSubsteps) {
     substeps_since_energy_check_ = 0;
     if (std::string refusal = explicit_energy_refusal(work); !refusal.empty()) {
       result.ok = false;
@@ -140,6 +139,7 @@ StepResult Simulation::step() {
       substeps_since_energy_check_ = kEnergyCheckSubsteps;
       std::copy(x_before_m_.begin(), x_before_m_.end(), body_.x_m.begin());
       std::copy(v_before_m_per_s_.begin(), v_before_m_per_s_.end(), body_.v_m_per_s.begin());
+      integrator_->state_restored();  // r and its growth were of the refused state
       energy_known_ = false;
       return result;
     }

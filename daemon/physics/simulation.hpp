@@ -95,10 +95,16 @@ class Simulation {
   // For setting initial conditions (velocities, a deformed start) between
   // steps. Mesh changes must go through Body::split/merge. Call it again
   // after a step before changing the state: it drops the energy the next
-  // step would otherwise take from the last one.
+  // step would otherwise take from the last one. It also re-takes the
+  // explicit energy bound's base from the state given (the next step is
+  // checked against that state's energy, and any excess held so far is
+  // forgiven), and has the explicit integrator measure r afresh (a state
+  // set here moved nodes its r_rise_bound_ never saw). The daemon never
+  // calls it; tests and benchmarks do.
   Body& mutable_body() {
     energy_known_ = false;
     energy_base_known_ = false;  // the explicit bound starts again from the state given
+    integrator_->state_restored();
     return body_;
   }
   // False when the scene asked for no adaptivity: no adaptivity state exists.
@@ -210,10 +216,11 @@ class Simulation {
   bool energy_known_ = false;
   double energy_J_ = 0.0;
   // The explicit rung's bound (explicit_energy_refusal): the energy, work
-  // and booked adaptation energy at its base, and the state before a checked
+  // and booked adaptation energy at its base, and the state before every
   // step, restored when the step is refused (the integrator stores into the
   // body on acceptance; the bound is judged after). Checked once at least
-  // kEnergyCheckSubsteps sub-steps have run since the last check: the energy
+  // kEnergyCheckSubsteps sub-steps have run since the last check, counting
+  // the step's own (known only after it, hence the copy): the energy
   // pass costs about one sub-step, +24-34 % on an R3 step of 3-4 checked
   // every step, +3-6 % at this cadence (docs/scene-format.md).
   static constexpr std::int64_t kEnergyCheckSubsteps = 32;
@@ -221,7 +228,6 @@ class Simulation {
   bool energy_base_known_ = false;
   double base_energy_J_ = 0.0, base_work_J_ = 0.0, base_adaptation_J_ = 0.0;
   std::int64_t substeps_since_energy_check_ = 0;
-  int last_substeps_ = 0;
   std::vector<Vec3> x_before_m_, v_before_m_per_s_;
 };
 

@@ -314,6 +314,39 @@ TEST(OffsetLayout, EndDisplacementRatioIsTheBodysAndTheSameOnEitherInstructionSe
   }
 }
 
+// On the offset layout a verified step's r is measured at the last
+// sub-step's forces, i.e. at that sub-step's start: its move is in
+// r_rise_bound, so r plus the bound covers the state the step reached (it
+// was set to 0 there, the last sub-step's move unseen). A tip load from
+// rest: r rises at every sub-step.
+TEST(OffsetLayout, AVerifiedStepsRiseBoundCoversItsLastSubstep) {
+  Body body = uniform_beam(3);
+  std::vector<Vec3> load(body.x_m.size(), Vec3::Zero());
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    if (body.rest_m[n].x() > 0.399) load[n] = Vec3(0, 0, -0.01);
+  });
+  ExplicitIntegrator integrator(body.scene().integrator, body.scene().material);
+  integrator.set_layout(Layout::kOffset);
+  std::int64_t verified = 0;
+  for (int i = 0; i < 50; ++i) {
+    const StepOutcome out = integrator.step(body, load, 1e-3);
+    ASSERT_TRUE(out.ok) << out.error;
+    ASSERT_TRUE(integrator.offset_layout());
+    double reached = 0.0;
+    for (std::size_t e = 0; e < body.edge_a.size(); ++e)
+      if (body.stiffness_N_per_m[e] > 0.0 &&
+          (body.inv_mass_per_kg[body.edge_a[e]] > 0.0 || body.inv_mass_per_kg[body.edge_b[e]] > 0.0))
+        reached = std::max(reached, ((body.x_m[body.edge_b[e]] - body.rest_m[body.edge_b[e]]) -
+                                     (body.x_m[body.edge_a[e]] - body.rest_m[body.edge_a[e]]))
+                                            .norm() /
+                                        body.rest_length_m[e]);
+    if (out.verified_substeps) ++verified;
+    EXPECT_LE(reached, integrator.end_displacement_ratio() + integrator.r_rise_bound())
+        << "step " << i << (out.verified_substeps ? " (verified)" : "");
+  }
+  EXPECT_GT(verified, 0);
+}
+
 // A state gone non-finite (or past the finiteness limit: 1e150 N is finite
 // in double) on the layout is rejected and the body kept.
 TEST(OffsetLayout, NonFiniteStepIsRejectedAndTheStateKept) {

@@ -388,7 +388,9 @@ TEST(ExplicitIntegrator, ARerunNeedingMoreThanMaxSubstepsIsRefusedNotCapped) {
   s.material.rayleigh_beta_s = 0.0;
   s.adaptivity.min_depth = 1;
   Body body(s);
-  testing::jiggle_free_nodes(body, 7, 0.0, 5.0);  // at rest (r = 0) but fast, as above
+  // At rest (r = 0) but fast, as above; 3 m/s rather than 5 so the state
+  // reached stays below r = ½ (0.33), where a retry is not re-measured.
+  testing::jiggle_free_nodes(body, 7, 0.0, 3.0);
   const std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
   const double dt_s = 20.0 * s.integrator.substep_safety * explicit_stable_dt_s(body);
   const int margin = static_cast<int>(std::ceil(dt_s / (s.integrator.substep_safety * explicit_stable_dt_s(body))));
@@ -414,6 +416,47 @@ TEST(ExplicitIntegrator, ARerunNeedingMoreThanMaxSubstepsIsRefusedNotCapped) {
       << out.error;
   EXPECT_EQ(body.x_m, before.x_m);
   EXPECT_EQ(body.v_m_per_s, before.v_m_per_s);
+  // Asked again (the service retries), the same step is refused again: the
+  // refusal kept r and its growth from the run it threw away, so the retry
+  // took the margin's count and was accepted (refused once, then run on).
+  const StepOutcome again = integrator.step(body, f, dt_s);
+  EXPECT_FALSE(again.ok) << again.substeps << " sub-steps taken";
+  EXPECT_EQ(body.x_m, before.x_m);
+  EXPECT_EQ(body.v_m_per_s, before.v_m_per_s);
+}
+
+// Where r, measured, asks for more than integrator.max_substeps, the margin's
+// count (which fits) is not taken either: within its bound or refused. A body
+// stretched uniformly by 45 % (r = 0.45 on every spring, below the collapse
+// check's 1/2) at a dt whose margin count is the cap.
+TEST(ExplicitIntegrator, AMarginStepWhoseMeasuredRAsksForMoreThanMaxSubstepsIsRefused) {
+  scene::Scene s = beam_scene();
+  s.material.rayleigh_beta_s = 0.0;
+  s.adaptivity.min_depth = 1;
+  Body body(s);
+  Vec3 centre_m = Vec3::Zero();
+  for (const Vec3& x : body.x_m) centre_m += x;
+  centre_m /= static_cast<double>(body.x_m.size());
+  for (std::size_t n = 0; n < body.x_m.size(); ++n) body.x_m[n] = centre_m + 1.45 * (body.rest_m[n] - centre_m);
+  const std::vector<Vec3> f(body.x_m.size(), Vec3::Zero());
+  const double dt_s = 4.0 * s.integrator.substep_safety * explicit_stable_dt_s(body);
+  const int margin = static_cast<int>(std::ceil(dt_s / (s.integrator.substep_safety * explicit_stable_dt_s(body))));
+  scene::IntegratorSpec capped = s.integrator;
+  capped.max_substeps = margin;
+  ExplicitIntegrator integrator(capped, s.material);
+  const Body before = body;
+  const StepOutcome out = integrator.step(body, f, dt_s);
+  // The case exists: the bound at r = 0.45 asks for more than the cap.
+  ASSERT_GT(std::ceil(dt_s / (0.95 * integrator.stable_step_at(0.45).dt_s)), margin);
+  EXPECT_FALSE(out.ok) << out.substeps << " sub-steps taken";
+  EXPECT_NE(out.error.find("more than integrator.max_substeps = " + std::to_string(margin)), std::string::npos)
+      << out.error;
+  EXPECT_NE(out.error.find("x the stable bound at the deformation measured)"), std::string::npos) << out.error;
+  EXPECT_EQ(body.x_m, before.x_m);
+  EXPECT_EQ(body.v_m_per_s, before.v_m_per_s);
+  // Asked again, refused again.
+  EXPECT_FALSE(integrator.step(body, f, dt_s).ok);
+  EXPECT_EQ(body.x_m, before.x_m);
 }
 
 // The explicit sub-step tightens to the Lanczos bound once the mesh has

@@ -160,6 +160,11 @@ TEST(Stability, UndampedYankOnExplicitEndsRefusedAtItsEnergyBound) {
       // given; where every step is checked, never above the slack.
       EXPECT_EQ(sim.body().x_m, x_before);
       EXPECT_EQ(sim.body().v_m_per_s, v_before);
+      // And the integrator measures r afresh on the state kept, not the
+      // refused step's r and growth (which may ask for too few sub-steps).
+      const auto* explicit_integrator = dynamic_cast<const ExplicitIntegrator*>(&sim.integrator());
+      ASSERT_NE(explicit_integrator, nullptr);
+      EXPECT_LT(explicit_integrator->end_displacement_ratio(), 0.0) << "r of the refused state kept";
       EXPECT_LT(worst_excess, 9.0);
       if (dt_s > 1e-2) {
         EXPECT_GE(substeps, 32);  // so every step was checked
