@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <stdexcept>
 
 #include "physics/diagnostics.hpp"
 #include "physics/forces.hpp"
@@ -84,16 +85,6 @@ StepResult Simulation::step() {
     energy_base_known_ = true;
     substeps_since_energy_check_ = kEnergyCheckSubsteps;  // the first step is checked
   }
-  // Whether the step is checked is known after it (its sub-steps bring
-  // those since the last check to kEnergyCheckSubsteps), so the state is
-  // kept before every step: a step taking far more sub-steps than the last
-  // (a rerun, a collapsing spring) is checked too. Two copies of the nodes,
-  // a few % of a sub-step (docs/scene-format.md). Taken before the drivers
-  // set their velocities: all of it is restored on a refusal.
-  if (checks_explicit_energy_) {
-    x_before_m_.assign(body_.x_m.begin(), body_.x_m.end());
-    v_before_m_per_s_.assign(body_.v_m_per_s.begin(), body_.v_m_per_s.end());
-  }
   // A driver also gives its node the velocity of the track (kinematic nodes
   // keep their mass): that kinetic energy is its work too.
   const double driven_kinetic_before_J = prescribed_kinetic_energy_J();
@@ -112,7 +103,25 @@ StepResult Simulation::step() {
     if (body_.inv_mass_per_kg[n] != 0.0 && !f_ext_N_[n].isZero(0.0))
       loaded_before_.push_back({static_cast<NodeId>(n), body_.x_m[n]});
 
+  // Whether the step is checked is known once its sub-steps have run (they
+  // bring those since the last check to kEnergyCheckSubsteps), so the rung
+  // asks before it writes the body: the state the step started from is
+  // kept then for a checked step only, and a step taking far more sub-steps
+  // than the last (a rerun, a collapsing spring) is checked too.
+  struct KeepIfChecked final : BeforeStore {
+    Simulation& sim;
+    bool kept = false;
+    explicit KeepIfChecked(Simulation& s) : sim(s) {}
+    void before_store(const Body& body, int substeps) override {
+      if (sim.substeps_since_energy_check_ + substeps < kEnergyCheckSubsteps) return;
+      sim.x_before_m_.assign(body.x_m.begin(), body.x_m.end());
+      sim.v_before_m_per_s_.assign(body.v_m_per_s.begin(), body.v_m_per_s.end());
+      kept = true;
+    }
+  } keep_if_checked(*this);
+  integrator_->set_before_store(checks_explicit_energy_ ? &keep_if_checked : nullptr);
   const StepOutcome out = integrator_->step(body_, f_ext_N_, dt);
+  integrator_->set_before_store(nullptr);
   result.substeps = out.substeps;
   result.solver_iterations = out.solver_iterations;
   result.solver_residual = out.solver_residual;
@@ -130,6 +139,11 @@ StepResult Simulation::step() {
   if (checks_explicit_energy_) substeps_since_energy_check_ += out.substeps;
   if (checks_explicit_energy_ && substeps_since_energy_check_ >= kEnergyCheckSubsteps) {
     substeps_since_energy_check_ = 0;
+    // The rung asked before it stored (the same count decides both); a rung
+    // that did not could not be restored, so it is refused here rather than
+    // judged without a way back.
+    if (!keep_if_checked.kept)
+      throw std::logic_error("Simulation::step: the explicit rung stored a checked step without keeping its state");
     if (std::string refusal = explicit_energy_refusal(work); !refusal.empty()) {
       result.ok = false;
       result.error = std::move(refusal);
@@ -139,6 +153,8 @@ StepResult Simulation::step() {
       substeps_since_energy_check_ = kEnergyCheckSubsteps;
       std::copy(x_before_m_.begin(), x_before_m_.end(), body_.x_m.begin());
       std::copy(v_before_m_per_s_.begin(), v_before_m_per_s_.end(), body_.v_m_per_s.begin());
+      // Kept after the drivers set this step's velocities: theirs as before.
+      for (std::size_t i = 0; i < kinematic_.size(); ++i) body_.v_m_per_s[kinematic_[i]] = kinematic_v_before_[i];
       integrator_->state_restored();  // r and its growth were of the refused state
       energy_known_ = false;
       return result;

@@ -216,13 +216,13 @@ class Simulation {
   bool energy_known_ = false;
   double energy_J_ = 0.0;
   // The explicit rung's bound (explicit_energy_refusal): the energy, work
-  // and booked adaptation energy at its base, and the state before every
-  // step, restored when the step is refused (the integrator stores into the
-  // body on acceptance; the bound is judged after). Checked once at least
-  // kEnergyCheckSubsteps sub-steps have run since the last check, counting
-  // the step's own (known only after it, hence the copy): the energy
+  // and booked adaptation energy at its base, and the state before a
+  // checked step, restored when the step is refused (the integrator stores
+  // into the body on acceptance, asking BeforeStore first; the bound is
+  // judged after). Checked once at least kEnergyCheckSubsteps sub-steps
+  // have run since the last check, counting the step's own: the energy
   // pass costs about one sub-step, +24-34 % on an R3 step of 3-4 checked
-  // every step, +3-6 % at this cadence (docs/scene-format.md).
+  // every step, a few % at this cadence (docs/scene-format.md).
   static constexpr std::int64_t kEnergyCheckSubsteps = 32;
   bool checks_explicit_energy_ = false;
   bool energy_base_known_ = false;
