@@ -228,6 +228,17 @@ bool ContactRenderer::surrounded(const Closest& c) const noexcept {
   return fan_size > 0;
 }
 
+double ContactRenderer::border_reach_m(const Closest& c) const noexcept {
+  // The patch reaches |c - position_ref| from the point the sim built it
+  // around to this border; its own width (the farthest vertex from c) caps
+  // that for a model whose reference lies off the patch.
+  double width2_m2 = 0.0;
+  for (int i = 0; i < model_->vertex_count; ++i)
+    width2_m2 = std::max(width2_m2, (vertex_m_[i] - c.point).squaredNorm());
+  const double reach_m = std::min((c.point - model_->position_ref_m).norm(), std::sqrt(width2_m2));
+  return std::isfinite(reach_m) ? reach_m : 0.0;
+}
+
 Vec3 ContactRenderer::surface_velocity(const Closest& c) const noexcept {
   if (!surface_moving_) return Vec3::Zero();  // extrapolation has stopped: the patch is held still
   const auto& tri = model_->triangle[c.triangle];
@@ -400,20 +411,51 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
 
   Closest c;
   Vec3 n = Vec3::Zero();
+  Vec3 rigid_proxy_m = Vec3::Zero();  // on the patch, or on a border face's plane past it
   Vec3 compliant_proxy_m = Vec3::Zero();
   bool compliant = false;
+  bool beyond_reach = false;  // let go past the border, farther than the surface is taken to go on
   if (touching_) {
     c = closest_facing(device_m, reference_m, true);
     if (c.triangle < 0 || !c.point.allFinite()) {
       touching_ = false;  // a non-finite point must not become the proxy
     } else {
       n = pseudo_normal(c);
-      compliant = compliant_proxy(device_m, n, &compliant_proxy_m);
-      // Back outside the patch. A deformed object still pushing holds the
-      // contact until its force reaches zero (top of the header), so the
-      // force does not drop by k_v f0 / (k_v + k) at the patch.
-      const double height_m = n.dot(device_m - c.point);
-      if (height_m > 0.0 && !(compliant && height_m <= kMaxHeldHeight_m)) touching_ = false;
+      const Vec3 offset_m = device_m - c.point;
+      const double height_m = n.dot(offset_m);
+      rigid_proxy_m = c.point;
+      // Past the patch's border (top of the header): the patch is a window
+      // the sim cut, the surface goes on, to first order along the plane
+      // through the border point c with its normal n. Held on the border
+      // edge instead, the proxy dragged the hand back sideways with k_v
+      // times its overshoot until the next model came (4 N at 0.3 m/s over
+      // the 0.1 s a model may be old). The extended plane meets the patch
+      // at c, so the force is continuous across the border.
+      const Vec3 sideways_m = offset_m - height_m * n;
+      const double sideways2_m2 = sideways_m.squaredNorm();
+      if (sideways2_m2 > kFootprintTolerance_m * kFootprintTolerance_m && !surrounded(c)) {
+        // Not without end: beside an object's edge there is no surface at
+        // all. No farther than the patch reaches from the point it was
+        // built around: the next model, built around the proxy, covers
+        // about that much around it, so an edge the hand slid past is in it
+        // and decides there (its pseudo-normal lets the hand go), and a
+        // first-order guess is not stretched beyond the stretch of surface
+        // it comes from.
+        const double reach_m = border_reach_m(c);
+        if (sideways2_m2 > reach_m * reach_m) {
+          touching_ = false;
+          beyond_reach = true;
+        } else {
+          rigid_proxy_m = c.point + sideways_m;
+        }
+      }
+      if (touching_) {
+        compliant = compliant_proxy(device_m, n, &compliant_proxy_m);
+        // Back outside the patch. A deformed object still pushing holds the
+        // contact until its force reaches zero (top of the header), so the
+        // force does not drop by k_v f0 / (k_v + k) at the patch.
+        if (height_m > 0.0 && !(compliant && height_m <= kMaxHeldHeight_m)) touching_ = false;
+      }
     }
   }
 
@@ -429,7 +471,11 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     // is not known to be inside: the device stays outside until the next
     // model, built around it, says where the surface is (a device that went
     // below the plane of a surface that goes on is met then).
-    outside_ = device_height_m() > 0.0 || (outside_ && !device_over_patch());
+    // A hand let go beyond the border's reach was on the surface, so in
+    // front of it: held to be outside likewise, so the next model, if the
+    // surface does go on under it, meets it there (it is not left inside
+    // with no force).
+    outside_ = device_height_m() > 0.0 || ((outside_ || beyond_reach) && !device_over_patch());
     clear_ = outside_ && !in_reach;
     return out;
   }
@@ -438,10 +484,10 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
   contact_triangle_ = c.triangle;
   contact_weight_ = c.weight;
   surface_point_m_ = c.point;
-  proxy_m_ = c.point;
+  proxy_m_ = rigid_proxy_m;
 
   const double k_v = params_.coupling_stiffness_N_per_m;
-  const Vec3 proxy = compliant ? compliant_proxy_m : c.point;
+  const Vec3 proxy = compliant ? compliant_proxy_m : rigid_proxy_m;
   out.compliant = compliant;
 
   Vec3 force_N = k_v * (proxy - device_m);

@@ -29,9 +29,29 @@
 //     with a rigid patch ends when the device is on the outer side of that
 //     feature, judged with the angle-weighted pseudo-normal (Baerentzen &
 //     Aanaes 2005), which is well defined on edges and vertices too (a
-//     deformed patch holds it a little longer, see below). A contact that
-//     started over the patch goes on past its border: the proxy stays on the
-//     border edge (the sim re-centres the patch on the tool every step).
+//     deformed patch holds it a little longer, see below).
+//   - Past the border: the patch is a window the sim cut around the tool,
+//     and a touching hand that slides past its border (faster than the
+//     models follow it: 0.3 m/s over the 0.1 s a model may be old takes it
+//     10 mm past a 20 mm patch) is over surface that goes on. The proxy
+//     goes on along the plane through the border point c with its normal
+//     (first-order extrapolation of the surface), so the force stays along
+//     that normal and from the hand's depth alone; held on the border edge,
+//     it dragged the hand back sideways with k_v times the overshoot. The
+//     contact point (and the nodes the sim pushes) stays c. (The deformable
+//     proxy below moves along the normal from the hand anyway; only the
+//     bound that follows is new to it.) On a curved patch the plane turns
+//     where c passes between a border edge and a border vertex (their
+//     normals differ by the angle between the faces there), so the proxy
+//     steps by about the hand's distance from c times that angle. Not
+//     without end: beside an object's edge there is no surface. No farther
+//     past the border than the patch reaches from the point the sim built
+//     it around (position_ref_m) to c; beyond, the hand is let go and held
+//     to be outside, as a free hand beside the patch (above). The sim builds
+//     the next model around the proxy, covering about as much around it:
+//     where the surface goes on, it meets the hand again; where the hand
+//     slid off an edge, the edge is in it and its pseudo-normal lets the
+//     hand go.
 //
 // Deformable object (LocalModel::in_contact): the patch is the surface as the
 // sim last left it under force_ref; pushing harder displaces the contact point
@@ -154,6 +174,9 @@ class ContactRenderer {
   // two triangles share, a vertex with a closed fan), i.e. it is not on the
   // patch's border, where the pseudo-normal lacks the faces beyond it.
   bool surrounded(const Closest& c) const noexcept;
+  // How far past the border feature c the surface is taken to go on along
+  // its plane (top of the file).
+  double border_reach_m(const Closest& c) const noexcept;
   Vec3 surface_velocity(const Closest& c) const noexcept;
   // The deformable proxy (top of the file) for contact normal n: true, with
   // *proxy_m, when the model is in contact and the solve pushes into the

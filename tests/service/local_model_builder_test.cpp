@@ -4,6 +4,8 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cmath>
+#include <memory>
 #include <random>
 
 #include "haptics/contact_renderer.hpp"
@@ -204,6 +206,93 @@ TEST(LocalModelBuilder, AHandBesideTheCubeLevelWithItsTopFaceFeelsNoForce) {
   // Else the builder never hands over a top-face triangle here and the case
   // above is not reached: the test would need another place.
   EXPECT_GT(top_face_patches, 0);
+}
+
+// The builder and the renderer together, as the daemon runs them: a hand
+// pressing 2 mm into the cube's top face slides across it at 0.5 m/s while
+// no new model comes for 0.1 s (device.limits.stale_model_s: the loop still
+// renders a model that old), past the border of the patch the sim cut
+// around it. The top face is frictionless: the force is along its normal,
+// from the depth alone. The proxy was held on the patch's border edge and
+// the hand felt a sideways tug of k_v times its overshoot. Then, with a
+// model every 10 ms built around the proxy (as the sim thread does), the
+// hand slides on off the cube's edge and is let go there, not held up by
+// the top face's plane in the air beside the cube.
+TEST(LocalModelBuilder, AHandSlidingOverTheCubeFeelsNoSidewaysForceAndIsLetGoOffItsEdge) {
+  physics::Simulation sim(cantilever_with_tool());  // [0, 0.1]^3
+  haptics::RenderParams params;                     // the lab default: 400 N/m, 1 N s/m
+  params.coupling_stiffness_N_per_m = 400.0;
+  params.coupling_damping_N_s_per_m = 1.0;
+  const double depth_m = 0.002, speed_m_per_s = 0.5, y_m = 0.04;
+  const std::int64_t ms = 1000000;
+  const Vec3 velocity(speed_m_per_s, 0.0, 0.0);
+  const Vec3 pressed_N(0.0, 0.0, params.coupling_stiffness_N_per_m * depth_m);
+
+  LocalModelBuilder builder;
+  haptics::LocalModel models[2];
+  int active = 0;
+  PatchQuery query;
+  query.tool_m = Vec3(0.015, y_m, 0.101);  // free, 1 mm above the top face
+  builder.build(sim, query, &models[active]);
+  models[active].version = 1;
+  models[active].built_ns = 0;
+  double patch_max_x_m = 0.0;
+  for (int v = 0; v < models[active].vertex_count; ++v)
+    patch_max_x_m = std::max(patch_max_x_m, models[active].vertex_m[v].x());
+  auto renderer = std::make_unique<haptics::ContactRenderer>(params);
+  renderer->set_model(&models[active]);
+  std::int64_t now_ns = 0;
+  ASSERT_FALSE(renderer->render(now_ns += ms, query.tool_m, Vec3::Zero()).contact);
+  ASSERT_TRUE(renderer->render(now_ns += ms, Vec3(0.015, y_m, 0.1 - depth_m), Vec3::Zero()).contact);
+
+  // 0.1 s on the one model: 50 mm, to x = 65 mm.
+  const double start_x_m = 0.015;
+  const double stale_model_s = 0.1;
+  const int stale_ticks = static_cast<int>(std::lround(stale_model_s / 1e-3));
+  ASSERT_LT(patch_max_x_m + 0.01, start_x_m + speed_m_per_s * stale_model_s)
+      << "the slide must pass the patch's border by 10 mm or more";
+  haptics::RenderOutput out;
+  for (int k = 1; k <= stale_ticks; ++k) {
+    const Vec3 hand(start_x_m + speed_m_per_s * 1e-3 * k, y_m, 0.1 - depth_m);
+    out = renderer->render(now_ns += ms, hand, velocity);
+    EXPECT_TRUE(out.contact) << "hand at " << hand.transpose();
+    EXPECT_LT((out.force_on_device_N - pressed_N).norm(), 1e-9)
+        << "hand at " << hand.transpose() << " (patch up to x = " << patch_max_x_m
+        << "): " << out.force_on_device_N.transpose() << " N";
+  }
+
+  // On, with a model every 10 ms around the proxy, to 40 mm beside the cube.
+  int let_go = 0;
+  for (int k = stale_ticks + 1; k <= 250; ++k) {
+    const Vec3 hand(start_x_m + speed_m_per_s * 1e-3 * k, y_m, 0.1 - depth_m);
+    if ((k - stale_ticks) % 10 == 1) {
+      query.tool_m = out.proxy_m;  // the newest tool sample's proxy
+      const int next = 1 - active;
+      builder.build(sim, query, &models[next]);
+      models[next].version = models[active].version + 1;
+      models[next].built_ns = now_ns;
+      auto switched = std::make_unique<haptics::ContactRenderer>(params);
+      switched->set_model(&models[next]);
+      switched->carry_state_from(*renderer);  // as the haptic loop does on every new model
+      renderer = std::move(switched);
+      active = next;
+    }
+    out = renderer->render(now_ns += ms, hand, velocity);
+    if (hand.x() < 0.1 - 1e-9) {  // on the top face, short of its edge
+      EXPECT_TRUE(out.contact) << "hand at " << hand.transpose();
+      EXPECT_LT((out.force_on_device_N - pressed_N).norm(), 1e-9)
+          << "hand at " << hand.transpose() << ": " << out.force_on_device_N.transpose() << " N";
+    }
+    // Past the edge by more than the depth the edge's pseudo-normal lets go,
+    // with one model's travel (5 mm) for the model that holds the edge.
+    if (hand.x() > 0.1 + depth_m + 0.005) {
+      ++let_go;
+      EXPECT_FALSE(out.contact) << "hand at " << hand.transpose() << ", proxy at " << out.proxy_m.transpose();
+      EXPECT_EQ(out.force_on_device_N, Vec3::Zero())
+          << "hand at " << hand.transpose() << ": " << out.force_on_device_N.transpose() << " N";
+    }
+  }
+  EXPECT_GT(let_go, 50);
 }
 
 TEST(LocalModelBuilder, NeedsAToolInTheScene) {
