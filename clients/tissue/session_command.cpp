@@ -278,13 +278,15 @@ Subcommand add_session_command(CLI::App& parent) {
   options->list = session->add_subcommand(
       "list",
       "The sessions in a state directory: state (closed cleanly, OPEN: recording or crashed, repaired, NOT closed "
-      "cleanly, NOT closed (crash tail): `tissue session repair` trims it), start, duration, rows, scene");
+      "cleanly, NOT closed (crash tail): `tissue session repair` trims it), start, duration, rows, recorder holes in "
+      "/haptic (count, session time spanned), scene");
   options->list->add_option("dir", options->dir, "Directory (default: tissued's default state_dir)")
       ->capture_default_str();
   options->list->footer(
       "Unreadable session files and unfinished creations are listed after the sessions, with the reason.\n"
       "Exit codes: 0 listed, 1 the directory cannot be read, 2 bad arguments.");
-  options->info = session->add_subcommand("info", "Duration, row counts, scene, host, version, clean close or crash");
+  options->info = session->add_subcommand(
+      "info", "Duration, row counts, scene, host, version, clean close or crash, recorder holes in /haptic");
   options->info->add_option("file", options->file, "Session file (.h5)")->required();
   options->repair = session->add_subcommand(
       "repair",

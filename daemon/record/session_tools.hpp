@@ -67,6 +67,12 @@ struct SessionInfo {
   // all. Filled by read_session_info (so `info` and `list`); SessionFile's
   // info() leaves them 0 (read_haptic_holes reads them).
   std::uint64_t haptic_holes = 0, haptic_ticks_lost = 0;
+  // The session time those holes span: for each hole with a recorded row on
+  // either side, the time between those two rows (the jump in
+  // /haptic/time_s the hole explains; the time a replay leaves out of
+  // device_timeout_s), summed. A hole at either end of /haptic has no such
+  // span and adds nothing. Filled by read_session_info.
+  double haptic_hole_time_s = 0.0;
   // Hole events that do not match the rows they name (damage), one line each
   // naming the event row; not counted above. Filled by read_session_info:
   // info and list report them and show the rest of the file (repair does not
