@@ -851,7 +851,13 @@ std::vector<SimRow> read_sim_rows(const SessionFile& f) {
 
 SessionRows read_session_rows(const std::string& path) {
   const SessionFile f(path);
-  return {read_haptic_rows(f), read_sim_rows(f)};
+  SessionRows rows{read_haptic_rows(f), read_sim_rows(f), {}};
+  // A damaged hole event is left out, not a reason to refuse the rows: the
+  // publishing replay only says where holes are (it judges no device), and
+  // info and list name the damage.
+  std::vector<std::string> damaged;
+  rows.haptic_holes = read_haptic_holes(f, &damaged);
+  return rows;
 }
 
 HapticTrack read_haptic_track(const std::string& path) {

@@ -183,6 +183,10 @@ std::string mesh_frame_problem(std::uint64_t frame, std::uint64_t vertex_offset,
 struct SessionRows {
   std::vector<HapticRow> haptic;
   std::vector<SimRow> sim;
+  // The holes the recorder left in /haptic (read_haptic_holes; a damaged
+  // hole event is left out, as info and list leave it out of their count),
+  // by row_after: a replay says where it reaches one.
+  std::vector<HapticHole> haptic_holes;
 };
 SessionRows read_session_rows(const std::string& path);
 
