@@ -70,6 +70,27 @@ std::string fixed(double v, int digits) {
   return buf;
 }
 
+// The publishers, and a line on stdout where the replay reaches a hole the
+// recorder left in /haptic: no haptic_state goes out over it, so a viewer
+// sees the hand stop there though live it moved on; the person running the
+// replay learns why (nothing on the wire can say "no data").
+class AnnouncingSink final : public replay::ReplaySink {
+ public:
+  explicit AnnouncingSink(replay::PublisherSink& publishers) : publishers_(publishers) {}
+  void mesh(const service::MeshSnapshot& snapshot) override { publishers_.mesh(snapshot); }
+  void haptic(const service::SimStatus& status) override { publishers_.haptic(status); }
+  void stats(const service::SimStatus& status) override { publishers_.stats(status); }
+  void haptic_hole(const record::HapticHole& hole) override {
+    std::cout << "hole: no haptic_state from t=" << fixed(hole.time_before_s, 3)
+              << " s to t=" << fixed(hole.time_after_s, 3) << " s (" << fixed(hole.time_after_s - hole.time_before_s, 3)
+              << " s of session time): the recorder dropped " << hole.ticks_lost
+              << " haptic ticks there (its ring was full); live clients got them" << std::endl;
+  }
+
+ private:
+  replay::PublisherSink& publishers_;
+};
+
 int run_replay(const std::string& file, const ReplayCommandOptions& o) {
   if (!o.lcm_url && !o.dds.enabled) {
     std::cerr << "tissue session replay: choose where to publish: --lcm [URL] and/or --dds\n";
@@ -128,7 +149,8 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
     while (dds->matched_readers().meshes == 0 && std::chrono::steady_clock::now() < until && !stops.stopped())
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  replay::PublisherSink sink(lcm.get(), dds.get());
+  replay::PublisherSink publishers(lcm.get(), dds.get());
+  AnnouncingSink sink(publishers);
   replay::SteadyReplayClock clock;
   replay::ReplaySummary sum;
   try {
@@ -146,6 +168,10 @@ int run_replay(const std::string& file, const ReplayCommandOptions& o) {
   std::cout << "\n  " << fixed(sum.session_span_s, 3) << " s of session time in " << fixed(sum.wall_s, 3)
             << " s wall: pace " << fixed(sum.pace(), 3) << "x (asked " << fixed(o.replay.speed, 3) << "x), "
             << sum.late_items << " items sent > 10 ms late (worst " << fixed(1e3 * sum.max_lag_s, 1) << " ms)\n";
+  if (sum.haptic_holes > 0)
+    std::cout << "  " << sum.haptic_holes << (sum.haptic_holes == 1 ? " recorder hole" : " recorder holes")
+              << " crossed (" << fixed(sum.haptic_hole_time_s, 3)
+              << " s without haptic rows): no haptic_state over them, the ticks the recorder dropped\n";
   if (lcm)
     std::cout << "  LCM " << lcm->url() << ": " << lcm->counts().meshes << " meshes, " << lcm->counts().haptic_states
               << " haptic states, " << lcm->counts().stats << " stats sent, " << lcm->counts().failures
@@ -278,13 +304,15 @@ Subcommand add_session_command(CLI::App& parent) {
   options->list = session->add_subcommand(
       "list",
       "The sessions in a state directory: state (closed cleanly, OPEN: recording or crashed, repaired, NOT closed "
-      "cleanly, NOT closed (crash tail): `tissue session repair` trims it), start, duration, rows, scene");
+      "cleanly, NOT closed (crash tail): `tissue session repair` trims it), start, duration, rows, recorder holes in "
+      "/haptic (count, session time spanned), scene");
   options->list->add_option("dir", options->dir, "Directory (default: tissued's default state_dir)")
       ->capture_default_str();
   options->list->footer(
       "Unreadable session files and unfinished creations are listed after the sessions, with the reason.\n"
       "Exit codes: 0 listed, 1 the directory cannot be read, 2 bad arguments.");
-  options->info = session->add_subcommand("info", "Duration, row counts, scene, host, version, clean close or crash");
+  options->info = session->add_subcommand(
+      "info", "Duration, row counts, scene, host, version, clean close or crash, recorder holes in /haptic");
   options->info->add_option("file", options->file, "Session file (.h5)")->required();
   options->repair = session->add_subcommand(
       "repair",

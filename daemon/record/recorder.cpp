@@ -35,6 +35,7 @@ std::unique_ptr<Recorder> Recorder::start(const std::string& state_dir, const st
     throw RecordError("recorder: mesh_frame_buffers must be in [2, 16]");
   auto writer = SessionWriter::open_in(state_dir, name, metadata);
   if (options.write_fault_for_testing) writer->set_write_fault_for_testing(options.write_fault_for_testing);
+  if (options.flush_fault_for_testing) writer->set_flush_fault_for_testing(options.flush_fault_for_testing);
   auto recorder = std::unique_ptr<Recorder>(new Recorder(std::move(writer), std::move(options)));
   recorder->thread_ = std::thread([r = recorder.get()] { r->run(); });
   return recorder;
@@ -304,6 +305,7 @@ void Recorder::note_haptic_hole(std::uint64_t drops, const HapticRow* next) {
                                                : session_time_s_now();
   pending_events_.push_back(Event::make(time_s, EventKind::kWarning, haptic_hole_message(hole)));
   haptic_drops_in_holes_ = drops;
+  hole_event_pending_ = true;
 }
 
 // Returns false once recording has failed. Mesh frames are written as soon as
@@ -381,6 +383,25 @@ bool Recorder::drain_and_write(bool force_flush) {
   const auto now = Clock::now();
   const bool ring_pressure = pending_haptic_.size() >= kHapticRingRows;
   if (!force_flush && !ring_pressure && now < next_flush_) return true;
+  // A hole's event goes into the file, synced, before the rows after the
+  // hole are handed to HDF5 at all. In one flush the writer flushes /haptic
+  // before /events, and HDF5 or the kernel may write either out early, so a
+  // crash (or power cut) between the two could leave the rows after a hole
+  // without its event: the hole invisible, a jump in /haptic/time_s like the
+  // loop skipping ticks. This order leaves at worst the event without those
+  // rows, which readers keep (its ticks were lost all the same). Only in a
+  // flush that carries a hole (rare: the disk stalled for a ring's worth),
+  // so the extra sync costs nothing in steady state. Simpler and exact
+  // beside the other option, telling holes from the time stamps at read
+  // time: rows carry no tick count, and the loop's own skipped ticks and the
+  // tool-sample ring's drops make jumps in /haptic/time_s too.
+  if (hole_event_pending_) {
+    writer_->append_events(pending_events_);
+    writer_->flush();
+    events_written_.fetch_add(pending_events_.size(), std::memory_order_relaxed);
+    pending_events_.clear();
+    hole_event_pending_ = false;
+  }
   writer_->append_haptic(pending_haptic_);
   writer_->append_sim(pending_sim_);
   writer_->append_events(pending_events_);

@@ -21,6 +21,8 @@
 // (HapticHole, docs/session-format.md). Each row carries the ring's drop
 // count into the ring (one load of a counter its own thread writes), so the
 // recorder thread knows exactly which two rows a run of drops fell between.
+// A hole's event is flushed and synced before the rows after the hole are
+// written, so no crash leaves those rows without it.
 //
 // Every push is either written or counted as a drop, also when producers
 // keep pushing while the recorder stops or fails (a retired recorder whose
@@ -93,6 +95,8 @@ struct RecorderOptions {
   // SessionWriter::set_write_fault_for_testing. Called on the recorder
   // thread only.
   std::function<void(const char* dataset_path)> write_fault_for_testing;
+  // Likewise, SessionWriter::set_flush_fault_for_testing.
+  std::function<void(const char* dataset_path)> flush_fault_for_testing;
 };
 
 enum class RecorderState : int { kRecording, kFailed, kStopped };
@@ -248,6 +252,9 @@ class Recorder {
   std::uint64_t haptic_rows_drained_ = 0;
   double last_haptic_time_s_ = 0.0;
   std::uint64_t haptic_drops_in_holes_ = 0;
+  // pending_events_ holds a hole's event: the next flush writes the events
+  // first (drain_and_write says why).
+  bool hole_event_pending_ = false;
   // Queues the hole event for the rows the ring refused since the last hole
   // (its drop count is now `drops`), before `next` (nullptr: none follows,
   // the recording stops).

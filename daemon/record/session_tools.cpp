@@ -675,6 +675,11 @@ SessionInfo read_session_info(const std::string& path) {
   // does not touch events, so the file could never be summarised again.
   for (const HapticHole& hole : read_haptic_holes(f, &info.damaged_hole_events)) {
     ++info.haptic_holes;
+    // The jump in /haptic/time_s it explains. Its rows' times were checked
+    // where the file holds them; one past them (a crash's last write) is the
+    // event's own number. Never negative: rows out of order are not a span.
+    if (hole.has_row_before() && hole.has_row_after())
+      info.haptic_hole_time_s += std::max(0.0, hole.time_after_s - hole.time_before_s);
     // Saturated: a damaged or forged count must not wrap to a small one.
     info.haptic_ticks_lost = hole.ticks_lost > std::numeric_limits<std::uint64_t>::max() - info.haptic_ticks_lost
                                  ? std::numeric_limits<std::uint64_t>::max()
@@ -846,7 +851,13 @@ std::vector<SimRow> read_sim_rows(const SessionFile& f) {
 
 SessionRows read_session_rows(const std::string& path) {
   const SessionFile f(path);
-  return {read_haptic_rows(f), read_sim_rows(f)};
+  SessionRows rows{read_haptic_rows(f), read_sim_rows(f), {}};
+  // A damaged hole event is left out, not a reason to refuse the rows: the
+  // publishing replay only says where holes are (it judges no device), and
+  // info and list name the damage.
+  std::vector<std::string> damaged;
+  rows.haptic_holes = read_haptic_holes(f, &damaged);
+  return rows;
 }
 
 HapticTrack read_haptic_track(const std::string& path) {
@@ -924,10 +935,14 @@ std::string format_session_info(const SessionInfo& info) {
   o << "  /events         " << info.rows.events << " events\n";
   // Ticks the recorder dropped (its ring full: the disk stalled) are not in
   // /haptic; a hole is otherwise just a jump in /haptic/time_s.
-  if (info.haptic_holes > 0)
+  if (info.haptic_holes > 0) {
+    char span[64];
+    std::snprintf(span, sizeof span, "%.3f s", info.haptic_hole_time_s);
     o << "haptic holes:     " << info.haptic_holes << (info.haptic_holes == 1 ? " hole, " : " holes, ")
       << info.haptic_ticks_lost << (info.haptic_ticks_lost == 1 ? " tick" : " ticks")
-      << " the recorder dropped (its ring was full); a warning event each names the rows on either side\n";
+      << " the recorder dropped (its ring was full), " << span
+      << " of session time between the rows on either side; a warning event each names those rows\n";
+  }
   // The replay refuses the file while one is there (it would skip the
   // device's judgement in the wrong place); everything else reads.
   for (const std::string& damaged : info.damaged_hole_events)
@@ -1017,6 +1032,23 @@ const char* state_label(SessionState state) {
 // write (repair trims it).
 constexpr const char* kCrashTailLabel = "NOT closed (crash tail)";
 
+// The holes column: "-" for none, else the count and, when any has a row on
+// either side, the session time they span ("2 (0.031 s)"); damaged hole
+// events add "+N damaged" (each also gets its own "damaged:" line), so a
+// user scanning the table sees every file whose /haptic has holes without
+// `info` on each. From read_session_info's count: the rows are not read.
+std::string holes_cell(const SessionInfo& s) {
+  if (s.haptic_holes == 0 && s.damaged_hole_events.empty()) return "-";
+  std::string cell = std::to_string(s.haptic_holes);
+  if (s.haptic_hole_time_s > 0.0) {
+    char span[48];
+    std::snprintf(span, sizeof span, " (%.3f s)", s.haptic_hole_time_s);
+    cell += span;
+  }
+  if (!s.damaged_hole_events.empty()) cell += " +" + std::to_string(s.damaged_hole_events.size()) + " damaged";
+  return cell;
+}
+
 }  // namespace
 
 std::string format_session_listing(const SessionListing& listing) {
@@ -1027,12 +1059,13 @@ std::string format_session_listing(const SessionListing& listing) {
   // row rather than being cut.
   const auto row = [&o](const std::string& file, const std::string& state, const std::string& start,
                         const std::string& duration, const std::string& haptic, const std::string& frames,
-                        const std::string& scene) {
+                        const std::string& holes, const std::string& scene) {
     o << std::left << std::setw(28) << file << ' ' << std::setw(28) << state << ' ' << std::setw(24) << start << ' '
       << std::right << std::setw(10) << duration << ' ' << std::setw(10) << haptic << ' ' << std::setw(7) << frames
-      << "  " << scene << "\n";
+      << ' ' << std::setw(12) << holes << "  " << scene << "\n";
   };
-  if (!listing.sessions.empty()) row("file", "state", "start (UTC)", "duration s", "haptic", "frames", "scene");
+  if (!listing.sessions.empty())
+    row("file", "state", "start (UTC)", "duration s", "haptic", "frames", "holes", "scene");
   for (const SessionInfo& s : listing.sessions) {
     char duration[32];
     std::snprintf(duration, sizeof duration, "%.3f", s.duration_s);
@@ -1042,8 +1075,13 @@ std::string format_session_listing(const SessionListing& listing) {
         : state == SessionState::kNotClosed && s.crash_tail ? kCrashTailLabel
                                                             : state_label(state),
         shown(s.start_time_utc), duration, std::to_string(s.rows.haptic_rows), std::to_string(s.rows.mesh_frames),
-        shown(s.scene_name));
+        holes_cell(s), shown(s.scene_name));
   }
+  // What the column means, once, when a session has any (as the OPEN hint).
+  if (std::any_of(listing.sessions.begin(), listing.sessions.end(),
+                  [](const SessionInfo& s) { return s.haptic_holes > 0 || !s.damaged_hole_events.empty(); }))
+    o << "holes: runs of haptic ticks the recorder dropped (its ring was full), with the session time between the "
+         "rows on either side; `tissue session info FILE` counts the ticks\n";
   for (const SessionListing::Unreadable& u : listing.unreadable) o << "unreadable: " << shown(u.reason) << "\n";
   for (const SessionInfo& s : listing.sessions)
     for (const std::string& damaged : s.damaged_hole_events)

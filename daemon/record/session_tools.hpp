@@ -67,6 +67,12 @@ struct SessionInfo {
   // all. Filled by read_session_info (so `info` and `list`); SessionFile's
   // info() leaves them 0 (read_haptic_holes reads them).
   std::uint64_t haptic_holes = 0, haptic_ticks_lost = 0;
+  // The session time those holes span: for each hole with a recorded row on
+  // either side, the time between those two rows (the jump in
+  // /haptic/time_s the hole explains; the time a replay leaves out of
+  // device_timeout_s), summed. A hole at either end of /haptic has no such
+  // span and adds nothing. Filled by read_session_info.
+  double haptic_hole_time_s = 0.0;
   // Hole events that do not match the rows they name (damage), one line each
   // naming the event row; not counted above. Filled by read_session_info:
   // info and list report them and show the rest of the file (repair does not
@@ -177,6 +183,10 @@ std::string mesh_frame_problem(std::uint64_t frame, std::uint64_t vertex_offset,
 struct SessionRows {
   std::vector<HapticRow> haptic;
   std::vector<SimRow> sim;
+  // The holes the recorder left in /haptic (read_haptic_holes; a damaged
+  // hole event is left out, as info and list leave it out of their count),
+  // by row_after: a replay says where it reaches one.
+  std::vector<HapticHole> haptic_holes;
 };
 SessionRows read_session_rows(const std::string& path);
 

@@ -595,6 +595,13 @@ void SessionWriter::flush(Sync sync) {
   bool synced = true;  // nothing new: nothing to sync
   for (std::size_t i = 0; i < kDatasetCount; ++i) {
     if (!dirty_[i]) continue;
+    if (flush_fault_) {
+      try {
+        flush_fault_(kDatasets[i].path);
+      } catch (const RecordError& e) {
+        fail(std::string("cannot flush ") + kDatasets[i].path + ": " + e.what());
+      }
+    }
     if (H5Dflush(datasets_[i].get()) < 0) fail(std::string("cannot flush ") + kDatasets[i].path);
     dirty_[i] = false;
     synced = false;

@@ -129,6 +129,12 @@ class SessionWriter {
   // writer still healthy (as std::bad_alloc from a scratch column would).
   using WriteFault = std::function<void(const char* dataset_path)>;
   void set_write_fault_for_testing(WriteFault fault) { write_fault_ = std::move(fault); }
+  // Test seam (never set in the daemon): called in flush() before each
+  // dataset's H5Dflush with the dataset's path. A RecordError thrown from it
+  // fails that flush as a real one fails: the writer fails and the file
+  // stays as of the datasets flushed before, which is what a crash at that
+  // point leaves (the order of a flush matters to what a crash can leave).
+  void set_flush_fault_for_testing(WriteFault fault) { flush_fault_ = std::move(fault); }
   // Test seam (never set in the daemon): replaces fdatasync(2) on the file's
   // descriptor (flush() and close() sync the file to disk). Returns 0 or an
   // errno value, which fails the writer like a write error.
@@ -158,6 +164,7 @@ class SessionWriter {
   bool closed_ = false;
   RecordingLock lock_;      // from before the file appears under its name until close()
   WriteFault write_fault_;  // see set_write_fault_for_testing
+  WriteFault flush_fault_;  // see set_flush_fault_for_testing
   SyncFile sync_;           // see set_sync_for_testing; empty: fdatasync
   // A create that failed after the file was made removes it: its close
   // syncs nothing (out of descriptors, the copy for the sync failed and the

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <optional>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "transport/dds_publisher.hpp"
 #include "transport/lcm_publisher.hpp"
@@ -198,12 +200,41 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
     throw ReplayError(frames.name() + ": --loop needs a pass of at least 1 ms of wall time: the window spans " +
                       fmt(span_s) + " s of session time, " + fmt(pass_wall_s) + " s at speed " + fmt(o.speed));
 
+  // The recorder's holes the replay crosses: a haptic item followed (before
+  // the next haptic item) by a hole with recorded rows on either side. Over
+  // it no haptic_state goes out, and a viewer sees the hand stop, as if it
+  // were still or lost, though live it moved on: the sink hears of the hole
+  // right after that item, when the stream stops (the CLI prints it). A hole
+  // the window does not reach across is not crossed. By item position.
+  std::vector<std::pair<std::size_t, const record::HapticHole*>> holes_after;
+  {
+    std::vector<const record::HapticHole*> holes;
+    for (const record::HapticHole& h : rows.haptic_holes)
+      if (h.has_row_before() && h.has_row_after()) holes.push_back(&h);
+    std::stable_sort(holes.begin(), holes.end(), [](const record::HapticHole* a, const record::HapticHole* b) {
+      return a->row_after < b->row_after;
+    });
+    std::size_t next_hole = 0;
+    std::optional<std::size_t> last_haptic;  // position in items
+    for (std::size_t pos = 0; pos < items.size() && next_hole < holes.size(); ++pos) {
+      if (items[pos].kind != StreamKind::kHaptic) continue;
+      if (last_haptic) {
+        // Holes at or before the row sent last are not between it and this.
+        while (next_hole < holes.size() && holes[next_hole]->row_after <= items[*last_haptic].index) ++next_hole;
+        while (next_hole < holes.size() && holes[next_hole]->row_after <= items[pos].index)
+          holes_after.emplace_back(*last_haptic, holes[next_hole++]);
+      }
+      last_haptic = pos;
+    }
+  }
+
   constexpr double kLate_s = 0.01;
   ReplaySummary sum;
   const double start_wall_s = clock.now_s();
   std::uint64_t sequence = 0;
   for (;;) {
-    for (const TimelineItem& item : items) {
+    for (std::size_t position = 0; position < items.size(); ++position) {
+      const TimelineItem& item = items[position];
       // Read before waiting: a large frame takes time to load, and that time
       // should come out of the wait, not delay the send.
       std::optional<service::MeshSnapshot> snapshot;
@@ -227,6 +258,13 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
         case StreamKind::kHaptic:
           sink.haptic(haptic_status(rows.haptic[item.index]));
           ++sum.haptic_rows;
+          for (auto it = std::lower_bound(holes_after.begin(), holes_after.end(), position,
+                                          [](const auto&entry, std::size_t p) { return entry.first < p; });
+               it != holes_after.end() && it->first == position; ++it) {
+            sink.haptic_hole(*it->second);
+            ++sum.haptic_holes;
+            sum.haptic_hole_time_s += std::max(0.0, it->second->time_after_s - it->second->time_before_s);
+          }
           break;
         case StreamKind::kStats:
           sink.stats(sim_status(rows.sim[item.index]));

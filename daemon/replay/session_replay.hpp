@@ -92,6 +92,10 @@ class ReplaySink {
   virtual void mesh(const service::MeshSnapshot& snapshot) = 0;
   virtual void haptic(const service::SimStatus& status) = 0;
   virtual void stats(const service::SimStatus& status) = 0;
+  // A hole the recorder left in /haptic (record::HapticHole) starts: no
+  // haptic state comes until its row_after. Nothing goes on the wire (no
+  // message says "no data"); the CLI prints it.
+  virtual void haptic_hole(const record::HapticHole& /*hole*/) {}
 };
 
 // The daemon's publishers as a sink (either may be null).
@@ -150,6 +154,10 @@ struct ReplaySummary {
   // at the start, so a slow item delays only itself and those right after it.
   std::uint64_t late_items = 0;
   double max_lag_s = 0.0;
+  // Recorder holes crossed (announced to the sink), summed over passes, and
+  // the session time between the rows on either side of them.
+  std::uint64_t haptic_holes = 0;
+  double haptic_hole_time_s = 0.0;
   // Session seconds per wall second achieved (≈ speed when on time).
   double pace() const { return wall_s > 0.0 ? session_span_s / wall_s : 0.0; }
 };

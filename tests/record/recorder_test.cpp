@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <filesystem>
 #include <functional>
 #include <limits>
@@ -398,6 +399,70 @@ TEST(Recorder, RowsDroppedWhenTheHapticRingOverflowsLeaveAHoleInTheFile) {
   EXPECT_NE(text.find("haptic holes:     2 holes, 57 ticks the recorder dropped"), std::string::npos) << text;
   EXPECT_EQ(read_haptic_track(path).rows_after_holes, (std::vector<std::size_t>{kRing}));
 }
+
+// A crash in the middle of the flush that carries a hole (here: that flush
+// failing at one dataset, which leaves the file as of the datasets flushed
+// before it, as a crash there would) never leaves the rows after the hole
+// in the file without the hole's event: a hole without its event is
+// invisible, a jump in /haptic/time_s like the loop skipping ticks. The
+// writer flushes /haptic before /events, so before, a crash between the two
+// did just that. Now the event is flushed first, so a crash while the rows
+// are flushed finds it there.
+class RecorderCrashInTheHolesFlush : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(RecorderCrashInTheHolesFlush, TheRowsAfterAHoleAreNeverInTheFileWithoutItsEvent) {
+  TempDir dir;
+  RecorderOptions o = fast_options();
+  o.flush_interval_s = 1.0;
+  o.poll_interval_s = 1.0;
+  std::atomic<bool> armed{false};
+  const std::string failing = GetParam();
+  o.flush_fault_for_testing = [&armed, failing](const char* dataset) {
+    if (armed.load() && dataset == failing) throw RecordError("injected crash");
+  };
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  constexpr std::uint64_t kRing = Recorder::kHapticRingRows;
+  std::uint64_t pushed = 0, accepted = 0;
+  const auto push = [&](std::uint64_t n) {
+    for (std::uint64_t k = 0; k < n; ++k) accepted += rec->push_haptic(testing::haptic_row(pushed++)) ? 1 : 0;
+  };
+  push(kRing + 50);  // the ring holds kRing: 50 dropped
+  ASSERT_EQ(accepted, kRing) << "the recorder drained before the ring was full: no hole to check";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (rec->stats().haptic_rows_written < kRing && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_EQ(rec->stats().haptic_rows_written, kRing);
+  // The next flush is the hole's: the first of these rows comes after it.
+  armed.store(true);
+  push(10);
+  ASSERT_EQ(accepted, kRing + 10);
+  rec->stop();
+  ASSERT_EQ(rec->state(), RecorderState::kFailed) << "the injected crash never happened: " << failing;
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  ASSERT_GE(info.rows.haptic_rows, kRing);
+  if (info.rows.haptic_rows > kRing) {
+    EXPECT_EQ(info.haptic_holes, 1u) << "the crash at " << failing << " left " << info.rows.haptic_rows - kRing
+                                     << " rows after the hole in the file, and no event of the hole";
+  }
+  // The event goes first: a crash while the rows after it are being flushed
+  // finds it in the file already.
+  if (failing.rfind("/haptic/", 0) == 0) {
+    EXPECT_EQ(info.haptic_holes, 1u) << "the crash at " << failing << " left no event of the hole";
+  }
+  // When the event is there, it is the hole's.
+  EXPECT_EQ(info.haptic_ticks_lost, info.haptic_holes == 0 ? 0u : 50u);
+  EXPECT_TRUE(info.damaged_hole_events.empty());
+}
+
+INSTANTIATE_TEST_SUITE_P(Recorder, RecorderCrashInTheHolesFlush,
+                         ::testing::Values("/haptic/time_s", "/events/kind", "/events/message", "/events/time_s"),
+                         [](const ::testing::TestParamInfo<const char*>& p) {
+                           std::string name = p.param;
+                           std::string out;
+                           for (char c : name)
+                             if (std::isalnum(static_cast<unsigned char>(c))) out += c;
+                           return out;
+                         });
 
 // What a recording's on_error said: how often, and the last message (read
 // after stop(), which joins the recorder thread that calls it).

@@ -1909,6 +1909,82 @@ TEST(SessionReader, InfoAndListReportADamagedHoleEventAndShowTheRest) {
   EXPECT_NE(listed.find("bad.h5: hole event 1 does not match its rows (damaged)"), std::string::npos) << listed;
 }
 
+// `tissue session list` shows which sessions have recorder holes, so a lab
+// user scanning a directory sees them without `info` on every file: a holes
+// column with the count and the session time they span (the jumps in
+// /haptic/time_s between the rows on either side; a hole at the end has no
+// row after it and spans nothing), "-" for none, and a damaged hole event
+// flagged on its session's row as well as on its own line. Before, list
+// showed holes nowhere, only a damaged event.
+TEST(SessionTools, ListShowsEachSessionsHolesAndTheTimeTheySpan) {
+  TempDir dir;
+  const std::string d = dir / "state";
+  std::filesystem::create_directories(d);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const auto write = [&](const std::string& name, const std::vector<HapticHole>& holes) {
+    auto w = SessionWriter::create(d + "/" + name, SessionMetadata{});
+    std::vector<HapticRow> rows;
+    // Rows 49 and 50 are at 49 and 80 ms: 30 ticks lost between them.
+    for (std::uint64_t i = 0; i < 100; ++i) rows.push_back(testing::haptic_row(i < 50 ? i : i + 30));
+    w->append_haptic(rows);
+    std::vector<Event> events = {testing::event_row(0)};
+    for (const HapticHole& h : holes)
+      events.push_back(
+          Event::make(h.has_row_before() ? h.time_before_s : 0.0, EventKind::kWarning, haptic_hole_message(h)));
+    w->append_events(events);
+    w->close();
+  };
+  const HapticHole between{30, 50, testing::haptic_row(49).time_s, testing::haptic_row(80).time_s};
+  const HapticHole at_end{4, 100, testing::haptic_row(129).time_s, nan};
+  // Names 50 ms for row 50, which is at 80 ms.
+  const HapticHole misplaced{1, 50, testing::haptic_row(49).time_s, testing::haptic_row(50).time_s};
+  write("holes.h5", {between, at_end});
+  write("end-only.h5", {at_end});
+  write("damaged.h5", {misplaced, at_end});
+  testing::write_test_session(d + "/plain.h5");
+
+  const SessionListing l = list_sessions(d);
+  ASSERT_EQ(l.sessions.size(), 4u);
+  const auto session = [&](const std::string& name) -> const SessionInfo& {
+    for (const SessionInfo& s : l.sessions)
+      if (std::filesystem::path(s.path).filename() == name) return s;
+    throw std::runtime_error("no session " + name);
+  };
+  EXPECT_EQ(session("holes.h5").haptic_holes, 2u);
+  EXPECT_NEAR(session("holes.h5").haptic_hole_time_s, 0.031, 1e-9);
+  EXPECT_EQ(session("end-only.h5").haptic_hole_time_s, 0.0);
+  EXPECT_EQ(session("plain.h5").haptic_hole_time_s, 0.0);
+
+  const auto r = run(tissue() + " session list " + quote(d), dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  // Each session's own row of the table.
+  const auto row_of = [&](const std::string& name) {
+    std::istringstream lines(r.out);
+    for (std::string line; std::getline(lines, line);)
+      if (line.rfind(name + " ", 0) == 0) return line;
+    return std::string("(no row for " + name + ")");
+  };
+  std::istringstream lines(r.out);
+  std::string title, header;
+  std::getline(lines, title);
+  std::getline(lines, header);
+  EXPECT_NE(header.find(" holes "), std::string::npos) << r.out;
+  EXPECT_NE(row_of("holes.h5").find(" 2 (0.031 s) "), std::string::npos) << r.out;
+  EXPECT_NE(row_of("end-only.h5").find(" 1 "), std::string::npos) << r.out;
+  EXPECT_EQ(row_of("end-only.h5").find(" s) "), std::string::npos) << r.out;
+  EXPECT_NE(row_of("damaged.h5").find(" 1 +1 damaged "), std::string::npos) << r.out;
+  EXPECT_NE(row_of("plain.h5").find(" - "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("damaged: damaged.h5: hole event 1 does not match its rows (damaged)"), std::string::npos)
+      << r.out;
+
+  // info says the time too.
+  const std::string info = format_session_info(session("holes.h5"));
+  EXPECT_NE(info.find("haptic holes:     2 holes, 34 ticks the recorder dropped (its ring was full), 0.031 s of "
+                      "session time between the rows on either side"),
+            std::string::npos)
+      << info;
+}
+
 // Hole events whose ticks add up past what a count holds (damage, or a forged
 // file) show the largest count, not a small number that wrapped.
 TEST(SessionReader, TheTicksLostInHolesSaturate) {

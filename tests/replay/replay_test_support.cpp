@@ -16,6 +16,8 @@ void RecordingSink::stats(const service::SimStatus& s) {
   sent.push_back({StreamKind::kStats, s.sim_time_s, clock_->now_s()});
 }
 
+void RecordingSink::haptic_hole(const record::HapticHole& hole) { holes.push_back({hole, sent.size()}); }
+
 std::vector<x3d::SurfaceFrame> moving_frames(std::size_t n, double dt_s) {
   std::vector<x3d::SurfaceFrame> out;
   for (std::size_t k = 0; k < n; ++k) {

@@ -43,6 +43,12 @@ class RecordingSink final : public ReplaySink {
     std::size_t vertices = 0;    // mesh only
   };
   std::vector<Sent> sent;
+  // Holes the replay announced, and how many items had been sent then.
+  struct Hole {
+    record::HapticHole hole;
+    std::size_t after_sent = 0;
+  };
+  std::vector<Hole> holes;
   std::map<std::uint64_t, double> mesh_cost_s;  // mesh sequence -> time its publish takes
   std::uint64_t stop_after = 0;                 // meshes; 0: never
   std::atomic<bool>* stop = nullptr;
@@ -50,6 +56,7 @@ class RecordingSink final : public ReplaySink {
   void mesh(const service::MeshSnapshot& s) override;
   void haptic(const service::SimStatus& s) override;
   void stats(const service::SimStatus& s) override;
+  void haptic_hole(const record::HapticHole& hole) override;
 
  private:
   FakeClock* clock_;

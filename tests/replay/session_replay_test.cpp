@@ -22,6 +22,7 @@
 #include <optional>
 #include <thread>
 
+#include "record/session_writer.hpp"
 #include "record_test_support.hpp"
 #include "replay_test_support.hpp"
 #include "support/loopback_listener.hpp"
@@ -419,6 +420,53 @@ TEST(ReplayPacing, ALoopOfLessThanAMillisecondPerPassIsRefused) {
     EXPECT_DOUBLE_EQ(sink2.sent[k].wall_s, start_s + 1e-3 * static_cast<double>((k + 1) / 2)) << k;
 }
 
+// A hole the recorder left in /haptic (ticks it dropped, its ring full) is
+// a stretch without rows: the replay sends no haptic_state over it, and a
+// viewer sees the hand stop there with nothing to tell it from a still hand
+// or a lost device, though live the hand moved on. So the replay says so
+// where it reaches one: the sink hears the hole right after the last haptic
+// state before it (when the stream stops), and the summary counts the holes
+// crossed and the session time they span. A hole the window does not reach
+// across is not announced. Before, nothing said it.
+TEST(ReplayPacing, AHoleTheRecorderLeftIsAnnouncedWhereTheStreamStops) {
+  VectorFrameSource frames{{}};
+  SessionRows rows = testing::rows(100, 0.001, 0, 0.0);
+  // Rows 0..49 at 0..49 ms, then 30 ticks dropped: row 50 is at 80 ms.
+  for (std::size_t i = 50; i < rows.haptic.size(); ++i) rows.haptic[i].time_s += 0.030;
+  rows.haptic_holes = {record::HapticHole{30, 50, rows.haptic[49].time_s, rows.haptic[50].time_s}};
+  FakeClock clock(10.0);
+  RecordingSink sink(&clock);
+  std::atomic<bool> stop{false};
+  ReplayOptions o;  // 100 Hz: rows 0, 10, .., 40, then 50 (80 ms)
+  const ReplaySummary s = replay_session(frames, rows, o, sink, clock, stop);
+  ASSERT_EQ(sink.holes.size(), 1u);
+  EXPECT_EQ(sink.holes[0].hole.row_after, 50u);
+  EXPECT_EQ(sink.holes[0].hole.ticks_lost, 30u);
+  const std::size_t k = sink.holes[0].after_sent;
+  ASSERT_GE(k, 1u);
+  ASSERT_LT(k, sink.sent.size());
+  EXPECT_NEAR(sink.sent[k - 1].time_s, 0.040, 1e-12) << "heard after the last state before the hole";
+  EXPECT_NEAR(sink.sent[k].time_s, 0.080, 1e-12) << "heard before the first state after the hole";
+  EXPECT_EQ(s.haptic_holes, 1u);
+  EXPECT_NEAR(s.haptic_hole_time_s, 0.031, 1e-12);
+
+  // Every row sent: heard after row 49.
+  RecordingSink every(&clock);
+  o.timeline.haptic_rate_hz = 0;
+  EXPECT_EQ(replay_session(frames, rows, o, every, clock, stop).haptic_holes, 1u);
+  ASSERT_EQ(every.holes.size(), 1u);
+  EXPECT_EQ(every.holes[0].after_sent, 50u);
+
+  // A window that starts after the hole, or ends before it, does not cross it.
+  for (const auto& [from_s, to_s] : {std::pair{0.081, 0.2}, std::pair{0.0, 0.049}}) {
+    RecordingSink outside(&clock);
+    o.timeline.from_s = from_s;
+    o.timeline.to_s = to_s;
+    EXPECT_EQ(replay_session(frames, rows, o, outside, clock, stop).haptic_holes, 0u) << from_s << " " << to_s;
+    EXPECT_TRUE(outside.holes.empty()) << from_s << " " << to_s;
+  }
+}
+
 TEST(ReplayPacing, SteadyClockWaitEndsSoonAfterStop) {
   SteadyReplayClock clock;
   std::atomic<bool> stop{false};
@@ -537,6 +585,35 @@ TEST(ReplayCli, ReplaysEverythingAndPrintsTheSummary) {
   EXPECT_NE(r.out.find("LCM memq://: 45 meshes, 150 haptic states, 8 stats sent, 0 failures"), std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("(asked 8.000x)"), std::string::npos) << r.out;
+}
+
+// `tissue session replay` prints each recorder hole as it reaches it (no
+// haptic_state goes out over it; a viewer sees the hand stop) and counts them
+// in the summary; the holes come from the session's hole events.
+TEST(ReplayCli, SaysWhereTheRecordedHapticRowsHaveAHole) {
+  TempDir dir;
+  const std::string path = dir / "holes.h5";
+  {
+    auto w = record::SessionWriter::create(path, record::SessionMetadata{});
+    std::vector<record::HapticRow> rows;
+    // Rows 49 and 50 are at 49 and 80 ms: 30 ticks dropped between them.
+    for (std::uint64_t i = 0; i < 200; ++i) rows.push_back(record::testing::haptic_row(i < 50 ? i : i + 30));
+    w->append_haptic(rows);
+    const record::HapticHole hole{30, 50, rows[49].time_s, rows[50].time_s};
+    const std::vector<record::Event> events = {
+        record::Event::make(hole.time_before_s, record::EventKind::kWarning, record::haptic_hole_message(hole))};
+    w->append_events(events);
+    w->close();
+  }
+  ASSERT_EQ(record::read_session_rows(path).haptic_holes.size(), 1u);
+  const RunResult r =
+      record::testing::run(tissue() + " session replay " + quote(path) + " --lcm memq:// --speed 10", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("hole: no haptic_state from t=0.049 s to t=0.080 s (0.031 s of session time): the recorder "
+                       "dropped 30 haptic ticks there"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("1 recorder hole crossed (0.031 s without haptic rows)"), std::string::npos) << r.out;
 }
 
 // `--lcm`'s URL is optional: a FILE right after it is the FILE, published on
