@@ -259,6 +259,7 @@ std::array<double, 6> Body::tet_edge_shares_m3(const std::array<NodeId, 4>& v, i
 }
 
 void Body::refresh_edge(EdgeId e) {
+  ++edges_refreshed_;
   const NodeId a = edge_a[e], b = edge_b[e];
   stiffness_N_per_m[e] =
       spring_stiffness_N_per_m(scene_.material.youngs_modulus_Pa, weighted_volume_m3[e], rest_length_m[e]);
@@ -401,11 +402,18 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
     }
   }
   const double rho = scene_.material.density_kg_per_m3;
+  // The paper's damper depends on both end masses. A node's mass changes
+  // only with the tets around it, so the touched nodes are all whose mass
+  // changed, and the springs at them, named by no event when the tet at
+  // their other end stayed, are the rest that need a refresh. Refreshing
+  // every spring instead cost O(springs) per split or merge.
+  const bool damper_needs_masses = scene_.material.damping == scene::DampingLaw::kPaper;
   for (NodeId n : touched_nodes_) {
     node_touched_[n] = 0;
     if (!mesh_.node_alive(n)) continue;
     mass_kg[n] = node_mass_kg(rho, mesh_.node(n).six_volume, unit);
     inv_mass_per_kg[n] = kind[n] == NodeKind::kFree ? 1.0 / mass_kg[n] : 0.0;
+    if (damper_needs_masses) mesh_.for_each_edge_at_node(n, [&](EdgeId e, const mesh::Edge&) { touch_edge(e); });
   }
   touched_nodes_.clear();
   for (EdgeId e : touched_edges_) {
@@ -413,10 +421,6 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
     if (mesh_.edge_alive(e)) refresh_edge(e);
   }
   touched_edges_.clear();
-  // The paper's damper depends on both end masses, which change for edges
-  // no event names: refresh them all (the "paper" law is for comparison).
-  if (scene_.material.damping == scene::DampingLaw::kPaper)
-    mesh_.for_each_edge([&](EdgeId e, const mesh::Edge&) { refresh_edge(e); });
 }
 
 double Body::total_mass_kg() const {

@@ -103,6 +103,11 @@ class Body {
   // and mass are sums of such per-tet shares (eqs. (2), (3)).
   std::array<double, 6> tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const;
 
+  // Springs (stiffness and damper) recomputed since construction, rebuilds
+  // included: what a split or merge costs in parameter updates, which must
+  // not grow with the mesh (a test compares it across mesh sizes).
+  std::uint64_t edges_refreshed() const { return edges_refreshed_; }
+
   // Total mass [kg] and momentum [kg m/s] of all nodes.
   double total_mass_kg() const;
   Vec3 momentum_kg_m_per_s() const;
@@ -124,6 +129,7 @@ class Body {
   scene::Scene scene_;
   mesh::KuhnMesh mesh_;
   std::uint64_t parameters_version_ = 0;
+  std::uint64_t edges_refreshed_ = 0;
   mesh::MeshChangeLog log_;            // reused: no allocation in steady state
   std::vector<EdgeId> touched_edges_;  // reused scratch
   std::vector<NodeId> touched_nodes_;

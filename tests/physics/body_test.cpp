@@ -195,6 +195,37 @@ TEST(Body, MassesSumToDensityTimesVolumeThroughChurn) {
   EXPECT_NEAR(body.total_mass_kg(), expected, 1e-13);
 }
 
+// The paper's damper depends on its end masses, so a change refreshes the
+// springs at every node whose mass it changed, and only those: the same
+// split and merge at the corner of a 2³ and of a 6³ cube box (the same
+// neighbourhood, 19x the springs) refresh the same number of springs, a
+// small part of the large box's. Refreshing every spring on every change
+// cost O(springs) per split, O(budget x springs) per adaptation pass.
+TEST(Body, APaperDamperChangeRefreshesOnlyTheSpringsAtTheNodesItChanges) {
+  scene::Scene small = adaptive_cube(scene::StiffnessLaw::kIsotropic, scene::DampingLaw::kPaper);
+  scene::Scene large = small;
+  large.object.cubes = {6, 6, 6};
+  Body a(small), b(large);
+  ASSERT_GT(b.mesh().edge_count(), 15 * a.mesh().edge_count());
+  const mesh::Key diamond = a.mesh().diamond_of(0);
+  // The same diamond by lattice key: the corner cube's tets are the same.
+  ASSERT_EQ(b.mesh().diamond_of(0), diamond);
+  const std::uint64_t a0 = a.edges_refreshed(), b0 = b.edges_refreshed();
+  ASSERT_EQ(a.split(diamond), 1);
+  ASSERT_EQ(b.split(diamond), 1);
+  const std::uint64_t split_a = a.edges_refreshed() - a0, split_b = b.edges_refreshed() - b0;
+  EXPECT_GT(split_a, 0u);
+  EXPECT_EQ(split_a, split_b);
+  EXPECT_LT(split_b, b.mesh().edge_count() / 10);
+  const std::uint64_t a1 = a.edges_refreshed(), b1 = b.edges_refreshed();
+  a.merge(diamond);
+  b.merge(diamond);
+  const std::uint64_t merge_a = a.edges_refreshed() - a1, merge_b = b.edges_refreshed() - b1;
+  EXPECT_GT(merge_a, 0u);
+  EXPECT_EQ(merge_a, merge_b);
+  EXPECT_LT(merge_b, b.mesh().edge_count() / 10);
+}
+
 // Incremental updates on every split/merge equal a from-scratch rebuild.
 TEST(Body, IncrementalParametersMatchARebuild) {
   for (auto law : {scene::StiffnessLaw::kIsotropic, scene::StiffnessLaw::kPaper}) {
