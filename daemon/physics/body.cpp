@@ -187,6 +187,7 @@ void Body::resize_to_mesh() {
     edge_b.resize(edges, 0);
     rest_length_m.resize(edges, 1.0);  // never 0: a dead edge must not divide by zero
     weighted_volume_m3.resize(edges, 0.0);
+    weighted_six_volume_e4_.resize(edges, 0);
     stiffness_N_per_m.resize(edges, 0.0);
     damping_N_s_per_m.resize(edges, 0.0);
     edge_touched_.resize(edges, 0);
@@ -241,25 +242,45 @@ void Body::place_kinematic_node(NodeId n) {
   }
 }
 
-std::array<double, 6> Body::tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const {
+std::array<std::int64_t, 6> Body::tet_edge_weights_e4(const std::array<NodeId, 4>& v, int depth) const {
   // Lattice coordinates of a node stay readable after it dies (merge removes
   // its node last, and no mesh operation re-adds a node it removed), so this
   // also serves removed tets replayed from a change log.
-  const double unit = mesh_.lattice_unit_m();
-  const double volume_m3 = static_cast<double>(mesh_.six_volume_at_depth(depth)) * unit * unit * unit / 6.0;
   std::array<std::int64_t, 6> len2{};
   std::int64_t longest2 = 0;
   for (int i = 0; i < 6; ++i) {
     len2[i] = lattice_length2(mesh_, v[mesh::kTetEdgeSlots[i][0]], v[mesh::kTetEdgeSlots[i][1]]);
     longest2 = std::max(longest2, len2[i]);
   }
+  std::array<std::int64_t, 6> weights{};
+  for (int i = 0; i < 6; ++i) weights[i] = edge_weight_e4(scene_.material.stiffness, depth, len2[i], longest2);
+  return weights;
+}
+
+std::array<double, 6> Body::tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const {
+  const double unit = mesh_.lattice_unit_m();
+  const double volume_m3 = static_cast<double>(mesh_.six_volume_at_depth(depth)) * unit * unit * unit / 6.0;
+  const std::array<std::int64_t, 6> weights = tet_edge_weights_e4(v, depth);
   std::array<double, 6> shares{};
-  for (int i = 0; i < 6; ++i) shares[i] = edge_weight(scene_.material.stiffness, depth, len2[i], longest2) * volume_m3;
+  for (int i = 0; i < 6; ++i)
+    shares[i] = static_cast<double>(weights[i]) / static_cast<double>(kEdgeWeightScale) * volume_m3;
   return shares;
 }
 
+void Body::add_tet_shares(const std::array<NodeId, 4>& v, int depth, const std::array<EdgeId, 6>& edges, int sign) {
+  const std::array<std::int64_t, 6> weights = tet_edge_weights_e4(v, depth);
+  const WeightedSixVolume six_volume = mesh_.six_volume_at_depth(depth);
+  for (int i = 0; i < 6; ++i) weighted_six_volume_e4_[edges[i]] += sign * weights[i] * six_volume;
+}
+
 void Body::refresh_edge(EdgeId e) {
+  ++edges_refreshed_;
   const NodeId a = edge_a[e], b = edge_b[e];
+  // One rounding, of the exact sum: the spring is a function of its
+  // incident tets, whatever order they came in.
+  const double unit = mesh_.lattice_unit_m();
+  weighted_volume_m3[e] = static_cast<double>(weighted_six_volume_e4_[e]) * unit * unit * unit /
+                          (6.0 * static_cast<double>(kEdgeWeightScale));
   stiffness_N_per_m[e] =
       spring_stiffness_N_per_m(scene_.material.youngs_modulus_Pa, weighted_volume_m3[e], rest_length_m[e]);
   damping_N_s_per_m[e] =
@@ -270,6 +291,7 @@ void Body::rebuild_parameters() {
   parameters_version_ = next_parameters_version();
   resize_to_mesh();
   std::fill(weighted_volume_m3.begin(), weighted_volume_m3.end(), 0.0);
+  std::fill(weighted_six_volume_e4_.begin(), weighted_six_volume_e4_.end(), 0);
   std::fill(stiffness_N_per_m.begin(), stiffness_N_per_m.end(), 0.0);
   std::fill(damping_N_s_per_m.begin(), damping_N_s_per_m.end(), 0.0);
   const double unit = mesh_.lattice_unit_m();
@@ -278,11 +300,7 @@ void Body::rebuild_parameters() {
     edge_b[e] = edge.b;
     rest_length_m[e] = std::sqrt(static_cast<double>(lattice_length2(mesh_, edge.a, edge.b))) * unit;
   });
-  mesh_.for_each_tet([&](TetId, const mesh::Tet& t) {
-    const auto shares = tet_edge_shares_m3(t.v, t.depth);
-    for (int i = 0; i < 6; ++i)
-      weighted_volume_m3[mesh_.find_edge(t.v[mesh::kTetEdgeSlots[i][0]], t.v[mesh::kTetEdgeSlots[i][1]])] += shares[i];
-  });
+  mesh_.for_each_tet([&](TetId, const mesh::Tet& t) { add_tet_shares(t.v, t.depth, t.e, +1); });
   const double rho = scene_.material.density_kg_per_m3;
   mesh_.for_each_node([&](NodeId n, const mesh::Node& node) {
     mass_kg[n] = node_mass_kg(rho, node.six_volume, unit);
@@ -377,6 +395,7 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
         edge_b[e] = ev.nodes[1];
         rest_length_m[e] = std::sqrt(static_cast<double>(lattice_length2(mesh_, ev.nodes[0], ev.nodes[1]))) * unit;
         weighted_volume_m3[e] = 0.0;
+        weighted_six_volume_e4_[e] = 0;
         touch_edge(e);
         break;
       }
@@ -385,27 +404,31 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
         edge_a[e] = edge_b[e] = 0;
         rest_length_m[e] = 1.0;
         weighted_volume_m3[e] = stiffness_N_per_m[e] = damping_N_s_per_m[e] = 0.0;
+        weighted_six_volume_e4_[e] = 0;
         break;
       }
       case mesh::MeshEvent::Kind::kTetAdded:
       case mesh::MeshEvent::Kind::kTetRemoved: {
-        const double sign = ev.kind == mesh::MeshEvent::Kind::kTetAdded ? 1.0 : -1.0;
-        const auto shares = tet_edge_shares_m3(ev.nodes, ev.depth);
-        for (int i = 0; i < 6; ++i) {
-          weighted_volume_m3[ev.edges[i]] += sign * shares[i];
-          touch_edge(ev.edges[i]);
-        }
+        add_tet_shares(ev.nodes, ev.depth, ev.edges, ev.kind == mesh::MeshEvent::Kind::kTetAdded ? +1 : -1);
+        for (EdgeId e : ev.edges) touch_edge(e);
         for (NodeId n : ev.nodes) touch_node(n);
         break;
       }
     }
   }
   const double rho = scene_.material.density_kg_per_m3;
+  // The paper's damper depends on both end masses. A node's mass changes
+  // only with the tets around it, so the touched nodes are all whose mass
+  // changed, and the springs at them, named by no event when the tet at
+  // their other end stayed, are the rest that need a refresh. Refreshing
+  // every spring instead cost O(springs) per split or merge.
+  const bool damper_needs_masses = scene_.material.damping == scene::DampingLaw::kPaper;
   for (NodeId n : touched_nodes_) {
     node_touched_[n] = 0;
     if (!mesh_.node_alive(n)) continue;
     mass_kg[n] = node_mass_kg(rho, mesh_.node(n).six_volume, unit);
     inv_mass_per_kg[n] = kind[n] == NodeKind::kFree ? 1.0 / mass_kg[n] : 0.0;
+    if (damper_needs_masses) mesh_.for_each_edge_at_node(n, [&](EdgeId e, const mesh::Edge&) { touch_edge(e); });
   }
   touched_nodes_.clear();
   for (EdgeId e : touched_edges_) {
@@ -413,10 +436,6 @@ void Body::apply_log(const mesh::MeshChangeLog& log) {
     if (mesh_.edge_alive(e)) refresh_edge(e);
   }
   touched_edges_.clear();
-  // The paper's damper depends on both end masses, which change for edges
-  // no event names: refresh them all (the "paper" law is for comparison).
-  if (scene_.material.damping == scene::DampingLaw::kPaper)
-    mesh_.for_each_edge([&](EdgeId e, const mesh::Edge&) { refresh_edge(e); });
 }
 
 double Body::total_mass_kg() const {

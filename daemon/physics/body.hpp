@@ -76,7 +76,7 @@ class Body {
   // Per edge (index = EdgeId); dead edges: a = b = 0, k = c = 0.
   std::vector<NodeId> edge_a, edge_b;
   std::vector<double> rest_length_m;
-  std::vector<double> weighted_volume_m3;  // Σ w V of incident tets, eq. (3)
+  std::vector<double> weighted_volume_m3;  // Σ w V of incident tets, eq. (3), from the exact sum (below)
   std::vector<double> stiffness_N_per_m;
   std::vector<double> damping_N_s_per_m;
 
@@ -100,8 +100,15 @@ class Body {
 
   // Σ w V share [m³] a tet at `depth` with corners v gives each of its edges
   // (kTetEdgeSlots order): its stiffness share is E · share / L². Stiffness
-  // and mass are sums of such per-tet shares (eqs. (2), (3)).
+  // and mass are sums of such per-tet shares (eqs. (2), (3)); the body sums
+  // them exactly, as integers 10⁴ w · 6V (weighted_volume_m3 is that sum
+  // rounded once), so a spring's bits differ from the sum of these doubles.
   std::array<double, 6> tet_edge_shares_m3(const std::array<NodeId, 4>& v, int depth) const;
+
+  // Springs (stiffness and damper) recomputed since construction, rebuilds
+  // included: what a split or merge costs in parameter updates, which must
+  // not grow with the mesh (a test compares it across mesh sizes).
+  std::uint64_t edges_refreshed() const { return edges_refreshed_; }
 
   // Total mass [kg] and momentum [kg m/s] of all nodes.
   double total_mass_kg() const;
@@ -120,10 +127,24 @@ class Body {
   // drivers move the other nodes of its region; leaves a free node alone.
   void place_kinematic_node(NodeId n);
   void refresh_edge(EdgeId e);
+  // 10⁴ × the weight w of each edge of a tet at `depth` with corners v
+  // (kTetEdgeSlots order).
+  std::array<std::int64_t, 6> tet_edge_weights_e4(const std::array<NodeId, 4>& v, int depth) const;
+  // Adds sign × a tet's shares 10⁴ w · 6V to its edges' exact sums.
+  void add_tet_shares(const std::array<NodeId, 4>& v, int depth, const std::array<EdgeId, 6>& edges, int sign);
 
   scene::Scene scene_;
   mesh::KuhnMesh mesh_;
   std::uint64_t parameters_version_ = 0;
+  std::uint64_t edges_refreshed_ = 0;
+  // Per edge: Σ 10⁴ w · 6V of its incident tets, lattice units. Exact, so a
+  // spring depends on its incident tets alone, not on the history of splits
+  // and merges that made them (a floating running sum of per-tet shares,
+  // minus the parent's and plus the children's and back, drifted by ulps:
+  // the same mesh reached two ways had different bits). 128 bits: 10⁴ w ·
+  // 6V can pass 2⁶³ on the deepest lattices.
+  __extension__ using WeightedSixVolume = __int128;
+  std::vector<WeightedSixVolume> weighted_six_volume_e4_;
   mesh::MeshChangeLog log_;            // reused: no allocation in steady state
   std::vector<EdgeId> touched_edges_;  // reused scratch
   std::vector<NodeId> touched_nodes_;

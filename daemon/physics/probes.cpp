@@ -12,9 +12,24 @@ std::array<double, 4> barycentric(const Vec3& p, const Vec3& a, const Vec3& b, c
   return {1.0 - l.sum(), l[0], l[1], l[2]};
 }
 
-bool Probe::cache_valid(const Body& body) const {
-  // Tet ids are reused, so the vertices must match too.
-  return tet_ != mesh::kInvalidId && body.mesh().tet_alive(tet_) && body.mesh().tet(tet_).v == nodes_;
+bool Probe::cache_valid(const Body& body) {
+  const mesh::KuhnMesh& mesh = body.mesh();
+  if (tet_ == mesh::kInvalidId) return false;
+  // Leaf tets change only with the topology version: the per-step read costs
+  // one comparison.
+  if (mesh.topology_version() == topology_version_) return true;
+  // Tet and node ids are both reused, so a live tet of the same id with the
+  // same vertex ids can be another tet (a merge frees a node and its tets, a
+  // later split hands the ids out again with the node elsewhere). A tet is
+  // its four lattice points: if they are the same, so is the tet and so are
+  // the weights. Checking them, rather than locating again after every
+  // change, keeps a pass that changed the mesh elsewhere from costing a walk
+  // over every tet per probe.
+  if (!mesh.tet_alive(tet_) || mesh.tet(tet_).v != nodes_) return false;
+  for (int i = 0; i < 4; ++i)
+    if (!mesh.node_alive(nodes_[i]) || mesh.node(nodes_[i]).lattice != corners_[i]) return false;
+  topology_version_ = mesh.topology_version();
+  return true;
 }
 
 void Probe::locate(const Body& body) {
@@ -37,7 +52,12 @@ void Probe::locate(const Body& body) {
   // can exceed any fixed tolerance (0.09 nm outside a 25 mm tet is -3.6e-9).
   // The nearest tet is taken; only a point clearly outside (callers that
   // skip the scene's checks) is refused.
-  if (best < -1e-6) throw std::invalid_argument("probe '" + name_ + "' lies outside the object");
+  if (best < -1e-6) {
+    tet_ = mesh::kInvalidId;
+    throw std::invalid_argument("probe '" + name_ + "' lies outside the object");
+  }
+  for (int i = 0; i < 4; ++i) corners_[i] = body.mesh().node(nodes_[i]).lattice;
+  topology_version_ = body.mesh().topology_version();
 }
 
 Vec3 Probe::displacement_m(const Body& body) {

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <string>
 
 #include "physics/body.hpp"
@@ -29,13 +30,17 @@ class Probe {
 
  private:
   void locate(const Body& body);
-  bool cache_valid(const Body& body) const;
+  // Whether the cached tet still holds the probe; records the mesh's
+  // topology version when it does.
+  bool cache_valid(const Body& body);
 
   std::string name_;
   Vec3 rest_m_;
   TetId tet_ = mesh::kInvalidId;
   std::array<NodeId, 4> nodes_{};
+  std::array<mesh::Vec3i, 4> corners_{};  // lattice points of nodes_ when located
   std::array<double, 4> bary_{};
+  std::uint64_t topology_version_ = 0;  // of the mesh the cache was last checked on
 };
 
 // Barycentric coordinates of p in the tet (a, b, c, d).

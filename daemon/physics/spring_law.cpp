@@ -6,26 +6,26 @@
 
 namespace tissue::physics {
 
-double isotropic_edge_weight(int depth, std::int64_t length2, std::int64_t longest2) {
+std::int64_t isotropic_edge_weight_e4(int depth, std::int64_t length2, std::int64_t longest2) {
   // 24 * (l / l_max)² is an integer for every Kuhn-lattice edge.
   const std::int64_t r = 24 * length2;
   auto is = [&](std::int64_t num) { return r == num * longest2; };
   switch (depth % 3) {
     case 0:  // TYPE I: axis, face diagonal, body diagonal (the refinement edge)
-      if (is(8)) return 0.5525;
-      if (is(16)) return 1.4847;
-      if (is(24)) return 1.3729;
+      if (is(8)) return 5525;
+      if (is(16)) return 14847;
+      if (is(24)) return 13729;
       break;
     case 1:  // TYPE II: half body diagonal, axis, face diagonal (refinement)
-      if (is(9)) return 0.9507;
-      if (is(12)) return 1.0754;
-      if (is(24)) return 0.9971;
+      if (is(9)) return 9507;
+      if (is(12)) return 10754;
+      if (is(24)) return 9971;
       break;
     case 2:  // TYPE III: half axis, half face diagonal, half body diagonal, axis (refinement)
-      if (is(6)) return 0.9481;
-      if (is(12)) return 1.0074;
-      if (is(18)) return 1.0444;
-      if (is(24)) return 0.9481;
+      if (is(6)) return 9481;
+      if (is(12)) return 10074;
+      if (is(18)) return 10444;
+      if (is(24)) return 9481;
       break;
     default:
       break;
@@ -34,8 +34,17 @@ double isotropic_edge_weight(int depth, std::int64_t length2, std::int64_t longe
                          std::to_string(longest2) + " does not occur in a depth-" + std::to_string(depth) + " tet");
 }
 
+double isotropic_edge_weight(int depth, std::int64_t length2, std::int64_t longest2) {
+  return static_cast<double>(isotropic_edge_weight_e4(depth, length2, longest2)) /
+         static_cast<double>(kEdgeWeightScale);
+}
+
+std::int64_t edge_weight_e4(scene::StiffnessLaw law, int depth, std::int64_t length2, std::int64_t longest2) {
+  return law == scene::StiffnessLaw::kPaper ? kEdgeWeightScale : isotropic_edge_weight_e4(depth, length2, longest2);
+}
+
 double edge_weight(scene::StiffnessLaw law, int depth, std::int64_t length2, std::int64_t longest2) {
-  return law == scene::StiffnessLaw::kPaper ? 1.0 : isotropic_edge_weight(depth, length2, longest2);
+  return static_cast<double>(edge_weight_e4(law, depth, length2, longest2)) / static_cast<double>(kEdgeWeightScale);
 }
 
 double paper_closed_form_stiffness_N_per_m(double youngs_modulus_Pa, double coarse_cube_m, int level) {

@@ -18,12 +18,19 @@
 
 namespace tissue::physics {
 
-// Weight w of an edge inside a tet at bisection `depth` for the isotropic law.
-// The edge's role is identified exactly from its squared lattice length
-// relative to the tet's longest edge. Throws std::logic_error for a length
-// ratio no Kuhn tet has.
+// The weights are given to four decimals, so 10⁴ w is an integer: springs
+// sum integer shares 10⁴ w · 6V (Body), exactly, in any order.
+inline constexpr std::int64_t kEdgeWeightScale = 10000;
+
+// 10⁴ × the weight w of an edge inside a tet at bisection `depth` for the
+// isotropic law. The edge's role is identified exactly from its squared
+// lattice length relative to the tet's longest edge. Throws std::logic_error
+// for a length ratio no Kuhn tet has.
+std::int64_t isotropic_edge_weight_e4(int depth, std::int64_t length2, std::int64_t longest2);
+// w itself: the integer / 10⁴, which is the nearest double to the decimal.
 double isotropic_edge_weight(int depth, std::int64_t length2, std::int64_t longest2);
 
+std::int64_t edge_weight_e4(scene::StiffnessLaw law, int depth, std::int64_t length2, std::int64_t longest2);
 double edge_weight(scene::StiffnessLaw law, int depth, std::int64_t length2, std::int64_t longest2);
 
 // Eq. (3) for one edge from its weighted incident volume Σ w V [m³].

@@ -9,6 +9,8 @@
 #include <random>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "physics/body.hpp"
 #include "physics/physics_test_support.hpp"
@@ -144,6 +146,74 @@ TEST(Probes, ProbeRelocatesAfterTheMeshChanges) {
   const Vec3 delta(2e-3, 1e-3, -1e-3);
   body.x_m[z] += delta;
   EXPECT_NEAR((probe.displacement_m(body) - delta).norm(), 0.0, 1e-15);
+}
+
+// Node and tet ids are both reused: a merge frees a node and its tets, and
+// a later split elsewhere can hand the same ids out again, so a live tet of
+// the probe's old id with the probe's old vertex ids can be another tet, its
+// new node somewhere else. A random walk of split/merge pairs finds one such
+// pair; a probe read inside the old tet before it, under a linear field
+// after it, must read the field at its own point, not through the stale
+// weights at the new node.
+TEST(Probes, AProbeIsRelocatedWhenItsTetIdAndVertexIdsComeBackAsAnotherTet) {
+  scene::Scene s = testing::free_cube_scene(1, 0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 4;
+  Body body(s);
+  std::mt19937 rng(18);
+  using Corners = std::array<mesh::Vec3i, 4>;
+  const auto corners_of = [](const Body& b, const mesh::Tet& tet) {
+    Corners c;
+    for (int i = 0; i < 4; ++i) c[i] = b.mesh().node(tet.v[i]).lattice;
+    return c;
+  };
+  for (int pair = 0; pair < 1000; ++pair) {
+    const Body before = body;
+    // Two random operations (split or merge), recorded so they can be redone.
+    std::vector<std::pair<bool, mesh::Key>> ops;
+    for (int k = 0; k < 2; ++k) {
+      const mesh::KuhnMesh& m = body.mesh();
+      if (rng() % 2) {
+        TetId t;
+        do t = static_cast<TetId>(rng() % m.tet_capacity());
+        while (!m.tet_alive(t));
+        if (m.can_split(m.diamond_of(t))) {
+          ops.emplace_back(true, m.diamond_of(t));
+          body.split(m.diamond_of(t));
+        }
+      } else {
+        NodeId n;
+        do n = static_cast<NodeId>(rng() % m.node_capacity());
+        while (!m.node_alive(n));
+        if (m.node(n).edge_a != mesh::kInvalidId && m.can_merge(m.node_key(n))) {
+          ops.emplace_back(false, m.node_key(n));
+          body.merge(m.node_key(n));
+        }
+      }
+    }
+    TetId reused = mesh::kInvalidId;
+    body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      if (reused == mesh::kInvalidId && before.mesh().tet_alive(t) && before.mesh().tet(t).v == tet.v &&
+          corners_of(before, before.mesh().tet(t)) != corners_of(body, tet))
+        reused = t;
+    });
+    if (reused == mesh::kInvalidId) continue;
+
+    Body replay = before;
+    const auto& v = before.mesh().tet(reused).v;
+    const Vec3 inside = 0.25 * (before.rest_m[v[0]] + before.rest_m[v[1]] + before.rest_m[v[2]] + before.rest_m[v[3]]);
+    Probe probe("reused", inside);
+    EXPECT_EQ(probe.displacement_m(replay), Vec3::Zero());
+    for (const auto& [split, key] : ops) split ? static_cast<void>(replay.split(key)) : replay.merge(key);
+    ASSERT_EQ(replay.mesh().tet(reused).v, v) << "the replay must reuse the ids as the walk did";
+    Eigen::Matrix3d g;
+    g << 0.01, -0.02, 0.005, 0.03, 0.0, -0.01, -0.02, 0.015, 0.01;
+    replay.mesh().for_each_node(
+        [&](NodeId n, const mesh::Node&) { replay.x_m[n] = replay.rest_m[n] + g * replay.rest_m[n]; });
+    EXPECT_NEAR((probe.displacement_m(replay) - g * inside).norm(), 0.0, 1e-15) << "after pair " << pair;
+    return;
+  }
+  FAIL() << "no split/merge pair reused a tet id with its vertex ids; the walk needs another seed";
 }
 
 // A probe on the object's surface (a corner, a face) is inside; one a

@@ -52,22 +52,31 @@ TEST(SpringLaw, UniformDilationGivesBulkModulusTwoThirdsE) {
   }
 }
 
+// Bodies sum springs from the integer weights 10⁴ w; the double weight (the
+// tet shares' energy sums use it) is the decimal's nearest double, exactly.
 TEST(SpringLaw, IsotropicWeightsFollowTheTypeTable) {
+  const auto expect_weight = [](int depth, std::int64_t length2, std::int64_t longest2, std::int64_t e4, double w) {
+    EXPECT_EQ(isotropic_edge_weight_e4(depth, length2, longest2), e4) << depth << " " << length2 << "/" << longest2;
+    EXPECT_EQ(isotropic_edge_weight(depth, length2, longest2), w) << depth << " " << length2 << "/" << longest2;
+    EXPECT_EQ(edge_weight(scene::StiffnessLaw::kIsotropic, depth, length2, longest2), w);
+  };
   // TYPE I: axis, face diagonal, body diagonal (squared lengths 1, 2, 3 of 3).
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(0, 1, 3), 0.5525);
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(3, 2, 3), 1.4847);
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(6, 3, 3), 1.3729);
+  expect_weight(0, 1, 3, 5525, 0.5525);
+  expect_weight(3, 2, 3, 14847, 1.4847);
+  expect_weight(6, 3, 3, 13729, 1.3729);
   // TYPE II: half body 3/4, axis 1, face diagonal 2 (of 2).
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(1, 3, 8), 0.9507);
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(4, 1, 2), 1.0754);
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(1, 2, 2), 0.9971);
+  expect_weight(1, 3, 8, 9507, 0.9507);
+  expect_weight(4, 1, 2, 10754, 1.0754);
+  expect_weight(1, 2, 2, 9971, 0.9971);
   // TYPE III: half axis, half face, half body, axis (1, 2, 3, 4 of 4).
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(2, 1, 4), 0.9481);
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(2, 2, 4), 1.0074);
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(5, 3, 4), 1.0444);
-  EXPECT_DOUBLE_EQ(isotropic_edge_weight(2, 4, 4), 0.9481);
+  expect_weight(2, 1, 4, 9481, 0.9481);
+  expect_weight(2, 2, 4, 10074, 1.0074);
+  expect_weight(5, 3, 4, 10444, 1.0444);
+  expect_weight(2, 4, 4, 9481, 0.9481);
   EXPECT_THROW(isotropic_edge_weight(0, 1, 4), std::logic_error);
-  EXPECT_DOUBLE_EQ(edge_weight(scene::StiffnessLaw::kPaper, 0, 1, 3), 1.0);
+  EXPECT_THROW(isotropic_edge_weight_e4(0, 1, 4), std::logic_error);
+  EXPECT_EQ(edge_weight(scene::StiffnessLaw::kPaper, 0, 1, 3), 1.0);
+  EXPECT_EQ(edge_weight_e4(scene::StiffnessLaw::kPaper, 0, 1, 3), kEdgeWeightScale);
 }
 
 TEST(SpringLaw, DampingLaws) {
