@@ -161,7 +161,8 @@ class Simulation {
   void mesh_changed();
 
   // Books the energy a mesh change made (adaptation_energy_J), given the
-  // kinetic + elastic energy before it.
+  // kinetic + elastic energy before it, and what the explicit bound counts
+  // of it (mesh_change_J_).
   void book_mesh_change(double energy_before_J);
   double prescribed_kinetic_energy_J() const;  // of the prescribed nodes
   // The implicit rung's passivity guard: backward Euler linearises the
@@ -188,6 +189,9 @@ class Simulation {
   // the base: construction, or the last mutable_body(). Returns the refusal,
   // or an empty string when within integrator.explicit_energy_slack.
   std::string explicit_energy_refusal(const StepWork& work) const;
+  // The explicit bound's budget [J] with `step_work_J` of a step not yet
+  // counted: base + the work since (0 while negative) + mesh_change_J_.
+  double explicit_budget_J(double step_work_J) const;
   // Rebuilds prescribed_, driven_springs_ and prescribed_before_m_ from
   // kinematic_ (after a mesh or parameter change).
   void list_driven_springs();
@@ -215,8 +219,9 @@ class Simulation {
   bool limits_energy_ = false;
   bool energy_known_ = false;
   double energy_J_ = 0.0;
-  // The explicit rung's bound (explicit_energy_refusal): the energy, work
-  // and booked adaptation energy at its base, and the state before every
+  // The explicit rung's bound (explicit_energy_refusal): the energy and work
+  // at its base, the mesh changes' energy since as it books them
+  // (book_mesh_change), and the state before every
   // step, restored when the step is refused (the integrator stores into the
   // body on acceptance; the bound is judged after). Checked once at least
   // kEnergyCheckSubsteps sub-steps have run since the last check, counting
@@ -226,7 +231,7 @@ class Simulation {
   static constexpr std::int64_t kEnergyCheckSubsteps = 32;
   bool checks_explicit_energy_ = false;
   bool energy_base_known_ = false;
-  double base_energy_J_ = 0.0, base_work_J_ = 0.0, base_adaptation_J_ = 0.0;
+  double base_energy_J_ = 0.0, base_work_J_ = 0.0, mesh_change_J_ = 0.0;
   std::int64_t substeps_since_energy_check_ = 0;
   std::vector<Vec3> x_before_m_, v_before_m_per_s_;
 };
