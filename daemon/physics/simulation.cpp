@@ -172,6 +172,7 @@ StepResult Simulation::step() {
       std::copy(v_before_m_per_s_.begin(), v_before_m_per_s_.end(), body_.v_m_per_s.begin());
       integrator_->state_restored();  // r and its growth were of the refused state
       energy_known_ = false;
+      result.error += kept_state_note();
       return result;
     }
   }
@@ -235,6 +236,21 @@ std::string Simulation::explicit_energy_refusal(const StepWork& work) const {
      << " J (start + work + mesh changes), more than integrator.explicit_energy_slack = " << slack
      << " allows; step refused, previous state kept: lower integrator.substep_safety, add damping "
      << "(material.rayleigh_beta_s) or use the implicit integrator";
+  return os.str();
+}
+
+std::string Simulation::kept_state_note() const {
+  // The work and mesh changes up to the state kept: the refused step's work
+  // was never counted, and no mesh change comes between the two.
+  const double energy_J = kinetic_energy_J() + elastic_energy_J();
+  const double budget_J = explicit_budget_J(0.0);
+  const double excess = energy_excess(energy_J, budget_J, body_);
+  if (excess <= scene().integrator.explicit_energy_slack) return {};
+  std::ostringstream os;
+  os.precision(3);
+  os << "; the state kept is itself " << 100.0 * excess << " % above its budget (gained between checks, once "
+     << kEnergyCheckSubsteps << " sub-steps have run), so every retry is refused too: start the scene afresh "
+     << "(set, reset, load_scene or reload)";
   return os.str();
 }
 

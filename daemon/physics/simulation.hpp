@@ -189,6 +189,18 @@ class Simulation {
   // the base: construction, or the last mutable_body(). Returns the refusal,
   // or an empty string when within integrator.explicit_energy_slack.
   std::string explicit_energy_refusal(const StepWork& work) const;
+  // After a refusal, with the state before the step restored: "" when that
+  // state is within the bound, else what the refusal adds to say it is not
+  // (by how much, and that every retry is refused too). The bound is
+  // checked once kEnergyCheckSubsteps sub-steps have run, so the state kept
+  // was not checked unless the step before it was, and a gain between
+  // checks leaves it over the bound; then the refusal repeats at every try
+  // until the state is set afresh. Restoring the state of the last passing
+  // check instead would mean rewinding time, the step count, the work
+  // booked and any mesh change since (up to 31 sub-steps back, in a loop
+  // others watch), for a retry that the same dynamics would most likely
+  // refuse again; an energy pass on a refusal only says what holds.
+  std::string kept_state_note() const;
   // The explicit bound's budget [J] with `step_work_J` of a step not yet
   // counted: base + the work since (0 while negative) + mesh_change_J_.
   double explicit_budget_J(double step_work_J) const;
