@@ -186,8 +186,10 @@ class Simulation {
   // tumbling at a rate near the springs' ω) the energy grows without bound
   // although every sub-step is within the stable bound. The energy the body
   // holds is judged against what EnergyBudget (diagnostics.hpp) allows since
-  // the base: construction, or the last mutable_body(). Returns the refusal,
-  // or an empty string when within integrator.explicit_energy_slack.
+  // the base (construction, or the last mutable_body()), except that a mesh
+  // change taking energy out of a body above its budget is booked in
+  // proportion (book_mesh_change). Returns the refusal, or an empty string
+  // when within integrator.explicit_energy_slack.
   std::string explicit_energy_refusal(const StepWork& work) const;
   // After a refusal, with the state before the step restored: "" when that
   // state is within the bound, else what the refusal adds to say it is not
