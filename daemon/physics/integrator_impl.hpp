@@ -327,7 +327,8 @@ class ExplicitIntegrator final : public Integrator {
   // layout at the last sub-step's forces, inside that force pass; on the
   // gathered streams on the state reached, in a pass of its own); the step
   // is accepted if the bound there allows them too, else run again from the
-  // body (untouched until a step is accepted) with the usual count or more.
+  // body (untouched until a step is accepted) with the usual count or more,
+  // and r measured again at the end of that run (as for a verified step).
   // So a shortened step is verified at its start and near its end (not at
   // every sub-step: the margin is for that). A pass of its own costs
   // 0.4-0.8 of a sub-step, so the count is shortened only where that saves
@@ -391,8 +392,14 @@ class ExplicitIntegrator final : public Integrator {
     return std::min(kVerifiedSafetyPerSafety * spec_.substep_safety, kVerifiedSafetyMax);
   }
   // Runs `count` sub-steps from the loaded state and stores the result in the
-  // body, or rejects a non-finite one (the body untouched).
-  StepOutcome run_and_accept(Body& body, double dt_s, int count, StepOutcome out);
+  // body, or rejects a non-finite one (the body untouched). measure_r (a
+  // step run again): r is measured at the end, as on the verified path,
+  // instead of r_rise_bound_ growing by the step's move.
+  StepOutcome run_and_accept(Body& body, double dt_s, int count, StepOutcome out, bool measure_r = false);
+  // r's rise over a last sub-step of h_s ending at the body's velocities:
+  // 2 h max|v| / the shortest moving spring (the offset layout measures r
+  // at that sub-step's start).
+  double last_substep_rise(const Body& body, double h_s) const;
   // state_is_finite for the padded copy, over the body's live nodes.
   bool advanced_state_is_finite(const Body& body) const;
   // Copies the padded state back to the body.
@@ -417,9 +424,9 @@ class ExplicitIntegrator final : public Integrator {
   // at most 2 d, so r rises by at most 2 d / (the shortest moving spring's
   // rest length). When r + this bound reaches 1/2, r is measured again
   // before the step (the collapse check needs it; the steps on the plain
-  // margin path measured it only every kRemeasureSteps). A verified step on
-  // the offset layout measures r at its last sub-step's start, so the bound
-  // starts from that sub-step's move, not 0.
+  // margin path measured it only every kRemeasureSteps). A verified or
+  // rerun step on the offset layout measures r at its last sub-step's
+  // start, so the bound starts from that sub-step's move, not 0.
   double r_rise_bound_ = 0.0;
   double shortest_rest_m_ = 0.0;  // of a spring with a free end, on this layout
   std::vector<Vec3> x_start_m_;   // the body's positions before a stored step

@@ -161,7 +161,8 @@ class Simulation {
   void mesh_changed();
 
   // Books the energy a mesh change made (adaptation_energy_J), given the
-  // kinetic + elastic energy before it.
+  // kinetic + elastic energy before it, and what the explicit bound counts
+  // of it (mesh_change_J_).
   void book_mesh_change(double energy_before_J);
   double prescribed_kinetic_energy_J() const;  // of the prescribed nodes
   // The implicit rung's passivity guard: backward Euler linearises the
@@ -185,9 +186,26 @@ class Simulation {
   // tumbling at a rate near the springs' ω) the energy grows without bound
   // although every sub-step is within the stable bound. The energy the body
   // holds is judged against what EnergyBudget (diagnostics.hpp) allows since
-  // the base: construction, or the last mutable_body(). Returns the refusal,
-  // or an empty string when within integrator.explicit_energy_slack.
+  // the base (construction, or the last mutable_body()), except that a mesh
+  // change taking energy out of a body above its budget is booked in
+  // proportion (book_mesh_change). Returns the refusal, or an empty string
+  // when within integrator.explicit_energy_slack.
   std::string explicit_energy_refusal(const StepWork& work) const;
+  // After a refusal, with the state before the step restored: "" when that
+  // state is within the bound, else what the refusal adds to say it is not
+  // (by how much, and that every retry is refused too). The bound is
+  // checked once kEnergyCheckSubsteps sub-steps have run, so the state kept
+  // was not checked unless the step before it was, and a gain between
+  // checks leaves it over the bound; then the refusal repeats at every try
+  // until the state is set afresh. Restoring the state of the last passing
+  // check instead would mean rewinding time, the step count, the work
+  // booked and any mesh change since (up to 31 sub-steps back, in a loop
+  // others watch), for a retry that the same dynamics would most likely
+  // refuse again; an energy pass on a refusal only says what holds.
+  std::string kept_state_note() const;
+  // The explicit bound's budget [J] with `step_work_J` of a step not yet
+  // counted: base + the work since (0 while negative) + mesh_change_J_.
+  double explicit_budget_J(double step_work_J) const;
   // Rebuilds prescribed_, driven_springs_ and prescribed_before_m_ from
   // kinematic_ (after a mesh or parameter change).
   void list_driven_springs();
@@ -215,18 +233,19 @@ class Simulation {
   bool limits_energy_ = false;
   bool energy_known_ = false;
   double energy_J_ = 0.0;
-  // The explicit rung's bound (explicit_energy_refusal): the energy, work
-  // and booked adaptation energy at its base, and the state before a
-  // checked step, restored when the step is refused (the integrator stores
-  // into the body on acceptance, asking BeforeStore first; the bound is
-  // judged after). Checked once at least kEnergyCheckSubsteps sub-steps
-  // have run since the last check, counting the step's own: the energy
+  // The explicit rung's bound (explicit_energy_refusal): the energy and work
+  // at its base, the mesh changes' energy since as it books them
+  // (book_mesh_change), and the state before a checked step, restored when
+  // the step is refused (the integrator stores into the body on acceptance,
+  // asking BeforeStore first; the bound is judged after). Checked once at
+  // least kEnergyCheckSubsteps sub-steps have run since the last check,
+  // counting the step's own: the energy
   // pass costs about one sub-step, +24-34 % on an R3 step of 3-4 checked
   // every step, a few % at this cadence (docs/scene-format.md).
   static constexpr std::int64_t kEnergyCheckSubsteps = 32;
   bool checks_explicit_energy_ = false;
   bool energy_base_known_ = false;
-  double base_energy_J_ = 0.0, base_work_J_ = 0.0, base_adaptation_J_ = 0.0;
+  double base_energy_J_ = 0.0, base_work_J_ = 0.0, mesh_change_J_ = 0.0;
   std::int64_t substeps_since_energy_check_ = 0;
   std::vector<Vec3> x_before_m_, v_before_m_per_s_;
 };

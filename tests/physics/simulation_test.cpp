@@ -18,6 +18,7 @@ using testing::box;
 using testing::cantilever_scene;
 using testing::run_until;
 using testing::sphere;
+using testing::total_energy_J;
 
 TEST(Simulation, SameSceneGivesBitIdenticalRuns) {
   Simulation a(cantilever_scene()), b(cantilever_scene());
@@ -261,6 +262,116 @@ TEST(Simulation, MeshChangesBookTheEnergyTheyMake) {
     return;
   }
   ADD_FAILURE() << "no adaptation pass changed the mesh in 200 steps";
+}
+
+// The explicit rung's energy bound across a merge that takes energy out of a
+// body holding more than its budget (the integrator's gain, unchecked
+// between checks or within the slack). Booked in full, the merge took it all
+// from the budget: the excess, in joules, stayed, over a budget shrunk
+// toward 0 (below it when the merge took more than the budget), so the body
+// was over its bound by many times the slack and every later step refused
+// for good. A free cube drifting rigidly (the budget: its kinetic energy K0)
+// has one split node flung, standing in for the integrator's gain (set
+// through the body reference kept, which, unlike mutable_body(), leaves the
+// bound's base alone), then merged away. Undamped and unloaded, the energy
+// after stays what the merge left: the bound must judge it by the excess
+// the body held before the merge, neither forgiven nor magnified.
+TEST(Simulation, AMergeNeitherForgivesNorMagnifiesTheExplicitEnergyExcess) {
+  const double gain = 0.9;  // of K0: within the default slack (1), above a slack of 0.8
+  for (const double slack : {1.0, 0.8}) {
+    SCOPED_TRACE(::testing::Message() << "gain " << gain << " x K0, slack " << slack);
+    scene::Scene s = testing::free_cube_scene(2, 0);
+    s.adaptivity.enabled = true;  // for split_diamond / merge_diamond
+    s.adaptivity.every_steps = 100000;
+    s.material.rayleigh_beta_s = 0.0;
+    s.integrator.kind = scene::IntegratorKind::kExplicit;
+    s.integrator.substep_safety = 0.1;  // symplectic Euler's own swing ~0.01 of the budget, not ~0.1
+    s.integrator.explicit_energy_slack = slack;
+    Simulation sim(s);
+    const mesh::Key d = sim.body().mesh().diamond_of(0);
+    ASSERT_EQ(sim.split_diamond(d), 1);
+    const NodeId z = sim.body().mesh().find_node(d);
+    Body& body = sim.mutable_body();
+    const Vec3 drift_m_per_s(0.1, 0.0, 0.0);
+    for (std::size_t n = 0; n < body.v_m_per_s.size(); ++n) body.v_m_per_s[n] = drift_m_per_s;
+    ASSERT_TRUE(sim.step().ok);  // the base: K0, checked (the first step is)
+    const double k0_J = total_energy_J(sim);
+    ASSERT_GT(k0_J, 0.0);
+    // The gain: z flung across the drift, adding gain × K0 of kinetic energy.
+    const double speed_m_per_s = std::sqrt(2.0 * gain * k0_J / body.mass_kg[z]);
+    body.v_m_per_s[z] += Vec3(0.0, 0.0, speed_m_per_s);
+    const double before_J = total_energy_J(sim);
+    ASSERT_NEAR(before_J / k0_J - 1.0, gain, 0.02);
+    sim.merge_diamond(d);
+    const double after_J = total_energy_J(sim);
+    // The case: the merge took out half of K0 or more (z's momentum shared
+    // with its edge's ends, inelastically), so booked in full the budget
+    // fell below half of K0 with the whole gain still over it.
+    ASSERT_LT(after_J, before_J - 0.5 * k0_J);
+    // Steps until two checks have run (32 sub-steps each at most).
+    std::string refused;
+    for (int i = 0; i < 64 && refused.empty(); ++i)
+      if (const StepResult r = sim.step(); !r.ok) refused = r.error;
+    if (gain <= slack)
+      EXPECT_EQ(refused, "") << "the merge magnified the excess";
+    else
+      EXPECT_NE(refused.find("above its budget"), std::string::npos) << "the merge forgave the excess: " << refused;
+  }
+}
+
+// The explicit bound is checked once 32 sub-steps have run, so the state a
+// refusal keeps (the one before the checked step) may itself hold more than
+// the bound allows: gained between checks, never checked. Then every retry
+// is refused, and the refusal must say so (the state kept is over, a retry
+// cannot pass, the scene must be started afresh) rather than read as if the
+// next try might. The gain between checks stands in as above: one split node
+// of a drifting free cube flung to 2 x K0 (over the slack, 1), through the
+// body reference kept; and, the reviewer's case, that node then merged away
+// (booked in full, the merge took the budget below 0).
+TEST(Simulation, AnExplicitRefusalWhoseKeptStateIsOverTheBoundSaysARetryCannotPass) {
+  for (const bool merge : {false, true}) {
+    SCOPED_TRACE(merge ? "flung node merged away" : "flung node kept");
+    scene::Scene s = testing::free_cube_scene(2, 0);
+    s.adaptivity.enabled = true;
+    s.adaptivity.every_steps = 100000;
+    s.material.rayleigh_beta_s = 0.0;
+    s.integrator.kind = scene::IntegratorKind::kExplicit;
+    s.integrator.substep_safety = 0.1;
+    Simulation sim(s);
+    const mesh::Key d = sim.body().mesh().diamond_of(0);
+    ASSERT_EQ(sim.split_diamond(d), 1);
+    const NodeId z = sim.body().mesh().find_node(d);
+    Body& body = sim.mutable_body();
+    for (std::size_t n = 0; n < body.v_m_per_s.size(); ++n) body.v_m_per_s[n] = Vec3(0.1, 0.0, 0.0);
+    ASSERT_TRUE(sim.step().ok);
+    const double k0_J = total_energy_J(sim);
+    body.v_m_per_s[z] += Vec3(0.0, 0.0, std::sqrt(2.0 * 2.0 * k0_J / body.mass_kg[z]));
+    if (merge) sim.merge_diamond(d);
+    StepResult refused;
+    for (int i = 0; i < 64 && refused.ok; ++i) refused = sim.step();
+    ASSERT_FALSE(refused.ok);
+    const std::string& why = refused.error;
+    EXPECT_EQ(why.find('\n'), std::string::npos) << why;
+    for (const char* says : {"step refused, previous state kept", "; the state kept is itself ",
+                             " % above its budget (gained between checks, once 32 sub-steps have run)",
+                             "so every retry is refused too", "set, reset, load_scene or reload"})
+      EXPECT_NE(why.find(says), std::string::npos) << says << " not in: " << why;
+    // The budget stays above 0 across the merge (fix of the booking above).
+    const std::size_t at = why.find("above its budget ");
+    ASSERT_NE(at, std::string::npos) << why;
+    EXPECT_GT(std::stod(why.substr(at + std::string("above its budget ").size())), 0.0) << why;
+    // Asked again: refused again, the state as it was, and says so again.
+    const std::vector<Vec3> x_kept_m = sim.body().x_m;
+    const StepResult again = sim.step();
+    EXPECT_FALSE(again.ok);
+    EXPECT_NE(again.error.find("; the state kept is itself "), std::string::npos) << again.error;
+    EXPECT_EQ(sim.body().x_m, x_kept_m);
+    // Started afresh (here: the state set again, the bound's base with it),
+    // it runs on.
+    Body& fresh = sim.mutable_body();
+    for (Vec3& v : fresh.v_m_per_s) v = Vec3(0.1, 0.0, 0.0);
+    for (int i = 0; i < 64; ++i) ASSERT_TRUE(sim.step().ok) << "step " << i;
+  }
 }
 
 // The scene chooses the CG preconditioner (integrator.cg_preconditioner):

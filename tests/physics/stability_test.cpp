@@ -169,6 +169,8 @@ TEST(Stability, UndampedYankOnExplicitEndsRefusedAtItsEnergyBound) {
       if (dt_s > 1e-2) {
         EXPECT_GE(substeps, 32);  // so every step was checked
         EXPECT_LE(worst_excess, slack);
+        // The state kept passed its own check: a retry is not said to be hopeless.
+        EXPECT_EQ(refused.error.find("the state kept is itself"), std::string::npos) << refused.error;
       }
       // One line: what the energy and the budget are, by how much, the key,
       // and what to do.
