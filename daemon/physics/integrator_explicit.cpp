@@ -461,7 +461,7 @@ void ExplicitIntegrator::run_substeps(Body& body, const std::vector<Vec3>& f_ext
   load(body, f_ext_N);
   rest_m_ = body.rest_m.data();
   advance(h_s, count);
-  store(body);
+  store(body, count);
 }
 
 void ExplicitIntegrator::load(const Body& body, const std::vector<Vec3>& f_ext_N) {
@@ -540,7 +540,10 @@ bool ExplicitIntegrator::advanced_state_is_finite(const Body& body) const {
   return finite;  // NaN fails every comparison, so it is caught too
 }
 
-void ExplicitIntegrator::store(Body& body) const {
+void ExplicitIntegrator::store(Body& body, int substeps) const {
+  // The one way a step reaches the body: the caller's hook sees the state
+  // the step started from first (Simulation keeps it for a checked step).
+  if (before_store_) before_store_->before_store(body, substeps);
   if (offset_) return single_precision() ? offset_float_.store(body) : offset_double_.store(body);
   if (single_precision()) return float_.store(body);
   for (std::size_t n = 0; n < body.x_m.size(); ++n) {
@@ -694,8 +697,7 @@ StepOutcome ExplicitIntegrator::step(Body& body, const std::vector<Vec3>& f_ext_
       ++verified_steps_;
       out.substeps = fewer;
       out.verified_substeps = true;
-      if (before_store_) before_store_->before_store(body, out.substeps);
-      store(body);
+      store(body, out.substeps);
       // On the offset layout r was measured at the last sub-step's forces,
       // i.e. at its start: its move (h times the velocity it ended with, the
       // drift of symplectic Euler) is added as r_rise_bound_ is in
@@ -759,17 +761,15 @@ StepOutcome ExplicitIntegrator::run_and_accept(Body& body, double dt_s, int coun
     steps_since_measured_ = 0;
     growth_per_step_ = std::max(0.0, reached - end_displacement_ratio_);
     end_displacement_ratio_ = reached;
-    if (before_store_) before_store_->before_store(body, out.substeps);
-    store(body);
+    store(body, out.substeps);
     r_rise_bound_ = offset_ ? last_substep_rise(body, dt_s / count) : 0.0;
     spend_on_estimate(body, out.substeps);
     return out;
   }
   // How far the step moved the nodes bounds how far r rose (r_rise_bound_):
   // a copy and a pass over the nodes, no square root per spring.
-  if (before_store_) before_store_->before_store(body, out.substeps);
   x_start_m_.assign(body.x_m.begin(), body.x_m.end());
-  store(body);
+  store(body, out.substeps);
   const double moved2_m2 = max_squared_norm(body.x_m, &x_start_m_);
   r_rise_bound_ += 2.0 * std::sqrt(moved2_m2) / shortest_rest_m_;
   spend_on_estimate(body, out.substeps);

@@ -402,8 +402,9 @@ class ExplicitIntegrator final : public Integrator {
   double last_substep_rise(const Body& body, double h_s) const;
   // state_is_finite for the padded copy, over the body's live nodes.
   bool advanced_state_is_finite(const Body& body) const;
-  // Copies the padded state back to the body.
-  void store(Body& body) const;
+  // Copies the padded state back to the body: a step of `substeps`
+  // sub-steps, told to before_store_ first.
+  void store(Body& body, int substeps) const;
   // Counts a step's sub-steps on this layout and, past the wait, runs the
   // Lanczos iterations they pay for; takes its bound once it is done.
   void spend_on_estimate(const Body& body, int substeps);

@@ -150,9 +150,13 @@ StepResult Simulation::step() {
       kept = true;
     }
   } keep_if_checked(*this);
+  // Cleared however the step ends: the hook lives in this frame.
+  struct ClearHook {
+    Integrator& integrator;
+    ~ClearHook() { integrator.set_before_store(nullptr); }
+  } clear_hook{*integrator_};
   integrator_->set_before_store(checks_explicit_energy_ ? &keep_if_checked : nullptr);
   const StepOutcome out = integrator_->step(body_, f_ext_N_, dt);
-  integrator_->set_before_store(nullptr);
   result.substeps = out.substeps;
   result.solver_iterations = out.solver_iterations;
   result.solver_residual = out.solver_residual;
@@ -169,12 +173,12 @@ StepResult Simulation::step() {
   const StepWork work = step_work(driven_kinetic_before_J);
   if (checks_explicit_energy_) substeps_since_energy_check_ += out.substeps;
   if (checks_explicit_energy_ && substeps_since_energy_check_ >= kEnergyCheckSubsteps) {
-    substeps_since_energy_check_ = 0;
-    // The rung asked before it stored (the same count decides both); a rung
-    // that did not could not be restored, so it is refused here rather than
-    // judged without a way back.
+    // The rung asks before it stores (ExplicitIntegrator::store, the same
+    // count decides both), so a checked step always has its state kept; a
+    // rung that did not could not be restored: a programming error.
     if (!keep_if_checked.kept)
       throw std::logic_error("Simulation::step: the explicit rung stored a checked step without keeping its state");
+    substeps_since_energy_check_ = 0;
     if (std::string refusal = explicit_energy_refusal(work); !refusal.empty()) {
       result.ok = false;
       result.error = std::move(refusal);
