@@ -26,6 +26,10 @@ struct AdaptStats {
   double elastic_energy_before_J = 0.0;
   // The pass stopped splitting at adaptivity.max_tets.
   bool ceiling_reached = false;
+  // Nodes whose edges the pass walked (KuhnMesh::for_each_edge_at_node,
+  // 26 (K + 1) hash lookups each) to find the merges that reach into the
+  // frozen sphere: the cost a tool contact adds to a pass.
+  int frozen_edge_walks = 0;
 };
 
 class Adaptivity {
@@ -59,8 +63,10 @@ class Adaptivity {
   // True when a tet split(diamond) would bisect, closure included, has a
   // frozen vertex.
   bool closure_touches_frozen(const Body& body, mesh::Key diamond);
-  // True when a tet merging node z would replace has a frozen vertex.
-  bool merge_touches_frozen(const Body& body, NodeId z) const;
+  // near_frozen_[n] = 1 for every node in the frozen sphere and every node
+  // joined to one by an edge: a merge of such a node would replace a tet
+  // with a frozen vertex. Counts the nodes whose edges it walks.
+  void mark_near_frozen(const Body& body, AdaptStats& stats);
 
   bool is_frozen(const Vec3& x_m) const {
     return frozen_ && (x_m - frozen_centre_m_).squaredNorm() <= frozen_radius_m_ * frozen_radius_m_;
@@ -81,6 +87,7 @@ class Adaptivity {
   std::vector<std::tuple<int, double, mesh::Key>> merge_;  // (−depth, measure, diamond)
   std::vector<TetId> closure_tets_;                        // scratch of closure_touches_frozen
   std::vector<mesh::Key> closure_keys_;
+  std::vector<std::uint8_t> near_frozen_;  // per node slot, see mark_near_frozen
 };
 
 }  // namespace tissue::physics

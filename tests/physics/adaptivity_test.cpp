@@ -471,6 +471,42 @@ TEST(Adaptivity, ASplitWhoseClosureReachesTheFrozenSphereIsSkipped) {
   EXPECT_FALSE(m.is_split(cube1)) << "the closure split a tet with a vertex in the frozen sphere";
 }
 
+// A tool contact must not make every merge candidate pay for the sphere.
+// Finding whether a merge reaches into it walks a node's edges (26 (K + 1)
+// hash lookups); the pass walked those of every old relaxed node it looked
+// at, before its cheap tests, so one contact made every pass ~19x slower on
+// a 196,608-tet mesh at rest. It walks the edges of the nodes in the sphere
+// instead, once: a cost bounded by what is under the tool.
+TEST(Adaptivity, AFrozenSphereCostsAPassWorkForTheNodesInsideItNotForEveryMergeCandidate) {
+  scene::Scene s = relaxed_cube_scene();
+  Body body(s);
+  for (int depth = 0; depth < s.adaptivity.max_depth; ++depth) {
+    std::vector<mesh::Key> keys;
+    body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      if (tet.depth == depth) keys.push_back(body.mesh().diamond_of(t));
+    });
+    for (const mesh::Key k : keys)
+      if (body.mesh().can_split(k)) body.split(k);
+  }
+  body.step_index = 1000;  // every split node is old, relaxed and mergeable
+  int split_nodes = 0;
+  body.mesh().for_each_node([&](NodeId, const mesh::Node& n) { split_nodes += n.edge_a != mesh::kInvalidId; });
+  // A small contact on the top face, at the centre of a coarse face's edge.
+  const double cube_m = s.object.cube_size_m;
+  const Vec3 centre_m(cube_m, 0.5 * cube_m, 2.0 * cube_m);
+  const double radius_m = 0.3 * cube_m;
+  int inside = 0;
+  body.mesh().for_each_node(
+      [&](NodeId n, const mesh::Node&) { inside += (body.x_m[n] - centre_m).norm() <= radius_m; });
+  ASSERT_GT(inside, 0);
+  ASSERT_GT(split_nodes, 10 * inside);
+  Adaptivity adaptivity(s.adaptivity);
+  adaptivity.freeze_sphere(centre_m, radius_m);
+  const AdaptStats stats = adaptivity.adapt(body);
+  EXPECT_EQ(stats.merges, s.adaptivity.max_ops_per_step);
+  EXPECT_LE(stats.frozen_edge_walks, inside) << "of " << split_nodes << " merge candidates";
+}
+
 // docs/scene-format.md: `stretch` refines when any l/L or L/l exceeds
 // stretch_ratio. A spring compressed to 40 % has L/l = 2.5 > 2. (The pass
 // compared |l/L - 1| with stretch_ratio - 1, so a compression never reached
