@@ -97,7 +97,18 @@ AdaptStats Adaptivity::adapt(Body& body) {
     }
     const mesh::Key d = refine_[i].second;
     if (!mesh.can_split(d)) continue;  // split already (closure of an earlier one) or at max depth
-    if (frozen_ && closure_touches_frozen(body, d)) continue;
+    int closure = 0;
+    if (frozen_) {
+      if (closure_touches_frozen(body, d)) continue;
+      closure = static_cast<int>(closure_keys_.size());
+    } else {
+      closure = mesh.closure_diamonds(d, closure_keys_);
+    }
+    // A closure longer than what is left waits for a later pass (splitting
+    // it anyway overshot the budget by up to a whole closure: 52-134
+    // diamonds at max_depth 30), unless nothing has been spent yet, so that
+    // a pass always progresses: only a pass's first split may exceed it.
+    if (closure > budget && budget < spec_.max_ops_per_step) continue;
     const int n = body.split(d);
     stats.splits += n;
     budget -= n;

@@ -7,7 +7,11 @@
 //   tet around its node is below Th · simplify_factor, its node sits within
 //   midpoint_tolerance · L of its edge's midpoint (merging then moves nothing
 //   visibly), and it has not changed for min_age_steps;
-// - a budget of split+merge operations per pass keeps a pass's cost bounded.
+// - a budget of max_ops_per_step diamond splits + merges per pass keeps a
+//   pass's cost bounded: a split counts its whole closure (the unsplit
+//   ancestors it splits first), and one whose closure exceeds what is left
+//   of the budget waits for a later pass, except as the pass's first split
+//   (so a pass always progresses; that one pass does the closure whole).
 #pragma once
 
 #include <cstdint>
@@ -86,8 +90,8 @@ class Adaptivity {
   std::vector<std::pair<double, mesh::Key>> refine_;       // (−measure, diamond)
   std::vector<std::tuple<int, double, mesh::Key>> merge_;  // (−depth, measure, diamond)
   std::vector<TetId> closure_tets_;                        // scratch of closure_touches_frozen
-  std::vector<mesh::Key> closure_keys_;
-  std::vector<std::uint8_t> near_frozen_;  // per node slot, see mark_near_frozen
+  std::vector<mesh::Key> closure_keys_;                    // a split candidate's closure
+  std::vector<std::uint8_t> near_frozen_;                  // per node slot, see mark_near_frozen
 };
 
 }  // namespace tissue::physics

@@ -323,6 +323,46 @@ TEST(KuhnMesh, EdgesAtANodeByLookupAreTheEdgesAWalkFinds) {
   }
 }
 
+// A mesh split and merged unevenly down to depth 12, for the questions an
+// adaptation pass asks before it changes anything.
+KuhnMesh churned_mesh() {
+  KuhnMesh mesh({1, 2, 2, 0.05, 12});
+  std::mt19937 rng(11);
+  for (int op = 0; op < 600; ++op) {
+    TetId t;
+    do t = static_cast<TetId>(rng() % mesh.tet_capacity());
+    while (!mesh.tet_alive(t));
+    const Key d = mesh.diamond_of(t);
+    if (mesh.can_split(d)) mesh.split(d);
+    if (op % 3 == 0) {
+      NodeId n;
+      do n = static_cast<NodeId>(rng() % mesh.node_capacity());
+      while (!mesh.node_alive(n));
+      if (mesh.node(n).edge_a != kInvalidId && mesh.can_merge(mesh.node_key(n))) mesh.merge(mesh.node_key(n));
+    }
+  }
+  return mesh;
+}
+
+// How many diamonds a split's closure holds is what split() then returns.
+TEST(KuhnMesh, ClosureDiamondsCountWhatSplitThenSplits) {
+  const KuhnMesh mesh = churned_mesh();
+  std::vector<Key> closure;
+  int longest = 0, splits_checked = 0;
+  mesh.for_each_tet([&](TetId t, const Tet&) {
+    if (t % 5 != 0) return;  // a sample: each check copies the mesh
+    const Key d = mesh.diamond_of(t);
+    const int predicted = mesh.closure_diamonds(d, closure);
+    ASSERT_EQ(predicted, static_cast<int>(closure.size()));
+    KuhnMesh copy = mesh;
+    EXPECT_EQ(predicted, copy.can_split(d) ? copy.split(d) : 0);
+    longest = std::max(longest, predicted);
+    ++splits_checked;
+  });
+  EXPECT_GT(splits_checked, 50) << "longest " << longest;
+  EXPECT_GE(longest, 5) << "the sample must hold closures longer than the diamond itself";
+}
+
 TEST(KuhnMesh, RefineAllToMaxDepthThenMergeAllRestoresTheMesh) {
   KuhnMesh mesh({2, 1, 2, 0.1, 9});
   const auto before = mesh_sets(mesh);

@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "mesh/refine_ops.hpp"
 #include "physics/forces.hpp"
 #include "physics/physics_test_support.hpp"
 
@@ -63,8 +64,8 @@ TEST(Adaptivity, DisabledAdaptivityBuildsNoState) {
   EXPECT_TRUE(Simulation(cantilever_scene()).adaptive());
 }
 
-// One pass does at most the budget, overshooting only by its last split's
-// closure (a few diamonds per level).
+// One pass does at most the budget: a split whose closure does not fit what
+// is left waits (at depth 3 no closure alone exceeds 10).
 TEST(Adaptivity, OnePassRespectsTheOperationBudget) {
   scene::Scene s = cantilever_scene();
   s.adaptivity.refine_threshold_Pa = 1e-6;  // everything strained wants refining
@@ -74,7 +75,7 @@ TEST(Adaptivity, OnePassRespectsTheOperationBudget) {
   const StepResult r = sim.step();
   ASSERT_TRUE(r.ok);
   EXPECT_GE(r.adapted.splits, 10);
-  EXPECT_LE(r.adapted.splits, 10 + 3 * 3);
+  EXPECT_LE(r.adapted.splits, 10);
 }
 
 TEST(Adaptivity, AdaptationNeverAddsKineticEnergy) {
@@ -356,8 +357,9 @@ TEST(Adaptivity, NoSplitOnceTheMeshHoldsMaxTets) {
 // The budget counts a split's closure: once one split and the parents it
 // needed use up max_ops_per_step, the pass splits nothing more. Here every
 // wanted diamond (a coarse cube edge around the one split face diamond)
-// needs at least two unsplit face diamonds first, so a budget of 2 allows
-// one wanted split.
+// needs at least two unsplit face diamonds first, so its closure exceeds a
+// budget of 2: the pass's first split takes it whole (a pass always
+// progresses), and no other fits.
 TEST(Adaptivity, ASplitsClosureCountsAgainstTheBudget) {
   scene::Scene s = relaxed_cube_scene();
   s.adaptivity.max_depth = 6;
@@ -505,6 +507,57 @@ TEST(Adaptivity, AFrozenSphereCostsAPassWorkForTheNodesInsideItNotForEveryMergeC
   const AdaptStats stats = adaptivity.adapt(body);
   EXPECT_EQ(stats.merges, s.adaptivity.max_ops_per_step);
   EXPECT_LE(stats.frozen_edge_walks, inside) << "of " << split_nodes << " merge candidates";
+}
+
+// The budget holds at depth, where closures are long: a split whose closure
+// is longer than what remains of max_ops_per_step waits for a later pass
+// (splitting it anyway overshot by up to a whole closure, 52-134 diamonds at
+// max_depth 30). Here one cube is refined towards a point to depth 18, so
+// its leaves' closures run from 1 to 71 diamonds, and everything strained
+// wants refining: with a budget of the longest closure, no pass may pass it.
+// With a budget below the first wanted closure, that closure is still split
+// whole, so a pass always progresses.
+TEST(Adaptivity, ALongClosureWaitsWhenItExceedsTheRemainingBudget) {
+  scene::Scene s = testing::free_cube_scene(1, 0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 30;
+  s.adaptivity.refine_threshold_Pa = 1e-6;
+  Body body(s);
+  const std::array<double, 3> point_m{0.0123, 0.0311, 0.0271};
+  for (;;) {
+    std::vector<mesh::Key> keys;
+    body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      if (tet.depth >= 18) return;
+      const mesh::RegionBox box = mesh::tet_bounds_m(body.mesh(), t);
+      for (int i = 0; i < 3; ++i)
+        if (point_m[i] < box.min_m[i] || point_m[i] > box.max_m[i]) return;
+      keys.push_back(body.mesh().diamond_of(t));
+    });
+    if (keys.empty()) break;
+    for (const mesh::Key k : keys)
+      if (body.mesh().can_split(k)) body.split(k);
+  }
+  std::vector<TetId> tets;
+  std::vector<mesh::Key> closure;
+  int longest = 0;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) {
+    body.mesh().closure_tets(body.mesh().diamond_of(t), tets, closure);
+    longest = std::max(longest, static_cast<int>(closure.size()));
+  });
+  ASSERT_GE(longest, 50);
+  dilate(body, 1e-3);
+  for (const int budget : {longest, 10}) {
+    s.adaptivity.max_ops_per_step = budget;
+    Body state = body;
+    Adaptivity adaptivity(s.adaptivity);
+    const AdaptStats stats = adaptivity.adapt(state);
+    EXPECT_GT(stats.splits, 0) << "budget " << budget;
+    if (budget == longest) {
+      EXPECT_LE(stats.splits, budget) << "a closure overshot the budget";
+    } else {
+      EXPECT_LE(stats.splits, longest) << "only the first split may pass the budget, by its own closure";
+    }
+  }
 }
 
 // docs/scene-format.md: `stretch` refines when any l/L or L/l exceeds
