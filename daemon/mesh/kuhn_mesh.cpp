@@ -206,6 +206,32 @@ void KuhnMesh::closure_tets(Key diamond, std::vector<TetId>& tets, std::vector<K
   }
 }
 
+int KuhnMesh::merge_restores(Key diamond, std::array<std::array<NodeId, 4>, 8>& parents) const {
+  if (!can_merge(diamond)) return 0;
+  const NodeId z = node_index_.find(diamond);
+  DiamondInfo info;
+  classify_diamond(domain_, diamond, &info, nullptr);
+  std::array<Key, 8> children{};
+  const int child_count = diamond_children(domain_, info, &children);
+  const int k = maubach_tag(info.depth);
+  int count = 0;
+  // As merge(): the tets around z sit in the child diamonds' lists; each
+  // parent is its first child with z replaced by the far end of z's edge.
+  for (int i = 0; i < child_count; ++i) {
+    const EdgeId e = edge_index_.find(children[i]);
+    if (e == util::KeyIndexMap::kNotFound) continue;
+    for (TetId t = edges_[e].diamond_head; t != kInvalidId; t = tets_[t].next_in_diamond) {
+      const Tet& child = tets_[t];
+      if (child.v[k] != z || ((child.child_path >> info.depth) & 1)) continue;  // not a first child of z
+      if (count == 8) throw std::logic_error(describe_key(diamond) + ": more than 8 parent tets");
+      parents[count] = child.v;
+      parents[count][k] = child.v[0] == nodes_[z].edge_a ? nodes_[z].edge_b : nodes_[z].edge_a;
+      ++count;
+    }
+  }
+  return count;
+}
+
 int KuhnMesh::split_recursive(Key diamond, const DiamondInfo& info, MeshChangeLog* log) {
   int splits = 0;
   // Closure: a diamond's tets exist only once all its parents are split.

@@ -154,6 +154,12 @@ class KuhnMesh {
   // it of a candidate before deciding whether its closure fits the budget.
   int closure_diamonds(Key diamond, std::vector<Key>& closure) const;
 
+  // The tets merge(diamond) would restore, each by its vertices in Maubach
+  // order (as tet().v would hold them), into `parents`; returns their count,
+  // 0 when !can_merge(diamond). Changes nothing: a pass measures the
+  // restored tets before it merges.
+  int merge_restores(Key diamond, std::array<std::array<NodeId, 4>, 8>& parents) const;
+
   // Merges a split diamond whose children are all unsplit. Throws
   // std::invalid_argument otherwise.
   void merge(Key diamond, MeshChangeLog* log = nullptr);

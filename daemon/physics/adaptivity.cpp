@@ -56,6 +56,38 @@ void Adaptivity::mark_near_frozen(const Body& body, AdaptStats& stats) {
   });
 }
 
+double Adaptivity::restored_measure(const Body& body, mesh::Key diamond) {
+  // The tets a merge restores can be up to ~2x as dense as their children
+  // (the children's edges lack some of the parents' directions), so a merge
+  // judged on the children alone could restore tets above Th, which the
+  // next pass split again: a static body cycled forever (simplify_factor
+  // above ~0.5). Measured as measure_from_edges will measure them once
+  // restored: merging moves no node, and a rest length is the lattice
+  // length's root times the unit, as Body gives it.
+  const mesh::KuhnMesh& mesh = body.mesh();
+  const int count = mesh.merge_restores(diamond, restored_);
+  const double unit_m = mesh.lattice_unit_m();
+  double worst = 0.0;
+  for (int i = 0; i < count; ++i) {
+    const std::array<NodeId, 4>& v = restored_[i];
+    double sum = 0.0, stretch = 0.0;
+    for (const auto& slot : mesh::kTetEdgeSlots) {
+      const NodeId a = v[slot[0]], b = v[slot[1]];
+      const mesh::Vec3i& p = mesh.node(a).lattice;
+      const mesh::Vec3i& q = mesh.node(b).lattice;
+      std::int64_t length2 = 0;
+      for (int c = 0; c < 3; ++c) length2 += (p[c] - q[c]) * (p[c] - q[c]);
+      const double rest_m = std::sqrt(static_cast<double>(length2)) * unit_m;
+      const double strain = (body.x_m[b] - body.x_m[a]).norm() / rest_m - 1.0;
+      sum += strain * strain;
+      stretch = std::max(stretch, stretch_from_strain(strain));
+    }
+    worst =
+        std::max(worst, spec_.criterion == scene::RefineCriterion::kStretch ? stretch : 0.5 * youngs_modulus_Pa_ * sum);
+  }
+  return worst;
+}
+
 AdaptStats Adaptivity::adapt(Body& body) {
   AdaptStats stats;
   const mesh::KuhnMesh& mesh = body.mesh();
@@ -144,6 +176,11 @@ AdaptStats Adaptivity::adapt(Body& body) {
   for (std::size_t i = 0; i < merge_.size() && budget > 0; ++i) {
     const mesh::Key d = std::get<2>(merge_[i]);
     if (!mesh.can_merge(d)) continue;
+    // Hysteresis across the merge: the restored tets must be relaxed too,
+    // else the next pass splits them again (see restored_measure). After
+    // can_merge: a coarser diamond becomes mergeable only once this pass
+    // merged its children, and merging moves no node, so it is measured now.
+    if (restored_measure(body, d) >= merge_below) continue;
     body.merge(d);
     ++stats.merges;
     --budget;

@@ -4,9 +4,12 @@
 //   exceeds Th (or whose worst edge length ratio, max(l/L, L/l), exceeds
 //   stretch_ratio);
 // - simplify, with hysteresis: merge a split diamond when it can merge, every
-//   tet around its node is below Th · simplify_factor, its node sits within
+//   tet around its node is below Th · simplify_factor and so is every tet the
+//   merge would restore (those can be ~2x as dense as their children: judged
+//   on the children alone, a static body merged and re-split a diamond
+//   forever once simplify_factor passed ~0.5), its node sits within
 //   midpoint_tolerance · L of its edge's midpoint (merging then moves nothing
-//   visibly), and it has not changed for min_age_steps;
+//   visibly), and it was split at least min_age_steps ago;
 // - a budget of max_ops_per_step diamond splits + merges per pass keeps a
 //   pass's cost bounded: a split counts its whole closure (the unsplit
 //   ancestors it splits first), and one whose closure exceeds what is left
@@ -14,6 +17,7 @@
 //   (so a pass always progresses; that one pass does the closure whole).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -71,6 +75,9 @@ class Adaptivity {
   // joined to one by an edge: a merge of such a node would replace a tet
   // with a frozen vertex. Counts the nodes whose edges it walks.
   void mark_near_frozen(const Body& body, AdaptStats& stats);
+  // Largest measure of the tets merging `diamond` would restore, from the
+  // current positions (0 when it cannot merge).
+  double restored_measure(const Body& body, mesh::Key diamond);
 
   bool is_frozen(const Vec3& x_m) const {
     return frozen_ && (x_m - frozen_centre_m_).squaredNorm() <= frozen_radius_m_ * frozen_radius_m_;
@@ -92,6 +99,7 @@ class Adaptivity {
   std::vector<TetId> closure_tets_;                        // scratch of closure_touches_frozen
   std::vector<mesh::Key> closure_keys_;                    // a split candidate's closure
   std::vector<std::uint8_t> near_frozen_;                  // per node slot, see mark_near_frozen
+  std::array<std::array<NodeId, 4>, 8> restored_{};        // scratch of restored_measure
 };
 
 }  // namespace tissue::physics

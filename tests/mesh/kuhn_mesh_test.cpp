@@ -363,6 +363,41 @@ TEST(KuhnMesh, ClosureDiamondsCountWhatSplitThenSplits) {
   EXPECT_GE(longest, 5) << "the sample must hold closures longer than the diamond itself";
 }
 
+// The tets a merge restores, corners in Maubach order, are those merge()
+// then adds; a diamond that cannot merge restores none.
+TEST(KuhnMesh, MergeRestoresAreTheTetsMergeThenAdds) {
+  const KuhnMesh mesh = churned_mesh();
+  int merges_checked = 0, refused = 0;
+  mesh.for_each_node([&](NodeId n, const Node& node) {
+    if (node.edge_a == kInvalidId) return;
+    const Key d = mesh.node_key(n);
+    std::array<std::array<NodeId, 4>, 8> restored{};
+    const int count = mesh.merge_restores(d, restored);
+    if (!mesh.can_merge(d)) {
+      EXPECT_EQ(count, 0);
+      ++refused;
+      return;
+    }
+    if (++merges_checked % 3 != 0) return;  // a sample, as above
+    KuhnMesh copy = mesh;
+    const auto before = sorted_live_tets(copy);
+    copy.merge(d);
+    std::vector<std::array<NodeId, 4>> added_by_merge, predicted;
+    copy.for_each_tet([&](TetId, const Tet& tet) {
+      auto sorted = tet.v;
+      std::sort(sorted.begin(), sorted.end());
+      if (!std::binary_search(before.begin(), before.end(), SortedTet{sorted, tet.depth}))
+        added_by_merge.push_back(tet.v);
+    });
+    predicted.assign(restored.begin(), restored.begin() + count);
+    std::sort(added_by_merge.begin(), added_by_merge.end());
+    std::sort(predicted.begin(), predicted.end());
+    EXPECT_EQ(predicted, added_by_merge) << "diamond of node " << n;
+  });
+  EXPECT_GT(merges_checked / 3, 20);
+  EXPECT_GT(refused, 20);
+}
+
 TEST(KuhnMesh, RefineAllToMaxDepthThenMergeAllRestoresTheMesh) {
   KuhnMesh mesh({2, 1, 2, 0.1, 9});
   const auto before = mesh_sets(mesh);

@@ -509,6 +509,59 @@ TEST(Adaptivity, AFrozenSphereCostsAPassWorkForTheNodesInsideItNotForEveryMergeC
   EXPECT_LE(stats.frozen_edge_walks, inside) << "of " << split_nodes << " merge candidates";
 }
 
+// Hysteresis across a merge: a merge restores the parent tets, whose density
+// can be up to ~2x their children's, so with simplify_factor above ~0.5 a
+// static body merged a diamond whose parents exceeded Th, re-split it on the
+// next pass and merged it again min_age_steps later, forever, booking
+// adaptation energy each time. Here one cube's diagonal ends are moved
+// oppositely across it (its midpoint stays): the parents' density is ~2x the
+// children's, and Th lies between the children's / simplify_factor and the
+// parents'. A merge must also leave the parents below Th · simplify_factor,
+// so the diamond stays split and the mesh never changes. (The stretch
+// criterion cannot thrash so: the parents' only edge their children lack,
+// the refinement edge, has its halves' strain.)
+TEST(Adaptivity, AStaticBodyNeverReSplitsADiamondAMergeRestored) {
+  scene::Scene s = testing::free_cube_scene(1, 0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 1;
+  s.adaptivity.simplify_factor = 0.75;
+  s.adaptivity.min_age_steps = 20;
+  Body unsplit(s);
+  const mesh::Key d = unsplit.mesh().diamond_of(0);
+  Body body = unsplit;
+  ASSERT_EQ(body.split(d), 1);
+  const NodeId z = body.mesh().find_node(d);
+  const NodeId a = body.mesh().node(z).edge_a, b = body.mesh().node(z).edge_b;
+  const Vec3 across = Vec3(1e-3, 0.0, -1e-3);
+  ASSERT_NEAR(across.dot(body.rest_m[b] - body.rest_m[a]), 0.0, 1e-15);
+  for (Body* state : {&unsplit, &body}) {
+    state->x_m[a] += across;
+    state->x_m[b] -= across;
+  }
+  body.x_m[z] = 0.5 * (body.x_m[a] + body.x_m[b]);
+  auto max_density_Pa = [](const Body& state) {
+    double worst = 0.0;
+    state.mesh().for_each_tet(
+        [&](TetId t, const mesh::Tet&) { worst = std::max(worst, strain_energy_density_Pa(state, t)); });
+    return worst;
+  };
+  const double child_Pa = max_density_Pa(body), parent_Pa = max_density_Pa(unsplit);
+  s.adaptivity.refine_threshold_Pa = std::sqrt(child_Pa / s.adaptivity.simplify_factor * parent_Pa);
+  ASSERT_LT(child_Pa, s.adaptivity.refine_threshold_Pa * s.adaptivity.simplify_factor);
+  ASSERT_GT(parent_Pa, s.adaptivity.refine_threshold_Pa);
+  Adaptivity adaptivity(s.adaptivity);
+  int splits = 0, merges = 0;
+  for (int pass = 0; pass < 40; ++pass) {
+    body.step_index += 5;
+    const AdaptStats stats = adaptivity.adapt(body);
+    splits += stats.splits;
+    merges += stats.merges;
+  }
+  EXPECT_EQ(merges, 0) << "merged a diamond whose parents exceed Th · simplify_factor";
+  EXPECT_EQ(splits, 0) << "re-split a diamond a merge restored";
+  EXPECT_TRUE(body.mesh().is_split(d));
+}
+
 // The budget holds at depth, where closures are long: a split whose closure
 // is longer than what remains of max_ops_per_step waits for a later pass
 // (splitting it anyway overshot by up to a whole closure, 52-134 diamonds at
