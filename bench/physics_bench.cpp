@@ -957,6 +957,56 @@ void BM_AdaptationShare(benchmark::State& state) {
   state.counters["transient_adaptation_share"] = (cadence_mean - other_mean) / s.adaptivity.every_steps / mean_step;
 }
 
+// What a tool contact costs an adaptation pass: one adapt() of a body at rest
+// (4^3 cubes of 25 mm refined uniformly to depth 9: 196,608 tets, every split
+// node old, relaxed and mergeable; the pass merges its budget of 64), with no
+// contact and with a 2 mm frozen sphere on the top face, as the service's sim
+// runner sets on every contact. Each pass runs on a fresh copy (a pass
+// changes the mesh); only adapt() is timed. The pass used to walk the edges
+// of every merge candidate to test the sphere (26 (K + 1) hash lookups each):
+// 10.5-18.3 ms unfrozen, 218-227 ms frozen (2026-11-28, load average 8 on 2
+// cores); walking those of the nodes in the sphere once, 14.6 ms frozen,
+// 18.3 ms unfrozen (frozen_x 0.80: within the machine's noise).
+void BM_AdaptationFrozen(benchmark::State& state) {
+  scene::Scene s;
+  s.name = "cube";
+  s.object.cubes = {4, 4, 4};
+  s.object.cube_size_m = 0.025;
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 12;
+  physics::Body body(s);
+  for (int depth = 0; depth < 9; ++depth) {
+    std::vector<mesh::Key> keys;
+    body.mesh().for_each_tet([&](mesh::TetId t, const mesh::Tet& tet) {
+      if (tet.depth == depth) keys.push_back(body.mesh().diamond_of(t));
+    });
+    for (const mesh::Key k : keys)
+      if (body.mesh().can_split(k)) body.split(k);
+  }
+  body.step_index = 1000;
+  std::vector<double> unfrozen_ns, frozen_ns;
+  int merges = 0, walks = 0;
+  for (auto _ : state) {
+    for (const bool frozen : {false, true}) {
+      physics::Body copy = body;
+      physics::Adaptivity adaptivity(s.adaptivity);
+      if (frozen) adaptivity.freeze_sphere(physics::Vec3(0.05, 0.05, 0.1), 0.002);
+      const auto t0 = std::chrono::steady_clock::now();
+      const physics::AdaptStats stats = adaptivity.adapt(copy);
+      const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
+      (frozen ? frozen_ns : unfrozen_ns).push_back(ns);
+      merges = stats.merges;
+      if (frozen) walks = stats.frozen_edge_walks;
+    }
+  }
+  state.counters["tets"] = static_cast<double>(body.mesh().tet_count());
+  state.counters["unfrozen_ms"] = bench::median(unfrozen_ns) * 1e-6;
+  state.counters["frozen_ms"] = bench::median(frozen_ns) * 1e-6;
+  state.counters["frozen_x"] = bench::median(frozen_ns) / bench::median(unfrozen_ns);
+  state.counters["merges"] = merges;
+  state.counters["frozen_edge_walks"] = walks;
+}
+
 // The two O(mesh) energy sums the daemon writes into every recorded sim row,
 // beside the step they follow (shipped default: implicit, 1e-6 tolerance).
 void BM_EnergySumsPerStep(benchmark::State& state) {
@@ -1129,6 +1179,7 @@ BENCHMARK(BM_ImplicitVsExplicitSubstep)->DenseRange(0, 9, 3)->Arg(11)->Iteration
 BENCHMARK(BM_FrequencyEstimate)->DenseRange(0, 9, 3)->Iterations(5)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_OffsetPlan)->DenseRange(0, 9, 3)->Arg(11)->Iterations(3)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_AdaptationShare)->Iterations(3)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_AdaptationFrozen)->Iterations(5)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_EnergySumsPerStep)->Arg(0)->Arg(3)->Arg(6)->Iterations(50)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ContactStiffnessPastTheCap)->Arg(0)->Arg(3)->Iterations(1)->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

@@ -175,28 +175,61 @@ int KuhnMesh::split(Key diamond, MeshChangeLog* log) {
   return split_recursive(diamond, info, log);
 }
 
-void KuhnMesh::closure_tets(Key diamond, std::vector<TetId>& tets, std::vector<Key>& pending) const {
-  tets.clear();
-  pending.clear();
-  if (!can_split(diamond)) return;
-  // Breadth-first over the unsplit ancestors; `pending` is also the visited
-  // list (a diamond is reached through up to four children).
-  pending.push_back(diamond);
-  for (std::size_t i = 0; i < pending.size(); ++i) {
-    const Key key = pending[i];
-    // A diamond's tets exist once the parent each comes from is split: some
-    // may exist while another parent is unsplit, so the walk goes on up.
-    const EdgeId e = edge_index_.find(key);
-    if (e != util::KeyIndexMap::kNotFound)
-      for (TetId t = edges_[e].diamond_head; t != kInvalidId; t = tets_[t].next_in_diamond) tets.push_back(t);
+int KuhnMesh::closure_diamonds(Key diamond, std::vector<Key>& closure) const {
+  closure.clear();
+  if (!can_split(diamond)) return 0;
+  // Breadth-first over the unsplit ancestors; `closure` is also the visited
+  // list (a diamond is reached through up to four children). split_recursive
+  // splits exactly these: every unsplit parent, recursively.
+  closure.push_back(diamond);
+  for (std::size_t i = 0; i < closure.size(); ++i) {
     DiamondInfo info;
-    classify_diamond(domain_, key, &info, nullptr);
+    classify_diamond(domain_, closure[i], &info, nullptr);
     std::array<Key, 4> parents{};
     const int parent_count = diamond_parents(domain_, info, &parents);
     for (int j = 0; j < parent_count; ++j)
-      if (!is_split(parents[j]) && std::find(pending.begin(), pending.end(), parents[j]) == pending.end())
-        pending.push_back(parents[j]);
+      if (!is_split(parents[j]) && std::find(closure.begin(), closure.end(), parents[j]) == closure.end())
+        closure.push_back(parents[j]);
   }
+  return static_cast<int>(closure.size());
+}
+
+void KuhnMesh::closure_tets(Key diamond, std::vector<TetId>& tets, std::vector<Key>& pending) const {
+  tets.clear();
+  closure_diamonds(diamond, pending);
+  for (const Key key : pending) {
+    // A diamond's tets exist once the parent each comes from is split: some
+    // may exist while another parent is unsplit, hence every diamond's list.
+    const EdgeId e = edge_index_.find(key);
+    if (e != util::KeyIndexMap::kNotFound)
+      for (TetId t = edges_[e].diamond_head; t != kInvalidId; t = tets_[t].next_in_diamond) tets.push_back(t);
+  }
+}
+
+int KuhnMesh::merge_restores(Key diamond, std::array<std::array<NodeId, 4>, 8>& parents) const {
+  if (!can_merge(diamond)) return 0;
+  const NodeId z = node_index_.find(diamond);
+  DiamondInfo info;
+  classify_diamond(domain_, diamond, &info, nullptr);
+  std::array<Key, 8> children{};
+  const int child_count = diamond_children(domain_, info, &children);
+  const int k = maubach_tag(info.depth);
+  int count = 0;
+  // As merge(): the tets around z sit in the child diamonds' lists; each
+  // parent is its first child with z replaced by the far end of z's edge.
+  for (int i = 0; i < child_count; ++i) {
+    const EdgeId e = edge_index_.find(children[i]);
+    if (e == util::KeyIndexMap::kNotFound) continue;
+    for (TetId t = edges_[e].diamond_head; t != kInvalidId; t = tets_[t].next_in_diamond) {
+      const Tet& child = tets_[t];
+      if (child.v[k] != z || ((child.child_path >> info.depth) & 1)) continue;  // not a first child of z
+      if (count == 8) throw std::logic_error(describe_key(diamond) + ": more than 8 parent tets");
+      parents[count] = child.v;
+      parents[count][k] = child.v[0] == nodes_[z].edge_a ? nodes_[z].edge_b : nodes_[z].edge_a;
+      ++count;
+    }
+  }
+  return count;
 }
 
 int KuhnMesh::split_recursive(Key diamond, const DiamondInfo& info, MeshChangeLog* log) {

@@ -147,6 +147,18 @@ class KuhnMesh {
   // (tets the closure creates on the way lie inside these). Empty when it
   // cannot split. `pending` is scratch (reused: no allocation once grown).
   void closure_tets(Key diamond, std::vector<TetId>& tets, std::vector<Key>& pending) const;
+  // The diamonds split(diamond) would split, itself and every unsplit
+  // ancestor, each once, into `closure` (scratch, reused); returns their
+  // count, which is what split(diamond) would return (0 when it cannot
+  // split). Costs what the walk up costs, not the tets' lists: a pass asks
+  // it of a candidate before deciding whether its closure fits the budget.
+  int closure_diamonds(Key diamond, std::vector<Key>& closure) const;
+
+  // The tets merge(diamond) would restore, each by its vertices in Maubach
+  // order (as tet().v would hold them), into `parents`; returns their count,
+  // 0 when !can_merge(diamond). Changes nothing: a pass measures the
+  // restored tets before it merges.
+  int merge_restores(Key diamond, std::array<std::array<NodeId, 4>, 8>& parents) const;
 
   // Merges a split diamond whose children are all unsplit. Throws
   // std::invalid_argument otherwise.

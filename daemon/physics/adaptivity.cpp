@@ -38,16 +38,54 @@ bool Adaptivity::closure_touches_frozen(const Body& body, mesh::Key diamond) {
   return false;
 }
 
-bool Adaptivity::merge_touches_frozen(const Body& body, NodeId z) const {
-  // The merge replaces every tet around z, and their vertices are exactly z
-  // and the nodes joined to it by an edge: a node just outside the sphere
-  // can have tets reaching into it.
-  if (is_frozen(body.x_m[z])) return true;
-  bool touches = false;
-  body.mesh().for_each_edge_at_node(z, [&](EdgeId, const mesh::Edge& edge) {
-    touches = touches || is_frozen(body.x_m[edge.a == z ? edge.b : edge.a]);
+void Adaptivity::mark_near_frozen(const Body& body, AdaptStats& stats) {
+  // A merge replaces every tet around its node z, and their vertices are
+  // exactly z and the nodes joined to it by an edge: a node just outside the
+  // sphere can have tets reaching into it. So mark each node in the sphere
+  // and its neighbours, walking the edges of the few nodes under the tool
+  // once, not those of every merge candidate (26 (K + 1) hash lookups each:
+  // a contact made a pass on a big relaxed mesh ~19x slower).
+  const mesh::KuhnMesh& mesh = body.mesh();
+  near_frozen_.assign(mesh.node_capacity(), 0);
+  mesh.for_each_node([&](NodeId n, const mesh::Node&) {
+    if (!is_frozen(body.x_m[n])) return;
+    near_frozen_[n] = 1;
+    ++stats.frozen_edge_walks;
+    mesh.for_each_edge_at_node(
+        n, [&](EdgeId, const mesh::Edge& edge) { near_frozen_[edge.a] = near_frozen_[edge.b] = 1; });
   });
-  return touches;
+}
+
+double Adaptivity::restored_measure(const Body& body, mesh::Key diamond) {
+  // The tets a merge restores can be up to ~2x as dense as their children
+  // (the children's edges lack some of the parents' directions), so a merge
+  // judged on the children alone could restore tets above Th, which the
+  // next pass split again: a static body cycled forever (simplify_factor
+  // above ~0.5). Measured as measure_from_edges will measure them once
+  // restored: merging moves no node, and a rest length is the lattice
+  // length's root times the unit, as Body gives it.
+  const mesh::KuhnMesh& mesh = body.mesh();
+  const int count = mesh.merge_restores(diamond, restored_);
+  const double unit_m = mesh.lattice_unit_m();
+  double worst = 0.0;
+  for (int i = 0; i < count; ++i) {
+    const std::array<NodeId, 4>& v = restored_[i];
+    double sum = 0.0, stretch = 0.0;
+    for (const auto& slot : mesh::kTetEdgeSlots) {
+      const NodeId a = v[slot[0]], b = v[slot[1]];
+      const mesh::Vec3i& p = mesh.node(a).lattice;
+      const mesh::Vec3i& q = mesh.node(b).lattice;
+      std::int64_t length2 = 0;
+      for (int c = 0; c < 3; ++c) length2 += (p[c] - q[c]) * (p[c] - q[c]);
+      const double rest_m = std::sqrt(static_cast<double>(length2)) * unit_m;
+      const double strain = (body.x_m[b] - body.x_m[a]).norm() / rest_m - 1.0;
+      sum += strain * strain;
+      stretch = std::max(stretch, stretch_from_strain(strain));
+    }
+    worst =
+        std::max(worst, spec_.criterion == scene::RefineCriterion::kStretch ? stretch : 0.5 * youngs_modulus_Pa_ * sum);
+  }
+  return worst;
 }
 
 AdaptStats Adaptivity::adapt(Body& body) {
@@ -91,7 +129,18 @@ AdaptStats Adaptivity::adapt(Body& body) {
     }
     const mesh::Key d = refine_[i].second;
     if (!mesh.can_split(d)) continue;  // split already (closure of an earlier one) or at max depth
-    if (frozen_ && closure_touches_frozen(body, d)) continue;
+    int closure = 0;
+    if (frozen_) {
+      if (closure_touches_frozen(body, d)) continue;
+      closure = static_cast<int>(closure_keys_.size());
+    } else {
+      closure = mesh.closure_diamonds(d, closure_keys_);
+    }
+    // A closure longer than what is left waits for a later pass (splitting
+    // it anyway overshot the budget by up to a whole closure: 52-134
+    // diamonds at max_depth 30), unless nothing has been spent yet, so that
+    // a pass always progresses: only a pass's first split may exceed it.
+    if (closure > budget && budget < spec_.max_ops_per_step) continue;
     const int n = body.split(d);
     stats.splits += n;
     budget -= n;
@@ -104,20 +153,34 @@ AdaptStats Adaptivity::adapt(Body& body) {
   // freed slot was merged in the same pass, every pass.)
   merge_.clear();
   const double tol = spec_.midpoint_tolerance;
+  bool near_frozen_marked = false;
   mesh.for_each_node([&](NodeId z, const mesh::Node& node) {
     if (node.edge_a == mesh::kInvalidId || node.depth < spec_.min_depth) return;
     if (body.step_index - body.changed_step[z] < spec_.min_age_steps) return;
     if (z >= node_max_.size() || node_max_[z] == kUnmeasured || node_max_[z] >= merge_below) return;
-    if (frozen_ && merge_touches_frozen(body, z)) return;
     const Vec3 mid = 0.5 * (body.x_m[node.edge_a] + body.x_m[node.edge_b]);
     const double length = (body.rest_m[node.edge_b] - body.rest_m[node.edge_a]).norm();
     if ((body.x_m[z] - mid).norm() >= tol * length) return;
+    if (frozen_) {
+      // Marked after the splits above: a node one of them put in the sphere
+      // blocks the merges around it too.
+      if (!near_frozen_marked) {
+        mark_near_frozen(body, stats);
+        near_frozen_marked = true;
+      }
+      if (near_frozen_[z]) return;
+    }
     merge_.emplace_back(-static_cast<int>(node.depth), node_max_[z], mesh.node_key(z));
   });
   std::sort(merge_.begin(), merge_.end());
   for (std::size_t i = 0; i < merge_.size() && budget > 0; ++i) {
     const mesh::Key d = std::get<2>(merge_[i]);
     if (!mesh.can_merge(d)) continue;
+    // Hysteresis across the merge: the restored tets must be relaxed too,
+    // else the next pass splits them again (see restored_measure). After
+    // can_merge: a coarser diamond becomes mergeable only once this pass
+    // merged its children, and merging moves no node, so it is measured now.
+    if (restored_measure(body, d) >= merge_below) continue;
     body.merge(d);
     ++stats.merges;
     --budget;

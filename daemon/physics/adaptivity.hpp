@@ -4,12 +4,20 @@
 //   exceeds Th (or whose worst edge length ratio, max(l/L, L/l), exceeds
 //   stretch_ratio);
 // - simplify, with hysteresis: merge a split diamond when it can merge, every
-//   tet around its node is below Th · simplify_factor, its node sits within
+//   tet around its node is below Th · simplify_factor and so is every tet the
+//   merge would restore (those can be ~2x as dense as their children: judged
+//   on the children alone, a static body merged and re-split a diamond
+//   forever once simplify_factor passed ~0.5), its node sits within
 //   midpoint_tolerance · L of its edge's midpoint (merging then moves nothing
-//   visibly), and it has not changed for min_age_steps;
-// - a budget of split+merge operations per pass keeps a pass's cost bounded.
+//   visibly), and it was split at least min_age_steps ago;
+// - a budget of max_ops_per_step diamond splits + merges per pass keeps a
+//   pass's cost bounded: a split counts its whole closure (the unsplit
+//   ancestors it splits first), and one whose closure exceeds what is left
+//   of the budget waits for a later pass, except as the pass's first split
+//   (so a pass always progresses; that one pass does the closure whole).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -26,6 +34,10 @@ struct AdaptStats {
   double elastic_energy_before_J = 0.0;
   // The pass stopped splitting at adaptivity.max_tets.
   bool ceiling_reached = false;
+  // Nodes whose edges the pass walked (KuhnMesh::for_each_edge_at_node,
+  // 26 (K + 1) hash lookups each) to find the merges that reach into the
+  // frozen sphere: the cost a tool contact adds to a pass.
+  int frozen_edge_walks = 0;
 };
 
 class Adaptivity {
@@ -59,8 +71,13 @@ class Adaptivity {
   // True when a tet split(diamond) would bisect, closure included, has a
   // frozen vertex.
   bool closure_touches_frozen(const Body& body, mesh::Key diamond);
-  // True when a tet merging node z would replace has a frozen vertex.
-  bool merge_touches_frozen(const Body& body, NodeId z) const;
+  // near_frozen_[n] = 1 for every node in the frozen sphere and every node
+  // joined to one by an edge: a merge of such a node would replace a tet
+  // with a frozen vertex. Counts the nodes whose edges it walks.
+  void mark_near_frozen(const Body& body, AdaptStats& stats);
+  // Largest measure of the tets merging `diamond` would restore, from the
+  // current positions (0 when it cannot merge).
+  double restored_measure(const Body& body, mesh::Key diamond);
 
   bool is_frozen(const Vec3& x_m) const {
     return frozen_ && (x_m - frozen_centre_m_).squaredNorm() <= frozen_radius_m_ * frozen_radius_m_;
@@ -80,7 +97,9 @@ class Adaptivity {
   std::vector<std::pair<double, mesh::Key>> refine_;       // (−measure, diamond)
   std::vector<std::tuple<int, double, mesh::Key>> merge_;  // (−depth, measure, diamond)
   std::vector<TetId> closure_tets_;                        // scratch of closure_touches_frozen
-  std::vector<mesh::Key> closure_keys_;
+  std::vector<mesh::Key> closure_keys_;                    // a split candidate's closure
+  std::vector<std::uint8_t> near_frozen_;                  // per node slot, see mark_near_frozen
+  std::array<std::array<NodeId, 4>, 8> restored_{};        // scratch of restored_measure
 };
 
 }  // namespace tissue::physics

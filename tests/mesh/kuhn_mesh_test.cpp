@@ -323,6 +323,81 @@ TEST(KuhnMesh, EdgesAtANodeByLookupAreTheEdgesAWalkFinds) {
   }
 }
 
+// A mesh split and merged unevenly down to depth 12, for the questions an
+// adaptation pass asks before it changes anything.
+KuhnMesh churned_mesh() {
+  KuhnMesh mesh({1, 2, 2, 0.05, 12});
+  std::mt19937 rng(11);
+  for (int op = 0; op < 600; ++op) {
+    TetId t;
+    do t = static_cast<TetId>(rng() % mesh.tet_capacity());
+    while (!mesh.tet_alive(t));
+    const Key d = mesh.diamond_of(t);
+    if (mesh.can_split(d)) mesh.split(d);
+    if (op % 3 == 0) {
+      NodeId n;
+      do n = static_cast<NodeId>(rng() % mesh.node_capacity());
+      while (!mesh.node_alive(n));
+      if (mesh.node(n).edge_a != kInvalidId && mesh.can_merge(mesh.node_key(n))) mesh.merge(mesh.node_key(n));
+    }
+  }
+  return mesh;
+}
+
+// How many diamonds a split's closure holds is what split() then returns.
+TEST(KuhnMesh, ClosureDiamondsCountWhatSplitThenSplits) {
+  const KuhnMesh mesh = churned_mesh();
+  std::vector<Key> closure;
+  int longest = 0, splits_checked = 0;
+  mesh.for_each_tet([&](TetId t, const Tet&) {
+    if (t % 5 != 0) return;  // a sample: each check copies the mesh
+    const Key d = mesh.diamond_of(t);
+    const int predicted = mesh.closure_diamonds(d, closure);
+    ASSERT_EQ(predicted, static_cast<int>(closure.size()));
+    KuhnMesh copy = mesh;
+    EXPECT_EQ(predicted, copy.can_split(d) ? copy.split(d) : 0);
+    longest = std::max(longest, predicted);
+    ++splits_checked;
+  });
+  EXPECT_GT(splits_checked, 50) << "longest " << longest;
+  EXPECT_GE(longest, 5) << "the sample must hold closures longer than the diamond itself";
+}
+
+// The tets a merge restores, corners in Maubach order, are those merge()
+// then adds; a diamond that cannot merge restores none.
+TEST(KuhnMesh, MergeRestoresAreTheTetsMergeThenAdds) {
+  const KuhnMesh mesh = churned_mesh();
+  int merges_checked = 0, refused = 0;
+  mesh.for_each_node([&](NodeId n, const Node& node) {
+    if (node.edge_a == kInvalidId) return;
+    const Key d = mesh.node_key(n);
+    std::array<std::array<NodeId, 4>, 8> restored{};
+    const int count = mesh.merge_restores(d, restored);
+    if (!mesh.can_merge(d)) {
+      EXPECT_EQ(count, 0);
+      ++refused;
+      return;
+    }
+    if (++merges_checked % 3 != 0) return;  // a sample, as above
+    KuhnMesh copy = mesh;
+    const auto before = sorted_live_tets(copy);
+    copy.merge(d);
+    std::vector<std::array<NodeId, 4>> added_by_merge, predicted;
+    copy.for_each_tet([&](TetId, const Tet& tet) {
+      auto sorted = tet.v;
+      std::sort(sorted.begin(), sorted.end());
+      if (!std::binary_search(before.begin(), before.end(), SortedTet{sorted, tet.depth}))
+        added_by_merge.push_back(tet.v);
+    });
+    predicted.assign(restored.begin(), restored.begin() + count);
+    std::sort(added_by_merge.begin(), added_by_merge.end());
+    std::sort(predicted.begin(), predicted.end());
+    EXPECT_EQ(predicted, added_by_merge) << "diamond of node " << n;
+  });
+  EXPECT_GT(merges_checked / 3, 20);
+  EXPECT_GT(refused, 20);
+}
+
 TEST(KuhnMesh, RefineAllToMaxDepthThenMergeAllRestoresTheMesh) {
   KuhnMesh mesh({2, 1, 2, 0.1, 9});
   const auto before = mesh_sets(mesh);
