@@ -45,13 +45,20 @@
 //     normals differ by the angle between the faces there), so the proxy
 //     steps by about the hand's distance from c times that angle. Not
 //     without end: beside an object's edge there is no surface. No farther
-//     past the border than the patch reaches from the point the sim built
-//     it around (position_ref_m) to c; beyond, the hand is let go and held
-//     to be outside, as a free hand beside the patch (above). The sim builds
-//     the next model around the proxy, covering about as much around it:
-//     where the surface goes on, it meets the hand again; where the hand
-//     slid off an edge, the edge is in it and its pseudo-normal lets the
-//     hand go.
+//     past the border than the distance from the point the sim built the
+//     patch around (position_ref_m) to c, at most the patch's width (its
+//     farthest vertex from c: a deformed model's position_ref_m is where the
+//     last contact was, which may lie off this patch). Where position_ref_m
+//     lies on the border itself (a tool beside the surface gets the nearest
+//     triangle alone, built around its nearest point) that is about zero
+//     there. Beyond, the proxy stays at that reach, so the hand feels a tug
+//     back of k_v times its overshoot besides the force from its depth; it
+//     is not let go (a hand that still presses, let go, lost its whole force
+//     at once and went on into the object, deeper than the next model
+//     captures). The sim builds the next model around the proxy, covering
+//     about as much around it: where the surface goes on, the contact goes
+//     on with it; where the hand slid off an edge, the edge is in it and its
+//     pseudo-normal lets the hand go.
 //
 // Deformable object (LocalModel::in_contact): the patch is the surface as the
 // sim last left it under force_ref; pushing harder displaces the contact point
