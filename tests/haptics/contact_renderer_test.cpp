@@ -533,6 +533,37 @@ TEST(ContactRenderer, AHandPressingADeformedPatchFarPastItsBorderIsHeldAndCarrie
   }
 }
 
+// The reach is the distance from position_ref_m to the border, at most the
+// patch's width (its farthest vertex from the border point): a deformed
+// model's position_ref_m is where the last contact was, which may lie off
+// this patch, far from its border; the surface is not taken to go on farther
+// than the stretch of it the patch holds.
+TEST(ContactRenderer, PastThePatchBorderTheSurfaceGoesOnNoFartherThanThePatchIsWide) {
+  LocalModel patch = test::make_flat_patch(0.02, 2);  // z = 0 for |x|, |y| <= 20 mm
+  patch.position_ref_m = Vec3(-0.2, 0.0, 0.0);        // 220 mm from the border at x = 20 mm
+  const double width_m = std::hypot(0.04, 0.02);      // from (20, 0) mm to the corners (-20, +-20) mm
+  const double reach_x_m = 0.02 + width_m;
+  const double depth_m = 0.002;
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0.0105, 0, 0.001), Vec3::Zero()).contact);
+  ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0.0105, 0, -depth_m), Vec3::Zero()).contact);
+  int within = 0, beyond = 0;
+  sweep(r, now_ns, Vec3(0.0105, 0, -depth_m), Vec3(0.0905, 0, -depth_m), 80,
+        [&](const Vec3& device, const RenderOutput& out) {
+          (device.x() < reach_x_m ? within : beyond) += 1;
+          const Vec3 expected_N(-kCouplingStiffness_N_per_m * std::max(0.0, device.x() - reach_x_m), 0.0,
+                                kCouplingStiffness_N_per_m * depth_m);
+          EXPECT_TRUE(out.contact) << "hand at " << device.transpose();
+          EXPECT_LT((out.force_on_device_N - expected_N).norm(), 1e-9)
+              << "hand at " << device.transpose() << ": " << out.force_on_device_N.transpose() << " N, expected "
+              << expected_N.transpose();
+        });
+  ASSERT_GT(within, 40);
+  ASSERT_GT(beyond, 20);
+}
+
 TEST(ContactRenderer, MovingSurfaceMeetsAStillToolAndExtrapolationIsBounded) {
   LocalModel patch = test::make_flat_patch();
   for (int i = 0; i < patch.vertex_count; ++i) patch.vertex_velocity_m_per_s[i] = Vec3(0, 0, 0.5);  // rising
