@@ -430,7 +430,8 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
       // edge instead, the proxy dragged the hand back sideways with k_v
       // times its overshoot until the next model came (4 N at 0.3 m/s over
       // the 0.1 s a model may be old). The extended plane meets the patch
-      // at c, so the force is continuous across the border.
+      // at c, so the force is continuous across the border (not where c
+      // changes feature on a curved patch: top of the header).
       const Vec3 sideways_m = offset_m - height_m * n;
       const double sideways2_m2 = sideways_m.squaredNorm();
       if (sideways2_m2 > kFootprintTolerance_m * kFootprintTolerance_m && !surrounded(c)) {
