@@ -414,7 +414,7 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
   Vec3 rigid_proxy_m = Vec3::Zero();  // on the patch, or on a border face's plane past it
   Vec3 compliant_proxy_m = Vec3::Zero();
   bool compliant = false;
-  bool beyond_reach = false;  // let go past the border, farther than the surface is taken to go on
+  Vec3 tug_m = Vec3::Zero();  // past the border beyond its reach: the proxy held back at the reach
   if (touching_) {
     c = closest_facing(device_m, reference_m, true);
     if (c.triangle < 0 || !c.point.allFinite()) {
@@ -430,7 +430,8 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
       // edge instead, the proxy dragged the hand back sideways with k_v
       // times its overshoot until the next model came (4 N at 0.3 m/s over
       // the 0.1 s a model may be old). The extended plane meets the patch
-      // at c, so the force is continuous across the border.
+      // at c, so the force is continuous across the border (not where c
+      // changes feature on a curved patch: top of the header).
       const Vec3 sideways_m = offset_m - height_m * n;
       const double sideways2_m2 = sideways_m.squaredNorm();
       if (sideways2_m2 > kFootprintTolerance_m * kFootprintTolerance_m && !surrounded(c)) {
@@ -440,22 +441,33 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
         // about that much around it, so an edge the hand slid past is in it
         // and decides there (its pseudo-normal lets the hand go), and a
         // first-order guess is not stretched beyond the stretch of surface
-        // it comes from.
+        // it comes from. Beyond, the proxy stays at the reach (a tug back,
+        // k_v times the overshoot), and the hand is NOT let go: it still
+        // presses, and let go it lost its whole force at once and went on
+        // into the object, deeper than the next model captures
+        // (kCaptureDepth_m), so it was never met again (6 mm deep; on a
+        // deformed patch the tissue springs back once the tool's force is
+        // gone, deeper still). Remembering the depth and capturing deeper
+        // next time would not do: the force would still drop to zero and
+        // come back, and the hand, pushed on by the user with nothing
+        // against it, goes as deep as it likes before the next model.
+        // Only a model can say the surface ends there (the contact rule
+        // below: the hand in front of the feature's plane, or off an
+        // object's edge by the edge's pseudo-normal in the next model).
         const double reach_m = border_reach_m(c);
-        if (sideways2_m2 > reach_m * reach_m) {
-          touching_ = false;
-          beyond_reach = true;
-        } else {
-          rigid_proxy_m = c.point + sideways_m;
-        }
+        const double sideways_norm_m = std::sqrt(sideways2_m2);
+        rigid_proxy_m = c.point + std::min(1.0, reach_m / sideways_norm_m) * sideways_m;
+        tug_m = rigid_proxy_m - (c.point + sideways_m);
       }
-      if (touching_) {
-        compliant = compliant_proxy(device_m, n, &compliant_proxy_m);
-        // Back outside the patch. A deformed object still pushing holds the
-        // contact until its force reaches zero (top of the header), so the
-        // force does not drop by k_v f0 / (k_v + k) at the patch.
-        if (height_m > 0.0 && !(compliant && height_m <= kMaxHeldHeight_m)) touching_ = false;
-      }
+      compliant = compliant_proxy(device_m, n, &compliant_proxy_m);
+      // The deformable proxy moves along n from the hand, so it follows the
+      // hand past the border on its own; beyond the reach it is held back
+      // as the rigid one is.
+      if (compliant) compliant_proxy_m += tug_m;
+      // Back outside the patch. A deformed object still pushing holds the
+      // contact until its force reaches zero (top of the header), so the
+      // force does not drop by k_v f0 / (k_v + k) at the patch.
+      if (height_m > 0.0 && !(compliant && height_m <= kMaxHeldHeight_m)) touching_ = false;
     }
   }
 
@@ -471,11 +483,7 @@ RenderOutput ContactRenderer::render(std::int64_t now_ns, const Vec3& device_m,
     // is not known to be inside: the device stays outside until the next
     // model, built around it, says where the surface is (a device that went
     // below the plane of a surface that goes on is met then).
-    // A hand let go beyond the border's reach was on the surface, so in
-    // front of it: held to be outside likewise, so the next model, if the
-    // surface does go on under it, meets it there (it is not left inside
-    // with no force).
-    outside_ = device_height_m() > 0.0 || ((outside_ || beyond_reach) && !device_over_patch());
+    outside_ = device_height_m() > 0.0 || (outside_ && !device_over_patch());
     clear_ = outside_ && !in_reach;
     return out;
   }

@@ -30,28 +30,47 @@
 //     feature, judged with the angle-weighted pseudo-normal (Baerentzen &
 //     Aanaes 2005), which is well defined on edges and vertices too (a
 //     deformed patch holds it a little longer, see below).
-//   - Past the border: the patch is a window the sim cut around the tool,
-//     and a touching hand that slides past its border (faster than the
-//     models follow it: 0.3 m/s over the 0.1 s a model may be old takes it
-//     10 mm past a 20 mm patch) is over surface that goes on. The proxy
-//     goes on along the plane through the border point c with its normal
-//     (first-order extrapolation of the surface), so the force stays along
-//     that normal and from the hand's depth alone; held on the border edge,
-//     it dragged the hand back sideways with k_v times the overshoot. The
-//     contact point (and the nodes the sim pushes) stays c. (The deformable
-//     proxy below moves along the normal from the hand anyway; only the
-//     bound that follows is new to it.) On a curved patch the plane turns
-//     where c passes between a border edge and a border vertex (their
-//     normals differ by the angle between the faces there), so the proxy
-//     steps by about the hand's distance from c times that angle. Not
-//     without end: beside an object's edge there is no surface. No farther
-//     past the border than the patch reaches from the point the sim built
-//     it around (position_ref_m) to c; beyond, the hand is let go and held
-//     to be outside, as a free hand beside the patch (above). The sim builds
-//     the next model around the proxy, covering about as much around it:
-//     where the surface goes on, it meets the hand again; where the hand
-//     slid off an edge, the edge is in it and its pseudo-normal lets the
-//     hand go.
+//   - Past the border: the patch is a window the sim cut around the tool, and
+//     a touching hand that slides past its border (faster than the models
+//     follow it: 0.3 m/s over the 0.1 s a model may be old takes it 10 mm past
+//     a 20 mm patch) is over surface that goes on. The proxy goes on along the
+//     plane through the border point c with its normal (first-order
+//     extrapolation of the surface), so the force stays along that normal and
+//     from the hand's depth alone; held on the border edge, it dragged the
+//     hand back sideways with k_v times the overshoot. The contact point (and
+//     the nodes the sim pushes) stays c. (The deformable proxy below moves
+//     along the normal from the hand anyway; only the bound that follows is
+//     new to it.) Not continuous on a curved patch: the plane is that of c's
+//     feature, and it turns in one step where c passes from a border edge to a
+//     border vertex and on to the next border edge (the edge's face normal,
+//     the vertex's pseudo-normal, the next face's normal; on a convex ridge
+//     the facing filter above keeps c on the face it came from until that
+//     face's border edge ends, so both steps come within a tick or two). The
+//     proxy steps by up to the hand's distance from c times the angle turned:
+//     a hand 5 mm past the border of a ridge of slope 0.3, 2.6 mm deep,
+//     crossing it at 40 um a tick, felt (-0.31, 0, 1.04) -> (0, 0, 1.04) ->
+//     (0.26, 0, 0.86) N in single ticks (the force turns by the angle between
+//     the faces). Known and left so: blending the two border edges' normals
+//     across the vertex's region does not help (held on the first face by that
+//     filter, c reaches the vertex only where the hand already lies in the
+//     next edge's region, so there is no stretch to blend across), and a
+//     continuous proxy needs the god-object carried on over the extended faces
+//     and the lines where they meet, more than a first-order guess the next
+//     model replaces is worth. Not without end: beside an object's edge there
+//     is no surface. No farther past the border than the distance from the
+//     point the sim built the patch around (position_ref_m) to c, at most the
+//     patch's width (its farthest vertex from c: a deformed model's
+//     position_ref_m is where the last contact was, which may lie off this
+//     patch). Where position_ref_m lies on the border itself (a tool beside
+//     the surface gets the nearest triangle alone, built around its nearest
+//     point) that is about zero there. Beyond, the proxy stays at that reach,
+//     so the hand feels a tug back of k_v times its overshoot besides the
+//     force from its depth; it is not let go (a hand that still presses, let
+//     go, lost its whole force at once and went on into the object, deeper
+//     than the next model captures). The sim builds the next model around the
+//     proxy, covering about as much around it: where the surface goes on, the
+//     contact goes on with it; where the hand slid off an edge, the edge is in
+//     it and its pseudo-normal lets the hand go.
 //
 // Deformable object (LocalModel::in_contact): the patch is the surface as the
 // sim last left it under force_ref; pushing harder displaces the contact point

@@ -427,50 +427,141 @@ TEST(ContactRenderer, AHandSlidingPastThePatchBorderInContactFeelsNoSidewaysForc
 
 // ... but not without end: past the border the renderer knows nothing of the
 // surface, and beside an object's edge there is none (a hand sliding off a
-// cube's top face). The surface is taken to go on no farther past the border
-// than the patch reaches from the point it was built around (its
-// position_ref_m) to that border; farther, the hand is let go, and held to
-// be outside until the next model, built around it, says where the surface
-// is: where it does go on, that model meets the hand again.
-TEST(ContactRenderer, AHandFarPastThePatchBorderIsLetGoAndMetAgainByTheNextModelAroundIt) {
-  LocalModel patch = test::make_flat_patch(0.02, 2);  // z = 0 for |x|, |y| <= 20 mm, built around the origin
-  patch.position_ref_m = Vec3::Zero();
+// cube's top face). The surface is taken to go on along the border face's
+// plane no farther past the border than the patch reaches from the point it
+// was built around (its position_ref_m) to that border; farther, the proxy
+// stays at that reach and the hand feels a tug back, k_v times its
+// overshoot, besides the force from its depth. It is not let go there: a
+// hand that presses is still pressing. Let go, it lost its whole force at
+// once and went on into the object, and the next model captures a hand only
+// within kCaptureDepth_m (5 mm) of its surface: found by review, a hand 6 mm
+// deep was never met again (4 mm deep, it was). The next model, built around
+// the hand, takes the contact over.
+TEST(ContactRenderer, AHandPressingFarPastThePatchBorderIsHeldAtItsReachAndCarriedToTheNextModel) {
+  for (const double depth_m : {0.002, 0.006}) {
+    LocalModel patch = test::make_flat_patch(0.02, 2);  // z = 0 for |x|, |y| <= 20 mm, built around the origin
+    patch.position_ref_m = Vec3::Zero();
+    const double reach_x_m = 0.04;  // the border (x = 20 mm) is 20 mm from position_ref_m
+    const double pressed_N = kCouplingStiffness_N_per_m * depth_m;
+    ContactRenderer r(params());
+    r.set_model(&patch);
+    std::int64_t now_ns = 0;
+    ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0.0105, 0, 0.001), Vec3::Zero()).contact);
+    ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0.0105, 0, -depth_m), Vec3::Zero()).contact);
+    // 1 mm a tick to 40 mm past the border: 20 mm beyond the reach.
+    int within = 0, beyond = 0;
+    sweep(r, now_ns, Vec3(0.0105, 0, -depth_m), Vec3(0.0605, 0, -depth_m), 50,
+          [&](const Vec3& device, const RenderOutput& out) {
+            (device.x() < reach_x_m ? within : beyond) += 1;
+            const Vec3 expected_N(-kCouplingStiffness_N_per_m * std::max(0.0, device.x() - reach_x_m), 0.0, pressed_N);
+            EXPECT_TRUE(out.contact) << "depth " << depth_m << ", hand at " << device.transpose();
+            EXPECT_LT((out.force_on_device_N - expected_N).norm(), 1e-9)
+                << "depth " << depth_m << ", hand at " << device.transpose() << ": "
+                << out.force_on_device_N.transpose() << " N, expected " << expected_N.transpose();
+          });
+    ASSERT_GT(within, 20);
+    ASSERT_GT(beyond, 10);
+    // The next model, around the hand: the surface goes on there, and the
+    // contact goes on with it, the force from the depth alone again.
+    LocalModel around = test::make_grid_patch(0.02, 2, Vec3(0.06, 0.0, 0.0));
+    around.position_ref_m = Vec3(0.06, 0.0, 0.0);
+    around.version = 2;
+    ContactRenderer next(params());
+    next.set_model(&around);
+    next.carry_state_from(r);
+    for (int k = 0; k < 3; ++k) {
+      const RenderOutput out = next.render(now_ns += kMs, Vec3(0.0605, 0, -depth_m), Vec3::Zero());
+      EXPECT_TRUE(out.contact) << "depth " << depth_m;
+      EXPECT_LT((out.force_on_device_N - Vec3(0, 0, pressed_N)).norm(), 1e-9)
+          << "depth " << depth_m << ": " << out.force_on_device_N.transpose() << " N";
+    }
+  }
+}
+
+// A deformed patch likewise, where letting go is worse: with the tool's force
+// gone the sim lets the tissue spring back up around the hand, so the next
+// model has the hand deeper under its surface than the last had it (here 3 mm
+// under the pressed-in patch, 6 mm under the sprung-back surface: beyond
+// kCaptureDepth_m, though 3 mm is within it).
+TEST(ContactRenderer, AHandPressingADeformedPatchFarPastItsBorderIsHeldAndCarriedToTheNextModel) {
+  const double object_N_per_m = 400.0, dent_m = 0.003, depth_m = 0.006;  // the hand 3 mm under the dent
+  const Vec3 force_ref_N(0.0, 0.0, -object_N_per_m * dent_m);            // the sim's tool force on the object
+  const auto dented_around = [&](const Vec3& centre_m) {
+    LocalModel m = test::make_grid_patch(0.02, 2, centre_m + Vec3(0, 0, -dent_m));
+    test::set_linear_contact(m, object_N_per_m, force_ref_N, centre_m + Vec3(0, 0, -dent_m));
+    return m;
+  };
+  const LocalModel patch = dented_around(Vec3::Zero());
+  const double reach_x_m = 0.04;  // the border (x = 20 mm) is 20 mm from position_ref_m
+  // The series solve: the coupling and the object balance at the dent, 3 mm under the hand.
+  const double pressed_N = kCouplingStiffness_N_per_m * (depth_m - dent_m);
+  ContactRenderer r(params());
+  r.set_model(&patch);
+  std::int64_t now_ns = 0;
+  ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0.0105, 0, 0.001), Vec3::Zero()).contact);
+  ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0.0105, 0, -depth_m), Vec3::Zero()).contact);
+  RenderOutput last;
+  int beyond = 0;
+  sweep(r, now_ns, Vec3(0.0105, 0, -depth_m), Vec3(0.0605, 0, -depth_m), 50,
+        [&](const Vec3& device, const RenderOutput& out) {
+          beyond += device.x() > reach_x_m ? 1 : 0;
+          const Vec3 expected_N(-kCouplingStiffness_N_per_m * std::max(0.0, device.x() - reach_x_m), 0.0, pressed_N);
+          EXPECT_TRUE(out.contact) << "hand at " << device.transpose();
+          EXPECT_LT((out.force_on_device_N - expected_N).norm(), 1e-9)
+              << "hand at " << device.transpose() << ": " << out.force_on_device_N.transpose() << " N, expected "
+              << expected_N.transpose();
+          last = out;
+        });
+  ASSERT_GT(beyond, 10);
+  // The next model, around the hand, as the sim builds it from what the
+  // loop did: still pushed in where the tool still pushes, sprung back
+  // (undeformed, no tool force) where it was let go.
+  LocalModel around = dented_around(Vec3(0.06, 0.0, 0.0));
+  if (!last.contact) {
+    around = test::make_grid_patch(0.02, 2, Vec3(0.06, 0.0, 0.0));
+    around.position_ref_m = Vec3(0.06, 0.0, 0.0);
+  }
+  around.version = 2;
+  ContactRenderer next(params());
+  next.set_model(&around);
+  next.carry_state_from(r);
+  for (int k = 0; k < 3; ++k) {
+    const RenderOutput out = next.render(now_ns += kMs, Vec3(0.0605, 0, -depth_m), Vec3::Zero());
+    EXPECT_TRUE(out.contact) << "in_contact " << around.in_contact;
+    EXPECT_LT((out.force_on_device_N - Vec3(0, 0, pressed_N)).norm(), 1e-9)
+        << "in_contact " << around.in_contact << ": " << out.force_on_device_N.transpose() << " N";
+  }
+}
+
+// The reach is the distance from position_ref_m to the border, at most the
+// patch's width (its farthest vertex from the border point): a deformed
+// model's position_ref_m is where the last contact was, which may lie off
+// this patch, far from its border; the surface is not taken to go on farther
+// than the stretch of it the patch holds.
+TEST(ContactRenderer, PastThePatchBorderTheSurfaceGoesOnNoFartherThanThePatchIsWide) {
+  LocalModel patch = test::make_flat_patch(0.02, 2);  // z = 0 for |x|, |y| <= 20 mm
+  patch.position_ref_m = Vec3(-0.2, 0.0, 0.0);        // 220 mm from the border at x = 20 mm
+  const double width_m = std::hypot(0.04, 0.02);      // from (20, 0) mm to the corners (-20, +-20) mm
+  const double reach_x_m = 0.02 + width_m;
   const double depth_m = 0.002;
   ContactRenderer r(params());
   r.set_model(&patch);
   std::int64_t now_ns = 0;
   ASSERT_FALSE(r.render(now_ns += kMs, Vec3(0.0105, 0, 0.001), Vec3::Zero()).contact);
   ASSERT_TRUE(r.render(now_ns += kMs, Vec3(0.0105, 0, -depth_m), Vec3::Zero()).contact);
-  // 1 mm a tick to 40 mm past the border: the surface goes on to x = 40 mm.
-  int held = 0, let_go = 0;
-  sweep(r, now_ns, Vec3(0.0105, 0, -depth_m), Vec3(0.0605, 0, -depth_m), 50,
+  int within = 0, beyond = 0;
+  sweep(r, now_ns, Vec3(0.0105, 0, -depth_m), Vec3(0.0905, 0, -depth_m), 80,
         [&](const Vec3& device, const RenderOutput& out) {
-          if (device.x() < 0.04) {
-            ++held;
-            EXPECT_TRUE(out.contact) << "hand at " << device.transpose();
-            EXPECT_TRUE(out.force_on_device_N.isApprox(Vec3(0, 0, kCouplingStiffness_N_per_m * depth_m), 1e-9))
-                << "hand at " << device.transpose() << ": " << out.force_on_device_N.transpose() << " N";
-          } else {
-            ++let_go;
-            EXPECT_FALSE(out.contact) << "hand at " << device.transpose();
-            EXPECT_EQ(out.force_on_device_N, Vec3::Zero())
-                << "hand at " << device.transpose() << ": " << out.force_on_device_N.transpose() << " N";
-          }
+          (device.x() < reach_x_m ? within : beyond) += 1;
+          const Vec3 expected_N(-kCouplingStiffness_N_per_m * std::max(0.0, device.x() - reach_x_m), 0.0,
+                                kCouplingStiffness_N_per_m * depth_m);
+          EXPECT_TRUE(out.contact) << "hand at " << device.transpose();
+          EXPECT_LT((out.force_on_device_N - expected_N).norm(), 1e-9)
+              << "hand at " << device.transpose() << ": " << out.force_on_device_N.transpose() << " N, expected "
+              << expected_N.transpose();
         });
-  ASSERT_GT(held, 20);
-  ASSERT_GT(let_go, 10);
-  // The next model, around the hand: the surface goes on there, and the hand
-  // (in front of it when last known) is met.
-  LocalModel around = test::make_grid_patch(0.02, 2, Vec3(0.06, 0.0, 0.0));
-  around.position_ref_m = Vec3(0.06, 0.0, 0.0);
-  around.version = 2;
-  ContactRenderer next(params());
-  next.set_model(&around);
-  next.carry_state_from(r);
-  const RenderOutput out = next.render(now_ns += kMs, Vec3(0.0605, 0, -depth_m), Vec3::Zero());
-  EXPECT_TRUE(out.contact);
-  EXPECT_TRUE(out.force_on_device_N.isApprox(Vec3(0, 0, kCouplingStiffness_N_per_m * depth_m), 1e-9))
-      << out.force_on_device_N.transpose();
+  ASSERT_GT(within, 40);
+  ASSERT_GT(beyond, 20);
 }
 
 TEST(ContactRenderer, MovingSurfaceMeetsAStillToolAndExtrapolationIsBounded) {
