@@ -206,6 +206,18 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
   // were still or lost, though live it moved on: the sink hears of the hole
   // right after that item, when the stream stops (the CLI prints it). A hole
   // the window does not reach across is not crossed. By item position.
+  //
+  // Only a hole that shows at the published rate: the two states either
+  // side of it at least two publish periods apart, so a whole period passes
+  // with no state beyond the usual one (a state the stream would carry is
+  // missing). A hole no longer than a period never does (the states either
+  // side are then less than two periods apart: the next one comes late by
+  // less than a period, as network jitter makes it), and announcing it
+  // printed a line per pass for nothing a viewer could see; one of two
+  // periods or more always does. Every row sent (rate 0): any hole does.
+  const double haptic_period_s = o.timeline.haptic_rate_hz > 0.0 ? 1.0 / o.timeline.haptic_rate_hz : 0.0;
+  // build_timeline's slack: 1 kHz rows stored as i * 1e-3 are due on time.
+  constexpr double kSlack_s = 5e-7;
   std::vector<std::pair<std::size_t, const record::HapticHole*>> holes_after;
   {
     std::vector<const record::HapticHole*> holes;
@@ -221,8 +233,9 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
       if (last_haptic) {
         // Holes at or before the row sent last are not between it and this.
         while (next_hole < holes.size() && holes[next_hole]->row_after <= items[*last_haptic].index) ++next_hole;
-        while (next_hole < holes.size() && holes[next_hole]->row_after <= items[pos].index)
-          holes_after.emplace_back(*last_haptic, holes[next_hole++]);
+        const bool shows = items[pos].time_s - items[*last_haptic].time_s >= 2.0 * haptic_period_s - kSlack_s;
+        for (; next_hole < holes.size() && holes[next_hole]->row_after <= items[pos].index; ++next_hole)
+          if (shows) holes_after.emplace_back(*last_haptic, holes[next_hole]);
       }
       last_haptic = pos;
     }
@@ -230,6 +243,11 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
 
   constexpr double kLate_s = 0.01;
   ReplaySummary sum;
+  const auto announce = [&](const record::HapticHole& hole) {
+    sink.haptic_hole(hole);
+    ++sum.haptic_holes;
+    sum.haptic_hole_time_s += std::max(0.0, hole.time_after_s - hole.time_before_s);
+  };
   const double start_wall_s = clock.now_s();
   std::uint64_t sequence = 0;
   for (;;) {
@@ -260,11 +278,8 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
           ++sum.haptic_rows;
           for (auto it = std::lower_bound(holes_after.begin(), holes_after.end(), position,
                                           [](const auto&entry, std::size_t p) { return entry.first < p; });
-               it != holes_after.end() && it->first == position; ++it) {
-            sink.haptic_hole(*it->second);
-            ++sum.haptic_holes;
-            sum.haptic_hole_time_s += std::max(0.0, it->second->time_after_s - it->second->time_before_s);
-          }
+               it != holes_after.end() && it->first == position; ++it)
+            announce(*it->second);
           break;
         case StreamKind::kStats:
           sink.stats(sim_status(rows.sim[item.index]));

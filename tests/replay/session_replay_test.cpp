@@ -467,6 +467,56 @@ TEST(ReplayPacing, AHoleTheRecorderLeftIsAnnouncedWhereTheStreamStops) {
   }
 }
 
+// At the published haptic rate (100 Hz by default, a state every 10 ms) a
+// hole only shows when a whole publish period passes with no state beyond
+// the usual one: the states on either side of it 2 periods apart or more, a
+// state the stream would carry missing. A hole no longer than a period never
+// does that (the next state comes late by less than a period, as network
+// jitter makes it), so it is not announced: before, each one printed a line
+// (at every pass of a loop) though nothing could be seen. One of two periods
+// or more always is.
+TEST(ReplayPacing, AHoleThatLeavesNoStateMissingAtThePublishedRateIsNotAnnounced) {
+  VectorFrameSource frames{{}};
+  FakeClock clock(10.0);
+  std::atomic<bool> stop{false};
+  // Rows 0..99 at 1 ms; `ticks` dropped after row `before`.
+  const auto holed = [](std::size_t before, std::uint64_t ticks) {
+    SessionRows rows = testing::rows(100, 0.001, 0, 0.0);
+    for (std::size_t i = before + 1; i < rows.haptic.size(); ++i)
+      rows.haptic[i].time_s += 0.001 * static_cast<double>(ticks);
+    rows.haptic_holes = {
+        record::HapticHole{ticks, before + 1, rows.haptic[before].time_s, rows.haptic[before + 1].time_s}};
+    return rows;
+  };
+  struct Case {
+    std::size_t before;
+    std::uint64_t ticks;
+    bool announced;
+    const char* why;
+  };
+  for (const Case& c : {
+           // Row 50, due at 50 ms, is at 51 ms: states at 40 and 51 ms.
+           Case{49, 1, false, "1 tick where a state is due: it comes 1 ms late"},
+           // 49 -> 59 ms, one period, as late as it can fall: states at 40, 59 ms.
+           Case{49, 9, false, "a hole of one period: the state due at 50 ms comes at 59 ms"},
+           // 40 -> 60 ms, two periods, right after a state: states at 40, 60 ms.
+           Case{40, 19, true, "a hole of two periods: the state due at 50 ms is missing"},
+           Case{49, 30, true, "a hole of 31 ms"},
+       }) {
+    const SessionRows rows = holed(c.before, c.ticks);
+    RecordingSink sink(&clock);
+    ReplayOptions o;  // 100 Hz
+    const ReplaySummary s = replay_session(frames, rows, o, sink, clock, stop);
+    EXPECT_EQ(sink.holes.size(), c.announced ? 1u : 0u) << c.why;
+    EXPECT_EQ(s.haptic_holes, c.announced ? 1u : 0u) << c.why;
+    // Every row sent: any hole leaves states missing.
+    RecordingSink every(&clock);
+    o.timeline.haptic_rate_hz = 0;
+    EXPECT_EQ(replay_session(frames, rows, o, every, clock, stop).haptic_holes, 1u) << c.why;
+    EXPECT_EQ(every.holes.size(), 1u) << c.why;
+  }
+}
+
 TEST(ReplayPacing, SteadyClockWaitEndsSoonAfterStop) {
   SteadyReplayClock clock;
   std::atomic<bool> stop{false};
