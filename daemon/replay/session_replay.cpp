@@ -219,6 +219,15 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
   // build_timeline's slack: 1 kHz rows stored as i * 1e-3 are due on time.
   constexpr double kSlack_s = 5e-7;
   std::vector<std::pair<std::size_t, const record::HapticHole*>> holes_after;
+  // A window that starts inside a hole (its first haptic item is the row
+  // after it): the other streams start while no haptic state comes until
+  // that row, the same stop as at a hole crossed, so the sink hears of it
+  // before the first item of each pass. Only when that row comes at least a
+  // period after the replay's first item (and not with it): a haptic stream
+  // starts with the first item, so that is a whole period with no state
+  // beyond the usual, the rule above; a window that starts with the row
+  // after the hole leaves nothing missing.
+  const record::HapticHole* hole_at_start = nullptr;
   {
     std::vector<const record::HapticHole*> holes;
     for (const record::HapticHole& h : rows.haptic_holes)
@@ -236,6 +245,11 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
         const bool shows = items[pos].time_s - items[*last_haptic].time_s >= 2.0 * haptic_period_s - kSlack_s;
         for (; next_hole < holes.size() && holes[next_hole]->row_after <= items[pos].index; ++next_hole)
           if (shows) holes_after.emplace_back(*last_haptic, holes[next_hole]);
+      } else {
+        const double late_s = items[pos].time_s - items.front().time_s;
+        for (const record::HapticHole* h : holes)
+          if (h->row_after == items[pos].index && late_s > 0.0 && late_s >= haptic_period_s - kSlack_s)
+            hole_at_start = h;
       }
       last_haptic = pos;
     }
@@ -268,6 +282,7 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
       const double lag_s = clock.now_s() - due_s;
       if (lag_s > kLate_s) ++sum.late_items;
       sum.max_lag_s = std::max(sum.max_lag_s, lag_s);
+      if (position == 0 && hole_at_start) announce(*hole_at_start);
       switch (item.kind) {
         case StreamKind::kMesh:
           sink.mesh(*snapshot);

@@ -517,6 +517,42 @@ TEST(ReplayPacing, AHoleThatLeavesNoStateMissingAtThePublishedRateIsNotAnnounced
   }
 }
 
+// A --from inside a hole: the replay starts with the other streams while no
+// haptic state comes until the row after the hole, the same stop a viewer
+// sees at a hole crossed, so the sink hears of it before the first item
+// (at every pass). Before, nothing said it. A window that starts with that
+// row leaves nothing missing and says nothing.
+TEST(ReplayPacing, AWindowThatStartsInsideAHoleAnnouncesItAtTheStart) {
+  VectorFrameSource frames{{}};
+  // Haptic rows 0..49 at 0..49 ms, 30 ticks dropped, row 50 at 80 ms; sim
+  // rows every 10 ms.
+  SessionRows rows = testing::rows(100, 0.001, 20, 0.010);
+  for (std::size_t i = 50; i < rows.haptic.size(); ++i) rows.haptic[i].time_s += 0.030;
+  rows.haptic_holes = {record::HapticHole{30, 50, rows.haptic[49].time_s, rows.haptic[50].time_s}};
+  FakeClock clock(10.0);
+  std::atomic<bool> stop{false};
+  ReplayOptions o;
+  o.timeline.stats_rate_hz = 0;  // every sim row: the stats at 60 and 70 ms go out before row 50
+  o.timeline.from_s = 0.060;
+  RecordingSink sink(&clock);
+  const ReplaySummary s = replay_session(frames, rows, o, sink, clock, stop);
+  ASSERT_EQ(sink.holes.size(), 1u);
+  EXPECT_EQ(sink.holes[0].hole.row_after, 50u);
+  EXPECT_EQ(sink.holes[0].after_sent, 0u) << "heard before the first item";
+  ASSERT_GE(sink.sent.size(), 3u);
+  EXPECT_EQ(sink.sent[0].kind, StreamKind::kStats);
+  EXPECT_EQ(s.haptic_holes, 1u);
+  EXPECT_NEAR(s.haptic_hole_time_s, 0.031, 1e-12);
+
+  // Only haptic rows in the window: it starts with row 50, nothing missing.
+  o.timeline.stats_rate_hz = 5.0;
+  SessionRows haptic_only = rows;
+  haptic_only.sim.clear();
+  RecordingSink at_once(&clock);
+  EXPECT_EQ(replay_session(frames, haptic_only, o, at_once, clock, stop).haptic_holes, 0u);
+  EXPECT_TRUE(at_once.holes.empty());
+}
+
 TEST(ReplayPacing, SteadyClockWaitEndsSoonAfterStop) {
   SteadyReplayClock clock;
   std::atomic<bool> stop{false};
