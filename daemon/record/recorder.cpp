@@ -398,7 +398,15 @@ bool Recorder::drain_and_write(bool force_flush) {
   if (hole_event_pending_) {
     writer_->append_events(pending_events_);
     writer_->flush();
+    // That flush wrote and synced every dataset appended so far, the mesh
+    // frames drained since the last flush among them: they are in the file
+    // for good, so they count as written now (and the flush as done), not
+    // as drops if the next flush fails.
     events_written_.fetch_add(pending_events_.size(), std::memory_order_relaxed);
+    frames_written_.fetch_add(frames_unflushed_, std::memory_order_relaxed);
+    frames_unflushed_ = 0;
+    bytes_written_.store(writer_->bytes_written(), std::memory_order_relaxed);
+    flushes_.fetch_add(1, std::memory_order_relaxed);
     pending_events_.clear();
     hole_event_pending_ = false;
   }

@@ -1057,12 +1057,17 @@ std::string format_session_listing(const SessionListing& listing) {
     << shown(listing.dir) << "\n";
   // Left-aligned text columns, right-aligned numbers; a long name widens its
   // row rather than being cut.
-  const auto row = [&o](const std::string& file, const std::string& state, const std::string& start,
-                        const std::string& duration, const std::string& haptic, const std::string& frames,
-                        const std::string& holes, const std::string& scene) {
+  // The holes column is as wide as its widest cell: "2 (0.051 s) +1
+  // damaged" outgrows any fixed width, and a wider cell pushed its row's
+  // scene out of line with the others.
+  std::size_t holes_width = std::string_view("holes").size();
+  for (const SessionInfo& s : listing.sessions) holes_width = std::max(holes_width, holes_cell(s).size());
+  const auto row = [&o, holes_width](const std::string& file, const std::string& state, const std::string& start,
+                                     const std::string& duration, const std::string& haptic, const std::string& frames,
+                                     const std::string& holes, const std::string& scene) {
     o << std::left << std::setw(28) << file << ' ' << std::setw(28) << state << ' ' << std::setw(24) << start << ' '
       << std::right << std::setw(10) << duration << ' ' << std::setw(10) << haptic << ' ' << std::setw(7) << frames
-      << ' ' << std::setw(12) << holes << "  " << scene << "\n";
+      << ' ' << std::setw(static_cast<int>(holes_width)) << holes << "  " << scene << "\n";
   };
   if (!listing.sessions.empty())
     row("file", "state", "start (UTC)", "duration s", "haptic", "frames", "holes", "scene");

@@ -206,7 +206,28 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
   // were still or lost, though live it moved on: the sink hears of the hole
   // right after that item, when the stream stops (the CLI prints it). A hole
   // the window does not reach across is not crossed. By item position.
+  //
+  // Only a hole that shows at the published rate: the two states either
+  // side of it at least two publish periods apart, so a whole period passes
+  // with no state beyond the usual one (a state the stream would carry is
+  // missing). A hole no longer than a period never does (the states either
+  // side are then less than two periods apart: the next one comes late by
+  // less than a period, as network jitter makes it), and announcing it
+  // printed a line per pass for nothing a viewer could see; one of two
+  // periods or more always does. Every row sent (rate 0): any hole does.
+  const double haptic_period_s = o.timeline.haptic_rate_hz > 0.0 ? 1.0 / o.timeline.haptic_rate_hz : 0.0;
+  // build_timeline's slack: 1 kHz rows stored as i * 1e-3 are due on time.
+  constexpr double kSlack_s = 5e-7;
   std::vector<std::pair<std::size_t, const record::HapticHole*>> holes_after;
+  // A window that starts inside a hole (its first haptic item is the row
+  // after it): the other streams start while no haptic state comes until
+  // that row, the same stop as at a hole crossed, so the sink hears of it
+  // before the first item of each pass. Only when that row comes at least a
+  // period after the replay's first item (and not with it): a haptic stream
+  // starts with the first item, so that is a whole period with no state
+  // beyond the usual, the rule above; a window that starts with the row
+  // after the hole leaves nothing missing.
+  const record::HapticHole* hole_at_start = nullptr;
   {
     std::vector<const record::HapticHole*> holes;
     for (const record::HapticHole& h : rows.haptic_holes)
@@ -221,8 +242,14 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
       if (last_haptic) {
         // Holes at or before the row sent last are not between it and this.
         while (next_hole < holes.size() && holes[next_hole]->row_after <= items[*last_haptic].index) ++next_hole;
-        while (next_hole < holes.size() && holes[next_hole]->row_after <= items[pos].index)
-          holes_after.emplace_back(*last_haptic, holes[next_hole++]);
+        const bool shows = items[pos].time_s - items[*last_haptic].time_s >= 2.0 * haptic_period_s - kSlack_s;
+        for (; next_hole < holes.size() && holes[next_hole]->row_after <= items[pos].index; ++next_hole)
+          if (shows) holes_after.emplace_back(*last_haptic, holes[next_hole]);
+      } else {
+        const double late_s = items[pos].time_s - items.front().time_s;
+        for (const record::HapticHole* h : holes)
+          if (h->row_after == items[pos].index && late_s > 0.0 && late_s >= haptic_period_s - kSlack_s)
+            hole_at_start = h;
       }
       last_haptic = pos;
     }
@@ -230,6 +257,11 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
 
   constexpr double kLate_s = 0.01;
   ReplaySummary sum;
+  const auto announce = [&](const record::HapticHole& hole) {
+    sink.haptic_hole(hole);
+    ++sum.haptic_holes;
+    sum.haptic_hole_time_s += std::max(0.0, hole.time_after_s - hole.time_before_s);
+  };
   const double start_wall_s = clock.now_s();
   std::uint64_t sequence = 0;
   for (;;) {
@@ -250,6 +282,7 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
       const double lag_s = clock.now_s() - due_s;
       if (lag_s > kLate_s) ++sum.late_items;
       sum.max_lag_s = std::max(sum.max_lag_s, lag_s);
+      if (position == 0 && hole_at_start) announce(*hole_at_start);
       switch (item.kind) {
         case StreamKind::kMesh:
           sink.mesh(*snapshot);
@@ -260,11 +293,8 @@ ReplaySummary replay_session(x3d::FrameSource& frames, const SessionRows& rows, 
           ++sum.haptic_rows;
           for (auto it = std::lower_bound(holes_after.begin(), holes_after.end(), position,
                                           [](const auto&entry, std::size_t p) { return entry.first < p; });
-               it != holes_after.end() && it->first == position; ++it) {
-            sink.haptic_hole(*it->second);
-            ++sum.haptic_holes;
-            sum.haptic_hole_time_s += std::max(0.0, it->second->time_after_s - it->second->time_before_s);
-          }
+               it != holes_after.end() && it->first == position; ++it)
+            announce(*it->second);
           break;
         case StreamKind::kStats:
           sink.stats(sim_status(rows.sim[item.index]));

@@ -464,6 +464,54 @@ INSTANTIATE_TEST_SUITE_P(Recorder, RecorderCrashInTheHolesFlush,
                            return out;
                          });
 
+// The hole's first flush (its event, written and synced before the rows
+// after the hole) flushes every dataset written so far, a mesh frame drained
+// with those rows included: once it succeeds, that frame is in the file for
+// good. So it counts as written then, and the flush as done. Before, frames
+// moved to written only after the second flush; when that one failed,
+// count_unwritten_as_drops counted a frame the file holds as a drop, and the
+// status said one frame fewer than the file has (and one flush fewer).
+TEST(Recorder, AFrameTheHolesFirstFlushWroteIsWrittenWhenTheNextFlushFails) {
+  TempDir dir;
+  RecorderOptions o = fast_options();
+  o.flush_interval_s = 1.0;
+  o.poll_interval_s = 1.0;
+  std::atomic<bool> armed{false};
+  o.flush_fault_for_testing = [&armed](const char* dataset) {
+    if (armed.load() && std::string_view(dataset) == "/haptic/time_s") throw RecordError("injected crash");
+  };
+  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  constexpr std::uint64_t kRing = Recorder::kHapticRingRows;
+  std::uint64_t pushed = 0, accepted = 0;
+  const auto push = [&](std::uint64_t n) {
+    for (std::uint64_t k = 0; k < n; ++k) accepted += rec->push_haptic(testing::haptic_row(pushed++)) ? 1 : 0;
+  };
+  push(kRing + 50);  // the ring holds kRing: 50 dropped
+  ASSERT_EQ(accepted, kRing) << "the recorder drained before the ring was full: no hole to check";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (rec->stats().haptic_rows_written < kRing && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_EQ(rec->stats().haptic_rows_written, kRing);
+  const std::uint64_t flushes_before = rec->stats().flushes;
+  // The next flush is the hole's: the frame and the rows after the hole go
+  // in the same drain; the hole's first flush succeeds, the second fails.
+  armed.store(true);
+  ASSERT_TRUE(rec->push_mesh_frame(testing::test_frame(0).view()));
+  push(10);
+  ASSERT_EQ(accepted, kRing + 10);
+  rec->stop();
+  ASSERT_EQ(rec->state(), RecorderState::kFailed) << "the injected crash never happened";
+  const SessionInfo info = read_session_info(dir / "s.h5");
+  ASSERT_EQ(info.haptic_holes, 1u) << "the hole's first flush did not reach the file";
+  ASSERT_EQ(info.rows.mesh_frames, 1u) << "the hole's first flush did not flush the frame drained with it";
+  const RecorderStats s = rec->stats();
+  EXPECT_EQ(s.mesh_frames_written, info.rows.mesh_frames) << "a frame the file holds, not counted as written";
+  EXPECT_EQ(s.mesh_frame_drops, 0u) << "a frame the file holds, counted as dropped";
+  EXPECT_EQ(s.events_written, info.rows.events);
+  // The hole's first flush was done (and synced): it counts.
+  EXPECT_GE(s.flushes, flushes_before + 1);
+}
+
 // What a recording's on_error said: how often, and the last message (read
 // after stop(), which joins the recorder thread that calls it).
 struct ErrorsHeard {

@@ -1985,6 +1985,52 @@ TEST(SessionTools, ListShowsEachSessionsHolesAndTheTimeTheySpan) {
       << info;
 }
 
+// The holes column is as wide as its widest cell: "1 (0.031 s) +1 damaged"
+// is wider than the 12 characters it had, and pushed that row's scene out
+// of line with every other row's.
+TEST(SessionTools, ListLinesUpItsColumnsAroundAWideHolesCell) {
+  TempDir dir;
+  const std::string d = dir / "state";
+  std::filesystem::create_directories(d);
+  const auto write = [&](const std::string& name, const std::vector<HapticHole>& holes) {
+    SessionMetadata m;
+    m.scene_name = "scene-" + name;
+    auto w = SessionWriter::create(d + "/" + name, m);
+    std::vector<HapticRow> rows;
+    // Rows 49 and 50 are at 49 and 80 ms: 30 ticks lost between them.
+    for (std::uint64_t i = 0; i < 100; ++i) rows.push_back(testing::haptic_row(i < 50 ? i : i + 30));
+    w->append_haptic(rows);
+    std::vector<Event> events;
+    for (const HapticHole& h : holes)
+      events.push_back(Event::make(h.time_before_s, EventKind::kWarning, haptic_hole_message(h)));
+    w->append_events(events);
+    w->close();
+  };
+  const HapticHole between{30, 50, testing::haptic_row(49).time_s, testing::haptic_row(80).time_s};
+  // Names 50 ms for row 50, which is at 80 ms: damaged.
+  const HapticHole misplaced{1, 50, testing::haptic_row(49).time_s, testing::haptic_row(50).time_s};
+  write("a.h5", {});
+  write("b.h5", {between, misplaced});
+  write("c.h5", {between});
+
+  const std::string text = format_session_listing(list_sessions(d));
+  std::istringstream lines(text);
+  std::string title, header;
+  std::getline(lines, title);
+  std::getline(lines, header);
+  const std::size_t scene_column = header.rfind("  scene");
+  ASSERT_NE(scene_column, std::string::npos) << text;
+  // The header's "holes" is right-aligned like the cells.
+  EXPECT_EQ(header.rfind("holes") + 5, scene_column) << text;
+  for (const char* name : {"a.h5", "b.h5", "c.h5"}) {
+    std::string line;
+    ASSERT_TRUE(std::getline(lines, line)) << text;
+    ASSERT_EQ(line.rfind(std::string(name) + " ", 0), 0u) << text;
+    EXPECT_EQ(line.rfind("  scene-" + std::string(name)), scene_column) << name << "\n" << text;
+  }
+  EXPECT_NE(text.find(" 1 (0.031 s) +1 damaged  scene-b.h5\n"), std::string::npos) << text;
+}
+
 // Hole events whose ticks add up past what a count holds (damage, or a forged
 // file) show the largest count, not a small number that wrapped.
 TEST(SessionReader, TheTicksLostInHolesSaturate) {

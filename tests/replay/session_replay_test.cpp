@@ -467,6 +467,92 @@ TEST(ReplayPacing, AHoleTheRecorderLeftIsAnnouncedWhereTheStreamStops) {
   }
 }
 
+// At the published haptic rate (100 Hz by default, a state every 10 ms) a
+// hole only shows when a whole publish period passes with no state beyond
+// the usual one: the states on either side of it 2 periods apart or more, a
+// state the stream would carry missing. A hole no longer than a period never
+// does that (the next state comes late by less than a period, as network
+// jitter makes it), so it is not announced: before, each one printed a line
+// (at every pass of a loop) though nothing could be seen. One of two periods
+// or more always is.
+TEST(ReplayPacing, AHoleThatLeavesNoStateMissingAtThePublishedRateIsNotAnnounced) {
+  VectorFrameSource frames{{}};
+  FakeClock clock(10.0);
+  std::atomic<bool> stop{false};
+  // Rows 0..99 at 1 ms; `ticks` dropped after row `before`.
+  const auto holed = [](std::size_t before, std::uint64_t ticks) {
+    SessionRows rows = testing::rows(100, 0.001, 0, 0.0);
+    for (std::size_t i = before + 1; i < rows.haptic.size(); ++i)
+      rows.haptic[i].time_s += 0.001 * static_cast<double>(ticks);
+    rows.haptic_holes = {
+        record::HapticHole{ticks, before + 1, rows.haptic[before].time_s, rows.haptic[before + 1].time_s}};
+    return rows;
+  };
+  struct Case {
+    std::size_t before;
+    std::uint64_t ticks;
+    bool announced;
+    const char* why;
+  };
+  for (const Case& c : {
+           // Row 50, due at 50 ms, is at 51 ms: states at 40 and 51 ms.
+           Case{49, 1, false, "1 tick where a state is due: it comes 1 ms late"},
+           // 49 -> 59 ms, one period, as late as it can fall: states at 40, 59 ms.
+           Case{49, 9, false, "a hole of one period: the state due at 50 ms comes at 59 ms"},
+           // 40 -> 60 ms, two periods, right after a state: states at 40, 60 ms.
+           Case{40, 19, true, "a hole of two periods: the state due at 50 ms is missing"},
+           Case{49, 30, true, "a hole of 31 ms"},
+       }) {
+    const SessionRows rows = holed(c.before, c.ticks);
+    RecordingSink sink(&clock);
+    ReplayOptions o;  // 100 Hz
+    const ReplaySummary s = replay_session(frames, rows, o, sink, clock, stop);
+    EXPECT_EQ(sink.holes.size(), c.announced ? 1u : 0u) << c.why;
+    EXPECT_EQ(s.haptic_holes, c.announced ? 1u : 0u) << c.why;
+    // Every row sent: any hole leaves states missing.
+    RecordingSink every(&clock);
+    o.timeline.haptic_rate_hz = 0;
+    EXPECT_EQ(replay_session(frames, rows, o, every, clock, stop).haptic_holes, 1u) << c.why;
+    EXPECT_EQ(every.holes.size(), 1u) << c.why;
+  }
+}
+
+// A --from inside a hole: the replay starts with the other streams while no
+// haptic state comes until the row after the hole, the same stop a viewer
+// sees at a hole crossed, so the sink hears of it before the first item
+// (at every pass). Before, nothing said it. A window that starts with that
+// row leaves nothing missing and says nothing.
+TEST(ReplayPacing, AWindowThatStartsInsideAHoleAnnouncesItAtTheStart) {
+  VectorFrameSource frames{{}};
+  // Haptic rows 0..49 at 0..49 ms, 30 ticks dropped, row 50 at 80 ms; sim
+  // rows every 10 ms.
+  SessionRows rows = testing::rows(100, 0.001, 20, 0.010);
+  for (std::size_t i = 50; i < rows.haptic.size(); ++i) rows.haptic[i].time_s += 0.030;
+  rows.haptic_holes = {record::HapticHole{30, 50, rows.haptic[49].time_s, rows.haptic[50].time_s}};
+  FakeClock clock(10.0);
+  std::atomic<bool> stop{false};
+  ReplayOptions o;
+  o.timeline.stats_rate_hz = 0;  // every sim row: the stats at 60 and 70 ms go out before row 50
+  o.timeline.from_s = 0.060;
+  RecordingSink sink(&clock);
+  const ReplaySummary s = replay_session(frames, rows, o, sink, clock, stop);
+  ASSERT_EQ(sink.holes.size(), 1u);
+  EXPECT_EQ(sink.holes[0].hole.row_after, 50u);
+  EXPECT_EQ(sink.holes[0].after_sent, 0u) << "heard before the first item";
+  ASSERT_GE(sink.sent.size(), 3u);
+  EXPECT_EQ(sink.sent[0].kind, StreamKind::kStats);
+  EXPECT_EQ(s.haptic_holes, 1u);
+  EXPECT_NEAR(s.haptic_hole_time_s, 0.031, 1e-12);
+
+  // Only haptic rows in the window: it starts with row 50, nothing missing.
+  o.timeline.stats_rate_hz = 5.0;
+  SessionRows haptic_only = rows;
+  haptic_only.sim.clear();
+  RecordingSink at_once(&clock);
+  EXPECT_EQ(replay_session(frames, haptic_only, o, at_once, clock, stop).haptic_holes, 0u);
+  EXPECT_TRUE(at_once.holes.empty());
+}
+
 TEST(ReplayPacing, SteadyClockWaitEndsSoonAfterStop) {
   SteadyReplayClock clock;
   std::atomic<bool> stop{false};
