@@ -255,6 +255,16 @@ void Recorder::close_to_producers() noexcept {
 // frame buffers are released.
 // Rows of a batch whose write failed part-way are counted too: the file may
 // hold some of them, but none were counted as written.
+// A flush succeeded: it wrote and synced every dataset appended so far, the
+// mesh frames drained since the last flush among them, so they count as
+// written (never as drops if a later flush fails), and the flush as done.
+void Recorder::count_flush_done() {
+  frames_written_.fetch_add(frames_unflushed_, std::memory_order_relaxed);
+  frames_unflushed_ = 0;
+  bytes_written_.store(writer_->bytes_written(), std::memory_order_relaxed);
+  flushes_.fetch_add(1, std::memory_order_relaxed);
+}
+
 void Recorder::count_unwritten_as_drops() {
   std::uint64_t haptic = pending_haptic_.size(), sim = pending_sim_.size(), events = pending_events_.size();
   pending_haptic_.clear();
@@ -398,15 +408,8 @@ bool Recorder::drain_and_write(bool force_flush) {
   if (hole_event_pending_) {
     writer_->append_events(pending_events_);
     writer_->flush();
-    // That flush wrote and synced every dataset appended so far, the mesh
-    // frames drained since the last flush among them: they are in the file
-    // for good, so they count as written now (and the flush as done), not
-    // as drops if the next flush fails.
     events_written_.fetch_add(pending_events_.size(), std::memory_order_relaxed);
-    frames_written_.fetch_add(frames_unflushed_, std::memory_order_relaxed);
-    frames_unflushed_ = 0;
-    bytes_written_.store(writer_->bytes_written(), std::memory_order_relaxed);
-    flushes_.fetch_add(1, std::memory_order_relaxed);
+    count_flush_done();
     pending_events_.clear();
     hole_event_pending_ = false;
   }
@@ -417,10 +420,7 @@ bool Recorder::drain_and_write(bool force_flush) {
   haptic_written_.fetch_add(pending_haptic_.size(), std::memory_order_relaxed);
   sim_written_.fetch_add(pending_sim_.size(), std::memory_order_relaxed);
   events_written_.fetch_add(pending_events_.size(), std::memory_order_relaxed);
-  frames_written_.fetch_add(frames_unflushed_, std::memory_order_relaxed);
-  frames_unflushed_ = 0;
-  bytes_written_.store(writer_->bytes_written(), std::memory_order_relaxed);
-  flushes_.fetch_add(1, std::memory_order_relaxed);
+  count_flush_done();
   pending_haptic_.clear();
   pending_sim_.clear();
   pending_events_.clear();

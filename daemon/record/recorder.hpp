@@ -200,6 +200,7 @@ class Recorder {
   void set_failed(const std::string& message);
   void close_to_producers() noexcept;
   void count_unwritten_as_drops();
+  void count_flush_done();
   bool accepting() const noexcept {
     return !closing_.load(std::memory_order_relaxed) &&
            state_.load(std::memory_order_relaxed) == RecorderState::kRecording;
