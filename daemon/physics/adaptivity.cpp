@@ -38,6 +38,23 @@ bool Adaptivity::closure_touches_frozen(const Body& body, mesh::Key diamond) {
   return false;
 }
 
+void Adaptivity::pass_over(const mesh::KuhnMesh& mesh, mesh::Key diamond) {
+  // A candidate is the refinement edge of a live tet, and a passed-over one
+  // is not split later in the pass (see adapt()), so its edge keeps its id.
+  const EdgeId e = mesh.find_edge(diamond);
+  if (e == util::KeyIndexMap::kNotFound) return;
+  if (e >= passed_over_.size()) passed_over_.resize(mesh.edge_capacity(), 0);
+  if (passed_over_[e]) return;
+  passed_over_[e] = 1;
+  passed_over_edges_.push_back(e);
+}
+
+bool Adaptivity::passed_over(const mesh::KuhnMesh& mesh, mesh::Key diamond) const {
+  if (passed_over_edges_.empty()) return false;  // no lookup while nothing waits
+  const EdgeId e = mesh.find_edge(diamond);
+  return e < passed_over_.size() && passed_over_[e];
+}
+
 void Adaptivity::mark_near_frozen(const Body& body, AdaptStats& stats) {
   // A merge replaces every tet around its node z, and their vertices are
   // exactly z and the nodes joined to it by an edge: a node just outside the
@@ -116,8 +133,11 @@ AdaptStats Adaptivity::adapt(Body& body) {
     }
   });
 
-  // Most strained first; each diamond once.
+  // Most strained first; each diamond once (a diamond comes once per
+  // strained tet: a repeat finds it split, or passed over, below).
   std::sort(refine_.begin(), refine_.end());
+  for (const EdgeId e : passed_over_edges_) passed_over_[e] = 0;
+  passed_over_edges_.clear();
   int budget = spec_.max_ops_per_step;
   for (std::size_t i = 0; i < refine_.size() && budget > 0; ++i) {
     // The ceiling (adaptivity.max_tets): a threshold far below every tet's
@@ -129,9 +149,20 @@ AdaptStats Adaptivity::adapt(Body& body) {
     }
     const mesh::Key d = refine_[i].second;
     if (!mesh.can_split(d)) continue;  // split already (closure of an earlier one) or at max depth
+    // Decided already this pass: a repeat would be decided the same way. A
+    // closure that waited stays longer than the budget (a later split that
+    // splits k of its diamonds spends at least k), and one that reached the
+    // frozen sphere still does (the frozen tet's diamond is not split: a
+    // split's closure passed the same test, and tets only appear until
+    // their diamond splits). So no walk up again, up to 8 times.
+    if (passed_over(mesh, d)) continue;
+    ++stats.closure_walks;
     int closure = 0;
     if (frozen_) {
-      if (closure_touches_frozen(body, d)) continue;
+      if (closure_touches_frozen(body, d)) {
+        pass_over(mesh, d);
+        continue;
+      }
       closure = static_cast<int>(closure_keys_.size());
     } else {
       closure = mesh.closure_diamonds(d, closure_keys_);
@@ -140,7 +171,22 @@ AdaptStats Adaptivity::adapt(Body& body) {
     // it anyway overshot the budget by up to a whole closure: 52-134
     // diamonds at max_depth 30), unless nothing has been spent yet, so that
     // a pass always progresses: only a pass's first split may exceed it.
-    if (closure > budget && budget < spec_.max_ops_per_step) continue;
+    if (closure > budget && budget < spec_.max_ops_per_step) {
+      pass_over(mesh, d);
+      // Looking further for a closure that fits what is left walked up every
+      // remaining candidate (tens of thousands on a big strained body, each
+      // O(L²)) when all of theirs were longer. The pass is for spending the
+      // budget on the most strained first: once kMaxSplitWaitsPerPass of
+      // them have waited (what is left is shorter than each of their
+      // closures), the rest, less strained, waits for the next pass, which
+      // starts from the top again, its first split exempt. So a pass walks
+      // at most one closure per split plus 32 (well under a millisecond
+      // even at L ~130), and a short closure (a refined front's diamond)
+      // a few waits down the list still fills what is left. Only a binding
+      // budget waits: where it does not, the same splits happen.
+      if (++stats.split_waits >= kMaxSplitWaitsPerPass) break;
+      continue;
+    }
     const int n = body.split(d);
     stats.splits += n;
     budget -= n;

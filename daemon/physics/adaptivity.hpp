@@ -14,7 +14,9 @@
 //   pass's cost bounded: a split counts its whole closure (the unsplit
 //   ancestors it splits first), and one whose closure exceeds what is left
 //   of the budget waits for a later pass, except as the pass's first split
-//   (so a pass always progresses; that one pass does the closure whole).
+//   (so a pass always progresses; that one pass does the closure whole);
+//   after kMaxSplitWaitsPerPass such waits the pass stops looking for a
+//   closure that fits (each look walks a closure up).
 #pragma once
 
 #include <array>
@@ -38,10 +40,22 @@ struct AdaptStats {
   // 26 (K + 1) hash lookups each) to find the merges that reach into the
   // frozen sphere: the cost a tool contact adds to a pass.
   int frozen_edge_walks = 0;
+  // Split candidates whose closure the pass walked up (closure_diamonds, or
+  // closure_tets when a sphere is frozen: a BFS plus a linear visited check,
+  // O(L²) for a closure of L diamonds, L up to ~130 at depth 30).
+  int closure_walks = 0;
+  // Split candidates (distinct diamonds) whose closure waited for a later
+  // pass because it exceeded what was left of the budget.
+  int split_waits = 0;
 };
 
 class Adaptivity {
  public:
+  // Split candidates whose closure does not fit what is left of the budget
+  // (distinct diamonds) after which a pass stops looking for one that does;
+  // see adapt().
+  static constexpr int kMaxSplitWaitsPerPass = 32;
+
   explicit Adaptivity(const scene::AdaptivitySpec& spec) : spec_(spec) {}
   // One adaptation pass over the body.
   AdaptStats adapt(Body& body);
@@ -79,6 +93,11 @@ class Adaptivity {
   // current positions (0 when it cannot merge).
   double restored_measure(const Body& body, mesh::Key diamond);
 
+  // Marks, and tells, a split candidate this pass passed over (see
+  // passed_over_).
+  void pass_over(const mesh::KuhnMesh& mesh, mesh::Key diamond);
+  bool passed_over(const mesh::KuhnMesh& mesh, mesh::Key diamond) const;
+
   bool is_frozen(const Vec3& x_m) const {
     return frozen_ && (x_m - frozen_centre_m_).squaredNorm() <= frozen_radius_m_ * frozen_radius_m_;
   }
@@ -98,8 +117,16 @@ class Adaptivity {
   std::vector<std::tuple<int, double, mesh::Key>> merge_;  // (−depth, measure, diamond)
   std::vector<TetId> closure_tets_;                        // scratch of closure_touches_frozen
   std::vector<mesh::Key> closure_keys_;                    // a split candidate's closure
-  std::vector<std::uint8_t> near_frozen_;                  // per node slot, see mark_near_frozen
-  std::array<std::array<NodeId, 4>, 8> restored_{};        // scratch of restored_measure
+  // Split candidates this pass passed over (their closure waited for the
+  // budget or reached the frozen sphere), by their edge: a diamond comes
+  // once per strained tet (up to 8), and a repeat would be decided the same
+  // way (see adapt()), so it is skipped without walking its closure again.
+  // Flags per edge slot, and the slots set, to clear them: no allocation
+  // once grown.
+  std::vector<std::uint8_t> passed_over_;
+  std::vector<EdgeId> passed_over_edges_;
+  std::vector<std::uint8_t> near_frozen_;            // per node slot, see mark_near_frozen
+  std::array<std::array<NodeId, 4>, 8> restored_{};  // scratch of restored_measure
 };
 
 }  // namespace tissue::physics

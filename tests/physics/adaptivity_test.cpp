@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <random>
 #include <set>
 #include <utility>
 #include <vector>
@@ -568,8 +569,9 @@ TEST(Adaptivity, AStaticBodyNeverReSplitsADiamondAMergeRestored) {
 // max_depth 30). Here one cube is refined towards a point to depth 18, so
 // its leaves' closures run from 1 to 71 diamonds, and everything strained
 // wants refining: with a budget of the longest closure, no pass may pass it.
-// With a budget below the first wanted closure, that closure is still split
-// whole, so a pass always progresses.
+// With a budget below the first wanted closure (the most strained tet's
+// diamond, the pass's order), that closure is still split whole, and nothing
+// more, so a pass always progresses.
 TEST(Adaptivity, ALongClosureWaitsWhenItExceedsTheRemainingBudget) {
   scene::Scene s = testing::free_cube_scene(1, 0);
   s.adaptivity.enabled = true;
@@ -599,7 +601,28 @@ TEST(Adaptivity, ALongClosureWaitsWhenItExceedsTheRemainingBudget) {
   });
   ASSERT_GE(longest, 50);
   dilate(body, 1e-3);
-  for (const int budget : {longest, 10}) {
+  // The pass's first candidate: most strained first, ties by key, measured
+  // as the pass measures (each edge's strain from Body's rest length, summed
+  // in the tet's edge order: the dilation's densities differ by rounding
+  // only, so the order is the rounding's).
+  std::pair<double, mesh::Key> first{0.0, 0};
+  bool found = false;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+    double sum = 0.0;
+    for (const EdgeId e : tet.e) {
+      const double strain = (body.x_m[body.edge_b[e]] - body.x_m[body.edge_a[e]]).norm() / body.rest_length_m[e] - 1.0;
+      sum += strain * strain;
+    }
+    const double m = 0.5 * body.scene().material.youngs_modulus_Pa * sum;
+    if (m <= s.adaptivity.refine_threshold_Pa || tet.depth >= s.adaptivity.max_depth) return;
+    const std::pair<double, mesh::Key> candidate{-m, body.mesh().diamond_of(t)};
+    if (!found || candidate < first) first = candidate;
+    found = true;
+  });
+  ASSERT_TRUE(found);
+  const int first_closure = body.mesh().closure_diamonds(first.second, closure);
+  ASSERT_GE(first_closure, 2);
+  for (const int budget : {longest, first_closure - 1}) {
     s.adaptivity.max_ops_per_step = budget;
     Body state = body;
     Adaptivity adaptivity(s.adaptivity);
@@ -608,9 +631,75 @@ TEST(Adaptivity, ALongClosureWaitsWhenItExceedsTheRemainingBudget) {
     if (budget == longest) {
       EXPECT_LE(stats.splits, budget) << "a closure overshot the budget";
     } else {
-      EXPECT_LE(stats.splits, longest) << "only the first split may pass the budget, by its own closure";
+      EXPECT_TRUE(state.mesh().is_split(first.second)) << "the first candidate waited";
+      EXPECT_EQ(stats.splits, first_closure) << "only the first split may pass the budget, by its own closure";
     }
   }
+}
+
+// A pass whose budget binds stops looking for a closure that fits after
+// Adaptivity::kMaxSplitWaitsPerPass waits, and walks a waiting diamond's
+// closure once, not once per tet: with a few operations left and the
+// following candidates' closures longer, it walked each of them up (an O(L²)
+// walk, L up to ~130 at depth 30), a diamond up to 8 times, to the end of
+// the list (tens of thousands on a big body strained everywhere). Here a
+// 2x2x2-cube body, uniform to depth 4, has a third of its leaves split twice
+// more and one corner refined towards a point to depth 16 (closures of 1 to
+// tens of diamonds, ~870 distinct diamonds), and every node is moved a
+// little, so everything wants refining. Each budget's pass walks at most one
+// closure per split it makes (at most the budget) plus the waits.
+TEST(Adaptivity, ABindingBudgetBoundsTheClosureWalksOfAPass) {
+  scene::Scene s = testing::free_cube_scene(2, 0);
+  s.adaptivity.enabled = true;
+  s.adaptivity.max_depth = 30;
+  s.adaptivity.refine_threshold_Pa = 1e-6;
+  Body body(s);
+  auto split_where = [&](auto&& want) {
+    std::vector<mesh::Key> keys;
+    body.mesh().for_each_tet([&](TetId t, const mesh::Tet& tet) {
+      if (want(t, tet)) keys.push_back(body.mesh().diamond_of(t));
+    });
+    for (const mesh::Key k : keys)
+      if (body.mesh().can_split(k)) body.split(k);
+    return !keys.empty();
+  };
+  for (int depth = 0; depth < 4; ++depth) split_where([&](TetId, const mesh::Tet& tet) { return tet.depth == depth; });
+  for (int round = 0; round < 2; ++round) split_where([&](TetId t, const mesh::Tet&) { return t % 3 == 0; });
+  const std::array<double, 3> point_m{0.0123, 0.0311, 0.0271};
+  while (split_where([&](TetId t, const mesh::Tet& tet) {
+    if (tet.depth >= 16) return false;
+    const mesh::RegionBox box = mesh::tet_bounds_m(body.mesh(), t);
+    for (int i = 0; i < 3; ++i)
+      if (point_m[i] < box.min_m[i] || point_m[i] > box.max_m[i]) return false;
+    return true;
+  })) {
+  }
+  std::set<mesh::Key> wanted;
+  body.mesh().for_each_tet([&](TetId t, const mesh::Tet&) { wanted.insert(body.mesh().diamond_of(t)); });
+  // Every node moved by up to 1 um: strain ~ 1 um / L, so the fine tets
+  // near the refinement fronts, whose diamonds wait on coarser ones, come
+  // first, and no two tets tie.
+  // (mt19937's raw output, which the standard fixes, unlike a distribution's.)
+  std::mt19937 rng(7);
+  auto jitter_m = [&] { return (static_cast<double>(rng()) / 4294967295.0 * 2.0 - 1.0) * 1e-6; };
+  body.mesh().for_each_node([&](NodeId n, const mesh::Node&) {
+    const double dx_m = jitter_m(), dy_m = jitter_m(), dz_m = jitter_m();
+    body.x_m[n] = body.rest_m[n] + Vec3(dx_m, dy_m, dz_m);
+  });
+  const int waits = Adaptivity::kMaxSplitWaitsPerPass;
+  bool capped = false;
+  for (int budget = 2; budget <= 40; ++budget) {
+    s.adaptivity.max_ops_per_step = budget;
+    ASSERT_GT(static_cast<int>(wanted.size()), 10 * (budget + waits));
+    Body state = body;
+    Adaptivity adaptivity(s.adaptivity);
+    const AdaptStats stats = adaptivity.adapt(state);
+    ASSERT_EQ(stats.merges, 0);
+    EXPECT_LE(stats.closure_walks, budget + waits) << "budget " << budget << ", " << wanted.size() << " wanted";
+    EXPECT_LE(stats.split_waits, waits) << "budget " << budget;
+    capped = capped || stats.split_waits == waits;
+  }
+  EXPECT_TRUE(capped) << "no pass waited its most: the case this test is for";
 }
 
 // docs/scene-format.md: `stretch` refines when any l/L or L/l exceeds
