@@ -280,6 +280,25 @@ INSTANTIATE_TEST_SUITE_P(Shapes, RandomChurn,
                                            std::make_tuple(BoxSpec{4, 1, 1, 0.1, 15}, 4u),
                                            std::make_tuple(BoxSpec{3, 3, 3, 0.1, 9}, 5u)));
 
+// `ops` random splits, and a merge every third op, of live tets and nodes
+// drawn from `seed`: a mesh split and merged unevenly.
+void churn(KuhnMesh& mesh, unsigned seed, int ops) {
+  std::mt19937 rng(seed);
+  for (int op = 0; op < ops; ++op) {
+    TetId t;
+    do t = static_cast<TetId>(rng() % mesh.tet_capacity());
+    while (!mesh.tet_alive(t));
+    const Key d = mesh.diamond_of(t);
+    if (mesh.can_split(d)) mesh.split(d);
+    if (op % 3 == 0) {
+      NodeId n;
+      do n = static_cast<NodeId>(rng() % mesh.node_capacity());
+      while (!mesh.node_alive(n));
+      if (mesh.node(n).edge_a != kInvalidId && mesh.can_merge(mesh.node_key(n))) mesh.merge(mesh.node_key(n));
+    }
+  }
+}
+
 // The edges at a node found by lattice lookups are exactly those a walk over
 // every edge finds, on meshes refined unevenly to several depths (including
 // depths that are not a multiple of 3, whose tets are not Kuhn cubes') and
@@ -287,20 +306,7 @@ INSTANTIATE_TEST_SUITE_P(Shapes, RandomChurn,
 TEST(KuhnMesh, EdgesAtANodeByLookupAreTheEdgesAWalkFinds) {
   for (const BoxSpec& spec : {BoxSpec{2, 1, 1, 0.1, 7}, BoxSpec{1, 2, 3, 0.05, 12}}) {
     KuhnMesh mesh(spec);
-    std::mt19937 rng(7);
-    for (int op = 0; op < 1500; ++op) {
-      TetId t;
-      do t = static_cast<TetId>(rng() % mesh.tet_capacity());
-      while (!mesh.tet_alive(t));
-      const Key d = mesh.diamond_of(t);
-      if (mesh.can_split(d)) mesh.split(d);
-      if (op % 3 == 0) {
-        NodeId n;
-        do n = static_cast<NodeId>(rng() % mesh.node_capacity());
-        while (!mesh.node_alive(n));
-        if (mesh.node(n).edge_a != kInvalidId && mesh.can_merge(mesh.node_key(n))) mesh.merge(mesh.node_key(n));
-      }
-    }
+    churn(mesh, 7, 1500);
     std::vector<std::set<EdgeId>> walked(mesh.node_capacity());
     mesh.for_each_edge([&](EdgeId e, const Edge& edge) {
       walked[edge.a].insert(e);
@@ -327,20 +333,7 @@ TEST(KuhnMesh, EdgesAtANodeByLookupAreTheEdgesAWalkFinds) {
 // adaptation pass asks before it changes anything.
 KuhnMesh churned_mesh() {
   KuhnMesh mesh({1, 2, 2, 0.05, 12});
-  std::mt19937 rng(11);
-  for (int op = 0; op < 600; ++op) {
-    TetId t;
-    do t = static_cast<TetId>(rng() % mesh.tet_capacity());
-    while (!mesh.tet_alive(t));
-    const Key d = mesh.diamond_of(t);
-    if (mesh.can_split(d)) mesh.split(d);
-    if (op % 3 == 0) {
-      NodeId n;
-      do n = static_cast<NodeId>(rng() % mesh.node_capacity());
-      while (!mesh.node_alive(n));
-      if (mesh.node(n).edge_a != kInvalidId && mesh.can_merge(mesh.node_key(n))) mesh.merge(mesh.node_key(n));
-    }
-  }
+  churn(mesh, 11, 600);
   return mesh;
 }
 

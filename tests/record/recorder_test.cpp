@@ -400,6 +400,38 @@ TEST(Recorder, RowsDroppedWhenTheHapticRingOverflowsLeaveAHoleInTheFile) {
   EXPECT_EQ(read_haptic_track(path).rows_after_holes, (std::vector<std::size_t>{kRing}));
 }
 
+// A recording whose next flush carries a hole: the haptic ring filled past
+// full (it takes kHapticRingRows, 50 are dropped) and what it took written,
+// so rows pushed now come after the hole. Once `armed`, the flush of the
+// dataset `failing` throws, as a crash there would.
+struct HolePending {
+  TempDir dir;
+  std::atomic<bool> armed{false};
+  std::string failing;
+  std::unique_ptr<Recorder> rec;
+  std::uint64_t pushed = 0, accepted = 0;
+  void push(std::uint64_t n) {
+    for (std::uint64_t k = 0; k < n; ++k) accepted += rec->push_haptic(testing::haptic_row(pushed++)) ? 1 : 0;
+  }
+  void start(const std::string& failing_dataset) {
+    failing = failing_dataset;
+    RecorderOptions o = fast_options();
+    o.flush_interval_s = 1.0;
+    o.poll_interval_s = 1.0;
+    o.flush_fault_for_testing = [this](const char* dataset) {
+      if (armed.load() && dataset == failing) throw RecordError("injected crash");
+    };
+    rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+    constexpr std::uint64_t kRing = Recorder::kHapticRingRows;
+    push(kRing + 50);
+    ASSERT_EQ(accepted, kRing) << "the recorder drained before the ring was full: no hole to check";
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (rec->stats().haptic_rows_written < kRing && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    ASSERT_EQ(rec->stats().haptic_rows_written, kRing);
+  }
+};
+
 // A crash in the middle of the flush that carries a hole (here: that flush
 // failing at one dataset, which leaves the file as of the datasets flushed
 // before it, as a crash there would) never leaves the rows after the hole
@@ -411,27 +443,15 @@ TEST(Recorder, RowsDroppedWhenTheHapticRingOverflowsLeaveAHoleInTheFile) {
 class RecorderCrashInTheHolesFlush : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(RecorderCrashInTheHolesFlush, TheRowsAfterAHoleAreNeverInTheFileWithoutItsEvent) {
-  TempDir dir;
-  RecorderOptions o = fast_options();
-  o.flush_interval_s = 1.0;
-  o.poll_interval_s = 1.0;
-  std::atomic<bool> armed{false};
   const std::string failing = GetParam();
-  o.flush_fault_for_testing = [&armed, failing](const char* dataset) {
-    if (armed.load() && dataset == failing) throw RecordError("injected crash");
-  };
-  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  HolePending h;
+  ASSERT_NO_FATAL_FAILURE(h.start(failing));
+  TempDir& dir = h.dir;
+  const auto& rec = h.rec;
+  std::atomic<bool>& armed = h.armed;
+  std::uint64_t& accepted = h.accepted;
   constexpr std::uint64_t kRing = Recorder::kHapticRingRows;
-  std::uint64_t pushed = 0, accepted = 0;
-  const auto push = [&](std::uint64_t n) {
-    for (std::uint64_t k = 0; k < n; ++k) accepted += rec->push_haptic(testing::haptic_row(pushed++)) ? 1 : 0;
-  };
-  push(kRing + 50);  // the ring holds kRing: 50 dropped
-  ASSERT_EQ(accepted, kRing) << "the recorder drained before the ring was full: no hole to check";
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (rec->stats().haptic_rows_written < kRing && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  ASSERT_EQ(rec->stats().haptic_rows_written, kRing);
+  const auto push = [&h](std::uint64_t n) { h.push(n); };
   // The next flush is the hole's: the first of these rows comes after it.
   armed.store(true);
   push(10);
@@ -472,26 +492,14 @@ INSTANTIATE_TEST_SUITE_P(Recorder, RecorderCrashInTheHolesFlush,
 // count_unwritten_as_drops counted a frame the file holds as a drop, and the
 // status said one frame fewer than the file has (and one flush fewer).
 TEST(Recorder, AFrameTheHolesFirstFlushWroteIsWrittenWhenTheNextFlushFails) {
-  TempDir dir;
-  RecorderOptions o = fast_options();
-  o.flush_interval_s = 1.0;
-  o.poll_interval_s = 1.0;
-  std::atomic<bool> armed{false};
-  o.flush_fault_for_testing = [&armed](const char* dataset) {
-    if (armed.load() && std::string_view(dataset) == "/haptic/time_s") throw RecordError("injected crash");
-  };
-  auto rec = Recorder::start(dir.path(), "s.h5", meta(), o);
+  HolePending h;
+  ASSERT_NO_FATAL_FAILURE(h.start("/haptic/time_s"));
+  TempDir& dir = h.dir;
+  const auto& rec = h.rec;
+  std::atomic<bool>& armed = h.armed;
+  std::uint64_t& accepted = h.accepted;
   constexpr std::uint64_t kRing = Recorder::kHapticRingRows;
-  std::uint64_t pushed = 0, accepted = 0;
-  const auto push = [&](std::uint64_t n) {
-    for (std::uint64_t k = 0; k < n; ++k) accepted += rec->push_haptic(testing::haptic_row(pushed++)) ? 1 : 0;
-  };
-  push(kRing + 50);  // the ring holds kRing: 50 dropped
-  ASSERT_EQ(accepted, kRing) << "the recorder drained before the ring was full: no hole to check";
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (rec->stats().haptic_rows_written < kRing && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  ASSERT_EQ(rec->stats().haptic_rows_written, kRing);
+  const auto push = [&h](std::uint64_t n) { h.push(n); };
   const std::uint64_t flushes_before = rec->stats().flushes;
   // The next flush is the hole's: the frame and the rows after the hole go
   // in the same drain; the hole's first flush succeeds, the second fails.
